@@ -1,0 +1,173 @@
+"""Closed-loop simulation result shared by every scenario.
+
+Glossary (one name for one thing):
+
+* ``reference`` -- reference-model outputs the controlled variables must track
+  (seed: ``y_m``).
+* ``output`` -- true plant outputs for those controlled variables (``y``).
+* ``command`` -- pilot / commanded inputs to the reference models (``y_c``).
+* ``pseudo`` -- sliding-mode pseudo-commands handed to the allocator; the
+  allocator demand ``v`` (seed: ``u_SMC`` before the control distribution).
+* ``effectors`` -- actual effector positions after actuator dynamics (``u``).
+
+Tracking error is ``reference - output``.  Metrics are split at
+``failure_time``: "before" covers ``t < failure_time`` and "after" covers
+``t >= failure_time``.  With no failure, every "after" metric is NaN, written
+as ``null`` in JSON.
+
+Divergence rule (documented once, applied by every scenario through
+:func:`divergence_check`): a run is *diverged* when any state or output is
+non-finite, or when any controlled output exceeds the scenario's bound
+``|output| > output_bound`` (a per-channel bound far outside the flight
+envelope, chosen by the scenario).  A diverged run stops at the first
+offending step; its arrays are truncated to the samples actually simulated
+(nothing is padded or extrapolated) and ``diverged`` is ``True``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["SimResult", "divergence_check", "tracking_metrics"]
+
+# An effector counts as "in saturation" when within this fraction of its
+# position (or rate) range of the limit; exact equality is fragile with
+# first-order actuators approaching a limit asymptotically.
+SATURATION_TOLERANCE = 1e-3
+
+
+def divergence_check(y: np.ndarray, bound: np.ndarray | float, *states: np.ndarray) -> bool:
+    """Return True when the run has diverged (see module docstring).
+
+    Parameters
+    ----------
+    y : ndarray
+        Controlled outputs at the current step.
+    bound : float or ndarray
+        Scenario bound on ``|y|`` (per channel or scalar).
+    *states : ndarray
+        Any further states to check for non-finite values.
+    """
+    if not np.all(np.isfinite(y)) or np.any(np.abs(y) > bound):
+        return True
+    return any(not np.all(np.isfinite(s)) for s in states)
+
+
+def _none_if_nan(x: float) -> float | None:
+    return None if (x is None or not math.isfinite(x)) else float(x)
+
+
+def tracking_metrics(err: np.ndarray, mask: np.ndarray) -> tuple[float, float]:
+    """RMS and max-abs of ``err`` over the samples selected by ``mask``.
+
+    Returns ``(nan, nan)`` when the mask is empty.
+    """
+    sel = err[mask]
+    if sel.size == 0:
+        return math.nan, math.nan
+    return float(np.sqrt(np.mean(sel**2))), float(np.max(np.abs(sel)))
+
+
+@dataclass
+class SimResult:
+    """Time histories and metadata of one closed-loop run.
+
+    Arrays are sampled on ``t`` (N samples, possibly decimated from the
+    integration step).  Shapes: ``reference``, ``output``, ``command`` are
+    ``(N, nch)``; ``pseudo`` and ``unallocated`` are ``(N, k)``;
+    ``effectors`` and ``effector_rates`` are ``(N, m)``.
+    """
+
+    scenario: str
+    method: str | None
+    failure: str | None
+    t: np.ndarray
+    channels: list[str]
+    reference: np.ndarray
+    output: np.ndarray
+    command: np.ndarray
+    pseudo: np.ndarray | None = None
+    effectors: np.ndarray | None = None
+    effector_rates: np.ndarray | None = None
+    effector_names: list[str] = field(default_factory=list)
+    effector_limits: tuple[np.ndarray, np.ndarray] | None = None
+    rate_limits: tuple[np.ndarray, np.ndarray] | None = None
+    failure_time: float | None = None
+    diverged: bool = False
+    unallocated: np.ndarray | None = None
+    extra: dict[str, np.ndarray] = field(default_factory=dict)
+
+    # ------------------------------------------------------------------ metrics
+    @property
+    def duration(self) -> float:
+        """Simulated time actually covered (shorter than asked when diverged)."""
+        return float(self.t[-1] - self.t[0]) if self.t.size else 0.0
+
+    @property
+    def error(self) -> np.ndarray:
+        """Tracking error ``reference - output``, shape (N, nch)."""
+        return self.reference - self.output
+
+    def _dt(self) -> float:
+        return float(self.t[1] - self.t[0]) if self.t.size > 1 else 0.0
+
+    def _time_in_saturation(self, x: np.ndarray | None, limits: tuple[np.ndarray, np.ndarray] | None) -> float:
+        if x is None or limits is None or x.size == 0:
+            return 0.0
+        lo, hi = (np.asarray(a, dtype=float) for a in limits)
+        span = np.where(np.isfinite(hi - lo), hi - lo, np.inf)
+        tol = SATURATION_TOLERANCE * span
+        sat = (x <= lo + tol) | (x >= hi - tol)
+        # A jammed effector (lo == hi) is not "saturated" in any useful sense.
+        sat &= span > 0
+        return float(np.count_nonzero(np.any(sat, axis=1)) * self._dt())
+
+    @property
+    def time_in_position_saturation(self) -> float:
+        """Seconds during which any effector sits at a position limit."""
+        return self._time_in_saturation(self.effectors, self.effector_limits)
+
+    @property
+    def time_in_rate_saturation(self) -> float:
+        """Seconds during which any effector moves at its rate limit."""
+        return self._time_in_saturation(self.effector_rates, self.rate_limits)
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-serialisable metrics (see module docstring for definitions)."""
+        err = self.error
+        if self.failure_time is None:
+            before = np.ones(self.t.shape, dtype=bool)
+        else:
+            before = self.t < self.failure_time
+        after = ~before if self.failure_time is not None else np.zeros_like(before)
+        channels: dict[str, dict[str, float | None]] = {}
+        for j, name in enumerate(self.channels):
+            rb, mb = tracking_metrics(err[:, j], before)
+            ra, ma = tracking_metrics(err[:, j], after)
+            channels[name] = {
+                "rms_before": _none_if_nan(rb),
+                "rms_after": _none_if_nan(ra),
+                "max_before": _none_if_nan(mb),
+                "max_after": _none_if_nan(ma),
+            }
+        return {
+            "scenario": self.scenario,
+            "method": self.method,
+            "failure": self.failure,
+            "failure_time": self.failure_time,
+            "duration": self.duration,
+            "diverged": bool(self.diverged),
+            "channels": channels,
+            "time_in_position_saturation": self.time_in_position_saturation,
+            "time_in_rate_saturation": self.time_in_rate_saturation,
+        }
+
+    def to_json(self, path: str | Path) -> None:
+        """Write :meth:`summary` to ``path`` as indented JSON."""
+        Path(path).write_text(json.dumps(self.summary(), indent=2, allow_nan=False) + "\n")

@@ -1,0 +1,114 @@
+"""Scenario registry: closed-loop simulations runnable by name.
+
+A scenario is a callable with the signature::
+
+    run(*, method: str = <default>, failure: str | None = None,
+        duration: float | None = None, seed: int = 0, dt: float = 0.0005,
+        allocator_knows_failure: bool = False, progress: bool = False,
+        **options) -> sim.result.SimResult
+
+registered with :func:`register_scenario`, which also attaches the metadata
+attributes ``name``, ``description``, ``failures`` (failure name ->
+description), ``default_duration`` and ``default_method``.
+
+Scenario modules are imported lazily: :data:`SCENARIO_MODULES` maps each name
+to the module that registers it, so importing :mod:`sim.scenarios` stays cheap
+and a broken module only breaks its own scenario.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable
+from typing import Any, Protocol
+
+from sim.result import SimResult
+
+__all__ = ["Scenario", "register_scenario", "get_scenario", "scenarios", "SCENARIO_MODULES"]
+
+#: Scenario name -> module that registers it (imported on first use).
+SCENARIO_MODULES: dict[str, str] = {
+    "pendulum": "sim.scenarios.pendulum",
+    "f16": "sim.scenarios.f16",
+    "dc8": "sim.scenarios.dc8",
+    "ice": "sim.scenarios.ice",
+    "harv_lon": "sim.scenarios.harv_lon",
+    "harv_latdir": "sim.scenarios.harv_latdir",
+}
+
+
+class Scenario(Protocol):
+    """What :func:`get_scenario` returns."""
+
+    name: str
+    description: str
+    failures: dict[str, str]
+    default_duration: float
+    default_method: str | None
+
+    def __call__(self, **kwargs: Any) -> SimResult: ...
+
+
+_REGISTRY: dict[str, Scenario] = {}
+
+
+def register_scenario(
+    name: str,
+    *,
+    description: str | None = None,
+    failures: dict[str, str] | None = None,
+    default_duration: float | None = None,
+    default_method: str | None = None,
+) -> Callable[[Callable[..., SimResult]], Scenario]:
+    """Register ``run`` under ``name`` and attach its metadata.
+
+    Metadata not given here is taken from attributes already set on ``run``
+    (``description`` falls back to the first docstring line,
+    ``default_duration`` to 10 s, ``failures`` to none).
+
+    Examples
+    --------
+    >>> @register_scenario("demo", description="...", default_duration=10.0)
+    ... def run(*, method="pinv", failure=None, duration=None, **kw): ...
+    """
+
+    def decorate(run: Callable[..., SimResult]) -> Scenario:
+        if name in _REGISTRY and _REGISTRY[name] is not run:
+            raise ValueError(f"scenario {name!r} is already registered")
+        doc = (run.__doc__ or "").strip().splitlines()
+        run.name = name  # type: ignore[attr-defined]
+        run.description = (  # type: ignore[attr-defined]
+            description or getattr(run, "description", None) or (doc[0] if doc else name)
+        )
+        run.failures = dict(failures or getattr(run, "failures", {}) or {})  # type: ignore[attr-defined]
+        run.default_duration = float(  # type: ignore[attr-defined]
+            default_duration or getattr(run, "default_duration", 10.0)
+        )
+        run.default_method = default_method or getattr(run, "default_method", None)  # type: ignore[attr-defined]
+        _REGISTRY[name] = run  # type: ignore[assignment]
+        return run  # type: ignore[return-value]
+
+    return decorate
+
+
+def get_scenario(name: str) -> Scenario:
+    """Return the scenario registered as ``name``, importing its module if needed.
+
+    Raises
+    ------
+    KeyError
+        If ``name`` is unknown; the message lists the known scenarios.
+    """
+    if name not in _REGISTRY:
+        module = SCENARIO_MODULES.get(name)
+        if module is None:
+            raise KeyError(f"unknown scenario {name!r}; known scenarios: {', '.join(scenarios())}")
+        importlib.import_module(module)
+    if name not in _REGISTRY:
+        raise KeyError(f"module {SCENARIO_MODULES[name]!r} did not register scenario {name!r}")
+    return _REGISTRY[name]
+
+
+def scenarios() -> list[str]:
+    """Names of all known scenarios (registered or lazily importable), sorted."""
+    return sorted(set(SCENARIO_MODULES) | set(_REGISTRY))
