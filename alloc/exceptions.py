@@ -1,0 +1,45 @@
+"""Exceptions raised by the allocation library.
+
+Every exception derives from :class:`AllocError` and also from the built-in
+exception it means, so callers can catch either.  Messages name the field and
+the offending value.
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "AllocError",
+    "ProblemError",
+    "DemandError",
+    "OptionError",
+    "UnknownMethodError",
+    "SolverError",
+]
+
+
+class AllocError(Exception):
+    """Base class of every error raised by :mod:`alloc`."""
+
+
+class ProblemError(AllocError, ValueError):
+    """An allocation problem is malformed (shape, finiteness, limits, weights)."""
+
+
+class DemandError(AllocError, ValueError):
+    """A demand ``v``, previous command ``u_prev`` or time step ``dt`` is invalid."""
+
+
+class OptionError(AllocError, TypeError):
+    """A method received an unknown option or an option of the wrong type."""
+
+
+class UnknownMethodError(AllocError, ValueError):
+    """The requested allocation method is not registered."""
+
+
+class SolverError(AllocError, RuntimeError):
+    """A numerical backend failed.
+
+    Never escapes an allocator call: the allocator catches it and returns the
+    documented safe answer with ``status="fallback"``.
+    """

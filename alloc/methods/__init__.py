@@ -1,0 +1,5 @@
+"""Built-in allocation methods, one module per family; importing registers them."""
+
+from . import cascade, direct, ganging, linear, pseudo_inverse, quadratic  # noqa: F401
+
+__all__ = ["cascade", "direct", "ganging", "linear", "pseudo_inverse", "quadratic"]

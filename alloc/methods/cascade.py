@@ -1,0 +1,158 @@
+"""Cascaded generalized inverse and daisy chaining (seed sections 1.3.4.6-1.3.4.7)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from .._linalg import RCOND, max_scale, priority_groups, weighted_pinv
+from ..exceptions import ProblemError
+from ..problem import Problem
+from ..registry import FloatArray, Method, register
+
+
+def check_priorities(priorities, k: int) -> list[np.ndarray] | None:
+    """Validate the ``priorities`` option: one integer level per axis, larger = more important."""
+    if priorities is None:
+        return None
+    try:
+        pr = np.asarray(priorities)
+    except (TypeError, ValueError) as exc:
+        raise ProblemError(f"priorities: not a sequence of integers ({exc})") from exc
+    if pr.shape != (k,):
+        raise ProblemError(f"priorities: expected {k} levels (one per axis), got shape {pr.shape}")
+    if not np.issubdtype(pr.dtype, np.number) or not np.all(np.isfinite(pr)) or not np.all(pr == np.round(pr)):
+        raise ProblemError(f"priorities: levels must be integers, got {pr.tolist()}")
+    return priority_groups(pr.astype(int).tolist(), k)
+
+
+@register("cgi")
+class CascadedGeneralizedInverse(Method):
+    """Cascaded generalized inverse (section 1.3.4.6, after Eq 1.23).
+
+    Solve Eq 1.23 over the free effectors; effectors whose command violates a limit are
+    set to that limit, their effect is subtracted from the demand and they are removed;
+    repeat until (1) no new effector saturates, (2) all have saturated, or (3) fewer free
+    effectors remain than axes, when the least-squares left pseudo-inverse (Eq 1.24) is
+    used and the result clipped.  With ``priorities`` each inverse is the prioritised one
+    (higher levels met first, lower levels in their null space).  Inverses are cached per
+    free set, so repeated saturation patterns cost one matrix-vector product each.
+    """
+
+    equation = "Eqs 1.23-1.24"
+    summary = "cascade: saturate violators, remove, re-solve Eq 1.23 (Eq 1.24 when few remain)"
+    options = {
+        "rcond": f"relative singular-value cut-off (default {RCOND:g})",
+        "priorities": "priority level per axis; larger levels are met first",
+    }
+    _CACHE_LIMIT = 4096
+
+    def __init__(self, problem: Problem, *, rcond: float = RCOND, priorities: Sequence[int] | None = None) -> None:
+        super().__init__(problem)
+        self.rcond = float(rcond)
+        self.groups = check_priorities(priorities, problem.k)
+        self._cache: dict[bytes, FloatArray] = {}
+
+    def _pinv(self, free: np.ndarray) -> FloatArray:
+        key = free.tobytes()
+        P = self._cache.get(key)
+        if P is None:
+            p = self.problem
+            P = weighted_pinv(p.B[:, free], p.Wu[np.ix_(free, free)], p.Wv, groups=self.groups, rcond=self.rcond)
+            if len(self._cache) < self._CACHE_LIMIT:
+                self._cache[key] = P
+        return P
+
+    def solve(self, v, lo, hi, u_prev):
+        p = self.problem
+        base = np.minimum(np.maximum(p.up, lo), hi)
+        u = base.copy()
+        free = lo < hi
+        k = p.k
+        for it in range(1, p.m + 2):
+            F = np.flatnonzero(free)
+            if F.size == 0:
+                return u, it - 1  # (2) all saturated
+            u[F] = base[F]
+            r = v - p.B @ u
+            uF = base[F] + self._pinv(free) @ r
+            if F.size < k:
+                u[F] = np.minimum(np.maximum(uF, lo[F]), hi[F])  # (3) Eq 1.24, then clip
+                return u, it
+            over, under = uF > hi[F], uF < lo[F]
+            if not (over.any() or under.any()):
+                u[F] = uF  # (1) no new saturation
+                return u, it
+            u[F[over]] = hi[F[over]]
+            u[F[under]] = lo[F[under]]
+            free[F[over | under]] = False
+        return u, p.m + 1
+
+
+@register("daisy")
+class DaisyChain(Method):
+    """Daisy chaining (section 1.3.4.7, Eqs 1.25-1.27).
+
+    Effector groups are used in priority order.  Group ``g`` is given the remaining demand
+    through its own (pseudo-)inverse (Eq 1.26; the inverse when its B-block is square and
+    invertible, the weighted pseudo-inverse otherwise); if that is inadmissible the group's
+    increment is scaled until its first effector reaches a limit, the group is held there
+    (``u_1(sat)``) and the next group gets the rest (Eq 1.27).  Effectors in no group stay at
+    their preferred position.  Without ``groups`` all effectors form one group (then this is
+    the direction-preserving pseudo-inverse).
+    """
+
+    equation = "Eqs 1.25-1.27"
+    summary = "effector groups used one after another, each held where it saturates"
+    options = {
+        "groups": "list of lists of effector indices (or names), in priority order",
+        "rcond": f"relative singular-value cut-off (default {RCOND:g})",
+    }
+
+    def __init__(self, problem: Problem, *, groups=None, rcond: float = RCOND) -> None:
+        super().__init__(problem)
+        self.groups = self._check_groups(problem, groups)
+        self.P = []
+        for g in self.groups:
+            gf = g[~problem.jammed[g]]
+            Pg = weighted_pinv(problem.B[:, gf], problem.Wu[np.ix_(gf, gf)], problem.Wv, rcond=float(rcond))
+            self.P.append((gf, Pg))
+
+    @staticmethod
+    def _check_groups(problem: Problem, groups) -> list[np.ndarray]:
+        if groups is None:
+            return [np.arange(problem.m)]
+        if isinstance(groups, (str, bytes)) or not hasattr(groups, "__iter__"):
+            raise ProblemError("groups: expected a list of lists of effector indices")
+        out, seen = [], set()
+        for gi, g in enumerate(groups):
+            if isinstance(g, (str, bytes)) or not hasattr(g, "__iter__"):
+                raise ProblemError(f"groups[{gi}]: expected a list of effector indices")
+            idx = [problem.index(e) for e in g]
+            if not idx:
+                raise ProblemError(f"groups[{gi}]: empty group")
+            dup = seen.intersection(idx)
+            if dup or len(set(idx)) != len(idx):
+                raise ProblemError(f"groups[{gi}]: effector(s) {sorted(dup) or idx} listed twice")
+            seen.update(idx)
+            out.append(np.array(idx, dtype=np.intp))
+        if not out:
+            raise ProblemError("groups: no groups given")
+        return out
+
+    def solve(self, v, lo, hi, u_prev):
+        p = self.problem
+        u = np.minimum(np.maximum(p.up, lo), hi)
+        r = v - p.B @ u
+        tol = 1e-12 * max(1.0, float(np.abs(v).max()))
+        used = 0
+        for gf, Pg in self.P:
+            if np.abs(r).max() <= tol:
+                break
+            used += 1
+            du = Pg @ r
+            s = max_scale(u[gf], du, lo[gf], hi[gf])
+            u[gf] += s * du
+            r = r - p.B[:, gf] @ (s * du)
+        return u, used

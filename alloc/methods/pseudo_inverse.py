@@ -1,0 +1,119 @@
+"""Weighted pseudo-inverse family (seed section 1.3.4.5, Eq 1.23).
+
+``pinv``
+    ``u = up + P (v - B up)``, ``P = Wu^-1 B' (B Wu^-1 B')^-1`` (Eq 1.23).  The unconstrained
+    solution is returned where it is admissible; where it is not, the individual commands
+    are clipped (so ``pinv`` and ``pinv_clip`` return the same command; ``pinv`` is the
+    seed's name for the design distribution of Eq 4.23/4.24).
+``pinv_clip``
+    Eq 1.23 with the individual commands clipped to their limits (does not preserve the
+    direction of the moment).
+``pinv_scale``
+    The direction-preserving weighted pseudo-inverse: the whole increment from the
+    preferred position is scaled by one factor until every effector is admissible.
+
+Jammed effectors (``umin == umax``) are removed from the inverse and held at their
+position; axes no free effector reaches (singular values below ``rcond * s_max``) get
+no command, and the unreached part of ``v`` is reported as ``Result.unallocated``.
+
+Option ``incremental=True`` is the discrete-time weighted pseudo-inverse that Page and
+Steinberg found best in closed loop (seed section 1.3.4.9): with ``u_prev`` given, the
+bias point is the previous command, ``u = u_prev + P (v - B u_prev)``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .._linalg import RCOND, max_scale, weighted_pinv
+from ..problem import Problem
+from ..registry import FloatArray, Method, register
+
+_OPTIONS = {
+    "rcond": f"relative singular-value cut-off of the inverse (default {RCOND:g})",
+    "incremental": "bias at u_prev instead of up when u_prev is given (discrete-time pseudo-inverse)",
+}
+
+
+def distribution_matrix(problem: Problem, rcond: float = RCOND) -> FloatArray:
+    """Eq 1.23 distribution matrix ``P`` (m x k) over the non-jammed effectors."""
+    P = np.zeros((problem.m, problem.k))
+    free = ~problem.jammed
+    if free.any():
+        P[free] = weighted_pinv(problem.B[:, free], problem.Wu[np.ix_(free, free)], problem.Wv, rcond=rcond)
+    return P
+
+
+class _PinvBase(Method):
+    equation = "Eq 1.23"
+    options = _OPTIONS
+
+    def __init__(self, problem: Problem, *, rcond: float = RCOND, incremental: bool = False) -> None:
+        super().__init__(problem)
+        rcond = float(rcond)
+        if not (0.0 <= rcond < 1.0):
+            raise ValueError(f"rcond: must be in [0, 1), got {rcond!r}")
+        self.P = distribution_matrix(problem, rcond)
+        self.incremental = bool(incremental)
+        # u = c + P v with c = up - P B up: one matrix-vector product per call.
+        self.c = problem.up - self.P @ (problem.B @ problem.up)
+        self._PT = np.ascontiguousarray(self.P.T)
+
+    def _unconstrained(self, v: FloatArray, u_prev: FloatArray | None) -> FloatArray:
+        if self.incremental and u_prev is not None:
+            return u_prev + self.P @ (v - self.problem.B @ u_prev)
+        return self.c + self.P @ v
+
+
+@register("pinv")
+class Pinv(_PinvBase):
+    summary = "biased weighted pseudo-inverse, min (u-up)'Wu(u-up) s.t. Bu=v; clipped where inadmissible"
+
+    def solve(self, v, lo, hi, u_prev):
+        return np.minimum(np.maximum(self._unconstrained(v, u_prev), lo), hi), 0
+
+    def solve_batch(self, V, lo, hi):
+        return np.minimum(np.maximum(self.c + V @ self._PT, lo), hi)
+
+
+@register("pinv_clip")
+class PinvClip(Pinv):
+    summary = "Eq 1.23 with individual commands clipped to their limits"
+
+
+@register("pinv_scale")
+class PinvScale(_PinvBase):
+    summary = "direction-preserving weighted pseudo-inverse: the increment scaled by one factor"
+
+    def _base(self, lo: FloatArray, hi: FloatArray, u_prev: FloatArray | None) -> FloatArray:
+        b = u_prev if (self.incremental and u_prev is not None) else self.problem.up
+        return np.minimum(np.maximum(b, lo), hi)
+
+    def solve(self, v, lo, hi, u_prev):
+        base = self._base(lo, hi, u_prev)
+        du = self.P @ (v - self.problem.B @ base)
+        return base + max_scale(base, du, lo, hi) * du, 0
+
+    def solve_batch(self, V, lo, hi):
+        base = np.minimum(np.maximum(self.problem.up, lo), hi)
+        dU = (V - self.problem.B @ base) @ self._PT
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s_up = np.where(dU > 0, (hi - base) / dU, np.inf)
+            s_dn = np.where(dU < 0, (lo - base) / dU, np.inf)
+        s = np.clip(np.minimum(s_up, s_dn).min(axis=1), 0.0, 1.0)
+        return base + s[:, None] * dU
+
+
+class SafeCommand:
+    """The documented safe answer returned with ``status="fallback"``.
+
+    The weighted pseudo-inverse of Eq 1.23 clipped to the call's bounds: closed form,
+    always finite and admissible, and close to the optimisers' answers for attainable
+    demands.
+    """
+
+    def __init__(self, problem: Problem) -> None:
+        self._pinv = Pinv(problem)
+
+    def __call__(self, v: FloatArray, lo: FloatArray, hi: FloatArray) -> FloatArray:
+        return self._pinv.solve(v, lo, hi, None)[0]

@@ -1,0 +1,107 @@
+"""One registry of allocation methods, all with the same signature.
+
+A method is a class deriving from :class:`Method`, registered with
+``@register("name")``.  It is constructed once per allocator with the problem
+and its options (precomputing whatever it can) and then called with a demand
+and the effective bounds of that call (position limits, or the rate-limited
+bounds of Eq 1.28).  Adding a method is one new module plus one decorator.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from typing import Any, ClassVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .exceptions import OptionError, UnknownMethodError
+from .problem import Problem
+
+__all__ = ["Method", "register", "get_method", "methods", "method_info"]
+
+FloatArray = NDArray[np.float64]
+
+_REGISTRY: dict[str, type[Method]] = {}
+
+
+class Method(ABC):
+    """Base class of allocation methods.
+
+    Subclasses set the class attributes and implement :meth:`solve`.  ``solve``
+    may return a command slightly outside ``[lo, hi]`` (round-off); the allocator
+    clips it and computes the status.  It raises :class:`~alloc.exceptions.SolverError`
+    when its backend fails; the allocator then returns the safe fallback.
+    """
+
+    #: registry name
+    name: ClassVar[str] = ""
+    #: where the method comes from (seed equation numbers)
+    equation: ClassVar[str] = ""
+    #: one line: what the method optimises
+    summary: ClassVar[str] = ""
+    #: accepted options: name -> description (shown by ``alloc methods`` and the service)
+    options: ClassVar[dict[str, str]] = {}
+
+    def __init__(self, problem: Problem) -> None:
+        self.problem = problem
+
+    @abstractmethod
+    def solve(
+        self, v: FloatArray, lo: FloatArray, hi: FloatArray, u_prev: FloatArray | None
+    ) -> tuple[FloatArray, int]:
+        """Return ``(u, iterations)`` for demand ``v`` within bounds ``[lo, hi]``."""
+
+    def solve_batch(self, V: FloatArray, lo: FloatArray, hi: FloatArray) -> FloatArray | None:
+        """Vectorised allocation of the rows of ``V`` (N, k); ``None`` if not vectorised."""
+        return None
+
+
+def register(name: str):
+    """Class decorator registering an allocation method under ``name``."""
+
+    def deco(cls: type[Method]) -> type[Method]:
+        if name in _REGISTRY:
+            raise ValueError(f"method {name!r} registered twice")
+        cls.name = name
+        _REGISTRY[name] = cls
+        return cls
+
+    return deco
+
+
+def _load_builtin() -> None:
+    # Importing the package registers the built-in methods (one module per family).
+    from . import methods as _methods  # noqa: F401
+
+
+def get_method(name: str) -> type[Method]:
+    """The method class registered as ``name``; unknown names list the registered ones."""
+    _load_builtin()
+    if not isinstance(name, str) or name not in _REGISTRY:
+        raise UnknownMethodError(f"method: unknown method {name!r}; registered: {', '.join(sorted(_REGISTRY))}")
+    return _REGISTRY[name]
+
+
+def methods() -> list[str]:
+    """Names of the registered allocation methods."""
+    _load_builtin()
+    return sorted(_REGISTRY)
+
+
+def method_info(name: str) -> dict[str, Any]:
+    """Name, seed equation, summary and options of a method (for the CLI and the service)."""
+    cls = get_method(name)
+    return {"name": name, "equation": cls.equation, "summary": cls.summary, "options": dict(cls.options)}
+
+
+def build(problem: Problem, name: str, options: dict[str, Any]) -> Method:
+    """Construct method ``name`` for ``problem``; unknown options raise OptionError (a TypeError)."""
+    cls = get_method(name)
+    unknown = sorted(set(options) - set(cls.options))
+    if unknown:
+        allowed = ", ".join(sorted(cls.options)) or "none"
+        raise OptionError(f"{name}: unknown option(s) {unknown}; accepted: {allowed}")
+    if not isinstance(problem, Problem):
+        raise TypeError(f"problem: expected alloc.Problem, got {type(problem).__name__}")
+    return cls(problem, **options)

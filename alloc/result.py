@@ -1,0 +1,139 @@
+"""Results of an allocation: the command, what it achieves, and how it was found."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import Enum
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = ["Status", "Result", "BatchResult", "EXACT_RTOL"]
+
+#: Relative tolerance of the ``exact`` status: ``max|B u - v| <= EXACT_RTOL * max(1, max|v|)``.
+EXACT_RTOL = 1e-6
+
+
+class Status(str, Enum):
+    """Outcome of one allocation (a closed set).
+
+    ``exact``
+        ``B u = v`` within ``EXACT_RTOL``.
+    ``unattainable``
+        ``v`` lies outside what the method reaches with admissible ``u``; ``u`` is the
+        method's best admissible answer and ``v - B u`` is reported as ``unallocated``.
+    ``fallback``
+        The numerical backend failed or hit its iteration cap; ``u`` is the documented
+        safe answer (the weighted pseudo-inverse clipped to the limits, see
+        :func:`alloc.methods.pseudo_inverse.safe_command`), always finite and admissible.
+    """
+
+    EXACT = "exact"
+    UNATTAINABLE = "unattainable"
+    FALLBACK = "fallback"
+
+    def __str__(self) -> str:
+        return self.value
+
+
+def exact_tolerance(v: NDArray[np.float64]) -> float:
+    """Absolute moment tolerance used for the ``exact`` status of demand ``v``."""
+    return EXACT_RTOL * max(1.0, float(np.abs(v).max()) if v.size else 1.0)
+
+
+@dataclass(frozen=True, slots=True)
+class Result:
+    """One allocation.
+
+    Attributes
+    ----------
+    u : ndarray (m,)
+        Effector command, finite and within the (rate-limited) bounds.
+    v : ndarray (k,)
+        The demand.
+    v_achieved : ndarray (k,)
+        ``B u``.
+    status : Status
+    method : str
+    iterations : int
+        Solver iterations or cascade steps (0 for closed-form methods).
+    solve_time : float
+        Seconds spent in the method (excluding validation).
+    message : str
+        Why a fallback happened, or empty.
+    """
+
+    u: NDArray[np.float64]
+    v: NDArray[np.float64]
+    v_achieved: NDArray[np.float64]
+    status: Status
+    method: str
+    iterations: int = 0
+    solve_time: float = 0.0
+    message: str = ""
+
+    @property
+    def unallocated(self) -> NDArray[np.float64]:
+        """The part of the demand left unallocated, ``v - B u`` (for hedging/anti-windup)."""
+        return self.v - self.v_achieved
+
+    @property
+    def moment_error(self) -> float:
+        """Euclidean norm of ``v - B u``."""
+        return float(np.linalg.norm(self.v - self.v_achieved))
+
+    @property
+    def fallback(self) -> bool:
+        return self.status is Status.FALLBACK
+
+    def limit_violation(self, lo: NDArray[np.float64], hi: NDArray[np.float64]) -> float:
+        """Largest amount by which ``u`` leaves ``[lo, hi]`` (0 when admissible)."""
+        return float(max(0.0, (lo - self.u).max(), (self.u - hi).max()))
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "u": self.u.tolist(),
+            "v": self.v.tolist(),
+            "v_achieved": self.v_achieved.tolist(),
+            "unallocated": self.unallocated.tolist(),
+            "status": self.status.value,
+            "method": self.method,
+            "iterations": int(self.iterations),
+            "solve_time": float(self.solve_time),
+            "message": self.message,
+        }
+
+
+@dataclass(frozen=True, slots=True)
+class BatchResult:
+    """Allocations of ``N`` demands: arrays stacked along the first axis."""
+
+    u: NDArray[np.float64]
+    v: NDArray[np.float64]
+    v_achieved: NDArray[np.float64]
+    status: NDArray[np.str_]
+    method: str
+    solve_time: float = 0.0
+
+    @property
+    def unallocated(self) -> NDArray[np.float64]:
+        return self.v - self.v_achieved
+
+    def __len__(self) -> int:
+        return int(self.u.shape[0])
+
+    def counts(self) -> dict[str, int]:
+        """How many results have each status."""
+        return {s.value: int((self.status == s.value).sum()) for s in Status}
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "u": self.u.tolist(),
+            "v_achieved": self.v_achieved.tolist(),
+            "unallocated": self.unallocated.tolist(),
+            "status": self.status.tolist(),
+            "method": self.method,
+            "counts": self.counts(),
+            "solve_time": float(self.solve_time),
+        }

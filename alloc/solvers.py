@@ -1,0 +1,266 @@
+"""A small internal interface to well-kept QP/LP solvers, built once and updated per call.
+
+Every backend solves
+
+    minimise 0.5 x' H x + f' x   subject to  lb <= x <= ub,  bl <= A x <= bu
+
+where ``H`` may be ``None`` (a linear program) and rows with ``bl == bu`` are
+equalities.  A backend is set up once (the solver model is kept) and each call
+only updates the data that change (cost vector, bounds, sometimes ``A``), so
+the hot path never rebuilds a model.  Measured costs are in
+``benchmarks/bench_alloc.py`` and the README.
+
+Backends
+--------
+``daqp``
+    DAQP's dual active-set solver through a persistent ``daqp.Model`` (default for QPs
+    and LPs: a few microseconds on allocation-sized problems; LPs and singular
+    Hessians use its proximal-point iterations).
+``highs``
+    HiGHS (highspy) with the model kept between calls; LPs only.
+any name in ``qpsolvers.available_solvers`` (``osqp``, ``clarabel``, ``proxqp``, ...)
+    Through qpsolvers, which rebuilds the solver each call: slow, for cross-checks.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .exceptions import OptionError, SolverError
+
+__all__ = ["Backend", "make_backend", "backends"]
+
+FloatArray = NDArray[np.float64]
+
+
+class Backend(Protocol):
+    def solve(
+        self,
+        f: FloatArray | None = None,
+        lb: FloatArray | None = None,
+        ub: FloatArray | None = None,
+        bl: FloatArray | None = None,
+        bu: FloatArray | None = None,
+        A: FloatArray | None = None,
+    ) -> tuple[FloatArray, int]:
+        """Solve with updated data; return ``(x, iterations)`` or raise SolverError."""
+        ...
+
+
+def backends(lp: bool = False) -> list[str]:
+    """Names of the backends usable here (for LPs when ``lp``)."""
+    names = ["daqp", "highs"] if lp else ["daqp"]
+    if not lp:
+        try:
+            import qpsolvers
+
+            names += [s for s in qpsolvers.available_solvers if s not in names]
+        except ImportError:  # pragma: no cover - qpsolvers is a dependency
+            pass
+    return names
+
+
+def make_backend(
+    name: str,
+    H: FloatArray | None,
+    f: FloatArray,
+    A: FloatArray,
+    bl: FloatArray,
+    bu: FloatArray,
+    lb: FloatArray,
+    ub: FloatArray,
+    *,
+    singular: bool = False,
+) -> Backend:
+    """Build backend ``name`` for the given problem structure.
+
+    ``singular`` says the Hessian is only positive semidefinite (DAQP then uses its
+    proximal-point iterations).
+    """
+    lp = H is None
+    if name == "daqp":
+        return _Daqp(H, f, A, bl, bu, lb, ub, singular=singular or lp)
+    if name == "highs":
+        if not lp:
+            raise OptionError("backend: 'highs' is used for linear programs only (it returns wrong QP answers, see SOLVER-NOTES)")
+        return _Highs(f, A, bl, bu, lb, ub)
+    if lp:
+        raise OptionError(f"backend: {name!r} is not an LP backend; use one of {backends(lp=True)}")
+    return _Qpsolvers(name, H, f, A, bl, bu, lb, ub)
+
+
+class _Daqp:
+    """Persistent DAQP workspace (``daqp.Model``)."""
+
+    _EQ = 5  # DAQP sense flag of an equality constraint
+
+    def __init__(self, H, f, A, bl, bu, lb, ub, *, singular: bool) -> None:
+        import daqp
+
+        self._n = int(f.size)
+        # daqp.Model needs a matrix: an LP is a QP with H = 0 solved by proximal-point iterations.
+        self._H = np.zeros((f.size, f.size)) if H is None else np.array(H, dtype=float, order="C")
+        self._A = np.array(A, dtype=float, order="C")
+        self._bupper = np.concatenate([ub, bu]).astype(float)
+        self._blower = np.concatenate([lb, bl]).astype(float)
+        self._sense = np.zeros(self._bupper.size, dtype=np.int32)
+        self._sense[self._n:][bl == bu] = self._EQ
+        self._f = np.array(f, dtype=float)
+        self._model = daqp.Model()
+        flag, _ = self._model.setup(self._H, self._f, self._A, self._bupper, self._blower, self._sense)
+        if flag < 0:
+            raise SolverError(f"daqp setup failed with exit flag {flag}")
+        settings = {"iter_limit": 2000}
+        if singular:
+            settings["eps_prox"] = 1e-6
+        self._model.settings = settings
+        self._base_sense = self._sense.copy()
+
+    def solve(self, f=None, lb=None, ub=None, bl=None, bu=None, A=None):
+        n = self._n
+        upd: dict = {}
+        if f is not None:
+            upd["f"] = np.asarray(f, dtype=float)
+        if lb is not None or bl is not None:
+            if lb is not None:
+                self._blower[:n] = lb
+            if bl is not None:
+                self._blower[n:] = bl
+            upd["blower"] = self._blower
+        if ub is not None or bu is not None:
+            if ub is not None:
+                self._bupper[:n] = ub
+            if bu is not None:
+                self._bupper[n:] = bu
+            upd["bupper"] = self._bupper
+        if A is not None:
+            upd["A"] = np.array(A, dtype=float, order="C")
+        if upd:
+            upd["sense"] = self._base_sense  # cold start: no stale active set across updates
+            flag = self._model.update(**upd)
+            if flag < 0:
+                raise SolverError(f"daqp update failed with exit flag {flag}")
+        x, _fval, flag, info = self._model.solve()
+        if flag < 1 or not np.all(np.isfinite(x)):
+            raise SolverError(f"daqp returned exit flag {flag}")
+        return np.array(x, dtype=float), int(info.get("iterations", 0))
+
+
+class _Highs:
+    """HiGHS LP kept between calls; bounds and costs are changed in place."""
+
+    def __init__(self, f, A, bl, bu, lb, ub) -> None:
+        import highspy
+
+        self._hs = highspy
+        h = highspy.Highs()
+        h.setOptionValue("output_flag", False)
+        lp = highspy.HighsLp()
+        n, mA = int(f.size), int(A.shape[0])
+        lp.num_col_, lp.num_row_ = n, mA
+        lp.col_cost_ = np.asarray(f, dtype=float)
+        lp.col_lower_ = np.asarray(lb, dtype=float)
+        lp.col_upper_ = np.asarray(ub, dtype=float)
+        lp.row_lower_ = np.asarray(bl, dtype=float)
+        lp.row_upper_ = np.asarray(bu, dtype=float)
+        Acsc = _to_csc(A)
+        lp.a_matrix_.format_ = highspy.MatrixFormat.kColwise
+        lp.a_matrix_.start_, lp.a_matrix_.index_, lp.a_matrix_.value_ = Acsc
+        lp.a_matrix_.num_col_, lp.a_matrix_.num_row_ = n, mA
+        h.passModel(lp)
+        self._h, self._n, self._mA = h, n, mA
+        self._cols = np.arange(n, dtype=np.int32)
+        self._rows = np.arange(mA, dtype=np.int32)
+        self._A = np.array(A, dtype=float)
+
+    def solve(self, f=None, lb=None, ub=None, bl=None, bu=None, A=None):
+        h = self._h
+        if f is not None:
+            h.changeColsCost(self._n, self._cols, np.asarray(f, dtype=float))
+        if lb is not None or ub is not None:
+            info = h.getLp()
+            lo = np.asarray(lb if lb is not None else info.col_lower_, dtype=float)
+            hi = np.asarray(ub if ub is not None else info.col_upper_, dtype=float)
+            h.changeColsBounds(self._n, self._cols, lo, hi)
+        if bl is not None or bu is not None:
+            info = h.getLp()
+            lo = np.asarray(bl if bl is not None else info.row_lower_, dtype=float)
+            hi = np.asarray(bu if bu is not None else info.row_upper_, dtype=float)
+            h.changeRowsBounds(self._mA, self._rows, lo, hi)
+        if A is not None:
+            changed = np.argwhere(A != self._A)
+            for r, c in changed:
+                h.changeCoeff(int(r), int(c), float(A[r, c]))
+            self._A = np.array(A, dtype=float)
+        h.run()
+        status = h.getModelStatus()
+        if status != self._hs.HighsModelStatus.kOptimal:
+            raise SolverError(f"highs returned model status {h.modelStatusToString(status)}")
+        x = np.array(h.getSolution().col_value, dtype=float)
+        if not np.all(np.isfinite(x)):
+            raise SolverError("highs returned non-finite values")
+        return x, int(h.getInfo().simplex_iteration_count)
+
+
+class _Qpsolvers:
+    """Any qpsolvers backend; the problem is rebuilt on every call (slow, for cross-checks)."""
+
+    def __init__(self, name, H, f, A, bl, bu, lb, ub) -> None:
+        import qpsolvers
+
+        if name not in qpsolvers.available_solvers:
+            raise OptionError(f"backend: {name!r} is not available; available: {backends()}")
+        self._name = name
+        self._H = np.array(H, dtype=float)
+        self._f, self._A = np.array(f, dtype=float), np.array(A, dtype=float)
+        self._bl, self._bu = np.array(bl, dtype=float), np.array(bu, dtype=float)
+        self._lb, self._ub = np.array(lb, dtype=float), np.array(ub, dtype=float)
+
+    def solve(self, f=None, lb=None, ub=None, bl=None, bu=None, A=None):
+        import qpsolvers
+
+        f = self._f if f is None else f
+        lb = self._lb if lb is None else lb
+        ub = self._ub if ub is None else ub
+        bl = self._bl if bl is None else bl
+        bu = self._bu if bu is None else bu
+        A = self._A if A is None else A
+        eq = bl == bu
+        G_parts, h_parts = [], []
+        up_rows = ~eq & np.isfinite(bu)
+        lo_rows = ~eq & np.isfinite(bl)
+        if up_rows.any():
+            G_parts.append(A[up_rows]); h_parts.append(bu[up_rows])
+        if lo_rows.any():
+            G_parts.append(-A[lo_rows]); h_parts.append(-bl[lo_rows])
+        G = np.vstack(G_parts) if G_parts else None
+        h = np.concatenate(h_parts) if h_parts else None
+        Aeq = A[eq] if eq.any() else None
+        beq = bu[eq] if eq.any() else None
+        try:
+            x = qpsolvers.solve_qp(self._H, f, G, h, Aeq, beq, lb, ub, solver=self._name,
+                                   **_TIGHT.get(self._name, {}))
+        except Exception as exc:  # backend errors are re-raised as SolverError
+            raise SolverError(f"{self._name} failed: {exc}") from exc
+        if x is None or not np.all(np.isfinite(x)):
+            raise SolverError(f"{self._name} found no solution")
+        return np.asarray(x, dtype=float), 0
+
+
+# Stock tolerances of first-order/interior-point solvers do not resolve the small
+# regularisation terms of allocation QPs (SOLVER-NOTES); tighten them.
+_TIGHT = {
+    "osqp": {"eps_abs": 1e-9, "eps_rel": 1e-9, "polish": True, "max_iter": 200000},
+    "clarabel": {"tol_gap_abs": 1e-10, "tol_gap_rel": 1e-10, "tol_feas": 1e-10},
+}
+
+
+def _to_csc(A: FloatArray) -> tuple[NDArray[np.int32], NDArray[np.int32], FloatArray]:
+    """Dense matrix to CSC (start, index, value), keeping explicit structural entries."""
+    from scipy.sparse import csc_matrix
+
+    M = csc_matrix(np.asarray(A, dtype=float))
+    return M.indptr.astype(np.int32), M.indices.astype(np.int32), M.data.astype(float)
