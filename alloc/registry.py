@@ -73,6 +73,7 @@ def register(name: str):
 def _load_builtin() -> None:
     # Importing the package registers the built-in methods (one module per family).
     from . import methods as _methods  # noqa: F401
+    from . import ams as _ams  # noqa: F401  (facet-search direct allocation)
 
 
 def get_method(name: str) -> type[Method]:
