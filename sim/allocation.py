@@ -1,0 +1,118 @@
+"""The control distribution in the loop: any method of the allocation registry.
+
+The simulator calls the same :func:`alloc.make_allocator` a user would, on the
+vehicle's allocation :class:`alloc.Problem` (effectiveness ``B_alloc``,
+Table limits, rate limits, seed weights).  When the scenario says the
+allocator knows the failure, the failed effectors' new limits (jam position,
+reduced position and rate limits, lost effectiveness) go into the Problem.
+
+One extra method lives here because it is not an allocation algorithm: the
+seed's printed static distribution matrix, ``static`` (``u = B_k u_c``, seed
+Eq 4.12, 4.19, 4.24), used to reproduce the seed's designs exactly.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from sim.loop import Failure, Vehicle
+
+__all__ = ["LoopAllocator", "STATIC", "allocation_problem", "build_allocator"]
+
+#: Name of the seed's printed static distribution (not a registry method).
+STATIC = "static"
+
+#: ``(v, u_prev, dt) -> (u_cmd, unallocated)``
+LoopAllocator = Callable[[np.ndarray, np.ndarray, float], tuple[np.ndarray, np.ndarray]]
+
+
+def allocation_problem(vehicle: Vehicle, failure: Failure | None = None) -> Any:
+    """The vehicle's :class:`alloc.Problem`; with ``failure``, as told of the failed effectors.
+
+    Plant-level failures (A, B scaling) are unknown to the allocator by
+    design (seed: "sudden, unknown failure"); effector failures are told as:
+    jam -> ``umin = umax = position``; hard-over -> jam at the hard-over
+    position; float -> zero effectiveness; limits -> new position/rate limits;
+    effectiveness -> scaled column.  Reduced bandwidth and delays are not
+    expressible in a static Problem and are not told.
+    """
+    import alloc
+
+    problem = alloc.Problem(
+        vehicle.B_alloc,
+        vehicle.umin,
+        vehicle.umax,
+        Wu=None if vehicle.Wu is None else np.asarray(vehicle.Wu, dtype=float),
+        rate_min=-vehicle.rate_max,
+        rate_max=vehicle.rate_max,
+        names=vehicle.effector_names,
+        axes=vehicle.channels,
+    )
+    if failure is None:
+        return problem
+    for f in failure.actuators:
+        i = f.index
+        if f.kind in ("jam", "hardover"):
+            pos = f.position if f.position is not None else vehicle.umax[i]
+            problem = problem.with_jam(i, pos)
+        elif f.kind == "float":
+            problem = problem.with_effectiveness(i, 0.0)
+        elif f.kind == "effectiveness":
+            problem = problem.with_effectiveness(i, float(f.fraction))
+        elif f.kind == "limits":
+            if f.lo is not None or f.hi is not None:
+                lo = problem.umin[i] if f.lo is None else f.lo
+                hi = problem.umax[i] if f.hi is None else f.hi
+                problem = problem.with_limits(i, lo, hi)
+            if f.rate is not None:
+                rmin, rmax = problem.rate_min.copy(), problem.rate_max.copy()
+                rmin[i], rmax[i] = -f.rate, f.rate
+                problem = problem.replace(rate_min=rmin, rate_max=rmax)
+    return problem
+
+
+def build_allocator(
+    vehicle: Vehicle,
+    method: str,
+    options: dict[str, Any],
+    *,
+    failure: Failure | None = None,
+    u_prev: np.ndarray | None = None,
+) -> LoopAllocator:
+    """Allocator callable for the loop.
+
+    ``static`` ignores the failure (a fixed matrix cannot be told anything).
+    For ``ganging`` the seed's distribution ``B_k`` is the default gang matrix.
+    """
+    if method == STATIC:
+        if options:
+            raise TypeError(f"method {STATIC!r} takes no options, got {sorted(options)}")
+        # v = demand_map u_c, so u = B_k u_c = B_k demand_map^-1 v.
+        Bk = vehicle.Bk_seed @ np.linalg.inv(vehicle.demand_map)
+        B = vehicle.B_alloc
+
+        def static(v: np.ndarray, u_prev: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+            u = Bk @ v
+            return u, v - B @ u
+
+        return static
+
+    import alloc
+
+    opts = dict(options)
+    if method == "ganging" and "G" not in opts:
+        opts["G"] = vehicle.Bk_seed
+    problem = allocation_problem(vehicle, failure)
+    solve = alloc.make_allocator(problem, method, **opts)
+    lo, hi = problem.umin, problem.umax
+
+    def registry(v: np.ndarray, u_prev: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        # A jammed effector's previous command may lie outside its new (point) limits.
+        res = solve(v, u_prev=np.clip(u_prev, lo, hi), dt=dt)
+        return res.u, res.unallocated
+
+    return registry
