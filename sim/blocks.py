@@ -301,29 +301,33 @@ class ActuatorBank:
 
 
 class DelayLine:
-    """Pure time delay of ``round(delay / dt)`` steps on a vector signal (ring buffer)."""
+    """Pure time delay of ``round(delay / dt)`` steps on a vector signal (ring buffer).
 
-    def __init__(self, width: int, dt: float, delay: float = 0.0) -> None:
+    ``delay`` may be a scalar or one value per component.
+    """
+
+    def __init__(self, width: int, dt: float, delay: float | np.ndarray = 0.0) -> None:
         self.width = width
         self.dt = dt
+        self._last = np.zeros(width)
         self.set_delay(delay)
 
-    def set_delay(self, delay: float) -> None:
+    def set_delay(self, delay: float | np.ndarray) -> None:
         """Change the delay; the buffer is pre-filled with the last value pushed."""
-        n = int(round(delay / self.dt))
-        last = getattr(self, "_last", np.zeros(self.width))
-        self.n = n
-        self._buf = np.tile(last, (max(n, 1), 1))
+        self.n = np.broadcast_to(np.rint(np.asarray(delay, dtype=float) / self.dt).astype(int), (self.width,)).copy()
+        self._len = int(self.n.max()) + 1
+        self._buf = np.tile(self._last, (self._len, 1))
+        self._cols = np.arange(self.width)
         self._i = 0
 
     def push(self, u: np.ndarray) -> np.ndarray:
-        """Store ``u`` and return the value pushed ``n`` steps ago (``u`` itself if n = 0)."""
+        """Store ``u`` and return, per component, the value pushed ``n`` steps ago."""
         self._last = u
-        if self.n == 0:
+        if self._len == 1:
             return u
-        out = self._buf[self._i].copy()
         self._buf[self._i] = u
-        self._i = (self._i + 1) % self.n
+        out = self._buf[(self._i - self.n) % self._len, self._cols]
+        self._i = (self._i + 1) % self._len
         return out
 
 

@@ -104,7 +104,8 @@ class Failure:
     B: np.ndarray | None = None
     D: np.ndarray | None = None
     actuators: tuple[ActuatorFailure, ...] = ()
-    delay: float | None = None
+    #: actuator time delay after the failure (s): scalar or one per effector
+    delay: float | np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -168,6 +169,9 @@ class _Recorder:
         self.eff = np.zeros((self.n, self.m))
         self.rate = np.zeros((self.n, self.m))
         self.extra = np.zeros((self.n, self.n_extra))
+        self.lo = np.zeros((self.n, self.m))
+        self.hi = np.zeros((self.n, self.m))
+        self.rmax = np.zeros((self.n, self.m))
         self.count = 0
 
 
@@ -233,6 +237,7 @@ def simulate(
     method: str,
     method_options: dict | None = None,
     allocator_knows_failure: bool = False,
+    rate_aware: bool = False,
     actuators: bool = True,
     noise: bool = True,
     duration: float,
@@ -276,7 +281,7 @@ def simulate(
     )
     bank = ActuatorBank(vehicle.actuators, dt)
     delay = DelayLine(m, dt, 0.0)
-    allocator: LoopAllocator = build_allocator(vehicle, method, method_options or {})
+    allocator: LoopAllocator = build_allocator(vehicle, method, method_options or {}, rate_aware=rate_aware)
 
     smc = isinstance(controller, SMCDesign)
     if smc:
@@ -326,7 +331,9 @@ def simulate(
             failed = True
             _inject(failure, plant, bank, delay)
             if allocator_knows_failure:
-                allocator = build_allocator(vehicle, method, method_options or {}, failure=failure, u_prev=u_cmd)
+                allocator = build_allocator(
+                    vehicle, method, method_options or {}, failure=failure, rate_aware=rate_aware
+                )
         y_all = plant.output(u_act)
         z_all = y_all + noise_all[step]
         if divergence_check(y_all[ctrl], output_bound, plant.x):
@@ -367,6 +374,7 @@ def simulate(
             rec.unalloc[i] = unalloc
             rec.eff[i] = u_act
             rec.rate[i] = bank.rate_out if step else 0.0
+            rec.lo[i], rec.hi[i], rec.rmax[i] = bank.lo, bank.hi, bank.rmax
             for j, p in enumerate(pilots):
                 rec.extra[i, 2 * j] = pilot_cmds[j][step]
                 rec.extra[i, 2 * j + 1] = pilot_att[j]
@@ -402,8 +410,9 @@ def simulate(
         effectors=rec.eff[:n],
         effector_rates=rec.rate[:n],
         effector_names=vehicle.effector_names,
-        effector_limits=(vehicle.umin, vehicle.umax),
-        rate_limits=(-vehicle.rate_max, vehicle.rate_max),
+        # Limits as they were at each sample (failures change them).
+        effector_limits=(rec.lo[:n], rec.hi[:n]),
+        rate_limits=(-rec.rmax[:n], rec.rmax[:n]),
         failure_time=t_fail,
         diverged=diverged,
         unallocated=rec.unalloc[:n],

@@ -96,7 +96,9 @@ class SimResult:
     effectors: np.ndarray | None = None
     effector_rates: np.ndarray | None = None
     effector_names: list[str] = field(default_factory=list)
+    #: (lo, hi), each (m,) or (N, m) when failures change them during the run
     effector_limits: tuple[np.ndarray, np.ndarray] | None = None
+    #: (min, max) rates, each (m,) or (N, m)
     rate_limits: tuple[np.ndarray, np.ndarray] | None = None
     failure_time: float | None = None
     diverged: bool = False

@@ -231,7 +231,7 @@ def loop_shaped_design() -> LoopShapedDesign:
 
 #: Divergence bound on |alpha| (deg), |ps| (deg/s), |beta| (deg): far outside the
 #: validity of a model linearised at 1 g, wings level (see sim.result).
-OUTPUT_BOUND = np.array([45.0, 300.0, 30.0])
+OUTPUT_BOUND = np.array([45.0, 200.0, 30.0])
 
 FAILURES = {"seed": "t = 20 s: " + failure().description}
 
@@ -260,6 +260,8 @@ def run(
     failure_time: float = 20.0,
     record_every: int = 10,
     method_options: dict | None = None,
+    pilot_gain: float = 2.0,
+    pilot_delay: float = 0.2,
 ) -> SimResult:
     """Run the ICE scenario.
 
@@ -281,7 +283,7 @@ def run(
     row = np.zeros(len(OUTPUTS))
     row[OUTPUTS.index("phi")] = 1.0
     roll_pilot = Pilot(
-        channel=1, row=row, name="phi",
+        channel=1, row=row, name="phi", gain=pilot_gain, delay=pilot_delay,
         attitude_command=lambda tt: sum_of_sines(tt, 10.0, phase_step=np.pi / 4),  # xi = 10, i*pi/4
     )
     return simulate(
