@@ -1,0 +1,51 @@
+"""Service settings, read from the environment (prefix ``ALLOC_``).
+
+=========================  ==========================================================
+``ALLOC_DATA_DIR``         directory of the embedded database (default ``./data``)
+``ALLOC_DATABASE_URL``     SQLAlchemy URL; default ``sqlite:///<data_dir>/alloc.sqlite3``
+                           (a ``postgresql+psycopg://...`` URL works through the same layer)
+``ALLOC_API_KEY``          when set, write endpoints require header ``X-API-Key``
+``ALLOC_MAX_BODY_BYTES``   request body limit, larger bodies get 413 (default 4 MiB)
+``ALLOC_CACHE_SIZE``       built allocators kept in memory (default 512)
+=========================  ==========================================================
+
+The size caps (``MAX_EFFECTORS``, ``MAX_AXES``, ``MAX_BATCH``) are part of the API
+contract (they appear in the OpenAPI schema) and are therefore constants, not settings.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from pydantic import Field
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+__all__ = ["Settings", "MAX_EFFECTORS", "MAX_AXES", "MAX_BATCH", "MAX_DIRECTIONS"]
+
+#: largest number of effectors ``m`` of a problem or vehicle
+MAX_EFFECTORS = 64
+#: largest number of virtual-control axes ``k``
+MAX_AXES = 6
+#: largest number of demands in one batch request
+MAX_BATCH = 10_000
+#: largest number of directions in one AMS request
+MAX_DIRECTIONS = 256
+
+
+class Settings(BaseSettings):
+    """Runtime configuration; every field can be set as ``ALLOC_<FIELD>``."""
+
+    model_config = SettingsConfigDict(env_prefix="ALLOC_", extra="ignore")
+
+    data_dir: Path = Path("./data")
+    database_url: str | None = None
+    api_key: str | None = None
+    max_body_bytes: int = Field(default=4 * 1024 * 1024, gt=0)
+    cache_size: int = Field(default=512, gt=0)
+
+    @property
+    def resolved_database_url(self) -> str:
+        """The configured URL, or the embedded SQLite file under ``data_dir``."""
+        if self.database_url:
+            return self.database_url
+        return f"sqlite:///{(self.data_dir / 'alloc.sqlite3').resolve()}"

@@ -1,0 +1,159 @@
+"""Errors of the HTTP layer and their RFC 9457 ``application/problem+json`` form.
+
+Routes raise library exceptions (:class:`alloc.AllocError` subclasses) or the
+:class:`ServiceError` subclasses below; :func:`install_handlers` maps every one of
+them to a problem document in one place::
+
+    {"type": "urn:alloc:problem:invalid-problem", "title": "Invalid allocation problem",
+     "status": 422, "detail": "umin/umax: umin[2] = 3 > umax[2] = 1",
+     "errors": [{"loc": ["body", "umin"], "pointer": "/umin", "reason": "..."}]}
+
+``loc`` is the FastAPI-style location, ``pointer`` a JSON Pointer (RFC 6901) into the
+request body when the error is in the body.
+"""
+
+from __future__ import annotations
+
+import logging
+import re
+from collections.abc import Sequence
+from typing import Any
+
+from fastapi import FastAPI, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+from starlette.exceptions import HTTPException as StarletteHTTPException
+
+import alloc
+
+__all__ = [
+    "ServiceError", "NotFound", "Unauthorized", "PayloadTooLarge", "InvalidRequest",
+    "problem_response", "install_handlers", "PROBLEM_JSON",
+]
+
+PROBLEM_JSON = "application/problem+json"
+_log = logging.getLogger("service")
+
+
+class ServiceError(Exception):
+    """Base of the service's own errors: an HTTP status, a problem type and title."""
+
+    status: int = 400
+    slug: str = "bad-request"
+    title: str = "Bad request"
+
+    def __init__(self, detail: str, errors: Sequence[dict[str, Any]] = ()) -> None:
+        super().__init__(detail)
+        self.detail = detail
+        self.errors = list(errors)
+
+
+class NotFound(ServiceError):
+    status, slug, title = 404, "not-found", "Resource not found"
+
+
+class Unauthorized(ServiceError):
+    status, slug, title = 401, "unauthorized", "Missing or wrong API key"
+
+
+class PayloadTooLarge(ServiceError):
+    status, slug, title = 413, "payload-too-large", "Request body too large"
+
+
+class InvalidRequest(ServiceError):
+    """A request that is well-formed JSON but not a valid allocation request."""
+
+    status, slug, title = 422, "invalid-request", "Invalid request"
+
+
+def _error(loc: Sequence[str | int], reason: str) -> dict[str, Any]:
+    body = list(loc[1:]) if loc and loc[0] == "body" else None
+    pointer = "/" + "/".join(str(p).replace("~", "~0").replace("/", "~1") for p in body) if body else None
+    return {"loc": list(loc), "pointer": pointer, "reason": reason}
+
+
+def field_error(field: str, reason: str, *, prefix: Sequence[str | int] = ("body",)) -> dict[str, Any]:
+    """One entry of ``errors`` for a body field (``umin``, ``options/G``, ...)."""
+    return _error([*prefix, *field.split("/")], reason)
+
+
+def problem_response(
+    status: int, slug: str, title: str, detail: str,
+    errors: Sequence[dict[str, Any]] = (), headers: dict[str, str] | None = None,
+) -> JSONResponse:
+    content = {"type": f"urn:alloc:problem:{slug}", "title": title, "status": status, "detail": detail,
+               "errors": list(errors)}
+    return JSONResponse(content, status_code=status, media_type=PROBLEM_JSON, headers=headers)
+
+
+# Library messages start with the field they are about: "umin/umax: umin[2] = 3 > ...".
+_FIELD = re.compile(r"^([A-Za-z_][A-Za-z0-9_]*)(?:/[A-Za-z_]+)?(?:\[[^\]]*\])?:")
+
+_LIBRARY_ERRORS: tuple[tuple[type[Exception], int, str, str], ...] = (
+    (alloc.UnknownMethodError, 422, "unknown-method", "Unknown allocation method"),
+    (alloc.OptionError, 422, "invalid-option", "Invalid method option"),
+    (alloc.DemandError, 422, "invalid-demand", "Invalid demand"),
+    (alloc.ProblemError, 422, "invalid-problem", "Invalid allocation problem"),
+    (alloc.AllocError, 422, "allocation-error", "Allocation request rejected"),
+)
+
+
+def library_error_fields(exc: Exception, prefix: Sequence[str | int] = ("body",)) -> list[dict[str, Any]]:
+    """The ``errors`` entry of a library exception, its field taken from the message."""
+    message = str(exc)
+    match = _FIELD.match(message)
+    field = match.group(1) if match else None
+    if isinstance(exc, alloc.UnknownMethodError):
+        field = "method"
+    elif isinstance(exc, alloc.OptionError):
+        field = "options"
+    return [field_error(field, message, prefix=prefix)] if field else [_error(list(prefix), message)]
+
+
+_TYPE_TAGS = frozenset({"str", "int", "float", "bool", "list", "dict", "none"})
+
+
+def _validation_errors(exc: RequestValidationError) -> list[dict[str, Any]]:
+    out = []
+    for err in exc.errors():
+        loc = [p for p in err.get("loc", ()) if isinstance(p, (str, int))]
+        # Drop pydantic's union-member tags ("list[float]", "int", "function-after[...]").
+        loc = [p for p in loc if not (isinstance(p, str) and ("[" in p or p in _TYPE_TAGS))]
+        out.append(_error(loc, str(err.get("msg", "invalid value"))))
+    return out
+
+
+def install_handlers(app: FastAPI) -> None:
+    """Register the one mapping from exceptions to problem+json responses."""
+
+    @app.exception_handler(ServiceError)
+    async def _service(request: Request, exc: ServiceError) -> JSONResponse:
+        headers = {"WWW-Authenticate": 'ApiKey header="X-API-Key"'} if exc.status == 401 else None
+        return problem_response(exc.status, exc.slug, exc.title, exc.detail, exc.errors, headers)
+
+    @app.exception_handler(alloc.AllocError)
+    async def _library(request: Request, exc: alloc.AllocError) -> JSONResponse:
+        for cls, status, slug, title in _LIBRARY_ERRORS:
+            if isinstance(exc, cls):
+                return problem_response(status, slug, title, str(exc), library_error_fields(exc))
+        raise AssertionError("unreachable: AllocError is the last entry")
+
+    @app.exception_handler(RequestValidationError)
+    async def _validation(request: Request, exc: RequestValidationError) -> JSONResponse:
+        errors = _validation_errors(exc)
+        detail = "; ".join(f"{'/'.join(map(str, e['loc']))}: {e['reason']}" for e in errors[:5])
+        return problem_response(422, "validation-error", "Request validation failed", detail, errors)
+
+    @app.exception_handler(StarletteHTTPException)
+    async def _http(request: Request, exc: StarletteHTTPException) -> JSONResponse:
+        # Routing errors raised by the framework itself (unknown path, wrong verb).
+        title = {404: "Not found", 405: "Method not allowed"}.get(exc.status_code, "HTTP error")
+        return problem_response(exc.status_code, "http-error", title, str(exc.detail),
+                                headers=getattr(exc, "headers", None))
+
+    @app.exception_handler(Exception)
+    async def _unexpected(request: Request, exc: Exception) -> JSONResponse:
+        # A bug, never a client error: log it with the traceback, leak nothing.
+        _log.exception("unhandled error on %s %s", request.method, request.url.path)
+        return problem_response(500, "internal-error", "Internal server error",
+                                "the service failed to handle this request; it has been logged")

@@ -1,0 +1,137 @@
+"""The ASGI application and the ``serve`` entry point used by ``alloc serve`` / ``make run``."""
+
+from __future__ import annotations
+
+from contextlib import asynccontextmanager
+from pathlib import Path
+from typing import Any
+
+from fastapi import FastAPI
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
+
+import alloc
+
+from .config import MAX_AXES, MAX_BATCH, MAX_EFFECTORS, Settings
+from .db import make_engine, make_sessionmaker
+from .errors import PROBLEM_JSON, install_handlers, problem_response
+from .routes import allocation, ams, methods, system, vehicles
+from .store import VehicleStore
+
+__all__ = ["create_app", "serve", "BodySizeLimit"]
+
+DESCRIPTION = f"""
+Control allocation over HTTP: allocate for an inline problem or for a stored vehicle at its
+current health, record failures and repairs, read the history.
+
+* Sizes: m <= {MAX_EFFECTORS} effectors, k <= {MAX_AXES} axes, batches <= {MAX_BATCH:,} demands;
+  request bodies are limited (``ALLOC_MAX_BODY_BYTES``, 413 beyond).
+* Numbers must be finite; an unlimited rate is ``null``.
+* Errors are RFC 9457 ``{PROBLEM_JSON}`` with an ``errors`` list (``loc``, ``pointer``, ``reason``).
+* Write endpoints need ``X-API-Key`` when ``ALLOC_API_KEY`` is set.
+"""
+
+
+class BodySizeLimit:
+    """ASGI middleware: requests whose body exceeds ``limit`` bytes get 413 problem+json.
+
+    Checks ``Content-Length`` up front and counts streamed (chunked) bodies, which are
+    buffered here (at most ``limit`` bytes) and replayed to the application.
+    """
+
+    def __init__(self, app: ASGIApp, limit: int) -> None:
+        self.app, self.limit = app, limit
+
+    async def _reject(self, scope: Scope, receive: Receive, send: Send, detail: str) -> None:
+        response = problem_response(413, "payload-too-large", "Request body too large", detail,
+                                    [{"loc": ["body"], "pointer": "", "reason": detail}])
+        await response(scope, receive, send)
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        limit = self.limit
+        for name, value in scope.get("headers", ()):
+            if name == b"content-length":
+                if not value.isdigit() or int(value) > limit:
+                    await self._reject(scope, receive, send, f"body of {value.decode(errors='replace')} "
+                                                             f"bytes exceeds the limit of {limit} bytes")
+                    return
+        chunks, size = [], 0
+        while True:
+            message = await receive()
+            if message["type"] != "http.request":
+                break
+            chunk = message.get("body", b"")
+            size += len(chunk)
+            if size > limit:
+                await self._reject(scope, receive, send, f"body exceeds the limit of {limit} bytes")
+                return
+            chunks.append(chunk)
+            if not message.get("more_body", False):
+                break
+        body = b"".join(chunks)
+        replayed = False
+
+        async def replay() -> Message:
+            nonlocal replayed
+            if not replayed:
+                replayed = True
+                return {"type": "http.request", "body": body, "more_body": False}
+            return await receive()
+
+        await self.app(scope, replay, send)
+
+
+def create_app(settings: Settings | None = None) -> FastAPI:
+    """Build the application: database, store, routers, error handlers, body limit."""
+    settings = settings or Settings()
+    engine = make_engine(settings.resolved_database_url)
+    store = VehicleStore(make_sessionmaker(engine), settings.cache_size)
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI):  # type: ignore[no-untyped-def]
+        yield
+        engine.dispose()
+
+    app = FastAPI(title="alloc service", version=alloc.__version__, description=DESCRIPTION, lifespan=lifespan)
+    app.state.settings = settings
+    app.state.store = store
+    for module in (allocation, methods, ams, vehicles, system):
+        app.include_router(module.router)
+    install_handlers(app)
+    app.add_middleware(BodySizeLimit, limit=settings.max_body_bytes)
+    return app
+
+
+def serve(host: str = "127.0.0.1", port: int = 8000, data_dir: str | Path | None = None,
+          database_url: str | None = None, api_key: str | None = None, **uvicorn_options: Any) -> None:
+    """Run the service with uvicorn (one process: see :mod:`service.store` on why)."""
+    import uvicorn
+
+    overrides: dict[str, Any] = {}
+    if data_dir is not None:
+        overrides["data_dir"] = Path(data_dir)
+    if database_url is not None:
+        overrides["database_url"] = database_url
+    if api_key is not None:
+        overrides["api_key"] = api_key
+    app = create_app(Settings(**overrides))
+    uvicorn.run(app, host=host, port=port, workers=1, **uvicorn_options)
+
+
+def _main() -> None:
+    import argparse
+
+    parser = argparse.ArgumentParser(description="Run the alloc HTTP service.")
+    parser.add_argument("--host", default="127.0.0.1")
+    parser.add_argument("--port", type=int, default=8000)
+    parser.add_argument("--data-dir", default=None)
+    parser.add_argument("--database-url", default=None)
+    parser.add_argument("--log-level", default="info")
+    args = parser.parse_args()
+    serve(args.host, args.port, args.data_dir, args.database_url, log_level=args.log_level)
+
+
+if __name__ == "__main__":
+    _main()

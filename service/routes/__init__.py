@@ -1,0 +1,1 @@
+"""One router per resource: allocation, methods, AMS, vehicles (with their events), system."""

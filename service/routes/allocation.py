@@ -1,0 +1,30 @@
+"""``/v1/allocate``: allocations for an inline problem (single and batch)."""
+
+from __future__ import annotations
+
+from fastapi import APIRouter
+
+from ..deps import StoreDep
+from ..schemas import AllocateRequest, AllocationOut, BatchAllocateRequest, BatchOut, ProblemIn
+from ..store import build_allocator
+
+router = APIRouter(prefix="/v1/allocate", tags=["allocation"])
+
+_PROBLEM_FIELDS = set(ProblemIn.model_fields)
+
+
+# async: runs on the event loop, so the cached (not thread-safe) allocators are never
+# called concurrently, and a single allocation costs no thread hand-off.
+@router.post("", response_model=AllocationOut, summary="Allocate one demand for an inline problem")
+async def allocate(body: AllocateRequest, store: StoreDep) -> AllocationOut:
+    key = body.model_dump_json(include=_PROBLEM_FIELDS)
+    allocator = store.inline_allocator(key, body.to_problem, body.method, body.options)
+    return AllocationOut.of(allocator(body.v, u_prev=body.u_prev, dt=body.dt))
+
+
+# sync (thread pool): a 10,000-demand batch must not block the event loop; it builds its
+# own allocator, since cached ones are only ever called from the event loop.
+@router.post("/batch", response_model=BatchOut, summary="Allocate many demands for one inline problem")
+def allocate_batch(body: BatchAllocateRequest) -> BatchOut:
+    allocator = build_allocator(body.to_problem(), body.method, body.options)
+    return BatchOut.of(allocator.batch(body.V))

@@ -1,0 +1,15 @@
+"""``/v1/ams``: attainable-moment-set summary of an inline problem."""
+
+from __future__ import annotations
+
+from fastapi import APIRouter
+
+from .. import ams
+from ..schemas import AmsOut, AmsRequest
+
+router = APIRouter(prefix="/v1/ams", tags=["ams"])
+
+
+@router.post("", response_model=AmsOut, summary="AMS volume and largest moments along directions")
+def ams_summary(body: AmsRequest) -> AmsOut:
+    return ams.summarize(body.to_problem(), body.directions)

@@ -1,0 +1,18 @@
+"""``/v1/health``: liveness and database check."""
+
+from __future__ import annotations
+
+from fastapi import APIRouter
+
+import alloc
+
+from ..deps import StoreDep
+from ..schemas import ServiceHealth
+
+router = APIRouter(prefix="/v1", tags=["system"])
+
+
+@router.get("/health", response_model=ServiceHealth, summary="Service health check")
+def health(store: StoreDep) -> ServiceHealth:
+    store.ping()
+    return ServiceHealth(status="ok", version=alloc.__version__, database="ok", methods=len(alloc.methods()))

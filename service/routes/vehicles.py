@@ -1,0 +1,112 @@
+"""``/v1/vehicles``: effector suites, their failure/repair events, health and allocations.
+
+Writes (create, delete, record an event) require the API key when one is configured;
+reads and allocations are open.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from fastapi import APIRouter, Depends, Path, Query, Response, status
+
+from .. import ams
+from ..db import EventRow
+from ..deps import StoreDep, require_api_key
+from ..health import health_out
+from ..schemas import (
+    AllocationOut, AmsOut, AmsVehicleRequest, BatchOut, EventIn, EventList, EventOut, EventRecorded,
+    HealthOut, ProblemOut, VehicleAllocateRequest, VehicleBatchRequest, VehicleCreate, VehicleList,
+    VehicleOut, VehicleSummary,
+)
+from ..store import VehicleState, build_allocator
+
+router = APIRouter(prefix="/v1/vehicles", tags=["vehicles"])
+VehicleId = Annotated[str, Path(min_length=1, max_length=64, description="vehicle id from POST /v1/vehicles")]
+WriteAccess = [Depends(require_api_key)]
+
+
+def _vehicle_out(s: VehicleState) -> VehicleOut:
+    return VehicleOut(id=s.id, name=s.name, created_at=s.created_at, health_version=s.version,
+                      problem=ProblemOut.of(s.nominal), health=health_out(s.nominal, s.health))
+
+
+def _health_out(s: VehicleState) -> HealthOut:
+    return HealthOut(vehicle_id=s.id, health_version=s.version, effectors=health_out(s.nominal, s.health),
+                     effective=ProblemOut.of(s.problem))
+
+
+def _event_out(e: EventRow) -> EventOut:
+    return EventOut(seq=e.seq, effector=e.effector, kind=e.kind, params=e.params, note=e.note,
+                    recorded_at=e.recorded_at)
+
+
+@router.post("", response_model=VehicleOut, status_code=status.HTTP_201_CREATED, dependencies=WriteAccess,
+             summary="Create a vehicle (its nominal effector suite)")
+def create_vehicle(body: VehicleCreate, store: StoreDep, response: Response) -> VehicleOut:
+    state = store.create(body)
+    response.headers["Location"] = f"/v1/vehicles/{state.id}"
+    return _vehicle_out(state)
+
+
+@router.get("", response_model=VehicleList, summary="List vehicles")
+def list_vehicles(store: StoreDep, limit: Annotated[int, Query(ge=1, le=1000)] = 100,
+                  offset: Annotated[int, Query(ge=0, le=2**31)] = 0) -> VehicleList:
+    rows, total = store.list(limit, offset)
+    items = [VehicleSummary(id=r.id, name=r.name, created_at=r.created_at, health_version=r.health_version,
+                            m=len(r.problem["umin"]), k=len(r.problem["B"])) for r in rows]
+    return VehicleList(items=items, total=total)
+
+
+@router.get("/{vehicle_id}", response_model=VehicleOut, summary="Read a vehicle")
+def get_vehicle(vehicle_id: VehicleId, store: StoreDep) -> VehicleOut:
+    return _vehicle_out(store.get(vehicle_id))
+
+
+@router.delete("/{vehicle_id}", status_code=status.HTTP_204_NO_CONTENT, dependencies=WriteAccess,
+               summary="Delete a vehicle and its history")
+def delete_vehicle(vehicle_id: VehicleId, store: StoreDep) -> Response:
+    store.delete(vehicle_id)
+    return Response(status_code=status.HTTP_204_NO_CONTENT)
+
+
+@router.post("/{vehicle_id}/events", response_model=EventRecorded, status_code=status.HTTP_201_CREATED,
+             dependencies=WriteAccess, summary="Record a failure or repair of one effector")
+def record_event(vehicle_id: VehicleId, body: EventIn, store: StoreDep) -> EventRecorded:
+    # Committed (fsync'd) before the response; allocators in use are rebuilt before it too.
+    event, state = store.record_event(vehicle_id, body)
+    return EventRecorded(event=_event_out(event), health=_health_out(state))
+
+
+@router.get("/{vehicle_id}/events", response_model=EventList, summary="Event history, oldest first")
+def list_events(vehicle_id: VehicleId, store: StoreDep) -> EventList:
+    return EventList(vehicle_id=vehicle_id, items=[_event_out(e) for e in store.events(vehicle_id)])
+
+
+@router.get("/{vehicle_id}/health", response_model=HealthOut, summary="Current health and effective problem")
+def get_health(vehicle_id: VehicleId, store: StoreDep) -> HealthOut:
+    return _health_out(store.get(vehicle_id))
+
+
+@router.post("/{vehicle_id}/allocate", response_model=AllocationOut,
+             summary="Allocate one demand at the vehicle's current health")
+async def allocate(vehicle_id: VehicleId, body: VehicleAllocateRequest, store: StoreDep) -> AllocationOut:
+    state = store.get(vehicle_id)
+    allocator = store.vehicle_allocator(state, body.method, body.options)
+    result = allocator(body.v, u_prev=body.u_prev, dt=body.dt)
+    return AllocationOut.of(result, vehicle_id=state.id, health_version=state.version)
+
+
+@router.post("/{vehicle_id}/allocate/batch", response_model=BatchOut,
+             summary="Allocate many demands at the vehicle's current health")
+def allocate_batch(vehicle_id: VehicleId, body: VehicleBatchRequest, store: StoreDep) -> BatchOut:
+    state = store.get(vehicle_id)
+    allocator = build_allocator(state.problem, body.method, body.options)
+    return BatchOut.of(allocator.batch(body.V), vehicle_id=state.id, health_version=state.version)
+
+
+@router.post("/{vehicle_id}/ams", response_model=AmsOut, summary="AMS summary at the vehicle's current health")
+def ams_summary(vehicle_id: VehicleId, body: AmsVehicleRequest, store: StoreDep) -> AmsOut:
+    state = store.get(vehicle_id)
+    out = ams.summarize(state.problem, body.directions)
+    return out.model_copy(update={"vehicle_id": state.id, "health_version": state.version})

@@ -1,0 +1,318 @@
+"""Request and response bodies (pydantic), separate for input and output.
+
+Sizes are capped in the schema so the caps are visible in the OpenAPI document:
+``m <= 64`` effectors, ``k <= 6`` axes, batches of at most 10,000 demands, AMS
+requests of at most 256 directions.  Numbers must be finite: JSON has no NaN or
+infinity, and the literals ``NaN``/``Infinity`` (which Python's parser accepts) are
+rejected with 422.  An unlimited rate is written ``null``.
+"""
+
+from __future__ import annotations
+
+from datetime import datetime
+from typing import Annotated, Any, Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+import alloc
+
+from .config import MAX_AXES, MAX_BATCH, MAX_DIRECTIONS, MAX_EFFECTORS
+
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+Rate = Annotated[float | None, Field(allow_inf_nan=False, description="units/s; null = unlimited")]
+EffectorVector = Annotated[list[Finite], Field(min_length=1, max_length=MAX_EFFECTORS)]
+AxisVector = Annotated[list[Finite], Field(min_length=1, max_length=MAX_AXES)]
+SquareRow = Annotated[list[Finite], Field(min_length=1, max_length=MAX_EFFECTORS)]
+Weight = EffectorVector | Annotated[list[SquareRow], Field(min_length=1, max_length=MAX_EFFECTORS)]
+Label = Annotated[str, Field(min_length=1, max_length=64)]
+MethodName = Annotated[str, Field(min_length=1, max_length=64, examples=["pinv", "qp"])]
+Options = Annotated[dict[str, Any], Field(max_length=16, description="method options, see GET /v1/methods")]
+EffectorRef = Annotated[str, Field(min_length=1, max_length=64)] | Annotated[int, Field(ge=0, lt=MAX_EFFECTORS)]
+
+
+class _In(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+# ---------------------------------------------------------------- problems
+class ProblemIn(_In):
+    """The fields of :class:`alloc.Problem` (seed Eq 1.14); shapes are checked by the library."""
+
+    B: Annotated[list[EffectorVector], Field(min_length=1, max_length=MAX_AXES,
+                                             description="effectiveness matrix, k rows x m columns")]
+    umin: EffectorVector
+    umax: EffectorVector
+    up: EffectorVector | None = Field(default=None, description="preferred position (default 0 clipped)")
+    Wu: Weight | None = Field(default=None, description="preference weight: m-vector (diagonal) or m x m")
+    Wv: Weight | None = Field(default=None, description="moment-error weight: k-vector (diagonal) or k x k")
+    rate_min: Annotated[list[Rate], Field(min_length=1, max_length=MAX_EFFECTORS)] | None = None
+    rate_max: Annotated[list[Rate], Field(min_length=1, max_length=MAX_EFFECTORS)] | None = None
+    names: Annotated[list[Label], Field(min_length=1, max_length=MAX_EFFECTORS)] | None = None
+    axes: Annotated[list[Label], Field(min_length=1, max_length=MAX_AXES)] | None = None
+
+    def problem_fields(self) -> dict[str, Any]:
+        """Keyword arguments of :class:`alloc.Problem` (``null`` rates become infinite)."""
+        fields = self.model_dump(include=set(ProblemIn.model_fields), exclude_none=True)
+        for name, inf in (("rate_min", -np.inf), ("rate_max", np.inf)):
+            if name in fields:
+                fields[name] = [inf if r is None else r for r in fields[name]]
+        return fields
+
+    def to_problem(self) -> alloc.Problem:
+        return alloc.Problem(**self.problem_fields())
+
+
+class ProblemOut(BaseModel):
+    B: list[list[float]]
+    umin: list[float]
+    umax: list[float]
+    up: list[float]
+    Wu: list[list[float]]
+    Wv: list[list[float]]
+    rate_min: list[float | None]
+    rate_max: list[float | None]
+    names: list[str]
+    axes: list[str]
+
+    @classmethod
+    def of(cls, problem: alloc.Problem) -> ProblemOut:
+        return cls.model_validate(problem.to_dict())
+
+
+# ------------------------------------------------------------- allocation
+class _Demand(_In):
+    method: MethodName = "pinv"
+    options: Options = Field(default_factory=dict)
+
+
+class _Single(_Demand):
+    v: AxisVector = Field(description="demand (virtual control), k values")
+    u_prev: EffectorVector | None = Field(default=None, description="previous command, for rate limits")
+    dt: Annotated[float, Field(gt=0, le=3600, allow_inf_nan=False)] | None = Field(
+        default=None, description="time step in s, for rate limits (with u_prev)")
+
+
+class _Batch(_Demand):
+    V: Annotated[list[AxisVector], Field(min_length=1, max_length=MAX_BATCH, description="N demands, N x k")]
+
+
+class AllocateRequest(ProblemIn, _Single):
+    """``POST /v1/allocate``: an inline problem and one demand."""
+
+
+class BatchAllocateRequest(ProblemIn, _Batch):
+    """``POST /v1/allocate/batch``: an inline problem and up to 10,000 demands."""
+
+
+class VehicleAllocateRequest(_Single):
+    """``POST /v1/vehicles/{id}/allocate``: one demand against the vehicle's current health."""
+
+
+class VehicleBatchRequest(_Batch):
+    """``POST /v1/vehicles/{id}/allocate/batch``."""
+
+
+Status = Literal["exact", "unattainable", "fallback"]
+
+
+class AllocationOut(BaseModel):
+    u: list[float] = Field(description="effector commands")
+    v: list[float]
+    v_achieved: list[float] = Field(description="B u")
+    unallocated: list[float] = Field(description="v - B u")
+    status: Status
+    fallback: bool = Field(description="true when the solver failed and the safe answer was returned")
+    method: str
+    iterations: int
+    solve_time: float = Field(description="seconds spent in the method")
+    message: str
+    vehicle_id: str | None = None
+    health_version: int | None = None
+
+    @classmethod
+    def of(cls, r: alloc.Result, **extra: Any) -> AllocationOut:
+        return cls(u=r.u.tolist(), v=r.v.tolist(), v_achieved=r.v_achieved.tolist(),
+                   unallocated=r.unallocated.tolist(), status=r.status.value, fallback=r.fallback,
+                   method=r.method, iterations=int(r.iterations), solve_time=float(r.solve_time),
+                   message=r.message, **extra)
+
+
+class BatchOut(BaseModel):
+    u: list[list[float]]
+    v_achieved: list[list[float]]
+    unallocated: list[list[float]]
+    status: list[Status]
+    counts: dict[str, int]
+    method: str
+    solve_time: float
+    vehicle_id: str | None = None
+    health_version: int | None = None
+
+    @classmethod
+    def of(cls, b: alloc.BatchResult, **extra: Any) -> BatchOut:
+        return cls(u=b.u.tolist(), v_achieved=b.v_achieved.tolist(), unallocated=b.unallocated.tolist(),
+                   status=b.status.tolist(), counts=b.counts(), method=b.method,
+                   solve_time=float(b.solve_time), **extra)
+
+
+class MethodOut(BaseModel):
+    name: str
+    equation: str
+    summary: str
+    options: dict[str, str]
+
+
+# -------------------------------------------------------------------- AMS
+class _AmsQuery(_In):
+    directions: Annotated[list[AxisVector], Field(max_length=MAX_DIRECTIONS)] | None = Field(
+        default=None, description="directions d (k values each); default: +/- each axis")
+
+
+class AmsRequest(ProblemIn, _AmsQuery):
+    """``POST /v1/ams``: summary of the attainable moment set of an inline problem."""
+
+
+class AmsVehicleRequest(_AmsQuery):
+    """``POST /v1/vehicles/{id}/ams``: the same for a vehicle at its current health."""
+
+
+class DirectionOut(BaseModel):
+    direction: list[float]
+    scale: float | None = Field(description="largest a with a*d attainable (null: the line misses the AMS)")
+    moment: list[float] | None = Field(description="a*d, the largest attainable moment along d")
+    u: list[float] | None = Field(description="an admissible command achieving it")
+
+
+class AmsOut(BaseModel):
+    volume: float | None = Field(description="k-volume of the AMS, null when not computed")
+    volume_note: str
+    directions: list[DirectionOut]
+    vehicle_id: str | None = None
+    health_version: int | None = None
+
+
+# --------------------------------------------------------------- vehicles
+class VehicleCreate(ProblemIn):
+    """``POST /v1/vehicles``: an effector suite (its nominal, healthy problem)."""
+
+    name: Label | None = None
+
+
+class EffectorHealthOut(BaseModel):
+    effector: str
+    status: Literal["healthy", "jammed", "floating", "degraded"]
+    jam_position: float | None = None
+    effectiveness: float = 1.0
+    limits: tuple[float, float] | None = Field(default=None, description="reduced position limits")
+    rate_limits: tuple[float, float] | None = Field(default=None, description="reduced rate limits")
+
+
+class HealthOut(BaseModel):
+    vehicle_id: str
+    health_version: int = Field(description="number of events recorded; changes with every event")
+    effectors: list[EffectorHealthOut]
+    effective: ProblemOut = Field(description="the problem allocations use now")
+
+
+class VehicleOut(BaseModel):
+    id: str
+    name: str | None
+    created_at: datetime
+    health_version: int
+    problem: ProblemOut = Field(description="the nominal (healthy) problem")
+    health: list[EffectorHealthOut]
+
+
+class VehicleSummary(BaseModel):
+    id: str
+    name: str | None
+    created_at: datetime
+    health_version: int
+    m: int
+    k: int
+
+
+class VehicleList(BaseModel):
+    items: list[VehicleSummary]
+    total: int
+
+
+# ----------------------------------------------------------------- events
+class _Event(_In):
+    effector: EffectorRef = Field(description="effector name or index")
+    note: Annotated[str, Field(max_length=500)] | None = None
+
+
+class JamEvent(_Event):
+    """The effector is stuck at ``position`` (within its nominal limits)."""
+
+    kind: Literal["jam"]
+    position: Finite
+
+
+class EffectivenessEvent(_Event):
+    """The effector produces ``fraction`` of its nominal moment (its column of B scaled)."""
+
+    kind: Literal["effectiveness"]
+    fraction: Annotated[float, Field(ge=0.0, le=1.0)]
+
+
+class LimitsEvent(_Event):
+    """Reduced position limits ``[lo, hi]``, within the nominal ones."""
+
+    kind: Literal["limits"]
+    lo: Finite
+    hi: Finite
+
+
+class RateLimitsEvent(_Event):
+    """Reduced rate limits, ``rate_min <= 0 <= rate_max``, within the nominal ones."""
+
+    kind: Literal["rate_limits"]
+    rate_min: Annotated[float, Field(le=0.0, allow_inf_nan=False)]
+    rate_max: Annotated[float, Field(ge=0.0, allow_inf_nan=False)]
+
+
+class FloatEvent(_Event):
+    """A floating surface: produces no moment and is not commanded (see service.health)."""
+
+    kind: Literal["float"]
+
+
+class RepairEvent(_Event):
+    """Back to healthy: clears every failure of the effector."""
+
+    kind: Literal["repair"]
+
+
+EventIn = Annotated[
+    JamEvent | EffectivenessEvent | LimitsEvent | RateLimitsEvent | FloatEvent | RepairEvent,
+    Field(discriminator="kind"),
+]
+
+
+class EventOut(BaseModel):
+    seq: int = Field(description="1, 2, ... per vehicle; the health_version after this event")
+    effector: str
+    kind: str
+    params: dict[str, Any]
+    note: str | None
+    recorded_at: datetime
+
+
+class EventList(BaseModel):
+    vehicle_id: str
+    items: list[EventOut]
+
+
+class EventRecorded(BaseModel):
+    event: EventOut
+    health: HealthOut
+
+
+class ServiceHealth(BaseModel):
+    status: Literal["ok"]
+    version: str
+    database: str
+    methods: int
