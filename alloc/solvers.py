@@ -82,7 +82,14 @@ def make_backend(
     """
     lp = H is None
     if name == "daqp":
-        return _Daqp(H, f, A, bl, bu, lb, ub, singular=singular or lp)
+        primary = _Daqp(H, f, A, bl, bu, lb, ub, singular=singular or lp)
+        if lp:
+            # DAQP's proximal-point LP reports false infeasibility or cycling on a few
+            # degenerate allocation LPs (~0.3 % of the random suites); HiGHS' simplex
+            # re-solves exactly those calls.
+            return _Chain(primary, lambda d: _Highs(d["f"], d["A"], d["bl"], d["bu"], d["lb"], d["ub"]),
+                          dict(f=f, A=A, bl=bl, bu=bu, lb=lb, ub=ub))
+        return primary
     if name == "highs":
         if not lp:
             raise OptionError("backend: 'highs' is used for linear programs only (it returns wrong QP answers, see SOLVER-NOTES)")
@@ -104,7 +111,7 @@ class _Daqp:
         # daqp.Model needs a matrix: an LP is a QP with H = 0 solved by proximal-point iterations.
         self._H = np.zeros((f.size, f.size)) if H is None else np.array(H, dtype=float, order="C")
         self._A = np.array(A, dtype=float, order="C")
-        self._bupper = np.concatenate([ub, bu]).astype(float)
+        self._bupper = np.concatenate([_widen(lb, ub), bu]).astype(float)
         self._blower = np.concatenate([lb, bl]).astype(float)
         self._sense = np.zeros(self._bupper.size, dtype=np.int32)
         self._sense[self._n:][bl == bu] = self._EQ
@@ -127,12 +134,14 @@ class _Daqp:
         if lb is not None or bl is not None:
             if lb is not None:
                 self._blower[:n] = lb
+                self._bupper[:n] = _widen(lb, self._bupper[:n] if ub is None else ub)
+                upd["bupper"] = self._bupper
             if bl is not None:
                 self._blower[n:] = bl
             upd["blower"] = self._blower
         if ub is not None or bu is not None:
             if ub is not None:
-                self._bupper[:n] = ub
+                self._bupper[:n] = _widen(self._blower[:n], ub)
             if bu is not None:
                 self._bupper[n:] = bu
             upd["bupper"] = self._bupper
@@ -147,6 +156,32 @@ class _Daqp:
         if flag < 1 or not np.all(np.isfinite(x)):
             raise SolverError(f"daqp returned exit flag {flag}")
         return np.array(x, dtype=float), int(info.get("iterations", 0))
+
+
+class _Chain:
+    """A fast primary backend with a robust secondary built on the primary's first failure."""
+
+    def __init__(self, primary, make_secondary, data: dict) -> None:
+        self._primary = primary
+        self._make_secondary = make_secondary
+        self._secondary = None
+        self._data = {key: np.array(val, dtype=float) for key, val in data.items()}
+
+    def solve(self, f=None, lb=None, ub=None, bl=None, bu=None, A=None):
+        upd = dict(f=f, lb=lb, ub=ub, bl=bl, bu=bu, A=A)
+        for key, val in upd.items():
+            if val is not None:
+                self._data[key] = np.array(val, dtype=float)
+        try:
+            return self._primary.solve(**upd)
+        except SolverError as first:
+            try:
+                if self._secondary is None:
+                    self._secondary = self._make_secondary(self._data)
+                    return self._secondary.solve()
+                return self._secondary.solve(**self._data)
+            except SolverError as second:
+                raise SolverError(f"{first}; then {second}") from second
 
 
 class _Highs:
@@ -256,6 +291,17 @@ _TIGHT = {
     "osqp": {"eps_abs": 1e-9, "eps_rel": 1e-9, "polish": True, "max_iter": 200000},
     "clarabel": {"tol_gap_abs": 1e-10, "tol_gap_rel": 1e-10, "tol_feas": 1e-10},
 }
+
+
+def _widen(lb: FloatArray, ub: FloatArray) -> FloatArray:
+    """Upper bounds nudged above collapsed ones (a jammed effector, ``lb == ub``).
+
+    DAQP treats ``lb == ub`` as an equality; with the allocation equalities this can
+    make its initial active set overdetermined (exit flag -6).  A gap of 1e-12 relative
+    avoids that; the allocator clips the result back onto the limits.
+    """
+    ub = np.asarray(ub, dtype=float)
+    return np.maximum(ub, np.asarray(lb, dtype=float) + 1e-12 * (1.0 + np.abs(ub)))
 
 
 def _to_csc(A: FloatArray) -> tuple[NDArray[np.int32], NDArray[np.int32], FloatArray]:

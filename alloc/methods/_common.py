@@ -8,6 +8,14 @@ from ..exceptions import OptionError
 from ..registry import FloatArray
 
 
+#: Stage 2 of the two-stage methods keeps stage 1's moment within this relative band
+#: instead of as an exact equality.  When stage 1's optimum is a single point of the box
+#: (typical for unattainable demands) an exact equality leaves a degenerate feasible set
+#: on which active-set solvers report false infeasibility; a 1e-9 band removes that and
+#: changes the moment by far less than the ``exact`` tolerance (1e-6).
+KEEP_RTOL = 1e-9
+
+
 def row_basis(B: FloatArray, rtol: float = 1e-10) -> FloatArray:
     """Orthonormal rows ``Q'`` spanning the row space of ``B`` (``r x k``, ``r = rank B``).
 

@@ -10,7 +10,8 @@ bounds; ``u0 = 0`` in the seed):
 The solution ``u*`` lies on the AMS boundary.  When ``a* >= 1`` the demand is attainable
 and the boundary solution is scaled back along the ray (Eq 1.15):
 ``u = u0 + (u* - u0) / a*``, so ``B u = v``.  Otherwise ``u = u*``, the boundary point in
-the demanded direction (status ``unattainable``).  When the ray leaves the AMS through an
+the demanded direction (status ``unattainable``).  With a rank-deficient ``B`` the ray
+follows the part of ``d`` in the range of ``B``; the rest is reported as unallocated.  When the ray leaves the AMS through an
 edge or a degenerate facet, ``u*`` is not unique (the moment is).  The facet-search
 versions (``da_facet``, ``da_bisect``) live in :mod:`alloc.ams`.
 """
@@ -22,7 +23,7 @@ import numpy as np
 from ..problem import Problem
 from ..registry import Method, register
 from ..solvers import backends, make_backend
-from ._common import check_backend
+from ._common import check_backend, row_basis
 
 
 @register("da")
@@ -35,13 +36,16 @@ class DirectAllocationLP(Method):
         super().__init__(problem)
         name = check_backend(backend, backends(lp=True), "da")
         p = problem
-        self._A = np.hstack([p.B, np.zeros((p.k, 1))])
+        # Equalities on the row space of B only (a rank-deficient B has dependent rows).
+        self._Q = row_basis(p.B)
+        self._QB = self._Q @ p.B
+        self._A = np.hstack([self._QB, np.zeros((self._Q.shape[0], 1))])
         self._c = np.zeros(p.m + 1)
         self._c[-1] = -1.0
         self._colnorm = np.linalg.norm(p.B, axis=0)
         self._lb = np.concatenate([p.umin, [0.0]])
         self._ub = np.concatenate([p.umax, [1.0]])
-        z = np.zeros(p.k)
+        z = self._QB @ p.up  # feasible at set-up: u = up, a = 0
         self._model = make_backend(name, None, self._c, self._A, z, z, self._lb, self._ub)
 
     def boundary(self, d, u0, lo, hi):
@@ -51,18 +55,20 @@ class DirectAllocationLP(Method):
         reach = float(self._colnorm @ np.maximum(hi - u0, u0 - lo))
         a_cap = 2.0 * reach / float(np.linalg.norm(d)) + 1.0
         A = self._A
-        A[:, -1] = -d
+        A[:, -1] = -(self._Q @ d)
         lb, ub = self._lb, self._ub
         lb[:-1], ub[:-1] = lo, hi
         ub[-1] = a_cap
-        rhs = p.B @ u0
+        rhs = self._QB @ u0
         x, it = self._model.solve(A=A, lb=lb, ub=ub, bl=rhs, bu=rhs)
         return float(x[-1]), np.minimum(np.maximum(x[:-1], lo), hi), it
 
     def solve(self, v, lo, hi, u_prev):
         p = self.problem
         u0 = np.minimum(np.maximum(p.up, lo), hi)
-        d = v - p.B @ u0
+        # Only the part of the demand in the range of B can be reached; the rest is
+        # reported as unallocated (it is zero unless B is rank deficient).
+        d = self._Q.T @ (self._Q @ (v - p.B @ u0))
         if np.abs(d).max() <= 1e-14 * max(1.0, float(np.abs(v).max())):
             return u0, 0
         a, ustar, it = self.boundary(d, u0, lo, hi)

@@ -8,7 +8,8 @@ diagonals of ``Wv`` and ``Wu`` (the seed's weight vectors).  With ``priorities``
 stage 1 runs per level, most important first, earlier levels keeping their errors.
 
 Slack form: stage 1 has variables ``[u, e+, e-]`` with ``B u - e+ + e- = v``; stage 2
-``[u, d+, d-]`` with ``u - d+ + d- = up`` and ``Q' B u = Q' B u1`` (row-reduced).  Only
+``[d+, d-]`` with ``u = c + d+ - d-`` (``c`` = ``up`` clipped into the bounds) and
+``Q' B u = Q' B u1`` (row-reduced), all else simple bounds.  Only
 bounds and costs change between calls, so the solver models are built once.
 """
 
@@ -18,10 +19,10 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ..exceptions import SolverError
 from ..problem import Problem
 from ..registry import Method, register
 from ..result import exact_tolerance
+from ._common import KEEP_RTOL
 from ..solvers import backends, make_backend
 from ._common import check_backend, check_diagonal, row_basis
 from .cascade import check_priorities
@@ -50,18 +51,16 @@ class TwoStageLP(Method):
         self._lb1 = np.concatenate([p.umin, np.zeros(2 * k)])
         self._ub1 = np.concatenate([p.umax, inf])
         self._stage1 = make_backend(name, None, np.zeros(m + 2 * k), A1, z, z, self._lb1, self._ub1)
+        # Stage 2 in deviation form: u = c + d+ - d-, c = up clipped into the call's bounds
+        # (for u on one side of up, |u - up| = |u - c| + |c - up|, so the argmin is the same):
+        # only the r row-reduced moment equalities, everything else simple bounds.
         self._Q = row_basis(p.B)
-        r = self._Q.shape[0]
-        A2 = np.vstack([
-            np.hstack([np.eye(m), -np.eye(m), np.eye(m)]),
-            np.hstack([self._Q @ p.B, np.zeros((r, 2 * m))]),
-        ])
-        f2 = np.concatenate([np.zeros(m), self.wu, self.wu])
-        self._lb2 = np.concatenate([p.umin, np.zeros(2 * m)])
-        self._ub2 = np.concatenate([p.umax, np.full(2 * m, np.inf)])
-        b2 = np.concatenate([p.up, np.zeros(r)])
-        self._b2 = b2
-        self._stage2 = make_backend(name, None, f2, A2, b2, b2, self._lb2, self._ub2)
+        self._QB = self._Q @ p.B
+        A2 = np.hstack([self._QB, -self._QB])
+        f2 = np.concatenate([self.wu, self.wu])
+        b2 = np.ones(self._Q.shape[0])  # a band, not an equality (see KEEP_RTOL)
+        self._stage2 = make_backend(name, None, f2, A2, -b2, b2, np.zeros(2 * m),
+                                    np.concatenate([p.umax - p.up, p.up - p.umin]))
 
     def solve(self, v, lo, hi, u_prev):
         p = self.problem
@@ -84,15 +83,10 @@ class TwoStageLP(Method):
         u1 = np.minimum(np.maximum(x[:m], lo), hi)
         m1 = p.B @ u1
         target = v if np.abs(m1 - v).max() <= exact_tolerance(v) else m1
-        b2 = self._b2.copy()
-        b2[m:] = self._Q @ target
-        lb2, ub2 = self._lb2.copy(), self._ub2.copy()
-        lb2[:m], ub2[:m] = lo, hi
-        try:
-            x2, it2 = self._stage2.solve(lb=lb2, ub=ub2, bl=b2, bu=b2)
-        except SolverError:
-            if target is not v:
-                raise
-            b2[m:] = self._Q @ m1  # v met only to tolerance: keep stage 1's exact moment
-            x2, it2 = self._stage2.solve(lb=lb2, ub=ub2, bl=b2, bu=b2)
-        return x2[:m], iters + it2
+        c = np.minimum(np.maximum(p.up, lo), hi)
+        ub2 = np.concatenate([hi - c, c - lo])
+        lb2 = np.zeros(2 * m)
+        rhs = self._Q @ target - self._QB @ c
+        band = KEEP_RTOL * max(1.0, float(np.abs(target).max()))
+        x2, it2 = self._stage2.solve(lb=lb2, ub=ub2, bl=rhs - band, bu=rhs + band)
+        return c + x2[:m] - x2[m:], iters + it2
