@@ -64,6 +64,7 @@ __all__ = [
     "R_WEIGHT",
     "linear_model",
     "nonlinear_derivative",
+    "SMCDesign",
     "smc_design",
     "run",
 ]
