@@ -1,0 +1,6 @@
+"""Attainable moment set (seed sections 1.3.4.2 and 1.3.4.9): geometry, facet-search
+direct allocation (``da_facet``, ``da_bisect``, ``da_table``) and method coverage."""
+
+from .geometry import AttainableSet, Facet, generator_classes, zonotope_volume
+
+__all__ = ["AttainableSet", "Facet", "generator_classes", "zonotope_volume"]

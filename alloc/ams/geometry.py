@@ -1,0 +1,575 @@
+"""The attainable moment set (AMS) as a zonotope (seed section 1.3.4.2).
+
+The AMS is the image of the effector box under ``B``:
+
+    AMS = {B u : lo <= u <= hi} = c + sum_j [-1, 1] g_j,   c = B (lo + hi) / 2,
+    g_j = b_j (hi_j - lo_j) / 2,
+
+a zonotope in ``k`` dimensions.  Its boundary facets (seed: "m(m-1) parallelograms" for
+``k = 3`` in general position) are found from the *directions* of the columns only, so
+the facet structure survives any change of the box (rate limits, reduced limits) and
+only the positions move.
+
+Degenerate suites are handled exactly:
+
+* zero columns and jammed effectors (``lo == hi``) generate nothing;
+* collinear columns (ICE: pitch flap and pitch thrust vectoring act only on pitch;
+  duplicated effectors) are merged into one *generator class* that moves all its members
+  together;
+* coplanar classes (ICE: left + right elevon is a pure pitch moment) span one hyperplane;
+  its facet is a polygon (a (k-1)-zonotope) with more than four corners.  For the ray
+  search such a facet is tiled into parallelepipeds by lifting its generators with
+  generic heights and projecting the upper faces back (a regular zonotopal tiling), so
+  every tile is an Eq 1.16 parallelogram.
+
+Glossary: the seed's facet vectors ``m_i*, m_(i-j)*, m_(i-k)*`` of Eq 1.16 are a tile's
+corner and its edges; ``u_d*`` is the boundary control of :meth:`AttainableSet.max_in_direction`;
+``a`` is the scale of Eq 1.15 (the largest ``a`` with ``a d`` attainable from the base point).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+from itertools import combinations, product
+from math import comb
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ..exceptions import DemandError, ProblemError
+from ..problem import Problem
+
+__all__ = ["AttainableSet", "Facet", "zonotope_volume", "generator_classes"]
+
+FloatArray = NDArray[np.float64]
+
+#: Two unit column directions closer than this (sine of the angle) are collinear; a unit
+#: column whose component along a unit hyperplane normal is below it lies in the hyperplane.
+DIRECTION_TOL = 1e-9
+_LIFT_SEED = 20240229  # generic heights for tiling degenerate facets (any generic values work)
+
+
+# --------------------------------------------------------------------------- helpers
+def _active(B: FloatArray, lo: FloatArray, hi: FloatArray) -> NDArray[np.bool_]:
+    """Effectors that move the moment: a range and a non-zero column."""
+    norms = np.linalg.norm(B, axis=0)
+    scale = float(norms.max()) if norms.size else 0.0
+    return (hi > lo) & (norms > 1e-12 * scale) & (scale > 0)
+
+
+def generator_classes(B: FloatArray, active: NDArray[np.bool_], tol: float = DIRECTION_TOL):
+    """Group active columns by direction (collinear columns, either sign, share a class).
+
+    Returns
+    -------
+    cls : ndarray (m,) of int
+        Class of each effector, ``-1`` for inactive ones.
+    sign : ndarray (m,)
+        ``+1`` when the column points along its class direction, ``-1`` against, 0 inactive.
+    R : ndarray (k, C)
+        Unit class directions (the first member's column, normalised).
+    """
+    k, m = B.shape
+    idx = np.flatnonzero(active)
+    cls = np.full(m, -1, dtype=np.intp)
+    sign = np.zeros(m)
+    if idx.size == 0:
+        return cls, sign, np.zeros((k, 0))
+    U = B[:, idx] / np.linalg.norm(B[:, idx], axis=0)
+    dots = U.T @ U  # (n, n)
+    # sine of the angle between each pair: |u_i - (u_i . u_j) u_j|
+    resid = np.linalg.norm(U.T[:, None, :] - dots[:, :, None] * U.T[None, :, :], axis=2)
+    reps: list[int] = []
+    for a, j in enumerate(idx):
+        for c, r in enumerate(reps):
+            if resid[a, r] <= tol:
+                cls[j], sign[j] = c, np.sign(dots[a, r])
+                break
+        else:
+            reps.append(a)
+            cls[j], sign[j] = len(reps) - 1, 1.0
+    return cls, sign, U[:, reps]
+
+
+def _cross(M: FloatArray) -> FloatArray:
+    """Generalised cross product of the ``d-1`` columns of each ``M[s]`` (S, d, d-1) -> (S, d)."""
+    S, d, _ = M.shape
+    if d == 2:
+        return np.stack([M[:, 1, 0], -M[:, 0, 0]], axis=1)
+    if d == 3:
+        return np.cross(M[:, :, 0], M[:, :, 1])
+    out = np.empty((S, d))
+    rows = np.arange(d)
+    for i in range(d):
+        out[:, i] = (-1) ** i * np.linalg.det(M[:, rows != i, :])
+    return out
+
+
+def _hyperplanes(R: FloatArray, tol: float = DIRECTION_TOL) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """Distinct hyperplanes spanned by ``d-1`` of the unit directions ``R`` (d, C), rank d.
+
+    Returns unit normals (H, d) and the mask (H, C) of directions lying in each hyperplane.
+    Subsets spanning the same hyperplane (coplanar directions) are merged: a hyperplane is
+    identified by the set of directions it contains, not by a rounded normal.
+    """
+    d, C = R.shape
+    if d == 1:
+        return np.ones((1, 1)), np.zeros((1, C), dtype=bool)
+    subsets = np.array(list(combinations(range(C), d - 1)), dtype=np.intp)
+    n = _cross(np.moveaxis(R[:, subsets], 1, 0))
+    norms = np.linalg.norm(n, axis=1)
+    keep = norms > tol
+    n = n[keep] / norms[keep, None]
+    free = np.abs(n @ R) <= tol
+    key = np.packbits(free, axis=1)
+    _, first = np.unique(key.view(np.dtype((np.void, key.shape[1]))).ravel(), return_index=True)
+    first.sort()
+    n, free = n[first], free[first]
+    for h in np.flatnonzero(free.sum(axis=1) > d - 1):
+        # coplanar directions: the least-squares normal of all of them, not of the first pair
+        n[h] = np.linalg.svd(R[:, free[h]])[0][:, -1]
+    return n, free
+
+
+def _plane_basis(n: FloatArray) -> FloatArray:
+    """Orthonormal basis (d, d-1) of the hyperplane with unit normal ``n``."""
+    return np.linalg.svd(n[:, None])[0][:, 1:]
+
+
+def _unit_columns(X: FloatArray) -> FloatArray:
+    return X / np.linalg.norm(X, axis=0)
+
+
+def _vertex_signs(R: FloatArray) -> NDArray[np.int8]:
+    """Sign vectors (V, C) of the vertices of the zonotope with generator directions ``R`` (d, C).
+
+    Vertex ``sigma`` is ``c + sum_c sigma_c g_c``.  Recursion on facets: a facet fixes the
+    directions outside its hyperplane at ``sign(n . r_c)`` and its own vertices are those of
+    the (d-1)-zonotope of its free directions.
+    """
+    d, C = R.shape
+    if C == 0:
+        return np.zeros((1, 0), dtype=np.int8)
+    if d == 1:
+        s = np.sign(R[0]).astype(np.int8)
+        return np.stack([s, -s])
+    normals, free = _hyperplanes(R)
+    out = []
+    simple = free.sum(axis=1) == d - 1
+    if simple.any():
+        sig = np.sign(normals[simple] @ R).astype(np.int8)
+        sig[free[simple]] = 0
+        fidx = np.nonzero(free[simple])[1].reshape(int(simple.sum()), d - 1)
+        combos = np.array(list(product((-1, 1), repeat=d - 1)), dtype=np.int8)
+        for sgn in (1, -1):
+            rows = np.repeat(sgn * sig, len(combos), axis=0)
+            rr = np.arange(len(rows))
+            rows[rr[:, None], np.repeat(fidx, len(combos), axis=0)] = np.tile(combos, (len(sig), 1))
+            out.append(rows)
+    for h in np.flatnonzero(~simple):
+        F = np.flatnonzero(free[h])
+        sub = _vertex_signs(_unit_columns(_plane_basis(normals[h]).T @ R[:, F]))
+        base = np.sign(normals[h] @ R).astype(np.int8)
+        base[F] = 0
+        for sgn in (1, -1):
+            rows = np.repeat((sgn * base)[None], len(sub), axis=0)
+            rows[:, F] = sub
+            out.append(rows)
+    rows = np.concatenate(out)
+    key = np.packbits(rows > 0, axis=1)
+    _, first = np.unique(key.view(np.dtype((np.void, key.shape[1]))).ravel(), return_index=True)
+    return rows[np.sort(first)]
+
+
+def _upper_tiles(Rp: FloatArray) -> tuple[NDArray[np.intp], NDArray[np.int8]]:
+    """Tile the zonotope of directions ``Rp`` (d, F), rank d, into parallelepipeds.
+
+    Lifts the directions to ``d+1`` dimensions with generic heights and keeps the upper
+    facets (regular fine zonotopal tiling).  Returns the spanning direction indices (T, d)
+    and, per tile, the end (0 = low, 1 = high, -1 = spanning) of every direction.
+    """
+    d, F = Rp.shape
+    rng = np.random.default_rng(_LIFT_SEED)
+    for _ in range(8):
+        L = np.vstack([Rp, rng.standard_normal(F)])
+        L = _unit_columns(L)
+        normals, free = _hyperplanes(L)
+        up = np.abs(normals[:, -1]) > DIRECTION_TOL
+        normals, free = normals[up] * np.sign(normals[up, -1:]), free[up]
+        if (free.sum(axis=1) == d).all():
+            span = np.nonzero(free)[1].reshape(-1, d)
+            ends = (normals @ L > 0).astype(np.int8)
+            ends[free] = -1
+            return span, ends
+    raise ProblemError("AMS: could not tile a degenerate facet (generic lift failed)")  # pragma: no cover
+
+
+def zonotope_volume(B: ArrayLike, lo: ArrayLike, hi: ArrayLike) -> float:
+    """Volume of ``{B u : lo <= u <= hi}`` by the zonotope formula.
+
+    ``vol = sum over k-subsets S of the effectors of |det B_S| prod_{j in S} (hi_j - lo_j)``
+    (Shephard/McMullen).  Independent of the facet enumeration of :class:`AttainableSet`,
+    it serves as its check.  Vectorised over subsets in chunks.
+    """
+    B = np.atleast_2d(np.asarray(B, dtype=float))
+    rng = np.asarray(hi, dtype=float) - np.asarray(lo, dtype=float)
+    k, m = B.shape
+    idx = np.flatnonzero(rng > 0)
+    if idx.size < k:
+        return 0.0
+    G = B[:, idx] * rng[idx]
+    total = 0.0
+    it = combinations(range(idx.size), k)
+    n_sub = comb(idx.size, k)
+    chunk = 200_000
+    for start in range(0, n_sub, chunk):
+        S = np.array([s for _, s in zip(range(chunk), it)], dtype=np.intp)
+        total += float(np.abs(np.linalg.det(np.moveaxis(G[:, S], 1, 0))).sum())
+    return total
+
+
+# --------------------------------------------------------------------------- the set
+@dataclass(frozen=True)
+class Facet:
+    """One boundary facet of the AMS: ``normal . v <= offset`` with equality on the facet.
+
+    ``free`` are the effectors that move within the facet (two for a parallelogram in
+    general position, more for a merged polygon); every other effector sits at ``fixed[j]``
+    (its limit by the sign of ``normal . b_j``, or its base position when it generates
+    nothing).  ``vertices`` are the facet's corners (ordered around the polygon for k = 3).
+    """
+
+    index: int
+    normal: FloatArray
+    offset: float
+    free: tuple[int, ...]
+    fixed: FloatArray
+    vertices: FloatArray
+
+    @property
+    def n_corners(self) -> int:
+        return int(len(self.vertices))
+
+
+class AttainableSet:
+    """The attainable moment set of a problem (seed section 1.3.4.2), for k = 1..6.
+
+    Parameters
+    ----------
+    problem : Problem
+    lo, hi : array_like (m,), optional
+        The box (default: the position limits).  Effective bounds of a rate-limited step
+        (Eq 1.28) give the set reachable in that step.
+
+    Attributes
+    ----------
+    base_u : ndarray (m,)
+        Base point ``u0 = clip(up, lo, hi)``: rays of Eq 1.15 start at ``B u0`` (the core's
+        ``da`` convention; ``u0 = 0`` in the seed).
+    rank : int
+        Dimension of the set; ``rank < k`` means a flat set (volume 0), whose facets are
+        then relative to its affine hull.
+
+    Examples
+    --------
+    >>> import alloc
+    >>> from alloc.ams import AttainableSet
+    >>> ams = AttainableSet(alloc.vehicles.harv_latdir())
+    >>> len(ams.facets), len(ams.vertices)        # m(m-1) and m(m-1)+2 for m = 5
+    (20, 22)
+    """
+
+    def __init__(self, problem: Problem, lo: ArrayLike | None = None, hi: ArrayLike | None = None) -> None:
+        if not isinstance(problem, Problem):
+            raise TypeError(f"problem: expected alloc.Problem, got {type(problem).__name__}")
+        self.problem = problem
+        B = problem.B
+        self.k, self.m = problem.k, problem.m
+        self.lo = problem.umin if lo is None else np.asarray(lo, dtype=float)
+        self.hi = problem.umax if hi is None else np.asarray(hi, dtype=float)
+        if self.lo.shape != (self.m,) or self.hi.shape != (self.m,) or (self.lo > self.hi).any():
+            raise ProblemError(f"lo/hi: expected ordered bounds of shape ({self.m},)")
+        self.base_u = np.minimum(np.maximum(problem.up, self.lo), self.hi)
+        self.base_v = B @ self.base_u
+        # Structure (depends on the column directions and on which effectors move only).
+        self.active = _active(B, problem.umin, problem.umax) & (self.hi > self.lo)
+        self.cls, self.sign, R = generator_classes(B, self.active)
+        self.n_classes = R.shape[1]
+        # Work in the span of the directions (rank r); Q (k, r) orthonormal.
+        if self.n_classes:
+            Uq, s, _ = np.linalg.svd(R, full_matrices=False)
+            self.rank = int((s > 1e-10 * s[0]).sum())
+            # full rank: keep the user's axes (no rotation round-off)
+            self._Q = np.eye(self.k) if self.rank == self.k else Uq[:, : self.rank]
+        else:
+            self.rank, self._Q = 0, np.zeros((self.k, 0))
+        r = self.rank
+        self._full = r == self.k
+        Rr = _unit_columns(self._Q.T @ R) if r else np.zeros((0, self.n_classes))
+        self._Br = self._Q.T @ B  # (r, m)
+        member = np.zeros((self.n_classes, self.m))
+        member[self.cls[self.active], np.flatnonzero(self.active)] = 1.0
+        self._member = member
+        if r == 0:
+            self._Nr = np.zeros((0, 0))
+            self._free_cls = np.zeros((0, 0), dtype=bool)
+            self._tile_facet = np.zeros(0, dtype=np.intp)
+            self._tile_span = np.zeros((0, 0), dtype=np.intp)
+            self._tile_hi = np.zeros((0, self.m), dtype=bool)
+            self._vertex_hi = np.zeros((1, self.m), dtype=bool)
+        else:
+            self._build_structure(Rr)
+        self._place(self.lo, self.hi)
+
+    # ------------------------------------------------------------ structure
+    def _build_structure(self, Rr: FloatArray) -> None:
+        r, C = Rr.shape
+        normals, free = _hyperplanes(Rr)
+        # each hyperplane bounds the set on both sides
+        N = np.concatenate([normals, -normals])
+        free_cls = np.concatenate([free, free])
+        self._Nr, self._free_cls = N, free_cls
+        sgn_cls = np.sign(N @ Rr)  # (F, C), 0 on free classes
+        free_eff = free_cls[:, self.cls] & self.active
+        # fixed effector j sits at hi when its column points along the normal
+        fixed_hi = (sgn_cls[:, self.cls] * self.sign > 0) & ~free_eff & self.active
+        self._free_eff = free_eff
+        # tiles: one per simple facet, a zonotopal tiling of each merged polygon
+        low_hi = (self.sign < 0) & self.active  # a class's low end: members at lo if sign>0
+        simple = free_cls.sum(axis=1) == r - 1
+        tf = [np.flatnonzero(simple)]
+        ts = [np.nonzero(free_cls[simple])[1].reshape(int(simple.sum()), r - 1)]
+        th = [fixed_hi[simple] | (free_eff[simple] & low_hi)]
+        for f in np.flatnonzero(~simple):
+            F = np.flatnonzero(free_cls[f])
+            sub_span, ends = _upper_tiles(_unit_columns(_plane_basis(N[f]).T @ Rr[:, F]))
+            # class end 1 = members at the class's high end
+            end_eff = np.zeros((len(ends), self.m), dtype=np.int8)
+            end_eff[:, :] = -2
+            mem = free_eff[f]
+            end_eff[:, mem] = ends[:, np.searchsorted(F, self.cls[mem])]
+            at_hi = np.repeat(fixed_hi[f][None], len(ends), axis=0)
+            at_hi[:, mem] = np.where(end_eff[:, mem] == 1, ~low_hi[mem], low_hi[mem])
+            tf.append(np.full(len(ends), f))
+            ts.append(F[sub_span])
+            th.append(at_hi)
+        tf_all = np.concatenate(tf)
+        order = np.argsort(tf_all, kind="stable")
+        self._tile_facet = tf_all[order].astype(np.intp)
+        self._tile_span = np.concatenate(ts)[order].astype(np.intp).reshape(len(order), r - 1)
+        self._tile_hi = np.concatenate(th)[order]
+        starts = np.searchsorted(self._tile_facet, np.arange(len(N) + 1))
+        self._facet_tiles = [np.arange(starts[f], starts[f + 1]) for f in range(len(N))]
+        # vertices: sign vectors over classes -> effector at hi when sigma_c * sign_j > 0
+        sig = _vertex_signs(Rr)
+        self._vertex_hi = (sig[:, self.cls] * self.sign > 0) & self.active
+        self._vertex_sig, self._sgn_cls = sig, sgn_cls.astype(np.int8)
+        self._fixed_hi = fixed_hi
+        self._NB = N @ self._Br  # (F, m): facet normal . column, in the set's own coordinates
+
+    # ------------------------------------------------------------ positions
+    def _config(self, at_hi: NDArray[np.bool_], lo: FloatArray, hi: FloatArray, u0: FloatArray) -> FloatArray:
+        """Effector positions of boolean configurations; inactive effectors at the base point."""
+        U = np.where(at_hi, hi, lo)
+        U[..., ~self.active] = u0[~self.active]
+        return U
+
+    def _class_steps(self, lo: FloatArray, hi: FloatArray) -> FloatArray:
+        """(C, m): the change of u moving each class from its low to its high end."""
+        return self._member * (self.sign * (hi - lo))
+
+    def _place(self, lo: FloatArray, hi: FloatArray) -> None:
+        """Positions for this box: offsets, tile corners and edges, vertices."""
+        u0 = self.base_u
+        B, Br = self.problem.B, self._Br
+        self.vertex_u = self._config(self._vertex_hi, lo, hi, u0)
+        self.vertices = self.vertex_u @ B.T
+        if self.rank == 0:
+            self._offsets = np.zeros(0)
+            self._gap = np.zeros(0)
+            return
+        self._steps = self._class_steps(lo, hi)
+        self._Er = Br @ self._steps.T  # (r, C) class generators (full length)
+        self._gap = self._gaps(lo, hi, u0)
+        self._offsets = self._gap + self._Nr @ (Br @ u0)
+        self._tile_u = self._config(self._tile_hi, lo, hi, u0)
+        self._tile_corner = self._tile_u @ Br.T  # (T, r)
+
+    def _gaps(self, lo: FloatArray, hi: FloatArray, u0: FloatArray) -> FloatArray:
+        """Distance (along each unit normal) from the base point to each facet; >= 0 exactly."""
+        NB = self._NB
+        return np.maximum(NB * (lo - u0), NB * (hi - u0)).sum(axis=1)
+
+    # ------------------------------------------------------------ public geometry
+    @property
+    def n_facets(self) -> int:
+        return int(len(self._Nr))
+
+    @property
+    def n_tiles(self) -> int:
+        """Parallelogram tiles used by the ray search (= facets in general position)."""
+        return int(len(self._tile_facet))
+
+    @property
+    def normals(self) -> FloatArray:
+        """Unit outward facet normals (F, k) (in the set's affine hull when it is flat)."""
+        return self._Nr @ self._Q.T
+
+    @property
+    def offsets(self) -> FloatArray:
+        """Facet offsets ``h``: ``normals @ v <= offsets`` for every ``v`` in the set."""
+        return self._offsets.copy()
+
+    @cached_property
+    def volume(self) -> float:
+        """Exact k-dimensional volume (divergence theorem over the facet tiles); 0 when flat.
+
+        ``vol = (1/k) sum_tiles (n . (corner - c)) area``, with ``area`` the (k-1)-volume of
+        the tile's parallelepiped.  Checked against :func:`zonotope_volume` in the tests.
+        """
+        return self.volume_in_hull if self._full else 0.0
+
+    @cached_property
+    def volume_in_hull(self) -> float:
+        """Volume within the set's own affine hull (``rank``-dimensional)."""
+        r = self.rank
+        if r == 0:
+            return 0.0
+        if r == 1:
+            return float(np.abs(self._Er).sum())
+        E = np.moveaxis(self._Er[:, self._tile_span], 1, 0)  # (T, r, r-1)
+        area = np.sqrt(np.abs(np.linalg.det(np.swapaxes(E, 1, 2) @ E)))
+        center = self._Br @ ((self.lo + self.hi) / 2)
+        height = np.einsum("tr,tr->t", self._Nr[self._tile_facet], self._tile_corner - center)
+        return float((height * area).sum() / r)
+
+    def support(self, n: ArrayLike) -> float:
+        """``max n . v`` over the set: each effector at the limit given by ``sign(n . b_j)``."""
+        nb = np.asarray(n, dtype=float) @ self.problem.B
+        return float(np.maximum(nb * self.lo, nb * self.hi).sum())
+
+    def contains(self, v: ArrayLike, tol: float = 1e-9) -> bool | NDArray[np.bool_]:
+        """Whether ``v`` (k,) or each row of ``V`` (N, k) is attainable: ``n . v <= h(n)`` for all facets.
+
+        ``tol`` is relative to the size of the set.
+        """
+        V = np.asarray(v, dtype=float)
+        one = V.ndim == 1
+        V = np.atleast_2d(V)
+        if V.shape[1] != self.k:
+            raise DemandError(f"v: expected {self.k} components, got {V.shape[1]}")
+        scale = tol * max(1.0, float(np.abs(self.vertices).max()))
+        D = V - self.base_v
+        Y = D @ self._Q
+        ok = np.linalg.norm(D - Y @ self._Q.T, axis=1) <= scale
+        if self.rank:
+            ok &= (Y @ self._Nr.T - self._gap <= scale).all(axis=1)
+        else:
+            ok &= np.linalg.norm(D, axis=1) <= scale
+        return bool(ok[0]) if one else ok
+
+    def max_in_direction(self, d: ArrayLike, *, lo: ArrayLike | None = None, hi: ArrayLike | None = None,
+                         u0: ArrayLike | None = None) -> tuple[float, FloatArray]:
+        """Eq 1.15's ``a*`` and ``u_d*``: the largest ``a`` with ``B u0 + a d`` attainable.
+
+        Support-function form of the sequential facet search: ``a* = min over facets with
+        n . d > 0 of gap(n) / (n . d)``, the gap from the base point to the facet being
+        ``sum_j max(n.b_j (lo_j - u0_j), n.b_j (hi_j - u0_j))``.  Valid for any box inside
+        the position limits (the facet directions do not change), so a rate-limited step
+        only recomputes the gaps.  ``u_d*`` is found on the hit facet's tiles (Eq 1.16).
+
+        Returns ``(a*, u_d*)``; ``a* = inf`` for ``d = 0``.
+        """
+        a, u, _ = self.ray_exit(d, lo=lo, hi=hi, u0=u0)
+        return a, u
+
+    def facet_hit(self, d: ArrayLike) -> int:
+        """Index (into :attr:`facets`) of the facet the ray ``B u0 + a d`` leaves through (-1 if none)."""
+        return self.ray_exit(d)[2]
+
+    def ray_exit(self, d: ArrayLike, *, lo: ArrayLike | None = None, hi: ArrayLike | None = None,
+                 u0: ArrayLike | None = None) -> tuple[float, FloatArray, int]:
+        """``(a*, u_d*, facet index)`` of the ray from ``B u0`` along ``d``; see :meth:`max_in_direction`."""
+        d = np.asarray(d, dtype=float)
+        if d.shape != (self.k,):
+            raise DemandError(f"d: expected shape ({self.k},), got {d.shape}")
+        nominal = lo is None and hi is None and u0 is None
+        lo = self.lo if lo is None else np.asarray(lo, dtype=float)
+        hi = self.hi if hi is None else np.asarray(hi, dtype=float)
+        u0 = np.minimum(np.maximum(self.problem.up, lo), hi) if u0 is None else np.asarray(u0, dtype=float)
+        dn = float(np.linalg.norm(d))
+        if dn == 0.0:
+            return np.inf, u0.copy(), -1
+        y = self._Q.T @ d
+        if self.rank == 0 or np.linalg.norm(d - self._Q @ y) > 1e-12 * dn:
+            return 0.0, u0.copy(), -1  # leaves the (flat) set's hull at once
+        gap = self._gap if nominal else self._gaps(lo, hi, u0)
+        nd = self._Nr @ y
+        ok = nd > 1e-12 * dn
+        ratio = np.full(len(nd), np.inf)
+        ratio[ok] = gap[ok] / nd[ok]
+        f = int(np.argmin(ratio))
+        a = max(0.0, float(ratio[f]))
+        if a == 0.0:
+            return 0.0, u0.copy(), f
+        return a, self.point_on_facet(f, self._Br @ u0 + a * y, lo, hi, u0, nominal=nominal), f
+
+    def point_on_facet(self, f: int, q: FloatArray, lo: FloatArray, hi: FloatArray, u0: FloatArray,
+                       *, nominal: bool = False) -> FloatArray:
+        """A control ``u`` in the box with ``B u = q`` for ``q`` (in the set's coordinates) on facet ``f``.
+
+        Solves Eq 1.16 on each tile of the facet and keeps the one whose parameters satisfy
+        Eq 1.17 best (they all do up to round-off on a shared edge).
+        """
+        tiles = self._facet_tiles[f]
+        steps = self._steps if nominal else self._class_steps(lo, hi)
+        U = self._tile_u[tiles] if nominal else self._config(self._tile_hi[tiles], lo, hi, u0)
+        best, best_u = -np.inf, None
+        for i, t in enumerate(tiles):
+            S = steps[self._tile_span[t]]  # (r-1, m)
+            E = self._Br @ S.T
+            p = np.linalg.lstsq(E, q - self._Br @ U[i], rcond=None)[0]
+            margin = float(np.minimum(p, 1.0 - p).min()) if p.size else 0.0
+            if margin > best:
+                best, best_u = margin, U[i] + np.clip(p, 0.0, 1.0) @ S
+            if margin >= -1e-12:
+                break
+        return best_u
+
+    @cached_property
+    def facets(self) -> list[Facet]:
+        """Boundary facets with their effector assignments (merged polygons for coplanar columns)."""
+        out = []
+        V = self.vertices
+        N = self.normals
+        for f in range(self.n_facets):
+            # a vertex is a corner of the facet when it agrees with the facet's fixed signs
+            fixed_cls = ~self._free_cls[f]
+            on = (self._vertex_sig[:, fixed_cls] == self._sgn_cls[f, fixed_cls]).all(axis=1)
+            corners = V[on]
+            if self.rank == 3 and len(corners) > 2:
+                P = _plane_basis(self._Nr[f])
+                xy = (corners - corners.mean(axis=0)) @ self._Q @ P
+                corners = corners[np.argsort(np.arctan2(xy[:, 1], xy[:, 0]))]
+            fixed = self._config(self._fixed_hi[f], self.lo, self.hi, self.base_u).astype(float)
+            fixed[self._free_eff[f]] = np.nan
+            free = tuple(int(j) for j in np.flatnonzero(self._free_eff[f]))
+            out.append(Facet(f, N[f], float(self._offsets[f]), free, fixed, corners))
+        return out
+
+    def summary(self) -> dict[str, object]:
+        """Counts and volume (for the CLI's ``alloc ams summary``)."""
+        merged = [[self.problem.names[j] for j in np.flatnonzero(self.cls == c)] for c in range(self.n_classes)]
+        return {
+            "k": self.k, "m": self.m, "rank": self.rank, "volume": self.volume,
+            "facets": self.n_facets, "tiles": self.n_tiles, "vertices": int(len(self.vertices)),
+            "generator_classes": self.n_classes,
+            "merged_collinear": [g for g in merged if len(g) > 1],
+            "inactive": [self.problem.names[j] for j in np.flatnonzero(~self.active)],
+            "polygon_facets": int((self._free_cls.sum(axis=1) > max(self.rank - 1, 0)).sum()) if self.rank else 0,
+        }
+
+    def __repr__(self) -> str:
+        return (f"AttainableSet(k={self.k}, m={self.m}, rank={self.rank}, facets={self.n_facets}, "
+                f"vertices={len(self.vertices)}, volume={self.volume:.6g})")
