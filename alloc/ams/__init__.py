@@ -4,3 +4,4 @@ direct allocation (``da_facet``, ``da_bisect``, ``da_table``) and method coverag
 from .geometry import AttainableSet, Facet, generator_classes, zonotope_volume
 
 __all__ = ["AttainableSet", "Facet", "generator_classes", "zonotope_volume"]
+from . import search  # noqa: E402,F401  (registers da_facet, da_bisect, da_table)

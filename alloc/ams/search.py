@@ -1,0 +1,380 @@
+"""Direct allocation by facet search (seed sections 1.3.4.2.1-1.3.4.2.3, Eqs 1.15-1.17).
+
+Same convention as the core's LP-based ``da``: base point ``u0 = clip(up, lo, hi)``,
+``d = v - B u0``; the ray ``B u0 + a d`` leaves the AMS at ``a*`` through a facet with
+boundary control ``u*``; ``a* >= 1`` gives ``u = u0 + (u* - u0) / a*`` (Eq 1.15, so
+``B u = v``), otherwise ``u = u*`` (status ``unattainable``).
+
+``da_facet``
+    Sequential facet search (1.3.4.2.1): for every tile (a facet's parallelogram, Eq 1.16)
+    the inverse of ``[corner - B u0, edge_1, ..., edge_(k-1)]`` is stored at build time;
+    a call is one stacked matrix-vector product and the Eq 1.17 test
+    ``a > 0, 0 <= b_i <= 1`` over all tiles at once (the tile satisfying it best wins, so
+    rays through an edge are handled).  Any k.
+``da_bisect``
+    Durham's edge-bisecting search (1.3.4.2.2), k = 3: ``d`` is turned into the x-axis;
+    for a rotation angle about it the AMS is projected onto the (x, y) plane and the
+    silhouette edge crossing the positive x-axis is found by a weighted median over the
+    generators (O(m log m), no facet list); the sign of that edge's z-coordinate brackets
+    the ray and the angle interval is cut (``angles`` per round) until the two bracketing
+    edges span a facet that passes Eq 1.17.  Work grows about linearly with m.
+``da_table``
+    Spherical look-up table (1.3.4.2.3, Peterson and Bodson's option 2), k = 3: azimuth and
+    elevation of ``d`` quantised (option ``resolution``); each cell stores the tiles hit by
+    its centre and corners; a call tests those few (Eq 1.17) and falls back to the
+    sequential search when none passes, so it stays exact.  ``build_time`` is the
+    (re)build cost after an effector failure.
+
+Rate limits: the facet *structure* depends only on the columns' directions, so with
+``u_prev``/``dt`` the search is the support-function form over the same facets with gaps
+recomputed from the call's bounds (:meth:`AttainableSet.ray_exit`): exact, no LP.  Other
+``k`` than 3 make ``da_bisect``/``da_table`` use the sequential search.  A flat AMS
+(rank B < k) is handled by :class:`AttainableSet` (a demand off its hull has ``a* = 0``).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from ..exceptions import OptionError
+from ..problem import Problem
+from ..registry import FloatArray, Method, register
+from .geometry import AttainableSet
+
+__all__ = ["FacetSearch", "EdgeBisect", "SphericalTable"]
+
+_EQ = "Eqs 1.15-1.17"
+_TOL = 1e-10  # Eq 1.17 slack, relative (rays through an edge satisfy two tiles up to round-off)
+
+
+@register("da_facet")
+class FacetSearch(Method):
+    """Direct allocation by sequential facet search over precomputed facet inverses."""
+
+    equation = _EQ
+    summary = "direct allocation: sequential facet search over stored facet inverses (Eq 1.16-1.17)"
+    options: dict[str, str] = {}
+
+    def __init__(self, problem: Problem) -> None:
+        super().__init__(problem)
+        t0 = time.perf_counter()
+        self.ams = AttainableSet(problem)
+        self._prepare()
+        self.build_time = time.perf_counter() - t0
+        self.fallbacks = 0
+
+    # ------------------------------------------------------------ tables
+    def _prepare(self) -> None:
+        ams, p = self.ams, self.problem
+        self._u0 = ams.base_u
+        self._p0 = ams.base_v
+        self._umin, self._umax = p.umin, p.umax
+        self._flat = ams.rank < p.k or ams.rank == 0
+        if self._flat:
+            return
+        k = p.k
+        scale = np.abs(ams._NB).sum(axis=1) * np.abs(p.umax - p.umin).max() + 1e-300
+        base = ams._gap <= 1e-12 * scale  # facets through the base point: Eq 1.16 is singular there
+        self._Nz = ams._Nr[base]
+        keep = ~base[ams._tile_facet]
+        tiles = np.flatnonzero(keep)
+        self._tiles = tiles
+        span = ams._tile_span[tiles]  # (T, k-1)
+        M = np.empty((len(tiles), k, k))
+        M[:, :, 0] = ams._tile_corner[tiles] - self._p0
+        M[:, :, 1:] = np.moveaxis(ams._Er[:, span], 0, 1)
+        self._Minv = np.linalg.inv(M)
+        self._Minv2 = self._Minv.reshape(-1, k)  # X = (Minv2 @ d).reshape(T, k): one BLAS call
+        self._U = ams._tile_u[tiles]  # (T, m) corner controls
+        self._S = ams._steps[span]  # (T, k-1, m) edge steps in u
+        self._facet_of_tile = ams._tile_facet[tiles]
+
+    def _nominal(self, lo: FloatArray, hi: FloatArray) -> bool:
+        return (lo is self._umin or np.array_equal(lo, self._umin)) and (
+            hi is self._umax or np.array_equal(hi, self._umax))
+
+    # ------------------------------------------------------------ search
+    def _tile_test(self, X: FloatArray) -> tuple[int, float]:
+        """Eq 1.17 on rows ``X = [1/a, b/a, c/a, ...]``: the best tile and its margin."""
+        x0 = X[:, 0]
+        P = X[:, 1:]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            score = np.minimum(P, x0[:, None] - P).min(axis=1, initial=np.inf) / x0
+        score[~(x0 > 0)] = -np.inf
+        t = int(np.argmax(score))
+        return t, float(score[t])
+
+    def _boundary(self, d: FloatArray) -> tuple[float, FloatArray]:
+        """``(a*, u*)`` for the nominal box (subclasses replace the tile search)."""
+        t, _ = self._tile_test((self._Minv2 @ d).reshape(-1, self.problem.k))
+        return self._from_tile(t, (self._Minv[t] @ d))
+
+    def _from_tile(self, t: int, x: FloatArray) -> tuple[float, FloatArray]:
+        a = 1.0 / x[0]
+        b = np.minimum(np.maximum(x[1:] * a, 0.0), 1.0)
+        return a, self._U[t] + b @ self._S[t]
+
+    def solve(self, v, lo, hi, u_prev):
+        p = self.problem
+        if self._flat or not self._nominal(lo, hi):
+            u0 = np.minimum(np.maximum(p.up, lo), hi)
+            d = v - p.B @ u0
+            if not np.abs(d).max() > 1e-14 * max(1.0, float(np.abs(v).max())):
+                return u0, 0
+            a, ustar, _ = self.ams.ray_exit(d, lo=lo, hi=hi, u0=u0)
+        else:
+            u0 = self._u0
+            d = v - self._p0
+            if not np.abs(d).max() > 1e-14 * max(1.0, float(np.abs(v).max())):
+                return u0.copy(), 0
+            if self._Nz.size and (self._Nz @ d > 1e-12 * np.linalg.norm(d)).any():
+                return u0.copy(), 0  # the ray leaves at once through a facet holding the base point
+            a, ustar = self._boundary(d)
+        if a >= 1.0:
+            return u0 + (ustar - u0) / a, 1  # Eq 1.15
+        return ustar, 1
+
+    def solve_batch(self, V, lo, hi):
+        if self._flat or not self._nominal(lo, hi):
+            return None
+        k, N = self.problem.k, len(V)
+        D = V - self._p0
+        U = np.empty((N, self.problem.m))
+        T = len(self._tiles)
+        chunk = max(1, 2_000_000 // max(1, T * k))
+        for s in range(0, N, chunk):
+            Dc = D[s:s + chunk]
+            X = (Dc @ self._Minv2.T).reshape(len(Dc), T, k)
+            x0 = X[:, :, 0]
+            P = X[:, :, 1:]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                score = np.minimum(P, x0[:, :, None] - P).min(axis=2, initial=np.inf) / x0
+            score[~(x0 > 0)] = -np.inf
+            t = np.argmax(score, axis=1)
+            xt = X[np.arange(len(Dc)), t]
+            a = 1.0 / xt[:, 0]
+            b = np.clip(xt[:, 1:] * a[:, None], 0.0, 1.0)
+            ustar = self._U[t] + np.einsum("ni,nim->nm", b, self._S[t])
+            scale = np.where(a >= 1.0, 1.0 / a, 1.0)
+            u = np.where((a >= 1.0)[:, None], self._u0 + (ustar - self._u0) * scale[:, None], ustar)
+            still = ~(np.abs(Dc).max(axis=1) > 1e-14 * np.maximum(1.0, np.abs(V[s:s + chunk]).max(axis=1)))
+            if self._Nz.size:
+                still |= (Dc @ self._Nz.T > 1e-12 * np.linalg.norm(Dc, axis=1, keepdims=True)).any(axis=1)
+            u[still] = self._u0
+            U[s:s + chunk] = u
+        return U
+
+
+@register("da_bisect")
+class EdgeBisect(FacetSearch):
+    """Direct allocation by Durham's edge-bisecting facet search (k = 3)."""
+
+    summary = "direct allocation: Durham's edge-bisecting facet search, cost ~linear in m (Eq 1.16-1.17)"
+    options = {"angles": "rotation angles tried per round (1 = plain bisection; default 16)",
+               "max_rounds": "rounds before falling back to the sequential search (default 40)"}
+
+    def __init__(self, problem: Problem, *, angles: int = 16, max_rounds: int = 40) -> None:
+        if not isinstance(angles, int) or angles < 1:
+            raise OptionError(f"da_bisect: angles must be a positive integer, got {angles!r}")
+        if not isinstance(max_rounds, int) or max_rounds < 1:
+            raise OptionError(f"da_bisect: max_rounds must be a positive integer, got {max_rounds!r}")
+        self.angles, self.max_rounds = angles, max_rounds
+        super().__init__(problem)
+        self.rounds = 0
+
+    def _prepare(self) -> None:
+        super()._prepare()
+        ams = self.ams
+        self._bisect = not self._flat and self.problem.k == 3 and ams.n_classes >= 2
+        if not self._bisect:
+            return
+        G = ams._Er / 2.0  # centred class generators
+        self._R = G / np.linalg.norm(G, axis=0)
+        # Search in axes scaled to the set's extent: facet identity is invariant under a
+        # linear map, and the angular search is far better conditioned on a round set.
+        self._W = 1.0 / np.abs(G).sum(axis=1)
+        self._G = G * self._W[:, None]
+        self._c = (ams._Br @ ((ams.lo + ams.hi) / 2.0) - self._p0) * self._W  # centre seen from B u0
+        C = G.shape[1]
+        # facet of each (class i, class j, side): side 1 when n . (r_i x r_j) > 0
+        lut = np.full((C, C, 2), -1, dtype=np.intp)
+        tiles_of = {}
+        for i, f in enumerate(self._facet_of_tile):
+            tiles_of.setdefault(int(f), []).append(i)
+        for f, tl in tiles_of.items():
+            F = np.flatnonzero(ams._free_cls[f])
+            n = ams._Nr[f]
+            for a in range(len(F)):
+                for b in range(a + 1, len(F)):
+                    i, j = F[a], F[b]
+                    side = int(n @ np.cross(self._R[:, i], self._R[:, j]) > 0)
+                    lut[i, j, side] = lut[j, i, 1 - side] = f
+        self._lut = lut
+        self._tiles_of = {f: np.array(tl) for f, tl in tiles_of.items()}
+        self._pair_cross = np.cross(self._R.T[:, None, :], self._R.T[None, :, :])  # (C, C, 3)
+
+    def _edge(self, th: FloatArray, gx, gy0, gz0, cx, cy0, cz0):
+        """Silhouette edge over the positive x-axis for rotation angles ``th`` (K,).
+
+        Returns the edge class (K,), the generator signs (K, C) and the edge point's z (K,).
+        """
+        cs, sn = np.cos(th)[:, None], np.sin(th)[:, None]
+        gy = cs * gy0 + sn * gz0  # (K, C)
+        gz = cs * gz0 - sn * gy0
+        cy = cs[:, 0] * cy0 + sn[:, 0] * cz0
+        cz = cs[:, 0] * cz0 - sn[:, 0] * cy0
+        # max x on y = 0 of the projection: minimise cx + t cy + sum|gx + t gy| over t
+        # (a weighted median of the breakpoints t_c = -gx_c / gy_c)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            tb = -gx / gy
+        tb[~np.isfinite(tb)] = np.inf
+        order = np.argsort(tb, axis=1)
+        w = 2.0 * np.abs(np.take_along_axis(gy, order, axis=1))
+        slope = (cy - np.abs(gy).sum(axis=1))[:, None] + np.cumsum(w, axis=1)
+        i = np.minimum((slope < 0).sum(axis=1), gy.shape[1] - 1)
+        rows = np.arange(len(th))
+        c = order[rows, i]
+        t = tb[rows, c]
+        sig = np.sign(gx + t[:, None] * gy)
+        sig[rows, c] = 0.0
+        s = -(cy + (sig * gy).sum(axis=1)) / gy[rows, c]
+        z = cz + (sig * gz).sum(axis=1) + s * gz[rows, c]
+        return c, sig, z
+
+    def _boundary(self, d):
+        if not self._bisect:
+            return super()._boundary(d)
+        G, c0 = self._G, self._c
+        # orthonormal frame (x along the scaled demand), scalar arithmetic: np.cross costs ~10 us
+        x0, x1, x2 = d[0] * self._W[0], d[1] * self._W[1], d[2] * self._W[2]
+        nx = math.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
+        x0, x1, x2 = x0 / nx, x1 / nx, x2 / nx
+        if abs(x0) <= abs(x1) and abs(x0) <= abs(x2):
+            y0, y1, y2 = 0.0, x2, -x1  # x cross e0
+        elif abs(x1) <= abs(x2):
+            y0, y1, y2 = -x2, 0.0, x0  # x cross e1
+        else:
+            y0, y1, y2 = x1, -x0, 0.0  # x cross e2
+        ny = math.sqrt(y0 * y0 + y1 * y1 + y2 * y2)
+        y0, y1, y2 = y0 / ny, y1 / ny, y2 / ny
+        frame = np.array([[x0, x1, x2], [y0, y1, y2],
+                          [x1 * y2 - x2 * y1, x2 * y0 - x0 * y2, x0 * y1 - x1 * y0]])
+        gx, gy0, gz0 = frame @ G
+        cx, cy0, cz0 = frame @ c0
+        K = self.angles
+        lo_t, hi_t = 0.0, math.pi
+        (cl,), (sl,), (zl,) = self._edge(np.array([lo_t]), gx, gy0, gz0, cx, cy0, cz0)
+        ch, sh, zh = cl, sl, -zl  # the half-turn sees the same edge, z mirrored
+        for r in range(1, self.max_rounds + 1):
+            th = lo_t + (hi_t - lo_t) * np.arange(1, K + 1) / (K + 1)
+            cc, ss, zz = self._edge(th, gx, gy0, gz0, cx, cy0, cz0)
+            # bracket: first angle whose z has the sign of the upper end
+            pos = zz > 0 if zh > 0 else zz <= 0
+            j = int(np.argmax(pos)) if pos.any() else K
+            if j > 0:
+                lo_t, cl, sl = th[j - 1], cc[j - 1], ss[j - 1]
+            if j < K:
+                hi_t, ch, sh = th[j], cc[j], ss[j]
+            found = self._try_facet(cl, sl, ch, sh, d)
+            if found is not None:
+                self.rounds = r
+                return found
+        self.fallbacks += 1
+        return super()._boundary(d)
+
+    def _try_facet(self, cl, sl, ch, sh, d):
+        """Test the facet spanned by the two bracketing edges (Eq 1.17); ``None`` if it fails."""
+        differ = sl != sh
+        differ[cl] = differ[ch] = True
+        cand = np.flatnonzero(differ)
+        if len(cand) < 2:
+            return None
+        i, j = int(cand[0]), int(cand[1])
+        side = int(d @ self._pair_cross[i, j] > 0)
+        f = int(self._lut[i, j, side])
+        tl = self._tiles_of.get(f)
+        if tl is None:
+            return None
+        X = self._Minv[tl] @ d
+        t, score = self._tile_test(X)
+        if score < -_TOL:
+            return None
+        return self._from_tile(int(tl[t]), X[t])
+
+
+@register("da_table")
+class SphericalTable(FacetSearch):
+    """Direct allocation with a spherical (azimuth, elevation) look-up table of facets (k = 3)."""
+
+    summary = "direct allocation: quantised azimuth/elevation table of facets, sequential check as backup"
+    options = {"resolution": "elevation cells (azimuth gets twice as many; default 64)"}
+    _CANDIDATES = 5
+
+    def __init__(self, problem: Problem, *, resolution: int = 64) -> None:
+        if not isinstance(resolution, int) or resolution < 2:
+            raise OptionError(f"da_table: resolution must be an integer >= 2, got {resolution!r}")
+        self.resolution = resolution
+        super().__init__(problem)
+        self.hits = 0
+
+    def _prepare(self) -> None:
+        super()._prepare()
+        self._table = None
+        if self._flat or self.problem.k != 3 or len(self._tiles) == 0:
+            return
+        ne = self.resolution
+        na = 2 * ne
+        # quantise directions of W d, W = 1 / extent of the set per axis: a round set gives
+        # facets comparable solid angles (ICE's pitch/roll/yaw extents differ 10x)
+        ext = np.abs(self.ams._Er).sum(axis=1)
+        self._W = 1.0 / ext
+        az = np.linspace(-np.pi, np.pi, na + 1)
+        el = np.linspace(-np.pi / 2, np.pi / 2, ne + 1)
+        azc, elc = (az[:-1] + az[1:]) / 2, (el[:-1] + el[1:]) / 2
+
+        def directions(A, E):
+            A, E = np.meshgrid(A, E, indexing="ij")
+            return np.stack([np.cos(E) * np.cos(A), np.cos(E) * np.sin(A), np.sin(E)], axis=-1).reshape(-1, 3)
+
+        centre = self._tiles_hit(directions(azc, elc) * ext).reshape(na, ne)
+        corner = self._tiles_hit(directions(az, el) * ext).reshape(na + 1, ne + 1)
+        cand = np.stack([centre, corner[:-1, :-1], corner[1:, :-1], corner[:-1, 1:], corner[1:, 1:]], axis=-1)
+        cand = np.where(cand < 0, centre[..., None], cand)
+        self._table = np.ascontiguousarray(cand.reshape(na * ne, self._CANDIDATES))
+        self._na, self._ne = na, ne
+
+    def _tiles_hit(self, D: FloatArray) -> np.ndarray:
+        T, k = len(self._tiles), 3
+        out = np.empty(len(D), dtype=np.intp)
+        chunk = max(1, 2_000_000 // (T * k))
+        for s in range(0, len(D), chunk):
+            X = (D[s:s + chunk] @ self._Minv2.T).reshape(-1, T, k)
+            x0, P = X[:, :, 0], X[:, :, 1:]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                score = np.minimum(P, x0[:, :, None] - P).min(axis=2) / x0
+            score[~(x0 > 0)] = -np.inf
+            t = np.argmax(score, axis=1)
+            t[~np.isfinite(score[np.arange(len(t)), t])] = -1
+            out[s:s + chunk] = t
+        return out
+
+    def _boundary(self, d):
+        if self._table is None:
+            return super()._boundary(d)
+        w = self._W
+        x, y, z = d[0] * w[0], d[1] * w[1], d[2] * w[2]
+        az = math.atan2(y, x)
+        el = math.atan2(z, math.hypot(x, y))
+        i = min(int((az + math.pi) / (2 * math.pi) * self._na), self._na - 1)
+        j = min(int((el + math.pi / 2) / math.pi * self._ne), self._ne - 1)
+        cand = self._table[i * self._ne + j]
+        X = self._Minv[cand] @ d
+        t, score = self._tile_test(X)
+        if score >= -_TOL:
+            self.hits += 1
+            return self._from_tile(int(cand[t]), X[t])
+        self.fallbacks += 1
+        return super()._boundary(d)
