@@ -1,4 +1,8 @@
-"""Dependencies shared by the routers: the store, the settings, the API-key check."""
+"""Dependencies shared by the routers: the store, the settings, the API-key check.
+
+All are ``async``: FastAPI runs a sync dependency in the thread pool, a thread hand-off
+that costs more than the allocation itself.
+"""
 
 from __future__ import annotations
 
@@ -18,11 +22,11 @@ _api_key_header = APIKeyHeader(name="X-API-Key", auto_error=False,
                                description="required on write endpoints when ALLOC_API_KEY is set")
 
 
-def get_store(request: Request) -> VehicleStore:
+async def get_store(request: Request) -> VehicleStore:
     return request.app.state.store
 
 
-def get_settings(request: Request) -> Settings:
+async def get_settings(request: Request) -> Settings:
     return request.app.state.settings
 
 
@@ -30,7 +34,7 @@ StoreDep = Annotated[VehicleStore, Depends(get_store)]
 SettingsDep = Annotated[Settings, Depends(get_settings)]
 
 
-def require_api_key(settings: SettingsDep, key: Annotated[str | None, Security(_api_key_header)] = None) -> None:
+async def require_api_key(settings: SettingsDep, key: Annotated[str | None, Security(_api_key_header)] = None) -> None:
     """Write endpoints: when ``ALLOC_API_KEY`` is set, header ``X-API-Key`` must equal it."""
     expected = settings.api_key
     if not expected:

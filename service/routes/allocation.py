@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
-from fastapi import APIRouter
+from fastapi import APIRouter, Response
 
 from ..deps import StoreDep
+from ..responses import model_response
 from ..schemas import AllocateRequest, AllocationOut, BatchAllocateRequest, BatchOut, ProblemIn
 from ..store import build_allocator
 
@@ -16,15 +17,15 @@ _PROBLEM_FIELDS = set(ProblemIn.model_fields)
 # async: runs on the event loop, so the cached (not thread-safe) allocators are never
 # called concurrently, and a single allocation costs no thread hand-off.
 @router.post("", response_model=AllocationOut, summary="Allocate one demand for an inline problem")
-async def allocate(body: AllocateRequest, store: StoreDep) -> AllocationOut:
+async def allocate(body: AllocateRequest, store: StoreDep) -> Response:
     key = body.model_dump_json(include=_PROBLEM_FIELDS)
     allocator = store.inline_allocator(key, body.to_problem, body.method, body.options)
-    return AllocationOut.of(allocator(body.v, u_prev=body.u_prev, dt=body.dt))
+    return model_response(AllocationOut.of(allocator(body.v, u_prev=body.u_prev, dt=body.dt)))
 
 
 # sync (thread pool): a 10,000-demand batch must not block the event loop; it builds its
 # own allocator, since cached ones are only ever called from the event loop.
 @router.post("/batch", response_model=BatchOut, summary="Allocate many demands for one inline problem")
-def allocate_batch(body: BatchAllocateRequest) -> BatchOut:
+def allocate_batch(body: BatchAllocateRequest) -> Response:
     allocator = build_allocator(body.to_problem(), body.method, body.options)
-    return BatchOut.of(allocator.batch(body.V))
+    return model_response(BatchOut.of(allocator.batch(body.V)))

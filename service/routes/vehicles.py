@@ -13,6 +13,7 @@ from fastapi import APIRouter, Depends, Path, Query, Response, status
 from .. import ams
 from ..db import EventRow
 from ..deps import StoreDep, require_api_key
+from ..responses import model_response
 from ..health import health_out
 from ..schemas import (
     AllocationOut, AmsOut, AmsVehicleRequest, BatchOut, EventIn, EventList, EventOut, EventRecorded,
@@ -90,19 +91,19 @@ def get_health(vehicle_id: VehicleId, store: StoreDep) -> HealthOut:
 
 @router.post("/{vehicle_id}/allocate", response_model=AllocationOut,
              summary="Allocate one demand at the vehicle's current health")
-async def allocate(vehicle_id: VehicleId, body: VehicleAllocateRequest, store: StoreDep) -> AllocationOut:
+async def allocate(vehicle_id: VehicleId, body: VehicleAllocateRequest, store: StoreDep) -> Response:
     state = store.get(vehicle_id)
     allocator = store.vehicle_allocator(state, body.method, body.options)
     result = allocator(body.v, u_prev=body.u_prev, dt=body.dt)
-    return AllocationOut.of(result, vehicle_id=state.id, health_version=state.version)
+    return model_response(AllocationOut.of(result, vehicle_id=state.id, health_version=state.version))
 
 
 @router.post("/{vehicle_id}/allocate/batch", response_model=BatchOut,
              summary="Allocate many demands at the vehicle's current health")
-def allocate_batch(vehicle_id: VehicleId, body: VehicleBatchRequest, store: StoreDep) -> BatchOut:
+def allocate_batch(vehicle_id: VehicleId, body: VehicleBatchRequest, store: StoreDep) -> Response:
     state = store.get(vehicle_id)
     allocator = build_allocator(state.problem, body.method, body.options)
-    return BatchOut.of(allocator.batch(body.V), vehicle_id=state.id, health_version=state.version)
+    return model_response(BatchOut.of(allocator.batch(body.V), vehicle_id=state.id, health_version=state.version))
 
 
 @router.post("/{vehicle_id}/ams", response_model=AmsOut, summary="AMS summary at the vehicle's current health")

@@ -1,0 +1,228 @@
+"""Load benchmark of the HTTP service, loopback only, bounded in count and time.
+
+Starts the service (uvicorn, one worker) on a free 127.0.0.1 port with a temporary
+database, then measures for ``pinv`` and ``qp`` on the ICE problem (k = 3, m = 11):
+
+1. the library call alone (a built allocator, same process as the client), per demand;
+2. closed-loop single requests (one keep-alive connection): allocations/s, p50/p99;
+3. closed-loop batch requests (100 and 1,000 demands): allocations/s, p50/p99 per request;
+4. open loop at a fixed arrival rate (default 300 requests/s): latency measured from each
+   request's *scheduled* send time (no coordinated omission), p50/p99/max, goal p99 < 5 ms;
+5. the per-request overhead of the service over the library call, as a ratio of medians.
+
+Client and server share the machine (2 cores here): the latencies include the client.
+Run: ``.venv/bin/python -m benchmarks.bench_service [--rate 300] [--seconds 10] [--n 2000]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import http.client
+import json
+import os
+import queue
+import tempfile
+import threading
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+import alloc
+from alloc.vehicles import ice
+from service.process import ServiceProcess
+
+METHODS = ("pinv", "qp")
+DEADLINE_S = 300.0  # the whole run stops by itself within this
+
+
+@dataclass
+class Stats:
+    label: str
+    n: int
+    seconds: float
+    lat: np.ndarray  # seconds
+    per_request: int = 1  # allocations per request
+    errors: int = 0
+
+    @property
+    def rate(self) -> float:
+        return self.n * self.per_request / self.seconds
+
+    def row(self) -> str:
+        p50, p99 = np.percentile(self.lat, [50, 99]) * 1e3
+        return (f"{self.label:<34} {self.n:>6} {self.rate:>12,.0f} {p50:>9.3f} {p99:>9.3f} "
+                f"{self.lat.max() * 1e3:>9.3f} {self.errors:>4}")
+
+
+HEADER = f"{'case':<34} {'reqs':>6} {'allocs/s':>12} {'p50 ms':>9} {'p99 ms':>9} {'max ms':>9} {'err':>4}"
+
+
+class Connection:
+    """A persistent HTTP/1.1 connection (http.client: the lightest client in the stdlib)."""
+
+    def __init__(self, port: int) -> None:
+        self.conn = http.client.HTTPConnection("127.0.0.1", port, timeout=30)
+
+    def post(self, path: str, body: bytes) -> tuple[int, bytes]:
+        self.conn.request("POST", path, body, {"Content-Type": "application/json"})
+        r = self.conn.getresponse()
+        return r.status, r.read()
+
+    def close(self) -> None:
+        self.conn.close()
+
+
+def demands(p: alloc.Problem, n: int, seed: int = 0) -> np.ndarray:
+    """Random demands, mostly attainable: B u for u uniform in the middle half of the box."""
+    rng = np.random.default_rng(seed)
+    mid, half = (p.umin + p.umax) / 2, (p.umax - p.umin) / 4
+    U = mid + half * rng.uniform(-1, 1, size=(n, p.m))
+    return U @ p.B.T
+
+
+def bench_library(p: alloc.Problem, method: str, V: np.ndarray) -> Stats:
+    allocate = alloc.make_allocator(p, method)
+    for v in V[:50]:
+        allocate(v)
+    lat = np.empty(len(V))
+    t_start = time.perf_counter()
+    for i, v in enumerate(V):
+        t0 = time.perf_counter()
+        allocate(v)
+        lat[i] = time.perf_counter() - t0
+    return Stats(f"library {method} (built allocator)", len(V), time.perf_counter() - t_start, lat)
+
+
+def bench_closed(port: int, label: str, path: str, bodies: list[bytes], per_request: int = 1) -> Stats:
+    conn = Connection(port)
+    for b in bodies[:20]:  # warm-up: builds the cached allocator
+        conn.post(path, b)
+    lat = np.empty(len(bodies))
+    errors = 0
+    t_start = time.perf_counter()
+    for i, b in enumerate(bodies):
+        t0 = time.perf_counter()
+        status, _ = conn.post(path, b)
+        lat[i] = time.perf_counter() - t0
+        errors += status != 200
+    seconds = time.perf_counter() - t_start
+    conn.close()
+    return Stats(label, len(bodies), seconds, lat, per_request, errors)
+
+
+def bench_open(port: int, label: str, path: str, bodies: list[bytes], rate: float, workers: int = 8) -> Stats:
+    """Requests sent at ``t0 + i / rate`` whatever the server does; latency from the schedule."""
+    jobs: queue.Queue[tuple[float, bytes] | None] = queue.Queue()
+    lat = np.full(len(bodies), np.nan)
+    errors = [0]
+    lock = threading.Lock()
+    index = iter(range(len(bodies)))
+
+    def worker() -> None:
+        conn = Connection(port)
+        conn.post(path, bodies[0])
+        ready.release()
+        while (job := jobs.get()) is not None:
+            scheduled, body = job
+            status, _ = conn.post(path, body)
+            done = time.perf_counter()
+            with lock:
+                i = next(index)
+                lat[i] = done - scheduled
+                errors[0] += status != 200
+        conn.close()
+
+    ready = threading.Semaphore(0)
+    threads = [threading.Thread(target=worker, daemon=True) for _ in range(workers)]
+    for t in threads:
+        t.start()
+    for _ in threads:
+        ready.acquire()
+    t0 = time.perf_counter() + 0.05
+    for i, b in enumerate(bodies):
+        scheduled = t0 + i / rate
+        while (now := time.perf_counter()) < scheduled:
+            time.sleep(min(scheduled - now, 0.0005))
+        jobs.put((scheduled, b))
+    for _ in threads:
+        jobs.put(None)
+    for t in threads:
+        t.join(timeout=60)
+    seconds = time.perf_counter() - t0
+    return Stats(label, len(bodies), seconds, lat[~np.isnan(lat)], 1, errors[0])
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--n", type=int, default=2000, help="closed-loop single requests per case")
+    parser.add_argument("--rate", type=float, default=300.0, help="open-loop arrival rate, requests/s")
+    parser.add_argument("--seconds", type=float, default=10.0, help="open-loop duration per case")
+    args = parser.parse_args()
+    n = max(100, min(args.n, 20_000))
+    n_open = int(max(1, min(args.seconds, 60.0)) * args.rate)
+
+    p = ice()
+    V = demands(p, max(n, n_open, 1000))
+    problem = p.to_dict()
+    started = time.monotonic()
+    print(f"alloc service benchmark: ICE problem k={p.k}, m={p.m}; {os.cpu_count()} CPU(s); loopback; "
+          f"uvicorn, 1 worker")
+
+    with tempfile.TemporaryDirectory(prefix="alloc-bench-") as tmp, ServiceProcess(tmp) as server:
+        vid = json.loads(Connection(server.port).post("/v1/vehicles", json.dumps({**problem, "name": "ice"}).encode())[1])["id"]
+        lib: dict[str, Stats] = {}
+        single: list[Stats] = []
+        for method in METHODS:
+            lib[method] = bench_library(p, method, V[:n])
+            inline = [json.dumps({**problem, "v": v.tolist(), "method": method}).encode() for v in V[:n]]
+            vehicle = [json.dumps({"v": v.tolist(), "method": method}).encode() for v in V[:n]]
+            single.append(bench_closed(server.port, f"POST /v1/allocate {method}", "/v1/allocate", inline))
+            single.append(bench_closed(server.port, f"POST /v1/vehicles/{{id}}/allocate {method}",
+                                       f"/v1/vehicles/{vid}/allocate", vehicle))
+        batch: list[Stats] = []
+        for method in METHODS:
+            for size, reps in ((100, 50), (1000, 10)):
+                bodies = [json.dumps({**problem, "V": V[(r * size) % len(V):][:size].tolist(), "method": method}).encode()
+                          for r in range(reps)]
+                batch.append(bench_closed(server.port, f"POST /v1/allocate/batch {method} x{size}",
+                                          "/v1/allocate/batch", bodies, per_request=size))
+        open_loop: list[Stats] = []
+        for method in METHODS:
+            if time.monotonic() - started > DEADLINE_S:
+                break
+            bodies = [json.dumps({"v": v.tolist(), "method": method}).encode() for v in V[:n_open]]
+            open_loop.append(bench_open(server.port, f"open {args.rate:g}/s vehicle {method}",
+                                        f"/v1/vehicles/{vid}/allocate", bodies, args.rate))
+            bodies = [json.dumps({**problem, "v": v.tolist(), "method": method}).encode() for v in V[:n_open]]
+            open_loop.append(bench_open(server.port, f"open {args.rate:g}/s inline {method}",
+                                        "/v1/allocate", bodies, args.rate))
+
+    print("\nLibrary call (same machine, no HTTP)")
+    print(HEADER)
+    for s in lib.values():
+        print(s.row())
+    print("\nClosed loop, single requests (one keep-alive connection)")
+    print(HEADER)
+    for s in single:
+        print(s.row())
+    print("\nClosed loop, batch requests (allocs/s counts demands; latency per request)")
+    print(HEADER)
+    for s in batch:
+        print(s.row())
+    print(f"\nOpen loop at {args.rate:g} requests/s (latency from the scheduled send time; goal p99 < 5 ms)")
+    print(HEADER + "  goal")
+    for s in open_loop:
+        p99 = float(np.percentile(s.lat, 99)) * 1e3
+        print(s.row() + ("  met" if p99 < 5.0 else "  MISSED"))
+    print("\nPer-request overhead over the library call (ratio of medians, closed loop)")
+    print(f"{'case':<34} {'service p50 us':>15} {'library p50 us':>15} {'ratio':>8} {'overhead us':>12}")
+    for s in single:
+        method = s.label.split()[-1]
+        svc, libm = float(np.median(s.lat)) * 1e6, float(np.median(lib[method].lat)) * 1e6
+        print(f"{s.label:<34} {svc:>15.1f} {libm:>15.1f} {svc / libm:>8.1f} {svc - libm:>12.1f}")
+    print(f"\ntotal {time.monotonic() - started:.1f} s")
+
+
+if __name__ == "__main__":
+    main()
