@@ -3,5 +3,6 @@ direct allocation (``da_facet``, ``da_bisect``, ``da_table``) and method coverag
 
 from .geometry import AttainableSet, Facet, generator_classes, zonotope_volume
 
-__all__ = ["AttainableSet", "Facet", "generator_classes", "zonotope_volume"]
+__all__ = ["AttainableSet", "Facet", "generator_classes", "zonotope_volume", "coverage", "CoverageResult", "sample_ams"]
 from . import search  # noqa: E402,F401  (registers da_facet, da_bisect, da_table)
+from .coverage import CoverageResult, coverage, sample_ams  # noqa: E402
