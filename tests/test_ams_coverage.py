@@ -63,3 +63,32 @@ def test_samples_are_uniform_in_the_ams():
     centre = p.B @ ((p.umin + p.umax) / 2)
     se = V.std(axis=0) / np.sqrt(len(V))
     assert (np.abs(V.mean(axis=0) - centre) < 4 * se).all()
+
+
+def test_cli_summary_plot_and_coverage(tmp_path):
+    import json
+
+    from typer.testing import CliRunner
+
+    from alloc.ams.cli import app
+
+    runner = CliRunner()
+    res = runner.invoke(app, ["summary", "--problem", "ice", "--json"])
+    assert res.exit_code == 0, res.output
+    s = json.loads(res.output)
+    assert s["facets"] == 78 and s["vertices"] == 86
+    out = tmp_path / "ams.png"
+    res = runner.invoke(app, ["plot", "--problem", "harv", "--method", "cgi", "--samples", "500", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    assert out.stat().st_size > 10_000
+    res = runner.invoke(app, ["coverage", "--problem", "harv", "--method", "pinv", "--json"])
+    assert res.exit_code == 0, res.output
+    assert json.loads(res.output)[0]["fraction"] == pytest.approx(0.5458, abs=1e-3)
+
+
+def test_two_dimensional_picture(tmp_path):
+    from alloc.ams.plot import plot_ams
+
+    p = alloc.Problem(np.random.default_rng(1).standard_normal((2, 4)), -np.ones(4), np.ones(4))
+    fig = plot_ams(p, "pinv", tmp_path / "k2.png")
+    assert (tmp_path / "k2.png").exists() and len(fig.axes) == 1
