@@ -26,6 +26,8 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 
 import alloc
 
+from .schemas import EVENT_KINDS
+
 __all__ = [
     "ServiceError", "NotFound", "Unauthorized", "PayloadTooLarge", "InvalidRequest",
     "problem_response", "install_handlers", "PROBLEM_JSON",
@@ -113,13 +115,36 @@ def library_error_fields(exc: Exception, prefix: Sequence[str | int] = ("body",)
 _TYPE_TAGS = frozenset({"str", "int", "float", "bool", "list", "dict", "none"})
 
 
+def _is_union_tag(step: str | int) -> bool:
+    return isinstance(step, str) and ("[" in step or step in _TYPE_TAGS or step in EVENT_KINDS)
+
+
+def _strip_tags(loc: list[str | int], body: Any) -> list[str | int]:
+    """Drop pydantic's union tags (``"list[float]"``, ``"int"``, a discriminator value such
+    as ``"jam"``) from a body location, walking the request body alongside."""
+    if not loc or loc[0] != "body":
+        return loc
+    out: list[str | int] = ["body"]
+    node = body
+    for step in loc[1:]:
+        if isinstance(node, dict) and isinstance(step, str) and step in node:
+            node = node[step]
+        elif isinstance(node, list) and isinstance(step, int) and 0 <= step < len(node):
+            node = node[step]
+        elif _is_union_tag(step):
+            continue
+        else:
+            node = None  # a missing or extra field: name it, nothing below it to walk
+        out.append(step)
+    return out
+
+
 def _validation_errors(exc: RequestValidationError) -> list[dict[str, Any]]:
+    body = getattr(exc, "body", None)
     out = []
     for err in exc.errors():
         loc = [p for p in err.get("loc", ()) if isinstance(p, (str, int))]
-        # Drop pydantic's union-member tags ("list[float]", "int", "function-after[...]").
-        loc = [p for p in loc if not (isinstance(p, str) and ("[" in p or p in _TYPE_TAGS))]
-        out.append(_error(loc, str(err.get("msg", "invalid value"))))
+        out.append(_error(_strip_tags(loc, body), str(err.get("msg", "invalid value"))))
     return out
 
 

@@ -292,6 +292,9 @@ EventIn = Annotated[
 ]
 
 
+EVENT_KINDS = frozenset({"jam", "effectiveness", "limits", "rate_limits", "float", "repair"})
+
+
 class EventOut(BaseModel):
     seq: int = Field(description="1, 2, ... per vehicle; the health_version after this event")
     effector: str

@@ -54,6 +54,11 @@ def build_allocator(problem: alloc.Problem, method: str, options: dict[str, Any]
     """
     try:
         return alloc.make_allocator(problem, method, **options)
+    except alloc.ProblemError as exc:  # an option value the method rejected, e.g. "G: expected shape"
+        field = str(exc).split(":", 1)[0]
+        if field in options:
+            raise InvalidRequest(str(exc), [field_error(f"options/{field}", str(exc))]) from exc
+        raise
     except alloc.AllocError:
         raise
     except (ValueError, TypeError, ArithmeticError, IndexError, KeyError, np.linalg.LinAlgError) as exc:

@@ -5,7 +5,7 @@ from __future__ import annotations
 from fastapi import APIRouter, Response
 
 from ..deps import StoreDep
-from ..responses import model_response
+from ..responses import allocation_response, batch_response
 from ..schemas import AllocateRequest, AllocationOut, BatchAllocateRequest, BatchOut, ProblemIn
 from ..store import build_allocator
 
@@ -20,7 +20,7 @@ _PROBLEM_FIELDS = set(ProblemIn.model_fields)
 async def allocate(body: AllocateRequest, store: StoreDep) -> Response:
     key = body.model_dump_json(include=_PROBLEM_FIELDS)
     allocator = store.inline_allocator(key, body.to_problem, body.method, body.options)
-    return model_response(AllocationOut.of(allocator(body.v, u_prev=body.u_prev, dt=body.dt)))
+    return allocation_response(allocator(body.v, u_prev=body.u_prev, dt=body.dt))
 
 
 # sync (thread pool): a 10,000-demand batch must not block the event loop; it builds its
@@ -28,4 +28,4 @@ async def allocate(body: AllocateRequest, store: StoreDep) -> Response:
 @router.post("/batch", response_model=BatchOut, summary="Allocate many demands for one inline problem")
 def allocate_batch(body: BatchAllocateRequest) -> Response:
     allocator = build_allocator(body.to_problem(), body.method, body.options)
-    return model_response(BatchOut.of(allocator.batch(body.V)))
+    return batch_response(allocator.batch(body.V))

@@ -13,7 +13,7 @@ from fastapi import APIRouter, Depends, Path, Query, Response, status
 from .. import ams
 from ..db import EventRow
 from ..deps import StoreDep, require_api_key
-from ..responses import model_response
+from ..responses import allocation_response, batch_response
 from ..health import health_out
 from ..schemas import (
     AllocationOut, AmsOut, AmsVehicleRequest, BatchOut, EventIn, EventList, EventOut, EventRecorded,
@@ -95,7 +95,7 @@ async def allocate(vehicle_id: VehicleId, body: VehicleAllocateRequest, store: S
     state = store.get(vehicle_id)
     allocator = store.vehicle_allocator(state, body.method, body.options)
     result = allocator(body.v, u_prev=body.u_prev, dt=body.dt)
-    return model_response(AllocationOut.of(result, vehicle_id=state.id, health_version=state.version))
+    return allocation_response(result, vehicle_id=state.id, health_version=state.version)
 
 
 @router.post("/{vehicle_id}/allocate/batch", response_model=BatchOut,
@@ -103,7 +103,7 @@ async def allocate(vehicle_id: VehicleId, body: VehicleAllocateRequest, store: S
 def allocate_batch(vehicle_id: VehicleId, body: VehicleBatchRequest, store: StoreDep) -> Response:
     state = store.get(vehicle_id)
     allocator = build_allocator(state.problem, body.method, body.options)
-    return model_response(BatchOut.of(allocator.batch(body.V), vehicle_id=state.id, health_version=state.version))
+    return batch_response(allocator.batch(body.V), vehicle_id=state.id, health_version=state.version)
 
 
 @router.post("/{vehicle_id}/ams", response_model=AmsOut, summary="AMS summary at the vehicle's current health")

@@ -1,0 +1,364 @@
+"""The service in-process (TestClient): error catalogue, size caps, health semantics,
+equality with the library, durability settings, allocator cache, concurrency."""
+
+from __future__ import annotations
+
+import json
+import threading
+
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from sqlalchemy import text
+
+import alloc
+from alloc.methods.quadratic import TwoStageQP
+from alloc.vehicles import harv_latdir, ice
+from service.config import MAX_AXES, MAX_BATCH, MAX_EFFECTORS, Settings
+from service.main import create_app
+
+KEY = "k3y"
+SIMPLE = {"B": [[1.0, 1.0, 0.5]], "umin": [-1.0, -1.0, -1.0], "umax": [1.0, 1.0, 1.0]}
+
+
+@pytest.fixture()
+def app(tmp_path):
+    return create_app(Settings(data_dir=tmp_path, api_key=KEY, max_body_bytes=256 * 1024))
+
+
+@pytest.fixture()
+def client(app):
+    with TestClient(app) as c:
+        yield c
+
+
+def vehicle(client, problem: alloc.Problem = None) -> str:
+    problem = problem or ice()
+    r = client.post("/v1/vehicles", json={**problem.to_dict(), "name": "test"}, headers={"X-API-Key": KEY})
+    assert r.status_code == 201, r.text
+    return r.json()["id"]
+
+
+def event(client, vid: str, **body):
+    return client.post(f"/v1/vehicles/{vid}/events", json=body, headers={"X-API-Key": KEY})
+
+
+def assert_problem(r, status: int, pointer: str | None, reason_part: str = "") -> dict:
+    """An RFC 9457 problem naming the field (JSON pointer) and the reason."""
+    assert r.status_code == status, r.text
+    assert r.headers["content-type"].startswith("application/problem+json")
+    body = r.json()
+    assert body["status"] == status and body["type"].startswith("urn:alloc:problem:")
+    assert body["title"] and body["detail"]
+    pointers = [e["pointer"] for e in body["errors"]]
+    if pointer is not None:
+        assert pointer in pointers, body
+    assert all("reason" in e and "loc" in e for e in body["errors"])
+    if reason_part:
+        assert reason_part in json.dumps(body), body
+    return body
+
+
+# ---------------------------------------------------------------- error catalogue
+@pytest.mark.parametrize(("body", "pointer", "reason"), [
+    ({**SIMPLE, "umin": [-1.0, -1.0], "v": [1.0]}, "/umin", "shape"),                   # shape mismatch
+    ({**SIMPLE, "B": [[1.0, 1.0], [1.0]], "v": [1.0]}, "/B", "B"),                        # ragged matrix
+    ({**SIMPLE, "v": [1.0, 2.0]}, "/v", "shape"),                                        # demand length
+    ({**SIMPLE, "umin": [-1.0, 2.0, -1.0], "v": [1.0]}, "/umin", "umin[1] = 2 > umax[1] = 1"),  # order
+    ({**SIMPLE, "v": [1.0], "method": "simplex"}, "/method", "registered: "),           # unknown method
+    ({**SIMPLE, "v": [1.0], "options": {"tolerance": 1}}, "/options", "unknown option"),
+    ({**SIMPLE, "v": [1.0], "method": "ganging", "options": {"G": [[1.0, 2.0]]}}, "/options/G", "shape"),
+    ({**SIMPLE, "v": [1.0], "u_prev": [0.0, 0.0, 0.0]}, "/u_prev", "both"),            # dt missing
+    ({**SIMPLE, "v": [1.0], "dt": -0.1, "u_prev": [0, 0, 0]}, "/dt", "greater than 0"),
+    ({**SIMPLE, "v": [1.0], "Wu": [1.0, 0.0, 1.0]}, "/Wu", "not positive"),
+    ({**SIMPLE, "v": [1.0], "surprise": 1}, "/surprise", "Extra inputs"),
+    ({**SIMPLE, "v": ["one"]}, "/v/0", "number"),
+])
+def test_bad_inline_requests_are_4xx_problems(client, body, pointer, reason):
+    assert_problem(client.post("/v1/allocate", json=body), 422, pointer, reason)
+
+
+@pytest.mark.parametrize("literal", [b"NaN", b"Infinity", b"-Infinity", b"1e999"])
+def test_non_finite_literals_rejected(client, literal):
+    raw = b'{"B": [[1, 1, 0.5]], "umin": [-1, -1, -1], "umax": [1, 1, 1], "v": [' + literal + b"]}"
+    r = client.post("/v1/allocate", content=raw, headers={"content-type": "application/json"})
+    assert_problem(r, 422, "/v/0", "finite")
+
+
+def test_malformed_json_is_4xx(client):
+    r = client.post("/v1/allocate", content=b'{"B": [[1, ', headers={"content-type": "application/json"})
+    assert 400 <= r.status_code < 500
+    assert r.headers["content-type"].startswith("application/problem+json")
+
+
+def test_size_caps(client):
+    m, k = MAX_EFFECTORS, MAX_AXES
+    rng = np.random.default_rng(1)
+    ok = {"B": rng.normal(size=(k, m)).tolist(), "umin": [-1.0] * m, "umax": [1.0] * m, "v": [0.1] * k}
+    r = client.post("/v1/allocate", json={**ok, "method": "qp"})
+    assert r.status_code == 200 and r.json()["status"] == "exact"
+    too_wide = {**ok, "B": rng.normal(size=(k, m + 1)).tolist(), "umin": [-1.0] * (m + 1), "umax": [1.0] * (m + 1)}
+    assert_problem(client.post("/v1/allocate", json=too_wide), 422, "/B/0", "at most 64")
+    too_tall = {**ok, "B": rng.normal(size=(k + 1, m)).tolist(), "v": [0.1] * (k + 1)}
+    assert_problem(client.post("/v1/allocate", json=too_tall), 422, "/B", "at most 6")
+    batch = {**SIMPLE, "V": [[0.1]] * (MAX_BATCH + 1)}
+    assert_problem(client.post("/v1/allocate/batch", json=batch), 422, "/V", "at most 10000")
+
+
+def test_oversized_body_is_413(client):
+    big = {**SIMPLE, "V": [[0.123456789]] * 40_000}  # > 256 KiB configured above
+    assert_problem(client.post("/v1/allocate/batch", json=big), 413, "")
+
+    def chunks():  # no Content-Length: counted while streaming
+        yield b'{"B": [[1, 1, 0.5]], "umin": [-1, -1, -1], "umax": [1, 1, 1], "V": ['
+        for _ in range(30_000):
+            yield b"[0.123456789],"
+        yield b"[0.1]]}"
+    r = client.post("/v1/allocate/batch", content=chunks(), headers={"content-type": "application/json"})
+    assert_problem(r, 413, "")
+
+
+def test_unknown_vehicle_and_routes(client):
+    assert_problem(client.get("/v1/vehicles/nope"), 404, None, "does not exist")
+    assert_problem(client.post("/v1/vehicles/nope/allocate", json={"v": [1.0]}), 404, None)
+    assert_problem(event(client, "nope", effector=0, kind="repair"), 404, None)
+    assert_problem(client.get("/v1/nothing-here"), 404, None)
+    assert_problem(client.get("/v1/methods/nope"), 422, None, "registered")
+
+
+def test_api_key_guards_writes_only(client):
+    body = {**ice().to_dict()}
+    assert_problem(client.post("/v1/vehicles", json=body), 401, None, "X-API-Key")
+    r = client.post("/v1/vehicles", json=body, headers={"X-API-Key": "wrong"})
+    assert_problem(r, 401, None, "wrong")
+    vid = vehicle(client)
+    assert_problem(client.post(f"/v1/vehicles/{vid}/events", json={"effector": 0, "kind": "float"}), 401, None)
+    assert_problem(client.delete(f"/v1/vehicles/{vid}"), 401, None)
+    # reads and allocations stay open
+    assert client.get(f"/v1/vehicles/{vid}").status_code == 200
+    assert client.get(f"/v1/vehicles/{vid}/health").status_code == 200
+    assert client.post(f"/v1/vehicles/{vid}/allocate", json={"v": [0.1, 0.1, 0.1]}).status_code == 200
+    assert client.post("/v1/allocate", json={**SIMPLE, "v": [1.0]}).status_code == 200
+
+
+# ------------------------------------------------------------ library equality
+problems = st.integers(1, 3).flatmap(lambda k: st.integers(k, 8).flatmap(lambda m: st.tuples(
+    # no subnormal entries: those are the degenerate case tested separately below
+    st.lists(st.lists(st.floats(-2, 2, allow_subnormal=False), min_size=m, max_size=m), min_size=k, max_size=k),
+    st.lists(st.floats(0.1, 3), min_size=m, max_size=m),
+    st.lists(st.floats(-1.5, 1.5), min_size=k, max_size=k),
+)))
+
+
+@given(data=problems, method=st.sampled_from(["pinv", "qp"]))
+@settings(max_examples=40, deadline=None, suppress_health_check=list(HealthCheck))
+def test_results_equal_the_library(tmp_path_factory, data, method):
+    """Exact float equality of u through the JSON round trip, for inline and vehicle requests."""
+    B, span, v = data
+    umin, umax = [-s for s in span], span
+    p = alloc.Problem(B, umin, umax)
+    lib = alloc.make_allocator(p, method)(v)
+    app = _equality_app(tmp_path_factory)
+    with TestClient(app) as c:
+        r = c.post("/v1/allocate", json={"B": B, "umin": umin, "umax": umax, "v": v, "method": method})
+        assert r.status_code == 200, r.text
+        body = r.json()
+        assert body["u"] == lib.u.tolist()
+        assert body["v_achieved"] == lib.v_achieved.tolist()
+        assert body["status"] == lib.status.value
+        vid = c.post("/v1/vehicles", json=p.to_dict(), headers={"X-API-Key": KEY}).json()["id"]
+        body = c.post(f"/v1/vehicles/{vid}/allocate", json={"v": v, "method": method}).json()
+        assert body["u"] == lib.u.tolist()
+        batch = c.post("/v1/allocate/batch", json={"B": B, "umin": umin, "umax": umax, "V": [v, v],
+                                                   "method": method}).json()
+        lib_batch = alloc.make_allocator(p, method).batch([v, v])
+        assert batch["u"] == lib_batch.u.tolist()
+
+
+def test_degenerate_problem_is_422_not_null(client):
+    # pinv of a subnormal B overflows in the library (returns NaN even as its fallback);
+    # the service answers 422 naming B rather than a null command or a 500.
+    body = {"B": [[5e-324]], "umin": [-1.0], "umax": [1.0], "v": [0.0]}
+    assert_problem(client.post("/v1/allocate", json={**body, "method": "pinv"}), 422, "/B", "non-finite")
+    body = {"B": [[5e-324]], "umin": [-1.0], "umax": [1.0], "V": [[0.0]]}
+    assert_problem(client.post("/v1/allocate/batch", json={**body, "method": "pinv"}), 422, "/B", "non-finite")
+
+
+_APPS: dict[str, object] = {}
+
+
+def _equality_app(factory):
+    if "app" not in _APPS:
+        _APPS["app"] = create_app(Settings(data_dir=factory.mktemp("eq"), api_key=KEY))
+    return _APPS["app"]
+
+
+# ---------------------------------------------------------------- health model
+def test_jam_holds_effector_and_others_compensate(client):
+    p = ice()
+    vid = vehicle(client, p)
+    v = [0.5, 1.0, 0.2]
+    assert event(client, vid, effector="elevon_r", kind="jam", position=-12.5).status_code == 201
+    body = client.post(f"/v1/vehicles/{vid}/allocate", json={"v": v, "method": "qp"}).json()
+    assert body["u"][1] == -12.5 and body["status"] == "exact"
+    np.testing.assert_allclose(p.B @ np.array(body["u"]), v, atol=1e-6)
+    # with rate limits over one step: a jammed effector stays put whatever u_prev says
+    body = client.post(f"/v1/vehicles/{vid}/allocate",
+                       json={"v": v, "method": "qp", "u_prev": [0.0] * 11, "dt": 0.01}).json()
+    assert body["u"][1] == -12.5
+
+
+def test_jam_outside_limits_and_bad_events(client):
+    vid = vehicle(client)
+    assert_problem(event(client, vid, effector="elevon_l", kind="jam", position=30.5), 422, "/position", "outside")
+    assert_problem(event(client, vid, effector="lef_l", kind="limits", lo=10, hi=-10), 422, "/hi", "out of order")
+    assert_problem(event(client, vid, effector="lef_l", kind="limits", lo=-50, hi=10), 422, "/lo", "nominal")
+    assert_problem(event(client, vid, effector="lef_l", kind="rate_limits", rate_min=-100, rate_max=10),
+                   422, "/rate_min", "nominal")
+    assert_problem(event(client, vid, effector="lef_l", kind="effectiveness", fraction=1.5), 422, "/fraction")
+    assert_problem(event(client, vid, effector="wing", kind="float"), 422, "/effector", "unknown name")
+    assert_problem(event(client, vid, effector=11, kind="float"), 422, "/effector", "out of range")
+    assert_problem(event(client, vid, effector=0, kind="melt"), 422, None)
+    assert client.get(f"/v1/vehicles/{vid}/events").json()["items"] == []  # nothing recorded
+    assert client.get(f"/v1/vehicles/{vid}/health").json()["health_version"] == 0
+
+
+def test_effectiveness_limits_rates_float_and_repair(client):
+    p = ice()
+    vid = vehicle(client, p)
+    assert event(client, vid, effector="lef_l", kind="effectiveness", fraction=0.25).status_code == 201
+    assert event(client, vid, effector="amt_r", kind="limits", lo=0.0, hi=20.0).status_code == 201
+    assert event(client, vid, effector="pitch_tv", kind="rate_limits", rate_min=-5.0, rate_max=5.0).status_code == 201
+    r = event(client, vid, effector="ssd_l", kind="float", note="linkage broken")
+    assert r.status_code == 201
+    health = r.json()["health"]
+    status = {e["effector"]: e["status"] for e in health["effectors"]}
+    assert status["lef_l"] == status["amt_r"] == status["pitch_tv"] == "degraded"
+    assert status["ssd_l"] == "floating" and status["elevon_l"] == "healthy"
+    eff = health["effective"]
+    B = np.array(eff["B"])
+    np.testing.assert_array_equal(B[:, 7], 0.25 * p.B[:, 7])
+    np.testing.assert_array_equal(B[:, 5], 0.0)  # floating: no moment ...
+    assert eff["umin"][5] == eff["umax"][5] == p.up[5]  # ... and not commanded
+    assert (eff["umin"][4], eff["umax"][4]) == (0.0, 20.0)
+    assert (eff["rate_min"][9], eff["rate_max"][9]) == (-5.0, 5.0)
+    # allocations obey the effective problem, with rate limits over a step
+    u_prev = [0.0] * 11
+    body = client.post(f"/v1/vehicles/{vid}/allocate",
+                       json={"v": [1.0, 2.0, 0.5], "method": "qp", "u_prev": u_prev, "dt": 0.1}).json()
+    u = np.array(body["u"])
+    assert abs(u[9]) <= 0.5 + 1e-12 and 0.0 <= u[4] <= 20.0 and u[5] == p.up[5]
+    lib = alloc.make_allocator(alloc.Problem(**{**{k: v for k, v in eff.items() if k not in ("rate_min", "rate_max")},
+                                                "rate_min": [-np.inf if r is None else r for r in eff["rate_min"]],
+                                                "rate_max": [np.inf if r is None else r for r in eff["rate_max"]]}),
+                               "qp")([1.0, 2.0, 0.5], u_prev=u_prev, dt=0.1)
+    assert body["u"] == lib.u.tolist()
+    # repairs, one by one, give back the nominal problem
+    for name in ("lef_l", "amt_r", "pitch_tv", "ssd_l"):
+        assert event(client, vid, effector=name, kind="repair").status_code == 201
+    health = client.get(f"/v1/vehicles/{vid}/health").json()
+    assert health["health_version"] == 8
+    assert all(e["status"] == "healthy" for e in health["effectors"])
+    assert health["effective"] == json.loads(json.dumps(p.to_dict()))
+    kinds = [e["kind"] for e in client.get(f"/v1/vehicles/{vid}/events").json()["items"]]
+    assert kinds == ["effectiveness", "limits", "rate_limits", "float", "repair", "repair", "repair", "repair"]
+
+
+def test_event_prebuilds_allocators_no_rebuild_on_next_call(client, app):
+    vid = vehicle(client)
+    store = app.state.store
+    for method in ("pinv", "qp"):
+        client.post(f"/v1/vehicles/{vid}/allocate", json={"v": [0.1, 0.2, 0.0], "method": method})
+    builds = store.allocators.builds
+    assert event(client, vid, effector="elevon_l", kind="jam", position=3.0).status_code == 201
+    assert store.allocators.builds == builds + 2  # rebuilt before the event's response
+    for method in ("pinv", "qp"):
+        body = client.post(f"/v1/vehicles/{vid}/allocate", json={"v": [0.1, 0.2, 0.0], "method": method}).json()
+        assert body["u"][0] == 3.0 and body["health_version"] == 1
+    assert store.allocators.builds == builds + 2  # ... so the next allocations build nothing
+
+
+def test_solver_failure_returns_flagged_fallback(client, monkeypatch):
+    def broken(self, v, lo, hi, u_prev):
+        raise alloc.SolverError("backend exploded")
+    monkeypatch.setattr(TwoStageQP, "solve", broken)
+    body = client.post("/v1/allocate", json={**SIMPLE, "v": [0.7], "method": "qp", "options": {"backend": "daqp"}})
+    assert body.status_code == 200
+    out = body.json()
+    assert out["status"] == "fallback" and out["fallback"] is True and "exploded" in out["message"]
+    assert all(-1.0 <= x <= 1.0 for x in out["u"])
+
+
+def test_concurrent_events_serialise(client, app):
+    vid = vehicle(client, harv_latdir())
+    store = app.state.store
+    from pydantic import TypeAdapter
+
+    from service.schemas import EventIn
+    adapter = TypeAdapter(EventIn)
+    errors: list[Exception] = []
+
+    def writer(i: int) -> None:
+        try:
+            store.record_event(vid, adapter.validate_python(
+                {"effector": i % 5, "kind": "effectiveness", "fraction": (i + 1) / 40}))
+        except Exception as exc:  # collected and asserted below
+            errors.append(exc)
+    threads = [threading.Thread(target=writer, args=(i,)) for i in range(20)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert errors == []
+    items = client.get(f"/v1/vehicles/{vid}/events").json()["items"]
+    assert [e["seq"] for e in items] == list(range(1, 21))
+    assert client.get(f"/v1/vehicles/{vid}/health").json()["health_version"] == 20
+
+
+# ------------------------------------------------------------- vehicles, misc
+def test_vehicle_crud_and_listing(client):
+    ids = [vehicle(client) for _ in range(3)]
+    listing = client.get("/v1/vehicles", params={"limit": 2}).json()
+    assert listing["total"] == 3 and [v["id"] for v in listing["items"]] == ids[:2]
+    assert listing["items"][0]["m"] == 11 and listing["items"][0]["k"] == 3
+    got = client.get(f"/v1/vehicles/{ids[0]}").json()
+    assert got["problem"]["names"][0] == "elevon_l" and got["health_version"] == 0
+    assert client.delete(f"/v1/vehicles/{ids[0]}", headers={"X-API-Key": KEY}).status_code == 204
+    assert client.get(f"/v1/vehicles/{ids[0]}").status_code == 404
+    assert client.get("/v1/vehicles").json()["total"] == 2
+    r = client.post("/v1/vehicles", json={**SIMPLE, "umin": [2.0, 0.0, 0.0]}, headers={"X-API-Key": KEY})
+    assert_problem(r, 422, "/umin", "> umax")
+
+
+def test_storage_is_sqlite_wal_synchronous_full(app):
+    engine = app.state.store._sessions.kw["bind"]
+    with engine.connect() as conn:
+        assert conn.execute(text("PRAGMA journal_mode")).scalar() == "wal"
+        assert conn.execute(text("PRAGMA synchronous")).scalar() == 2  # FULL
+
+
+def test_methods_and_ams(client):
+    methods = client.get("/v1/methods").json()
+    assert {m["name"] for m in methods} == set(alloc.methods())
+    assert "rcond" in client.get("/v1/methods/pinv").json()["options"]
+    # AMS of B = [[1, 1, 0.5]] on [-1, 1]^3: the interval [-2.5, 2.5], length 5
+    out = client.post("/v1/ams", json={**SIMPLE, "directions": [[1.0], [-2.0]]}).json()
+    assert out["volume"] == pytest.approx(5.0)
+    assert [d["scale"] for d in out["directions"]] == pytest.approx([2.5, 1.25])
+    assert out["directions"][0]["moment"] == pytest.approx([2.5])
+    assert_problem(client.post("/v1/ams", json={**SIMPLE, "directions": [[0.0]]}), 422, "/directions/0", "zero")
+    assert_problem(client.post("/v1/ams", json={**SIMPLE, "directions": [[1.0, 0.0]]}), 422, "/directions/0")
+    # a vehicle's AMS shrinks when an effector jams
+    vid = vehicle(client)
+    before = client.post(f"/v1/vehicles/{vid}/ams", json={}).json()
+    event(client, vid, effector="elevon_l", kind="jam", position=0.0)
+    after = client.post(f"/v1/vehicles/{vid}/ams", json={}).json()
+    assert after["health_version"] == 1 and after["volume"] < before["volume"]
+    assert len(after["directions"]) == 6  # +/- each of the three axes by default
+
+
+def test_service_health(client):
+    assert client.get("/v1/health").json() == {"status": "ok", "version": alloc.__version__, "database": "ok",
+                                               "methods": len(alloc.methods())}
