@@ -138,34 +138,57 @@ class FacetSearch(Method):
         return ustar, 1
 
     def solve_batch(self, V, lo, hi):
+        """Vectorised over demands.  The facet is picked in support-function form (one
+        (N, F) product: ``a* = min gap / (n . d)``), then Eq 1.16 runs on that facet's tiles
+        only; testing every tile for every demand would touch (N, T, k) arrays."""
         if self._flat or not self._nominal(lo, hi):
             return None
+        if not hasattr(self, "_facet_pad"):
+            self._pad_tiles()
         k, N = self.problem.k, len(V)
+        ams = self.ams
         D = V - self._p0
         U = np.empty((N, self.problem.m))
-        T = len(self._tiles)
-        chunk = max(1, 2_000_000 // max(1, T * k))
+        chunk = max(1, 1_000_000 // max(1, ams.n_facets))
         for s in range(0, N, chunk):
             Dc = D[s:s + chunk]
-            X = (Dc @ self._Minv2.T).reshape(len(Dc), T, k)
-            x0 = X[:, :, 0]
-            P = X[:, :, 1:]
+            n = len(Dc)
+            rows = np.arange(n)
+            ND = Dc @ ams._Nr.T
+            with np.errstate(divide="ignore", invalid="ignore"):
+                R = np.where(ND > 1e-12 * np.linalg.norm(Dc, axis=1, keepdims=True), ams._gap / ND, np.inf)
+            f = np.argmin(R, axis=1)
+            a = np.maximum(R[rows, f], 0.0)
+            tl = self._facet_pad[f]  # (n, P) tile positions, -1 padded
+            X = np.einsum("npij,nj->npi", self._Minv[np.maximum(tl, 0)], Dc)
+            x0, P = X[:, :, 0], X[:, :, 1:]
             with np.errstate(divide="ignore", invalid="ignore"):
                 score = np.minimum(P, x0[:, :, None] - P).min(axis=2, initial=np.inf) / x0
-            score[~(x0 > 0)] = -np.inf
-            t = np.argmax(score, axis=1)
-            xt = X[np.arange(len(Dc)), t]
-            a = 1.0 / xt[:, 0]
-            b = np.clip(xt[:, 1:] * a[:, None], 0.0, 1.0)
+            score[~(x0 > 0) | (tl < 0)] = -np.inf
+            j = np.argmax(score, axis=1)
+            t = np.maximum(tl[rows, j], 0)
+            xt = X[rows, j]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                b = np.clip(xt[:, 1:] / xt[:, :1], 0.0, 1.0)
             ustar = self._U[t] + np.einsum("ni,nim->nm", b, self._S[t])
-            scale = np.where(a >= 1.0, 1.0 / a, 1.0)
-            u = np.where((a >= 1.0)[:, None], self._u0 + (ustar - self._u0) * scale[:, None], ustar)
+            att = a >= 1.0
+            u = ustar
+            u[att] = self._u0 + (ustar[att] - self._u0) / a[att, None]
             still = ~(np.abs(Dc).max(axis=1) > 1e-14 * np.maximum(1.0, np.abs(V[s:s + chunk]).max(axis=1)))
-            if self._Nz.size:
-                still |= (Dc @ self._Nz.T > 1e-12 * np.linalg.norm(Dc, axis=1, keepdims=True)).any(axis=1)
+            still |= (a == 0.0) | (tl[rows, j] < 0)
             u[still] = self._u0
             U[s:s + chunk] = u
         return U
+
+    def _pad_tiles(self) -> None:
+        """(F, P) positions in the inverse table of each facet's tiles, -1 padded."""
+        F = self.ams.n_facets
+        per = [np.flatnonzero(self._facet_of_tile == f) for f in range(F)]
+        width = max(1, max(len(x) for x in per))
+        pad = np.full((F, width), -1, dtype=np.intp)
+        for f, x in enumerate(per):
+            pad[f, : len(x)] = x
+        self._facet_pad = pad
 
 
 @register("da_bisect")
