@@ -97,16 +97,31 @@ class _Batch(_Demand):
     V: Annotated[list[AxisVector], Field(min_length=1, max_length=MAX_BATCH, description="N demands, N x k")]
 
 
+_EXAMPLE_PROBLEM = {"B": [[1.0, 1.0, 0.5], [0.5, -0.5, 0.0]], "umin": [-1.0, -1.0, -1.0],
+                    "umax": [1.0, 1.0, 1.0], "names": ["left", "right", "centre"], "axes": ["pitch", "roll"]}
+
+
+def _examples(*examples: dict[str, Any]) -> ConfigDict:
+    return ConfigDict(extra="forbid", json_schema_extra={"examples": list(examples)})
+
+
 class AllocateRequest(ProblemIn, _Single):
     """``POST /v1/allocate``: an inline problem and one demand."""
+
+    model_config = _examples({**_EXAMPLE_PROBLEM, "v": [1.2, 0.3], "method": "qp"})
 
 
 class BatchAllocateRequest(ProblemIn, _Batch):
     """``POST /v1/allocate/batch``: an inline problem and up to 10,000 demands."""
 
+    model_config = _examples({**_EXAMPLE_PROBLEM, "V": [[1.2, 0.3], [0.5, 0.0]], "method": "pinv"})
+
 
 class VehicleAllocateRequest(_Single):
     """``POST /v1/vehicles/{id}/allocate``: one demand against the vehicle's current health."""
+
+    model_config = _examples({"v": [1.2, 0.3], "method": "qp"},
+                             {"v": [1.2, 0.3], "method": "qp", "u_prev": [0.0, 0.0, 0.0], "dt": 0.01})
 
 
 class VehicleBatchRequest(_Batch):
@@ -172,6 +187,8 @@ class _AmsQuery(_In):
 class AmsRequest(ProblemIn, _AmsQuery):
     """``POST /v1/ams``: summary of the attainable moment set of an inline problem."""
 
+    model_config = _examples({**_EXAMPLE_PROBLEM, "directions": [[1.0, 0.0], [1.0, 1.0]]})
+
 
 class AmsVehicleRequest(_AmsQuery):
     """``POST /v1/vehicles/{id}/ams``: the same for a vehicle at its current health."""
@@ -195,6 +212,9 @@ class AmsOut(BaseModel):
 # --------------------------------------------------------------- vehicles
 class VehicleCreate(ProblemIn):
     """``POST /v1/vehicles``: an effector suite (its nominal, healthy problem)."""
+
+    model_config = _examples({**_EXAMPLE_PROBLEM, "name": "demo", "rate_min": [-100.0, -100.0, None],
+                              "rate_max": [100.0, 100.0, None]})
 
     name: Label | None = None
 
@@ -247,6 +267,8 @@ class _Event(_In):
 class JamEvent(_Event):
     """The effector is stuck at ``position`` (within its nominal limits)."""
 
+    model_config = _examples({"effector": "left", "kind": "jam", "position": 0.5, "note": "actuator seized"})
+
     kind: Literal["jam"]
     position: Finite
 
@@ -254,12 +276,16 @@ class JamEvent(_Event):
 class EffectivenessEvent(_Event):
     """The effector produces ``fraction`` of its nominal moment (its column of B scaled)."""
 
+    model_config = _examples({"effector": "right", "kind": "effectiveness", "fraction": 0.6})
+
     kind: Literal["effectiveness"]
     fraction: Annotated[float, Field(ge=0.0, le=1.0)]
 
 
 class LimitsEvent(_Event):
     """Reduced position limits ``[lo, hi]``, within the nominal ones."""
+
+    model_config = _examples({"effector": 2, "kind": "limits", "lo": -0.5, "hi": 0.5})
 
     kind: Literal["limits"]
     lo: Finite
@@ -269,6 +295,8 @@ class LimitsEvent(_Event):
 class RateLimitsEvent(_Event):
     """Reduced rate limits, ``rate_min <= 0 <= rate_max``, within the nominal ones."""
 
+    model_config = _examples({"effector": "left", "kind": "rate_limits", "rate_min": -20.0, "rate_max": 20.0})
+
     kind: Literal["rate_limits"]
     rate_min: Annotated[float, Field(le=0.0, allow_inf_nan=False)]
     rate_max: Annotated[float, Field(ge=0.0, allow_inf_nan=False)]
@@ -277,11 +305,15 @@ class RateLimitsEvent(_Event):
 class FloatEvent(_Event):
     """A floating surface: produces no moment and is not commanded (see service.health)."""
 
+    model_config = _examples({"effector": "centre", "kind": "float"})
+
     kind: Literal["float"]
 
 
 class RepairEvent(_Event):
     """Back to healthy: clears every failure of the effector."""
+
+    model_config = _examples({"effector": "left", "kind": "repair"})
 
     kind: Literal["repair"]
 
@@ -319,3 +351,34 @@ class ServiceHealth(BaseModel):
     version: str
     database: str
     methods: int
+
+
+class ProblemError(BaseModel):
+    loc: list[str | int] = Field(description="FastAPI-style location, e.g. [\"body\", \"umin\"]")
+    pointer: str | None = Field(description="JSON Pointer (RFC 6901) into the request body")
+    reason: str
+
+
+class ProblemDetails(BaseModel):
+    """RFC 9457 problem document (media type ``application/problem+json``)."""
+
+    type: str = Field(examples=["urn:alloc:problem:invalid-problem"])
+    title: str
+    status: int
+    detail: str
+    errors: list[ProblemError]
+
+
+def _problem(description: str) -> dict[str, Any]:
+    return {"description": description, "model": ProblemDetails,
+            "content": {"application/problem+json": {"schema": {"$ref": "#/components/schemas/ProblemDetails"}}}}
+
+
+#: error responses shared by every route, for the OpenAPI document
+PROBLEM_RESPONSES: dict[int | str, dict[str, Any]] = {
+    413: _problem("request body larger than ALLOC_MAX_BODY_BYTES"),
+    422: _problem("invalid request: shape, non-finite value, limits out of order, unknown method, ..."),
+}
+#: additionally, on routes with a vehicle id / on write routes
+NOT_FOUND = {404: _problem("unknown vehicle")}
+UNAUTHORIZED = {401: _problem("missing or wrong X-API-Key (when ALLOC_API_KEY is set)")}

@@ -12,7 +12,8 @@ import tempfile
 import itertools
 
 import schemathesis
-from hypothesis import HealthCheck, settings
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from pydantic import TypeAdapter
 from schemathesis import GenerationMode
 
@@ -65,3 +66,41 @@ def test_methods_listed_match_library():
 
     listed = TestClient(app).get("/v1/methods").json()
     assert [m["name"] for m in listed] == alloc.methods()
+
+
+# Schema-driven cases rarely produce consistent shapes; this one generates well-formed
+# problems of every size the API accepts and runs every registered method on them.
+_sizes = st.integers(1, 6).flatmap(lambda k: st.tuples(st.just(k), st.integers(1, 12)))
+_finite = st.floats(-1e3, 1e3, allow_nan=False, allow_infinity=False)
+
+
+@st.composite
+def _inline_requests(draw):
+    k, m = draw(_sizes)
+    B = draw(st.lists(st.lists(_finite, min_size=m, max_size=m), min_size=k, max_size=k))
+    lo = draw(st.lists(st.floats(-50, 0), min_size=m, max_size=m))
+    hi = draw(st.lists(st.floats(0, 50), min_size=m, max_size=m))
+    body = {"B": B, "umin": lo, "umax": hi, "v": draw(st.lists(_finite, min_size=k, max_size=k)),
+            "method": draw(st.sampled_from(alloc.methods()))}
+    if draw(st.booleans()):
+        body["u_prev"] = draw(st.lists(st.floats(-60, 60), min_size=m, max_size=m))
+        body["dt"] = draw(st.floats(1e-4, 1.0))
+        body["rate_min"] = draw(st.lists(st.one_of(st.none(), st.floats(-100, 0)), min_size=m, max_size=m))
+        body["rate_max"] = draw(st.lists(st.one_of(st.none(), st.floats(0, 100)), min_size=m, max_size=m))
+    return body
+
+
+@given(body=_inline_requests())
+@settings(max_examples=120, deadline=None, suppress_health_check=list(HealthCheck))
+def test_wellformed_problems_every_method_no_5xx(body):
+    from fastapi.testclient import TestClient
+
+    client = TestClient(app, raise_server_exceptions=False)
+    r = client.post("/v1/allocate", json=body)
+    assert r.status_code < 500, r.text[:2000]
+    if r.status_code == 200:
+        out = r.json()
+        assert all(lo - 1e-9 <= u <= hi + 1e-9 for u, lo, hi in zip(out["u"], body["umin"], body["umax"]))
+    batch = {k: v for k, v in body.items() if k not in ("v", "u_prev", "dt")}
+    r = client.post("/v1/allocate/batch", json={**batch, "V": [body["v"]] * 3})
+    assert r.status_code < 500, r.text[:2000]

@@ -6,10 +6,10 @@ from fastapi import APIRouter, Response
 
 from ..deps import StoreDep
 from ..responses import allocation_response, batch_response
-from ..schemas import AllocateRequest, AllocationOut, BatchAllocateRequest, BatchOut, ProblemIn
+from ..schemas import PROBLEM_RESPONSES, AllocateRequest, AllocationOut, BatchAllocateRequest, BatchOut, ProblemIn
 from ..store import build_allocator
 
-router = APIRouter(prefix="/v1/allocate", tags=["allocation"])
+router = APIRouter(prefix="/v1/allocate", tags=["allocation"], responses=PROBLEM_RESPONSES)
 
 _PROBLEM_FIELDS = set(ProblemIn.model_fields)
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 from fastapi import APIRouter
 
 from .. import ams
-from ..schemas import AmsOut, AmsRequest
+from ..schemas import PROBLEM_RESPONSES, AmsOut, AmsRequest
 
-router = APIRouter(prefix="/v1/ams", tags=["ams"])
+router = APIRouter(prefix="/v1/ams", tags=["ams"], responses=PROBLEM_RESPONSES)
 
 
 @router.post("", response_model=AmsOut, summary="AMS volume and largest moments along directions")

@@ -8,9 +8,9 @@ from fastapi import APIRouter, Path
 
 import alloc
 
-from ..schemas import MethodOut
+from ..schemas import PROBLEM_RESPONSES, MethodOut
 
-router = APIRouter(prefix="/v1/methods", tags=["methods"])
+router = APIRouter(prefix="/v1/methods", tags=["methods"], responses=PROBLEM_RESPONSES)
 
 
 @router.get("", response_model=list[MethodOut], summary="List allocation methods")

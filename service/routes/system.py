@@ -7,9 +7,9 @@ from fastapi import APIRouter
 import alloc
 
 from ..deps import StoreDep
-from ..schemas import ServiceHealth
+from ..schemas import PROBLEM_RESPONSES, ServiceHealth
 
-router = APIRouter(prefix="/v1", tags=["system"])
+router = APIRouter(prefix="/v1", tags=["system"], responses=PROBLEM_RESPONSES)
 
 
 @router.get("/health", response_model=ServiceHealth, summary="Service health check")

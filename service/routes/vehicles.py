@@ -16,13 +16,14 @@ from ..deps import StoreDep, require_api_key
 from ..responses import allocation_response, batch_response
 from ..health import health_out
 from ..schemas import (
+    NOT_FOUND, PROBLEM_RESPONSES, UNAUTHORIZED,
     AllocationOut, AmsOut, AmsVehicleRequest, BatchOut, EventIn, EventList, EventOut, EventRecorded,
     HealthOut, ProblemOut, VehicleAllocateRequest, VehicleBatchRequest, VehicleCreate, VehicleList,
     VehicleOut, VehicleSummary,
 )
 from ..store import VehicleState, build_allocator
 
-router = APIRouter(prefix="/v1/vehicles", tags=["vehicles"])
+router = APIRouter(prefix="/v1/vehicles", tags=["vehicles"], responses={**PROBLEM_RESPONSES, **NOT_FOUND})
 VehicleId = Annotated[str, Path(min_length=1, max_length=64, description="vehicle id from POST /v1/vehicles")]
 WriteAccess = [Depends(require_api_key)]
 
@@ -43,7 +44,7 @@ def _event_out(e: EventRow) -> EventOut:
 
 
 @router.post("", response_model=VehicleOut, status_code=status.HTTP_201_CREATED, dependencies=WriteAccess,
-             summary="Create a vehicle (its nominal effector suite)")
+             responses=UNAUTHORIZED, summary="Create a vehicle (its nominal effector suite)")
 def create_vehicle(body: VehicleCreate, store: StoreDep, response: Response) -> VehicleOut:
     state = store.create(body)
     response.headers["Location"] = f"/v1/vehicles/{state.id}"
@@ -65,14 +66,14 @@ def get_vehicle(vehicle_id: VehicleId, store: StoreDep) -> VehicleOut:
 
 
 @router.delete("/{vehicle_id}", status_code=status.HTTP_204_NO_CONTENT, dependencies=WriteAccess,
-               summary="Delete a vehicle and its history")
+               responses=UNAUTHORIZED, summary="Delete a vehicle and its history")
 def delete_vehicle(vehicle_id: VehicleId, store: StoreDep) -> Response:
     store.delete(vehicle_id)
     return Response(status_code=status.HTTP_204_NO_CONTENT)
 
 
 @router.post("/{vehicle_id}/events", response_model=EventRecorded, status_code=status.HTTP_201_CREATED,
-             dependencies=WriteAccess, summary="Record a failure or repair of one effector")
+             dependencies=WriteAccess, responses=UNAUTHORIZED, summary="Record a failure or repair of one effector")
 def record_event(vehicle_id: VehicleId, body: EventIn, store: StoreDep) -> EventRecorded:
     # Committed (fsync'd) before the response; allocators in use are rebuilt before it too.
     event, state = store.record_event(vehicle_id, body)
