@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import alloc
 from alloc.ams import AttainableSet
@@ -51,10 +53,12 @@ def demands(p: alloc.Problem, n: int, seed: int) -> np.ndarray:
 
 
 def exact_reference(ams: AttainableSet, v: np.ndarray) -> np.ndarray:
-    """Achieved moment of Eq 1.15 from the exact ray exit."""
-    d = v - ams.base_v
+    """Achieved moment of Eq 1.15 from the exact ray exit (d projected on the range of B, as ``da``)."""
+    U, sv, _ = np.linalg.svd(ams.problem.B, full_matrices=False)
+    Q = U[:, sv > 1e-10 * sv[0]]
+    d = Q @ (Q.T @ (v - ams.base_v))
     a, _ = ams.max_in_direction(d)
-    return v if a >= 1 else ams.base_v + a * d
+    return ams.base_v + min(a, 1.0) * d
 
 
 @pytest.mark.parametrize("method", FACET_METHODS)
@@ -144,3 +148,38 @@ def test_bisect_and_table_search_mostly_without_fallback():
         tab(v)
     assert bis.impl.fallbacks == 0
     assert tab.impl.fallbacks <= 0.02 * len(V)
+
+
+def test_flat_and_one_dimensional_sets_match_lp():
+    # rank B < k: the ray follows the part of d in the range of B (the core's convention)
+    flat = alloc.Problem([[1.0, 0, 1], [0, 1, 1], [0, 0, 0]], [-1] * 3, [1] * 3)
+    line = alloc.Problem([[1.0, -2.0, 0.5]], [-1, -1, 0], [1, 2, 1])
+    for p, V in ((flat, [[0.5, 0.5, 0], [0.5, 0.5, 1], [5, 0, 0], [3, -3, 2]]), (line, [[-6.0], [-1.0], [0.3], [4.0]])):
+        ref = alloc.make_allocator(p, "da")
+        for method in FACET_METHODS:
+            a = alloc.make_allocator(p, method)
+            for v in V:
+                assert np.allclose(a(v).v_achieved, ref(v).v_achieved, atol=1e-9)
+                assert a(v).status == ref(v).status
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 10_000), st.integers(3, 9))
+def test_property_admissible_and_exact_iff_attained(seed, m):
+    """Random suites with duplicated, opposite, zero and jammed columns."""
+    rng = np.random.default_rng(seed)
+    B = rng.standard_normal((3, m))
+    B[:, rng.integers(0, m)] = 0.0
+    i, j = rng.choice(m, 2, replace=False)
+    B[:, j] = -rng.uniform(0.2, 3) * B[:, i]
+    lo, hi = -rng.uniform(0.1, 2, m), rng.uniform(0.1, 2, m)
+    jam = rng.integers(0, m)
+    lo[jam] = hi[jam] = 0.0
+    p = alloc.Problem(B, lo, hi)
+    ams = AttainableSet(p)
+    a = alloc.make_allocator(p, "da_facet")
+    for v in rng.standard_normal((20, 3)) * 2:
+        r = a(v)
+        assert np.isfinite(r.u).all() and (r.u >= lo).all() and (r.u <= hi).all()
+        assert (r.status.value == "exact") == bool(np.abs(p.B @ r.u - v).max() <= 1e-6 * max(1, np.abs(v).max()))
+        assert np.abs(r.v_achieved - exact_reference(ams, v)).max() <= 1e-9 * max(1.0, np.abs(ams.vertices).max())

@@ -74,6 +74,10 @@ class FacetSearch(Method):
         self._umin, self._umax = p.umin, p.umax
         self._flat = ams.rank < p.k or ams.rank == 0
         if self._flat:
+            # as the core's ``da``: the ray follows the part of d in the range of B
+            U, sv, _ = np.linalg.svd(p.B, full_matrices=False)
+            Qb = U[:, sv > 1e-10 * sv[0]] if sv.size and sv[0] > 0 else np.zeros((p.k, 0))
+            self._range_proj = Qb @ Qb.T
             return
         k = p.k
         scale = np.abs(ams._NB).sum(axis=1) * np.abs(p.umax - p.umin).max() + 1e-300
@@ -122,6 +126,8 @@ class FacetSearch(Method):
         if self._flat or not self._nominal(lo, hi):
             u0 = np.minimum(np.maximum(p.up, lo), hi)
             d = v - p.B @ u0
+            if self._flat:
+                d = self._range_proj @ d
             if not np.abs(d).max() > 1e-14 * max(1.0, float(np.abs(v).max())):
                 return u0, 0
             a, ustar, _ = self.ams.ray_exit(d, lo=lo, hi=hi, u0=u0)
