@@ -1,10 +1,15 @@
 """Attainable moment set (AMS) summary: volume and the largest moment along directions.
 
-Uses :class:`alloc.ams.AttainableSet` when the library provides it.  Until then this
-module answers with its own small formulation, behind the same two calls:
+Convention (the core's ``da`` and :class:`alloc.ams.AttainableSet`): rays start at the
+base point ``B u0``, ``u0`` the preferred position clipped into the limits (0 by default);
+``scale`` is the largest ``a`` with ``B u0 + a d`` attainable and ``moment`` that point.
 
-* the largest attainable moment along ``d`` is an LP (seed Eqs 1.15-1.17, with base
-  point 0): maximise ``a`` subject to ``B u = a d``, ``umin <= u <= umax``;
+:class:`alloc.ams.AttainableSet` answers when it is available and the problem is small
+enough for its facet enumeration (``MAX_FACET_SUBSETS`` subsets of ``k - 1`` effectors,
+about a second).  Otherwise this module answers with its own small formulation:
+
+* the largest moment along ``d`` is an LP (seed Eqs 1.15-1.17): maximise ``a`` subject
+  to ``B (u - u0) = a d``, ``umin <= u <= umax``, ``a >= 0``;
 * the AMS is a zonotope with generators ``g_j = (umax_j - umin_j) b_j``, so its volume
   is ``sum over k-subsets S of |det G_S|`` (exact; computed only when there are at most
   ``MAX_SUBSETS`` subsets, else ``null``).
@@ -27,14 +32,18 @@ from .schemas import AmsOut, DirectionOut
 __all__ = ["summarize", "MAX_SUBSETS"]
 
 MAX_SUBSETS = 200_000
+MAX_FACET_SUBSETS = 20_000
 _CHUNK = 20_000
 
 
 def _library_set(problem: alloc.Problem):  # -> alloc.ams.AttainableSet | None
     try:
-        from alloc.ams import AttainableSet  # type: ignore[attr-defined]
+        from alloc.ams import AttainableSet
     except ImportError:
         return None
+    moving = int((problem.umax > problem.umin).sum())
+    if comb(moving, problem.k - 1) > MAX_FACET_SUBSETS:
+        return None  # facet enumeration would take seconds to minutes: answer with the LP
     return AttainableSet(problem)
 
 
@@ -61,15 +70,16 @@ def zonotope_volume(problem: alloc.Problem) -> tuple[float | None, str]:
 
 
 def max_in_direction(problem: alloc.Problem, d: NDArray[np.float64]) -> tuple[float | None, NDArray[np.float64] | None]:
-    """Largest ``a`` with ``a d`` attainable, and an admissible ``u`` with ``B u = a d``."""
+    """Largest ``a`` with ``B u0 + a d`` attainable, and an admissible ``u`` reaching it."""
     k, m = problem.k, problem.m
+    u0 = np.minimum(np.maximum(problem.up, problem.umin), problem.umax)
     c = np.zeros(m + 1)
     c[-1] = -1.0
     A_eq = np.hstack([problem.B, -d[:, None]])
-    bounds = [*zip(problem.umin, problem.umax), (None, None)]
-    res = linprog(c, A_eq=A_eq, b_eq=np.zeros(k), bounds=bounds, method="highs")
-    if res.status != 0:
-        return None, None  # the line through 0 along d misses the AMS
+    bounds = [*zip(problem.umin, problem.umax), (0.0, None)]
+    res = linprog(c, A_eq=A_eq, b_eq=problem.B @ u0, bounds=bounds, method="highs")
+    if res.status != 0:  # not expected (a = 0, u = u0 is feasible): report "not found"
+        return None, None
     u = np.minimum(np.maximum(res.x[:m], problem.umin), problem.umax)
     return float(res.x[-1]), u
 
@@ -100,10 +110,12 @@ def summarize(problem: alloc.Problem, directions: list[list[float]] | None) -> A
     else:
         volume, note = zonotope_volume(problem)
         found = [max_in_direction(problem, d) for d in ds]
+    base = problem.B @ np.minimum(np.maximum(problem.up, problem.umin), problem.umax)
     rows = []
     for d, (a, u) in zip(ds, found):
-        if a is None:
+        if a is None or not np.isfinite(a):
             rows.append(DirectionOut(direction=d.tolist(), scale=None, moment=None, u=None))
         else:
-            rows.append(DirectionOut(direction=d.tolist(), scale=a, moment=(a * d).tolist(), u=np.asarray(u).tolist()))
+            rows.append(DirectionOut(direction=d.tolist(), scale=a, moment=(base + a * d).tolist(),
+                                     u=np.asarray(u).tolist()))
     return AmsOut(volume=volume, volume_note=note, directions=rows)

@@ -196,8 +196,8 @@ class AmsVehicleRequest(_AmsQuery):
 
 class DirectionOut(BaseModel):
     direction: list[float]
-    scale: float | None = Field(description="largest a with a*d attainable (null: the line misses the AMS)")
-    moment: list[float] | None = Field(description="a*d, the largest attainable moment along d")
+    scale: float | None = Field(description="largest a with B u0 + a d attainable (u0: preferred position)")
+    moment: list[float] | None = Field(description="B u0 + a d, the farthest attainable moment along d")
     u: list[float] | None = Field(description="an admissible command achieving it")
 
 

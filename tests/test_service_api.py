@@ -362,3 +362,28 @@ def test_methods_and_ams(client):
 def test_service_health(client):
     assert client.get("/v1/health").json() == {"status": "ok", "version": alloc.__version__, "database": "ok",
                                                "methods": len(alloc.methods())}
+
+
+def test_ams_library_and_fallback_agree(monkeypatch):
+    """The fallback formulation (LP + zonotope determinant sum) matches alloc.ams."""
+    import service.ams as sams
+    p = ice()
+    dirs = [[1.0, 0.5, -0.2], [0.0, 0.0, 1.0]]
+    lib = sams.summarize(p, dirs)
+    monkeypatch.setattr(sams, "_library_set", lambda problem: None)
+    own = sams.summarize(p, dirs)
+    assert lib.volume_note == "alloc.ams.AttainableSet" and own.volume_note.startswith("exact (zonotope")
+    assert own.volume == pytest.approx(lib.volume, rel=1e-9)
+    for a, b in zip(own.directions, lib.directions):
+        assert a.scale == pytest.approx(b.scale, rel=1e-7)
+        assert a.moment == pytest.approx(b.moment, rel=1e-7, abs=1e-9)
+        np.testing.assert_allclose(p.B @ np.array(a.u), a.moment, atol=1e-6)
+
+
+def test_ams_large_problem_answers_without_facet_enumeration(client):
+    rng = np.random.default_rng(3)
+    m, k = MAX_EFFECTORS, MAX_AXES
+    body = {"B": rng.normal(size=(k, m)).tolist(), "umin": [-1.0] * m, "umax": [1.0] * m}
+    out = client.post("/v1/ams", json=body).json()
+    assert out["volume"] is None and "not computed" in out["volume_note"]
+    assert len(out["directions"]) == 2 * k and all(d["scale"] > 0 for d in out["directions"])
