@@ -35,9 +35,14 @@ class CascadedGeneralizedInverse(Method):
     set to that limit, their effect is subtracted from the demand and they are removed;
     repeat until (1) no new effector saturates, (2) all have saturated, or (3) fewer free
     effectors remain than axes, when the least-squares left pseudo-inverse (Eq 1.24) is
-    used and the result clipped.  With ``priorities`` each inverse is the prioritised one
-    (higher levels met first, lower levels in their null space).  Inverses are cached per
-    free set, so repeated saturation patterns cost one matrix-vector product each.
+    used and the result clipped.  Inverses are cached per free set, so repeated saturation
+    patterns cost one matrix-vector product each.
+
+    With ``priorities`` of more than one level the cascade runs level by level, most
+    important first: each level's remaining demand is distributed in the null space of
+    the levels before it (so their moments do not change), the increment is scaled until
+    the first free effector reaches a limit, that effector is removed, and the rest of the
+    level's demand is re-solved over the remaining free effectors.
     """
 
     equation = "Eqs 1.23-1.24"
@@ -65,6 +70,8 @@ class CascadedGeneralizedInverse(Method):
         return P
 
     def solve(self, v, lo, hi, u_prev):
+        if self.groups is not None and len(self.groups) > 1:
+            return self._solve_by_level(v, lo, hi)
         p = self.problem
         base = np.minimum(np.maximum(p.up, lo), hi)
         u = base.copy()
@@ -88,6 +95,38 @@ class CascadedGeneralizedInverse(Method):
             u[F[under]] = lo[F[under]]
             free[F[over | under]] = False
         return u, p.m + 1
+
+
+    def _solve_by_level(self, v, lo, hi):
+        p = self.problem
+        u = np.minimum(np.maximum(p.up, lo), hi)
+        free = lo < hi
+        done = np.zeros(0, dtype=np.intp)
+        steps = 0
+        for level in self.groups:
+            rows = np.concatenate([done, level])
+            sub = [np.arange(done.size), np.arange(done.size, rows.size)]
+            Wv = p.Wv[np.ix_(rows, rows)]
+            for _ in range(p.m + 1):
+                r = v[level] - p.B[level] @ u
+                if not free.any() or np.abs(r).max() <= 1e-12 * max(1.0, float(np.abs(v).max())):
+                    break
+                F = np.flatnonzero(free)
+                P = weighted_pinv(p.B[np.ix_(rows, F)], p.Wu[np.ix_(F, F)], Wv, groups=sub, rcond=self.rcond)
+                du = P[:, done.size:] @ r
+                s = max_scale(u[F], du, lo[F], hi[F])
+                u[F] = np.minimum(np.maximum(u[F] + s * du, lo[F]), hi[F])
+                steps += 1
+                if s >= 1.0:
+                    break
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    reach = np.where(du > 0, (hi[F] - u[F]) / du, np.where(du < 0, (lo[F] - u[F]) / du, np.inf))
+                hit = reach <= 1e-12
+                if not hit.any():
+                    break
+                free[F[hit]] = False
+            done = rows
+        return u, steps
 
 
 @register("daisy")
