@@ -138,14 +138,15 @@ def coverage_tables(samples: int) -> None:
     }
     print(f"## Coverage of the AMS (Bordignon-Durham), Monte Carlo N = {samples}, seed 0\n")
     for title, (key, p) in problems.items():
-        print(f"### {title}\n\n| method | coverage % | +/- 1 s.e. (%) | estimator |\n|---|---|---|---|")
+        print(f"### {title}\n\n| method | coverage % | +/- 1 s.e. (%) | 95 % CI (Wilson) | estimator |\n|---|---|---|---|---|")
         for meth in alloc.methods():
             opts = {}
             if meth == "daisy":
                 opts = {"groups": vehicles.ice_daisy_groups() if key.startswith("ice") else HARV_DAISY_GROUPS}
             r = coverage(p, meth, samples=samples, seed=0, **opts)
             se = "exact" if r.estimator == "polytope" else f"{100 * r.stderr:.2f}"
-            print(f"| {meth} | {100 * r.fraction:.2f} | {se} | {r.estimator} |")
+            ci = "-" if r.estimator == "polytope" else f"{100 * r.ci95[0]:.2f} - {100 * r.ci95[1]:.2f}"
+            print(f"| {meth} | {100 * r.fraction:.2f} | {se} | {ci} | {r.estimator} |")
         print()
 
 

@@ -92,3 +92,12 @@ def test_two_dimensional_picture(tmp_path):
     p = alloc.Problem(np.random.default_rng(1).standard_normal((2, 4)), -np.ones(4), np.ones(4))
     fig = plot_ams(p, "pinv", tmp_path / "k2.png")
     assert (tmp_path / "k2.png").exists() and len(fig.axes) == 1
+
+
+def test_wilson_interval_when_nothing_fails():
+    from alloc.ams.coverage import wilson95
+
+    lo, hi = wilson95(1.0, 20_000)
+    assert hi == pytest.approx(1.0) and 0.9997 < lo < 0.99985  # about 1 - 3.84/N
+    lo, hi = wilson95(0.5, 10_000)
+    assert lo == pytest.approx(0.5 - 1.96 * 0.005, abs=1e-4) and hi == pytest.approx(0.5 + 1.96 * 0.005, abs=1e-4)

@@ -86,8 +86,9 @@ def coverage_cmd(problem: str = typer.Option("ice", help="ice | ice-mid | harv")
     if as_json:
         typer.echo(json.dumps([r.to_dict() for r in rows], indent=2))
         return
-    typer.echo(f"| method | coverage % | +/- (1 s.e.) | estimator | N |")
-    typer.echo("|---|---|---|---|---|")
+    typer.echo("| method | coverage % | +/- 1 s.e. | 95 % CI (Wilson) | estimator | N |")
+    typer.echo("|---|---|---|---|---|---|")
     for r in rows:
         se = "exact" if r.estimator == "polytope" else f"{100 * r.stderr:.2f}"
-        typer.echo(f"| {r.method} | {100 * r.fraction:.2f} | {se} | {r.estimator} | {r.samples or '-'} |")
+        ci = "-" if r.estimator == "polytope" else f"{100 * r.ci95[0]:.2f} - {100 * r.ci95[1]:.2f}"
+        typer.echo(f"| {r.method} | {100 * r.fraction:.2f} | {se} | {ci} | {r.estimator} | {r.samples or '-'} |")

@@ -37,7 +37,8 @@ class CoverageResult:
     """Fraction of the AMS volume a method reaches exactly and admissibly.
 
     ``stderr`` is 0 for the exact polytope estimator and the binomial standard error of
-    the Monte Carlo estimator otherwise.
+    the Monte Carlo estimator otherwise; ``ci95`` is the Wilson 95 % interval (informative
+    also when no sample fails, where the standard error is 0: then it is about ``3/N``).
     """
 
     method: str
@@ -47,12 +48,14 @@ class CoverageResult:
     samples: int
     ams_volume: float
     seconds: float
+    ci95: tuple[float, float] = (0.0, 1.0)
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
 
     def __str__(self) -> str:
-        pm = "exact" if self.estimator == "polytope" else f"+/- {100 * self.stderr:.2f}"
+        pm = "exact" if self.estimator == "polytope" else (
+            f"+/- {100 * self.stderr:.2f}, 95 % CI {100 * self.ci95[0]:.2f}-{100 * self.ci95[1]:.2f}")
         return f"{self.method}: {100 * self.fraction:.2f} % ({pm})"
 
 
@@ -142,11 +145,21 @@ def coverage(problem: Problem, method: str, *, samples: int = 20_000, seed: int 
         raise ValueError(f"coverage: no exact estimator for method {method!r}")
     if affine is not None and ams.volume > 0:
         vol, _ = pinv_reached_polytope(problem, *affine)
-        return CoverageResult(method, min(1.0, vol / ams.volume), 0.0, "polytope", 0, ams.volume,
-                              time.perf_counter() - t0)
+        frac = min(1.0, vol / ams.volume)
+        return CoverageResult(method, frac, 0.0, "polytope", 0, ams.volume, time.perf_counter() - t0, (frac, frac))
     rng = np.random.default_rng(seed)
     V = sample_ams(ams, samples, rng)
     res = allocator.batch(V)
     p = float(np.mean(res.status == "exact"))
-    se = float(np.sqrt(p * (1 - p) / len(V)))
-    return CoverageResult(method, p, se, "monte-carlo", len(V), ams.volume, time.perf_counter() - t0)
+    n = len(V)
+    se = float(np.sqrt(p * (1 - p) / n))
+    return CoverageResult(method, p, se, "monte-carlo", n, ams.volume, time.perf_counter() - t0, wilson95(p, n))
+
+
+def wilson95(p: float, n: int) -> tuple[float, float]:
+    """Wilson score interval (95 %) of a binomial proportion ``p`` observed in ``n`` trials."""
+    z = 1.959963984540054
+    denom = 1 + z * z / n
+    centre = (p + z * z / (2 * n)) / denom
+    half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
+    return float(max(0.0, centre - half)), float(min(1.0, centre + half))
