@@ -8,7 +8,9 @@ database, then measures for ``pinv`` and ``qp`` on the ICE problem (k = 3, m = 1
 3. closed-loop batch requests (100 and 1,000 demands): allocations/s, p50/p99 per request;
 4. open loop at a fixed arrival rate (default 300 requests/s): latency measured from each
    request's *scheduled* send time (no coordinated omission), p50/p99/max, goal p99 < 5 ms;
-5. the per-request overhead of the service over the library call, as a ratio of medians.
+5. the per-request overhead of the service over the library call, as a ratio of medians;
+6. reconfiguration: latency of recording an event (committed with fsync, allocators
+   rebuilt before the response) and of the first allocation after it (no rebuild pause).
 
 Client and server share the machine (2 cores here): the latencies include the client.
 Run: ``.venv/bin/python -m benchmarks.bench_service [--rate 300] [--seconds 10] [--n 2000]``.
@@ -51,11 +53,11 @@ class Stats:
 
     def row(self) -> str:
         p50, p99 = np.percentile(self.lat, [50, 99]) * 1e3
-        return (f"{self.label:<34} {self.n:>6} {self.rate:>12,.0f} {p50:>9.3f} {p99:>9.3f} "
+        return (f"{self.label:<40} {self.n:>6} {self.rate:>12,.0f} {p50:>9.3f} {p99:>9.3f} "
                 f"{self.lat.max() * 1e3:>9.3f} {self.errors:>4}")
 
 
-HEADER = f"{'case':<34} {'reqs':>6} {'allocs/s':>12} {'p50 ms':>9} {'p99 ms':>9} {'max ms':>9} {'err':>4}"
+HEADER = f"{'case':<40} {'reqs':>6} {'allocs/s':>12} {'p50 ms':>9} {'p99 ms':>9} {'max ms':>9} {'err':>4}"
 
 
 class Connection:
@@ -111,7 +113,7 @@ def bench_closed(port: int, label: str, path: str, bodies: list[bytes], per_requ
     return Stats(label, len(bodies), seconds, lat, per_request, errors)
 
 
-def bench_open(port: int, label: str, path: str, bodies: list[bytes], rate: float, workers: int = 8) -> Stats:
+def bench_open(port: int, label: str, path: str, bodies: list[bytes], rate: float, workers: int = 4) -> Stats:
     """Requests sent at ``t0 + i / rate`` whatever the server does; latency from the schedule."""
     jobs: queue.Queue[tuple[float, bytes] | None] = queue.Queue()
     lat = np.full(len(bodies), np.nan)
@@ -153,6 +155,39 @@ def bench_open(port: int, label: str, path: str, bodies: list[bytes], rate: floa
     return Stats(label, len(bodies), seconds, lat[~np.isnan(lat)], 1, errors[0])
 
 
+def bench_events(port: int, vid: str, n: int = 40) -> tuple[Stats, Stats]:
+    """Alternate jam / repair events, each followed at once by a qp allocation."""
+    conn = Connection(port)
+    alloc_body = json.dumps({"v": [0.5, 1.0, 0.2], "method": "qp"}).encode()
+    conn.post(f"/v1/vehicles/{vid}/allocate", alloc_body)
+    ev_lat, first_lat = np.empty(n), np.empty(n)
+    errors = 0
+    t_start = time.perf_counter()
+    for i in range(n):
+        ev = ({"effector": "elevon_l", "kind": "jam", "position": 5.0 + i % 7} if i % 2 == 0
+              else {"effector": "elevon_l", "kind": "repair"})
+        t0 = time.perf_counter()
+        status, _ = conn.post(f"/v1/vehicles/{vid}/events", json.dumps(ev).encode())
+        t1 = time.perf_counter()
+        status2, _ = conn.post(f"/v1/vehicles/{vid}/allocate", alloc_body)
+        t2 = time.perf_counter()
+        ev_lat[i], first_lat[i] = t1 - t0, t2 - t1
+        errors += (status != 201) + (status2 != 200)
+    seconds = time.perf_counter() - t_start
+    conn.close()
+    return (Stats("POST /v1/vehicles/{id}/events", n, seconds, ev_lat, 1, errors),
+            Stats("first qp allocate after event", n, seconds, first_lat, 1, 0))
+
+
+def _environment() -> str:
+    import importlib.util
+
+    loop = "uvloop" if importlib.util.find_spec("uvloop") else "asyncio"
+    parser = "httptools" if importlib.util.find_spec("httptools") else "h11"
+    load = ", ".join(f"{x:.2f}" for x in os.getloadavg())
+    return f"uvicorn 1 worker ({loop}, {parser}); {os.cpu_count()} CPU(s); load average {load}"
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--n", type=int, default=2000, help="closed-loop single requests per case")
@@ -166,8 +201,7 @@ def main() -> None:
     V = demands(p, max(n, n_open, 1000))
     problem = p.to_dict()
     started = time.monotonic()
-    print(f"alloc service benchmark: ICE problem k={p.k}, m={p.m}; {os.cpu_count()} CPU(s); loopback; "
-          f"uvicorn, 1 worker")
+    print(f"alloc service benchmark: ICE problem k={p.k}, m={p.m}; loopback; {_environment()}")
 
     with tempfile.TemporaryDirectory(prefix="alloc-bench-") as tmp, ServiceProcess(tmp) as server:
         vid = json.loads(Connection(server.port).post("/v1/vehicles", json.dumps({**problem, "name": "ice"}).encode())[1])["id"]
@@ -187,6 +221,7 @@ def main() -> None:
                           for r in range(reps)]
                 batch.append(bench_closed(server.port, f"POST /v1/allocate/batch {method} x{size}",
                                           "/v1/allocate/batch", bodies, per_request=size))
+        reconfig = bench_events(server.port, vid)
         open_loop: list[Stats] = []
         for method in METHODS:
             if time.monotonic() - started > DEADLINE_S:
@@ -215,13 +250,17 @@ def main() -> None:
     for s in open_loop:
         p99 = float(np.percentile(s.lat, 99)) * 1e3
         print(s.row() + ("  met" if p99 < 5.0 else "  MISSED"))
+    print("\nReconfiguration (event committed with fsync + allocators rebuilt, then the next allocation)")
+    print(HEADER)
+    for s in reconfig:
+        print(s.row())
     print("\nPer-request overhead over the library call (ratio of medians, closed loop)")
-    print(f"{'case':<34} {'service p50 us':>15} {'library p50 us':>15} {'ratio':>8} {'overhead us':>12}")
+    print(f"{'case':<40} {'service p50 us':>15} {'library p50 us':>15} {'ratio':>8} {'overhead us':>12}")
     for s in single:
         method = s.label.split()[-1]
         svc, libm = float(np.median(s.lat)) * 1e6, float(np.median(lib[method].lat)) * 1e6
-        print(f"{s.label:<34} {svc:>15.1f} {libm:>15.1f} {svc / libm:>8.1f} {svc - libm:>12.1f}")
-    print(f"\ntotal {time.monotonic() - started:.1f} s")
+        print(f"{s.label:<40} {svc:>15.1f} {libm:>15.1f} {svc / libm:>8.1f} {svc - libm:>12.1f}")
+    print(f"\ntotal {time.monotonic() - started:.1f} s; at the end: {_environment()}")
 
 
 if __name__ == "__main__":

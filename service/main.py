@@ -14,7 +14,7 @@ import alloc
 
 from .config import MAX_AXES, MAX_BATCH, MAX_EFFECTORS, Settings
 from .db import make_engine, make_sessionmaker
-from .errors import PROBLEM_JSON, install_handlers, problem_response
+from .errors import PROBLEM_JSON, PayloadTooLarge, install_handlers, problem_response
 from .routes import allocation, ams, methods, system, vehicles
 from .store import VehicleStore
 
@@ -44,7 +44,8 @@ class BodySizeLimit:
         self.app, self.limit = app, limit
 
     async def _reject(self, scope: Scope, receive: Receive, send: Send, detail: str) -> None:
-        response = problem_response(413, "payload-too-large", "Request body too large", detail,
+        err = PayloadTooLarge
+        response = problem_response(err.status, err.slug, err.title, detail,
                                     [{"loc": ["body"], "pointer": "", "reason": detail}])
         await response(scope, receive, send)
 
