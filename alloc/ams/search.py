@@ -244,33 +244,38 @@ class EdgeBisect(FacetSearch):
         self._lut = lut
         self._tiles_of = {f: np.array(tl) for f, tl in tiles_of.items()}
         self._pair_cross = np.cross(self._R.T[:, None, :], self._R.T[None, :, :])  # (C, C, 3)
+        self._fractions = np.arange(1, self.angles + 1) / (self.angles + 1)
+        self._first_angles = np.concatenate([[0.0], math.pi * self._fractions])
 
     def _edge(self, th: FloatArray, gx, gy0, gz0, cx, cy0, cz0):
         """Silhouette edge over the positive x-axis for rotation angles ``th`` (K,).
 
         Returns the edge class (K,), the generator signs (K, C) and the edge point's z (K,).
         """
-        cs, sn = np.cos(th)[:, None], np.sin(th)[:, None]
-        gy = cs * gy0 + sn * gz0  # (K, C)
-        gz = cs * gz0 - sn * gy0
-        cy = cs[:, 0] * cy0 + sn[:, 0] * cz0
-        cz = cs[:, 0] * cz0 - sn[:, 0] * cy0
+        K = len(th)
+        rot = np.empty((2 * K, 2))
+        rot[:K, 0] = rot[K:, 1] = np.cos(th)
+        rot[:K, 1] = np.sin(th)
+        rot[K:, 0] = -rot[:K, 1]
+        H = rot @ np.array([np.append(gy0, cy0), np.append(gz0, cz0)])  # rows: y then z
+        gy, cy = H[:K, :-1], H[:K, -1]
+        gz, cz = H[K:, :-1], H[K:, -1]
         # max x on y = 0 of the projection: minimise cx + t cy + sum|gx + t gy| over t
         # (a weighted median of the breakpoints t_c = -gx_c / gy_c)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            tb = -gx / gy
-        tb[~np.isfinite(tb)] = np.inf
+        tb = np.divide(-gx, gy, out=np.full(gy.shape, np.inf), where=gy != 0)
         order = np.argsort(tb, axis=1)
-        w = 2.0 * np.abs(np.take_along_axis(gy, order, axis=1))
-        slope = (cy - np.abs(gy).sum(axis=1))[:, None] + np.cumsum(w, axis=1)
+        agy = np.abs(gy)
+        rows = np.arange(K)
+        slope = np.cumsum(agy[rows[:, None], order], axis=1)
+        slope *= 2.0
+        slope += (cy - agy.sum(axis=1))[:, None]
         i = np.minimum((slope < 0).sum(axis=1), gy.shape[1] - 1)
-        rows = np.arange(len(th))
         c = order[rows, i]
-        t = tb[rows, c]
-        sig = np.sign(gx + t[:, None] * gy)
+        sig = np.sign(gx + tb[rows, c][:, None] * gy)
         sig[rows, c] = 0.0
-        s = -(cy + (sig * gy).sum(axis=1)) / gy[rows, c]
-        z = cz + (sig * gz).sum(axis=1) + s * gz[rows, c]
+        gyc, gzc = gy[rows, c], gz[rows, c]
+        s = -(cy + np.einsum("kc,kc->k", sig, gy)) / gyc
+        z = cz + np.einsum("kc,kc->k", sig, gz) + s * gzc
         return c, sig, z
 
     def _boundary(self, d):
@@ -295,11 +300,16 @@ class EdgeBisect(FacetSearch):
         cx, cy0, cz0 = frame @ c0
         K = self.angles
         lo_t, hi_t = 0.0, math.pi
-        (cl,), (sl,), (zl,) = self._edge(np.array([lo_t]), gx, gy0, gz0, cx, cy0, cz0)
-        ch, sh, zh = cl, sl, -zl  # the half-turn sees the same edge, z mirrored
+        # round 1 also evaluates angle 0; the half-turn (pi) sees the same edge, z mirrored
+        th = self._first_angles
+        cc, ss, zz = self._edge(th, gx, gy0, gz0, cx, cy0, cz0)
+        cl, sl, zl = cc[0], ss[0], zz[0]
+        ch, sh, zh = cl, sl, -zl
+        th, cc, ss, zz = th[1:], cc[1:], ss[1:], zz[1:]
         for r in range(1, self.max_rounds + 1):
-            th = lo_t + (hi_t - lo_t) * np.arange(1, K + 1) / (K + 1)
-            cc, ss, zz = self._edge(th, gx, gy0, gz0, cx, cy0, cz0)
+            if r > 1:
+                th = lo_t + (hi_t - lo_t) * self._fractions
+                cc, ss, zz = self._edge(th, gx, gy0, gz0, cx, cy0, cz0)
             # bracket: first angle whose z has the sign of the upper end
             pos = zz > 0 if zh > 0 else zz <= 0
             j = int(np.argmax(pos)) if pos.any() else K
@@ -326,6 +336,14 @@ class EdgeBisect(FacetSearch):
         f = int(self._lut[i, j, side])
         tl = self._tiles_of.get(f)
         if tl is None:
+            return None
+        if len(tl) == 1:  # a parallelogram: Eq 1.17 on three floats
+            t = int(tl[0])
+            x = self._Minv[t] @ d
+            x0, *rest = x.tolist()
+            slack = _TOL * abs(x0)
+            if x0 > 0 and all(-slack <= b <= x0 + slack for b in rest):
+                return self._from_tile(t, x)
             return None
         X = self._Minv[tl] @ d
         t, score = self._tile_test(X)
