@@ -4,6 +4,7 @@ equality with the library, durability settings, allocator cache, concurrency."""
 from __future__ import annotations
 
 import json
+import os
 import threading
 
 import numpy as np
@@ -387,3 +388,25 @@ def test_ams_large_problem_answers_without_facet_enumeration(client):
     out = client.post("/v1/ams", json=body).json()
     assert out["volume"] is None and "not computed" in out["volume_note"]
     assert len(out["directions"]) == 2 * k and all(d["scale"] > 0 for d in out["directions"])
+
+
+# ----------------------------------------------------------------- PostgreSQL
+def test_schema_compiles_for_postgresql():
+    from sqlalchemy.dialects import postgresql
+    from sqlalchemy.schema import CreateTable
+
+    from service.db import Base
+    ddl = [str(CreateTable(t).compile(dialect=postgresql.dialect())) for t in Base.metadata.sorted_tables]
+    assert any("CREATE TABLE vehicles" in d and "JSON" in d for d in ddl)
+    assert any("CREATE TABLE events" in d and "ON DELETE CASCADE" in d for d in ddl)
+
+
+@pytest.mark.skipif(not os.environ.get("ALLOC_TEST_POSTGRES_URL"),
+                    reason="set ALLOC_TEST_POSTGRES_URL to run against a PostgreSQL server")
+def test_same_layer_on_postgresql(tmp_path):
+    app = create_app(Settings(data_dir=tmp_path, database_url=os.environ["ALLOC_TEST_POSTGRES_URL"]))
+    with TestClient(app) as c:
+        vid = c.post("/v1/vehicles", json=ice().to_dict()).json()["id"]
+        assert c.post(f"/v1/vehicles/{vid}/events", json={"effector": 0, "kind": "jam", "position": 4.0}).status_code == 201
+        assert c.post(f"/v1/vehicles/{vid}/allocate", json={"v": [0.1, 0.2, 0.0]}).json()["u"][0] == 4.0
+        assert c.delete(f"/v1/vehicles/{vid}").status_code == 204
