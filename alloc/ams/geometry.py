@@ -273,9 +273,9 @@ class AttainableSet:
 
     Examples
     --------
-    >>> import alloc
     >>> from alloc.ams import AttainableSet
-    >>> ams = AttainableSet(alloc.vehicles.harv_latdir())
+    >>> from alloc.vehicles import harv_latdir
+    >>> ams = AttainableSet(harv_latdir())
     >>> len(ams.facets), len(ams.vertices)        # m(m-1) and m(m-1)+2 for m = 5
     (20, 22)
     """
