@@ -25,10 +25,12 @@ EffectorVector = Annotated[list[Finite], Field(min_length=1, max_length=MAX_EFFE
 AxisVector = Annotated[list[Finite], Field(min_length=1, max_length=MAX_AXES)]
 SquareRow = Annotated[list[Finite], Field(min_length=1, max_length=MAX_EFFECTORS)]
 Weight = EffectorVector | Annotated[list[SquareRow], Field(min_length=1, max_length=MAX_EFFECTORS)]
-Label = Annotated[str, Field(min_length=1, max_length=64)]
+# Printable text only: a NUL byte, accepted by SQLite, is an error in PostgreSQL text columns.
+_PRINTABLE = r"^[^\x00-\x1f\x7f]*$"
+Label = Annotated[str, Field(min_length=1, max_length=64, pattern=_PRINTABLE)]
 MethodName = Annotated[str, Field(min_length=1, max_length=64, examples=["pinv", "qp"])]
 Options = Annotated[dict[str, Any], Field(max_length=16, description="method options, see GET /v1/methods")]
-EffectorRef = Annotated[str, Field(min_length=1, max_length=64)] | Annotated[int, Field(ge=0, lt=MAX_EFFECTORS)]
+EffectorRef = Label | Annotated[int, Field(ge=0, lt=MAX_EFFECTORS)]
 
 
 class _In(BaseModel):
@@ -261,7 +263,7 @@ class VehicleList(BaseModel):
 # ----------------------------------------------------------------- events
 class _Event(_In):
     effector: EffectorRef = Field(description="effector name or index")
-    note: Annotated[str, Field(max_length=500)] | None = None
+    note: Annotated[str, Field(max_length=500, pattern=r"^[^\x00]*$")] | None = None
 
 
 class JamEvent(_Event):

@@ -24,7 +24,8 @@ from ..schemas import (
 from ..store import VehicleState, build_allocator
 
 router = APIRouter(prefix="/v1/vehicles", tags=["vehicles"], responses={**PROBLEM_RESPONSES, **NOT_FOUND})
-VehicleId = Annotated[str, Path(min_length=1, max_length=64, description="vehicle id from POST /v1/vehicles")]
+VehicleId = Annotated[str, Path(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_-]+$",
+                                description="vehicle id from POST /v1/vehicles")]
 WriteAccess = [Depends(require_api_key)]
 
 
