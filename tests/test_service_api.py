@@ -410,3 +410,16 @@ def test_same_layer_on_postgresql(tmp_path):
         assert c.post(f"/v1/vehicles/{vid}/events", json={"effector": 0, "kind": "jam", "position": 4.0}).status_code == 201
         assert c.post(f"/v1/vehicles/{vid}/allocate", json={"v": [0.1, 0.2, 0.0]}).json()["u"][0] == 4.0
         assert c.delete(f"/v1/vehicles/{vid}").status_code == 204
+
+
+@pytest.mark.parametrize("method", ["pinv", "qp", "wls", "cgi"])
+def test_cached_allocator_answers_as_a_fresh_library_build(client, method):
+    """The service reuses built allocators; for these methods the answer does not depend on
+    earlier requests (for ``lp``/``da`` the LP backend warm-starts: see service/README.md)."""
+    p = ice()
+    rng = np.random.default_rng(7)
+    V = (rng.uniform(-1, 1, (30, p.m)) * 10) @ p.B.T
+    body = p.to_dict()
+    for v in V:
+        out = client.post("/v1/allocate", json={**body, "v": v.tolist(), "method": method}).json()
+        assert out["u"] == alloc.make_allocator(p, method)(v).u.tolist()
