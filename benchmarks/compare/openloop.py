@@ -1,0 +1,166 @@
+"""Open-loop measures of one method on one problem (one CSV row per spec).
+
+* ``coverage`` -- Bordignon-Durham fraction of the AMS volume reached exactly
+  (:func:`alloc.ams.coverage`: exact polytope volume for the pseudo-inverse family,
+  seeded Monte Carlo with ``samples`` otherwise; Wilson 95 % interval).
+* ``unatt_err_mean`` / ``unatt_err_max`` -- ``|v - B u|`` (2-norm) over ``demands``
+  seeded demands outside the AMS: ``v = B u0 + s a* d`` with ``d`` uniform on the sphere,
+  ``a*`` the ray exit of Eq 1.15 and ``s`` uniform in [1.1, 2]; ``unatt_angle_mean`` is the
+  mean angle (deg) between ``B u`` and ``v - B u0`` (0 for direction-preserving methods).
+* ``effort_mean`` -- mean ``|u - up|`` (2-norm, effector units) over ``demands`` demands
+  drawn uniformly in the AMS.
+* ``rate_violation_max`` -- along a smooth sum-of-sines demand trajectory (``steps`` of
+  ``TRAJ_DT`` s, amplitude 1.2 x the AMS extent per axis, so it saturates), allocated with
+  ``u_prev`` and ``dt`` (Eq 1.28): the largest ``|du/dt|`` beyond the rate limits
+  (effector units/s; 0 means compliant).  ``traj_err_mean`` is the mean ``|v - B u|`` there.
+* ``fallbacks`` -- allocations with status ``fallback`` over all of the above.
+* Timings (in the timings CSV): ``latency_median_us``, ``latency_p99_us`` of a full
+  allocator call (validation included), warm (after ``WARMUP`` calls), over ``latency_calls``
+  calls cycling through the in-AMS and out-of-AMS demands.
+"""
+
+from __future__ import annotations
+
+import time
+import zlib
+from typing import Any
+
+import numpy as np
+
+import alloc
+from alloc import vehicles
+from alloc.ams import AttainableSet, coverage, sample_ams
+from alloc.testing import random_problem
+
+from .sweep import Spec
+
+__all__ = ["problem_by_name", "method_options", "run_open", "TRAJ_DT", "WARMUP"]
+
+TRAJ_DT = 0.01
+WARMUP = 20
+#: seed of the random problem suite (problem ``random<i>`` uses ``[RANDOM_SUITE_SEED, i]``)
+RANDOM_SUITE_SEED = 2024
+
+# Daisy chaining needs groups (Eq 1.25): aerodynamic surfaces first, thrust vectoring last.
+_ICE_DAISY = [[vehicles.ICE_EFFECTORS.index(n) for n in g] for g in vehicles.ice_daisy_groups()]
+_HARV_DAISY = [[0, 1, 2], [3, 4]]
+
+def problem_by_name(name: str) -> alloc.Problem:
+    """``ice`` (the seed's design problem of Eq 4.24, which the ICE loop's allocator is
+    given), ``harv_latdir`` (Eq 4.16, 3 axes) or ``random<i>`` (3 x 8, general position,
+    with limits, preferences, weights and rate limits; ``Wv`` reduced to its diagonal
+    because ``lp`` accepts only weight vectors, Eqs 1.18-1.19)."""
+
+    if name == "ice":
+        return vehicles.ice(design=True)
+    if name == "harv_latdir":
+        return vehicles.harv_latdir()
+    if name.startswith("random") and name[6:].isdigit():
+        rng = np.random.default_rng([RANDOM_SUITE_SEED, int(name[6:])])
+        p = random_problem(rng, 3, 8, "general")
+        return p.replace(Wv=np.diag(np.diag(p.Wv)))
+    raise KeyError(f"problem: unknown {name!r}; ice, harv_latdir or random<i>")
+
+def method_options(problem: str, method: str) -> dict[str, Any]:
+    """Options a method needs on a problem (daisy groups; every other method runs on defaults)."""
+    if method == "daisy" and problem.startswith("ice"):
+        return {"groups": _ICE_DAISY}
+    if method == "daisy" and problem.startswith("harv"):
+        return {"groups": _HARV_DAISY}
+    return {}
+
+def _rng(spec: Spec, purpose: str) -> np.random.Generator:
+    # crc32, not hash(): str hashes are salted per process and would differ between workers
+    return np.random.default_rng([spec["seed"], zlib.crc32(spec["problem"].encode()), zlib.crc32(purpose.encode())])
+
+def unattainable_demands(ams: AttainableSet, u0: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
+    """``n`` demands outside the AMS: ``B u0 + s a*(d) d``, ``s`` in [1.1, 2] (Eq 1.15's ``a*``)."""
+    B = ams.problem.B
+    out = []
+    while len(out) < n:
+        d = rng.normal(size=B.shape[0])
+        d /= np.linalg.norm(d)
+        a, _ = ams.max_in_direction(d)
+        s = rng.uniform(1.1, 2.0)
+        if np.isfinite(a) and a > 0:
+            out.append(B @ u0 + s * a * d)
+    return np.array(out)
+
+def demand_trajectory(ams: AttainableSet, u0: np.ndarray, steps: int) -> np.ndarray:
+    """Smooth sum-of-sines demands, 1.2 x the AMS extent along each axis (so they saturate)."""
+    k = ams.problem.k
+    eye = np.eye(k)
+    extent = np.array([min(ams.max_in_direction(eye[j])[0], ams.max_in_direction(-eye[j])[0]) for j in range(k)])
+    t = np.arange(steps)[:, None] * TRAJ_DT
+    freq = 0.4 + 0.3 * np.arange(k)  # Hz, incommensurate enough
+    phase = np.pi / 3 * np.arange(k)
+    # two sines of amplitude 0.6 each: peaks up to 1.2 x the extent
+    wave = 0.6 * np.sin(2 * np.pi * freq * t + phase) + 0.6 * np.sin(2 * np.pi * 2.3 * freq * t)
+    return ams.problem.B @ u0 + extent * wave
+
+def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:
+    na, nb = np.linalg.norm(a), np.linalg.norm(b)
+    if na == 0 or nb == 0:
+        return 90.0
+    return float(np.degrees(np.arccos(np.clip(a @ b / (na * nb), -1.0, 1.0))))
+
+def run_open(spec: Spec) -> tuple[dict[str, Any], dict[str, Any]]:
+    """Row and timings of one open-loop spec (see the module docstring for the measures)."""
+    problem = problem_by_name(spec["problem"])
+    method = spec["method"]
+    options = method_options(spec["problem"], method)
+    allocate = alloc.make_allocator(problem, method, **options)
+    ams = AttainableSet(problem)
+    u0 = np.clip(problem.up, problem.umin, problem.umax)
+    B = problem.B
+
+    cov = coverage(problem, method, samples=spec["samples"], seed=spec["seed"], **options)
+
+    V_out = unattainable_demands(ams, u0, spec["demands"], _rng(spec, "unattainable"))
+    res_out = [allocate(v) for v in V_out]
+    err_out = np.array([r.moment_error for r in res_out])
+    angle_out = np.array([_angle_deg(r.v_achieved - B @ u0, v - B @ u0) for r, v in zip(res_out, V_out)])
+
+    V_in = sample_ams(ams, spec["demands"], _rng(spec, "attainable"))
+    res_in = [allocate(v) for v in V_in]
+    effort = np.array([np.linalg.norm(r.u - problem.up) for r in res_in])
+
+    traj = demand_trajectory(ams, u0, spec["steps"])
+    u = u0.copy()
+    rate_excess, traj_err, traj_fallbacks = 0.0, [], 0
+    for v in traj:
+        r = allocate(v, u_prev=u, dt=TRAJ_DT)
+        rate = (r.u - u) / TRAJ_DT
+        rate_excess = max(rate_excess, float(np.max(rate - problem.rate_max)), float(np.max(problem.rate_min - rate)))
+        traj_err.append(r.moment_error)
+        traj_fallbacks += r.fallback
+        u = r.u
+
+    fallbacks = sum(r.fallback for r in res_out) + sum(r.fallback for r in res_in) + traj_fallbacks
+    row = {
+        "id": spec["id"], "problem": spec["problem"], "method": method,
+        "coverage": cov.fraction, "coverage_lo": cov.ci95[0], "coverage_hi": cov.ci95[1],
+        "coverage_estimator": cov.estimator,
+        "unatt_err_mean": float(err_out.mean()), "unatt_err_max": float(err_out.max()),
+        "unatt_angle_mean": float(angle_out.mean()),
+        "effort_mean": float(effort.mean()),
+        "rate_violation_max": max(0.0, rate_excess),
+        "traj_err_mean": float(np.mean(traj_err)),
+        "fallbacks": int(fallbacks), "calls": len(res_out) + len(res_in) + len(traj),
+    }
+    return row, _latency(spec, allocate, np.vstack([V_in, V_out]))
+
+def _latency(spec: Spec, allocate: alloc.Allocator, V: np.ndarray) -> dict[str, Any]:
+    """Warm per-call latency of the allocator (µs), measured in the worker."""
+    for v in V[:WARMUP]:
+        allocate(v)
+    n = spec["latency_calls"]
+    times = np.empty(n)
+    clock = time.perf_counter_ns
+    for i in range(n):
+        v = V[i % len(V)]
+        t0 = clock()
+        allocate(v)
+        times[i] = clock() - t0
+    return {"id": spec["id"], "latency_median_us": float(np.median(times)) / 1e3,
+            "latency_p99_us": float(np.percentile(times, 99)) / 1e3}
