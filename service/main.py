@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import gc
+import time
 from contextlib import asynccontextmanager
 from pathlib import Path
 from typing import Any
@@ -18,7 +19,7 @@ from .errors import PROBLEM_JSON, PayloadTooLarge, install_handlers, problem_res
 from .routes import allocation, ams, methods, system, vehicles
 from .store import VehicleStore
 
-__all__ = ["create_app", "serve", "BodySizeLimit"]
+__all__ = ["create_app", "serve", "BodySizeLimit", "ServerTiming"]
 
 DESCRIPTION = f"""
 Control allocation over HTTP: allocate for an inline problem or for a stored vehicle at its
@@ -86,6 +87,32 @@ class BodySizeLimit:
         await self.app(scope, replay, send)
 
 
+class ServerTiming:
+    """ASGI middleware: a ``Server-Timing: app;dur=<ms>`` header on every response.
+
+    The time from the request reaching the application to its response headers, so a
+    client can tell the service's share of a latency from the network's and its own.
+    """
+
+    def __init__(self, app: ASGIApp) -> None:
+        self.app = app
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        t0 = time.perf_counter()
+
+        async def timed_send(message: Message) -> None:
+            if message["type"] == "http.response.start":
+                ms = (time.perf_counter() - t0) * 1e3
+                message = {**message, "headers": [*message.get("headers", ()),
+                                                  (b"server-timing", f"app;dur={ms:.3f}".encode())]}
+            await send(message)
+
+        await self.app(scope, receive, timed_send)
+
+
 def create_app(settings: Settings | None = None) -> FastAPI:
     """Build the application: database, store, routers, error handlers, body limit."""
     settings = settings or Settings()
@@ -109,6 +136,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         app.include_router(module.router)
     install_handlers(app)
     app.add_middleware(BodySizeLimit, limit=settings.max_body_bytes)
+    app.add_middleware(ServerTiming)  # outermost: includes the body limit's buffering
     return app
 
 

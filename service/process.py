@@ -29,7 +29,7 @@ class ServiceProcess:
     """``python -m service.main`` on 127.0.0.1 with ``ALLOC_*`` settings from ``env``."""
 
     def __init__(self, data_dir: str | Path, *, api_key: str | None = None, port: int | None = None,
-                 env: dict[str, str] | None = None, log_level: str = "warning") -> None:
+                 env: dict[str, str] | None = None, log_level: str = "warning", nice: int = 0) -> None:
         self.data_dir = Path(data_dir)
         self.port = port or free_port()
         self.url = f"http://127.0.0.1:{self.port}"
@@ -38,6 +38,7 @@ class ServiceProcess:
         if api_key is not None:
             self.env["ALLOC_API_KEY"] = api_key
         self.log_level = log_level
+        self.nice = nice  # scheduling priority increment of the server process (negative: root only)
         self.proc: subprocess.Popen[bytes] | None = None
 
     def start(self, timeout: float = 30.0) -> ServiceProcess:
@@ -49,6 +50,7 @@ class ServiceProcess:
             [sys.executable, "-m", "service.main", "--host", "127.0.0.1", "--port", str(self.port),
              "--log-level", self.log_level],
             cwd=root, env=self.env, stdout=subprocess.DEVNULL, stderr=log,
+            preexec_fn=(lambda: os.nice(self.nice)) if self.nice else None,
         )
         log.close()
         deadline = time.monotonic() + timeout
