@@ -240,7 +240,8 @@ def main() -> None:
     started = time.monotonic()
     print(f"alloc service benchmark: ICE problem k={p.k}, m={p.m}; loopback; {_environment()}")
 
-    with tempfile.TemporaryDirectory(prefix="alloc-bench-") as tmp, ServiceProcess(tmp) as server:  # inherits --nice
+    # the server process inherits the client's --nice
+    with tempfile.TemporaryDirectory(prefix="alloc-bench-") as tmp, ServiceProcess(tmp) as server:
         vid = json.loads(Connection(server.port).post("/v1/vehicles", json.dumps({**problem, "name": "ice"}).encode())[1])["id"]
         noise = bench_noise_floor()
         lib: dict[str, Stats] = {}
