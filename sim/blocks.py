@@ -4,7 +4,8 @@ Linear blocks are discretised exactly once (zero-order hold, ``scipy.signal.
 cont2discrete``) so the hot loop is one matrix-vector product per block;
 nonlinear blocks (actuators with rate and position limits) are stepped with
 Heun's method (Simulink ODE2, as in the seed: "ODE2 solver using a fixed time
-step of dt = 0.0005 sec", seed section 4.5).
+step of dt = 0.0005 sec", seed section 4.5), by a numba-compiled kernel
+(:func:`actuator_heun_step`) that the loop engine also calls directly.
 
 Every block here is independent of any vehicle; the vehicles in
 :mod:`sim.vehicles` and the engine in :mod:`sim.loop` assemble them.
@@ -16,6 +17,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from numba import njit
 from scipy import signal
 
 __all__ = [
@@ -27,6 +29,7 @@ __all__ = [
     "ActuatorSpec",
     "ActuatorFailure",
     "ActuatorBank",
+    "actuator_heun_step",
     "DelayLine",
     "ScheduledPlant",
     "smc_control",
@@ -231,6 +234,7 @@ class ActuatorBank:
         self.jam_pos = np.zeros(self.m)
         self.hardover = np.zeros(self.m, dtype=bool)
         self.hard_pos = np.zeros(self.m)
+        self.rate_out = np.zeros(self.m)
         self.set_specs(specs)
 
     def set_specs(self, specs: Sequence[ActuatorSpec]) -> None:
@@ -269,35 +273,78 @@ class ActuatorBank:
             )
         self.set_specs(self.specs)
 
-    def _velocity(self, pos: np.ndarray, rate: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        vel = np.where(self.first, self.c1 * (u - pos), rate)
-        np.clip(vel, -self.rmax, self.rmax, out=vel)
-        acc = np.where(self.first, 0.0, self.wn2 * (u - pos) - self.c1 * rate)
-        return vel, acc
-
     def step(self, u: np.ndarray) -> np.ndarray:
         """Advance one step with command ``u`` held; return the new positions."""
-        u = np.where(self.hardover, self.hard_pos, u)
-        dt = self.dt
-        v1, a1 = self._velocity(self.pos, self.rate, u)
-        p1 = self.pos + dt * v1
-        r1 = np.clip(self.rate + dt * a1, -self.rmax, self.rmax)
-        v2, a2 = self._velocity(p1, r1, u)
-        pos = self.pos + 0.5 * dt * (v1 + v2)
-        rate = np.clip(self.rate + 0.5 * dt * (a1 + a2), -self.rmax, self.rmax)
-        # Position limits stop the surface; a rate pushing outwards is zeroed.
-        at_lo = pos <= self.lo
-        at_hi = pos >= self.hi
-        pos = np.clip(pos, self.lo, self.hi)
-        rate = np.where((at_lo & (rate < 0)) | (at_hi & (rate > 0)), 0.0, rate)
-        if self.jammed.any():
-            pos = np.where(self.jammed, self.jam_pos, pos)
-            rate = np.where(self.jammed, 0.0, rate)
-        # Reported rate: first-order actuators have an algebraic rate.
-        self.rate_out = np.where(self.first, (pos - self.pos) / dt, rate)
-        self.pos = pos
-        self.rate = rate
-        return pos
+        self.rate_out = np.empty(self.m)
+        actuator_heun_step(
+            self.pos, self.rate, self.rate_out, np.asarray(u, dtype=float), self.first, self.wn2, self.c1,
+            self.lo, self.hi, self.rmax, self.jammed, self.jam_pos, self.hardover, self.hard_pos, self.dt,
+        )
+        return self.pos.copy()
+
+
+@njit(cache=True)
+def actuator_heun_step(
+    pos: np.ndarray,
+    rate: np.ndarray,
+    rate_out: np.ndarray,
+    u: np.ndarray,
+    first: np.ndarray,
+    wn2: np.ndarray,
+    c1: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    rmax: np.ndarray,
+    jammed: np.ndarray,
+    jam_pos: np.ndarray,
+    hardover: np.ndarray,
+    hard_pos: np.ndarray,
+    dt: float,
+) -> None:
+    """One Heun (ODE2) step of a bank of limited actuators, in place on ``pos``, ``rate``, ``rate_out``.
+
+    Second order: ``pos' = sat_rate(rate)``, ``rate' = wn2 (u - pos) - c1 rate``
+    with the rate state clipped to ``+-rmax``; first order: ``pos' =
+    sat_rate(c1 (u - pos))``.  After the step the position is clipped to
+    ``[lo, hi]`` and a rate pushing outwards is zeroed (a limited actuator
+    stops, it does not bounce).  A hard-over effector follows ``hard_pos``
+    instead of ``u``; a jammed one stays at ``jam_pos`` with zero rate.
+    ``rate_out`` is the reported rate (algebraic for first order).  The
+    arithmetic is elementwise in the order of the numpy formulation, so the
+    result is identical to it to the last bit.
+    """
+    for i in range(pos.size):
+        ui = hard_pos[i] if hardover[i] else u[i]
+        p0 = pos[i]
+        r0 = rate[i]
+        rm = rmax[i]
+        if first[i]:
+            v1 = c1[i] * (ui - p0)
+            a1 = 0.0
+        else:
+            v1 = r0
+            a1 = wn2[i] * (ui - p0) - c1[i] * r0
+        v1 = min(max(v1, -rm), rm)
+        p1 = p0 + dt * v1
+        r1 = min(max(r0 + dt * a1, -rm), rm)
+        if first[i]:
+            v2 = c1[i] * (ui - p1)
+            a2 = 0.0
+        else:
+            v2 = r1
+            a2 = wn2[i] * (ui - p1) - c1[i] * r1
+        v2 = min(max(v2, -rm), rm)
+        p2 = p0 + 0.5 * dt * (v1 + v2)
+        r2 = min(max(r0 + 0.5 * dt * (a1 + a2), -rm), rm)
+        if (p2 <= lo[i] and r2 < 0.0) or (p2 >= hi[i] and r2 > 0.0):
+            r2 = 0.0
+        p2 = min(max(p2, lo[i]), hi[i])
+        if jammed[i]:
+            p2 = jam_pos[i]
+            r2 = 0.0
+        rate_out[i] = (p2 - p0) / dt if first[i] else r2
+        pos[i] = p2
+        rate[i] = r2
 
 
 class DelayLine:
@@ -370,6 +417,16 @@ class ScheduledPlant:
         self._failed = DiscreteLTI(self.A_fail, B, self.C, D, self._nominal.dt)
         self.D = D
         self._cur = self._failed
+
+    @property
+    def Ad(self) -> np.ndarray:
+        """Discrete state matrix of the current (nominal or failed) model."""
+        return self._cur.Ad
+
+    @property
+    def Bd(self) -> np.ndarray:
+        """Discrete input matrix of the current (nominal or failed) model."""
+        return self._cur.Bd
 
     def output(self, u: np.ndarray) -> np.ndarray:
         return self.C @ self.x + self.D @ u

@@ -12,14 +12,24 @@ into one continuous system and discretised exactly once, so a step costs a
 handful of small matrix-vector products plus the allocator call.  The loop-
 shaped baseline replaces the SMC, observers and hedge by one linear
 compensator per channel acting on ``r - y_measured``.
+
+Speed: everything but the allocator runs in two numba-compiled functions on
+packed state (:class:`_Packed`): :func:`_observe` (outputs, divergence check,
+pilots, controller, demand ``v``) and :func:`_advance` (record, integrate the
+controller, plant, delay and actuators, then observe the next step).  The
+Python loop is ``allocator(v)`` then one ``_advance`` call per step; failure
+injection and allocator rebuilds stay in Python.  The compiled step repeats
+the numpy formulation operation for operation (``np.dot`` is the BLAS call
+numpy's ``@`` makes), so results are identical to the last bit.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from tqdm import tqdm
 
 from sim.allocation import LoopAllocator, build_allocator
@@ -31,14 +41,14 @@ from sim.blocks import (
     DiscreteLTI,
     HedgeTerm,
     ScheduledPlant,
+    actuator_heun_step,
     band_limited_noise,
     hedge_system,
     observer_gain,
-    smc_control,
     stack_lti,
     tf_to_ss,
 )
-from sim.result import SimResult, divergence_check
+from sim.result import SimResult
 
 __all__ = ["Vehicle", "Failure", "SMCDesign", "LoopShapedDesign", "Pilot", "simulate"]
 
@@ -151,30 +161,6 @@ class Pilot:
     integrate: bool = False
 
 
-@dataclass
-class _Recorder:
-    n: int
-    k: int
-    m: int
-    n_extra: int
-    t: np.ndarray = field(init=False)
-
-    def __post_init__(self) -> None:
-        self.t = np.zeros(self.n)
-        self.ref = np.zeros((self.n, self.k))
-        self.out = np.zeros((self.n, self.k))
-        self.cmd = np.zeros((self.n, self.k))
-        self.pseudo = np.zeros((self.n, self.k))
-        self.unalloc = np.zeros((self.n, self.k))
-        self.eff = np.zeros((self.n, self.m))
-        self.rate = np.zeros((self.n, self.m))
-        self.extra = np.zeros((self.n, self.n_extra))
-        self.lo = np.zeros((self.n, self.m))
-        self.hi = np.zeros((self.n, self.m))
-        self.rmax = np.zeros((self.n, self.m))
-        self.count = 0
-
-
 def _controller_system(
     vehicle: Vehicle, design: SMCDesign, references: Sequence[TF], dt: float
 ) -> tuple[DiscreteLTI, int]:
@@ -225,6 +211,279 @@ def _controller_system(
     return DiscreteLTI(A, B, C, D, dt), n_in
 
 
+# ------------------------------------------------------------- packed state
+# Every array the compiled step touches lives in one float64 buffer ``F`` or
+# one int64 buffer ``I``: numba unboxes each call argument (about 0.2 us per
+# array), so the step takes two buffers instead of some fifty arrays.  Slot
+# ``s`` is described by ``I[3 s : 3 s + 3] = (offset, rows, cols)``; float
+# slots index ``F``, int slots (numbered after them) index ``I``.
+
+# plant: state, ZOH matrices, outputs matrices, effector positions it sees
+(_F_X, _F_AD, _F_BD, _F_C, _F_D, _F_UACT,
+ # controller: SMC system (reference models, observers, hedge) or, loop-shaped,
+ # the reference models (XC..CC) and the compensators (XK..DK)
+ _F_XC, _F_ADC, _F_BDC, _F_CC, _F_XK, _F_AK, _F_BK, _F_CK, _F_DK,
+ _F_INTEG, _F_K0, _F_KM1, _F_RHO, _F_EPS, _F_DEMAND, _F_BOUND, _F_DT,
+ # actuator bank (ActuatorBank arrays) and the actuator delay ring buffer
+ _F_POS, _F_RATE, _F_RATE_OUT, _F_WN2, _F_C1, _F_LO, _F_HI, _F_RMAX, _F_JAM_POS, _F_HARD_POS, _F_DBUF,
+ # pilots: output rows, gains, attitudes, delay ring buffers (one column each)
+ _F_PROW, _F_PGAIN, _F_PATT, _F_PBUF,
+ # signals of the current step
+ _F_Y, _F_Z, _F_CMD, _F_R, _F_E, _F_UC, _F_V, _F_W, _F_UDEL,
+ _N_FLOAT_SLOTS) = range(48)
+
+(_I_FIRST, _I_JAMMED, _I_HARDOVER, _I_DN, _I_DSTATE,
+ _I_PN, _I_PLEN, _I_PIDX, _I_PCHAN, _I_PINT, _I_MEAS, _I_CTRL, _I_MISC,
+ _N_SLOTS) = range(_N_FLOAT_SLOTS, _N_FLOAT_SLOTS + 14)
+
+# _I_MISC entries
+(_M_N_STEPS, _M_RECORD_EVERY, _M_FAIL_STEP, _M_SMC, _M_OBSERVED, _M_SIGN, _M_ACTUATORS, _N_MISC) = range(8)
+# _I_DSTATE entries: ring index, ring length (DelayLine semantics)
+_D_INDEX, _D_LENGTH = 0, 1
+
+# step status
+_OK, _DIVERGED, _PENDING = 0, 1, 2
+
+
+class _Packed:
+    """The two buffers of the compiled step, with named numpy views for Python.
+
+    ``floats`` and ``ints`` map slot -> array; ``view(slot)`` is a writable
+    view with the array's shape (failure injection writes through it).
+    """
+
+    def __init__(self, floats: dict[int, np.ndarray], ints: dict[int, np.ndarray]) -> None:
+        arrays = {**floats, **ints}
+        if sorted(floats) != list(range(_N_FLOAT_SLOTS)) or sorted(arrays) != list(range(_N_SLOTS)):
+            raise ValueError("every slot must be given exactly once")
+        self._shapes = {slot: np.shape(a) for slot, a in arrays.items()}
+        header = 3 * _N_SLOTS
+        table = np.zeros((_N_SLOTS, 3), dtype=np.int64)
+        end = [0, header]  # next free offset in F, in I
+        for slot in range(_N_SLOTS):
+            shape = self._shapes[slot]
+            rows, cols = (shape + (1, 1))[:2] if len(shape) < 2 else shape
+            which = int(slot >= _N_FLOAT_SLOTS)
+            table[slot] = end[which], rows, cols
+            end[which] += rows * cols
+        self.F = np.zeros(end[0])
+        self.I = np.zeros(end[1], dtype=np.int64)
+        self.I[:header] = table.ravel()
+        for slot, a in arrays.items():
+            self.view(slot)[...] = a
+
+    def view(self, slot: int) -> np.ndarray:
+        off, rows, cols = self.I[3 * slot : 3 * slot + 3]
+        buf = self.F if slot < _N_FLOAT_SLOTS else self.I
+        return buf[off : off + rows * cols].reshape(self._shapes[slot])
+
+
+@njit(cache=True)
+def _vec(buf: np.ndarray, I: np.ndarray, slot: int) -> np.ndarray:
+    off = I[3 * slot]
+    return buf[off : off + I[3 * slot + 1] * I[3 * slot + 2]]
+
+
+@njit(cache=True)
+def _mat(buf: np.ndarray, I: np.ndarray, slot: int) -> np.ndarray:
+    off, rows, cols = I[3 * slot], I[3 * slot + 1], I[3 * slot + 2]
+    return buf[off : off + rows * cols].reshape((rows, cols))
+
+
+@njit(cache=True)
+def _matvec(A: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``A @ x`` bit for bit as numpy computes it: BLAS gemv, or dot for a single row."""
+    if A.shape[0] == 1:
+        y = np.empty(1)
+        y[0] = np.dot(A[0], x)
+        return y
+    return np.dot(A, x)
+
+
+@njit(cache=True)
+def _observe(step: int, F: np.ndarray, I: np.ndarray, inputs: np.ndarray) -> int:
+    """Everything up to the allocator demand at ``step``: outputs, divergence, pilots, SMC, ``v``.
+
+    Matrix products go through ``np.dot`` (the BLAS call numpy's ``@`` makes)
+    in the order of the reference formulation, so results match it exactly.
+    Returns ``_DIVERGED`` (see :func:`sim.result.divergence_check`) or ``_OK``.
+    """
+    misc = _vec(I, I, _I_MISC)
+    dt = F[I[3 * _F_DT]]
+    x = _vec(F, I, _F_X)
+    y = _vec(F, I, _F_Y)
+    z = _vec(F, I, _F_Z)
+    ctrl = _vec(I, I, _I_CTRL)
+    bound = _vec(F, I, _F_BOUND)
+    cmd = _vec(F, I, _F_CMD)
+    k = ctrl.size
+    ny = y.size
+    y[:] = _matvec(_mat(F, I, _F_C), x) + _matvec(_mat(F, I, _F_D), _vec(F, I, _F_UACT))
+    z[:] = y + inputs[step, k : k + ny]
+    for i in range(k):
+        yi = y[ctrl[i]]
+        if not np.isfinite(yi) or abs(yi) > bound[i]:
+            return _DIVERGED
+    for xi in x:
+        if not np.isfinite(xi):
+            return _DIVERGED
+    cmd[:] = inputs[step, :k]
+    # Pilots: crossover model on the measured outputs, through their delay lines.
+    prow = _mat(F, I, _F_PROW)
+    patt = _vec(F, I, _F_PATT)
+    pbuf = _mat(F, I, _F_PBUF)
+    pgain = _vec(F, I, _F_PGAIN)
+    pn, plen, pidx = _vec(I, I, _I_PN), _vec(I, I, _I_PLEN), _vec(I, I, _I_PIDX)
+    pchan, pint = _vec(I, I, _I_PCHAN), _vec(I, I, _I_PINT)
+    for j in range(patt.size):
+        att = np.dot(prow[j], z)
+        if pint[j]:
+            patt[j] += dt * att
+            att = patt[j]
+        else:
+            patt[j] = att
+        err = inputs[step, k + ny + j] - att
+        if plen[j] > 1:
+            i0 = pidx[j]
+            pbuf[i0, j] = err
+            err = pbuf[(i0 - pn[j]) % plen[j], j]
+            pidx[j] = (i0 + 1) % plen[j]
+        cmd[pchan[j]] = pgain[j] * err
+    r = _vec(F, I, _F_R)
+    e = _vec(F, I, _F_E)
+    uc = _vec(F, I, _F_UC)
+    xc = _vec(F, I, _F_XC)
+    if misc[_M_SMC]:
+        # sigma = K0 e + K_-1 int(e), u_c = rho sat(sigma / eps) (seed Eq 4.2, 4.8)
+        o = _matvec(_mat(F, I, _F_CC), xc)
+        integ = _vec(F, I, _F_INTEG)
+        K0, Km1 = _vec(F, I, _F_K0), _vec(F, I, _F_KM1)
+        rho, eps = _vec(F, I, _F_RHO), _vec(F, I, _F_EPS)
+        for i in range(k):
+            y_fb = o[k + i] if misc[_M_OBSERVED] else z[ctrl[i]]
+            r[i] = o[i]
+            e[i] = o[i] - (y_fb + o[2 * k + i])
+            sigma = K0[i] * e[i] + Km1[i] * integ[i]
+            if misc[_M_SIGN]:
+                uc[i] = rho[i] * np.sign(sigma)
+            else:
+                uc[i] = rho[i] * min(max(sigma / eps[i], -1.0), 1.0)
+    else:
+        r[:] = _matvec(_mat(F, I, _F_CC), xc)
+        for i in range(k):
+            e[i] = r[i] - z[ctrl[i]]
+        xk = _vec(F, I, _F_XK)
+        uc[:] = _matvec(_mat(F, I, _F_CK), xk) + _matvec(_mat(F, I, _F_DK), e)
+        xk[:] = _matvec(_mat(F, I, _F_AK), xk) + _matvec(_mat(F, I, _F_BK), e)
+        xc[:] = _matvec(_mat(F, I, _F_ADC), xc) + _matvec(_mat(F, I, _F_BDC), cmd)
+    _vec(F, I, _F_V)[:] = _matvec(_mat(F, I, _F_DEMAND), uc)
+    return _OK
+
+
+@njit(cache=True)
+def _advance(
+    step: int, u_cmd: np.ndarray, unallocated: np.ndarray, F: np.ndarray, I: np.ndarray,
+    inputs: np.ndarray, rec: np.ndarray,
+) -> int:
+    """Record ``step``, integrate to ``step + 1`` with ``u_cmd`` and observe it (unless a failure is due).
+
+    Returns the status of :func:`_observe`, or ``_PENDING`` when the next
+    step is past the end or is the failure step (Python injects it first).
+    """
+    misc = _vec(I, I, _I_MISC)
+    dt = F[I[3 * _F_DT]]
+    ctrl = _vec(I, I, _I_CTRL)
+    k = ctrl.size
+    y = _vec(F, I, _F_Y)
+    uact = _vec(F, I, _F_UACT)
+    cmd, r, e, uc = _vec(F, I, _F_CMD), _vec(F, I, _F_R), _vec(F, I, _F_E), _vec(F, I, _F_UC)
+    rate_out = _vec(F, I, _F_RATE_OUT)
+    lo, hi, rmax = _vec(F, I, _F_LO), _vec(F, I, _F_HI), _vec(F, I, _F_RMAX)
+    patt = _vec(F, I, _F_PATT)
+    m = uact.size
+    if step % misc[_M_RECORD_EVERY] == 0:
+        # column order of _record_columns
+        row = rec[step // misc[_M_RECORD_EVERY]]
+        row[0] = step * dt
+        c = 1
+        for i in range(k):
+            row[c + i] = r[i]
+            row[c + k + i] = y[ctrl[i]]
+            row[c + 2 * k + i] = cmd[i]
+            row[c + 3 * k + i] = uc[i]
+            row[c + 4 * k + i] = unallocated[i]
+        c += 5 * k
+        for i in range(m):
+            row[c + i] = uact[i]
+            row[c + m + i] = rate_out[i] if step else 0.0
+            row[c + 2 * m + i] = lo[i]
+            row[c + 3 * m + i] = hi[i]
+            row[c + 4 * m + i] = rmax[i]
+        c += 5 * m
+        ny = y.size
+        for j in range(patt.size):
+            row[c + 2 * j] = inputs[step, k + ny + j]
+            row[c + 2 * j + 1] = patt[j]
+    if misc[_M_SMC]:
+        # controller input w = [command, u_cmd, z_measured, u_c]
+        w = _vec(F, I, _F_W)
+        z = _vec(F, I, _F_Z)
+        meas = _vec(I, I, _I_MEAS)
+        w[:k] = cmd
+        w[k : k + m] = u_cmd
+        for i in range(meas.size):
+            w[k + m + i] = z[meas[i]]
+        w[k + m + meas.size :] = uc
+        xc = _vec(F, I, _F_XC)
+        xc[:] = _matvec(_mat(F, I, _F_ADC), xc) + _matvec(_mat(F, I, _F_BDC), w)
+        integ = _vec(F, I, _F_INTEG)
+        for i in range(k):
+            integ[i] += dt * e[i]
+    x = _vec(F, I, _F_X)
+    x[:] = _matvec(_mat(F, I, _F_AD), x) + _matvec(_mat(F, I, _F_BD), uact)
+    # Actuator delay (DelayLine.push): the command pushed n[c] steps ago.
+    udel = _vec(F, I, _F_UDEL)
+    dstate = _vec(I, I, _I_DSTATE)
+    length = dstate[_D_LENGTH]
+    if length == 1:
+        udel[:] = u_cmd
+    else:
+        dbuf = _mat(F, I, _F_DBUF)
+        dn = _vec(I, I, _I_DN)
+        i0 = dstate[_D_INDEX]
+        dbuf[i0] = u_cmd
+        for c in range(m):
+            udel[c] = dbuf[(i0 - dn[c]) % length, c]
+        dstate[_D_INDEX] = (i0 + 1) % length
+    if misc[_M_ACTUATORS]:
+        pos = _vec(F, I, _F_POS)
+        actuator_heun_step(
+            pos, _vec(F, I, _F_RATE), rate_out, udel, _vec(I, I, _I_FIRST), _vec(F, I, _F_WN2),
+            _vec(F, I, _F_C1), lo, hi, rmax, _vec(I, I, _I_JAMMED), _vec(F, I, _F_JAM_POS),
+            _vec(I, I, _I_HARDOVER), _vec(F, I, _F_HARD_POS), dt,
+        )
+        uact[:] = pos
+    else:
+        for i in range(m):
+            uact[i] = min(max(udel[i], lo[i]), hi[i])
+            rate_out[i] = 0.0
+    nxt = step + 1
+    if nxt > misc[_M_N_STEPS] or nxt == misc[_M_FAIL_STEP]:
+        return _PENDING
+    return _observe(nxt, F, I, inputs)
+
+
+def _record_columns(k: int, m: int, n_pilots: int) -> dict[str, slice]:
+    """Columns of the record matrix, in the order :func:`_advance` writes them."""
+    widths = [("t", 1), ("ref", k), ("out", k), ("cmd", k), ("pseudo", k), ("unalloc", k),
+              ("eff", m), ("rate", m), ("lo", m), ("hi", m), ("rmax", m), ("extra", 2 * n_pilots)]
+    cols, c = {}, 0
+    for name, width in widths:
+        cols[name] = slice(c, c + width)
+        c += width
+    return cols
+
+
 def simulate(
     *,
     scenario: str,
@@ -249,6 +508,11 @@ def simulate(
 ) -> SimResult:
     """Run one closed loop.
 
+    Per step, one compiled call (:func:`_advance`) records the step,
+    integrates the plant, controller, delay and actuators, and evaluates the
+    next step up to the allocator demand ``v``; the allocator (a plug-in) is
+    called from Python in between.
+
     Parameters
     ----------
     commands : ndarray (N, k)
@@ -266,7 +530,6 @@ def simulate(
     n_steps = int(round(duration / dt))
     rng = np.random.default_rng(seed)
     meas = np.asarray(vehicle.measured)
-    ctrl = np.asarray(vehicle.controlled)
     # Noise on the measured outputs only, precomputed (vectorised filtering).
     ny = vehicle.C.shape[0]
     noise_all = np.zeros((n_steps + 1, ny))
@@ -284,144 +547,154 @@ def simulate(
     allocator: LoopAllocator = build_allocator(vehicle, method, method_options or {}, rate_aware=rate_aware)
 
     smc = isinstance(controller, SMCDesign)
+    empty = np.zeros((0, 0))
     if smc:
         ctl, n_in = _controller_system(vehicle, controller, references, dt)
-        w = np.zeros(n_in)
-        s_cmd, s_u, s_z, s_uc = slice(0, k), slice(k, k + m), slice(k + m, k + m + len(meas)), slice(k + m + len(meas), n_in)
-        integ = np.zeros(k)
-        rho, eps = controller.rho, controller.eps
-        K0, Km1 = controller.K0, controller.Km1
-        observed = controller.observer_poles is not None
+        comp = (empty, np.zeros((0, k)), np.zeros((k, 0)), np.zeros((k, k)), np.zeros(0))  # Ad, Bd, C, D, x
+        rho, K0, Km1 = controller.rho, controller.K0, controller.Km1
+        eps = np.ones(k) if controller.eps is None else controller.eps
     else:
-        ref_sys = stack_lti(
-            [tf_to_ss(n, d) for n, d in references],
-            [np.eye(k)[[i]] for i in range(k)],
-            [np.eye(k)[:, [i]] for i in range(k)],
-            k, k,
-        )
-        ref = DiscreteLTI(*ref_sys, dt=dt)
-        comp_sys = stack_lti(
-            [tf_to_ss(n, d) for n, d in controller.compensators],
-            [np.eye(k)[[i]] for i in range(k)],
-            [np.eye(k)[:, [i]] for i in range(k)],
-            k, k,
-        )
-        comp = DiscreteLTI(*comp_sys, dt=dt)
+        ctl = DiscreteLTI(*_diagonal_system(references, k), dt=dt)
+        lti = DiscreteLTI(*_diagonal_system(controller.compensators, k), dt=dt)
+        comp = (lti.Ad, lti.Bd, lti.C, lti.D, lti.x)
+        n_in = 0
+        rho = K0 = Km1 = eps = np.zeros(k)
 
-    pilot_delays = [DelayLine(1, dt, p.delay) for p in pilots]
-    pilot_att = np.zeros(len(pilots))
+    n_pilots = len(pilots)
     t_grid = np.arange(n_steps + 1) * dt
-    pilot_cmds = [p.attitude_command(t_grid) for p in pilots]
+    pilot_delays = [DelayLine(1, dt, p.delay) for p in pilots]
+    pilot_len = np.array([int(d.n[0]) + 1 for d in pilot_delays], dtype=np.int64)
+    inputs = np.hstack([
+        np.asarray(commands, dtype=float)[: n_steps + 1],
+        noise_all,
+        np.column_stack([p.attitude_command(t_grid) for p in pilots]) if pilots else np.zeros((n_steps + 1, 0)),
+    ])
 
-    n_rec = n_steps // record_every + 1
-    rec = _Recorder(n_rec, k, m, 2 * len(pilots))
-    u_act = bank.pos.copy()
-    u_cmd = np.zeros(m)
-    uc = np.zeros(k)
-    cmd = np.zeros(k)
-    diverged = False
+    # Failure step: the first with t >= t_fail - dt/2 (never: n_steps + 1).
     t_fail = None if failure is None else failure.time
-    failed = False
+    fail_step = n_steps + 1
+    if t_fail is not None:
+        due = np.nonzero(t_grid >= t_fail - 0.5 * dt)[0]
+        fail_step = int(due[0]) if due.size else n_steps + 1
+    # The actuator delay ring holds the longest delay of the run.
+    ring = 1
+    if failure is not None and failure.delay is not None:
+        ring = int(DelayLine(m, dt, failure.delay).n.max()) + 1
+
+    misc = np.zeros(_N_MISC, dtype=np.int64)
+    misc[[_M_N_STEPS, _M_RECORD_EVERY, _M_FAIL_STEP]] = n_steps, record_every, fail_step
+    misc[_M_SMC] = smc
+    misc[_M_OBSERVED] = smc and controller.observer_poles is not None
+    misc[_M_SIGN] = smc and controller.eps is None
+    misc[_M_ACTUATORS] = actuators
+    packed = _Packed(
+        floats={
+            _F_X: np.zeros(vehicle.A.shape[0]), _F_AD: plant.Ad, _F_BD: plant.Bd,
+            _F_C: plant.C, _F_D: plant.D, _F_UACT: bank.pos,
+            _F_XC: ctl.x, _F_ADC: ctl.Ad, _F_BDC: ctl.Bd, _F_CC: ctl.C,
+            _F_XK: comp[4], _F_AK: comp[0], _F_BK: comp[1], _F_CK: comp[2], _F_DK: comp[3],
+            _F_INTEG: np.zeros(k), _F_K0: K0, _F_KM1: Km1, _F_RHO: rho, _F_EPS: eps,
+            _F_DEMAND: vehicle.demand_map, _F_BOUND: np.broadcast_to(output_bound, (k,)), _F_DT: np.array(dt),
+            _F_POS: bank.pos, _F_RATE: bank.rate, _F_RATE_OUT: np.zeros(m), _F_WN2: bank.wn2, _F_C1: bank.c1,
+            _F_LO: bank.lo, _F_HI: bank.hi, _F_RMAX: bank.rmax, _F_JAM_POS: bank.jam_pos,
+            _F_HARD_POS: bank.hard_pos, _F_DBUF: np.zeros((ring, m)),
+            _F_PROW: np.array([p.row for p in pilots], dtype=float).reshape(n_pilots, ny),
+            _F_PGAIN: np.array([p.gain for p in pilots], dtype=float), _F_PATT: np.zeros(n_pilots),
+            _F_PBUF: np.zeros((int(pilot_len.max(initial=1)), n_pilots)),
+            _F_Y: np.zeros(ny), _F_Z: np.zeros(ny), _F_CMD: np.zeros(k), _F_R: np.zeros(k),
+            _F_E: np.zeros(k), _F_UC: np.zeros(k), _F_V: np.zeros(k), _F_W: np.zeros(n_in),
+            _F_UDEL: np.zeros(m),
+        },
+        ints={
+            _I_FIRST: bank.first, _I_JAMMED: bank.jammed, _I_HARDOVER: bank.hardover,
+            _I_DN: delay.n, _I_DSTATE: np.array([0, 1]),
+            _I_PN: pilot_len - 1, _I_PLEN: pilot_len, _I_PIDX: np.zeros(n_pilots),
+            _I_PCHAN: np.array([p.channel for p in pilots]), _I_PINT: np.array([p.integrate for p in pilots]),
+            _I_MEAS: meas, _I_CTRL: np.asarray(vehicle.controlled), _I_MISC: misc,
+        },
+    )
+    # The bank's position and rate live in the packed buffer (failures write there).
+    bank.pos, bank.rate = packed.view(_F_POS), packed.view(_F_RATE)
+    F, I = packed.F, packed.I
+    v = packed.view(_F_V)
+
+    cols = _record_columns(k, m, n_pilots)
+    rec = np.zeros((n_steps // record_every + 1, cols["extra"].stop))
+    u_cmd = np.zeros(m)
+    n_done = n_steps + 1
+
+    def fail_now(u_last: np.ndarray) -> LoopAllocator:
+        _inject(failure, plant, bank, delay, packed, u_last)
+        if actuators:
+            packed.view(_F_UACT)[:] = bank.pos  # a jammed surface is at its jam position at once
+        if allocator_knows_failure:
+            return build_allocator(vehicle, method, method_options or {}, failure=failure, rate_aware=rate_aware)
+        return allocator
+
+    if fail_step == 0 and failure is not None:
+        allocator = fail_now(u_cmd)
+    status = _observe(0, F, I, inputs)
     iterator = range(n_steps + 1)
     if progress:
         iterator = tqdm(iterator, total=n_steps + 1, unit="step", mininterval=0.5, desc=scenario)
     for step in iterator:
-        t = step * dt
-        if t_fail is not None and not failed and t >= t_fail - 0.5 * dt:
-            failed = True
-            _inject(failure, plant, bank, delay)
-            if allocator_knows_failure:
-                allocator = build_allocator(
-                    vehicle, method, method_options or {}, failure=failure, rate_aware=rate_aware
-                )
-        y_all = plant.output(u_act)
-        z_all = y_all + noise_all[step]
-        if divergence_check(y_all[ctrl], output_bound, plant.x):
-            diverged = True
+        if status == _DIVERGED:
+            n_done = step
             break
-        # Pilot (outer loop) and commands into the reference models.
-        cmd[:] = commands[step]
-        for j, p in enumerate(pilots):
-            att = p.row @ z_all
-            if p.integrate:
-                pilot_att[j] += dt * att
-                att = pilot_att[j]
-            else:
-                pilot_att[j] = att
-            err = pilot_delays[j].push(np.array([pilot_cmds[j][step] - att]))
-            cmd[p.channel] = p.gain * err[0]
-        if smc:
-            o = ctl.C @ ctl.x
-            r = o[:k]
-            y_fb = o[k : 2 * k] if observed else z_all[ctrl]
-            e = r - (y_fb + o[2 * k :])
-            sigma = K0 * e + Km1 * integ
-            uc = smc_control(sigma, rho, eps)
-        else:
-            r = ref.C @ ref.x
-            e = r - z_all[ctrl]
-            uc = comp.step(e)
-            ref.step(cmd)
-        v = vehicle.demand_map @ uc
         u_cmd, unalloc = allocator(v, u_cmd, dt)
-        if step % record_every == 0:
-            i = rec.count
-            rec.t[i] = t
-            rec.ref[i] = r
-            rec.out[i] = y_all[ctrl]
-            rec.cmd[i] = cmd
-            rec.pseudo[i] = uc
-            rec.unalloc[i] = unalloc
-            rec.eff[i] = u_act
-            rec.rate[i] = bank.rate_out if step else 0.0
-            rec.lo[i], rec.hi[i], rec.rmax[i] = bank.lo, bank.hi, bank.rmax
-            for j, p in enumerate(pilots):
-                rec.extra[i, 2 * j] = pilot_cmds[j][step]
-                rec.extra[i, 2 * j + 1] = pilot_att[j]
-            rec.count += 1
-        if smc:
-            w[s_cmd] = cmd
-            w[s_u] = u_cmd
-            w[s_z] = z_all[meas]
-            w[s_uc] = uc
-            ctl.x = ctl.Ad @ ctl.x + ctl.Bd @ w
-            integ += dt * e
-        plant.step(u_act)
-        u_del = delay.push(u_cmd)
-        u_act = bank.step(u_del) if actuators else np.clip(u_del, bank.lo, bank.hi)
-        if not actuators:
-            bank.rate_out = np.zeros(m)
+        status = _advance(step, u_cmd, unalloc, F, I, inputs, rec)
+        if step + 1 == fail_step and failure is not None:
+            allocator = fail_now(u_cmd)
+            status = _observe(step + 1, F, I, inputs)
 
-    n = rec.count
+    n = (n_done + record_every - 1) // record_every  # samples recorded before step n_done
+    rec = rec[:n]
+
+    def column(name: str) -> np.ndarray:
+        return np.ascontiguousarray(rec[:, cols[name]])
+
     extra = {}
     for j, p in enumerate(pilots):
-        extra[f"{p.name}_command"] = rec.extra[:n, 2 * j]
-        extra[f"{p.name}"] = rec.extra[:n, 2 * j + 1]
+        extra[f"{p.name}_command"] = rec[:, cols["extra"].start + 2 * j].copy()
+        extra[f"{p.name}"] = rec[:, cols["extra"].start + 2 * j + 1].copy()
     return SimResult(
         scenario=scenario,
         method=method,
         failure=None if failure is None else failure.name,
-        t=rec.t[:n],
+        t=rec[:, 0].copy(),
         channels=vehicle.channels,
-        reference=rec.ref[:n],
-        output=rec.out[:n],
-        command=rec.cmd[:n],
-        pseudo=rec.pseudo[:n],
-        effectors=rec.eff[:n],
-        effector_rates=rec.rate[:n],
+        reference=column("ref"),
+        output=column("out"),
+        command=column("cmd"),
+        pseudo=column("pseudo"),
+        effectors=column("eff"),
+        effector_rates=column("rate"),
         effector_names=vehicle.effector_names,
         # Limits as they were at each sample (failures change them).
-        effector_limits=(rec.lo[:n], rec.hi[:n]),
-        rate_limits=(-rec.rmax[:n], rec.rmax[:n]),
+        effector_limits=(column("lo"), column("hi")),
+        rate_limits=(-column("rmax"), column("rmax")),
         failure_time=t_fail,
-        diverged=diverged,
-        unallocated=rec.unalloc[:n],
+        diverged=n_done <= n_steps,
+        unallocated=column("unalloc"),
         extra=extra,
     )
 
 
-def _inject(failure: Failure, plant: ScheduledPlant, bank: ActuatorBank, delay: DelayLine) -> None:
-    """Apply a failure to the plant, the actuators and the actuator delay."""
+def _diagonal_system(tfs: Sequence[TF], k: int) -> tuple[np.ndarray, ...]:
+    """Stack of SISO transfer functions, ``y[i] = G_i(s) u[i]``."""
+    return stack_lti(
+        [tf_to_ss(n, d) for n, d in tfs],
+        [np.eye(k)[[i]] for i in range(k)],
+        [np.eye(k)[:, [i]] for i in range(k)],
+        k, k,
+    )
+
+
+def _inject(
+    failure: Failure, plant: ScheduledPlant, bank: ActuatorBank, delay: DelayLine, packed: _Packed,
+    u_last: np.ndarray,
+) -> None:
+    """Apply a failure to the plant, the actuators and the actuator delay (``u_last``: last command pushed)."""
     eff = np.ones(bank.m)
     for f in failure.actuators:
         if f.kind == "float":
@@ -429,7 +702,19 @@ def _inject(failure: Failure, plant: ScheduledPlant, bank: ActuatorBank, delay: 
         elif f.kind == "effectiveness":
             eff[f.index] = float(f.fraction)
         else:
-            bank.apply_failure(f)
+            bank.apply_failure(f)  # a jam writes pos/rate straight into the packed buffer
     plant.fail(effectiveness=eff)
+    packed.view(_F_AD)[:] = plant.Ad
+    packed.view(_F_BD)[:] = plant.Bd
+    packed.view(_F_D)[:] = plant.D
+    for slot, a in ((_F_WN2, bank.wn2), (_F_C1, bank.c1), (_F_LO, bank.lo), (_F_HI, bank.hi),
+                    (_F_RMAX, bank.rmax), (_F_JAM_POS, bank.jam_pos), (_F_HARD_POS, bank.hard_pos),
+                    (_I_FIRST, bank.first), (_I_JAMMED, bank.jammed), (_I_HARDOVER, bank.hardover)):
+        packed.view(slot)[:] = a
     if failure.delay is not None:
+        # DelayLine.set_delay: the ring restarts, pre-filled with the last command pushed.
         delay.set_delay(failure.delay)
+        length = int(delay.n.max()) + 1
+        packed.view(_I_DN)[:] = delay.n
+        packed.view(_I_DSTATE)[:] = 0, length
+        packed.view(_F_DBUF)[:length] = u_last
