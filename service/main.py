@@ -142,9 +142,14 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
 def serve(host: str = "127.0.0.1", port: int = 8000, data_dir: str | Path | None = None,
           database_url: str | None = None, api_key: str | None = None, **uvicorn_options: Any) -> None:
-    """Run the service with uvicorn (one process: see :mod:`service.store` on why)."""
+    """Run the service with uvicorn (one process: see :mod:`service.store` on why).
+
+    Access logs are off unless ``access_log=True`` is passed: a log line per request
+    costs about as much as a pseudo-inverse allocation.
+    """
     import uvicorn
 
+    uvicorn_options.setdefault("access_log", False)
     overrides: dict[str, Any] = {}
     if data_dir is not None:
         overrides["data_dir"] = Path(data_dir)
@@ -165,8 +170,10 @@ def _main() -> None:
     parser.add_argument("--data-dir", default=None)
     parser.add_argument("--database-url", default=None)
     parser.add_argument("--log-level", default="info")
+    parser.add_argument("--access-log", action="store_true", help="log every request")
     args = parser.parse_args()
-    serve(args.host, args.port, args.data_dir, args.database_url, log_level=args.log_level)
+    serve(args.host, args.port, args.data_dir, args.database_url, log_level=args.log_level,
+          access_log=args.access_log)
 
 
 if __name__ == "__main__":
