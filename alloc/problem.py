@@ -10,12 +10,14 @@ preference cost is ``(u - up)' Wu (u - up)`` and the moment-error cost is
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ._kernels import all_finite, rate_window
 from .exceptions import DemandError, ProblemError
 
 __all__ = ["Problem"]
@@ -293,7 +295,7 @@ class Problem:
             dt_f = float(dt)
         except (TypeError, ValueError) as exc:
             raise DemandError(f"dt: not a number ({dt!r})") from exc
-        if not np.isfinite(dt_f) or dt_f <= 0.0:
+        if not math.isfinite(dt_f) or dt_f <= 0.0:
             raise DemandError(f"dt: time step must be positive and finite, got {dt!r}")
         try:
             up = np.asarray(u_prev, dtype=float)
@@ -301,16 +303,9 @@ class Problem:
             raise DemandError(f"u_prev: not a numeric vector ({exc})") from exc
         if up.shape != (self.m,):
             raise DemandError(f"u_prev: expected shape ({self.m},), got {up.shape}")
-        if not np.isfinite(up).all():
+        if not all_finite(up):
             raise DemandError(f"u_prev: non-finite value at index {int(np.argmax(~np.isfinite(up)))}")
-        lo = np.maximum(self.umin, up + self.rate_min * dt_f)
-        hi = np.minimum(self.umax, up + self.rate_max * dt_f)
-        empty = lo > hi
-        if empty.any():
-            nearest = np.minimum(np.maximum(up, self.umin), self.umax)
-            lo = np.where(empty, nearest, lo)
-            hi = np.where(empty, nearest, hi)
-        return lo, hi
+        return rate_window(self.umin, self.umax, self.rate_min, self.rate_max, up, dt_f)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-serialisable description (lists of floats; infinite rates as None)."""

@@ -43,6 +43,10 @@ class Method(ABC):
     #: accepted options: name -> description (shown by ``alloc methods`` and the service)
     options: ClassVar[dict[str, str]] = {}
 
+    #: ``(c, P)`` when the method is ``u = clip(c + P v)`` without rate limits: the
+    #: allocator then runs it as one compiled call (pseudo-inverse family, ganging).
+    fused: tuple[FloatArray, FloatArray] | None = None
+
     def __init__(self, problem: Problem) -> None:
         self.problem = problem
 

@@ -125,28 +125,35 @@ class _Daqp:
             settings["eps_prox"] = 1e-6
         self._model.settings = settings
         self._base_sense = self._sense.copy()
+        self._last_lb = self._last_ub = None
+        self._bupper_src = np.array(ub, dtype=float)
 
     def solve(self, f=None, lb=None, ub=None, bl=None, bu=None, A=None):
         n = self._n
         upd: dict = {}
         if f is not None:
-            upd["f"] = np.asarray(f, dtype=float)
-        if lb is not None or bl is not None:
-            if lb is not None:
-                self._blower[:n] = lb
-                self._bupper[:n] = _widen(lb, self._bupper[:n] if ub is None else ub)
-                upd["bupper"] = self._bupper
-            if bl is not None:
-                self._blower[n:] = bl
+            upd["f"] = f
+        # Simple bounds are re-sent only when the caller passes a different array (the
+        # position limits are the same object on every call without rate limits).
+        if lb is not None and lb is not self._last_lb:
+            self._blower[:n] = lb
+            self._last_lb = lb
             upd["blower"] = self._blower
-        if ub is not None or bu is not None:
-            if ub is not None:
-                self._bupper[:n] = _widen(self._blower[:n], ub)
-            if bu is not None:
-                self._bupper[n:] = bu
+            ub = self._bupper_src if ub is None else ub
+            self._last_ub = None
+        if ub is not None and ub is not self._last_ub:
+            self._bupper[:n] = _widen(self._blower[:n], ub)
+            self._bupper_src = ub
+            self._last_ub = ub
+            upd["bupper"] = self._bupper
+        if bl is not None:
+            self._blower[n:] = bl
+            upd["blower"] = self._blower
+        if bu is not None:
+            self._bupper[n:] = bu
             upd["bupper"] = self._bupper
         if A is not None:
-            upd["A"] = np.array(A, dtype=float, order="C")
+            upd["A"] = A if A.flags.c_contiguous and A.flags.writeable else np.array(A, dtype=float, order="C")
         if upd:
             upd["sense"] = self._base_sense  # cold start: no stale active set across updates
             flag = self._model.update(**upd)
@@ -155,7 +162,7 @@ class _Daqp:
         x, _fval, flag, info = self._model.solve()
         if flag < 1 or not np.all(np.isfinite(x)):
             raise SolverError(f"daqp returned exit flag {flag}")
-        return np.array(x, dtype=float), int(info.get("iterations", 0))
+        return x, info["iterations"]
 
 
 class _Chain:

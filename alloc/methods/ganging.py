@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._kernels import affine
 from ..exceptions import ProblemError
 from ..problem import Problem
 from ..registry import Method, register
@@ -40,9 +41,10 @@ class Ganging(Method):
                 raise ProblemError("G: non-finite values")
         self.G = G_arr
         self._GT = np.ascontiguousarray(G_arr.T)
+        self.fused = (np.array(problem.up), np.ascontiguousarray(G_arr))
 
     def solve(self, v, lo, hi, u_prev):
-        return np.minimum(np.maximum(self.problem.up + self.G @ v, lo), hi), 0
+        return affine(self.problem.up, self.G, v), 0  # clipped by the allocator
 
     def solve_batch(self, V, lo, hi):
         return np.minimum(np.maximum(self.problem.up + V @ self._GT, lo), hi)

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._kernels import affine
 from .._linalg import RCOND, max_scale, weighted_pinv
 from ..problem import Problem
 from ..registry import FloatArray, Method, register
@@ -62,15 +63,20 @@ class _PinvBase(Method):
     def _unconstrained(self, v: FloatArray, u_prev: FloatArray | None) -> FloatArray:
         if self.incremental and u_prev is not None:
             return u_prev + self.P @ (v - self.problem.B @ u_prev)
-        return self.c + self.P @ v
+        return affine(self.c, self.P, v)
 
 
 @register("pinv")
 class Pinv(_PinvBase):
     summary = "biased weighted pseudo-inverse, min (u-up)'Wu(u-up) s.t. Bu=v; clipped where inadmissible"
 
+    def __init__(self, problem: Problem, **options) -> None:
+        super().__init__(problem, **options)
+        self.fused = (self.c, np.ascontiguousarray(self.P))
+
     def solve(self, v, lo, hi, u_prev):
-        return np.minimum(np.maximum(self._unconstrained(v, u_prev), lo), hi), 0
+        # clipping to [lo, hi] is done by the allocator's compiled finish step
+        return self._unconstrained(v, u_prev), 0
 
     def solve_batch(self, V, lo, hi):
         return np.minimum(np.maximum(self.c + V @ self._PT, lo), hi)
@@ -116,4 +122,4 @@ class SafeCommand:
         self._pinv = Pinv(problem)
 
     def __call__(self, v: FloatArray, lo: FloatArray, hi: FloatArray) -> FloatArray:
-        return self._pinv.solve(v, lo, hi, None)[0]
+        return np.minimum(np.maximum(self._pinv.solve(v, lo, hi, None)[0], lo), hi)
