@@ -133,15 +133,16 @@ class _Daqp:
         upd: dict = {}
         if f is not None:
             upd["f"] = f
-        # Simple bounds are re-sent only when the caller passes a different array (the
-        # position limits are the same object on every call without rate limits).
-        if lb is not None and lb is not self._last_lb:
+        # Simple bounds are re-sent unless the caller passes the same read-only array as
+        # last time (the problem's position limits, on every call without rate limits);
+        # a writeable array may have been changed in place, so it is always sent.
+        if lb is not None and not (lb is self._last_lb and not lb.flags.writeable):
             self._blower[:n] = lb
             self._last_lb = lb
             upd["blower"] = self._blower
             ub = self._bupper_src if ub is None else ub
             self._last_ub = None
-        if ub is not None and ub is not self._last_ub:
+        if ub is not None and not (ub is self._last_ub and not ub.flags.writeable):
             self._bupper[:n] = _widen(self._blower[:n], ub)
             self._bupper_src = ub
             self._last_ub = ub
