@@ -45,6 +45,7 @@ RANDOM_SUITE_SEED = 2024
 _ICE_DAISY = [[vehicles.ICE_EFFECTORS.index(n) for n in g] for g in vehicles.ice_daisy_groups()]
 _HARV_DAISY = [[0, 1, 2], [3, 4]]
 
+
 def problem_by_name(name: str) -> alloc.Problem:
     """``ice`` (the seed's design problem of Eq 4.24, which the ICE loop's allocator is
     given), ``harv_latdir`` (Eq 4.16, 3 axes) or ``random<i>`` (3 x 8, general position,
@@ -61,6 +62,7 @@ def problem_by_name(name: str) -> alloc.Problem:
         return p.replace(Wv=np.diag(np.diag(p.Wv)))
     raise KeyError(f"problem: unknown {name!r}; ice, harv_latdir or random<i>")
 
+
 def method_options(problem: str, method: str) -> dict[str, Any]:
     """Options a method needs on a problem (daisy groups; every other method runs on defaults)."""
     if method == "daisy" and problem.startswith("ice"):
@@ -69,9 +71,11 @@ def method_options(problem: str, method: str) -> dict[str, Any]:
         return {"groups": _HARV_DAISY}
     return {}
 
+
 def _rng(spec: Spec, purpose: str) -> np.random.Generator:
     # crc32, not hash(): str hashes are salted per process and would differ between workers
     return np.random.default_rng([spec["seed"], zlib.crc32(spec["problem"].encode()), zlib.crc32(purpose.encode())])
+
 
 def unattainable_demands(ams: AttainableSet, u0: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
     """``n`` demands outside the AMS: ``B u0 + s a*(d) d``, ``s`` in [1.1, 2] (Eq 1.15's ``a*``)."""
@@ -86,6 +90,7 @@ def unattainable_demands(ams: AttainableSet, u0: np.ndarray, n: int, rng: np.ran
             out.append(B @ u0 + s * a * d)
     return np.array(out)
 
+
 def demand_trajectory(ams: AttainableSet, u0: np.ndarray, steps: int) -> np.ndarray:
     """Smooth sum-of-sines demands, 1.2 x the AMS extent along each axis (so they saturate)."""
     k = ams.problem.k
@@ -98,11 +103,13 @@ def demand_trajectory(ams: AttainableSet, u0: np.ndarray, steps: int) -> np.ndar
     wave = 0.6 * np.sin(2 * np.pi * freq * t + phase) + 0.6 * np.sin(2 * np.pi * 2.3 * freq * t)
     return ams.problem.B @ u0 + extent * wave
 
+
 def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:
     na, nb = np.linalg.norm(a), np.linalg.norm(b)
     if na == 0 or nb == 0:
         return 90.0
     return float(np.degrees(np.arccos(np.clip(a @ b / (na * nb), -1.0, 1.0))))
+
 
 def run_open(spec: Spec) -> tuple[dict[str, Any], dict[str, Any]]:
     """Row and timings of one open-loop spec (see the module docstring for the measures)."""
@@ -149,6 +156,7 @@ def run_open(spec: Spec) -> tuple[dict[str, Any], dict[str, Any]]:
         "fallbacks": int(fallbacks), "calls": len(res_out) + len(res_in) + len(traj),
     }
     return row, _latency(spec, allocate, np.vstack([V_in, V_out]))
+
 
 def _latency(spec: Spec, allocate: alloc.Allocator, V: np.ndarray) -> dict[str, Any]:
     """Warm per-call latency of the allocator (µs), measured in the worker."""
