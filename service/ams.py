@@ -26,13 +26,13 @@ from scipy.optimize import linprog
 
 import alloc
 
+from .config import MAX_FACET_SUBSETS
 from .errors import InvalidRequest, field_error
 from .schemas import AmsOut, DirectionOut
 
 __all__ = ["summarize", "MAX_SUBSETS"]
 
 MAX_SUBSETS = 200_000
-MAX_FACET_SUBSETS = 20_000
 _CHUNK = 20_000
 
 

@@ -20,7 +20,7 @@ from pathlib import Path
 from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
-__all__ = ["Settings", "MAX_EFFECTORS", "MAX_AXES", "MAX_BATCH", "MAX_DIRECTIONS"]
+__all__ = ["Settings", "MAX_EFFECTORS", "MAX_AXES", "MAX_BATCH", "MAX_DIRECTIONS", "MAX_FACET_SUBSETS"]
 
 #: largest number of effectors ``m`` of a problem or vehicle
 MAX_EFFECTORS = 64
@@ -30,6 +30,11 @@ MAX_AXES = 6
 MAX_BATCH = 10_000
 #: largest number of directions in one AMS request
 MAX_DIRECTIONS = 256
+#: largest number of (k-1)-subsets of moving effectors for work that enumerates the AMS
+#: facets (``alloc.ams``: the ``da_facet``/``da_bisect``/``da_table`` methods and the exact
+#: AMS summary), about a second of build time.  It grows as C(m, k-1): m = 64, k = 6 is
+#: 7.6 million facets, hours; larger problems use the LP forms instead.
+MAX_FACET_SUBSETS = 20_000
 
 
 class Settings(BaseSettings):

@@ -23,14 +23,18 @@ from collections import OrderedDict
 from collections.abc import Callable, Hashable
 from dataclasses import dataclass
 from datetime import datetime
+from functools import cache
+from math import comb
 from typing import Any
 
 import numpy as np
+from anyio import to_thread
 from sqlalchemy import delete, func, select, update
 from sqlalchemy.orm import Session, sessionmaker
 
 import alloc
 
+from .config import MAX_FACET_SUBSETS
 from .db import EventRow, VehicleRow, utcnow
 from .errors import InvalidRequest, NotFound, field_error
 from .health import Health, apply_event, dump_health, load_health, to_problem
@@ -45,13 +49,35 @@ def options_key(options: dict[str, Any]) -> str:
     return json.dumps(options, sort_keys=True, separators=(",", ":"))
 
 
+@cache
+def _enumerates_facets(method: str) -> bool:
+    from alloc.registry import get_method
+
+    return get_method(method).__module__.startswith("alloc.ams")
+
+
+def check_build_cost(problem: alloc.Problem, method: str) -> None:
+    """Refuse builds that would take minutes (a request must never stall the service):
+    methods of ``alloc.ams`` on problems above ``MAX_FACET_SUBSETS`` get 422."""
+    if method not in alloc.methods() or not _enumerates_facets(method):
+        return
+    moving = int((problem.umax > problem.umin).sum())
+    subsets = comb(moving, problem.k - 1)
+    if subsets > MAX_FACET_SUBSETS:
+        reason = (f"{method} enumerates the attainable set's facets: C({moving}, {problem.k - 1}) = {subsets} "
+                  f"exceeds the service's cap of {MAX_FACET_SUBSETS}; use 'da' (the same allocation as an LP)")
+        raise InvalidRequest(f"method: {reason}", [field_error("method", reason)])
+
+
 def build_allocator(problem: alloc.Problem, method: str, options: dict[str, Any]) -> alloc.Allocator:
     """``alloc.make_allocator`` with malformed option *values* reported as 422, not 500.
 
     Unknown methods and options raise the library's own errors (mapped by the handler);
     a method constructor given an option of the wrong shape or type raises a plain
-    ``ValueError``/``TypeError`` from numpy, reported here against ``options``.
+    ``ValueError``/``TypeError`` from numpy, reported here against ``options``.  Builds
+    too large to finish in about a second are refused (:func:`check_build_cost`).
     """
+    check_build_cost(problem, method)
     try:
         return alloc.make_allocator(problem, method, **options)
     except alloc.ProblemError as exc:  # an option value the method rejected, e.g. "G: expected shape"
@@ -75,13 +101,20 @@ class AllocatorCache:
         self._lock = threading.Lock()
         self.builds = 0
 
-    def get(self, key: Hashable, build: Callable[[], alloc.Allocator]) -> alloc.Allocator:
+    def lookup(self, key: Hashable) -> alloc.Allocator | None:
         with self._lock:
             found = self._items.get(key)
             if found is not None:
                 self._items.move_to_end(key)
-                return found
-        allocator = build()  # outside the lock: builds may take milliseconds
+            return found
+
+    async def get(self, key: Hashable, build: Callable[[], alloc.Allocator]) -> alloc.Allocator:
+        """The cached allocator, or one built in a worker thread (the event loop keeps
+        serving other requests meanwhile) and cached."""
+        found = self.lookup(key)
+        if found is not None:
+            return found
+        allocator = await to_thread.run_sync(build)
         self.put(key, allocator)
         return allocator
 
@@ -232,15 +265,15 @@ class VehicleStore:
             ).all())
 
     # --------------------------------------------------------- allocators
-    def vehicle_allocator(self, state: VehicleState, method: str, options: dict[str, Any]) -> alloc.Allocator:
+    async def vehicle_allocator(self, state: VehicleState, method: str, options: dict[str, Any]) -> alloc.Allocator:
         okey = options_key(options)
-        return self.allocators.get((state.id, state.version, method, okey),
-                                   lambda: build_allocator(state.problem, method, options))
+        return await self.allocators.get((state.id, state.version, method, okey),
+                                         lambda: build_allocator(state.problem, method, options))
 
-    def inline_allocator(self, problem_key: str, build_problem: Callable[[], alloc.Problem],
-                         method: str, options: dict[str, Any]) -> alloc.Allocator:
-        return self.allocators.get(("inline", problem_key, method, options_key(options)),
-                                   lambda: build_allocator(build_problem(), method, options))
+    async def inline_allocator(self, problem_key: str, build_problem: Callable[[], alloc.Problem],
+                               method: str, options: dict[str, Any]) -> alloc.Allocator:
+        return await self.allocators.get(("inline", problem_key, method, options_key(options)),
+                                         lambda: build_allocator(build_problem(), method, options))
 
     def ping(self) -> None:
         with self._sessions() as session:

@@ -423,3 +423,19 @@ def test_cached_allocator_answers_as_a_fresh_library_build(client, method):
     for v in V:
         out = client.post("/v1/allocate", json={**body, "v": v.tolist(), "method": method}).json()
         assert out["u"] == alloc.make_allocator(p, method)(v).u.tolist()
+
+
+@pytest.mark.parametrize("method", ["da_facet", "da_bisect", "da_table"])
+def test_facet_methods_refused_above_the_build_cap(client, method):
+    """Their build enumerates C(m, k-1) facets: hours at m = 64, k = 6; the service says so."""
+    rng = np.random.default_rng(5)
+    k, m = MAX_AXES, MAX_EFFECTORS
+    body = {"B": rng.normal(size=(k, m)).tolist(), "umin": [-1.0] * m, "umax": [1.0] * m, "method": method}
+    assert_problem(client.post("/v1/allocate", json={**body, "v": [0.1] * k}), 422, "/method", "use 'da'")
+    assert_problem(client.post("/v1/allocate/batch", json={**body, "V": [[0.1] * k]}), 422, "/method", "cap")
+    r = client.post("/v1/allocate", json={**body, "v": [0.1] * k, "method": "da"})
+    assert r.status_code == 200 and r.json()["status"] == "exact"
+    # small problems are fine, and equal the library
+    p = ice()
+    out = client.post("/v1/allocate", json={**p.to_dict(), "v": [0.5, 1.0, 0.2], "method": method}).json()
+    assert out["u"] == alloc.make_allocator(p, method)([0.5, 1.0, 0.2]).u.tolist()

@@ -15,11 +15,12 @@ _PROBLEM_FIELDS = set(ProblemIn.model_fields)
 
 
 # async: runs on the event loop, so the cached (not thread-safe) allocators are never
-# called concurrently, and a single allocation costs no thread hand-off.
+# called concurrently, and a single allocation costs no thread hand-off.  Only a cache
+# miss goes to a worker thread, for the build.
 @router.post("", response_model=AllocationOut, summary="Allocate one demand for an inline problem")
 async def allocate(body: AllocateRequest, store: StoreDep) -> Response:
     key = body.model_dump_json(include=_PROBLEM_FIELDS)
-    allocator = store.inline_allocator(key, body.to_problem, body.method, body.options)
+    allocator = await store.inline_allocator(key, body.to_problem, body.method, body.options)
     return allocation_response(allocator(body.v, u_prev=body.u_prev, dt=body.dt))
 
 

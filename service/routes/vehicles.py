@@ -95,7 +95,7 @@ def get_health(vehicle_id: VehicleId, store: StoreDep) -> HealthOut:
              summary="Allocate one demand at the vehicle's current health")
 async def allocate(vehicle_id: VehicleId, body: VehicleAllocateRequest, store: StoreDep) -> Response:
     state = store.get(vehicle_id)
-    allocator = store.vehicle_allocator(state, body.method, body.options)
+    allocator = await store.vehicle_allocator(state, body.method, body.options)
     result = allocator(body.v, u_prev=body.u_prev, dt=body.dt)
     return allocation_response(result, vehicle_id=state.id, health_version=state.version)
 
