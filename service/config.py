@@ -20,7 +20,8 @@ from pathlib import Path
 from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
-__all__ = ["Settings", "MAX_EFFECTORS", "MAX_AXES", "MAX_BATCH", "MAX_DIRECTIONS", "MAX_FACET_SUBSETS"]
+__all__ = ["Settings", "MAX_EFFECTORS", "MAX_AXES", "MAX_BATCH", "MAX_DIRECTIONS", "MAX_FACET_SUBSETS",
+           "OPTION_CAPS"]
 
 #: largest number of effectors ``m`` of a problem or vehicle
 MAX_EFFECTORS = 64
@@ -35,6 +36,13 @@ MAX_DIRECTIONS = 256
 #: AMS summary), about a second of build time.  It grows as C(m, k-1): m = 64, k = 6 is
 #: 7.6 million facets, hours; larger problems use the LP forms instead.
 MAX_FACET_SUBSETS = 20_000
+#: upper bounds on method options whose cost grows with their value (time or memory);
+#: the library accepts any positive value, a shared service cannot
+OPTION_CAPS: dict[tuple[str, str], int] = {
+    ("da_table", "resolution"): 256,  # build time ~ resolution^2: 256 -> ~3 s, 1024 -> ~1 min (ICE)
+    ("da_bisect", "angles"): 1024,
+    ("da_bisect", "max_rounds"): 1000,
+}
 
 
 class Settings(BaseSettings):

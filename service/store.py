@@ -34,7 +34,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 import alloc
 
-from .config import MAX_FACET_SUBSETS
+from .config import MAX_FACET_SUBSETS, OPTION_CAPS
 from .db import EventRow, VehicleRow, utcnow
 from .errors import InvalidRequest, NotFound, field_error
 from .health import Health, apply_event, dump_health, load_health, to_problem
@@ -56,9 +56,15 @@ def _enumerates_facets(method: str) -> bool:
     return get_method(method).__module__.startswith("alloc.ams")
 
 
-def check_build_cost(problem: alloc.Problem, method: str) -> None:
+def check_build_cost(problem: alloc.Problem, method: str, options: dict[str, Any]) -> None:
     """Refuse builds that would take minutes (a request must never stall the service):
-    methods of ``alloc.ams`` on problems above ``MAX_FACET_SUBSETS`` get 422."""
+    options above ``OPTION_CAPS`` and methods of ``alloc.ams`` on problems above
+    ``MAX_FACET_SUBSETS`` get 422."""
+    for name, value in options.items():
+        cap = OPTION_CAPS.get((method, name))
+        if cap is not None and isinstance(value, (int, float)) and value > cap:
+            reason = f"{method}: option {name} = {value} exceeds the service's cap of {cap}"
+            raise InvalidRequest(f"options/{name}: {reason}", [field_error(f"options/{name}", reason)])
     if method not in alloc.methods() or not _enumerates_facets(method):
         return
     moving = int((problem.umax > problem.umin).sum())
@@ -77,7 +83,7 @@ def build_allocator(problem: alloc.Problem, method: str, options: dict[str, Any]
     ``ValueError``/``TypeError`` from numpy, reported here against ``options``.  Builds
     too large to finish in about a second are refused (:func:`check_build_cost`).
     """
-    check_build_cost(problem, method)
+    check_build_cost(problem, method, options)
     try:
         return alloc.make_allocator(problem, method, **options)
     except alloc.ProblemError as exc:  # an option value the method rejected, e.g. "G: expected shape"

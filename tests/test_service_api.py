@@ -439,3 +439,10 @@ def test_facet_methods_refused_above_the_build_cap(client, method):
     p = ice()
     out = client.post("/v1/allocate", json={**p.to_dict(), "v": [0.5, 1.0, 0.2], "method": method}).json()
     assert out["u"] == alloc.make_allocator(p, method)([0.5, 1.0, 0.2]).u.tolist()
+
+
+@pytest.mark.parametrize(("method", "option", "value"), [
+    ("da_table", "resolution", 100_000), ("da_bisect", "angles", 10**9), ("da_bisect", "max_rounds", 10**9)])
+def test_costly_option_values_are_capped(client, method, option, value):
+    body = {**ice().to_dict(), "v": [0.5, 1.0, 0.2], "method": method, "options": {option: value}}
+    assert_problem(client.post("/v1/allocate", json=body), 422, f"/options/{option}", "cap")
