@@ -1,13 +1,16 @@
-"""Unit tests of the simulator building blocks (sim.blocks, sim.result, registry)."""
+"""Unit tests of the simulator building blocks (sim.blocks, sim.result, registry) and the compiled loop."""
 
 from __future__ import annotations
 
+import importlib
 import json
 
 import numpy as np
 import pytest
 from scipy import signal
 
+import sim.scenarios
+from sim.allocation import build_allocator
 from sim.blocks import (
     ActuatorBank,
     ActuatorFailure,
@@ -15,13 +18,16 @@ from sim.blocks import (
     DelayLine,
     DiscreteLTI,
     HedgeTerm,
+    ScheduledPlant,
+    actuator_heun_step,
     band_limited_noise,
     hedge_system,
     observer_gain,
     smc_control,
     sum_of_sines,
 )
-from sim.result import SimResult
+from sim.loop import _controller_system, _matvec
+from sim.result import SimResult, divergence_check
 from sim.scenarios import get_scenario, scenarios
 
 DT = 0.0005
@@ -144,3 +150,154 @@ def test_registry_lists_all_scenarios_and_rejects_unknown():
     assert get_scenario("ice").default_duration == 40.0
     with pytest.raises(KeyError, match="known scenarios"):
         get_scenario("nope")
+
+
+# ----------------------------------------------------------- compiled kernels
+def _numpy_heun(bank_arrays, u, dt):
+    """The actuator step as first written: vectorised numpy (reference formulation)."""
+    pos, rate, first, wn2, c1, lo, hi, rmax, jammed, jam_pos, hardover, hard_pos = bank_arrays
+
+    def velocity(p, r, u):
+        vel = np.clip(np.where(first, c1 * (u - p), r), -rmax, rmax)
+        acc = np.where(first, 0.0, wn2 * (u - p) - c1 * r)
+        return vel, acc
+
+    u = np.where(hardover, hard_pos, u)
+    v1, a1 = velocity(pos, rate, u)
+    p1 = pos + dt * v1
+    r1 = np.clip(rate + dt * a1, -rmax, rmax)
+    v2, a2 = velocity(p1, r1, u)
+    new_pos = pos + 0.5 * dt * (v1 + v2)
+    new_rate = np.clip(rate + 0.5 * dt * (a1 + a2), -rmax, rmax)
+    at_lo, at_hi = new_pos <= lo, new_pos >= hi
+    new_pos = np.clip(new_pos, lo, hi)
+    new_rate = np.where((at_lo & (new_rate < 0)) | (at_hi & (new_rate > 0)), 0.0, new_rate)
+    new_pos = np.where(jammed, jam_pos, new_pos)
+    new_rate = np.where(jammed, 0.0, new_rate)
+    rate_out = np.where(first, (new_pos - pos) / dt, new_rate)
+    return new_pos, new_rate, rate_out
+
+
+def test_actuator_heun_kernel_matches_numpy_formulation_bit_for_bit():
+    rng = np.random.default_rng(3)
+    m = 8
+    first = np.arange(m) % 3 == 0
+    wn2, c1 = rng.uniform(100.0, 5000.0, m), rng.uniform(10.0, 140.0, m)
+    lo, hi = -rng.uniform(5.0, 30.0, m), rng.uniform(5.0, 30.0, m)
+    rmax = rng.uniform(10.0, 150.0, m)
+    jammed, jam_pos = np.arange(m) == 1, np.full(m, 5.0)
+    hardover, hard_pos = np.arange(m) == 2, np.full(m, -30.0)
+    pos, rate = np.zeros(m), np.zeros(m)
+    kpos, krate, krate_out = np.zeros(m), np.zeros(m), np.zeros(m)
+    rate_limited = position_limited = 0
+    for _ in range(3000):
+        u = rng.uniform(-40.0, 40.0, m)  # beyond the position limits too
+        pos, rate, rate_out = _numpy_heun((pos, rate, first, wn2, c1, lo, hi, rmax, jammed, jam_pos,
+                                           hardover, hard_pos), u, DT)
+        actuator_heun_step(kpos, krate, krate_out, u, first, wn2, c1, lo, hi, rmax, jammed, jam_pos,
+                           hardover, hard_pos, DT)
+        assert np.array_equal(kpos, pos) and np.array_equal(krate, rate) and np.array_equal(krate_out, rate_out)
+        rate_limited += np.any(np.abs(krate_out) >= rmax)
+        position_limited += np.any((kpos == hi) | (kpos == lo))
+    assert rate_limited > 100 and position_limited > 100  # both limits were exercised
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (1, 5), (1, 30), (3, 3), (9, 48), (48, 28), (11, 11)])
+def test_compiled_matvec_is_numpy_matmul_bit_for_bit(shape):
+    rng = np.random.default_rng(sum(shape))
+    for _ in range(50):
+        A, x = rng.standard_normal(shape), rng.standard_normal(shape[1])
+        assert np.array_equal(_matvec(A, x), A @ x)
+
+
+def _reference_loop(*, vehicle, references, controller, commands, pilots, failure, method, duration, dt, seed,
+                    noise, output_bound, record_every, **_):
+    """The engine as first written: block objects stepped with numpy (SMC designs, static allocator)."""
+    k, m = len(vehicle.controlled), len(vehicle.actuators)
+    n_steps = int(round(duration / dt))
+    meas, ctrl = np.asarray(vehicle.measured), np.asarray(vehicle.controlled)
+    noise_all = np.zeros((n_steps + 1, vehicle.C.shape[0]))
+    if noise:
+        noise_all[:, meas] = band_limited_noise(n_steps + 1, dt, vehicle.noise_gains, np.random.default_rng(seed))
+    plant = ScheduledPlant(vehicle.A, vehicle.B, vehicle.C, vehicle.D, dt, A_fail=failure.A, B_fail=failure.B,
+                           D_fail=failure.D)
+    bank, delay = ActuatorBank(vehicle.actuators, dt), DelayLine(m, dt, 0.0)
+    allocator = build_allocator(vehicle, method, {})
+    ctl, n_in = _controller_system(vehicle, controller, references, dt)
+    w, integ = np.zeros(n_in), np.zeros(k)
+    t_grid = np.arange(n_steps + 1) * dt
+    pilot_delays = [DelayLine(1, dt, p.delay) for p in pilots]
+    pilot_cmds = [p.attitude_command(t_grid) for p in pilots]
+    pilot_att = np.zeros(len(pilots))
+    rec = {name: [] for name in ("reference", "output", "command", "pseudo", "unallocated", "effectors",
+                                 "effector_rates")}
+    u_act, u_cmd, cmd, rate_out = bank.pos.copy(), np.zeros(m), np.zeros(k), np.zeros(m)
+    failed = False
+    for step in range(n_steps + 1):
+        if not failed and step * dt >= failure.time - 0.5 * dt:
+            failed = True
+            eff = np.ones(m)
+            for f in failure.actuators:
+                if f.kind == "float":
+                    eff[f.index] = 0.0
+                elif f.kind == "effectiveness":
+                    eff[f.index] = f.fraction
+                else:
+                    bank.apply_failure(f)
+            plant.fail(effectiveness=eff)
+            if failure.delay is not None:
+                delay.set_delay(failure.delay)
+            u_act = bank.pos.copy()
+        y_all = plant.output(u_act)
+        z_all = y_all + noise_all[step]
+        if divergence_check(y_all[ctrl], output_bound, plant.x):
+            break
+        cmd[:] = commands[step]
+        for j, p in enumerate(pilots):
+            att = p.row @ z_all
+            if p.integrate:
+                pilot_att[j] += dt * att
+                att = pilot_att[j]
+            else:
+                pilot_att[j] = att
+            cmd[p.channel] = p.gain * pilot_delays[j].push(np.array([pilot_cmds[j][step] - att]))[0]
+        o = ctl.C @ ctl.x
+        r = o[:k]
+        e = r - (o[k : 2 * k] + o[2 * k :])
+        uc = smc_control(controller.K0 * e + controller.Km1 * integ, controller.rho, controller.eps)
+        u_cmd, unalloc = allocator(vehicle.demand_map @ uc, u_cmd, dt)
+        if step % record_every == 0:
+            for name, value in zip(rec, (r, y_all[ctrl], cmd, uc, unalloc, u_act, rate_out if step else 0 * u_act)):
+                rec[name].append(np.array(value))
+        w[:] = np.concatenate([cmd, u_cmd, z_all[meas], uc])
+        ctl.x = ctl.Ad @ ctl.x + ctl.Bd @ w
+        integ += dt * e
+        plant.step(u_act)
+        u_act = bank.step(delay.push(u_cmd))
+        rate_out = bank.rate_out
+    return {name: np.array(values) for name, values in rec.items()}
+
+
+@pytest.mark.parametrize("name, options", [
+    # pilot with 0.2 s delay, noise, plant failure, 50 ms actuator delay, jam, limits, bandwidth
+    ("ice", dict(failure="seed", failure_time=0.1, duration=0.4)),
+    # single-channel rows (numpy's dot path), integrating pilot, hard-over, failure at 0.05 s
+    ("harv_lon", dict(failure="failure1", failure_time=0.05, duration=0.4)),
+    ("harv_latdir", dict(failure="failure1", failure_time=0.05, duration=0.4)),
+])
+def test_compiled_loop_matches_reference_loop_bit_for_bit(monkeypatch, name, options):
+    import sim.loop
+
+    module = importlib.import_module(sim.scenarios.SCENARIO_MODULES[name])
+    captured = {}
+
+    def capture(**kwargs):
+        captured.update(kwargs)
+        return sim.loop.simulate(**kwargs)
+
+    monkeypatch.setattr(module, "simulate", capture)
+    result = get_scenario(name)(method="static", record_every=1, **options)
+    expected = _reference_loop(**captured)
+    assert not result.diverged
+    for field_name, values in expected.items():
+        assert np.array_equal(getattr(result, field_name), values), field_name
