@@ -26,7 +26,7 @@ __all__ = ["LoopAllocator", "STATIC", "allocation_problem", "build_allocator"]
 #: Name of the seed's printed static distribution (not a registry method).
 STATIC = "static"
 
-#: ``(v, u_prev, dt) -> (u_cmd, unallocated)``
+#: ``(v, u_prev, dt) -> (u_cmd, v_achieved)``; the loop records ``v - v_achieved`` as unallocated.
 LoopAllocator = Callable[[np.ndarray, np.ndarray, float], tuple[np.ndarray, np.ndarray]]
 
 
@@ -105,7 +105,7 @@ def build_allocator(
 
         def static(v: np.ndarray, u_prev: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
             u = Bk @ v
-            return u, v - B @ u
+            return u, B @ u
 
         return static
 
@@ -125,6 +125,6 @@ def build_allocator(
             res = solve(v, u_prev=np.clip(u_prev, lo, hi), dt=dt)
         else:
             res = solve(v)
-        return res.u, res.unallocated
+        return res.u, res.v_achieved
 
     return registry

@@ -232,7 +232,9 @@ def _controller_system(
  _F_PROW, _F_PGAIN, _F_PATT, _F_PBUF,
  # signals of the current step
  _F_Y, _F_Z, _F_CMD, _F_R, _F_E, _F_UC, _F_V, _F_W, _F_UDEL,
- _N_FLOAT_SLOTS) = range(48)
+ # controller outputs [r, y_hat, y_f]; two scratch rows for matrix-vector products
+ _F_O, _F_SCRATCH,
+ _N_FLOAT_SLOTS) = range(50)
 
 (_I_FIRST, _I_JAMMED, _I_HARDOVER, _I_DN, _I_DSTATE,
  _I_PN, _I_PLEN, _I_PIDX, _I_PCHAN, _I_PINT, _I_MEAS, _I_CTRL, _I_MISC,
@@ -293,13 +295,23 @@ def _mat(buf: np.ndarray, I: np.ndarray, slot: int) -> np.ndarray:
 
 
 @njit(cache=True)
-def _matvec(A: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """``A @ x`` bit for bit as numpy computes it: BLAS gemv, or dot for a single row."""
+def _matvec(A: np.ndarray, x: np.ndarray, out: np.ndarray) -> None:
+    """``out = A @ x`` bit for bit as numpy computes it: BLAS gemv, or dot for a single row."""
     if A.shape[0] == 1:
-        y = np.empty(1)
-        y[0] = np.dot(A[0], x)
-        return y
-    return np.dot(A, x)
+        out[0] = np.dot(A[0], x)
+    else:
+        np.dot(A, x, out)
+
+
+@njit(cache=True)
+def _affine(A: np.ndarray, x: np.ndarray, B: np.ndarray, u: np.ndarray, out: np.ndarray, scratch: np.ndarray) -> None:
+    """``out = A @ x + B @ u`` as numpy computes it; ``out`` may be ``x`` (scratch: 2 rows)."""
+    n = out.size
+    ax, bu = scratch[0, :n], scratch[1, :n]
+    _matvec(A, x, ax)
+    _matvec(B, u, bu)
+    for i in range(n):
+        out[i] = ax[i] + bu[i]
 
 
 @njit(cache=True)
@@ -320,7 +332,8 @@ def _observe(step: int, F: np.ndarray, I: np.ndarray, inputs: np.ndarray) -> int
     cmd = _vec(F, I, _F_CMD)
     k = ctrl.size
     ny = y.size
-    y[:] = _matvec(_mat(F, I, _F_C), x) + _matvec(_mat(F, I, _F_D), _vec(F, I, _F_UACT))
+    scratch = _mat(F, I, _F_SCRATCH)
+    _affine(_mat(F, I, _F_C), x, _mat(F, I, _F_D), _vec(F, I, _F_UACT), y, scratch)
     z[:] = y + inputs[step, k : k + ny]
     for i in range(k):
         yi = y[ctrl[i]]
@@ -357,7 +370,8 @@ def _observe(step: int, F: np.ndarray, I: np.ndarray, inputs: np.ndarray) -> int
     xc = _vec(F, I, _F_XC)
     if misc[_M_SMC]:
         # sigma = K0 e + K_-1 int(e), u_c = rho sat(sigma / eps) (seed Eq 4.2, 4.8)
-        o = _matvec(_mat(F, I, _F_CC), xc)
+        o = _vec(F, I, _F_O)
+        _matvec(_mat(F, I, _F_CC), xc, o)
         integ = _vec(F, I, _F_INTEG)
         K0, Km1 = _vec(F, I, _F_K0), _vec(F, I, _F_KM1)
         rho, eps = _vec(F, I, _F_RHO), _vec(F, I, _F_EPS)
@@ -371,23 +385,26 @@ def _observe(step: int, F: np.ndarray, I: np.ndarray, inputs: np.ndarray) -> int
             else:
                 uc[i] = rho[i] * min(max(sigma / eps[i], -1.0), 1.0)
     else:
-        r[:] = _matvec(_mat(F, I, _F_CC), xc)
+        _matvec(_mat(F, I, _F_CC), xc, r)
         for i in range(k):
             e[i] = r[i] - z[ctrl[i]]
         xk = _vec(F, I, _F_XK)
-        uc[:] = _matvec(_mat(F, I, _F_CK), xk) + _matvec(_mat(F, I, _F_DK), e)
-        xk[:] = _matvec(_mat(F, I, _F_AK), xk) + _matvec(_mat(F, I, _F_BK), e)
-        xc[:] = _matvec(_mat(F, I, _F_ADC), xc) + _matvec(_mat(F, I, _F_BDC), cmd)
-    _vec(F, I, _F_V)[:] = _matvec(_mat(F, I, _F_DEMAND), uc)
+        _affine(_mat(F, I, _F_CK), xk, _mat(F, I, _F_DK), e, uc, scratch)
+        _affine(_mat(F, I, _F_AK), xk, _mat(F, I, _F_BK), e, xk, scratch)
+        _affine(_mat(F, I, _F_ADC), xc, _mat(F, I, _F_BDC), cmd, xc, scratch)
+    _matvec(_mat(F, I, _F_DEMAND), uc, _vec(F, I, _F_V))
     return _OK
 
 
 @njit(cache=True)
 def _advance(
-    step: int, u_cmd: np.ndarray, unallocated: np.ndarray, F: np.ndarray, I: np.ndarray,
+    step: int, u_cmd: np.ndarray, v_achieved: np.ndarray, F: np.ndarray, I: np.ndarray,
     inputs: np.ndarray, rec: np.ndarray,
 ) -> int:
     """Record ``step``, integrate to ``step + 1`` with ``u_cmd`` and observe it (unless a failure is due).
+
+    ``v_achieved = B u_cmd`` as the allocator sees it; ``v - v_achieved`` is
+    recorded as unallocated.
 
     Returns the status of :func:`_observe`, or ``_PENDING`` when the next
     step is past the end or is the failure step (Python injects it first).
@@ -408,12 +425,13 @@ def _advance(
         row = rec[step // misc[_M_RECORD_EVERY]]
         row[0] = step * dt
         c = 1
+        v = _vec(F, I, _F_V)
         for i in range(k):
             row[c + i] = r[i]
             row[c + k + i] = y[ctrl[i]]
             row[c + 2 * k + i] = cmd[i]
             row[c + 3 * k + i] = uc[i]
-            row[c + 4 * k + i] = unallocated[i]
+            row[c + 4 * k + i] = v[i] - v_achieved[i]
         c += 5 * k
         for i in range(m):
             row[c + i] = uact[i]
@@ -437,12 +455,12 @@ def _advance(
             w[k + m + i] = z[meas[i]]
         w[k + m + meas.size :] = uc
         xc = _vec(F, I, _F_XC)
-        xc[:] = _matvec(_mat(F, I, _F_ADC), xc) + _matvec(_mat(F, I, _F_BDC), w)
+        _affine(_mat(F, I, _F_ADC), xc, _mat(F, I, _F_BDC), w, xc, _mat(F, I, _F_SCRATCH))
         integ = _vec(F, I, _F_INTEG)
         for i in range(k):
             integ[i] += dt * e[i]
     x = _vec(F, I, _F_X)
-    x[:] = _matvec(_mat(F, I, _F_AD), x) + _matvec(_mat(F, I, _F_BD), uact)
+    _affine(_mat(F, I, _F_AD), x, _mat(F, I, _F_BD), uact, x, _mat(F, I, _F_SCRATCH))
     # Actuator delay (DelayLine.push): the command pushed n[c] steps ago.
     udel = _vec(F, I, _F_UDEL)
     dstate = _vec(I, I, _I_DSTATE)
@@ -631,7 +649,8 @@ def simulate(
             _F_PBUF: np.zeros((int(pilot_len.max(initial=1)), n_pilots)),
             _F_Y: np.zeros(ny), _F_Z: np.zeros(ny), _F_CMD: np.zeros(k), _F_R: np.zeros(k),
             _F_E: np.zeros(k), _F_UC: np.zeros(k), _F_V: np.zeros(k), _F_W: np.zeros(n_in),
-            _F_UDEL: np.zeros(m),
+            _F_UDEL: np.zeros(m), _F_O: np.zeros(3 * k),
+            _F_SCRATCH: np.zeros((2, max(vehicle.A.shape[0], ny, ctl.Ad.shape[0], comp[0].shape[0], k))),
         },
         ints={
             _I_FIRST: bank.first, _I_JAMMED: bank.jammed, _I_HARDOVER: bank.hardover,
@@ -668,17 +687,18 @@ def simulate(
     timed = _step_times is not None
     times = np.full(n_steps + 1, np.nan) if timed else None
     clock = time.perf_counter
+    last_before_failure = fail_step - 1 if failure is not None else -1
     for step in iterator:
         if status == _DIVERGED:
             n_done = step
             break
         if timed:
             t0 = clock()
-        u_cmd, unalloc = allocator(v, u_cmd, dt)
-        status = _advance(step, u_cmd, unalloc, F, I, inputs, rec)
+        u_cmd, v_achieved = allocator(v, u_cmd, dt)
+        status = _advance(step, u_cmd, v_achieved, F, I, inputs, rec)
         if timed:
             times[step] = clock() - t0
-        if step + 1 == fail_step and failure is not None:
+        if step == last_before_failure:
             allocator = fail_now(u_cmd)
             status = _observe(step + 1, F, I, inputs)
     if timed:
