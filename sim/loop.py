@@ -593,23 +593,10 @@ def simulate(
     allocator: LoopAllocator = build_allocator(vehicle, method, method_options or {}, rate_aware=rate_aware)
 
     smc = isinstance(controller, SMCDesign)
-    empty = np.zeros((0, 0))
-    if smc:
-        ctl, n_in = _controller_system(vehicle, controller, references, dt)
-        comp = (empty, np.zeros((0, k)), np.zeros((k, 0)), np.zeros((k, k)), np.zeros(0))  # Ad, Bd, C, D, x
-        rho, K0, Km1 = controller.rho, controller.K0, controller.Km1
-        eps = np.ones(k) if controller.eps is None else controller.eps
-    else:
-        ctl = DiscreteLTI(*_diagonal_system(references, k), dt=dt)
-        lti = DiscreteLTI(*_diagonal_system(controller.compensators, k), dt=dt)
-        comp = (lti.Ad, lti.Bd, lti.C, lti.D, lti.x)
-        n_in = 0
-        rho = K0 = Km1 = eps = np.zeros(k)
-
+    controller_slots = _controller_slots(vehicle, controller, references, dt)
     n_pilots = len(pilots)
     t_grid = np.arange(n_steps + 1) * dt
-    pilot_delays = [DelayLine(1, dt, p.delay) for p in pilots]
-    pilot_len = np.array([int(d.n[0]) + 1 for d in pilot_delays], dtype=np.int64)
+    pilot_floats, pilot_ints = _pilot_slots(pilots, ny, dt)
     inputs = np.hstack([
         np.asarray(commands, dtype=float)[: n_steps + 1],
         noise_all,
@@ -617,10 +604,9 @@ def simulate(
     ])
 
     # Failure step: the first with t >= t_fail - dt/2 (never: n_steps + 1).
-    t_fail = None if failure is None else failure.time
     fail_step = n_steps + 1
-    if t_fail is not None:
-        due = np.nonzero(t_grid >= t_fail - 0.5 * dt)[0]
+    if failure is not None:
+        due = np.nonzero(t_grid >= failure.time - 0.5 * dt)[0]
         fail_step = int(due[0]) if due.size else n_steps + 1
     # The actuator delay ring holds the longest delay of the run.
     ring = 1
@@ -633,30 +619,24 @@ def simulate(
     misc[_M_OBSERVED] = smc and controller.observer_poles is not None
     misc[_M_SIGN] = smc and controller.eps is None
     misc[_M_ACTUATORS] = actuators
+    nx, nc, nk = vehicle.A.shape[0], controller_slots[_F_ADC].shape[0], controller_slots[_F_AK].shape[0]
     packed = _Packed(
         floats={
-            _F_X: np.zeros(vehicle.A.shape[0]), _F_AD: plant.Ad, _F_BD: plant.Bd,
-            _F_C: plant.C, _F_D: plant.D, _F_UACT: bank.pos,
-            _F_XC: ctl.x, _F_ADC: ctl.Ad, _F_BDC: ctl.Bd, _F_CC: ctl.C,
-            _F_XK: comp[4], _F_AK: comp[0], _F_BK: comp[1], _F_CK: comp[2], _F_DK: comp[3],
-            _F_INTEG: np.zeros(k), _F_K0: K0, _F_KM1: Km1, _F_RHO: rho, _F_EPS: eps,
-            _F_DEMAND: vehicle.demand_map, _F_BOUND: np.broadcast_to(output_bound, (k,)), _F_DT: np.array(dt),
+            _F_X: np.zeros(nx), _F_AD: plant.Ad, _F_BD: plant.Bd, _F_C: plant.C, _F_D: plant.D, _F_UACT: bank.pos,
+            **controller_slots,
+            _F_INTEG: np.zeros(k), _F_DEMAND: vehicle.demand_map, _F_BOUND: np.broadcast_to(output_bound, (k,)),
+            _F_DT: np.array(dt),
             _F_POS: bank.pos, _F_RATE: bank.rate, _F_RATE_OUT: np.zeros(m), _F_WN2: bank.wn2, _F_C1: bank.c1,
             _F_LO: bank.lo, _F_HI: bank.hi, _F_RMAX: bank.rmax, _F_JAM_POS: bank.jam_pos,
             _F_HARD_POS: bank.hard_pos, _F_DBUF: np.zeros((ring, m)),
-            _F_PROW: np.array([p.row for p in pilots], dtype=float).reshape(n_pilots, ny),
-            _F_PGAIN: np.array([p.gain for p in pilots], dtype=float), _F_PATT: np.zeros(n_pilots),
-            _F_PBUF: np.zeros((int(pilot_len.max(initial=1)), n_pilots)),
+            **pilot_floats,
             _F_Y: np.zeros(ny), _F_Z: np.zeros(ny), _F_CMD: np.zeros(k), _F_R: np.zeros(k),
-            _F_E: np.zeros(k), _F_UC: np.zeros(k), _F_V: np.zeros(k), _F_W: np.zeros(n_in),
-            _F_UDEL: np.zeros(m), _F_O: np.zeros(3 * k),
-            _F_SCRATCH: np.zeros((2, max(vehicle.A.shape[0], ny, ctl.Ad.shape[0], comp[0].shape[0], k))),
+            _F_E: np.zeros(k), _F_UC: np.zeros(k), _F_V: np.zeros(k), _F_UDEL: np.zeros(m), _F_O: np.zeros(3 * k),
+            _F_SCRATCH: np.zeros((2, max(nx, ny, nc, nk, k))),
         },
         ints={
             _I_FIRST: bank.first, _I_JAMMED: bank.jammed, _I_HARDOVER: bank.hardover,
-            _I_DN: delay.n, _I_DSTATE: np.array([0, 1]),
-            _I_PN: pilot_len - 1, _I_PLEN: pilot_len, _I_PIDX: np.zeros(n_pilots),
-            _I_PCHAN: np.array([p.channel for p in pilots]), _I_PINT: np.array([p.integrate for p in pilots]),
+            _I_DN: delay.n, _I_DSTATE: np.array([0, 1]), **pilot_ints,
             _I_MEAS: meas, _I_CTRL: np.asarray(vehicle.controlled), _I_MISC: misc,
         },
     )
@@ -678,7 +658,7 @@ def simulate(
             return build_allocator(vehicle, method, method_options or {}, failure=failure, rate_aware=rate_aware)
         return allocator
 
-    if fail_step == 0 and failure is not None:
+    if fail_step == 0:
         allocator = fail_now(u_cmd)
     status = _observe(0, F, I, inputs)
     iterator = range(n_steps + 1)
@@ -703,9 +683,15 @@ def simulate(
             status = _observe(step + 1, F, I, inputs)
     if timed:
         _step_times.append(times[:n_done])
-
     n = (n_done + record_every - 1) // record_every  # samples recorded before step n_done
-    rec = rec[:n]
+    return _result(rec[:n], cols, scenario, method, vehicle, failure, pilots, diverged=n_done <= n_steps)
+
+
+def _result(
+    rec: np.ndarray, cols: dict[str, slice], scenario: str, method: str, vehicle: Vehicle,
+    failure: Failure | None, pilots: Sequence[Pilot], *, diverged: bool,
+) -> SimResult:
+    """SimResult from the record matrix (contiguous copies of its columns)."""
 
     def column(name: str) -> np.ndarray:
         return np.ascontiguousarray(rec[:, cols[name]])
@@ -730,11 +716,51 @@ def simulate(
         # Limits as they were at each sample (failures change them).
         effector_limits=(column("lo"), column("hi")),
         rate_limits=(-column("rmax"), column("rmax")),
-        failure_time=t_fail,
-        diverged=n_done <= n_steps,
+        failure_time=None if failure is None else failure.time,
+        diverged=diverged,
         unallocated=column("unalloc"),
         extra=extra,
     )
+
+
+def _controller_slots(
+    vehicle: Vehicle, controller: SMCDesign | LoopShapedDesign, references: Sequence[TF], dt: float
+) -> dict[int, np.ndarray]:
+    """Packed arrays of the controller: the SMC system and gains, or reference models and compensators."""
+    k = len(vehicle.controlled)
+    if isinstance(controller, SMCDesign):
+        ctl, n_in = _controller_system(vehicle, controller, references, dt)
+        eps = np.ones(k) if controller.eps is None else controller.eps  # unused with sign (eps None)
+        return {
+            _F_XC: ctl.x, _F_ADC: ctl.Ad, _F_BDC: ctl.Bd, _F_CC: ctl.C, _F_W: np.zeros(n_in),
+            _F_XK: np.zeros(0), _F_AK: np.zeros((0, 0)), _F_BK: np.zeros((0, k)), _F_CK: np.zeros((k, 0)),
+            _F_DK: np.zeros((k, k)),
+            _F_K0: controller.K0, _F_KM1: controller.Km1, _F_RHO: controller.rho, _F_EPS: eps,
+        }
+    ref = DiscreteLTI(*_diagonal_system(references, k), dt=dt)
+    comp = DiscreteLTI(*_diagonal_system(controller.compensators, k), dt=dt)
+    return {
+        _F_XC: ref.x, _F_ADC: ref.Ad, _F_BDC: ref.Bd, _F_CC: ref.C, _F_W: np.zeros(0),
+        _F_XK: comp.x, _F_AK: comp.Ad, _F_BK: comp.Bd, _F_CK: comp.C, _F_DK: comp.D,
+        _F_K0: np.zeros(k), _F_KM1: np.zeros(k), _F_RHO: np.zeros(k), _F_EPS: np.zeros(k),
+    }
+
+
+def _pilot_slots(pilots: Sequence[Pilot], ny: int, dt: float) -> tuple[dict[int, np.ndarray], dict[int, np.ndarray]]:
+    """Packed arrays of the pilots (float slots, int slots); each delay is a DelayLine ring of its own."""
+    n = len(pilots)
+    length = np.array([int(DelayLine(1, dt, p.delay).n[0]) + 1 for p in pilots], dtype=np.int64)
+    floats = {
+        _F_PROW: np.array([p.row for p in pilots], dtype=float).reshape(n, ny),
+        _F_PGAIN: np.array([p.gain for p in pilots], dtype=float),
+        _F_PATT: np.zeros(n),
+        _F_PBUF: np.zeros((int(length.max(initial=1)), n)),
+    }
+    ints = {
+        _I_PN: length - 1, _I_PLEN: length, _I_PIDX: np.zeros(n),
+        _I_PCHAN: np.array([p.channel for p in pilots]), _I_PINT: np.array([p.integrate for p in pilots]),
+    }
+    return floats, ints
 
 
 def _diagonal_system(tfs: Sequence[TF], k: int) -> tuple[np.ndarray, ...]:
