@@ -61,7 +61,38 @@ class DirectAllocationLP(Method):
         ub[-1] = a_cap
         rhs = self._QB @ u0
         x, it = self._model.solve(A=A, lb=lb, ub=ub, bl=rhs, bu=rhs)
-        return float(x[-1]), np.minimum(np.maximum(x[:-1], lo), hi), it
+        a, ustar = float(x[-1]), np.minimum(np.maximum(x[:-1], lo), hi)
+        return (*self._polish(a, ustar, d, u0, lo, hi), it)
+
+    def _polish(self, a, ustar, d, u0, lo, hi):
+        """Re-solve Eq 1.16 exactly on the facet the LP found.
+
+        The LP (DAQP's proximal iterations) meets ``B(u - u0) = a d`` to ~1e-8 relative.
+        On a facet hit, ``k - 1`` effectors are strictly inside their limits and the rest
+        saturated; the ``k x k`` system for those effectors and ``a`` gives the exact point.
+        Kept only if admissible and on the ray; otherwise (edges, degenerate facets) the LP
+        answer stands.
+        """
+        p = self.problem
+        span = np.maximum(hi - lo, 1e-300)
+        inside = ((ustar - lo) > 1e-7 * span) & ((hi - ustar) > 1e-7 * span)
+        F = np.flatnonzero(inside)
+        if F.size != p.k - 1 or self._Q.shape[0] != p.k:
+            return a, ustar
+        M = np.empty((p.k, p.k))
+        M[:, :-1] = p.B[:, F]
+        M[:, -1] = -d
+        fixed = ustar.copy()
+        fixed[F] = 0.0
+        try:
+            sol = np.linalg.solve(M, p.B @ u0 - p.B @ fixed)
+        except np.linalg.LinAlgError:
+            return a, ustar
+        uF, a_new = sol[:-1], float(sol[-1])
+        if not (np.all(uF >= lo[F]) and np.all(uF <= hi[F]) and a_new >= 0 and abs(a_new - a) <= 1e-6 * max(1.0, a)):
+            return a, ustar
+        fixed[F] = uF
+        return a_new, fixed
 
     def solve(self, v, lo, hi, u_prev):
         p = self.problem
