@@ -282,13 +282,13 @@ class _Packed:
         return buf[off : off + rows * cols].reshape(self._shapes[slot])
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _vec(buf: np.ndarray, I: np.ndarray, slot: int) -> np.ndarray:
     off = I[3 * slot]
     return buf[off : off + I[3 * slot + 1] * I[3 * slot + 2]]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _mat(buf: np.ndarray, I: np.ndarray, slot: int) -> np.ndarray:
     off, rows, cols = I[3 * slot], I[3 * slot + 1], I[3 * slot + 2]
     return buf[off : off + rows * cols].reshape((rows, cols))
@@ -334,7 +334,8 @@ def _observe(step: int, F: np.ndarray, I: np.ndarray, inputs: np.ndarray) -> int
     ny = y.size
     scratch = _mat(F, I, _F_SCRATCH)
     _affine(_mat(F, I, _F_C), x, _mat(F, I, _F_D), _vec(F, I, _F_UACT), y, scratch)
-    z[:] = y + inputs[step, k : k + ny]
+    for i in range(ny):
+        z[i] = y[i] + inputs[step, k + i]
     for i in range(k):
         yi = y[ctrl[i]]
         if not np.isfinite(yi) or abs(yi) > bound[i]:
@@ -342,7 +343,8 @@ def _observe(step: int, F: np.ndarray, I: np.ndarray, inputs: np.ndarray) -> int
     for xi in x:
         if not np.isfinite(xi):
             return _DIVERGED
-    cmd[:] = inputs[step, :k]
+    for i in range(k):
+        cmd[i] = inputs[step, i]
     # Pilots: crossover model on the measured outputs, through their delay lines.
     prow = _mat(F, I, _F_PROW)
     patt = _vec(F, I, _F_PATT)
@@ -449,11 +451,14 @@ def _advance(
         w = _vec(F, I, _F_W)
         z = _vec(F, I, _F_Z)
         meas = _vec(I, I, _I_MEAS)
-        w[:k] = cmd
-        w[k : k + m] = u_cmd
-        for i in range(meas.size):
+        nz = meas.size
+        for i in range(k):
+            w[i] = cmd[i]
+            w[k + m + nz + i] = uc[i]
+        for i in range(m):
+            w[k + i] = u_cmd[i]
+        for i in range(nz):
             w[k + m + i] = z[meas[i]]
-        w[k + m + meas.size :] = uc
         xc = _vec(F, I, _F_XC)
         _affine(_mat(F, I, _F_ADC), xc, _mat(F, I, _F_BDC), w, xc, _mat(F, I, _F_SCRATCH))
         integ = _vec(F, I, _F_INTEG)
@@ -466,13 +471,14 @@ def _advance(
     dstate = _vec(I, I, _I_DSTATE)
     length = dstate[_D_LENGTH]
     if length == 1:
-        udel[:] = u_cmd
+        for c in range(m):
+            udel[c] = u_cmd[c]
     else:
         dbuf = _mat(F, I, _F_DBUF)
         dn = _vec(I, I, _I_DN)
         i0 = dstate[_D_INDEX]
-        dbuf[i0] = u_cmd
         for c in range(m):
+            dbuf[i0, c] = u_cmd[c]
             udel[c] = dbuf[(i0 - dn[c]) % length, c]
         dstate[_D_INDEX] = (i0 + 1) % length
     if misc[_M_ACTUATORS]:
@@ -482,7 +488,8 @@ def _advance(
             _vec(F, I, _F_C1), lo, hi, rmax, _vec(I, I, _I_JAMMED), _vec(F, I, _F_JAM_POS),
             _vec(I, I, _I_HARDOVER), _vec(F, I, _F_HARD_POS), dt,
         )
-        uact[:] = pos
+        for i in range(m):
+            uact[i] = pos[i]
     else:
         for i in range(m):
             uact[i] = min(max(udel[i], lo[i]), hi[i])
