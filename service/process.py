@@ -12,9 +12,9 @@ import socket
 import subprocess
 import sys
 import time
+import urllib.error
+import urllib.request
 from pathlib import Path
-
-import httpx
 
 __all__ = ["ServiceProcess", "free_port"]
 
@@ -59,9 +59,10 @@ class ServiceProcess:
                 err = self.log_path.read_text(errors="replace")
                 raise RuntimeError(f"service exited with {self.proc.returncode}: {err[-2000:]}")
             try:
-                if httpx.get(f"{self.url}/v1/health", timeout=1.0).status_code == 200:
-                    return self
-            except httpx.TransportError:
+                with urllib.request.urlopen(f"{self.url}/v1/health", timeout=1.0) as reply:
+                    if reply.status == 200:
+                        return self
+            except (urllib.error.URLError, ConnectionError, TimeoutError):
                 pass
             time.sleep(0.05)
         self.stop()
