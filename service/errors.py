@@ -29,7 +29,7 @@ import alloc
 from .schemas import EVENT_KINDS
 
 __all__ = [
-    "ServiceError", "NotFound", "Unauthorized", "PayloadTooLarge", "InvalidRequest",
+    "ServiceError", "NotFound", "Conflict", "Unauthorized", "PayloadTooLarge", "InvalidRequest",
     "problem_response", "install_handlers", "PROBLEM_JSON",
 ]
 
@@ -52,6 +52,10 @@ class ServiceError(Exception):
 
 class NotFound(ServiceError):
     status, slug, title = 404, "not-found", "Resource not found"
+
+
+class Conflict(ServiceError):
+    status, slug, title = 409, "conflict", "Concurrent update"
 
 
 class Unauthorized(ServiceError):

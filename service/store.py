@@ -36,7 +36,7 @@ import alloc
 
 from .config import MAX_FACET_SUBSETS, OPTION_CAPS
 from .db import EventRow, VehicleRow, utcnow
-from .errors import InvalidRequest, NotFound, field_error
+from .errors import Conflict, InvalidRequest, NotFound, field_error
 from .health import Health, apply_event, dump_health, load_health, to_problem
 from .schemas import EventIn, VehicleCreate
 
@@ -246,11 +246,12 @@ class VehicleStore:
                                to_problem(old.nominal, health))
             self._swap(old, new)
             return ev, new
-        raise InvalidRequest(f"vehicle {vehicle_id!r}: too many concurrent events, retry")
+        raise Conflict(f"vehicle {vehicle_id!r}: too many concurrent events; retry")
 
     def _swap(self, old: VehicleState, new: VehicleState) -> None:
         """Publish ``new`` after building the allocators that were in use for ``old``."""
-        stale = self.allocators.keys_where(lambda k: k[0] == old.id and k[1] != new.version)
+        # older versions only: a concurrent, later event may already have built its own
+        stale = self.allocators.keys_where(lambda k: k[0] == old.id and k[1] < new.version)
         for key in stale:
             _, _, method, okey = key
             try:
