@@ -120,11 +120,12 @@ def build_allocator(
     lo, hi = problem.umin, problem.umax
 
     def registry(v: np.ndarray, u_prev: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
-        # A jammed effector's previous command may lie outside its new (point) limits.
-        if rate_aware:
-            res = solve(v, u_prev=np.clip(u_prev, lo, hi), dt=dt)
-        else:
-            res = solve(v)
+        res = solve(v)
         return res.u, res.v_achieved
 
-    return registry
+    def registry_rate_aware(v: np.ndarray, u_prev: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        # A jammed effector's previous command may lie outside its new (point) limits.
+        res = solve(v, u_prev=np.minimum(np.maximum(u_prev, lo), hi), dt=dt)
+        return res.u, res.v_achieved
+
+    return registry_rate_aware if rate_aware else registry

@@ -220,7 +220,7 @@ def _controller_system(
 # ``s`` is described by ``I[3 s : 3 s + 3] = (offset, rows, cols)``; float
 # slots index ``F``, int slots (numbered after them) index ``I``.
 
-# plant: state, ZOH matrices, outputs matrices, effector positions it sees
+# plant: state, ZOH matrices, output matrices, effector positions it sees
 (_F_X, _F_AD, _F_BD, _F_C, _F_D, _F_UACT,
  # controller: SMC system (reference models, observers, hedge) or, loop-shaped,
  # the reference models (XC..CC) and the compensators (XK..DK)
@@ -284,12 +284,14 @@ class _Packed:
 
 @njit(cache=True, inline="always")
 def _vec(buf: np.ndarray, I: np.ndarray, slot: int) -> np.ndarray:
+    """Slot ``slot`` of ``buf`` (F or I) as a flat view."""
     off = I[3 * slot]
     return buf[off : off + I[3 * slot + 1] * I[3 * slot + 2]]
 
 
 @njit(cache=True, inline="always")
 def _mat(buf: np.ndarray, I: np.ndarray, slot: int) -> np.ndarray:
+    """Slot ``slot`` of ``buf`` as a (rows, cols) view."""
     off, rows, cols = I[3 * slot], I[3 * slot + 1], I[3 * slot + 2]
     return buf[off : off + rows * cols].reshape((rows, cols))
 
@@ -675,14 +677,15 @@ def simulate(
     times = np.full(n_steps + 1, np.nan) if timed else None
     clock = time.perf_counter
     last_before_failure = fail_step - 1 if failure is not None else -1
+    advance, diverged = _advance, _DIVERGED  # locals: the loop body is the per-step Python cost
     for step in iterator:
-        if status == _DIVERGED:
+        if status == diverged:
             n_done = step
             break
         if timed:
             t0 = clock()
         u_cmd, v_achieved = allocator(v, u_cmd, dt)
-        status = _advance(step, u_cmd, v_achieved, F, I, inputs, rec)
+        status = advance(step, u_cmd, v_achieved, F, I, inputs, rec)
         if timed:
             times[step] = clock() - t0
         if step == last_before_failure:
