@@ -21,6 +21,8 @@ from typing import Any
 
 import numpy as np
 
+from alloc.vehicles import ICE_B_FULL, ICE_BK_SEED
+
 from sim.blocks import DEFAULT_DT, ActuatorFailure, ActuatorSpec, HedgeTerm, sum_of_sines
 from sim.loop import Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle, simulate
 from sim.result import SimResult
@@ -47,20 +49,9 @@ A = np.array([
     [0, 0, 0, 0, 0, 1, 0.247684519, 0],
 ])
 
-# seed section 4.7, B^T (one row per effector, order EFFECTORS)
-B = np.array([
-    [-0.005969294, -0.267968418, -1.385041358, 0, -0.009123567, 2.411735136, 0.037657455, 0],
-    [-0.005969294, -0.267968418, -1.385041358, 0, 0.009123567, -2.411735136, -0.037657455, 0],
-    [-0.004085579, -0.230586355, -1.20225331, 0, 0, 0, 0, 0],
-    [-0.014173739, -0.084039328, -0.352069164, 0, -0.000248489, 0.536897487, -0.05609334, 0],
-    [-0.014173739, -0.084039326, -0.352069164, 0, 0.000248489, -0.536903664, 0.0560923, 0],
-    [-0.02523841, 0.111216392, 0.266496208, 0, 0.021932906, -1.196261818, -0.123503836, 0],
-    [-0.025238416, 0.111216392, 0.266496208, 0, -0.021932906, 1.196261818, 0.123503836, 0],
-    [0.011499932, 0.09704284, 0.233406726, 0, -0.028900689, -0.985320208, 0.185896833, 0],
-    [0.011499932, 0.09704284, 0.233406726, 0, 0.028900689, 0.985320208, -0.185896833, 0],
-    [-1.1804e-05, -0.123946616, -1.731151121, 0, 0, 0, 0, 0],
-    [0, 0, 0, 0, 0.123946616, -0.066733456, -1.227324384, 0],
-]).T
+# seed section 4.7, B (8 states x 11 effectors, order EFFECTORS): one transcription, in
+# alloc.vehicles, shared with the allocation problem.
+B = ICE_B_FULL.copy()
 
 # seed section 4.7, C matrix (outputs OUTPUTS)
 C = np.zeros((11, 8))
@@ -106,19 +97,7 @@ B_DESIGN[0, [EFFECTORS.index("de9"), EFFECTORS.index("de19")]] = 0.0
 WU = np.array([2.0, 2.0] + [1.0] * 9)
 
 # seed Eq 4.24 as printed (columns: alpha, p, beta pseudo-commands)
-SEED_BK = np.array([
-    [-0.773, 0.107, -0.097],
-    [-0.773, -0.107, 0.097],
-    [-1.33, 0, 0],
-    [-0.485, 0.048, 0.055],
-    [-0.485, -0.048, -0.055],
-    [0, -0.104, 1.06],
-    [0, 0.104, -1.06],
-    [0.560, -0.0920, -1.73],
-    [0.560, 0.0920, 1.73],
-    [-0.715, 0, 0],
-    [0, 0.01, 6.87],
-])
+SEED_BK = ICE_BK_SEED.copy()
 
 
 def _actuators() -> tuple[ActuatorSpec, ...]:
