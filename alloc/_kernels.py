@@ -94,3 +94,74 @@ def rate_window(umin, umax, rate_min, rate_max, u_prev, dt):  # pragma: no cover
         lo[j] = a
         hi[j] = b
     return lo, hi
+
+
+@njit(cache=True, nogil=True)
+def facet_polish(B, ustar, d, u0, lo, hi, a):  # pragma: no cover - compiled
+    """Exact boundary point on the facet an LP found (used by ``da``).
+
+    With ``k - 1`` effectors strictly inside their limits, solve the ``k x k`` system
+    ``B_F u_F - a d = B u0 - B_S u_S`` by Gaussian elimination with partial pivoting.
+    Returns ``(a, u, ok)``; ``ok`` is False (and the inputs are returned) when the point
+    is not a plain facet hit or the exact solution is not admissible.
+    """
+    k, m = B.shape
+    nf = 0
+    F = np.empty(m, dtype=np.int64)
+    for j in range(m):
+        span = max(hi[j] - lo[j], 1e-300)
+        if ustar[j] - lo[j] > 1e-7 * span and hi[j] - ustar[j] > 1e-7 * span:
+            if nf < m:
+                F[nf] = j
+            nf += 1
+    if nf != k - 1:
+        return a, ustar, False
+    M = np.empty((k, k))
+    rhs = np.empty(k)
+    for i in range(k):
+        s = 0.0
+        for j in range(m):
+            s += B[i, j] * u0[j]
+        for j in range(m):
+            inside = False
+            for q in range(nf):
+                if F[q] == j:
+                    inside = True
+            if not inside:
+                s -= B[i, j] * ustar[j]
+        rhs[i] = s
+        for q in range(nf):
+            M[i, q] = B[i, F[q]]
+        M[i, k - 1] = -d[i]
+    for c in range(k):  # elimination with partial pivoting
+        piv = c
+        for r in range(c + 1, k):
+            if abs(M[r, c]) > abs(M[piv, c]):
+                piv = r
+        if abs(M[piv, c]) < 1e-300:
+            return a, ustar, False
+        if piv != c:
+            for q in range(k):
+                M[c, q], M[piv, q] = M[piv, q], M[c, q]
+            rhs[c], rhs[piv] = rhs[piv], rhs[c]
+        for r in range(c + 1, k):
+            f = M[r, c] / M[c, c]
+            for q in range(c, k):
+                M[r, q] -= f * M[c, q]
+            rhs[r] -= f * rhs[c]
+    x = np.empty(k)
+    for c in range(k - 1, -1, -1):
+        s = rhs[c]
+        for q in range(c + 1, k):
+            s -= M[c, q] * x[q]
+        x[c] = s / M[c, c]
+    a_new = x[k - 1]
+    if not (a_new >= 0.0 and abs(a_new - a) <= 1e-6 * max(1.0, a)):
+        return a, ustar, False
+    u = ustar.copy()
+    for q in range(nf):
+        j = F[q]
+        if x[q] < lo[j] or x[q] > hi[j]:
+            return a, ustar, False
+        u[j] = x[q]
+    return a_new, u, True

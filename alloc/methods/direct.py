@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._kernels import facet_polish
 from ..problem import Problem
 from ..registry import Method, register
 from ..solvers import backends, make_backend
@@ -42,65 +43,58 @@ class DirectAllocationLP(Method):
         self._A = np.hstack([self._QB, np.zeros((self._Q.shape[0], 1))])
         self._c = np.zeros(p.m + 1)
         self._c[-1] = -1.0
-        self._colnorm = np.linalg.norm(p.B, axis=0)
+        self._reach = float(np.linalg.norm(p.B, axis=0) @ (p.umax - p.umin))
+        self._B = np.ascontiguousarray(p.B)
         self._lb = np.concatenate([p.umin, [0.0]])
-        self._ub = np.concatenate([p.umax, [1.0]])
+        # along a unit direction, a* |d| never exceeds the AMS's extent from any base point
+        self._ub = np.concatenate([p.umax, [2.0 * self._reach + 1.0]])
+        self._u0 = np.array(p.up)  # base point without rate limits (up is within the limits)
+        self._Bu0 = p.B @ self._u0
+        self._rhs0 = self._QB @ self._u0
         z = self._QB @ p.up  # feasible at set-up: u = up, a = 0
         self._model = make_backend(name, None, self._c, self._A, z, z, self._lb, self._ub)
 
     def boundary(self, d, u0, lo, hi):
-        """``(a*, u*)``: the largest ``a`` with ``B(u - u0) = a d`` admissible, and its ``u``."""
-        p = self.problem
-        # a is bounded by the AMS's extent from B u0: |a d| <= sum_j |b_j| max|u_j - u0_j|.
-        reach = float(self._colnorm @ np.maximum(hi - u0, u0 - lo))
-        a_cap = 2.0 * reach / float(np.linalg.norm(d)) + 1.0
-        A = self._A
-        A[:, -1] = -(self._Q @ d)
-        lb, ub = self._lb, self._ub
-        lb[:-1], ub[:-1] = lo, hi
-        ub[-1] = a_cap
-        rhs = self._QB @ u0
-        x, it = self._model.solve(A=A, lb=lb, ub=ub, bl=rhs, bu=rhs)
-        a, ustar = float(x[-1]), np.minimum(np.maximum(x[:-1], lo), hi)
-        return (*self._polish(a, ustar, d, u0, lo, hi), it)
+        """``(a*, u*)``: the largest ``a`` with ``B(u - u0) = a d`` admissible, and its ``u``.
 
-    def _polish(self, a, ustar, d, u0, lo, hi):
-        """Re-solve Eq 1.16 exactly on the facet the LP found.
-
-        The LP (DAQP's proximal iterations) meets ``B(u - u0) = a d`` to ~1e-8 relative.
-        On a facet hit, ``k - 1`` effectors are strictly inside their limits and the rest
-        saturated; the ``k x k`` system for those effectors and ``a`` gives the exact point.
-        Kept only if admissible and on the ray; otherwise (edges, degenerate facets) the LP
-        answer stands.
+        The LP runs along the unit direction ``d / |d|`` so that its bound on ``a`` (the
+        AMS's extent) is a constant and, without rate limits, no bound is re-sent per call.
+        The LP (DAQP's proximal iterations) meets the equality to ~1e-8 relative; on a
+        facet hit (``k - 1`` effectors strictly inside their limits) the point is then
+        re-solved exactly from Eq 1.16 on that facet (:func:`alloc._kernels.facet_polish`).
+        Edges and degenerate facets keep the LP's answer.
         """
         p = self.problem
-        span = np.maximum(hi - lo, 1e-300)
-        inside = ((ustar - lo) > 1e-7 * span) & ((hi - ustar) > 1e-7 * span)
-        F = np.flatnonzero(inside)
-        if F.size != p.k - 1 or self._Q.shape[0] != p.k:
-            return a, ustar
-        M = np.empty((p.k, p.k))
-        M[:, :-1] = p.B[:, F]
-        M[:, -1] = -d
-        fixed = ustar.copy()
-        fixed[F] = 0.0
-        try:
-            sol = np.linalg.solve(M, p.B @ u0 - p.B @ fixed)
-        except np.linalg.LinAlgError:
-            return a, ustar
-        uF, a_new = sol[:-1], float(sol[-1])
-        if not (np.all(uF >= lo[F]) and np.all(uF <= hi[F]) and a_new >= 0 and abs(a_new - a) <= 1e-6 * max(1.0, a)):
-            return a, ustar
-        fixed[F] = uF
-        return a_new, fixed
+        norm = float(np.sqrt(d @ d))
+        A = self._A
+        A[:, -1] = self._Q @ d * (-1.0 / norm)
+        if lo is p.umin and hi is p.umax:
+            lb = ub = None  # set at construction; unchanged
+            rhs = self._rhs0
+        else:
+            lb, ub = self._lb.copy(), self._ub.copy()
+            lb[:-1], ub[:-1] = lo, hi
+            rhs = self._QB @ u0
+        x, it = self._model.solve(A=A, lb=lb, ub=ub, bl=rhs, bu=rhs)
+        ustar = np.minimum(np.maximum(x[:-1], lo), hi)
+        a = float(x[-1]) / norm
+        if self._Q.shape[0] == p.k:
+            a, ustar, _ = facet_polish(self._B, ustar, d, u0, lo, hi, a)
+        return a, ustar, it
 
     def solve(self, v, lo, hi, u_prev):
         p = self.problem
-        u0 = np.minimum(np.maximum(p.up, lo), hi)
-        # Only the part of the demand in the range of B can be reached; the rest is
-        # reported as unallocated (it is zero unless B is rank deficient).
-        d = self._Q.T @ (self._Q @ (v - p.B @ u0))
-        if np.abs(d).max() <= 1e-14 * max(1.0, float(np.abs(v).max())):
+        if lo is p.umin and hi is p.umax:
+            u0, Bu0 = self._u0, self._Bu0
+        else:
+            u0 = np.minimum(np.maximum(p.up, lo), hi)
+            Bu0 = p.B @ u0
+        d = v - Bu0
+        if self._Q.shape[0] != p.k:
+            # Only the part of the demand in the range of B can be reached; the rest is
+            # reported as unallocated (rank-deficient B).
+            d = self._Q.T @ (self._Q @ d)
+        if float(d @ d) <= (1e-14 * max(1.0, float(np.abs(v).max()))) ** 2:
             return u0, 0
         a, ustar, it = self.boundary(d, u0, lo, hi)
         if a >= 1.0:
