@@ -28,6 +28,7 @@ import json
 import os
 import tempfile
 import time
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -133,7 +134,8 @@ async def _open_loop(port: int, path: str, bodies: list[bytes], rate: float, con
     n = len(bodies)
     from_schedule, from_send, server = (np.full(n, np.nan) for _ in range(3))
     errors = 0
-    idle: list[tuple[asyncio.StreamReader, asyncio.StreamWriter]] = []
+    # round robin (FIFO), so no connection idles past the server's keep-alive timeout (5 s)
+    idle: deque[tuple[asyncio.StreamReader, asyncio.StreamWriter]] = deque()
     head = f"POST {path} HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: application/json\r\n".encode()
 
     async def connect() -> tuple[asyncio.StreamReader, asyncio.StreamWriter]:
@@ -141,10 +143,16 @@ async def _open_loop(port: int, path: str, bodies: list[bytes], rate: float, con
 
     async def one(i: int, scheduled: float) -> None:
         nonlocal errors
-        reader, writer = idle.pop() if idle else await connect()
+        reader, writer = idle.popleft() if idle else await connect()
+        request = head + b"Content-Length: %d\r\n\r\n" % len(bodies[i]) + bodies[i]
         sent = time.perf_counter()
-        writer.write(head + b"Content-Length: %d\r\n\r\n" % len(bodies[i]) + bodies[i])
-        status = int((await reader.readline()).split()[1])
+        writer.write(request)
+        if not (status_line := await reader.readline()):  # closed by the server: reconnect once
+            writer.close()
+            reader, writer = await connect()
+            writer.write(request)
+            status_line = await reader.readline()
+        status = int(status_line.split()[1])
         length, timing = 0, float("nan")
         while (line := await reader.readline()) not in (b"\r\n", b""):
             name, _, value = line.decode("latin-1").partition(":")
