@@ -48,6 +48,8 @@ class DirectAllocationLP(Method):
         self._lb = np.concatenate([p.umin, [0.0]])
         # along a unit direction, a* |d| never exceeds the AMS's extent from any base point
         self._ub = np.concatenate([p.umax, [2.0 * self._reach + 1.0]])
+        self._lb.setflags(write=False)
+        self._ub.setflags(write=False)
         self._u0 = np.array(p.up)  # base point without rate limits (up is within the limits)
         self._Bu0 = p.B @ self._u0
         self._rhs0 = self._QB @ self._u0
@@ -69,7 +71,8 @@ class DirectAllocationLP(Method):
         A = self._A
         A[:, -1] = self._Q @ d * (-1.0 / norm)
         if lo is p.umin and hi is p.umax:
-            lb = ub = None  # set at construction; unchanged
+            # read-only: the backend re-sends them only after a rate-limited call changed them
+            lb, ub = self._lb, self._ub
             rhs = self._rhs0
         else:
             lb, ub = self._lb.copy(), self._ub.copy()
