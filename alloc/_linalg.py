@@ -30,12 +30,17 @@ def sqrt_factor(W: FloatArray) -> FloatArray:
     return np.linalg.cholesky(W).T
 
 
+#: Singular values below this are zero whatever the scale of B: inverting them (a
+#: subnormal effectiveness such as 5e-324) would overflow to inf and then NaN.
+ABS_FLOOR = 1e-150
+
+
 def truncated_pinv(A: FloatArray, atol: float) -> FloatArray:
-    """Moore-Penrose pseudo-inverse ignoring singular values ``<= atol``."""
+    """Moore-Penrose pseudo-inverse ignoring singular values ``<= max(atol, ABS_FLOOR)``."""
     if A.size == 0:
         return np.zeros((A.shape[1], A.shape[0]))
     U, s, Vt = np.linalg.svd(A, full_matrices=False)
-    keep = s > atol
+    keep = s > max(atol, ABS_FLOOR)
     return (Vt[keep].T / s[keep]) @ U[:, keep].T
 
 

@@ -75,6 +75,8 @@ class Allocator:
             status = _EXACT if code == 0 else _UNATT
         except SolverError as exc:
             u, iterations, status, message = self._safe(v, lo, hi), 0, _FALLBACK, str(exc)
+            if not all_finite(u):  # last resort: the preferred position, clipped
+                u = np.array(problem.up)
             u = np.minimum(np.maximum(u, lo), hi)
             v_ach = self._B @ u
         return Result(u, v, v_ach, status, self.method, iterations, time.perf_counter() - t0, message)

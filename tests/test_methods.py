@@ -187,3 +187,12 @@ def test_rate_limits_bound_each_step(method):
             assert (step <= p.rate_max * dt + 1e-9).all() and (step >= p.rate_min * dt - 1e-9).all()
             assert (r.u >= p.umin - 1e-9).all() and (r.u <= p.umax + 1e-9).all()
             u = r.u
+
+
+@pytest.mark.parametrize("method", ALL)
+def test_subnormal_effectiveness_stays_finite(method):
+    """A subnormal B (5e-324) must not overflow the pseudo-inverse into inf/NaN."""
+    p = alloc.Problem([[5e-324, 0.0]], [-1, -1], [1, 1])
+    r = alloc.allocate(p, [1.0], method)
+    assert np.isfinite(r.u).all() and np.abs(r.u).max() <= 1.0
+    assert r.status is not alloc.Status.EXACT
