@@ -72,6 +72,9 @@ class TwoStageQP(Method):
         z = self._BQ @ p.up  # feasible at set-up; a band, not an equality (KEEP_RTOL)
         self._f2 = -p.Wu @ p.up
         self._stage2 = make_backend(name, p.Wu, self._f2, self._BQ, z - 1.0, z + 1.0, lo, hi)
+        # Attainable demands: B u = v as an exact equality (interior feasible sets are not
+        # degenerate; when DAQP calls it infeasible the two-stage path takes over).
+        self._stage2_eq = make_backend(name, p.Wu, self._f2, self._BQ, z, z, lo, hi)
 
     def _in_range(self, v) -> bool:
         r = v - self._Q.T @ (self._Q @ v)
@@ -91,10 +94,9 @@ class TwoStageQP(Method):
         # Attainable demands (the common case in flight) need only stage 2 with B u = v;
         # when that is infeasible, stage 1 finds the closest attainable moment first.
         if self._in_range(v):
-            band = KEEP_RTOL * max(1.0, float(np.abs(v).max()))
             rhs = self._Q @ v
             try:
-                return self._stage2.solve(lb=lo, ub=hi, bl=rhs - band, bu=rhs + band)
+                return self._stage2_eq.solve(lb=lo, ub=hi, bl=rhs, bu=rhs)
             except SolverError:
                 pass
         u1, it1 = self.stage1(v, lo, hi)
