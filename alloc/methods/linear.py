@@ -19,6 +19,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from ..exceptions import SolverError
 from ..problem import Problem
 from ..registry import Method, register
 from ..result import exact_tolerance
@@ -59,6 +60,10 @@ class TwoStageLP(Method):
         A2 = np.hstack([self._QB, -self._QB])
         f2 = np.concatenate([self.wu, self.wu])
         b2 = np.ones(self._Q.shape[0])  # a band, not an equality (see KEEP_RTOL)
+        # attainable demands: the moment as an exact equality (the band model takes over
+        # when the solver calls it infeasible)
+        self._stage2_eq = make_backend(name, None, f2, A2, 0 * b2, 0 * b2, np.zeros(2 * m),
+                                       np.concatenate([p.umax - p.up, p.up - p.umin]))
         self._stage2 = make_backend(name, None, f2, A2, -b2, b2, np.zeros(2 * m),
                                     np.concatenate([p.umax - p.up, p.up - p.umin]))
 
@@ -87,6 +92,13 @@ class TwoStageLP(Method):
         ub2 = np.concatenate([hi - c, c - lo])
         lb2 = np.zeros(2 * m)
         rhs = self._Q @ target - self._QB @ c
-        band = KEEP_RTOL * max(1.0, float(np.abs(target).max()))
-        x2, it2 = self._stage2.solve(lb=lb2, ub=ub2, bl=rhs - band, bu=rhs + band)
+        x2 = None
+        if target is v:
+            try:
+                x2, it2 = self._stage2_eq.solve(lb=lb2, ub=ub2, bl=rhs, bu=rhs)
+            except SolverError:
+                x2 = None
+        if x2 is None:
+            band = KEEP_RTOL * max(1.0, float(np.abs(target).max()))
+            x2, it2 = self._stage2.solve(lb=lb2, ub=ub2, bl=rhs - band, bu=rhs + band)
         return c + x2[:m] - x2[m:], iters + it2
