@@ -165,3 +165,238 @@ def facet_polish(B, ustar, d, u0, lo, hi, a):  # pragma: no cover - compiled
             return a, ustar, False
         u[j] = x[q]
     return a_new, u, True
+
+
+# --- pseudo-inverse family and cascades (pinv_scale, cgi, daisy) ----------------------
+#
+# Each replaces a Python loop of small numpy calls (clip, fancy indexing, B u, a dict
+# lookup per iteration) with one compiled call.  The arithmetic is the same as the numpy
+# code it replaces (tests/test_kernels_cascade.py compares the two on random problems).
+
+
+@njit(cache=True, nogil=True)
+def clip(x, lo, hi):  # pragma: no cover - compiled
+    """``min(max(x, lo), hi)`` elementwise (a NaN stays NaN, as with np.minimum/np.maximum)."""
+    m = x.shape[0]
+    out = np.empty(m)
+    for j in range(m):
+        y = x[j]
+        if y < lo[j]:
+            y = lo[j]
+        if y > hi[j]:
+            y = hi[j]
+        out[j] = y
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _residual(B, u, v, r):  # pragma: no cover - compiled
+    """``r = v - B u``."""
+    k, m = B.shape
+    for i in range(k):
+        s = 0.0
+        for j in range(m):
+            s += B[i, j] * u[j]
+        r[i] = v[i] - s
+
+
+@njit(cache=True, nogil=True)
+def _scale_to_box(base, du, lo, hi, idx, n):  # pragma: no cover - compiled
+    """Largest ``s`` in [0, 1] with ``lo <= base + s du <= hi`` over ``j = idx[:n]``;
+    ``du`` is indexed by position ``q``, the bounds by ``idx[q]`` (``max_scale``)."""
+    s = 1.0
+    for q in range(n):
+        j = idx[q]
+        d = du[q]
+        if d > 0.0:
+            t = (hi[j] - base[j]) / d
+            if t < s:
+                s = t
+        elif d < 0.0:
+            t = (lo[j] - base[j]) / d
+            if t < s:
+                s = t
+    return max(0.0, s)
+
+
+@njit(cache=True, nogil=True)
+def scaled_increment(P, B, b, v, lo, hi):  # pragma: no cover - compiled
+    """``pinv_scale``: ``base = clip(b)``, ``du = P (v - B base)``, ``u = base + s du``
+    with the largest ``s`` in [0, 1] keeping ``u`` in ``[lo, hi]``."""
+    k, m = B.shape
+    base = clip(b, lo, hi)
+    r = np.empty(k)
+    _residual(B, base, v, r)
+    du = np.empty(m)
+    idx = np.empty(m, dtype=np.int64)
+    for j in range(m):
+        s = 0.0
+        for i in range(k):
+            s += P[j, i] * r[i]
+        du[j] = s
+        idx[j] = j
+    s = _scale_to_box(base, du, lo, hi, idx, m)
+    u = np.empty(m)
+    for j in range(m):
+        u[j] = base[j] + s * du[j]
+    return u
+
+
+@njit(cache=True, nogil=True)
+def daisy_chain(B, up, v, lo, hi, idx, start, Pcat):  # pragma: no cover - compiled
+    """Daisy chaining (Eqs 1.25-1.27) over groups ``idx[start[g]:start[g+1]]`` whose
+    pseudo-inverses are the rows ``Pcat[start[g]:start[g+1]]``.  Returns ``(u, used)``."""
+    k, m = B.shape
+    u = clip(up, lo, hi)
+    r = np.empty(k)
+    _residual(B, u, v, r)
+    vmax = 1.0
+    for i in range(k):
+        if abs(v[i]) > vmax:
+            vmax = abs(v[i])
+    tol = 1e-12 * vmax
+    du = np.empty(m)
+    step = np.empty(k)
+    used = 0
+    for g in range(start.shape[0] - 1):
+        small = True
+        for i in range(k):
+            if not abs(r[i]) <= tol:
+                small = False
+        if small:
+            break
+        used += 1
+        a = start[g]
+        n = start[g + 1] - a
+        for q in range(n):
+            s = 0.0
+            for i in range(k):
+                s += Pcat[a + q, i] * r[i]
+            du[q] = s
+        gidx = idx[a:a + n]
+        s = _scale_to_box(u, du, lo, hi, gidx, n)
+        for i in range(k):
+            step[i] = 0.0
+        for q in range(n):
+            d = s * du[q]
+            u[gidx[q]] += d
+            for i in range(k):
+                step[i] += B[i, gidx[q]] * d
+        for i in range(k):
+            r[i] = r[i] - step[i]
+    return u, used
+
+
+# Free sets of the cascade are keys into an open-addressing hash table held in numpy
+# arrays: ``keys[h]`` (the set as bit words, 63 effectors a word), ``slots[h]`` (-1 when
+# empty) the index into ``bank``, where ``bank[slot, :|F|]`` is that set's pseudo-inverse.
+_FREE_BITS = 63
+
+
+@njit(cache=True, nogil=True)
+def _free_key(free, key):  # pragma: no cover - compiled
+    for w in range(key.shape[0]):
+        key[w] = 0
+    for j in range(free.shape[0]):
+        if free[j]:
+            key[j // 63] |= np.int64(1) << np.int64(j % 63)
+
+
+@njit(cache=True, nogil=True)
+def _probe(keys, slots, key):  # pragma: no cover - compiled
+    """Table position of ``key``, or of the empty place where it belongs."""
+    h = np.int64(0)
+    for w in range(key.shape[0]):
+        h = (h ^ key[w]) * np.int64(-7046029254386353131)  # Fibonacci hashing
+    mask = slots.shape[0] - 1
+    pos = (h >> np.int64(29)) & mask
+    while slots[pos] >= 0:
+        same = True
+        for w in range(key.shape[0]):
+            if keys[pos, w] != key[w]:
+                same = False
+                break
+        if same:
+            return pos
+        pos = (pos + 1) & mask
+    return pos
+
+
+@njit(cache=True, nogil=True)
+def free_set_insert(keys, slots, free, slot):  # pragma: no cover - compiled
+    """Record that ``bank[slot]`` holds the pseudo-inverse of free set ``free``."""
+    key = np.empty(keys.shape[1], dtype=np.int64)
+    _free_key(free, key)
+    pos = _probe(keys, slots, key)
+    keys[pos] = key
+    slots[pos] = slot
+
+
+@njit(cache=True, nogil=True)
+def cascade(B, up, v, lo, hi, keys, slots, bank, u, free, it0):  # pragma: no cover - compiled
+    """Cascaded generalized inverse (section 1.3.4.6) over cached pseudo-inverses.
+
+    With ``it0 == 1`` starts afresh (writes ``u`` and ``free``); otherwise resumes at
+    iteration ``it0`` from the state in ``u`` and ``free``.  Returns ``(iterations, 0)``
+    when done, or ``(it, 1)`` when the pseudo-inverse of the current free set is not in the
+    table: the caller adds it and resumes with ``it0 = it``.
+    """
+    k, m = B.shape
+    base = clip(up, lo, hi)
+    if it0 == 1:
+        for j in range(m):
+            u[j] = base[j]
+            free[j] = lo[j] < hi[j]
+    F = np.empty(m, dtype=np.int64)
+    r = np.empty(k)
+    uF = np.empty(m)
+    key = np.empty(keys.shape[1], dtype=np.int64)
+    for it in range(it0, m + 2):
+        nf = 0
+        for j in range(m):
+            if free[j]:
+                F[nf] = j
+                nf += 1
+        if nf == 0:
+            return it - 1, 0  # (2) all saturated
+        for q in range(nf):
+            u[F[q]] = base[F[q]]
+        _residual(B, u, v, r)
+        _free_key(free, key)
+        pos = _probe(keys, slots, key)
+        if slots[pos] < 0:
+            return it, 1
+        P = bank[slots[pos]]
+        for q in range(nf):
+            s = 0.0
+            for i in range(k):
+                s += P[q, i] * r[i]
+            uF[q] = base[F[q]] + s
+        if nf < k:  # (3) Eq 1.24, then clip
+            for q in range(nf):
+                j = F[q]
+                y = uF[q]
+                if y < lo[j]:
+                    y = lo[j]
+                if y > hi[j]:
+                    y = hi[j]
+                u[j] = y
+            return it, 0
+        hit = False
+        for q in range(nf):
+            j = F[q]
+            if uF[q] > hi[j] or uF[q] < lo[j]:
+                hit = True
+        if not hit:  # (1) no new saturation
+            for q in range(nf):
+                u[F[q]] = uF[q]
+            return it, 0
+        for q in range(nf):
+            j = F[q]
+            if uF[q] > hi[j]:
+                u[j] = hi[j]
+                free[j] = False
+            elif uF[q] < lo[j]:
+                u[j] = lo[j]
+                free[j] = False
+    return m + 1, 0

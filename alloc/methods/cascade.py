@@ -6,6 +6,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from .._kernels import _FREE_BITS, cascade, daisy_chain, free_set_insert
 from .._linalg import RCOND, max_scale, priority_groups, weighted_pinv
 from ..exceptions import ProblemError
 from ..problem import Problem
@@ -58,6 +59,12 @@ class CascadedGeneralizedInverse(Method):
         self.rcond = float(rcond)
         self.groups = check_priorities(priorities, problem.k)
         self._cache: dict[bytes, FloatArray] = {}
+        # the compiled cascade's cache: free set -> slot of ``_bank`` (see _kernels.cascade)
+        m, k = problem.m, problem.k
+        self._keys = np.zeros((2 * self._CACHE_LIMIT, -(-max(m, 1) // _FREE_BITS)), dtype=np.int64)
+        self._slots = np.full(2 * self._CACHE_LIMIT, -1, dtype=np.int64)
+        self._bank = np.zeros((16, m, k))
+        self._banked = 0
 
     def _pinv(self, free: np.ndarray) -> FloatArray:
         key = free.tobytes()
@@ -69,7 +76,34 @@ class CascadedGeneralizedInverse(Method):
                 self._cache[key] = P
         return P
 
+    def _bank_pinv(self, free: np.ndarray) -> bool:
+        """Add the pseudo-inverse of ``free`` to the compiled cascade's cache (False if full)."""
+        if self._banked >= self._CACHE_LIMIT:
+            return False
+        if self._banked == self._bank.shape[0]:
+            self._bank = np.concatenate([self._bank, np.zeros_like(self._bank)])
+        P = self._pinv(free)
+        self._bank[self._banked, :P.shape[0]] = P
+        free_set_insert(self._keys, self._slots, free, self._banked)
+        self._banked += 1
+        return True
+
     def solve(self, v, lo, hi, u_prev):
+        if self.groups is not None and len(self.groups) > 1:
+            return self._solve_by_level(v, lo, hi)
+        p = self.problem
+        u = np.empty(p.m)
+        free = np.empty(p.m, dtype=np.bool_)
+        it = 1
+        while True:
+            it, missing = cascade(p.B, p.up, v, lo, hi, self._keys, self._slots, self._bank, u, free, it)
+            if not missing:
+                return u, it
+            if not self._bank_pinv(free):  # cache full: the uncached Python cascade
+                return self._solve_reference(v, lo, hi, u_prev)
+
+    def _solve_reference(self, v, lo, hi, u_prev):
+        """The cascade in numpy (what :func:`alloc._kernels.cascade` computes, compiled)."""
         if self.groups is not None and len(self.groups) > 1:
             return self._solve_by_level(v, lo, hi)
         p = self.problem
@@ -95,7 +129,6 @@ class CascadedGeneralizedInverse(Method):
             u[F[under]] = lo[F[under]]
             free[F[over | under]] = False
         return u, p.m + 1
-
 
     def _solve_by_level(self, v, lo, hi):
         p = self.problem
@@ -157,6 +190,10 @@ class DaisyChain(Method):
             gf = g[~problem.jammed[g]]
             Pg = weighted_pinv(problem.B[:, gf], problem.Wu[np.ix_(gf, gf)], problem.Wv, rcond=float(rcond))
             self.P.append((gf, Pg))
+        # the same groups packed for the compiled chain: indices, offsets, stacked inverses
+        self._idx = np.concatenate([gf for gf, _ in self.P]).astype(np.int64)
+        self._start = np.cumsum([0] + [len(gf) for gf, _ in self.P]).astype(np.int64)
+        self._Pcat = np.ascontiguousarray(np.concatenate([Pg for _, Pg in self.P]).reshape(-1, problem.k))
 
     @staticmethod
     def _check_groups(problem: Problem, groups) -> list[np.ndarray]:
@@ -181,6 +218,11 @@ class DaisyChain(Method):
         return out
 
     def solve(self, v, lo, hi, u_prev):
+        p = self.problem
+        return daisy_chain(p.B, p.up, v, lo, hi, self._idx, self._start, self._Pcat)
+
+    def _solve_reference(self, v, lo, hi, u_prev):
+        """The chain in numpy (what :func:`alloc._kernels.daisy_chain` computes, compiled)."""
         p = self.problem
         u = np.minimum(np.maximum(p.up, lo), hi)
         r = v - p.B @ u

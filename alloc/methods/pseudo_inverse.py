@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._kernels import affine
+from .._kernels import affine, scaled_increment
 from .._linalg import RCOND, max_scale, weighted_pinv
 from ..problem import Problem
 from ..registry import FloatArray, Method, register
@@ -91,11 +91,20 @@ class PinvClip(Pinv):
 class PinvScale(_PinvBase):
     summary = "direction-preserving weighted pseudo-inverse: the increment scaled by one factor"
 
+    def __init__(self, problem: Problem, **options) -> None:
+        super().__init__(problem, **options)
+        self._Pc = np.ascontiguousarray(self.P)
+
     def _base(self, lo: FloatArray, hi: FloatArray, u_prev: FloatArray | None) -> FloatArray:
         b = u_prev if (self.incremental and u_prev is not None) else self.problem.up
         return np.minimum(np.maximum(b, lo), hi)
 
     def solve(self, v, lo, hi, u_prev):
+        b = u_prev if (self.incremental and u_prev is not None) else self.problem.up
+        return scaled_increment(self._Pc, self.problem.B, b, v, lo, hi), 0
+
+    def _solve_reference(self, v, lo, hi, u_prev):
+        """The scaling in numpy (what :func:`alloc._kernels.scaled_increment` computes, compiled)."""
         base = self._base(lo, hi, u_prev)
         du = self.P @ (v - self.problem.B @ base)
         return base + max_scale(base, du, lo, hi) * du, 0
