@@ -400,3 +400,46 @@ def cascade(B, up, v, lo, hi, keys, slots, bank, u, free, it0):  # pragma: no co
                 u[j] = lo[j]
                 free[j] = False
     return m + 1, 0
+
+
+@njit(cache=True, nogil=True)
+def fused_affine(W, v, rtol):  # pragma: no cover - compiled
+    """One call for ``u = clip(c + P v)``, ``B u`` and the status, without rate limits.
+
+    ``W`` packs everything constant, one row per effector: ``[c | P (k) | B' (k) | umin | umax]``
+    (numba charges per argument, so one packed array is measurably cheaper than five).
+    Returns ``out`` of length ``m + k + 1``: ``u``, ``B u`` and a code (0 exact,
+    1 unattainable, 2 non-finite ``u``, 3 non-finite ``v``).
+    """
+    m = W.shape[0]
+    k = v.shape[0]
+    out = np.empty(m + k + 1)
+    vmax = 1.0
+    for i in range(k):
+        if not np.isfinite(v[i]):
+            out[m + k] = 3.0
+            return out
+        vmax = max(vmax, abs(v[i]))
+    for j in range(m):
+        s = W[j, 0]
+        for i in range(k):
+            s += W[j, 1 + i] * v[i]
+        if not np.isfinite(s):
+            out[m + k] = 2.0
+            return out
+        lo = W[j, 1 + 2 * k]
+        hi = W[j, 2 + 2 * k]
+        if s < lo:
+            s = lo
+        if s > hi:
+            s = hi
+        out[j] = s
+    err = 0.0
+    for i in range(k):
+        s = 0.0
+        for j in range(m):
+            s += W[j, 1 + k + i] * out[j]
+        out[m + i] = s
+        err = max(err, abs(s - v[i]))
+    out[m + k] = 0.0 if err <= rtol * vmax else 1.0
+    return out

@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._kernels import affine_finish, all_finite, finish
+from ._kernels import all_finite, finish, fused_affine
 from .exceptions import DemandError, SolverError
 from .methods.pseudo_inverse import SafeCommand
 from .problem import Problem
@@ -29,7 +29,7 @@ class Allocator:
     :class:`~alloc.methods.pseudo_inverse.SafeCommand` is returned with status ``fallback``.
     """
 
-    __slots__ = ("problem", "method", "impl", "_safe", "_B", "_lo", "_hi", "_kshape")
+    __slots__ = ("problem", "method", "impl", "_safe", "_B", "_lo", "_hi", "_kshape", "_W", "_m", "_mk")
 
     def __init__(self, problem: Problem, method: str, **options: Any) -> None:
         self.problem = problem
@@ -39,11 +39,25 @@ class Allocator:
         self._B = problem.B
         self._lo, self._hi = problem.umin, problem.umax
         self._kshape = (problem.k,)
+        self._m, self._mk = problem.m, problem.m + problem.k
+        self._W = None
+        if self.impl.fused is not None:  # closed-form u = clip(c + P v): one packed compiled call
+            c, P = self.impl.fused
+            self._W = np.ascontiguousarray(
+                np.column_stack([c, P, problem.B.T, problem.umin, problem.umax]), dtype=float)
 
     def __repr__(self) -> str:
         return f"Allocator(method={self.method!r}, {self.problem!r})"
 
     def __call__(self, v: ArrayLike, *, u_prev: ArrayLike | None = None, dt: float | None = None) -> Result:
+        if self._W is not None and u_prev is None and dt is None:
+            t0 = time.perf_counter()
+            if type(v) is np.ndarray and v.shape == self._kshape and v.dtype == np.float64:
+                out = fused_affine(self._W, v, EXACT_RTOL)
+                code = out[self._mk]
+                if code < 2.0:
+                    return Result(out[:self._m], v, out[self._m:self._mk], _EXACT if code == 0.0 else _UNATT,
+                                  self.method, 0, time.perf_counter() - t0, "")
         problem = self.problem
         try:
             v = np.asarray(v, dtype=float)
@@ -57,13 +71,6 @@ class Allocator:
             lo, hi = problem.effective_bounds(u_prev, dt)
             up = np.asarray(u_prev, dtype=float)
         t0 = time.perf_counter()
-        fused = self.impl.fused
-        if fused is not None and up is None:
-            # closed-form methods: one compiled call does u, B u and the status
-            u, v_ach, code = affine_finish(fused[0], fused[1], self._B, v, lo, hi, EXACT_RTOL)
-            if code != 2:
-                return Result(u, v, v_ach, _EXACT if code == 0 else _UNATT, self.method, 0,
-                              time.perf_counter() - t0, "")
         message = ""
         try:
             u, iterations = self.impl.solve(v, lo, hi, up)
