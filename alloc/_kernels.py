@@ -443,3 +443,44 @@ def fused_affine(W, v, rtol):  # pragma: no cover - compiled
         err = max(err, abs(s - v[i]))
     out[m + k] = 0.0 if err <= rtol * vmax else 1.0
     return out
+
+
+@njit(cache=True, nogil=True)
+def free_set_pinv(SB, rdiag, S, free, rcond, floor):  # pragma: no cover - compiled
+    """``weighted_pinv(B[:, F], Wu[F, F], Wv)`` for a diagonal ``Wu``, ``F`` = ``free``.
+
+    ``SB = S B`` with ``S' S = Wv`` and ``rdiag = Wu^-1/2``: ``A = S B_F R_F``, and
+    ``P = R_F A^+ S`` with singular values ``<= max(rcond * s_max(A), floor)`` dropped
+    (``alloc._linalg.truncated_pinv``).  Returns ``P`` (|F| x k).
+    """
+    k, m = SB.shape
+    nf = 0
+    for j in range(m):
+        if free[j]:
+            nf += 1
+    A = np.empty((k, nf))
+    F = np.empty(nf, dtype=np.int64)
+    q = 0
+    for j in range(m):
+        if free[j]:
+            F[q] = j
+            for i in range(k):
+                A[i, q] = SB[i, j] * rdiag[j]
+            q += 1
+    U, s, Vt = np.linalg.svd(A, full_matrices=False)
+    cut = max(rcond * s[0], floor)
+    Z = np.zeros((nf, k))
+    for l in range(s.shape[0]):
+        if s[l] > cut:
+            for q in range(nf):
+                a = Vt[l, q] / s[l]
+                for i in range(k):
+                    Z[q, i] += a * U[i, l]
+    P = np.zeros((nf, k))
+    for q in range(nf):
+        for i in range(k):
+            t = 0.0
+            for l in range(k):
+                t += Z[q, l] * S[l, i]
+            P[q, i] = rdiag[F[q]] * t
+    return P

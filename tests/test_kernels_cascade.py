@@ -25,7 +25,8 @@ def random_groups(rng: np.random.Generator, m: int) -> list[list[int]]:
 
 
 def cases(seed: int, method: str):
-    """Yield ``(impl, v, lo, hi, u_prev)``: problems of all kinds, k = 1..6, m = 1..30."""
+    """Yield ``(impl, v, lo, hi, u_prev)``: problems of all kinds, k = 1..6, m = 1..30, some
+    with a full (non-diagonal) ``Wu``."""
     rng = np.random.default_rng(seed)
     n = 0
     while n < CASES:
@@ -33,6 +34,9 @@ def cases(seed: int, method: str):
         k = int(rng.integers(1, 7))
         m = int(rng.integers(1, 31))
         p = random_problem(rng, k, m, kind, weights=bool(rng.random() < 0.8))
+        if rng.random() < 0.15:  # a full Wu: cgi computes new inverses in numpy, not compiled
+            L = rng.normal(size=(m, m))
+            p = p.replace(Wu=L @ L.T + m * np.eye(m))
         if method == "daisy":
             options = {"groups": random_groups(rng, m)} if rng.random() < 0.6 else {}
         elif method == "pinv_scale":

@@ -6,8 +6,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from .._kernels import _FREE_BITS, cascade, daisy_chain, free_set_insert
-from .._linalg import RCOND, max_scale, priority_groups, weighted_pinv
+from .._kernels import _FREE_BITS, cascade, daisy_chain, free_set_insert, free_set_pinv
+from .._linalg import ABS_FLOOR, RCOND, max_scale, priority_groups, sqrt_factor, weighted_pinv
 from ..exceptions import ProblemError
 from ..problem import Problem
 from ..registry import FloatArray, Method, register
@@ -65,6 +65,11 @@ class CascadedGeneralizedInverse(Method):
         self._slots = np.full(2 * self._CACHE_LIMIT, -1, dtype=np.int64)
         self._bank = np.zeros((16, m, k))
         self._banked = 0
+        # a diagonal Wu lets a new free set's inverse be computed compiled, from S B and Wu^-1/2
+        Wu = problem.Wu
+        self._diagonal_Wu = np.count_nonzero(Wu - np.diag(np.diagonal(Wu))) == 0
+        S = sqrt_factor(problem.Wv) if problem.Wv is not None else np.eye(k)
+        self._S, self._SB, self._rdiag = S, S @ problem.B, 1.0 / np.sqrt(np.diagonal(Wu))
 
     def _pinv(self, free: np.ndarray) -> FloatArray:
         key = free.tobytes()
@@ -82,7 +87,10 @@ class CascadedGeneralizedInverse(Method):
             return False
         if self._banked == self._bank.shape[0]:
             self._bank = np.concatenate([self._bank, np.zeros_like(self._bank)])
-        P = self._pinv(free)
+        if self._diagonal_Wu:
+            P = free_set_pinv(self._SB, self._rdiag, self._S, free, self.rcond, ABS_FLOOR)
+        else:
+            P = self._pinv(free)
         self._bank[self._banked, :P.shape[0]] = P
         free_set_insert(self._keys, self._slots, free, self._banked)
         self._banked += 1
