@@ -299,7 +299,7 @@ def _free_key(free, key):  # pragma: no cover - compiled
         key[w] = 0
     for j in range(free.shape[0]):
         if free[j]:
-            key[j // 63] |= np.int64(1) << np.int64(j % 63)
+            key[j // _FREE_BITS] |= np.int64(1) << np.int64(j % _FREE_BITS)
 
 
 @njit(cache=True, nogil=True)

@@ -91,17 +91,14 @@ class PinvClip(Pinv):
 class PinvScale(_PinvBase):
     summary = "direction-preserving weighted pseudo-inverse: the increment scaled by one factor"
 
-    def __init__(self, problem: Problem, **options) -> None:
-        super().__init__(problem, **options)
-        self._Pc = np.ascontiguousarray(self.P)
+    def _bias(self, u_prev: FloatArray | None) -> FloatArray:
+        return u_prev if (self.incremental and u_prev is not None) else self.problem.up
 
     def _base(self, lo: FloatArray, hi: FloatArray, u_prev: FloatArray | None) -> FloatArray:
-        b = u_prev if (self.incremental and u_prev is not None) else self.problem.up
-        return np.minimum(np.maximum(b, lo), hi)
+        return np.minimum(np.maximum(self._bias(u_prev), lo), hi)
 
     def solve(self, v, lo, hi, u_prev):
-        b = u_prev if (self.incremental and u_prev is not None) else self.problem.up
-        return scaled_increment(self._Pc, self.problem.B, b, v, lo, hi), 0
+        return scaled_increment(self.P, self.problem.B, self._bias(u_prev), v, lo, hi), 0
 
     def _solve_reference(self, v, lo, hi, u_prev):
         """The scaling in numpy (what :func:`alloc._kernels.scaled_increment` computes, compiled)."""
