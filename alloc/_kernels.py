@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["all_finite", "affine", "finish"]
+__all__ = ["all_finite", "affine", "finish", "fused_affine", "rate_window", "facet_polish"]
 
 FINISH_EXACT, FINISH_UNATTAINABLE, FINISH_NONFINITE = 0, 1, 2
 
@@ -68,15 +68,6 @@ def finish(B, u, lo, hi, v, v_ach, rtol):  # pragma: no cover - compiled
         if a > vmax:
             vmax = a
     return 0 if err <= rtol * vmax else 1
-
-
-@njit(cache=True, nogil=True)
-def affine_finish(c, P, B, v, lo, hi, rtol):  # pragma: no cover - compiled
-    """Fused pseudo-inverse/ganging step: ``u = clip(c + P v)``, ``B u`` and the status code."""
-    u = affine(c, P, v)
-    v_ach = np.empty(B.shape[0])
-    code = finish(B, u, lo, hi, v, v_ach, rtol)
-    return u, v_ach, code
 
 
 @njit(cache=True, nogil=True)
