@@ -6,9 +6,10 @@ their output from an :class:`alloc.Result` themselves and return its JSON direct
 pydantic-core writes floats in shortest round-trip form, so ``u`` parses back to the very
 same float64 values the library computed.
 
-The library promises finite commands.  Should a numerically degenerate problem (e.g. a
-subnormal ``B``) still yield a non-finite value, the caller gets a 422 naming the problem,
-never a ``null`` in ``u`` (JSON cannot carry NaN) and never a 500.
+The library promises finite commands (a subnormal ``B``, which once overflowed to NaN, is
+now answered finitely).  This module still guards the promise: should a non-finite value
+ever appear, the caller gets a 422 naming the problem, never a ``null`` in ``u`` (JSON
+cannot carry NaN) and never a 500.
 """
 
 from __future__ import annotations
@@ -33,8 +34,8 @@ def model_response(model: BaseModel, status_code: int = 200) -> Response:
 
 def _require_finite(method: str, *arrays: np.ndarray) -> None:
     if not all(np.isfinite(a).all() for a in arrays):
-        reason = (f"{method} produced non-finite values for this problem (numerically degenerate, "
-                  f"e.g. subnormal entries in B); rescale the problem or use another method")
+        reason = (f"{method} produced non-finite values for this problem (numerically degenerate); "
+                  f"rescale the problem or use another method")
         raise InvalidRequest(f"B: {reason}", [field_error("B", reason)])
 
 
