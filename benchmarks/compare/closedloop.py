@@ -28,10 +28,11 @@ def simulate_spec(spec: Spec) -> SimResult:
     """The closed-loop simulation a spec describes (also used to redraw time histories)."""
     run = get_scenario(spec["scenario"])
     options = None if spec["method"] == STATIC else (method_options(spec["scenario"], spec["method"]) or None)
+    extra = {} if spec.get("pilot_gain") is None else {"pilot_gain": spec["pilot_gain"]}
     return run(
         method=spec["method"], failure=spec["failure"], duration=spec["duration"], seed=spec["seed"],
         allocator_knows_failure=spec["told"], failure_time=spec["failure_time"], noise=spec["noise"],
-        method_options=options,
+        method_options=options, **extra,
     )
 
 
@@ -44,6 +45,7 @@ def run_closed(spec: Spec) -> tuple[dict[str, Any], dict[str, Any]]:
         "id": spec["id"], "scenario": spec["scenario"], "failure": spec["failure"],
         "method": spec["method"], "told": spec["told"], "seed": spec["seed"],
         "duration": spec["duration"], "failure_time": spec["failure_time"], "noise": spec["noise"],
+        "pilot_gain": spec.get("pilot_gain"),
         "diverged": summary["diverged"], "simulated": summary["duration"],
     }
     for channel, metrics in summary["channels"].items():
