@@ -397,6 +397,11 @@ def _observe(step: int, F: np.ndarray, I: np.ndarray, inputs: np.ndarray) -> int
         _affine(_mat(F, I, _F_AK), xk, _mat(F, I, _F_BK), e, xk, scratch)
         _affine(_mat(F, I, _F_ADC), xc, _mat(F, I, _F_BDC), cmd, xc, scratch)
     _matvec(_mat(F, I, _F_DEMAND), uc, _vec(F, I, _F_V))
+    # A reference that leaves the same validity bound is a pilot-loop runaway (the pilot
+    # keeps asking for more while the plant output stays bounded): loss of control too.
+    for i in range(k):
+        if not np.isfinite(r[i]) or abs(r[i]) > bound[i]:
+            return _DIVERGED
     return _OK
 
 
