@@ -82,8 +82,7 @@ def quick_sweep() -> list[Spec]:
     The stand-in pilot runs at gain 1: the seed's pilot models are figures lost to the scan,
     and at the scenario's default gain 2 the pilot loop itself oscillates after the failure
     (the roll reference runs away and the run is flagged diverged, with the seed's own static
-    design too), which
-    would rank the pilot, not the allocators.  At gain 1 the seed's Fig 4-110 result (stable
+    design too), which would rank the pilot, not the allocators.  At gain 1 the seed's Fig 4-110 result (stable
     through the failure) reproduces.  Measured sweep time: about 45 s.
 
     Closed-loop specs come first: they are the long runs, so the pool starts them first and
