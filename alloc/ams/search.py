@@ -42,6 +42,7 @@ import numpy as np
 from ..exceptions import OptionError
 from ..problem import Problem
 from ..registry import FloatArray, Method, register
+from . import _kernels
 from .geometry import AttainableSet
 
 __all__ = ["FacetSearch", "EdgeBisect", "SphericalTable"]
@@ -95,6 +96,18 @@ class FacetSearch(Method):
         self._U = ams._tile_u[tiles]  # (T, m) corner controls
         self._S = ams._steps[span]  # (T, k-1, m) edge steps in u
         self._facet_of_tile = ams._tile_facet[tiles]
+        self._prepare_kernels()
+
+    def _prepare_kernels(self) -> None:
+        """Contiguous copies of the tables the compiled kernels read (full-rank sets only)."""
+        ams = self.ams
+        f64 = np.ascontiguousarray
+        self._kMinv, self._kU, self._kS = f64(self._Minv), f64(self._U), f64(self._S)
+        self._kNz, self._kp0, self._ku0 = f64(self._Nz), f64(self._p0), f64(self._u0)
+        # rate-limited box: the facet structure with gaps and tiles placed per call
+        self._kray = (f64(self.problem.B), f64(ams._Br), f64(ams._Nr), f64(ams._NB), f64(ams._member),
+                      f64(ams.sign, dtype=float), f64(ams.active), f64(ams._tile_hi), f64(ams._tile_span),
+                      np.searchsorted(ams._tile_facet, np.arange(ams.n_facets + 1)).astype(np.intp))
 
     def _nominal(self, lo: FloatArray, hi: FloatArray) -> bool:
         return (lo is self._umin or np.array_equal(lo, self._umin)) and (
@@ -122,6 +135,18 @@ class FacetSearch(Method):
         return a, self._U[t] + b @ self._S[t]
 
     def solve(self, v, lo, hi, u_prev):
+        """Compiled search (:mod:`alloc.ams._kernels`); answers as :meth:`_solve_reference`."""
+        if self._flat:
+            return self._solve_reference(v, lo, hi, u_prev)
+        if not self._nominal(lo, hi):
+            return _kernels.ray_exit_solve(v, self.problem.up, lo, hi, *self._kray)
+        return self._solve_nominal(v)
+
+    def _solve_nominal(self, v: FloatArray) -> tuple[FloatArray, int]:
+        return _kernels.facet_solve(v, self._kp0, self._ku0, self._kNz, self._kMinv, self._kU, self._kS)
+
+    def _solve_reference(self, v, lo, hi, u_prev):
+        """The numpy implementation the kernels reproduce (kept for tests and flat sets)."""
         p = self.problem
         if self._flat or not self._nominal(lo, hi):
             u0 = np.minimum(np.maximum(p.up, lo), hi)
@@ -246,6 +271,24 @@ class EdgeBisect(FacetSearch):
         self._pair_cross = np.cross(self._R.T[:, None, :], self._R.T[None, :, :])  # (C, C, 3)
         self._fractions = np.arange(1, self.angles + 1) / (self.angles + 1)
         self._first_angles = np.concatenate([[0.0], math.pi * self._fractions])
+        # tiles of each facet as positions into the inverse table (CSR) for the kernel
+        order = np.argsort(self._facet_of_tile, kind="stable")
+        self._ktile_pos = order.astype(np.intp)
+        self._ktile_ptr = np.searchsorted(self._facet_of_tile[order], np.arange(ams.n_facets + 1)).astype(np.intp)
+        self._kbisect = (np.ascontiguousarray(self._W), np.ascontiguousarray(self._G), np.ascontiguousarray(self._c),
+                         np.ascontiguousarray(lut), np.ascontiguousarray(self._pair_cross), self._ktile_ptr,
+                         self._ktile_pos, np.ascontiguousarray(self._fractions),
+                         np.ascontiguousarray(self._first_angles), self.max_rounds)
+
+    def _solve_nominal(self, v):
+        if not self._bisect:
+            return super()._solve_nominal(v)
+        u, iterations, rounds, fell_back = _kernels.bisect_solve(
+            v, self._kp0, self._ku0, self._kNz, self._kMinv, self._kU, self._kS, *self._kbisect)
+        if rounds:
+            self.rounds = rounds
+        self.fallbacks += fell_back
+        return u, iterations
 
     def _edge(self, th: FloatArray, gx, gy0, gz0, cx, cy0, cz0):
         """Silhouette edge over the positive x-axis for rotation angles ``th`` (K,).
@@ -392,6 +435,16 @@ class SphericalTable(FacetSearch):
         cand = np.where(cand < 0, centre[..., None], cand)
         self._table = np.ascontiguousarray(cand.reshape(na * ne, self._CANDIDATES))
         self._na, self._ne = na, ne
+
+    def _solve_nominal(self, v):
+        if self._table is None:
+            return super()._solve_nominal(v)
+        u, iterations, hit = _kernels.table_solve(v, self._kp0, self._ku0, self._kNz, self._kMinv, self._kU,
+                                                  self._kS, self._W, self._table, self._na, self._ne)
+        if iterations:
+            self.hits += hit
+            self.fallbacks += not hit
+        return u, iterations
 
     def _tiles_hit(self, D: FloatArray) -> np.ndarray:
         T, k = len(self._tiles), 3
