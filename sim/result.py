@@ -128,14 +128,17 @@ class SimResult:
         lo, hi = (np.asarray(a, dtype=float) for a in limits)
         span = np.where(np.isfinite(hi - lo), hi - lo, np.inf)
         tol = SATURATION_TOLERANCE * span
-        sat = (x <= lo + tol) | (x >= hi - tol)
+        # A limit at zero is a rest position, not a saturation: a one-sided effector
+        # (ICE tips and spoiler-slot deflectors, 0..60 deg) sits there whenever unused.
+        sat = ((x <= lo + tol) & (lo != 0.0)) | ((x >= hi - tol) & (hi != 0.0))
         # A jammed effector (lo == hi) is not "saturated" in any useful sense.
         sat &= span > 0
         return float(np.count_nonzero(np.any(sat, axis=1)) * self._dt())
 
     @property
     def time_in_position_saturation(self) -> float:
-        """Seconds during which any effector sits at a position limit."""
+        """Seconds during which any effector sits at a position limit (a limit at zero, the
+        rest position of a one-sided effector, does not count)."""
         return self._time_in_saturation(self.effectors, self.effector_limits)
 
     @property

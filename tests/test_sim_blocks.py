@@ -304,3 +304,15 @@ def test_compiled_loop_matches_reference_loop_bit_for_bit(monkeypatch, name, opt
     assert not result.diverged
     for field_name, values in expected.items():
         assert np.array_equal(getattr(result, field_name), values), field_name
+
+
+def test_resting_at_a_zero_limit_is_not_saturation():
+    """A one-sided effector (limits [0, 60], like the ICE tips) resting at 0 is not saturated;
+    the same effector at 60 is."""
+    t = np.arange(0.0, 4.0, 1.0)
+    z = np.zeros((4, 1))
+    res = SimResult(
+        "x", "pinv", None, t, ["q"], z, z, z,
+        effectors=np.array([[0.0], [0.0], [60.0], [30.0]]), effector_limits=(np.array([0.0]), np.array([60.0])),
+    )
+    assert res.time_in_position_saturation == pytest.approx(1.0)
