@@ -108,3 +108,14 @@ def test_bisect_counters_follow_the_search():
         impl.solve(v, p.umin, p.umax, None)
         assert 1 <= impl.rounds <= impl.max_rounds
     assert impl.fallbacks == 0
+
+
+@pytest.mark.parametrize("m", [40, 60])
+def test_random_many_effectors_match_reference(m):
+    """Past 32 generator classes the bisect kernel sorts breakpoints with np.argsort."""
+    rng = np.random.default_rng(m)
+    p = random_problem(rng, 3, m)
+    V = random_demands(rng, p, 100)
+    assert p.m > 32
+    for method in METHODS:
+        assert check_same(p, method, V, rng) == 100

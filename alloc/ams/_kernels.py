@@ -157,7 +157,7 @@ def _sign(x):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def _edge(th, gx, gy0, gz0, cx, cy0, cz0, gy, gz, tb, agy, sig):  # pragma: no cover - compiled
+def _edge(th, gx, gy0, gz0, cx, cy0, cz0, gy, gz, tb, agy, order, sig):  # pragma: no cover - compiled
     """Silhouette edge over the positive x-axis at rotation angle ``th`` (``EdgeBisect._edge``).
 
     Writes the generator signs into ``sig``; returns the edge class and the edge point's z.
@@ -174,7 +174,15 @@ def _edge(th, gx, gy0, gz0, cx, cy0, cz0, gy, gz, tb, agy, sig):  # pragma: no c
         tb[c] = -gx[c] / gy[c] if gy[c] != 0 else np.inf
         agy[c] = abs(gy[c])
         total += agy[c]
-    order = np.argsort(tb)
+    if C <= 32:  # argsort by insertion: no allocation, ties keep index order
+        for q in range(C):
+            i = q
+            while i > 0 and tb[order[i - 1]] > tb[q]:
+                order[i] = order[i - 1]
+                i -= 1
+            order[i] = q
+    else:
+        order[:] = np.argsort(tb)
     # weighted median of the breakpoints: first one where the slope turns non-negative
     base = cy - total
     run = 0.0
@@ -277,12 +285,13 @@ def bisect_solve(v, p0, u0, Nz, Minv, U, S, W, G, c0, lut, pair_cross, tile_ptr,
     cz0 = z0 * c0[0] + z1 * c0[1] + z2 * c0[2]
     K = fractions.shape[0]
     gy, gz, tb, agy = np.empty(C), np.empty(C), np.empty(C), np.empty(C)
+    order = np.empty(C, dtype=np.int64)
     cc = np.empty(K, dtype=np.int64)
     zz = np.empty(K)
     ss = np.empty((K, C))
     sl, sh = np.empty(C), np.empty(C)
     x, xb = np.empty(3), np.empty(3)
-    cl, zl = _edge(first_angles[0], gx, gy0, gz0, cx, cy0, cz0, gy, gz, tb, agy, sl)
+    cl, zl = _edge(first_angles[0], gx, gy0, gz0, cx, cy0, cz0, gy, gz, tb, agy, order, sl)
     ch = cl
     sh[:] = sl
     zh = -zl  # the half-turn sees the same edge, z mirrored
@@ -290,7 +299,7 @@ def bisect_solve(v, p0, u0, Nz, Minv, U, S, W, G, c0, lut, pair_cross, tile_ptr,
     for r in range(1, max_rounds + 1):
         for q in range(K):
             th = first_angles[q + 1] if r == 1 else lo_t + (hi_t - lo_t) * fractions[q]
-            c, z = _edge(th, gx, gy0, gz0, cx, cy0, cz0, gy, gz, tb, agy, ss[q])
+            c, z = _edge(th, gx, gy0, gz0, cx, cy0, cz0, gy, gz, tb, agy, order, ss[q])
             cc[q] = c
             zz[q] = z
         # bracket: first angle whose z has the sign of the upper end
