@@ -110,6 +110,34 @@ def latency(suites: dict, n: int) -> None:
     print()
 
 
+def compiled_vs_reference(n: int) -> None:
+    """The compiled searches (alloc/ams/_kernels.py) next to the numpy reference they replaced."""
+    print("## Compiled search vs numpy reference, solve only, nominal and rate-limited (median / p99 us)\n")
+    print("Rate-limited: ``u_prev = 0``, ``dt = 0.0005`` s.  Allocator: ``make_allocator(p, name)(v)``.\n")
+    print("| suite | method | compiled | reference | compiled, rated | reference, rated | allocator call |"
+          " allocator call, rated |\n|---|---|---|---|---|---|---|---|")
+    for name, p in {"ICE": vehicles.ice(), "HARV": vehicles.harv_latdir()}.items():
+        V = demands(p, n)
+        lo_r, hi_r = p.effective_bounds(np.zeros(p.m), 0.0005)
+        up = np.zeros(p.m)
+        for meth in ("da_facet", "da_bisect", "da_table"):
+            a = alloc.make_allocator(p, meth)
+            impl = a.impl
+            cols = []
+            for fn in (impl.solve, impl._solve_reference):
+                it = iter(V)
+                cols.append(us(timed(lambda: fn(next(it), p.umin, p.umax, None), n)))
+            for fn in (impl.solve, impl._solve_reference):
+                it = iter(V)
+                cols.append(us(timed(lambda: fn(next(it), lo_r, hi_r, up), n)))
+            it = iter(V)
+            cols.append(us(timed(lambda: a(next(it)), n)))
+            it = iter(V)
+            cols.append(us(timed(lambda: a(next(it), u_prev=up, dt=0.0005), n)))
+            print(f"| {name} | {meth} | " + " | ".join(cols) + " |")
+    print()
+
+
 def batch_rate(n: int) -> None:
     print("## Batch direct allocation (allocations per second)\n")
     print("| suite | da_facet batch | pinv batch (floor) | da per call (LP) |\n|---|---|---|---|")
@@ -163,6 +191,7 @@ def main() -> None:
     floors(n)
     builds(suites, 20 if args.quick else 50)
     latency({**suites, **big}, n)
+    compiled_vs_reference(n)
     batch_rate(20_000 if args.quick else 100_000)
     if not args.no_coverage:
         coverage_tables(args.samples)
