@@ -352,6 +352,70 @@ def table_solve(v, p0, u0, Nz, Minv, U, S, W, table, na, ne):  # pragma: no cove
 
 # ---------------------------------------------------------------- rate-limited box
 @njit(cache=True, nogil=True)
+def _solve_columns(E, rhs, Q, R, rcond):  # pragma: no cover - compiled
+    """Least-squares ``p`` with ``E p = rhs`` (``E`` (k, n), n < k, ``rhs`` in its range).
+
+    Modified Gram-Schmidt QR (accurate to ``cond(E) eps``, as ``lstsq``; a few us cheaper).
+    When a column is nearly dependent on the others (``cond(E) >~ 1e6``: a class whose
+    rate window is empty, or nearly parallel classes) the system goes to
+    ``np.linalg.lstsq`` as in the numpy reference, for the same minimum-norm answer.
+    """
+    k, n = E.shape
+    for e in range(n):
+        for i in range(k):
+            Q[e, i] = E[i, e]
+    scale = 0.0
+    for e in range(n):
+        s = 0.0
+        for i in range(k):
+            s += Q[e, i] * Q[e, i]
+        scale = max(scale, math.sqrt(s))
+    for e in range(n):
+        for f in range(e):
+            s = 0.0
+            for i in range(k):
+                s += Q[f, i] * Q[e, i]
+            R[f, e] = s
+            for i in range(k):
+                Q[e, i] -= s * Q[f, i]
+        s = 0.0
+        for i in range(k):
+            s += Q[e, i] * Q[e, i]
+        s = math.sqrt(s)
+        if not s > 1e-6 * scale:  # ill-conditioned or dependent: as the reference
+            return np.linalg.lstsq(E, rhs, rcond)[0]
+        R[e, e] = s
+        for i in range(k):
+            Q[e, i] /= s
+    p = _qr_back(Q, R, rhs, np.zeros(n))
+    # one step of refinement on the residual: as close to lstsq as round-off allows
+    res = np.empty(k)
+    for i in range(k):
+        s = rhs[i]
+        for e in range(n):
+            s -= E[i, e] * p[e]
+        res[i] = s
+    return _qr_back(Q, R, res, p)
+
+
+@njit(cache=True, nogil=True)
+def _qr_back(Q, R, rhs, p0):  # pragma: no cover - compiled
+    """``p0 + R^-1 Q^T rhs`` for the thin QR of :func:`_solve_columns`."""
+    n, k = Q.shape
+    p = np.empty(n)
+    for e in range(n - 1, -1, -1):
+        s = 0.0
+        for i in range(k):
+            s += Q[e, i] * rhs[i]
+        for f in range(e + 1, n):
+            s -= R[e, f] * p[f]
+        p[e] = s / R[e, e]
+    for e in range(n):
+        p[e] += p0[e]
+    return p
+
+
+@njit(cache=True, nogil=True)
 def ray_exit_solve(v, up, lo, hi, B, Br, Nr, NB, member, sign, active, tile_hi, tile_span,
                    facet_ptr):  # pragma: no cover - compiled
     """Direct allocation in a box ``[lo, hi]`` inside the position limits (full-rank set).
@@ -415,6 +479,8 @@ def ray_exit_solve(v, up, lo, hi, B, Br, Nr, NB, member, sign, active, tile_hi, 
     ustar = u0.copy()
     best = -np.inf
     rcond = _EPS * max(k, n_free)
+    Qw = np.empty((n_free, k))
+    Rw = np.empty((n_free, n_free))
     for t in range(facet_ptr[f], facet_ptr[f + 1]):
         for j in range(m):
             Ut[j] = (hi[j] if tile_hi[t, j] else lo[j]) if active[j] else u0[j]
@@ -434,7 +500,7 @@ def ray_exit_solve(v, up, lo, hi, B, Br, Nr, NB, member, sign, active, tile_hi, 
                 E[i, e] = s
         margin = 0.0
         if n_free > 0:
-            p = np.linalg.lstsq(E, rhs, rcond)[0]
+            p = _solve_columns(E, rhs, Qw, Rw, rcond)
             margin = np.inf
             for e in range(n_free):
                 margin = min(margin, min(p[e], 1.0 - p[e]))
