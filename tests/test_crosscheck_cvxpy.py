@@ -142,10 +142,12 @@ def test_lp_matches_cvxpy_objectives(name, p, v, rated):
     assert J2 == pytest.approx(J2_ref, abs=1e-6 * max(1.0, J2_ref))
 
 
+@pytest.mark.parametrize("backend", ["auto", "daqp", "highs"])
 @pytest.mark.parametrize("name,p,v,rated", CASES, ids=IDS)
-def test_da_matches_cvxpy_scale(name, p, v, rated):
+def test_da_matches_cvxpy_scale(name, p, v, rated, backend):
+    """Both the facet search (``auto`` on these sizes) and the LP backends."""
     lo, hi, kw = bounds(p, rated)
-    alloc_da = alloc.make_allocator(p, "da")
+    alloc_da = alloc.make_allocator(p, "da", backend=backend)
     r = alloc_da(v, **kw)
     a_ref = cvx_da(p, v, lo, hi)
     u0 = np.clip(p.up, lo, hi)

@@ -10,13 +10,20 @@ bounds; ``u0 = 0`` in the seed):
 The solution ``u*`` lies on the AMS boundary.  When ``a* >= 1`` the demand is attainable
 and the boundary solution is scaled back along the ray (Eq 1.15):
 ``u = u0 + (u* - u0) / a*``, so ``B u = v``.  Otherwise ``u = u*``, the boundary point in
-the demanded direction (status ``unattainable``).  With a rank-deficient ``B`` the ray
+the demanded direction (status ``unattainable``).
+
+Backends: the exact facet search of :mod:`alloc.ams` (``da_facet``: precomputed facet
+inverses, compiled) and this module's LP on a persistent DAQP (or HiGHS) model, polished
+on the facet it finds.  ``backend="auto"`` picks the facet search while the attainable set
+is small enough to enumerate (``C(m, k-1) <= FACET_LIMIT``) and the LP beyond.  With a rank-deficient ``B`` the ray
 follows the part of ``d`` in the range of ``B``; the rest is reported as unallocated.  When the ray leaves the AMS through an
 edge or a degenerate facet, ``u*`` is not unique (the moment is).  The facet-search
 versions (``da_facet``, ``da_bisect``) live in :mod:`alloc.ams`.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -27,14 +34,29 @@ from ..solvers import backends, make_backend
 from ._common import check_backend, row_basis
 
 
+#: ``backend="auto"`` uses the facet search up to this many facet generator subsets
+#: C(m, k-1); beyond it the attainable set is too large to enumerate (k = 6, m = 64 has
+#: 7.6 million) and the LP is used.
+FACET_LIMIT = 20_000
+
+
 @register("da")
-class DirectAllocationLP(Method):
+class DirectAllocation(Method):
     equation = "Eqs 1.15-1.17"
     summary = "largest admissible moment along v (AMS boundary), scaled back when attainable"
-    options = {"backend": "LP solver: 'daqp' (default) or 'highs'"}
+    options = {"backend": "'auto' (default: facet search when C(m, k-1) <= 20,000, else LP), "
+                          "'facet', or an LP solver: 'daqp', 'highs'"}
 
-    def __init__(self, problem: Problem, *, backend: str = "daqp") -> None:
+    def __init__(self, problem: Problem, *, backend: str = "auto") -> None:
         super().__init__(problem)
+        self._facet = None
+        if backend in ("auto", "facet"):
+            if backend == "facet" or math.comb(problem.m, max(problem.k - 1, 0)) <= FACET_LIMIT:
+                from ..ams.search import FacetSearch  # the compiled exact facet search (alloc.ams)
+
+                self._facet = FacetSearch(problem)
+                return
+            backend = "daqp"
         name = check_backend(backend, backends(lp=True), "da")
         p = problem
         # Equalities on the row space of B only (a rank-deficient B has dependent rows).
@@ -85,7 +107,12 @@ class DirectAllocationLP(Method):
             a, ustar, _ = facet_polish(self._B, ustar, d, u0, lo, hi, a)
         return a, ustar, it
 
+    def solve_batch(self, V, lo, hi):
+        return None if self._facet is None else self._facet.solve_batch(V, lo, hi)
+
     def solve(self, v, lo, hi, u_prev):
+        if self._facet is not None:
+            return self._facet.solve(v, lo, hi, u_prev)
         p = self.problem
         if lo is p.umin and hi is p.umax:
             u0, Bu0 = self._u0, self._Bu0
