@@ -85,7 +85,7 @@ def main(argv: list[str] | None = None) -> dict:
     for name in ("pinv", "pinv_clip", "pinv_scale", "ganging", "da", "da_facet"):
         if name not in alloc.methods():
             continue
-        n = args.batch if name not in ("da",) else min(args.batch, 20_000)  # da loops: measured on fewer
+        n = args.batch
         t0 = time.perf_counter()
         alloc.allocate_batch(p, VB[:n], name)
         dt = time.perf_counter() - t0
