@@ -20,12 +20,13 @@ from .exceptions import (
     SolverError,
     UnknownMethodError,
 )
+from .health import EffectorHealth, FailureEvent, FailureKind
 from .problem import Problem
 from .registry import method_info, methods, register
 from .result import EXACT_RTOL, BatchResult, Result, Status
 
 __all__ = [
-    "Problem", "Result", "BatchResult", "Status", "EXACT_RTOL",
+    "Problem", "EffectorHealth", "FailureEvent", "FailureKind", "Result", "BatchResult", "Status", "EXACT_RTOL",
     "allocate", "allocate_batch", "make_allocator", "Allocator",
     "methods", "method_info", "register",
     "AllocError", "ProblemError", "DemandError", "OptionError", "UnknownMethodError", "SolverError",

@@ -259,6 +259,15 @@ class Problem:
         umin[i], umax[i] = lo_f, hi_f
         return self.replace(umin=umin, umax=umax)
 
+    def with_health(self, health: Any) -> Problem:
+        """The problem with effector failures applied: ``{effector: alloc.health.EffectorHealth}``.
+
+        See :mod:`alloc.health` for the failure kinds and their one meaning each.
+        """
+        from .health import apply_health
+
+        return apply_health(self, health)
+
     # ------------------------------------------------------------ rate limits
     def check_demand(self, v: ArrayLike) -> FloatArray:
         """Validate a demand vector; return it as a float array of shape (k,)."""
