@@ -43,6 +43,31 @@ class Method(ABC):
     #: accepted options: name -> description (shown by ``alloc methods`` and the service)
     options: ClassVar[dict[str, str]] = {}
 
+    # Capabilities, declared at registration (``@register(name, affine=True, ...)``) and read
+    # by the service, the coverage tools and the benchmarks; never guessed from module names.
+    #: without rate limits the method is an affine map ``u = clip(c + P v)``
+    affine: ClassVar[bool] = False
+    #: the build enumerates the attainable moment set's facets (cost grows as C(m, k-1))
+    needs_ams: ClassVar[bool] = False
+    #: accepts the ``priorities`` option (axes met level by level)
+    supports_priorities: ClassVar[bool] = False
+    #: implements a vectorised :meth:`solve_batch`
+    supports_batch: ClassVar[bool] = False
+
+    @classmethod
+    def facet_subsets(cls, problem: Problem, options: dict[str, Any]) -> int:
+        """Facet generator subsets the build enumerates, C(m_free, k-1); 0 if none.
+
+        The service caps builds with it (one definition of the facet limit lives in
+        :data:`alloc.methods.direct.FACET_LIMIT`).
+        """
+        if not cls.needs_ams:
+            return 0
+        import math
+
+        free = int((problem.umax > problem.umin).sum())
+        return math.comb(free, max(problem.k - 1, 0))
+
     #: ``(c, P)`` when the method is ``u = clip(c + P v)`` without rate limits: the
     #: allocator then runs it as one compiled call (pseudo-inverse family, ganging).
     fused: tuple[FloatArray, FloatArray] | None = None
@@ -61,13 +86,25 @@ class Method(ABC):
         return None
 
 
-def register(name: str):
-    """Class decorator registering an allocation method under ``name``."""
+_CAPABILITIES = ("affine", "needs_ams", "supports_priorities", "supports_batch")
+
+
+def register(name: str, **capabilities: bool):
+    """Class decorator registering an allocation method under ``name``.
+
+    ``capabilities`` set the declared capability attributes of :class:`Method`
+    (``affine``, ``needs_ams``, ``supports_priorities``, ``supports_batch``).
+    """
+    unknown = sorted(set(capabilities) - set(_CAPABILITIES))
+    if unknown:
+        raise TypeError(f"register: unknown capabilities {unknown}; accepted: {', '.join(_CAPABILITIES)}")
 
     def deco(cls: type[Method]) -> type[Method]:
         if name in _REGISTRY:
             raise ValueError(f"method {name!r} registered twice")
         cls.name = name
+        for cap, value in capabilities.items():
+            setattr(cls, cap, bool(value))
         _REGISTRY[name] = cls
         return cls
 
@@ -97,7 +134,8 @@ def methods() -> list[str]:
 def method_info(name: str) -> dict[str, Any]:
     """Name, seed equation, summary and options of a method (for the CLI and the service)."""
     cls = get_method(name)
-    return {"name": name, "equation": cls.equation, "summary": cls.summary, "options": dict(cls.options)}
+    return {"name": name, "equation": cls.equation, "summary": cls.summary, "options": dict(cls.options),
+            "capabilities": {cap: bool(getattr(cls, cap)) for cap in _CAPABILITIES}}
 
 
 def build(problem: Problem, name: str, options: dict[str, Any]) -> Method:

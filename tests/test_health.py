@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 import alloc
+import alloc.registry
 from alloc.health import (
     HEALTHY, EffectorHealth, FailureEvent, FailureKind, apply_event, health_from_dict, health_to_dict,
 )
@@ -72,3 +73,17 @@ def test_json_round_trip(nominal):
          "c": EffectorHealth(floating=True, limits=(0.0, 5.0))}
     assert health_from_dict(health_to_dict(h)) == h
     assert HEALTHY.status == "healthy"
+
+
+def test_capabilities_are_declared_not_guessed():
+    info = {name: alloc.method_info(name)["capabilities"] for name in alloc.methods()}
+    assert {n for n, c in info.items() if c["needs_ams"]} == {"da_facet", "da_bisect", "da_table"}
+    assert {n for n, c in info.items() if c["affine"]} == {"ganging", "pinv", "pinv_clip"}
+    assert {n for n, c in info.items() if c["supports_priorities"]} == {"qp", "lp", "cgi"}
+    for name, caps in info.items():
+        cls = alloc.registry.get_method(name)
+        assert caps["supports_priorities"] == ("priorities" in cls.options), name
+        assert caps["supports_batch"] == (cls.solve_batch is not alloc.registry.Method.solve_batch), name
+    p = alloc.Problem(np.ones((3, 11)), -np.ones(11), np.ones(11))
+    assert alloc.registry.get_method("da_facet").facet_subsets(p, {}) == 55
+    assert alloc.registry.get_method("pinv").facet_subsets(p, {}) == 0

@@ -51,7 +51,7 @@ _EQ = "Eqs 1.15-1.17"
 _TOL = 1e-10  # Eq 1.17 slack, relative (rays through an edge satisfy two tiles up to round-off)
 
 
-@register("da_facet")
+@register("da_facet", needs_ams=True, supports_batch=True)
 class FacetSearch(Method):
     """Direct allocation by sequential facet search over precomputed facet inverses."""
 
@@ -222,7 +222,7 @@ class FacetSearch(Method):
         self._facet_pad = pad
 
 
-@register("da_bisect")
+@register("da_bisect", needs_ams=True, supports_batch=True)
 class EdgeBisect(FacetSearch):
     """Direct allocation by Durham's edge-bisecting facet search (k = 3)."""
 
@@ -395,7 +395,7 @@ class EdgeBisect(FacetSearch):
         return self._from_tile(int(tl[t]), X[t])
 
 
-@register("da_table")
+@register("da_table", needs_ams=True, supports_batch=True)
 class SphericalTable(FacetSearch):
     """Direct allocation with a spherical (azimuth, elevation) look-up table of facets (k = 3)."""
 

@@ -28,7 +28,7 @@ def check_priorities(priorities, k: int) -> list[np.ndarray] | None:
     return priority_groups(pr.astype(int).tolist(), k)
 
 
-@register("cgi")
+@register("cgi", supports_priorities=True)
 class CascadedGeneralizedInverse(Method):
     """Cascaded generalized inverse (section 1.3.4.6, after Eq 1.23).
 

@@ -23,6 +23,8 @@ versions (``da_facet``, ``da_bisect``) live in :mod:`alloc.ams`.
 
 from __future__ import annotations
 
+from typing import Any
+
 import math
 
 import numpy as np
@@ -40,12 +42,21 @@ from ._common import check_backend, row_basis
 FACET_LIMIT = 20_000
 
 
-@register("da")
+@register("da", supports_batch=True)
 class DirectAllocation(Method):
     equation = "Eqs 1.15-1.17"
     summary = "largest admissible moment along v (AMS boundary), scaled back when attainable"
     options = {"backend": "'auto' (default: facet search when C(m, k-1) <= 20,000, else LP), "
                           "'facet', or an LP solver: 'daqp', 'highs'"}
+
+    @classmethod
+    def facet_subsets(cls, problem: Problem, options: dict[str, Any]) -> int:
+        """Subsets the build enumerates: only with ``backend="facet"`` or ``"auto"`` under the limit."""
+        backend = options.get("backend", "auto")
+        n = math.comb(int((problem.umax > problem.umin).sum()), max(problem.k - 1, 0))
+        if backend == "facet" or (backend == "auto" and math.comb(problem.m, max(problem.k - 1, 0)) <= FACET_LIMIT):
+            return n
+        return 0
 
     def __init__(self, problem: Problem, *, backend: str = "auto") -> None:
         super().__init__(problem)

@@ -11,7 +11,7 @@ from ..registry import Method, register
 from .pseudo_inverse import distribution_matrix
 
 
-@register("ganging")
+@register("ganging", affine=True, supports_batch=True)
 class Ganging(Method):
     """``u = up + G v`` clipped to the limits.
 

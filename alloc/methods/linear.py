@@ -29,7 +29,7 @@ from ._common import check_backend, check_diagonal, row_basis
 from .cascade import check_priorities
 
 
-@register("lp")
+@register("lp", supports_priorities=True)
 class TwoStageLP(Method):
     equation = "Eqs 1.18-1.19"
     summary = "stage 1 min weighted 1-norm moment error, stage 2 min weighted 1-norm |u-up|"

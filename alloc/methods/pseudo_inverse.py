@@ -66,7 +66,7 @@ class _PinvBase(Method):
         return affine(self.c, self.P, v)
 
 
-@register("pinv")
+@register("pinv", affine=True, supports_batch=True)
 class Pinv(_PinvBase):
     summary = "biased weighted pseudo-inverse, min (u-up)'Wu(u-up) s.t. Bu=v; clipped where inadmissible"
 
@@ -82,12 +82,12 @@ class Pinv(_PinvBase):
         return np.minimum(np.maximum(self.c + V @ self._PT, lo), hi)
 
 
-@register("pinv_clip")
+@register("pinv_clip", affine=True, supports_batch=True)
 class PinvClip(Pinv):
     summary = "Eq 1.23 with individual commands clipped to their limits"
 
 
-@register("pinv_scale")
+@register("pinv_scale", supports_batch=True)
 class PinvScale(_PinvBase):
     summary = "direction-preserving weighted pseudo-inverse: the increment scaled by one factor"
 

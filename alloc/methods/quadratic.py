@@ -35,7 +35,7 @@ STAGE1_RIDGE = 1e-10
 _BACKEND_DOC = "solver backend: 'daqp' (default) or a qpsolvers name such as 'osqp', 'clarabel'"
 
 
-@register("qp")
+@register("qp", supports_priorities=True)
 class TwoStageQP(Method):
     equation = "Eqs 1.20-1.21"
     summary = "stage 1 min moment error (Wv), stage 2 min (u-up)'Wu(u-up) at that moment"
