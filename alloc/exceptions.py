@@ -18,7 +18,22 @@ __all__ = [
 
 
 class AllocError(Exception):
-    """Base class of every error raised by :mod:`alloc`."""
+    """Base class of every error raised by :mod:`alloc`.
+
+    Messages start with the field they concern (``"rate_min: ..."``); :attr:`field`
+    carries it for programs (the service's problem+json), given explicitly or read from
+    that leading name.
+    """
+
+    def __init__(self, *args: object, field: str | None = None) -> None:
+        super().__init__(*args)
+        if field is None and args and isinstance(args[0], str):
+            head, sep, _ = args[0].partition(":")
+            token = head.split("[", 1)[0].strip()
+            if sep and token and all(part.isidentifier() for part in token.split("/")):
+                field = token
+        #: the input field the error concerns (``None`` when it concerns no single field)
+        self.field = field
 
 
 class ProblemError(AllocError, ValueError):

@@ -87,3 +87,12 @@ def test_capabilities_are_declared_not_guessed():
     p = alloc.Problem(np.ones((3, 11)), -np.ones(11), np.ones(11))
     assert alloc.registry.get_method("da_facet").facet_subsets(p, {}) == 55
     assert alloc.registry.get_method("pinv").facet_subsets(p, {}) == 0
+
+
+@pytest.mark.parametrize("msg, field", [
+    ("rate_min: rate_min[1] = 2 must be <= 0", "rate_min"), ("umin/umax: umin[0] > umax[0]", "umin/umax"),
+    ("Wu[3]: negative", "Wu"), ("no field here", None), ("two words: reason", None),
+])
+def test_errors_carry_the_field(msg, field):
+    assert alloc.ProblemError(msg).field == field
+    assert alloc.OptionError("x", field="gamma").field == "gamma"
