@@ -46,7 +46,7 @@ def test_dask_and_local_give_identical_csvs(tmp_path: Path, specs: list[dict], l
 def test_rerun_skips_finished_runs(tmp_path: Path, specs: list[dict], local_dir: Path) -> None:
     for name in RESULT_TABLES:
         (tmp_path / name).write_bytes((local_dir / name).read_bytes())
-    outcome = run_sweep(specs, tmp_path, workers=2, progress=False)
+    outcome = run_sweep(specs, tmp_path, workers=2, progress=False, resume=True)
     assert (outcome.ran, outcome.skipped) == (0, len(specs))
 
 
@@ -54,7 +54,7 @@ def test_interrupted_sweep_resumes(tmp_path: Path, specs: list[dict], local_dir:
     # an interrupted run: two complete open-loop rows, a third cut mid-line, no closed loop yet
     lines = (local_dir / "open.csv").read_text().splitlines(keepends=True)
     (tmp_path / "open.csv").write_text("".join(lines[:3]) + lines[3][: len(lines[3]) // 2])
-    outcome = run_sweep(specs, tmp_path, workers=2, progress=False)
+    outcome = run_sweep(specs, tmp_path, workers=2, progress=False, resume=True)
     assert (outcome.ran, outcome.skipped) == (len(specs) - 2, 2)
     for name in RESULT_TABLES:
         assert (tmp_path / name).read_bytes() == (local_dir / name).read_bytes(), name
