@@ -287,8 +287,9 @@ def _plot_heatmap(cells: Sequence[Row], failures: Sequence[str], out: Path, name
         ax.set_xticks(range(len(failures)), failures, rotation=45, ha="right", fontsize=7)
         ax.set_yticks(range(len(methods)), methods, fontsize=7)
         ax.set_title(f"allocator {mode}", fontsize=8)
-    fig.colorbar(img, ax=axes, shrink=0.8, label="median post-failure RMS / static's (log; div = median diverged)")
-    fig.suptitle(title, fontsize=9)
+    fig.colorbar(img, ax=axes, shrink=0.8).set_label("median score: post-failure RMS / static's\n(log scale; div: diverged)",
+                                                     fontsize=7)
+    fig.suptitle(title, fontsize=9, y=1.0 + 0.3 / (1.2 + 0.32 * len(methods)))
     fig.savefig(out / f"{name}.png", dpi=DPI, bbox_inches="tight")
     plt.close(fig)
     return f"{name}.png"
@@ -301,8 +302,8 @@ def _plot_forest(ratios: Sequence[Row], failures: Sequence[str], out: Path, name
     methods = sorted({r["method"] for r in ratios})
     cols = min(4, len(failures))
     nrows = math.ceil(len(failures) / cols)
-    fig, axes = plt.subplots(nrows, cols, figsize=(3.0 * cols, 0.6 + 0.22 * len(methods) * nrows), sharey=True,
-                             squeeze=False)
+    fig, axes = plt.subplots(nrows, cols, figsize=(3.0 * cols, 1.0 + nrows * (0.5 + 0.2 * len(methods))),
+                             sharey=True, squeeze=False)
     lookup = {(r["failure"], r["method"]): r for r in ratios}
     for k, ax in enumerate(axes.flat):
         if k >= len(failures):
@@ -326,7 +327,7 @@ def _plot_forest(ratios: Sequence[Row], failures: Sequence[str], out: Path, name
         ax.grid(axis="x", alpha=0.3)
     fig.suptitle(title + "\ntold / blind median score, 95 % paired bootstrap (< 1: telling helps; clipped to 1/16..16)",
                  fontsize=8)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0, 1, 1 - 0.45 / fig.get_figheight()))
     fig.savefig(out / f"{name}.png", dpi=DPI)
     plt.close(fig)
     return f"{name}.png"
