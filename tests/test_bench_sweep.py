@@ -111,3 +111,20 @@ def test_latency_comes_from_its_own_pass(tmp_path: Path) -> None:
     text = _latency_section(tmp_path, {"cores": 2})
     saved = list(csv.DictReader((tmp_path / TIMINGS_CSV).open()))
     assert f"| qp | {float(saved[1]['median_us']):.3g} / {float(saved[1]['p99_us']):.3g}" in text
+
+
+def test_recovery_time() -> None:
+    from benchmarks.compare.closedloop import recovery_time
+
+    t = np.arange(0, 10.0001, 0.01)
+    err = np.full((t.size, 2), 0.1)
+    err[(t >= 4) & (t < 6.5), 1] = 1.0  # 10x the pre-failure RMS of channel 1 for 2.5 s after t = 4
+    before = np.array([0.1, 0.1])
+    assert recovery_time(t, err, 4.0, before) == 3.0  # windows [4,5), [5,6), [6,7) bad; recovered from 7 s
+    err[t >= 9.5, 0] = 1.0  # bad again at the end: never recovered
+    assert recovery_time(t, err, 4.0, before) == float("inf")
+    err[t >= 9.5, 0] = 0.1
+    assert recovery_time(t, err, 4.0, before) == 3.0
+    err[-1, 0] = 50.0  # the lone end sample t = 10 belongs to the last full window [9, 10] (RMS about 5)
+    assert recovery_time(t, err, 4.0, before) == float("inf")
+    assert np.isnan(recovery_time(t, err, 0.0, np.array([np.nan, 0.1])))  # no pre-failure interval

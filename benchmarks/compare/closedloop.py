@@ -14,8 +14,10 @@ of it (``allocator_knows_failure``).  Row columns:
 * ``effort_after`` -- mean over post-failure samples and effectors of ``|u_i| / max(|lo_i|, |hi_i|)``
   (nominal limits): 0 = at rest, 1 = every effector at full deflection all the time.
 * ``unattainable_after`` -- fraction of post-failure samples where the allocator did not meet its
-  demand (``|v - v_achieved| > 1e-6 (1 + |v|)``, from the simulator's ``unallocated``), unless the
-  simulator reports its own ``unattainable_fraction``.
+  demand by its own model (``|v - v_achieved| > 1e-6 (1 + |v|)``, from the simulator's
+  ``unallocated``: clipping counts, so ``pinv`` on ICE, whose one-sided effectors it drives
+  negative, scores near 1 even before a failure), unless the simulator reports its own
+  ``unattainable_fraction``.
 * ``fallback_after`` -- fraction of allocator calls with status ``fallback``, when the simulator
   reports it (``fallback_fraction`` in the summary); empty otherwise.
 * ``time_in_position_saturation``, ``time_in_rate_saturation`` (s).
@@ -72,16 +74,18 @@ def recovery_time(t: np.ndarray, err: np.ndarray, failure_time: float, rms_befor
     ta, ea = t[after], err[after]
     if ta.size == 0:
         return math.nan
-    window = np.floor((ta - failure_time) / RECOVERY_WINDOW_S).astype(int)
+    # full windows only: samples past the last full window join it (a lone end sample is no window)
+    n_windows = max(1, int(np.floor((ta[-1] - failure_time) / RECOVERY_WINDOW_S + 1e-9)))
+    window = np.minimum(np.floor((ta - failure_time) / RECOVERY_WINDOW_S).astype(int), n_windows - 1)
     last_bad = -1
-    for w in range(int(window.max()) + 1):
+    for w in range(n_windows):
         sel = window == w
         if not np.any(sel):
             continue
         rms = np.sqrt(np.mean(ea[sel] ** 2, axis=0))
         if np.any(rms > RECOVERY_FACTOR * rms_before):
             last_bad = w
-    if last_bad == int(window.max()):
+    if last_bad == n_windows - 1:
         return math.inf
     return float((last_bad + 1) * RECOVERY_WINDOW_S)
 

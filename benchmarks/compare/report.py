@@ -56,6 +56,8 @@ DPI = 80
 RANDOM = "random suite"
 TITLES = {"ice": "ICE", "harv_latdir": "F-18/HARV lat-dir"}
 COVERAGE_PROBLEM = {"ice": "ice", "harv_latdir": "harv_latdir"}
+#: fewer noise seeds than this per cell: the report says its intervals are indicative only
+FEW_SEEDS = 10
 
 
 # ----------------------------------------------------------------------------- loading
@@ -467,6 +469,11 @@ def _closed_section(out: Path, scenario: str, setting: str, rows: list[Row], cel
              f"{len(rows)} runs: {r0['duration']:g} s, failure at t = {r0['failure_time']:g} s "
              f"(HARV `failure2`: at 0 s), noise seeds {sorted({int(r['seed']) for r in rows})}, "
              f"failures {', '.join(f'`{f}`' for f in failures)}.", ""]
+    n_seeds = len({int(r["seed"]) for r in rows})
+    if n_seeds < FEW_SEEDS:
+        lines += [f"**Only {n_seeds} noise seeds per cell:** a percentile bootstrap of a median over {n_seeds} values "
+                  "can only return values between their extremes and under-covers; the intervals, the ties and the "
+                  "told/blind verdicts below are indicative, not 95 % statements.", ""]
     figures = []
     png = _plot_heatmap(cells, failures, out, f"heatmap_{tag}", title)
     figures.append(png)
