@@ -13,7 +13,7 @@ import math
 from collections.abc import Mapping, Sequence
 
 import numpy as np
-from scipy.stats import spearmanr
+from scipy.stats import rankdata, spearmanr
 
 __all__ = ["Interval", "bootstrap_median", "paired_ratio", "rank_with_ties", "spearman", "N_BOOT"]
 
@@ -102,7 +102,5 @@ def spearman(a: Sequence[float], b: Sequence[float]) -> tuple[float, float, int]
     if n < 3 or np.all(x == x[0]) or np.all(y == y[0]):
         return math.nan, math.nan, n
     # rank first: scipy would turn inf into nan
-    from scipy.stats import rankdata
-
     res = spearmanr(rankdata(x), rankdata(y))
     return float(res.statistic), float(res.pvalue), n
