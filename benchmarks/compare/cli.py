@@ -139,8 +139,9 @@ def full(scheduler: str | None = _SCHEDULER, out: Path | None = _OUT, workers: i
          frame_rates: str = typer.Option("seed,100", "--frame-rates",
                                          help="flight-control frame rates: 'seed' (the seed's 0.5 ms) and/or Hz"),
          dry_run: bool = typer.Option(False, "--dry-run", help="print the run count and exit")) -> None:
-    """ICE and HARV lat-dir: every method x the scenario's and the catalogue's failures x blind/told
-    x frame rates x pilot settings x noise seeds (long: see --dry-run for its size)."""
+    """ICE and HARV lat-dir: every method x failure x blind/told x frame rate x pilot x seed (long; --dry-run).
+
+    Failures: the scenario's own and the catalogue's (5 kinds, single and double)."""
     specs = full_sweep(seeds=seeds, frame_rates=_frame_rates(frame_rates))
     if dry_run:
         closed = sum(s["kind"] == "closed" for s in specs)
