@@ -1,17 +1,28 @@
-"""The comparison report computes its numbers from the CSVs: scores, rankings, Spearman."""
+"""The comparison report computes its numbers from the CSVs (synthetic rows with known answers),
+and every figure's data (``X.csv`` next to ``X.png``) is the table printed next to it."""
 
 from __future__ import annotations
 
 import csv
+import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 
-from benchmarks.compare.report import make_report
+from benchmarks.compare.report import (
+    cell_summaries, closed_scores, coverage_agreement, make_report, parse_markdown_table, told_blind,
+)
+from benchmarks.compare.stats import bootstrap_median, paired_ratio, rank_with_ties, spearman
 from benchmarks.compare.sweep import STATIC, closed_spec, open_spec, quick_sweep
 
-METHODS = ("pinv", "qp", "da_facet", "cgi")
 CHANNELS = ("alphaw", "ps", "betaw")
+SETTING = {"pilot_gain": 1.0}
+SEEDS = range(1, 11)
+#: method -> (told factor, blind factor) on the static design's post-failure RMS
+FACTORS = {"da_facet": (0.5, 0.8), "qp": (0.52, 0.8), "cgi": (1.0, 1.0), "pinv": (2.0, 1.5)}
+COVERAGE = {"da_facet": 1.0, "qp": 0.95, "cgi": 0.8, "pinv": 0.5}
+FAILURES = ("seed", "jam1")
 
 
 def _write(path: Path, rows: list[dict]) -> None:
@@ -22,71 +33,174 @@ def _write(path: Path, rows: list[dict]) -> None:
 
 
 def _closed_row(spec: dict, rms_after: float, diverged: bool = False) -> dict:
-    row = {k: spec[k] for k in ("id", "scenario", "failure", "method", "told", "seed", "duration",
-                                "failure_time", "noise")}
-    row.update(diverged=diverged, simulated=spec["duration"])
+    row = {"id": spec["id"], "scenario": spec["scenario"], "setting": "pilot_gain=1", "failure": spec["failure"],
+           "method": spec["method"], "told": spec["told"], "seed": spec["seed"], "duration": spec["duration"],
+           "failure_time": spec["failure_time"], "noise": True, "diverged": diverged, "simulated": spec["duration"]}
     for c in CHANNELS:
         row.update({f"{c}_rms_before": 0.1, f"{c}_rms_after": rms_after, f"{c}_max_before": 0.2,
                     f"{c}_max_after": 2 * rms_after})
-    row.update(time_in_position_saturation=1.0, time_in_rate_saturation=0.0)
+    row.update(recover_s=1.0, effort_after=0.2, unattainable_after=0.0, fallback_after="",
+               time_in_position_saturation=1.0, time_in_rate_saturation=0.0)
     return row
-
-
-def _open_row(spec: dict, coverage: float, err: float) -> dict:
-    return {"id": spec["id"], "problem": spec["problem"], "method": spec["method"], "coverage": coverage,
-            "coverage_lo": coverage, "coverage_hi": coverage, "coverage_estimator": "polytope",
-            "unatt_err_mean": err, "unatt_err_max": 2 * err, "unatt_angle_mean": 0.0, "effort_mean": 1.0,
-            "rate_violation_max": 0.0, "traj_err_mean": err, "fallbacks": 0, "calls": 10}
 
 
 @pytest.fixture()
 def sweep(tmp_path: Path) -> list[dict]:
-    """Synthetic CSVs: told, the closed-loop order follows coverage exactly; blind, the reverse."""
-    kw = dict(seed=1, duration=2.0, failure_time=1.0)
-    specs = [closed_spec("ice", "seed", STATIC, told=False, **kw)]
-    closed = [_closed_row(specs[0], 2.0)]
-    for i, m in enumerate(METHODS):  # told: score (i + 1) / 4, the coverage order; blind: reversed
-        for told, rms in ((True, 0.5 * (i + 1)), (False, 0.5 * (len(METHODS) - i))):
-            s = closed_spec("ice", "seed", m, told=told, **kw)
-            specs.append(s)
-            closed.append(_closed_row(s, rms))
+    """Synthetic CSVs: static's post-failure RMS varies with the seed; each method is a fixed
+    factor of it (``FACTORS``), told runs times a seeded 5 % jitter; coverage orders the told methods."""
+    rng = np.random.default_rng(7)
+    kw = dict(duration=2.0, failure_time=1.0, sim=SETTING)
+    specs, closed = [], []
+    for f in FAILURES:
+        for s in SEEDS:
+            base = 1.0 + 0.5 * rng.random()
+            spec = closed_spec("ice", f, STATIC, told=False, seed=s, **kw)
+            specs.append(spec)
+            closed.append(_closed_row(spec, base))
+            for m, (ft, fb) in FACTORS.items():
+                jitter = 1.0 + 0.05 * rng.standard_normal()
+                if m == "cgi":  # told half 10 % better, half 10 % worse: told/blind undecided
+                    jitter = 0.9 + 0.2 * (s % 2)
+                for told, factor in ((True, ft), (False, fb)):
+                    spec = closed_spec("ice", f, m, told=told, seed=s, **kw)
+                    specs.append(spec)
+                    closed.append(_closed_row(spec, base * factor * (jitter if told else 1.0)))
     opened = []
-    for i, m in enumerate(METHODS):
-        s = open_spec("ice", m, samples=10, demands=5, steps=5, latency_calls=5)
+    for m, cov in COVERAGE.items():
+        s = open_spec("ice", m, samples=10, demands=5, steps=5)
         specs.append(s)
-        opened.append(_open_row(s, coverage=1.0 - 0.2 * i, err=float(i + 1)))
+        opened.append({"id": s["id"], "problem": "ice", "method": m, "coverage": cov, "coverage_lo": cov,
+                       "coverage_hi": cov, "coverage_estimator": "polytope", "unatt_err_mean": 1 - cov,
+                       "unatt_err_max": 1.0, "unatt_angle_mean": 0.0, "effort_mean": 1.0, "rate_violation_max": 0.0,
+                       "traj_err_mean": 0.1, "fallbacks": 0, "calls": 10})
     _write(tmp_path / "closed_ice.csv", closed)
     _write(tmp_path / "open.csv", opened)
-    _write(tmp_path / "open_timings.csv", [{"id": r["id"], "latency_median_us": 5.0, "latency_p99_us": 9.0}
-                                           for r in opened])
     return specs
 
 
-def test_report_numbers_come_from_the_csvs(tmp_path: Path, sweep: list[dict]) -> None:
-    meta = {"sweep": "test", "command": "alloc bench test", "date": "today", "cores": 2}
-    text = make_report(tmp_path, sweep, meta, history=False).read_text()
-    assert "Command: `alloc bench test`" in text
-    # score = mean over channels of rms_after / static's rms_after (2.0): pinv told 0.5 / 2
-    assert "allocator told** (score: post-failure RMS / the seed's static distribution, 1 = as good as the " \
-           "seed; 2 s runs, failure at 1 s): pinv (0.25), qp (0.5), da_facet (0.75)." in text
-    assert "allocator blind** (score: post-failure RMS / the seed's static distribution, 1 = as good as the " \
-           "seed; 2 s runs, failure at 1 s): cgi (0.25), da_facet (0.5), qp (0.75)." in text
-    assert "coverage rho = 1 told, -1 blind" in text
-    assert "telling the allocator lowers the score for 2 of 4 methods (pinv, qp)" in text
-    for png in ("coverage.png", "latency.png", "errors_ice_seed.png"):
-        assert (tmp_path / png).stat().st_size > 1000
+def _loaded(tmp_path: Path, specs: list[dict]) -> tuple[list[dict], list[dict]]:
+    from benchmarks.compare.report import load_rows
+
+    tables = load_rows(tmp_path, specs)
+    return closed_scores(tables["closed_ice"]), tables["open"]
 
 
-def test_a_diverged_run_ranks_last(tmp_path: Path, sweep: list[dict]) -> None:
+# ----------------------------------------------------------------------------- statistics
+def test_bootstrap_median_interval_holds_the_true_median_at_its_level() -> None:
+    rng = np.random.default_rng(0)
+    hits = 0
+    for _ in range(300):
+        x = rng.normal(3.0, 1.0, 15)
+        est, lo, hi = bootstrap_median(x, n_boot=500, seed=int(rng.integers(1 << 30)))
+        assert est == np.median(x) and lo <= est <= hi
+        assert lo in x and hi in x  # order statistics: no interpolation
+        hits += lo <= 3.0 <= hi
+    assert 0.88 <= hits / 300 <= 0.995  # nominal 95 %, percentile bootstrap of a median with n = 15
+
+
+def test_bootstrap_keeps_inf_and_drops_nan() -> None:
+    est, lo, hi = bootstrap_median([1.0, 2.0, math.inf, math.inf, math.inf, math.nan])
+    assert (est, hi) == (math.inf, math.inf) and lo in (1.0, 2.0, math.inf)
+    assert bootstrap_median([2.0, 2.0, 2.0]) == (2.0, 2.0, 2.0)
+    assert all(math.isnan(v) for v in bootstrap_median([math.nan]))
+
+
+def test_paired_ratio() -> None:
+    blind = np.array([1.0, 2.0, 3.0, 4.0, 5.0])
+    assert paired_ratio(0.5 * blind, blind) == (0.5, 0.5, 0.5)  # exactly half in every pair
+    assert paired_ratio([1.0, 1.0], [math.inf, math.inf])[0] == 0.0  # told survives, blind diverges
+    with pytest.raises(ValueError, match="paired"):
+        paired_ratio([1.0], [1.0, 2.0])
+
+
+def test_rank_with_ties() -> None:
+    ranks = rank_with_ties({"a": (0.5, 0.45, 0.55), "b": (0.52, 0.5, 0.6), "c": (2.0, 1.8, 2.2),
+                            "d": (math.inf, math.inf, math.inf), "e": (math.nan, math.nan, math.nan)})
+    assert ranks == {"a": 1, "b": 1, "c": 3, "d": 4, "e": 5}
+
+
+def test_spearman() -> None:
+    assert spearman([1, 2, 3, 4], [8, 6, 4, 2])[:1] == (-1.0,)
+    rho, p, n = spearman([1, 2, 3, 4, 5], [1, 2, math.inf, 3, math.nan])
+    assert n == 4 and rho == pytest.approx(0.8)
+    assert math.isnan(spearman([1, 2], [1, 2])[0])
+
+
+# ----------------------------------------------------------------------------- report numbers
+def test_scores_cells_and_ranking(tmp_path: Path, sweep: list[dict]) -> None:
+    rows, _ = _loaded(tmp_path, sweep)
+    pinv_blind = [r for r in rows if r["method"] == "pinv" and not r["told"]]
+    assert all(r["score"] == pytest.approx(1.5) for r in pinv_blind)
+    cells = cell_summaries(rows)
+    look = {(c["failure"], c["method"], c["mode"]): c for c in cells}
+    c = look[("seed", "da_facet", "told")]
+    scores = [r["score"] for r in rows if (r["failure"], r["method"], r["told"]) == ("seed", "da_facet", True)]
+    assert c["score"] == np.median(scores) and c["score_lo"] <= c["score"] <= c["score_hi"]
+    assert c["runs"] == 10 and c["diverged"] == 0
+    # da_facet told (0.5) and qp told (0.52) overlap: shared rank 1; then the 0.8s, then cgi, static, pinv
+    ranks = {(m, mode): look[("seed", m, mode)]["rank"] for (f, m, mode) in look if f == "seed"}
+    assert ranks[("da_facet", "told")] == ranks[("qp", "told")] == 1
+    assert ranks[("qp", "blind")] == ranks[("da_facet", "blind")] == 3
+    assert ranks[("pinv", "told")] == max(ranks.values())
+
+
+def test_told_blind_and_coverage_agreement(tmp_path: Path, sweep: list[dict]) -> None:
+    rows, open_rows = _loaded(tmp_path, sweep)
+    ratios = {(r["failure"], r["method"]): r for r in told_blind(rows)}
+    r = ratios[("seed", "pinv")]
+    assert r["ratio"] == pytest.approx(2.0 / 1.5, rel=0.03) and r["verdict"] == "hurts" and r["pairs"] == 10
+    assert ratios[("seed", "da_facet")]["verdict"] == "helps"
+    cgi = ratios[("seed", "cgi")]
+    assert (cgi["ratio"], cgi["ratio_lo"], cgi["ratio_hi"], cgi["verdict"]) == \
+        (pytest.approx(1.0), pytest.approx(0.9), pytest.approx(1.1), "undecided")
+    agree = {(a["failure"], a["mode"]): a for a in coverage_agreement(cell_summaries(rows), open_rows)}
+    assert agree[("seed", "told")]["rho"] == pytest.approx(-1.0)  # more coverage, less error, exactly
+    assert agree[("seed", "told")]["methods"] == 4
+
+
+def test_diverged_runs_rank_last_and_a_diverged_static_leaves_no_score(tmp_path: Path, sweep: list[dict]) -> None:
     rows = list(csv.DictReader((tmp_path / "closed_ice.csv").open()))
     for r in rows:
-        if r["method"] == "pinv" and r["told"] == "True":
+        if r["method"] == "da_facet" and r["told"] == "True" and r["failure"] == "jam1":
+            r["diverged"] = "True"
+        if r["method"] == STATIC and r["seed"] == "1" and r["failure"] == "seed":
             r["diverged"] = "True"
     _write(tmp_path / "closed_ice.csv", rows)
-    text = make_report(tmp_path, sweep, {}, history=False).read_text()
-    assert "1 = as good as the seed; 2 s runs, failure at 1 s): qp (0.5), da_facet (0.75), cgi (1)." in text
-    assert "| 9 | pinv | told | diverged |" in text
-    assert "Diverged ICE runs: 1 of 9." in text
+    scored, _ = _loaded(tmp_path, sweep)
+    cells = {(c["failure"], c["method"], c["mode"]): c for c in cell_summaries(scored)}
+    jam = cells[("jam1", "da_facet", "told")]
+    assert jam["score"] == math.inf and jam["diverged"] == 10
+    assert jam["rank"] == max(c["rank"] for k, c in cells.items() if k[0] == "jam1")
+    assert cells[("seed", "qp", "told")]["unscored"] == 1 and cells[("seed", "qp", "told")]["runs"] == 10
+
+
+# ----------------------------------------------------------------------------- figures = tables
+def _csv(path: Path) -> list[dict]:
+    return list(csv.DictReader(path.open()))
+
+
+def _fmt3(x: str) -> str:
+    v = float(x)
+    return "inf" if math.isinf(v) else f"{v:.3g}"
+
+
+def test_heatmap_and_forest_data_are_the_tables_next_to_them(tmp_path: Path, sweep: list[dict]) -> None:
+    text = make_report(tmp_path, sweep, {"sweep": "test", "command": "alloc bench test"}).read_text()
+    assert "Command: `alloc bench test`" in text
+    heat = _csv(tmp_path / "heatmap_ice_pilot_gain_1.csv")
+    table = {(r["method"], r["allocator"]): r for r in parse_markdown_table(text, "method")}
+    assert len(heat) == 2 * (1 + 2 * len(FACTORS))
+    for d in heat:
+        assert table[(d["method"], d["mode"])][d["failure"]] == \
+            f"{_fmt3(d['score'])} [{_fmt3(d['score_lo'])}, {_fmt3(d['score_hi'])}]"
+    forest = _csv(tmp_path / "forest_ice_pilot_gain_1.csv")
+    ratio_table = {r["method (told / blind)"]: r for r in parse_markdown_table(text, "method (told / blind)")}
+    assert len(forest) == 2 * len(FACTORS)
+    for d in forest:
+        assert ratio_table[d["method"]][d["failure"]] == \
+            f"{_fmt3(d['ratio'])} [{_fmt3(d['ratio_lo'])}, {_fmt3(d['ratio_hi'])}]"
+    for png in ("heatmap_ice_pilot_gain_1.png", "forest_ice_pilot_gain_1.png", "coverage.png"):
+        assert (tmp_path / png).stat().st_size > 1000
 
 
 def test_quick_sweep_shape() -> None:
@@ -96,3 +210,8 @@ def test_quick_sweep_shape() -> None:
     assert not any(s["method"] == STATIC and s.get("told") for s in specs)  # a fixed matrix cannot be told
     kinds = [s["kind"] for s in specs]
     assert kinds == sorted(kinds)  # closed (long) runs are submitted first
+    closed = [s for s in specs if s["kind"] == "closed"]
+    import alloc
+
+    assert {s["method"] for s in closed} == {STATIC, *alloc.methods()}
+    assert any(s["history"] for s in closed)

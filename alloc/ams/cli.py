@@ -60,7 +60,8 @@ def summary(problem: str = typer.Option("ice", help="ice | ice-mid | harv"),
 @app.command()
 def plot(problem: str = typer.Option("ice", help="ice | ice-mid | harv"),
          method: str = typer.Option("pinv", help="method whose reached region is drawn inside"),
-         out: Path = typer.Option(Path("docs/ams_ice.png"), help="PNG file"),
+         out: Path = typer.Option(..., "--out",
+                               help="PNG file to write (required: a run never overwrites a tracked picture)"),
          samples: int = typer.Option(4000, help="Monte Carlo demands for non-affine methods"),
          seed: int = typer.Option(0)) -> None:
     """3-D picture of the AMS (2-D for k = 2) with the method's reached region inside."""

@@ -1,4 +1,11 @@
-"""``alloc bench quick|full`` (also ``python -m benchmarks.compare quick|full``)."""
+"""``alloc bench quick|full|report|scaling`` (also ``python -m benchmarks.compare ...``).
+
+Runs are fresh unless asked otherwise: every sweep writes into ``--out`` (default: a new
+folder ``bench-<sweep>-<UTC timestamp>`` under the current directory, ignored by git) and
+refuses a folder that already holds results unless ``--resume`` is given.  The committed
+reference report (``benchmarks/reference/``) is only ever written by the documented command
+``alloc bench full --out benchmarks/reference`` (see ``benchmarks/reference/README.md``).
+"""
 
 from __future__ import annotations
 
@@ -12,16 +19,20 @@ from pathlib import Path
 
 import typer
 
-from .sweep import Spec, full_sweep, quick_sweep
+from .sweep import Spec, check_simulator_support, full_sweep, quick_sweep, smoke_sweep
 
 app = typer.Typer(help="Allocator comparison: open loop and closed loop, on all local cores or a Dask cluster.",
                   no_args_is_help=True)
 
 _SCHEDULER = typer.Option(None, "--scheduler", metavar="ADDRESS",
                           help="Dask scheduler address (tcp://host:8786); default: local process pool")
-_OUT = typer.Option(Path("benchmarks/results"), "--out", help="directory for the CSVs, report.md and PNGs")
+_OUT = typer.Option(None, "--out", help="folder for the CSVs, report.md and figures "
+                    "(default: a new ./bench-<sweep>-<timestamp>)")
 _WORKERS = typer.Option(None, "--workers", min=1, help="local worker processes (default: all cores)")
-_RESUME = typer.Option(True, "--resume/--no-resume", help="skip runs already in the CSVs")
+_RESUME = typer.Option(False, "--resume", help="continue a sweep in --out, skipping the runs already written")
+_TIMING = typer.Option(True, "--timing/--no-timing",
+                       help="after the sweep, measure per-call latency in this process alone (report's latency)")
+_TIMING_CALLS = typer.Option(2000, "--timing-calls", min=10, help="timed calls per method and problem")
 
 
 def _command() -> str:
@@ -31,36 +42,139 @@ def _command() -> str:
     return " ".join([prog, *map(shlex.quote, sys.argv[1:])])
 
 
-def _run(name: str, specs: list[Spec], scheduler: str | None, out: Path, workers: int | None, resume: bool) -> None:
+def _default_out(name: str) -> Path:
+    stamp = dt.datetime.now(dt.timezone.utc).strftime("%Y%m%d-%H%M%S")
+    return Path.cwd() / f"bench-{name}-{stamp}"
+
+
+def _prepare_out(out: Path, specs: list[Spec], resume: bool) -> None:
+    """Refuse a folder holding results unless resuming; a resumed folder must hold the same sweep."""
+    saved = out / "specs.json"
+    if out.exists() and any(out.iterdir()):
+        if not resume:
+            raise typer.BadParameter(f"{out} is not empty; choose a new folder or pass --resume to continue "
+                                     "the sweep in it", param_hint="--out")
+        if saved.exists() and json.loads(saved.read_text()) != specs:
+            raise typer.BadParameter(f"{out} holds a different sweep (specs.json differs); choose a new folder",
+                                     param_hint="--out")
+    out.mkdir(parents=True, exist_ok=True)
+    saved.write_text(json.dumps(specs, indent=1) + "\n")
+
+
+def _run(name: str, specs: list[Spec], scheduler: str | None, out: Path | None, workers: int | None,
+         resume: bool, timing: bool, timing_calls: int) -> Path:
     import numpy as np
 
     from .report import make_report
     from .runner import run_sweep
 
+    try:
+        check_simulator_support(specs)
+    except ValueError as exc:
+        raise typer.BadParameter(str(exc)) from None
+    out = _default_out(name) if out is None else out
+    _prepare_out(out, specs, resume)
+    typer.echo(f"{name} sweep: {len(specs)} runs -> {out}")
     outcome = run_sweep(specs, out, workers=workers, scheduler=scheduler, resume=resume, desc=f"{name} sweep")
     engine = (f"Dask scheduler {scheduler}" if scheduler else
               f"local process pool, {workers or os.cpu_count()} workers")
+    latency_s = None
+    if timing:
+        import time
+
+        import alloc
+
+        from .timing import measure_latency, write_timings
+
+        t0 = time.perf_counter()
+        write_timings(out, measure_latency(["ice", "harv_latdir"], alloc.methods(), calls=timing_calls))
+        latency_s = round(time.perf_counter() - t0, 1)
     meta = {
         "sweep": name, "command": _command(),
         "date": dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
-        "cores": os.cpu_count(), "platform": f"{platform.system()} {platform.machine()}",
+        "cores": os.cpu_count(), "load_avg_1min": round(os.getloadavg()[0], 2),
+        "platform": f"{platform.system()} {platform.machine()}",
         "python": platform.python_version(), "numpy": np.__version__, "engine": engine,
         "runs": len(specs), "ran": outcome.ran, "skipped": outcome.skipped, "wall_s": round(outcome.wall_s, 1),
+        "latency_pass_s": latency_s,
     }
     (out / "run.json").write_text(json.dumps(meta, indent=2) + "\n")
     path = make_report(out, specs, meta)
     typer.echo(f"{outcome.ran} runs in {outcome.wall_s:.1f} s ({outcome.skipped} resumed); report: {path}")
+    return path
 
 
 @app.command()
-def quick(scheduler: str | None = _SCHEDULER, out: Path = _OUT, workers: int | None = _WORKERS,
-          resume: bool = _RESUME) -> None:
-    """Every method open loop; ICE closed loop around the failure (under 3 min on 2 cores)."""
-    _run("quick", quick_sweep(), scheduler, out, workers, resume)
+def quick(scheduler: str | None = _SCHEDULER, out: Path | None = _OUT, workers: int | None = _WORKERS,
+          resume: bool = _RESUME, timing: bool = _TIMING, timing_calls: int = _TIMING_CALLS) -> None:
+    """Every method open loop; ICE closed loop, seed failure and a jam, blind and told, 3 seeds."""
+    _run("quick", quick_sweep(), scheduler, out, workers, resume, timing, timing_calls)
 
 
 @app.command()
-def full(scheduler: str | None = _SCHEDULER, out: Path = _OUT, workers: int | None = _WORKERS,
-         resume: bool = _RESUME) -> None:
-    """The complete sweep: every method, ICE and HARV lat-dir failures, blind and told, 5 seeds (long)."""
-    _run("full", full_sweep(), scheduler, out, workers, resume)
+def smoke(scheduler: str | None = _SCHEDULER, out: Path | None = _OUT, workers: int | None = _WORKERS,
+          resume: bool = _RESUME, timing: bool = _TIMING, timing_calls: int = _TIMING_CALLS) -> None:
+    """Seconds: three tiny runs through the whole machinery (sweep, latency pass, report); measures nothing."""
+    _run("smoke", smoke_sweep(), scheduler, out, workers, resume, timing, timing_calls)
+
+
+def _frame_rates(text: str) -> list[float | None]:
+    out: list[float | None] = []
+    for part in text.split(","):
+        part = part.strip()
+        if part == "seed":
+            out.append(None)
+            continue
+        try:
+            out.append(float(part))
+        except ValueError:
+            raise typer.BadParameter(f"expected 'seed' or a rate in Hz, got {part!r}", param_hint="--frame-rates") from None
+    return out
+
+
+@app.command()
+def full(scheduler: str | None = _SCHEDULER, out: Path | None = _OUT, workers: int | None = _WORKERS,
+         resume: bool = _RESUME, timing: bool = _TIMING, timing_calls: int = _TIMING_CALLS,
+         seeds: int = typer.Option(10, "--seeds", min=2, help="noise seeds per cell"),
+         frame_rates: str = typer.Option("seed,100", "--frame-rates",
+                                         help="flight-control frame rates: 'seed' (the seed's 0.5 ms) and/or Hz"),
+         dry_run: bool = typer.Option(False, "--dry-run", help="print the run count and exit")) -> None:
+    """ICE and HARV lat-dir: every method x failure x blind/told x frame rate x pilot x seed (long; --dry-run).
+
+    Failures: the scenario's own and the catalogue's (5 kinds, single and double)."""
+    specs = full_sweep(seeds=seeds, frame_rates=_frame_rates(frame_rates))
+    if dry_run:
+        closed = sum(s["kind"] == "closed" for s in specs)
+        typer.echo(f"full sweep: {len(specs)} runs ({closed} closed loop, {len(specs) - closed} open loop)")
+        return
+    _run("full", specs, scheduler, out, workers, resume, timing, timing_calls)
+
+
+@app.command()
+def report(out: Path = typer.Argument(..., help="folder of a sweep (holds specs.json and the CSVs)")) -> None:
+    """Re-render report.md and the figures of a sweep folder from its CSVs (no run)."""
+    from .report import make_report
+
+    specs = json.loads((out / "specs.json").read_text())
+    typer.echo(f"report: {make_report(out, specs)}")
+
+
+@app.command()
+def scaling(workers: str = typer.Option("1,2,4", help="worker counts"),
+            runs: int = typer.Option(24, min=2, help="closed-loop runs per measurement"),
+            engine: list[str] = typer.Option(["dask", "local"], help="dask (loopback cluster) and/or local"),
+            as_json: bool = typer.Option(False, "--json")) -> None:
+    """Throughput with 1, 2, 4 worker processes on a loopback Dask cluster and the local pool."""
+    from .throughput import measure_scaling
+
+    counts = [int(x) for x in workers.split(",")]
+    rows = measure_scaling(counts, runs, engine)
+    if as_json:
+        typer.echo(json.dumps(rows, indent=2))
+        return
+    typer.echo(f"{runs} closed-loop runs (ICE, 8 s each); {os.cpu_count()} cores, shared with other jobs")
+    typer.echo("| engine | workers | wall (s) | runs/s | speed-up vs 1 worker | load avg (1 min) |")
+    typer.echo("|---|---|---|---|---|---|")
+    for r in rows:
+        typer.echo(f"| {r['engine']} | {r['workers']} | {r['wall_s']:.1f} | {r['runs_per_s']:.2f} | "
+                   f"{r['speedup']:.2f} | {r['load_avg_1min']:.2f} |")

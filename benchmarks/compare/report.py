@@ -1,21 +1,37 @@
-"""Markdown report and PNG plots from the sweep's CSVs (every number comes from them).
+"""Markdown report and figures from a sweep folder's CSVs (every number and every figure comes from them).
 
 Closed-loop score
-    For each run, the post-failure RMS tracking error of each channel divided by that of
-    the seed's static distribution (``static``, blind) with the same noise seed, averaged
-    over the channels: 1 = as good as the seed's design, 0.5 = half its error.  A diverged
-    run scores infinity.  A method's score is the mean over noise seeds.
+    For each run, the post-failure RMS tracking error of each channel divided by that of the
+    seed's static distribution (``static``, blind) in the same scenario, simulator setting,
+    failure and noise seed, averaged over the channels: 1 = as good as the seed's design,
+    0.5 = half its error.  A diverged run scores ``inf``; a run whose ``static`` partner
+    diverged has no score (``nan``, counted apart).
+
+Per cell (scenario x setting x failure x method x told/blind)
+    the median score over noise seeds with a percentile-bootstrap 95 % interval, and the
+    medians of the other per-run measures (time to recover, effort, unattainable and fallback
+    fractions, time at a position limit).  Ranking per failure: 1 + the number of entries whose
+    interval lies entirely below (better than) the entry's own; overlapping intervals share a rank.
+
+Told / blind
+    ``median(score told) / median(score blind)`` over the same noise seeds, with a paired
+    bootstrap 95 % interval: < 1 with the interval below 1 means telling the allocator of the
+    failed effectors helps; an interval straddling 1 means this sweep cannot tell.
 
 Open-loop / closed-loop agreement
-    Spearman rank correlation between a method's open-loop rank on the ICE problem
-    (coverage: higher is better; moment error on unattainable demands: lower is better)
-    and its closed-loop rank (score after the ICE failure), over the registry methods run
-    in both.  +1: the open-loop measure orders the methods exactly as the closed loop does;
-    0: no relation; negative: the opposite order.
+    Spearman rank correlation, over the registry methods, between AMS coverage on the scenario's
+    own allocation problem (higher is better) and the closed-loop median score (lower is
+    better), per failure and told/blind; a *negative* rho means more coverage, lower error
+    (the seed's claim, section 1.3.4.9: coverage predicts closed-loop rank).
+
+Every figure ``X.png`` is written with ``X.csv``, the exact numbers it draws, taken from the
+same summaries as the table printed next to it; time histories are drawn from the runs stored
+in ``histories/`` by the sweep (never re-simulated).
 """
 
 from __future__ import annotations
 
+import csv
 import json
 import math
 import time
@@ -25,18 +41,23 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy.stats import rankdata, spearmanr
+from scipy.stats import rankdata
 
-from .runner import read_table, table_of
+from .runner import history_path, read_table, table_of
+from .stats import bootstrap_median, paired_ratio, rank_with_ties, spearman
 from .sweep import STATIC, Spec
+from .timing import TIMINGS_CSV
 
-__all__ = ["make_report", "load_rows", "closed_scores"]
+__all__ = ["make_report", "load_rows", "closed_scores", "cell_summaries", "told_blind", "coverage_agreement",
+           "parse_markdown_table"]
 
 Row = dict[str, Any]
 DPI = 80
 RANDOM = "random suite"
-#: Coverage above which methods count as "covering" the AMS in the restricted rank correlation
-GOOD_COVERAGE = 0.9
+TITLES = {"ice": "ICE", "harv_latdir": "F-18/HARV lat-dir"}
+COVERAGE_PROBLEM = {"ice": "ice", "harv_latdir": "harv_latdir"}
+#: fewer noise seeds than this per cell: the report says its intervals are indicative only
+FEW_SEEDS = 10
 
 
 # ----------------------------------------------------------------------------- loading
@@ -57,10 +78,10 @@ def load_rows(out: Path, specs: Sequence[Spec]) -> dict[str, list[Row]]:
     tables: dict[str, list[Row]] = {}
     for name in sorted({table_of(s) for s in specs}):
         rows = [{k: _typed(v) for k, v in r.items()} for r in read_table(out / f"{name}.csv")]
-        timing = {r["id"]: {k: _typed(v) for k, v in r.items()} for r in read_table(out / f"{name}_timings.csv")}
         for r in rows:
             r["id"] = str(r["id"])
-            r.update({k: v for k, v in timing.get(r["id"], {}).items() if k != "id"})
+            if "setting" in r:
+                r["setting"] = str(r["setting"])
         tables[name] = [r for r in rows if r["id"] in wanted]
     return tables
 
@@ -71,15 +92,22 @@ def _fmt(x: Any, digits: int = 3) -> str:
         return "-"
     if isinstance(x, bool):
         return "yes" if x else "no"
-    if isinstance(x, float):
+    if isinstance(x, (float, np.floating)):
+        x = float(x)
         if math.isinf(x):
-            return "diverged"
+            return "inf"
         if math.isnan(x):
             return "-"
         if x == 0:
             return "0"
         return f"{x:.{digits}g}"
     return str(x)
+
+
+def _ci(est: float, lo: float, hi: float) -> str:
+    if math.isnan(est):
+        return "-"
+    return f"{_fmt(est)} [{_fmt(lo)}, {_fmt(hi)}]"
 
 
 def _pct(x: float | None) -> str:
@@ -92,38 +120,54 @@ def _table(headers: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
     return "\n".join(lines)
 
 
+def parse_markdown_table(text: str, first_header: str) -> list[dict[str, str]]:
+    """Rows of the first Markdown table in ``text`` whose first header cell is ``first_header``."""
+    lines = text.splitlines()
+    for i, line in enumerate(lines):
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if line.startswith("|") and cells[0] == first_header:
+            out = []
+            for body in lines[i + 2:]:
+                if not body.startswith("|"):
+                    break
+                out.append(dict(zip(cells, (c.strip() for c in body.strip().strip("|").split("|")))))
+            return out
+    raise KeyError(f"no table with first header {first_header!r}")
+
+
+def _write_csv(path: Path, rows: Sequence[Row]) -> None:
+    with path.open("w", newline="") as fh:
+        w = csv.DictWriter(fh, list(rows[0]) if rows else [], lineterminator="\n")
+        w.writeheader()
+        w.writerows(rows)
+
+
 def _channels(rows: Sequence[Row]) -> list[str]:
     return [k[: -len("_rms_after")] for k in rows[0] if k.endswith("_rms_after")] if rows else []
 
 
 def _mode(row: Row) -> str:
+    if "mode" in row:  # a summary
+        return row["mode"]
     return "told" if row["told"] else "blind"
 
 
-def _ranks(values: Sequence[float], *, higher_is_better: bool = False) -> np.ndarray:
-    """Ranks (1 = best, ties share the lowest) of values rounded to the 3 significant digits
-    shown, so differences below the printed precision (round-off) do not reorder methods."""
-    shown = np.array([float(f"{v:.3g}") if math.isfinite(v) else v for v in values])
-    return rankdata(-shown if higher_is_better else shown, method="min")
+def _median(values: Sequence[Any]) -> float:
+    vals = [float(v) for v in values if v is not None and not (isinstance(v, float) and math.isnan(v))]
+    return float(np.median(vals)) if vals else math.nan
 
 
-def _spearman(a: Sequence[float], b: Sequence[float]) -> float:
-    a, b = np.asarray(a, float), np.asarray(b, float)
-    if len(a) < 3 or np.ptp(a) == 0 or np.ptp(b) == 0:
-        return math.nan
-    return float(spearmanr(a, b).statistic)
+def _slug(text: str) -> str:
+    return "".join(c if c.isalnum() or c in "-_." else "_" for c in text)
 
 
 # ----------------------------------------------------------------------------- closed loop
 def closed_scores(rows: Sequence[Row]) -> list[Row]:
     """Add ``score`` (see module docstring) to each closed-loop row; returns the rows."""
     channels = _channels(rows)
-    ref: dict[tuple, Row] = {}
+    ref = {(r["scenario"], r["setting"], r["failure"], r["seed"]): r for r in rows if r["method"] == STATIC}
     for r in rows:
-        if r["method"] == STATIC:
-            ref[(r["scenario"], r["failure"], r["seed"])] = r
-    for r in rows:
-        base = ref.get((r["scenario"], r["failure"], r["seed"]))
+        base = ref.get((r["scenario"], r["setting"], r["failure"], r["seed"]))
         if r["diverged"]:
             r["score"] = math.inf
         elif base is None or base["diverged"]:
@@ -133,66 +177,344 @@ def closed_scores(rows: Sequence[Row]) -> list[Row]:
     return list(rows)
 
 
-def _by_method_mode(rows: Sequence[Row]) -> dict[tuple[str, str], list[Row]]:
-    groups: dict[tuple[str, str], list[Row]] = defaultdict(list)
+def _groups(rows: Sequence[Row], keys: Sequence[str]) -> dict[tuple, list[Row]]:
+    out: dict[tuple, list[Row]] = defaultdict(list)
     for r in rows:
-        groups[(r["method"], _mode(r))].append(r)
-    return groups
-
-
-def _mean(values: Sequence[float]) -> float:
-    vals = [v for v in values if v is not None]
-    if not vals:
-        return math.nan
-    return math.inf if any(math.isinf(v) for v in vals) else float(np.mean(vals))
-
-
-def _closed_summary(rows: Sequence[Row]) -> list[Row]:
-    """One line per (method, blind/told): means over seeds, sorted by score."""
-    channels = _channels(rows)
-    out = []
-    for (method, mode), grp in _by_method_mode(rows).items():
-        line: Row = {"method": method, "mode": mode, "runs": len(grp),
-                     "diverged": sum(bool(r["diverged"]) for r in grp),
-                     "score": _mean([r["score"] for r in grp]),
-                     "saturation": _mean([r["time_in_position_saturation"] for r in grp])}
-        for c in channels:
-            for metric in ("rms_before", "rms_after", "max_after"):
-                line[f"{c}_{metric}"] = _mean([r[f"{c}_{metric}"] for r in grp])
-        out.append(line)
-    out.sort(key=lambda x: (math.isnan(x["score"]), x["score"], x["method"], x["mode"]))
+        out[tuple(_mode(r) if k == "mode" else r[k] for k in keys)].append(r)
     return out
 
 
-def _closed_section(title: str, rows: list[Row]) -> tuple[str, list[Row]]:
-    summary = _closed_summary(rows)
+def cell_summaries(rows: Sequence[Row]) -> list[Row]:
+    """One summary per (scenario, setting, failure, method, mode) of scored rows, with ``rank``
+    within its (scenario, setting, failure)."""
     channels = _channels(rows)
-    r0 = rows[0]
-    lines = [f"### {title}", "",
-             f"{len(rows)} runs: {r0['duration']:g} s, failure at t = {r0['failure_time']:g} s, "
-             f"noise seeds {sorted({int(r['seed']) for r in rows})}.  Ranked by score "
-             "(mean over channels of post-failure RMS / the seed's static distribution's; lower is better).", ""]
-    headers = ["rank", "method", "allocator", "score"] + [f"{c} RMS after" for c in channels] + \
-        [f"{c} max after" for c in channels] + ["pos. sat. (s)", "diverged"]
+    cells = []
+    for (scenario, setting, failure, method, mode), grp in _groups(
+            rows, ("scenario", "setting", "failure", "method", "mode")).items():
+        est, lo, hi = bootstrap_median([r["score"] for r in grp])
+        cell: Row = {"scenario": scenario, "setting": setting, "failure": failure, "method": method, "mode": mode,
+                     "runs": len(grp), "diverged": sum(bool(r["diverged"]) for r in grp),
+                     "unscored": sum(math.isnan(r["score"]) for r in grp),
+                     "score": est, "score_lo": lo, "score_hi": hi,
+                     "recover_s": _median([r.get("recover_s") for r in grp]),
+                     "effort_after": _median([r.get("effort_after") for r in grp]),
+                     "unattainable_after": _median([r.get("unattainable_after") for r in grp]),
+                     "fallback_after": _median([r.get("fallback_after") for r in grp]),
+                     "saturation_s": _median([r.get("time_in_position_saturation") for r in grp])}
+        for c in channels:
+            cell[f"{c}_rms_before"] = _median([r[f"{c}_rms_before"] for r in grp])
+            cell[f"{c}_rms_after"] = _median([r[f"{c}_rms_after"] for r in grp if not r["diverged"]])
+        cells.append(cell)
+    for _, grp in _groups(cells, ("scenario", "setting", "failure")).items():
+        ranks = rank_with_ties({(c["method"], c["mode"]): (c["score"], c["score_lo"], c["score_hi"]) for c in grp})
+        for c in grp:
+            c["rank"] = ranks[(c["method"], c["mode"])]
+    cells.sort(key=lambda c: (c["scenario"], c["setting"], c["failure"], c["rank"],
+                              math.inf if math.isnan(c["score"]) else c["score"], c["method"], c["mode"]))
+    return cells
+
+
+def told_blind(rows: Sequence[Row]) -> list[Row]:
+    """Paired told/blind ratio per (scenario, setting, failure, method) (see module docstring)."""
+    out = []
+    for (scenario, setting, failure, method), grp in _groups(rows, ("scenario", "setting", "failure", "method")).items():
+        told = {int(r["seed"]): r["score"] for r in grp if r["told"]}
+        blind = {int(r["seed"]): r["score"] for r in grp if not r["told"]}
+        seeds = sorted(set(told) & set(blind))
+        if not seeds:
+            continue
+        est, lo, hi = paired_ratio([told[s] for s in seeds], [blind[s] for s in seeds])
+        verdict = ("helps" if hi < 1 else "hurts" if lo > 1 else "undecided") if not math.isnan(est) else "no score"
+        out.append({"scenario": scenario, "setting": setting, "failure": failure, "method": method, "pairs": len(seeds),
+                    "ratio": est, "ratio_lo": lo, "ratio_hi": hi, "verdict": verdict})
+    out.sort(key=lambda r: (r["scenario"], r["setting"], r["failure"], r["method"]))
+    return out
+
+
+def coverage_agreement(cells: Sequence[Row], open_rows: Sequence[Row]) -> list[Row]:
+    """Spearman rho between coverage on the scenario's problem and the median closed-loop score,
+    per (scenario, setting, failure, mode), over the registry methods present in both."""
+    out = []
+    for (scenario, setting, failure, mode), grp in _groups(cells, ("scenario", "setting", "failure", "mode")).items():
+        problem = COVERAGE_PROBLEM.get(scenario)
+        cov = {r["method"]: float(r["coverage"]) for r in open_rows if r["problem"] == problem}
+        methods = sorted(c["method"] for c in grp if c["method"] in cov)
+        score = {c["method"]: c["score"] for c in grp}
+        rho, p, n = spearman([cov[m] for m in methods], [score[m] for m in methods])
+        out.append({"scenario": scenario, "setting": setting, "failure": failure, "mode": mode, "methods": n,
+                    "rho": rho, "p": p})
+    out.sort(key=lambda r: (r["scenario"], r["setting"], r["failure"], r["mode"]))
+    return out
+
+
+# ----------------------------------------------------------------------------- plots
+def _plt() -> Any:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def heatmap_data(cells: Sequence[Row]) -> list[Row]:
+    """What the heat map draws: median score per method, mode and failure."""
+    return [{"method": c["method"], "mode": c["mode"], "failure": c["failure"], "score": c["score"],
+             "score_lo": c["score_lo"], "score_hi": c["score_hi"]} for c in cells]
+
+
+def _method_order(cells: Sequence[Row]) -> list[str]:
+    methods = sorted({c["method"] for c in cells})
+    return [STATIC] + [m for m in methods if m != STATIC] if STATIC in methods else methods
+
+
+def _plot_heatmap(cells: Sequence[Row], failures: Sequence[str], out: Path, name: str, title: str) -> str:
+    plt = _plt()
+    from matplotlib.colors import LogNorm
+
+    data = heatmap_data(cells)
+    _write_csv(out / f"{name}.csv", data)
+    methods = _method_order(cells)
+    value = {(d["method"], d["mode"], d["failure"]): d["score"] for d in data}
+    fig, axes = plt.subplots(1, 2, figsize=(2.0 + 0.75 * len(failures) * 2, 1.2 + 0.32 * len(methods)), sharey=True)
+    norm = LogNorm(vmin=0.25, vmax=4.0)
+    for ax, mode in zip(axes, ("blind", "told")):
+        grid = np.array([[value.get((m, mode, f), math.nan) for f in failures] for m in methods])
+        shown = np.where(np.isinf(grid), 4.0, grid)
+        img = ax.imshow(np.clip(shown, 0.25, 4.0), cmap="RdYlGn_r", norm=norm, aspect="auto")
+        for i in range(len(methods)):
+            for j in range(len(failures)):
+                ax.text(j, i, "div" if np.isinf(grid[i, j]) else _fmt(grid[i, j], 2), ha="center", va="center",
+                        fontsize=6)
+        ax.set_xticks(range(len(failures)), failures, rotation=45, ha="right", fontsize=7)
+        ax.set_yticks(range(len(methods)), methods, fontsize=7)
+        ax.set_title(f"allocator {mode}", fontsize=8)
+    fig.colorbar(img, ax=axes, shrink=0.8).set_label("median score: post-failure RMS / static's\n(log scale; div: diverged)",
+                                                     fontsize=7)
+    fig.suptitle(title, fontsize=9, y=1.0 + 0.3 / (1.2 + 0.32 * len(methods)))
+    fig.savefig(out / f"{name}.png", dpi=DPI, bbox_inches="tight")
+    plt.close(fig)
+    return f"{name}.png"
+
+
+def _plot_forest(ratios: Sequence[Row], failures: Sequence[str], out: Path, name: str, title: str) -> str:
+    plt = _plt()
+    data = [{k: r[k] for k in ("failure", "method", "pairs", "ratio", "ratio_lo", "ratio_hi")} for r in ratios]
+    _write_csv(out / f"{name}.csv", data)
+    methods = sorted({r["method"] for r in ratios})
+    cols = min(4, len(failures))
+    nrows = math.ceil(len(failures) / cols)
+    fig, axes = plt.subplots(nrows, cols, figsize=(3.0 * cols, 1.0 + nrows * (0.5 + 0.2 * len(methods))),
+                             sharey=True, squeeze=False)
+    lookup = {(r["failure"], r["method"]): r for r in ratios}
+    for k, ax in enumerate(axes.flat):
+        if k >= len(failures):
+            ax.axis("off")
+            continue
+        f = failures[k]
+        for i, m in enumerate(methods):
+            r = lookup.get((f, m))
+            if r is None or math.isnan(r["ratio"]):
+                continue
+            est, lo, hi = (min(max(x, 1 / 16), 16) for x in (r["ratio"], r["ratio_lo"], r["ratio_hi"]))
+            colour = "tab:green" if r["ratio_hi"] < 1 else "tab:red" if r["ratio_lo"] > 1 else "0.4"
+            ax.plot([lo, hi], [i, i], color=colour, lw=1.2)
+            ax.plot([est], [i], "o", color=colour, ms=3)
+        ax.axvline(1.0, color="k", lw=0.6)
+        ax.set_xscale("log")
+        ax.set_xlim(1 / 16, 16)
+        ax.set_title(f, fontsize=8)
+        ax.set_yticks(range(len(methods)), methods, fontsize=6)
+        ax.tick_params(axis="x", labelsize=6)
+        ax.grid(axis="x", alpha=0.3)
+    fig.suptitle(title + "\ntold / blind median score, 95 % paired bootstrap (< 1: telling helps; clipped to 1/16..16)",
+                 fontsize=8)
+    fig.tight_layout(rect=(0, 0, 1, 1 - 0.45 / fig.get_figheight()))
+    fig.savefig(out / f"{name}.png", dpi=DPI)
+    plt.close(fig)
+    return f"{name}.png"
+
+
+HISTORY_DECIMATE = 4
+
+
+def history_data(out: Path, row_ids: Sequence[str], labels: Sequence[str]) -> tuple[list[Row], list[str]]:
+    """What a time-history figure draws: every ``HISTORY_DECIMATE``-th stored sample of each run
+    (columns ``t`` and ``<label>:<channel>:reference|output``), and the channels."""
+    runs = [np.load(history_path(out, i)) for i in row_ids]
+    channels = [str(c) for c in runs[0]["channels"]]
+    n = min(len(r["t"]) for r in runs)
+    rows: list[Row] = []
+    for k in range(0, n, HISTORY_DECIMATE):
+        row: Row = {"t": float(runs[0]["t"][k])}
+        for label, run in zip(labels, runs):
+            for j, c in enumerate(channels):
+                row[f"{label}:{c}:reference"] = float(run["reference"][k, j])
+                row[f"{label}:{c}:output"] = float(run["output"][k, j])
+        rows.append(row)
+    return rows, channels
+
+
+def _plot_history(out: Path, picked: Sequence[Row], name: str, title: str) -> str:
+    plt = _plt()
+    labels = [f"{r['method']} ({_mode(r)})" for r in picked]
+    data, channels = history_data(out, [r["id"] for r in picked], labels)
+    _write_csv(out / f"{name}.csv", data)
+    t = np.array([d["t"] for d in data])
+    t_fail = float(picked[0]["failure_time"])
+    fig, axes = plt.subplots(len(channels), 1, figsize=(8, 1.9 * len(channels)), sharex=True, squeeze=False)
+    colours = ("k", "tab:red", "tab:blue", "tab:green")
+    for ax, c in zip(axes[:, 0], channels):
+        for label, colour in zip(labels, colours):
+            ax.plot(t, [d[f"{label}:{c}:reference"] for d in data], color=colour, lw=0.6, ls="--")
+            ax.plot(t, [d[f"{label}:{c}:output"] for d in data], color=colour, lw=0.9, label=f"{label}")
+        ax.axvline(t_fail, color="0.3", lw=0.8, ls=":", label="failure")
+        ax.set_ylabel(c, fontsize=8)
+        ax.grid(alpha=0.3)
+    axes[0, 0].legend(fontsize=7, loc="upper left", ncols=len(labels) + 1)
+    axes[-1, 0].set_xlabel("t (s); solid: output, dashed: reference", fontsize=8)
+    fig.suptitle(title, fontsize=9)
+    fig.tight_layout()
+    fig.savefig(out / f"{name}.png", dpi=DPI)
+    plt.close(fig)
+    return f"{name}.png"
+
+
+# ----------------------------------------------------------------------------- closed-loop sections
+def _failure_description(scenario: str, failure: str) -> str:
+    from .failures import FAILED_EFFECTORS, is_catalogue
+
+    if is_catalogue(failure):
+        from alloc import vehicles
+
+        names = {"ice": vehicles.ICE_EFFECTORS, "harv_latdir": vehicles.HARV_LATDIR_EFFECTORS}.get(scenario)
+        idx = FAILED_EFFECTORS.get(scenario, ())[: int(failure[-1])]
+        who = ", ".join(names[i] for i in idx) if names else "?"
+        return f"{failure[:-1]} of {who} (catalogue, effector only; see benchmarks/compare/failures.py)"
+    try:
+        from sim.scenarios import get_scenario
+
+        return get_scenario(scenario).failures.get(failure, failure)
+    except (KeyError, ImportError):
+        return failure
+
+
+def _failure_order(failures: Sequence[str]) -> list[str]:
+    from .failures import catalogue_names
+
+    cat = catalogue_names()
+    return sorted(failures, key=lambda f: (f in cat, cat.index(f) if f in cat else 0, f))
+
+
+def _heatmap_table(cells: Sequence[Row], failures: Sequence[str]) -> str:
+    methods = _method_order(cells)
+    look = {(c["method"], c["mode"], c["failure"]): c for c in cells}
     body = []
-    for i, s in enumerate(summary, 1):
-        body.append([i, s["method"], s["mode"], _fmt(s["score"])] +
-                    [_fmt(s[f"{c}_rms_after"]) for c in channels] + [_fmt(s[f"{c}_max_after"]) for c in channels] +
-                    [_fmt(s["saturation"]), f"{s['diverged']}/{s['runs']}"])
-    lines += [_table(headers, body), ""]
-    lines += ["Before the failure (sanity check: every allocator tracks the nominal plant), RMS:", ""]
-    pre = sorted(summary, key=lambda s: (s["method"], s["mode"]))
-    lines += [_table(["method", "allocator"] + [f"{c} RMS before" for c in channels],
-                     [[s["method"], s["mode"]] + [_fmt(s[f"{c}_rms_before"]) for c in channels] for s in pre]), ""]
-    told = {s["method"]: s for s in summary if s["mode"] == "told"}
-    blind = {s["method"]: s for s in summary if s["mode"] == "blind"}
-    both = sorted(set(told) & set(blind), key=lambda m: told[m]["score"])
-    if both:
-        lines += ["Blind vs told (score; ratio < 1: telling the allocator about the failed effectors helps):", ""]
-        lines += [_table(["method", "blind", "told", "told / blind"],
-                         [[m, _fmt(blind[m]["score"]), _fmt(told[m]["score"]),
-                           _fmt(told[m]["score"] / blind[m]["score"]) if blind[m]["score"] else "-"] for m in both]), ""]
-    return "\n".join(lines), summary
+    for m in methods:
+        for mode in ("blind", "told"):
+            if not any((m, mode, f) in look for f in failures):
+                continue
+            body.append([m, mode] + [(_ci(look[(m, mode, f)]["score"], look[(m, mode, f)]["score_lo"],
+                                          look[(m, mode, f)]["score_hi"]) if (m, mode, f) in look else "-")
+                                     for f in failures])
+    return _table(["method", "allocator", *failures], body)
+
+
+def _ranking_table(cells: Sequence[Row], channels: Sequence[str]) -> str:
+    headers = ["rank", "method", "allocator", "median score [95 % CI]", "runs", "diverged", "unscored",
+               *[f"{c} RMS after" for c in channels], "recover (s)", "effort", "unattainable", "fallback",
+               "pos. sat. (s)"]
+    body = [[c["rank"], c["method"], c["mode"], _ci(c["score"], c["score_lo"], c["score_hi"]), c["runs"],
+             c["diverged"], c["unscored"], *[_fmt(c[f"{ch}_rms_after"]) for ch in channels], _fmt(c["recover_s"]),
+             _fmt(c["effort_after"]), _fmt(c["unattainable_after"]), _fmt(c["fallback_after"]),
+             _fmt(c["saturation_s"])] for c in cells]
+    return _table(headers, body)
+
+
+def _ratio_table(ratios: Sequence[Row], failures: Sequence[str]) -> str:
+    look = {(r["method"], r["failure"]): r for r in ratios}
+    body = []
+    for m in sorted({r["method"] for r in ratios}):
+        body.append([m] + [(_ci(look[(m, f)]["ratio"], look[(m, f)]["ratio_lo"], look[(m, f)]["ratio_hi"])
+                            if (m, f) in look else "-") for f in failures])
+    return _table(["method (told / blind)", *failures], body)
+
+
+def _pick_history_runs(rows: Sequence[Row], cells: Sequence[Row], out: Path) -> list[Row]:
+    """Stored runs to draw for one failure: static, the best-ranked told method with a stored
+    run, and the same method blind, all at the first stored noise seed."""
+    stored = [r for r in rows if history_path(out, r["id"]).exists()]
+    if not stored:
+        return []
+    seed = min(int(r["seed"]) for r in stored)
+    at_seed = {(r["method"], _mode(r)): r for r in stored if int(r["seed"]) == seed}
+    picked = [at_seed[(STATIC, "blind")]] if (STATIC, "blind") in at_seed else []
+    for c in cells:
+        if c["mode"] == "told" and c["method"] != STATIC and (c["method"], "told") in at_seed:
+            picked.append(at_seed[(c["method"], "told")])
+            if (c["method"], "blind") in at_seed:
+                picked.append(at_seed[(c["method"], "blind")])
+            break
+    return picked
+
+
+def _closed_section(out: Path, scenario: str, setting: str, rows: list[Row], cells: list[Row],
+                    ratios: list[Row], agreement: list[Row]) -> tuple[str, list[str]]:
+    channels = _channels(rows)
+    failures = _failure_order(sorted({r["failure"] for r in rows}))
+    r0 = rows[0]
+    tag = _slug(f"{scenario}_{setting}")
+    title = f"{TITLES.get(scenario, scenario)}, simulator setting `{setting}`"
+    lines = [f"### {title}", "",
+             f"{len(rows)} runs: {r0['duration']:g} s, failure at t = {r0['failure_time']:g} s "
+             f"(HARV `failure2`: at 0 s), noise seeds {sorted({int(r['seed']) for r in rows})}, "
+             f"failures {', '.join(f'`{f}`' for f in failures)}.", ""]
+    n_seeds = len({int(r["seed"]) for r in rows})
+    if n_seeds < FEW_SEEDS:
+        lines += [f"**Only {n_seeds} noise seeds per cell:** a percentile bootstrap of a median over {n_seeds} values "
+                  "can only return values between their extremes and under-covers; the intervals, the ties and the "
+                  "told/blind verdicts below are indicative, not 95 % statements.", ""]
+    figures = []
+    png = _plot_heatmap(cells, failures, out, f"heatmap_{tag}", title)
+    figures.append(png)
+    lines += [f"![heat map: median score per method and failure]({png})", "",
+              "Median score [95 % bootstrap CI] per method and failure (the heat map's numbers; "
+              f"`{png[:-4]}.csv`):", "", _heatmap_table(cells, failures), ""]
+    for f in failures:
+        fc = [c for c in cells if c["failure"] == f]
+        lines += [f"#### `{f}`: {_failure_description(scenario, f)}", "", _ranking_table(fc, channels), ""]
+    if ratios:
+        png = _plot_forest(ratios, failures, out, f"forest_{tag}", title)
+        figures.append(png)
+        helps = sum(r["verdict"] == "helps" for r in ratios)
+        hurts = sum(r["verdict"] == "hurts" for r in ratios)
+        lines += ["#### Told vs blind", "",
+                  f"Telling the allocator helps (interval below 1) in {helps} of {len(ratios)} method x failure "
+                  f"cells, hurts (interval above 1) in {hurts}, undecided or unscored in "
+                  f"{len(ratios) - helps - hurts}.  Ratio [95 % CI] (the forest plot's numbers; `{png[:-4]}.csv`):", "",
+                  _ratio_table(ratios, failures), "", f"![told/blind forest plot]({png})", ""]
+    if agreement:
+        lines += ["#### AMS coverage vs closed-loop score", "",
+                  "Spearman rho over the registry methods between coverage of the scenario's allocation problem "
+                  "and the median score (negative: more coverage, less error):", "",
+                  _table(["failure", "allocator", "methods", "rho", "p"],
+                         [[a["failure"], a["mode"], a["methods"], _fmt(a["rho"], 2), _fmt(a["p"], 2)]
+                          for a in agreement]), ""]
+    for f in failures:
+        fc = [c for c in cells if c["failure"] == f]
+        picked = _pick_history_runs([r for r in rows if r["failure"] == f], fc, out)
+        if len(picked) < 2:
+            continue
+        name = f"history_{tag}_{_slug(f)}"
+        png = _plot_history(out, picked, name, f"{title}, failure {f}, noise seed {int(picked[0]['seed'])}")
+        figures.append(png)
+        lines += [f"#### Time history, `{f}` (stored runs)", "",
+                  _table(["run id", "method", "allocator", "seed", "diverged",
+                          *[f"{c} RMS after" for c in channels]],
+                         [[p["id"], p["method"], _mode(p), int(p["seed"]), _fmt(p["diverged"]),
+                           *[_fmt(p[f"{c}_rms_after"]) for c in channels]] for p in picked]),
+                  "", f"![time history {f}]({png})", ""]
+    return "\n".join(lines), figures
 
 
 # ----------------------------------------------------------------------------- open loop
@@ -206,13 +528,17 @@ _OPEN_METRICS: list[tuple[str, str, bool, Callable[[float], str]]] = [
     ("traj_err_mean", "Moment error along the rate-limited demand trajectory, mean |v - Bu|", False, _fmt),
     ("rate_violation_max", "Rate-limit violation along the trajectory, max (units/s; 0 = compliant)", False, _fmt),
     ("fallbacks", "Fallbacks (status fallback) over all calls", False, _fmt),
-    ("latency_median_us", "Latency, median per call (µs, warm, in the worker)", False, _fmt),
-    ("latency_p99_us", "Latency, 99th percentile per call (µs)", False, _fmt),
 ]
 
 
 def _problem_group(problem: str) -> str:
     return RANDOM if problem.startswith("random") else problem
+
+
+def _ranks(values: Sequence[float], *, higher_is_better: bool = False) -> np.ndarray:
+    """Ranks (1 = best, ties share the lowest) of values rounded to the 3 significant digits shown."""
+    shown = np.array([float(f"{v:.3g}") if math.isfinite(v) else v for v in values])
+    return rankdata(-shown if higher_is_better else shown, method="min")
 
 
 def _open_pivot(rows: Sequence[Row], column: str) -> tuple[list[str], dict[str, dict[str, float]]]:
@@ -234,9 +560,7 @@ def _open_section(rows: list[Row], spec: Spec) -> str:
              f"polytope volume for the pseudo-inverse family, else seeded Monte Carlo with {samples} samples "
              f"(Wilson 95 % interval in open.csv); the other measures use {demands} demands in and {demands} "
              f"outside the AMS and a {steps}-step trajectory.  Each table is ranked by the "
-             f"mean rank over the problem columns (ties, to the 3 digits shown, share a rank).  Latencies are "
-             f"measured in the worker while the sweep's other runs share the cores: compare them within this "
-             f"report, not across machines.", ""]
+             f"mean rank over the problem columns (ties, to the 3 digits shown, share a rank).", ""]
     for column, title, higher, fmt in _OPEN_METRICS:
         groups, pivot = _open_pivot(rows, column)
         methods = sorted(pivot)
@@ -249,131 +573,49 @@ def _open_section(rows: list[Row], spec: Spec) -> str:
     return "\n".join(lines)
 
 
-# ----------------------------------------------------------------------------- agreement
-def _agreement(open_rows: Sequence[Row], summary: Sequence[Row]) -> tuple[str, dict[str, float]]:
-    ice = {r["method"]: r for r in open_rows if r["problem"] == "ice"}
-    rho: dict[str, float] = {}
-    lines = []
-    for mode in ("told", "blind"):
-        score = {s["method"]: s["score"] for s in summary if s["mode"] == mode and s["method"] in ice}
-        methods = sorted(score)
-        if len(methods) < 3:
-            continue
-        closed_rank = _ranks([score[m] for m in methods])
-        cov_rank = _ranks([ice[m]["coverage"] for m in methods], higher_is_better=True)
-        err_rank = _ranks([ice[m]["unatt_err_mean"] for m in methods])
-        rho[f"coverage_{mode}"] = _spearman(cov_rank, closed_rank)
-        rho[f"error_{mode}"] = _spearman(err_rank, closed_rank)
-        good = [m for m in methods if ice[m]["coverage"] >= GOOD_COVERAGE]
-        rho[f"n_good_{mode}"] = len(good)
-        rho[f"coverage_good_{mode}"] = _spearman(_ranks([ice[m]["coverage"] for m in good], higher_is_better=True),
-                                                 _ranks([score[m] for m in good]))
-        lines += [f"Allocator {mode} ({len(methods)} methods): Spearman rho(coverage rank, closed-loop rank) = "
-                  f"{_fmt(rho[f'coverage_{mode}'], 2)}; rho(unattainable moment error rank, closed-loop rank) = "
-                  f"{_fmt(rho[f'error_{mode}'], 2)}.  Among the {len(good)} methods reaching >= "
-                  f"{100 * GOOD_COVERAGE:.0f} % of the AMS ({', '.join(good)}): rho(coverage, closed loop) = "
-                  f"{_fmt(rho[f'coverage_good_{mode}'], 2)}.", ""]
-        lines += [_table(["method", "ICE coverage", "coverage rank", "unatt. error", "error rank",
-                          f"closed-loop score ({mode})", "closed-loop rank"],
-                         [[m, _pct(ice[m]["coverage"]), _fmt(float(c), 3), _fmt(ice[m]["unatt_err_mean"]),
-                           _fmt(float(e), 3), _fmt(score[m]), _fmt(float(r), 3)]
-                          for m, c, e, r in sorted(zip(methods, cov_rank, err_rank, closed_rank), key=lambda t: t[3])]), ""]
-    return "\n".join(lines), rho
-
-
-# ----------------------------------------------------------------------------- plots
-def _plt() -> Any:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
-def _plot_open_bars(rows: Sequence[Row], out: Path) -> list[str]:
+def _plot_coverage(rows: Sequence[Row], out: Path) -> str:
     plt = _plt()
-    files = []
-    for column, name, ylabel, log in (("coverage", "coverage.png", "AMS coverage (%)", False),
-                                      ("latency_median_us", "latency.png", "latency per call (µs)", True)):
-        groups, pivot = _open_pivot(rows, column)
-        methods = sorted(pivot)
-        fig, ax = plt.subplots(figsize=(9, 3.4))
-        width = 0.8 / len(groups)
-        for j, g in enumerate(groups):
-            vals = np.array([pivot[m].get(g, math.nan) for m in methods])
-            if column == "coverage":
-                vals = 100 * vals
-            bars = ax.bar(np.arange(len(methods)) + (j - (len(groups) - 1) / 2) * width, vals, width, label=g)
-            if column == "latency_median_us":
-                _, p99 = _open_pivot(rows, "latency_p99_us")
-                hi = np.array([p99[m].get(g, math.nan) for m in methods])
-                ax.errorbar([b.get_x() + b.get_width() / 2 for b in bars], vals,
-                            yerr=[np.zeros_like(vals), np.maximum(hi - vals, 0)], fmt="none", ecolor="k", lw=0.7)
-        ax.set_xticks(range(len(methods)), methods, rotation=30, ha="right", fontsize=8)
-        ax.set_ylabel(ylabel + (" (bar: median, whisker: p99)" if log else ""), fontsize=8)
-        if log:
-            ax.set_yscale("log")
-        ax.legend(fontsize=7, ncols=len(groups))
-        ax.grid(axis="y", alpha=0.3)
-        fig.tight_layout()
-        fig.savefig(out / name, dpi=DPI)
-        plt.close(fig)
-        files.append(name)
-    return files
-
-
-def _plot_distributions(rows: Sequence[Row], summary: Sequence[Row], out: Path, name: str) -> str:
-    plt = _plt()
-    channels = _channels(rows)
-    order = list(dict.fromkeys(s["method"] for s in summary))
-    fig, axes = plt.subplots(1, len(channels), figsize=(3.3 * len(channels), 3.4), sharey=False)
-    for ax, c in zip(np.atleast_1d(axes), channels):
-        for k, (mode, colour, dx) in enumerate((("blind", "tab:red", -0.15), ("told", "tab:blue", 0.15))):
-            xs, ys = [], []
-            for i, m in enumerate(order):
-                for r in rows:
-                    if r["method"] == m and _mode(r) == mode and not r["diverged"]:
-                        xs.append(i + dx)
-                        ys.append(r[f"{c}_rms_after"])
-            ax.scatter(xs, ys, s=14, color=colour, label=mode, alpha=0.8)
-        ax.set_xticks(range(len(order)), order, rotation=45, ha="right", fontsize=7)
-        ax.set_title(f"{c}: RMS error after failure (diverged runs omitted)", fontsize=8)
-        ax.set_yscale("log")
-        ax.grid(alpha=0.3)
-    np.atleast_1d(axes)[0].legend(fontsize=7)
+    groups, pivot = _open_pivot(rows, "coverage")
+    methods = sorted(pivot)
+    _write_csv(out / "coverage.csv", [{"method": m, **{g: pivot[m].get(g, math.nan) for g in groups}}
+                                      for m in methods])
+    fig, ax = plt.subplots(figsize=(9, 3.4))
+    width = 0.8 / len(groups)
+    for j, g in enumerate(groups):
+        vals = 100 * np.array([pivot[m].get(g, math.nan) for m in methods])
+        ax.bar(np.arange(len(methods)) + (j - (len(groups) - 1) / 2) * width, vals, width, label=g)
+    ax.set_xticks(range(len(methods)), methods, rotation=30, ha="right", fontsize=8)
+    ax.set_ylabel("AMS coverage (%)", fontsize=8)
+    ax.legend(fontsize=7, ncols=len(groups))
+    ax.grid(axis="y", alpha=0.3)
     fig.tight_layout()
-    fig.savefig(out / name, dpi=DPI)
+    fig.savefig(out / "coverage.png", dpi=DPI)
     plt.close(fig)
-    return name
+    return "coverage.png"
 
 
-def _plot_history(best: Row, seed_row: Row, out: Path, name: str) -> str:
-    """Re-run two specs (pure functions of their specs: same numbers) and overlay them."""
-    from .closedloop import simulate_spec
-
-    plt = _plt()
-    runs = []
-    for r in (seed_row, best):
-        spec = {k: r[k] for k in ("scenario", "failure", "method", "told", "duration", "failure_time", "noise")}
-        spec["seed"] = int(r["seed"])
-        runs.append((f"{r['method']} ({_mode(r)})", simulate_spec(spec)))
-    t_fail = float(best["failure_time"])
-    fig, axes = plt.subplots(len(runs[0][1].channels), 1, figsize=(8, 6), sharex=True)
-    for j, (ax, c) in enumerate(zip(axes, runs[0][1].channels)):
-        for (label, res), colour in zip(runs, ("tab:red", "tab:blue")):
-            sel = res.t >= t_fail - 1.0
-            ax.plot(res.t[sel], res.reference[sel, j], color=colour, lw=0.8, ls="--")
-            ax.plot(res.t[sel], res.output[sel, j], color=colour, lw=1.0, label=f"{label}: output (ref dashed)")
-        ax.axvline(t_fail, color="k", lw=0.6)
-        ax.set_ylabel(c, fontsize=8)
-        ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=7, loc="upper left")
-    axes[-1].set_xlabel("t (s); vertical line: failure", fontsize=8)
-    fig.tight_layout()
-    fig.savefig(out / name, dpi=DPI)
-    plt.close(fig)
-    return name
+def _latency_section(out: Path, meta: dict[str, Any]) -> str:
+    path = out / TIMINGS_CSV
+    if not path.exists():
+        return ""
+    rows = [{k: _typed(v) for k, v in r.items()} for r in csv.DictReader(path.open())]
+    problems = list(dict.fromkeys(r["problem"] for r in rows))
+    look = {(r["method"], r["problem"]): r for r in rows}
+    methods = sorted({r["method"] for r in rows}, key=lambda m: look.get((m, problems[0]), {}).get("median_us", 0))
+    body = [[m] + [f"{_fmt(look[(m, p)]['median_us'])} / {_fmt(look[(m, p)]['p99_us'])} "
+                   f"(x{_fmt(look[(m, p)]['median_over_floor'], 2)})" if (m, p) in look else "-" for p in problems]
+            for m in methods]
+    floor = ", ".join(f"{p} {_fmt(look[(methods[0], p)]['floor_median_us'])} µs" for p in problems
+                      if (methods[0], p) in look)
+    return "\n".join([
+        "## Latency per allocator call", "",
+        f"Measured after the sweep, in one process with no other run of ours active "
+        f"(`benchmarks/compare/timing.py`, {int(rows[0]['calls'])} warm calls per method and problem, demands "
+        f"inside and outside the AMS).  Median / p99 in µs, and (x) the median over a floor measured in the same "
+        f"pass (one Python call doing B @ u: {floor}).  The machine ({meta.get('cores', '?')} cores) was "
+        f"shared with other jobs (1-min load average {meta.get('load_avg_1min', '?')} at the end of the sweep): "
+        "compare ratios, not absolute times.", "",
+        _table(["method", *[f"{p}: median / p99 µs (x floor)" for p in problems]], body), ""])
 
 
 # ----------------------------------------------------------------------------- report
@@ -383,115 +625,96 @@ def _header(meta: dict[str, Any], report_s: float) -> str:
         f"- Command: `{meta.get('command', '?')}`",
         f"- Date: {meta.get('date', '?')}",
         f"- Machine: {meta.get('cores', '?')} cores ({meta.get('platform', '?')}), Python {meta.get('python', '?')}, "
-        f"numpy {meta.get('numpy', '?')}",
-        f"- Engine: {meta.get('engine', '?')}; this invocation ran {meta.get('ran', '?')} runs and skipped "
-        f"{meta.get('skipped', '?')} already in the CSVs; wall time: sweep {_fmt(meta.get('wall_s'))} s, "
-        f"report {report_s:.1f} s (tables, plots, two re-simulated time histories)",
+        f"numpy {meta.get('numpy', '?')}; shared with other jobs (1-min load average "
+        f"{meta.get('load_avg_1min', '?')} after the sweep)",
+        f"- Engine: {meta.get('engine', '?')}; {meta.get('runs', '?')} runs in the sweep, this invocation ran "
+        f"{meta.get('ran', '?')} and resumed {meta.get('skipped', '?')}; wall time: sweep {_fmt(meta.get('wall_s'))} s, "
+        f"latency pass {_fmt(meta.get('latency_pass_s'))} s, report {report_s:.1f} s",
         "",
-        "Generated by `benchmarks/compare/report.py` from the CSVs in this folder (one row per run; "
-        "timings in the `*_timings.csv` files); nothing is edited by hand.", "",
+        "Generated by `benchmarks/compare/report.py` from the CSVs in this folder (one row per run; run "
+        "wall times in `*_timings.csv`; stored time histories in `histories/`); every figure `X.png` has its "
+        "numbers in `X.csv`.  Nothing is edited by hand.", "",
     ])
 
 
-def make_report(out: Path | str, specs: Sequence[Spec], meta: dict[str, Any] | None = None,
-                *, history: bool = True) -> Path:
-    """Write ``report.md`` and its PNGs into ``out`` from the CSVs of ``specs``."""
+def _headline(cells: Sequence[Row], ratios: Sequence[Row], agreement: Sequence[Row]) -> list[str]:
+    out = []
+    for (scenario, setting), grp in _groups(cells, ("scenario", "setting")).items():
+        best = []
+        for f in _failure_order(sorted({c["failure"] for c in grp})):
+            top = [f"{c['method']} {c['mode']} ({_fmt(c['score'], 2)})" for c in grp
+                   if c["failure"] == f and c["rank"] == 1 and c["method"] != STATIC]
+            best.append(f"`{f}`: {', '.join(top) or 'static only'}")
+        out.append(f"- **{TITLES.get(scenario, scenario)}, `{setting}`, rank 1 per failure** (median score; "
+                   f"ties = overlapping 95 % intervals): " + "; ".join(best) + ".")
+        rs = [r for r in ratios if (r["scenario"], r["setting"]) == (scenario, setting)]
+        if rs:
+            helps = sum(r["verdict"] == "helps" for r in rs)
+            hurts = sum(r["verdict"] == "hurts" for r in rs)
+            out.append(f"  Telling the allocator helps in {helps} of {len(rs)} method x failure cells (95 % interval "
+                       f"of told/blind below 1), hurts in {hurts}.")
+        ag = [a for a in agreement if (a["scenario"], a["setting"]) == (scenario, setting) and not math.isnan(a["rho"])]
+        if ag:
+            sig = sum(a["rho"] < 0 and a["p"] < 0.05 for a in ag)
+            out.append(f"  Coverage vs closed-loop score: median Spearman rho {_fmt(float(np.median([a['rho'] for a in ag])), 2)} "
+                       f"over {len(ag)} failure x allocator cases; negative with p < 0.05 in {sig}.")
+        div = sum(c["diverged"] for c in grp)
+        runs = sum(c["runs"] for c in grp)
+        out.append(f"  Diverged: {div} of {runs} runs.")
+    return out
+
+
+def make_report(out: Path | str, specs: Sequence[Spec], meta: dict[str, Any] | None = None) -> Path:
+    """Write ``report.md``, its figures and their CSVs into ``out`` from the CSVs of ``specs``."""
     t0 = time.perf_counter()
     out = Path(out)
     meta = meta if meta is not None else json.loads((out / "run.json").read_text())
     tables = load_rows(out, specs)
     open_rows = tables.get("open", [])
-    parts: list[str] = []
-    headline: list[str] = []
     body: list[str] = []
-    figures: list[str] = []
-    ice_summary: list[Row] = []
+    all_cells: list[Row] = []
+    all_ratios: list[Row] = []
+    all_agree: list[Row] = []
     for name in sorted(t for t in tables if t.startswith("closed_")):
         rows = closed_scores(tables[name])
-        for failure in sorted({r["failure"] for r in rows}):
-            sub = [r for r in rows if r["failure"] == failure]
-            scenario = sub[0]["scenario"]
-            section, summary = _closed_section(f"{scenario}, failure `{failure}`", sub)
+        if not rows:
+            continue
+        cells = cell_summaries(rows)
+        ratios = told_blind(rows)
+        agree = coverage_agreement(cells, open_rows) if open_rows else []
+        all_cells += cells
+        all_ratios += ratios
+        all_agree += agree
+        _write_csv(out / f"{name}_cells.csv", cells)
+        _write_csv(out / f"{name}_told_blind.csv", ratios)
+        for (scenario, setting), grp in _groups(rows, ("scenario", "setting")).items():
+            key = (scenario, setting)
+            section, _ = _closed_section(
+                out, scenario, setting, grp,
+                [c for c in cells if (c["scenario"], c["setting"]) == key],
+                [r for r in ratios if (r["scenario"], r["setting"]) == key],
+                [a for a in agree if (a["scenario"], a["setting"]) == key])
             body.append(section)
-            tag = f"{scenario}_{failure}"
-            figures.append(f"![{tag} tracking errors]({_plot_distributions(sub, summary, out, f'errors_{tag}.png')})")
-            if scenario == "ice":
-                ice_summary = summary
-                headline += _headline_closed(summary, sub)
-                finite = [s for s in summary if s["method"] != STATIC and math.isfinite(s["score"])]
-                static = [r for r in sub if r["method"] == STATIC]
-                if history and finite and static:
-                    best = finite[0]
-                    seed = min(int(r["seed"]) for r in static)
-                    best_row = next(r for r in sub if r["method"] == best["method"] and _mode(r) == best["mode"]
-                                    and int(r["seed"]) == seed)
-                    static_row = next(r for r in static if int(r["seed"]) == seed)
-                    png = _plot_history(best_row, static_row, out, f"history_{tag}.png")
-                    figures.append(f"![{tag} time history: best method vs the seed's static distribution]({png})")
-    agreement = ""
-    if open_rows and ice_summary:
-        agreement, rho = _agreement(open_rows, ice_summary)
-        headline.append(
-            "- **Open loop vs closed loop** (ICE, Spearman rank correlation with the post-failure score rank): "
-            f"coverage rho = {_fmt(rho.get('coverage_told'), 2)} told, {_fmt(rho.get('coverage_blind'), 2)} blind; "
-            f"moment error on unattainable demands rho = {_fmt(rho.get('error_told'), 2)} told, "
-            f"{_fmt(rho.get('error_blind'), 2)} blind (+1 = same order, 0 = unrelated).  Among the methods "
-            f"reaching >= {100 * GOOD_COVERAGE:.0f} % of the AMS ({_fmt(rho.get('n_good_told'))} told, "
-            f"{_fmt(rho.get('n_good_blind'))} blind), coverage rho = {_fmt(rho.get('coverage_good_told'), 2)} told, "
-            f"{_fmt(rho.get('coverage_good_blind'), 2)} blind.")
-    if open_rows:
-        headline += _headline_open(open_rows)
-        figures = [f"![{f}]({f})" for f in _plot_open_bars(open_rows, out)] + figures
-    parts += ["## Headline", "", *headline, ""]
+    parts = ["## Headline", "", *_headline(all_cells, all_ratios, all_agree), ""]
     if body:
-        parts += ["## Closed loop", "", "Score: " + (__doc__ or "").split("Closed-loop score")[1]
-                  .split("Open-loop / closed-loop")[0].strip().replace("\n    ", " "), "",
+        doc = __doc__ or ""
+        parts += ["## Closed loop", "", "Definitions:", "",
+                  "```", doc.split("\n\n", 1)[1].split("Every figure")[0].strip(), "```", "",
                   f"`{STATIC}` is the seed's printed distribution matrix (ICE: Eq 4.24), the seed's static design; "
                   "a fixed matrix cannot be told of a failure, so it runs blind only.  *blind*: the allocator keeps "
-                  "the nominal problem; *told*: it is given the failed effectors' new limits "
-                  "(`allocator_knows_failure`; plant changes, bandwidth and delays are never told).", "", *body]
-    if agreement:
-        parts += ["## Open-loop ranking vs closed-loop ranking (ICE)", "", agreement]
+                  "the nominal problem; *told*: it is given the failed effectors' new limits and effectiveness "
+                  "(plant changes, bandwidths and delays are never told).  Columns: see "
+                  "`benchmarks/compare/closedloop.py` (recover: time until the 1 s windowed RMS error of every "
+                  "channel stays within 2x its pre-failure value; effort: mean |u| / max deflection after the "
+                  "failure; unattainable / fallback: fractions of post-failure allocator calls).", "", *body]
     if open_rows:
-        parts.append(_open_section(open_rows, next(s for s in specs if s["kind"] == "open")))
-    if figures:
-        parts += ["## Figures", "", *[f + "\n" for f in figures]]
+        png = _plot_coverage(open_rows, out)
+        parts += [_open_section(open_rows, next(s for s in specs if s["kind"] == "open")),
+                  f"![AMS coverage per method]({png})", ""]
+    latency = _latency_section(out, meta)
+    if latency:
+        parts.append(latency)
     parts.insert(0, _header(meta, report_s=time.perf_counter() - t0))
     path = out / "report.md"
     path.write_text("\n".join(parts).rstrip() + "\n")
     return path
-
-
-def _headline_closed(summary: Sequence[Row], rows: Sequence[Row]) -> list[str]:
-    r0 = rows[0]
-    out = []
-    for mode in ("told", "blind"):
-        ranked = [s for s in summary if s["mode"] == mode and s["method"] != STATIC]
-        if ranked:
-            top = ", ".join(f"{s['method']} ({_fmt(s['score'], 2)})" for s in ranked[:3])
-            out.append(f"- **Best tracking after the ICE failure, allocator {mode}** (score: post-failure RMS / the "
-                       f"seed's static distribution, 1 = as good as the seed; {r0['duration']:g} s runs, failure at "
-                       f"{r0['failure_time']:g} s): {top}.")
-    told = {s["method"]: s["score"] for s in summary if s["mode"] == "told"}
-    blind = {s["method"]: s["score"] for s in summary if s["mode"] == "blind"}
-    both = [m for m in told if m in blind and math.isfinite(told[m]) and math.isfinite(blind[m]) and blind[m] > 0]
-    if both:
-        ratios = {m: told[m] / blind[m] for m in both}
-        better = sorted(m for m in both if ratios[m] < 1)
-        out.append(f"- **Blind vs told**: telling the allocator lowers the score for {len(better)} of {len(both)} "
-                   f"methods ({', '.join(better) or 'none'}); told/blind ratio from {_fmt(min(ratios.values()), 2)} "
-                   f"to {_fmt(max(ratios.values()), 2)} (median {_fmt(float(np.median(list(ratios.values()))), 2)}).")
-    diverged = sum(bool(r["diverged"]) for r in rows)
-    out.append(f"- Diverged ICE runs: {diverged} of {len(rows)}.")
-    return out
-
-
-def _headline_open(rows: Sequence[Row]) -> list[str]:
-    _, cov = _open_pivot(rows, "coverage")
-    full = sorted(m for m, d in cov.items() if d.get("ice", 0) >= 0.999)
-    worst_rate = max(float(r["rate_violation_max"]) for r in rows)
-    fallbacks = int(sum(float(r["fallbacks"]) for r in rows))
-    calls = int(sum(float(r["calls"]) for r in rows))
-    return [f"- **Open loop**: methods reaching >= 99.9 % of the ICE AMS: {', '.join(full) or 'none'}; "
-            f"pinv on ICE: {_pct(cov.get('pinv', {}).get('ice'))}.  Largest rate-limit violation over all methods and problems: "
-            f"{_fmt(worst_rate)} units/s; fallbacks: {fallbacks} of {calls} calls."]

@@ -7,7 +7,9 @@ sorted by spec id, so the result CSVs are byte-identical whichever engine ran th
 in whatever order runs finished (the timings CSVs naturally are not).
 
 Tables: ``open`` (open loop), ``closed_<scenario>`` (closed loop; one per scenario
-because the channels differ).
+because the channels differ).  Runs whose spec asks for it (``history``) also leave their
+time history in ``histories/<id>.npz`` (written by the client as the run finishes, so it
+works the same on a remote cluster).
 """
 
 from __future__ import annotations
@@ -23,11 +25,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from tqdm import tqdm
 
 from .sweep import Spec
 
-__all__ = ["run_spec", "run_sweep", "table_of", "read_table", "SweepOutcome", "BLAS_ENV"]
+__all__ = ["run_spec", "run_sweep", "table_of", "read_table", "history_path", "SweepOutcome", "BLAS_ENV"]
 
 #: One BLAS/OpenMP thread per worker process: a process per core already uses every
 #: core, and Dask's nanny sets the same variables, so both engines compute alike.
@@ -42,8 +45,17 @@ def table_of(spec: Spec) -> str:
     return "open" if spec["kind"] == "open" else f"closed_{spec['scenario']}"
 
 
-def run_spec(spec: Spec) -> tuple[str, Row, Row]:
-    """Run one spec (in a worker): ``(table, row, timings)``."""
+def history_path(out: Path | str, spec_id: str) -> Path:
+    """Where the time history of run ``spec_id`` is stored."""
+    return Path(out) / "histories" / (spec_id.replace("/", "__") + ".npz")
+
+
+Result = tuple[str, Row, Row, "dict[str, Any] | None"]
+
+
+def run_spec(spec: Spec) -> Result:
+    """Run one spec (in a worker): ``(table, row, timings, history or None)``."""
+    history = None
     if spec["kind"] == "open":
         from .openloop import run_open
 
@@ -51,10 +63,10 @@ def run_spec(spec: Spec) -> tuple[str, Row, Row]:
     elif spec["kind"] == "closed":
         from .closedloop import run_closed
 
-        row, timings = run_closed(spec)
+        row, timings, history = run_closed(spec)
     else:
         raise ValueError(f"spec {spec.get('id')!r}: unknown kind {spec['kind']!r}; 'open' or 'closed'")
-    return table_of(spec), row, timings
+    return table_of(spec), row, timings, history
 
 
 # ----------------------------------------------------------------------------- CSV store
@@ -101,7 +113,7 @@ class _Table:
             if new:
                 self.header = list(row)
             elif list(row) != self.header:
-                raise ValueError(f"{self.path}: columns changed since it was written; re-run with --no-resume")
+                raise ValueError(f"{self.path}: columns changed since it was written; write to a new folder")
             self._fh = self.path.open("a", newline="")
             self._writer = csv.DictWriter(self._fh, self.header, lineterminator="\n")
             if new:
@@ -135,7 +147,7 @@ def _blas_env() -> Iterator[None]:
                 os.environ[k] = v
 
 
-def _local_results(specs: list[Spec], workers: int | None) -> Iterator[tuple[str, Row, Row]]:
+def _local_results(specs: list[Spec], workers: int | None) -> Iterator[Result]:
     # spawn: fresh interpreters that see BLAS_ENV before numpy is imported
     with _blas_env(), cf.ProcessPoolExecutor(workers or os.cpu_count(),
                                              mp_context=multiprocessing.get_context("spawn")) as pool:
@@ -148,7 +160,7 @@ def _local_results(specs: list[Spec], workers: int | None) -> Iterator[tuple[str
                 fut.cancel()
 
 
-def _dask_results(specs: list[Spec], client: Any) -> Iterator[tuple[str, Row, Row]]:
+def _dask_results(specs: list[Spec], client: Any) -> Iterator[Result]:
     from distributed import as_completed
 
     futures = client.map(run_spec, specs, pure=False)
@@ -171,7 +183,7 @@ class SweepOutcome:
 
 
 def run_sweep(specs: list[Spec], out: Path | str, *, workers: int | None = None, scheduler: Any = None,
-              resume: bool = True, progress: bool = True, desc: str = "sweep") -> SweepOutcome:
+              resume: bool = False, progress: bool = True, desc: str = "sweep") -> SweepOutcome:
     """Run ``specs``, writing rows to ``out/<table>.csv`` as they finish.
 
     Parameters
@@ -183,7 +195,9 @@ def run_sweep(specs: list[Spec], out: Path | str, *, workers: int | None = None,
         with ``client.map``.  The workers must be able to import ``alloc``, ``sim`` and
         ``benchmarks`` (install the repo on them).
     resume : bool
-        Skip spec ids already written; ``False`` starts the tables afresh.
+        Skip spec ids already written.  ``False`` (default): the sweep must start afresh, and
+        ``FileExistsError`` is raised if ``out`` already holds one of its tables (nothing is
+        deleted or overwritten).
     """
     ids = [s["id"] for s in specs]
     if len(set(ids)) != len(ids):
@@ -192,9 +206,10 @@ def run_sweep(specs: list[Spec], out: Path | str, *, workers: int | None = None,
     out.mkdir(parents=True, exist_ok=True)
     names = sorted({table_of(s) for s in specs})
     if not resume:
-        for name in names:
-            for suffix in ("", "_timings"):
-                (out / f"{name}{suffix}.csv").unlink(missing_ok=True)
+        found = [f"{n}{suffix}.csv" for n in names for suffix in ("", "_timings") if (out / f"{n}{suffix}.csv").exists()]
+        if found:
+            raise FileExistsError(f"out: {out} already holds {', '.join(found)} from an earlier sweep; "
+                                  "resume it explicitly (--resume) or write to a new folder")
     tables = {n: _Table(out / f"{n}.csv") for n in names}
     timings = {n: _Table(out / f"{n}_timings.csv") for n in names}
     todo = [s for s in specs if s["id"] not in tables[table_of(s)].ids]
@@ -211,7 +226,11 @@ def run_sweep(specs: list[Spec], out: Path | str, *, workers: int | None = None,
         if todo:
             results = _dask_results(todo, client) if client is not None else _local_results(todo, workers)
             with tqdm(total=len(todo), desc=desc, unit="run", disable=not progress) as bar:
-                for table, row, timing in results:
+                for table, row, timing, history in results:
+                    if history is not None:
+                        path = history_path(out, row["id"])
+                        path.parent.mkdir(exist_ok=True)
+                        np.savez_compressed(path, **history)
                     tables[table].append(row)
                     timings[table].append(timing)
                     bar.update()

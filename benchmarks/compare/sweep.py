@@ -4,21 +4,34 @@ A spec is a plain dict (JSON-able, picklable) naming everything a run depends on
 including its seeds, so a run is a pure function of its spec.  ``id`` is a readable,
 unique string; CSV rows are sorted by it.
 
+Closed-loop axes: scenario x failure x method x allocator told/blind x simulator setting x
+noise seed.  A *simulator setting* (``spec["sim"]``) is a dict of keyword arguments handed
+unchanged to the scenario (``sim.scenarios.get_scenario(name)(**spec["sim"], ...)``): the
+pilot (``pilot_gain``, ``pilot_delay`` today; a pilot model by name when the simulator has
+one) and the flight-control frame rate (:data:`FRAME_RATE`).  Settings are built as the
+product of *axes* (lists of dicts, merged); :func:`check_simulator_support` refuses, before
+any run starts, a setting the simulator in this checkout does not accept.
+
 Glossary: ``told`` -- the allocator is given the failed effectors' new limits
 (``allocator_knows_failure=True``, reconfiguration); ``blind`` -- it keeps the nominal
-problem (the seed's static design).  ``static`` is the seed's printed distribution
-matrix (Eq 4.24 for ICE), which cannot be told anything, so it only runs blind.
+problem.  ``static`` is the seed's printed distribution matrix (Eq 4.24 for ICE), which
+cannot be told anything, so it only runs blind.  Failures: see :mod:`.failures`.
 """
 
 from __future__ import annotations
 
+import inspect
+import itertools
+from collections.abc import Sequence
 from typing import Any
 
 import alloc
 
+from .failures import catalogue_names, is_catalogue
+
 __all__ = [
-    "Spec", "STATIC", "open_spec", "closed_spec", "quick_sweep", "full_sweep", "tiny_sweep",
-    "QUICK_CLOSED_METHODS",
+    "Spec", "STATIC", "FRAME_RATE", "PILOT_SETTINGS", "open_spec", "closed_spec", "closed_grid",
+    "setting_tag", "quick_sweep", "full_sweep", "tiny_sweep", "smoke_sweep", "check_simulator_support", "SCENARIO_TIMES",
 ]
 
 Spec = dict[str, Any]
@@ -26,33 +39,80 @@ Spec = dict[str, Any]
 #: The seed's printed static distribution (a simulator method, not a registry one).
 STATIC = "static"
 
-#: Methods of the quick closed loop: the seed's design, the pseudo-inverse it is built
-#: from and its direction-preserving variant, and one of each other family (daisy chain,
-#: cascade, QP, WLS, LP, direct allocation).
-QUICK_CLOSED_METHODS = (STATIC, "pinv", "pinv_scale", "daisy", "cgi", "qp", "wls", "lp", "da_facet")
+#: Scenario keyword for the flight-control frame rate (Hz) -- the multi-rate loop of issue 13.
+#: Absent from the spec = the scenario's default (the seed's 0.5 ms step).
+FRAME_RATE = "frame_rate"
+
+#: Pilot settings of the full sweep (scenario keywords).  The stand-in pilot at gain 1 (the
+#: setting in which the seed's Fig 4-110 reproduces), at its default gain 2, and slower with
+#: more delay.  A principled pilot model joins here by name when the simulator offers one.
+PILOT_SETTINGS: tuple[dict[str, Any], ...] = (
+    {"pilot_gain": 1.0},
+    {"pilot_gain": 2.0},
+    {"pilot_gain": 1.5, "pilot_delay": 0.3},
+)
+
+#: duration and failure time (s) of each scenario's closed-loop runs (the seed's)
+SCENARIO_TIMES = {"ice": (40.0, 20.0), "harv_latdir": (50.0, 25.0)}
+#: failures the scenario itself defines that the full sweep runs (besides the catalogue)
+SCENARIO_FAILURES = {"ice": ("seed",), "harv_latdir": ("failure1", "failure2")}
 
 
-def open_spec(problem: str, method: str, *, samples: int, demands: int, steps: int,
-              latency_calls: int, seed: int = 0) -> Spec:
+def setting_tag(sim: dict[str, Any] | None) -> str:
+    """Readable, order-independent name of a simulator setting (``default`` when empty)."""
+    if not sim:
+        return "default"
+    return ",".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in sorted(sim.items()))
+
+
+def open_spec(problem: str, method: str, *, samples: int, demands: int, steps: int, seed: int = 0) -> Spec:
     """One open-loop run of ``method`` on ``problem`` (see :mod:`.openloop`)."""
     return {
         "id": f"open/{problem}/{method}", "kind": "open", "problem": problem, "method": method,
-        "samples": samples, "demands": demands, "steps": steps, "latency_calls": latency_calls,
-        "seed": seed,
+        "samples": samples, "demands": demands, "steps": steps, "seed": seed,
     }
 
 
 def closed_spec(scenario: str, failure: str, method: str, *, told: bool, seed: int,
-                duration: float, failure_time: float | None, noise: bool = True,
-                pilot_gain: float | None = None) -> Spec:
-    """One closed-loop run (see :mod:`.closedloop`); ``pilot_gain`` None keeps the scenario's."""
+                duration: float, failure_time: float, noise: bool = True,
+                sim: dict[str, Any] | None = None, history: bool = False) -> Spec:
+    """One closed-loop run (see :mod:`.closedloop`); ``sim``: scenario keywords passed through;
+    ``history``: keep the run's time history (``histories/<id>.npz``) for the report's figures."""
     mode = "told" if told else "blind"
-    gain = "" if pilot_gain is None else f"/g{pilot_gain:g}"
+    sim = dict(sim or {})
     return {
-        "id": f"closed/{scenario}/{failure}/{method}/{mode}/s{seed}{gain}", "kind": "closed",
+        "id": f"closed/{scenario}/{setting_tag(sim)}/{failure}/{method}/{mode}/s{seed:02d}", "kind": "closed",
         "scenario": scenario, "failure": failure, "method": method, "told": told, "seed": seed,
-        "duration": duration, "failure_time": failure_time, "noise": noise, "pilot_gain": pilot_gain,
+        "duration": duration, "failure_time": failure_time, "noise": noise, "sim": sim, "history": history,
     }
+
+
+def settings_product(*axes: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Product of setting axes, each a list of keyword dicts (merged; later axes win)."""
+    out = []
+    for combo in itertools.product(*axes):
+        merged: dict[str, Any] = {}
+        for part in combo:
+            merged.update(part)
+        out.append(merged)
+    return out
+
+
+def closed_grid(scenario: str, failures: Sequence[str], methods: Sequence[str], seeds: Sequence[int], *,
+                settings: Sequence[dict[str, Any]] = ({},), duration: float, failure_time: float,
+                history_failures: Sequence[str] = (), noise: bool = True) -> list[Spec]:
+    """Every combination; ``static`` blind only; histories kept for the first seed and setting of
+    ``history_failures``."""
+    specs = []
+    for j, sim in enumerate(settings):
+        for failure in failures:
+            for method in methods:
+                for told in ((False,) if method == STATIC else (False, True)):
+                    for s in seeds:
+                        keep = j == 0 and s == seeds[0] and failure in history_failures
+                        specs.append(closed_spec(scenario, failure, method, told=told, seed=s, duration=duration,
+                                                 failure_time=failure_time, noise=noise, sim=sim, history=keep))
+    return specs
 
 
 def random_suite(n: int) -> list[str]:
@@ -64,57 +124,94 @@ def _open_sweep(problems: list[str], methods: list[str], **kw: Any) -> list[Spec
     return [open_spec(p, m, **kw) for p in problems for m in methods]
 
 
-def _closed_sweep(scenario: str, failures: list[str], methods: list[str], seeds: list[int],
-                  **kw: Any) -> list[Spec]:
-    specs = []
-    for failure in failures:
-        for method in methods:
-            for told in ((False,) if method == STATIC else (False, True)):
-                specs += [closed_spec(scenario, failure, method, told=told, seed=s, **kw) for s in seeds]
-    return specs
+def all_methods() -> list[str]:
+    """Every registry method and the seed's static matrix."""
+    return [STATIC, *alloc.methods()]
 
 
 def quick_sweep() -> list[Spec]:
-    """Under 3 minutes on 2 cores: ICE closed loop, the seed's 40 s with its failure at
-    20 s and the seed's noise, the :data:`QUICK_CLOSED_METHODS` blind and told, 3 noise
-    seeds; open loop on every method (ICE, HARV, 3 random problems, 2,000 coverage samples).
-
-    The stand-in pilot runs at gain 1: the seed's pilot models are figures lost to the scan,
-    and at the scenario's default gain 2 the pilot loop itself oscillates after the failure
-    (the roll reference runs away and the run is flagged diverged, with the seed's own static
-    design too), which would rank the pilot, not the allocators.  At gain 1 the seed's Fig 4-110 result (stable
-    through the failure) reproduces.  Measured sweep time: about 45 s.
+    """A few minutes on 2 cores: ICE closed loop (20 s, failure at 10 s, the seed's noise),
+    every method blind and told, the seed's failure and a single jam, 3 noise seeds, the
+    stand-in pilot at gain 1; open loop on every method (ICE, HARV, 3 random problems,
+    2,000 coverage samples).
 
     Closed-loop specs come first: they are the long runs, so the pool starts them first and
     fills the tail with the short open-loop ones."""
     problems = ["ice", "harv_latdir", *random_suite(3)]
-    specs = _closed_sweep("ice", ["seed"], list(QUICK_CLOSED_METHODS), [1, 2, 3], duration=40.0,
-                          failure_time=20.0, pilot_gain=1.0)
-    specs += _open_sweep(problems, alloc.methods(), samples=2000, demands=200, steps=300, latency_calls=300)
+    specs = closed_grid("ice", ["seed", "jam1"], all_methods(), [1, 2, 3], settings=[PILOT_SETTINGS[0]],
+                        duration=20.0, failure_time=10.0, history_failures=["seed"])
+    specs += _open_sweep(problems, alloc.methods(), samples=2000, demands=200, steps=300)
     return specs
 
 
-def full_sweep() -> list[Spec]:
-    """The complete sweep: open loop on 10 random problems with 20,000 coverage samples;
-    closed loop on every method, ICE (40 s, seed failure at 20 s) and HARV lat-dir
-    (50 s, its three failures), blind and told, 5 noise seeds."""
-    methods = [STATIC, *alloc.methods()]
-    problems = ["ice", "harv_latdir", *random_suite(10)]
-    seeds = [1, 2, 3, 4, 5]
-    specs = _closed_sweep("ice", ["seed"], methods, seeds, duration=40.0, failure_time=20.0)
-    specs += _closed_sweep("harv_latdir", ["plant", "failure1"], methods, seeds,
-                           duration=50.0, failure_time=25.0)
-    # failure2 happens at t = 0: there is no "before"
-    specs += _closed_sweep("harv_latdir", ["failure2"], methods, seeds, duration=50.0, failure_time=0.0)
-    specs += _open_sweep(problems, alloc.methods(), samples=20_000, demands=1000, steps=2000,
-                         latency_calls=2000)
+def full_sweep(*, seeds: int = 10, frame_rates: Sequence[float | None] = (None, 100.0),
+               pilots: Sequence[dict[str, Any]] = PILOT_SETTINGS) -> list[Spec]:
+    """The complete sweep: every method and ``static``; ICE (40 s, failure at 20 s) and HARV
+    lat-dir (50 s, failure at 25 s; its ``failure2`` is at t = 0 as in the seed) with the
+    scenario's own failures and every catalogue failure (5 kinds, single and double);
+    blind and told; frame rates (``None`` = the seed's rate) x pilot settings; ``seeds``
+    noise seeds.  Open loop on 10 random problems with 20,000 coverage samples."""
+    frame_axis = [{} if f is None else {FRAME_RATE: float(f)} for f in frame_rates]
+    settings = settings_product(pilots, frame_axis)
+    seed_list = list(range(1, seeds + 1))
+    specs: list[Spec] = []
+    for scenario, (duration, t_fail) in SCENARIO_TIMES.items():
+        failures = [*SCENARIO_FAILURES[scenario], *catalogue_names()]
+        specs += closed_grid(scenario, failures, all_methods(), seed_list, settings=settings, duration=duration,
+                             failure_time=t_fail, history_failures=[SCENARIO_FAILURES[scenario][0], "jam1"])
+    specs += _open_sweep(["ice", "harv_latdir", *random_suite(10)], alloc.methods(), samples=20_000,
+                         demands=1000, steps=2000)
+    return specs
+
+
+def smoke_sweep() -> list[Spec]:
+    """Seconds: one open-loop run and two 0.4 s closed-loop runs with stored histories
+    (``alloc bench smoke``: checks the machinery end to end, measures nothing)."""
+    specs = [closed_spec("ice", "seed", m, told=m != STATIC, seed=1, duration=0.4, failure_time=0.2,
+                         sim={"pilot_gain": 1.0}, history=True) for m in (STATIC, "pinv")]
+    specs.append(open_spec("ice", "pinv", samples=200, demands=20, steps=20))
     return specs
 
 
 def tiny_sweep() -> list[Spec]:
-    """For the engine tests: a few open-loop runs and two very short closed-loop runs."""
-    specs = _open_sweep(["ice", "random0"], ["pinv", "qp", "da_facet"], samples=300, demands=40,
-                        steps=40, latency_calls=30)
-    specs += [closed_spec("ice", "seed", m, told=m != STATIC, seed=1, duration=0.6, failure_time=0.3)
+    """For the engine tests: a few open-loop runs and three very short closed-loop runs."""
+    specs = _open_sweep(["ice", "random0"], ["pinv", "qp", "da_facet"], samples=300, demands=40, steps=40)
+    specs += [closed_spec("ice", "seed", m, told=m != STATIC, seed=1, duration=0.6, failure_time=0.3,
+                          sim={"pilot_gain": 1.0}, history=True)
               for m in (STATIC, "qp")]
+    specs.append(closed_spec("ice", "jam1", "pinv", told=True, seed=2, duration=0.6, failure_time=0.3))
     return specs
+
+
+# ----------------------------------------------------------------------------- guard
+def _accepted(scenario: str) -> tuple[set[str], bool]:
+    from sim.scenarios import get_scenario
+
+    params = inspect.signature(get_scenario(scenario)).parameters
+    return set(params), any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values())
+
+
+def check_simulator_support(specs: Sequence[Spec]) -> None:
+    """Raise ``ValueError`` naming the scenario and keyword when a spec's simulator setting or
+    failure is something the simulator in this checkout does not accept (checked before any run)."""
+    seen: set[tuple[str, str]] = set()
+    for spec in specs:
+        if spec["kind"] != "closed":
+            continue
+        from sim.scenarios import get_scenario
+
+        scenario = spec["scenario"]
+        accepted, var_kw = _accepted(scenario)
+        for key in spec["sim"]:
+            if (scenario, key) in seen:
+                continue
+            seen.add((scenario, key))
+            if key not in accepted and not var_kw:
+                hint = (" (the multi-rate loop of issue 13 is not in this checkout's simulator; run with the "
+                        "seed rate only, e.g. --frame-rates seed)") if key == FRAME_RATE else ""
+                raise ValueError(f"sweep axis {key!r}: scenario {scenario!r} does not accept it{hint}; "
+                                 f"it accepts {sorted(accepted)}")
+        failure = spec["failure"]
+        if not is_catalogue(failure) and failure not in get_scenario(scenario).failures:
+            raise ValueError(f"failure {failure!r}: not a catalogue failure ({', '.join(catalogue_names())}) and "
+                             f"not one scenario {scenario!r} defines ({', '.join(get_scenario(scenario).failures)})")

@@ -1,0 +1,81 @@
+"""``alloc bench`` and ``alloc ams plot`` write only where asked: a run from a clone leaves
+``git status`` clean, never resumes or overwrites unless told to."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from alloc.cli import app
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def _git(cwd: Path, *args: str) -> str:
+    return subprocess.run(["git", *args], cwd=cwd, check=True, capture_output=True, text=True).stdout
+
+
+@pytest.fixture(scope="module")
+def clone(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A fresh repository holding this checkout's files (tracked and new, not ignored), committed as they are."""
+    if shutil.which("git") is None:
+        pytest.skip("git not installed")
+    dst = tmp_path_factory.mktemp("clone")
+    for rel in _git(REPO, "ls-files", "-z", "--cached", "--others", "--exclude-standard").split("\0"):
+        if rel and (REPO / rel).is_file():
+            (dst / rel).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(REPO / rel, dst / rel)
+    _git(dst, "init", "-q")
+    _git(dst, "add", "-A")
+    _git(dst, "-c", "user.name=t", "-c", "user.email=t@t", "commit", "-q", "-m", "snapshot")
+    return dst
+
+
+def _bench(clone: Path, *args: str) -> subprocess.CompletedProcess:
+    env = {**os.environ, "PYTHONPATH": str(clone)}
+    return subprocess.run([sys.executable, "-m", "benchmarks.compare", *args], cwd=clone, env=env,
+                          capture_output=True, text=True, timeout=300)
+
+
+def test_bench_from_a_clone_leaves_git_status_clean(clone: Path) -> None:
+    before = set(clone.iterdir())
+    run = _bench(clone, "smoke", "--no-timing", "--workers", "1")
+    assert run.returncode == 0, run.stderr
+    new = set(clone.iterdir()) - before
+    assert len(new) == 1 and next(iter(new)).name.startswith("bench-smoke-")  # a new default folder
+    out = next(iter(new))
+    assert {"report.md", "run.json", "specs.json", "closed_ice.csv", "open.csv"} <= {p.name for p in out.iterdir()}
+    assert _git(clone, "status", "--porcelain", "--untracked-files=all") == ""
+
+
+def test_explicit_out_gets_everything_and_is_never_resumed_silently(clone: Path) -> None:
+    run = _bench(clone, "smoke", "--no-timing", "--workers", "1", "--out", "fresh")
+    assert run.returncode == 0, run.stderr
+    changed = _git(clone, "status", "--porcelain", "--untracked-files=all").splitlines()
+    assert changed and all(line.startswith("?? fresh/") for line in changed)
+    assert "3 runs in" in run.stdout and "(0 resumed)" in run.stdout
+    report = (clone / "fresh" / "report.md").read_bytes()
+    # the same folder again: refused, nothing touched
+    again = _bench(clone, "smoke", "--no-timing", "--out", "fresh")
+    assert again.returncode != 0 and "--resume" in again.stderr
+    assert (clone / "fresh" / "report.md").read_bytes() == report
+    # explicitly resumed: nothing re-run
+    resumed = _bench(clone, "smoke", "--no-timing", "--out", "fresh", "--resume")
+    assert resumed.returncode == 0, resumed.stderr
+    assert "0 runs in" in resumed.stdout and "(3 resumed)" in resumed.stdout
+
+
+def test_ams_plot_needs_an_explicit_out(tmp_path: Path) -> None:
+    runner = CliRunner()
+    missing = runner.invoke(app, ["ams", "plot", "--problem", "harv", "--samples", "50"])
+    assert missing.exit_code != 0 and "--out" in missing.output
+    png = tmp_path / "a.png"
+    ok = runner.invoke(app, ["ams", "plot", "--problem", "harv", "--samples", "50", "--out", str(png)])
+    assert ok.exit_code == 0, ok.output
+    assert png.stat().st_size > 1000
