@@ -1,22 +1,123 @@
 """The ``alloc`` command line: allocate, inspect methods and attainable sets, simulate,
 benchmark, and serve.  Every command has ``--help``; most print JSON with ``--json``.
 
-The simulator, attainable-set and benchmark commands live with their packages
-(``sim.cli``, ``alloc.ams.cli``, ``benchmarks.compare.cli``) and are mounted here; the
-service is imported only when ``alloc serve`` runs.
+The library's own commands (``methods``, ``allocate``, ``ams``) live here and in
+:mod:`alloc.ams.cli`.  Commands of the packages built on the library (``sim``, ``bench``,
+``serve``) register themselves as entry points of the group ``alloc.commands`` (declared in
+``pyproject.toml``, the way pytest and Dask discover plugins): the core never imports them,
+and loads one only when it runs.  ``alloc --help`` imports no plugin and no compiled kernel.
 """
 
 from __future__ import annotations
 
+import ast
+import importlib.machinery
+import importlib.util
 import json
+from functools import cache
+from importlib.metadata import EntryPoint, entry_points
 from pathlib import Path
 from typing import Optional
 
+import click
 import typer
+from typer.core import TyperGroup
 
 import alloc
 
+#: entry-point group through which other packages add sub-commands to ``alloc``
+COMMAND_GROUP = "alloc.commands"
+#: the library's own sub-applications, loaded like the plugins (on use)
+_BUILTIN = (EntryPoint("ams", "alloc.ams.cli:app", COMMAND_GROUP),)
+
+
+@cache
+def command_entry_points() -> dict[str, EntryPoint]:
+    """Sub-commands by name: the library's own lazily loaded ones and the installed plugins."""
+    found = {ep.name: ep for ep in entry_points(group=COMMAND_GROUP)}
+    return {**found, **{ep.name: ep for ep in _BUILTIN}}
+
+
+def _load_command(ep: EntryPoint) -> click.Command:
+    """The click command behind an entry point: a Typer app or a plain typer-style function."""
+    obj = ep.load()
+    if isinstance(obj, typer.Typer):
+        cmd = typer.main.get_command(obj)
+    elif isinstance(obj, click.Command):
+        cmd = obj
+    else:
+        holder = typer.Typer()
+        holder.command(ep.name)(obj)
+        cmd = typer.main.get_command(holder)
+    cmd.name = ep.name
+    return cmd
+
+
+def _summary(ep: EntryPoint) -> str:
+    """First line of the entry point's help, read from its source without importing it.
+
+    Listing the sub-commands must not import the simulator, the service or the sweep; a
+    function's docstring or a ``Typer(help=...)`` literal is found with :mod:`ast`.
+    """
+    module, _, attr = ep.value.partition(":")
+    try:
+        top, *rest = module.split(".")
+        spec = importlib.util.find_spec(top)  # a top-level name: finds, imports nothing
+        for i in range(len(rest)):
+            spec = importlib.machinery.PathFinder.find_spec(".".join([top, *rest[:i + 1]]),
+                                                            spec.submodule_search_locations)
+        tree = ast.parse(Path(spec.origin).read_text())
+    except (AttributeError, ImportError, OSError, SyntaxError, TypeError, ValueError):
+        return ""
+    for node in tree.body:
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) and node.name == attr:
+            return (ast.get_docstring(node) or "").strip().split("\n")[0]
+        if (isinstance(node, ast.Assign) and any(isinstance(t, ast.Name) and t.id == attr for t in node.targets)
+                and isinstance(node.value, ast.Call)):
+            for kw in node.value.keywords:
+                if kw.arg == "help" and isinstance(kw.value, ast.Constant) and isinstance(kw.value.value, str):
+                    return kw.value.value.strip().split("\n")[0]
+    return ""
+
+
+class PluginGroup(TyperGroup):
+    """The top-level group: own commands plus entry-point commands, loaded when they run.
+
+    Help listings get a light stand-in (name and one-line summary); resolving a command
+    for execution, or for its own ``--help``, loads the real one.
+    """
+
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        return list(super().list_commands(ctx)) + sorted(set(command_entry_points()) - set(self.commands))
+
+    def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
+        cmd = super().get_command(ctx, cmd_name)
+        ep = command_entry_points().get(cmd_name)
+        if cmd is None and ep is not None:
+            cmd = click.Command(cmd_name, help=_summary(ep) or f"see `alloc {cmd_name} --help`")
+        return cmd
+
+    def resolve_command(self, ctx: click.Context, args: list[str]) -> tuple[str | None, click.Command | None, list[str]]:
+        name = args[0] if args else None
+        ep = command_entry_points().get(name) if name not in self.commands else None
+        if ep is not None:
+            try:
+                cmd = _load_command(ep)
+            except ImportError as exc:
+                ctx.fail(f"`alloc {name}` needs packages that are not installed ({exc}); "
+                         f"install the extra: pip install 'alloc[{', '.join(ep.extras) or name}]'")
+            return name, cmd, args[1:]
+        return super().resolve_command(ctx, args)
+
+
+def _version(value: bool) -> None:
+    if value:
+        typer.echo(f"alloc {alloc.__version__}")
+        raise typer.Exit()
+
+
 app = typer.Typer(
+    cls=PluginGroup,
     help=(
         "Control allocation for over-actuated aircraft (seed section 1.3.4).\n\n"
         "Examples:\n\n"
@@ -30,6 +131,13 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
 )
+
+
+@app.callback()
+def _root(version: bool = typer.Option(False, "--version", callback=_version, is_eager=True,
+                                       help="print the version and exit")) -> None:
+    """Control allocation for over-actuated aircraft (seed section 1.3.4)."""
+
 
 VEHICLES = {"ice": "ICE 3 x 11 (seed section 4.7)", "ice-design": "ICE design problem of Eq 4.24",
             "harv": "F-18/HARV lateral-directional 3 x 5 (seed section 4.6)"}
@@ -128,34 +236,6 @@ def allocate_command(
         typer.echo(f"  {name:<12} {u: .6g}")
     for axis, want, got in zip(p.axes, result.v, result.v_achieved):
         typer.echo(f"  {axis:<12} demand {want: .6g}  achieved {got: .6g}")
-
-
-@app.command("serve")
-def serve_command(
-    host: str = typer.Option("127.0.0.1", help="bind address"),
-    port: int = typer.Option(8000, help="TCP port"),
-    data_dir: Optional[Path] = typer.Option(None, help="where the embedded SQLite database lives (ALLOC_DATA_DIR)"),
-    database_url: Optional[str] = typer.Option(None, help="SQLAlchemy URL, e.g. postgresql+psycopg://... (ALLOC_DATABASE_URL)"),
-    api_key: Optional[str] = typer.Option(None, help="require this X-API-Key on write endpoints (ALLOC_API_KEY)"),
-    access_log: bool = typer.Option(False, "--access-log", help="log every request"),
-) -> None:
-    """Start the allocation and reconfiguration HTTP service (OpenAPI docs at /docs)."""
-    from service.main import serve
-
-    serve(host=host, port=port, data_dir=data_dir, database_url=database_url, api_key=api_key, access_log=access_log)
-
-
-def _mount() -> None:
-    from alloc.ams.cli import app as ams_app
-    from benchmarks.compare.cli import app as bench_app
-    from sim.cli import sim_command
-
-    app.command("sim")(sim_command)
-    app.add_typer(ams_app, name="ams")
-    app.add_typer(bench_app, name="bench")
-
-
-_mount()
 
 
 def main() -> None:  # pragma: no cover - console entry point

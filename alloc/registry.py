@@ -9,6 +9,7 @@ bounds of Eq 1.28).  Adding a method is one new module plus one decorator.
 
 from __future__ import annotations
 
+import importlib
 from abc import ABC, abstractmethod
 from typing import Any, ClassVar
 
@@ -112,9 +113,10 @@ def register(name: str, **capabilities: bool):
 
 
 def _load_builtin() -> None:
-    # Importing the package registers the built-in methods (one module per family).
-    from . import methods as _methods  # noqa: F401
-    from . import ams as _ams  # noqa: F401  (facet-search direct allocation)
+    # Importing the packages registers the built-in methods (one module per family).  By
+    # full name: ``from . import methods`` would find the function ``alloc.methods``.
+    importlib.import_module("alloc.methods")
+    importlib.import_module("alloc.ams")  # facet-search direct allocation
 
 
 def get_method(name: str) -> type[Method]:
