@@ -8,6 +8,7 @@ point at their extra instead of failing obscurely.
 from __future__ import annotations
 
 import importlib.util
+import os
 import shutil
 import subprocess
 import sys
@@ -19,13 +20,13 @@ present = [name for name in ABSENT if importlib.util.find_spec(name) is not None
 assert not present, f"the core install pulled in optional packages: {present}"
 
 import alloc  # noqa: E402
-from alloc.vehicles import ice  # noqa: E402
+from alloc import vehicles  # noqa: E402
 
 assert "site-packages" in alloc.__file__, f"not the installed package: {alloc.__file__}"
-p = ice()
+p = vehicles.problem("ice")
 v = np.array([2.0, 30.0, 0.5])  # attainable: the README's example demand
 for method in alloc.methods():
-    options = {"groups": [[0, 1, 2, 7, 8], [3, 4, 5, 6], [9, 10]]} if method == "daisy" else {}
+    options = {"groups": vehicles.daisy_groups("ice")} if method == "daisy" else {}
     r = alloc.make_allocator(p, method, **options)(v)
     assert np.isfinite(r.u).all() and (r.u >= p.umin).all() and (r.u <= p.umax).all(), method
     assert r.status.value in ("exact", "unattainable"), (method, r.status)
@@ -42,7 +43,7 @@ for command in ("methods", "allocate", "ams", "sim", "serve", "bench"):
     assert command in out, (command, out)
 for command, extra in (("serve", "service"), ("sim", "sim")):
     run = subprocess.run([exe, command, "--port", "1"] if command == "serve" else [exe, command, "ice"],
-                         capture_output=True, text=True)
+                         capture_output=True, text=True, env={**os.environ, "COLUMNS": "200"})
     assert run.returncode == 2 and f"alloc[{extra}]" in run.stderr, (command, run.returncode, run.stderr)
 print("core install: `alloc serve` and `alloc sim` name their extras")
 sys.exit(0)

@@ -14,14 +14,14 @@ import ast
 import importlib.machinery
 import importlib.util
 import json
+import re
 from functools import cache
-from importlib.metadata import EntryPoint, entry_points
+from importlib.metadata import EntryPoint, PackageNotFoundError, entry_points, version
 from pathlib import Path
 from typing import Optional
 
-import click
 import typer
-from typer.core import TyperGroup
+from typer.core import TyperCommand, TyperGroup
 
 import alloc
 
@@ -38,13 +38,11 @@ def command_entry_points() -> dict[str, EntryPoint]:
     return {**found, **{ep.name: ep for ep in _BUILTIN}}
 
 
-def _load_command(ep: EntryPoint) -> click.Command:
-    """The click command behind an entry point: a Typer app or a plain typer-style function."""
+def _load_command(ep: EntryPoint) -> TyperCommand | TyperGroup:
+    """The command behind an entry point: a Typer app or a typer-style function."""
     obj = ep.load()
     if isinstance(obj, typer.Typer):
         cmd = typer.main.get_command(obj)
-    elif isinstance(obj, click.Command):
-        cmd = obj
     else:
         holder = typer.Typer()
         holder.command(ep.name)(obj)
@@ -59,7 +57,7 @@ def _summary(ep: EntryPoint) -> str:
     Listing the sub-commands must not import the simulator, the service or the sweep; a
     function's docstring or a ``Typer(help=...)`` literal is found with :mod:`ast`.
     """
-    module, _, attr = ep.value.partition(":")
+    module, attr = ep.module, ep.attr
     try:
         top, *rest = module.split(".")
         spec = importlib.util.find_spec(top)  # a top-level name: finds, imports nothing
@@ -80,6 +78,41 @@ def _summary(ep: EntryPoint) -> str:
     return ""
 
 
+def _requirement_name(requirement: str) -> tuple[str, list[str]]:
+    """``"alloc[sim,service]>=1; extra == 'x'"`` -> ``("alloc", ["sim", "service"])``."""
+    spec = requirement.split(";", 1)[0].strip()
+    name = re.split(r"[\s\[<>=!~(]", spec, maxsplit=1)[0]
+    extras = re.search(r"\[([^\]]*)\]", spec)
+    return name, [e.strip() for e in extras.group(1).split(",")] if extras else []
+
+
+def missing_requirements(ep: EntryPoint) -> list[str]:
+    """Packages of the entry point's extras (``[service]``, ...) that are not installed."""
+    if ep.dist is None or not ep.extras:
+        return []
+    requires = ep.dist.requires or []
+    own = ep.dist.metadata["Name"]
+    missing: list[str] = []
+    todo, seen = list(ep.extras), set()
+    while todo:
+        extra = todo.pop()
+        if extra in seen:
+            continue
+        seen.add(extra)
+        for requirement in requires:
+            if not re.search(rf"extra\s*==\s*['\"]{re.escape(extra)}['\"]", requirement):
+                continue
+            name, sub_extras = _requirement_name(requirement)
+            if name == own:
+                todo += sub_extras
+                continue
+            try:
+                version(name)
+            except PackageNotFoundError:
+                missing.append(name)
+    return sorted(set(missing))
+
+
 class PluginGroup(TyperGroup):
     """The top-level group: own commands plus entry-point commands, loaded when they run.
 
@@ -87,25 +120,28 @@ class PluginGroup(TyperGroup):
     for execution, or for its own ``--help``, loads the real one.
     """
 
-    def list_commands(self, ctx: click.Context) -> list[str]:
+    def list_commands(self, ctx: typer.Context) -> list[str]:
         return list(super().list_commands(ctx)) + sorted(set(command_entry_points()) - set(self.commands))
 
-    def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
+    def get_command(self, ctx: typer.Context, cmd_name: str) -> TyperCommand | TyperGroup | None:
         cmd = super().get_command(ctx, cmd_name)
         ep = command_entry_points().get(cmd_name)
         if cmd is None and ep is not None:
-            cmd = click.Command(cmd_name, help=_summary(ep) or f"see `alloc {cmd_name} --help`")
+            cmd = TyperCommand(cmd_name, help=_summary(ep) or f"see `alloc {cmd_name} --help`")
         return cmd
 
-    def resolve_command(self, ctx: click.Context, args: list[str]) -> tuple[str | None, click.Command | None, list[str]]:
+    def resolve_command(self, ctx: typer.Context, args: list[str]) -> tuple[str | None, TyperCommand | TyperGroup | None, list[str]]:
         name = args[0] if args else None
         ep = command_entry_points().get(name) if name not in self.commands else None
         if ep is not None:
+            hint = f"install the extra: pip install 'alloc[{','.join(ep.extras) or name}]'"
+            missing = missing_requirements(ep)
+            if missing:
+                ctx.fail(f"`alloc {name}` needs {', '.join(missing)}, not installed; {hint}")
             try:
                 cmd = _load_command(ep)
             except ImportError as exc:
-                ctx.fail(f"`alloc {name}` needs packages that are not installed ({exc}); "
-                         f"install the extra: pip install 'alloc[{', '.join(ep.extras) or name}]'")
+                ctx.fail(f"`alloc {name}` needs packages that are not installed ({exc}); {hint}")
             return name, cmd, args[1:]
         return super().resolve_command(ctx, args)
 
@@ -139,20 +175,13 @@ def _root(version: bool = typer.Option(False, "--version", callback=_version, is
     """Control allocation for over-actuated aircraft (seed section 1.3.4)."""
 
 
-VEHICLES = {"ice": "ICE 3 x 11 (seed section 4.7)", "ice-design": "ICE design problem of Eq 4.24",
-            "harv": "F-18/HARV lateral-directional 3 x 5 (seed section 4.6)"}
-
-
 def _vehicle(name: str) -> alloc.Problem:
     from . import vehicles
 
-    if name == "ice":
-        return vehicles.ice()
-    if name == "ice-design":
-        return vehicles.ice(design=True)
-    if name == "harv":
-        return vehicles.harv_latdir()
-    raise typer.BadParameter(f"unknown vehicle {name!r}; known: {', '.join(VEHICLES)}", param_hint="--vehicle")
+    try:
+        return vehicles.problem(name)
+    except alloc.ProblemError as exc:
+        raise typer.BadParameter(str(exc), param_hint="--vehicle") from None
 
 
 def _problem_from_file(path: Path) -> alloc.Problem:
@@ -205,11 +234,30 @@ def methods_command(as_json: bool = typer.Option(False, "--json", help="print JS
             typer.echo(f"{'':<13}--option {opt}=...  {doc}")
 
 
+@app.command("vehicles")
+def vehicles_command(as_json: bool = typer.Option(False, "--json", help="print JSON")) -> None:
+    """List the named problems (the seed's aircraft) that --vehicle and --problem accept."""
+    from . import vehicles
+
+    rows = []
+    for entry in vehicles.CATALOGUE.values():
+        p = entry.problem()
+        rows.append({"name": entry.name, "title": entry.title, "source": entry.source, "k": p.k, "m": p.m,
+                     "axes": list(p.axes), "effectors": list(p.names), "aliases": list(entry.aliases),
+                     "daisy_groups": [list(g) for g in entry.daisy_groups]})
+    if as_json:
+        typer.echo(json.dumps(rows, indent=2))
+        return
+    for r in rows:
+        alias = f" (also {', '.join(r['aliases'])})" if r["aliases"] else ""
+        typer.echo(f"{r['name']:<11} {r['k']} x {r['m']:<3} {r['title']}, {r['source']}{alias}")
+
+
 @app.command("allocate")
 def allocate_command(
     v: str = typer.Option(..., "--v", help="demand, comma-separated (one value per axis)"),
     method: str = typer.Option("qp", "--method", "-m", help="allocation method (see `alloc methods`)"),
-    vehicle: Optional[str] = typer.Option(None, "--vehicle", help=f"built-in problem: {', '.join(VEHICLES)}"),
+    vehicle: Optional[str] = typer.Option(None, "--vehicle", help="a named problem (see `alloc vehicles`), e.g. ice"),
     problem: Optional[Path] = typer.Option(None, "--problem", help="JSON file with B, umin, umax and optional fields"),
     option: list[str] = typer.Option([], "--option", "-o", help="method option key=value (value parsed as JSON)"),
     u_prev: Optional[str] = typer.Option(None, "--u-prev", help="previous command, comma-separated (rate limits)"),

@@ -29,7 +29,7 @@ ALLOWED: dict[str, set[str]] = {
 
 #: third-party packages the core may import at module level (``[project] dependencies``);
 #: anything else (solver front-ends, plotting) only inside the function that needs it.
-CORE_THIRD_PARTY = {"numpy", "scipy", "numba", "typer", "click"}
+CORE_THIRD_PARTY = {"numpy", "scipy", "numba", "typer"}
 
 
 def _module_name(path: Path) -> str:
