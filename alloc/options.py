@@ -156,16 +156,20 @@ def matrix(doc: str) -> Option:
     return Option("matrix", None, doc, check, "finite 2-D array")
 
 
+def _is_list(value: Any) -> bool:
+    """A list, tuple or array (a string is not a list of anything here)."""
+    return not isinstance(value, (str, bytes)) and isinstance(value, (Sequence, np.ndarray))
+
+
+def _is_whole(value: Any) -> bool:
+    return _is_real(value) and math.isfinite(float(value)) and float(value) == round(float(value))
+
+
 def levels(doc: str) -> Option:
     """A list of integers (default ``None``), e.g. one priority level per axis."""
 
     def check(value: Any) -> Any:
-        if value is None:
-            return None
-        if isinstance(value, (str, bytes)) or not isinstance(value, (Sequence, np.ndarray)):
-            raise ValueError("must be a list of integers")
-        items = list(value)
-        if not all((_is_real(x) and math.isfinite(float(x)) and float(x) == round(float(x))) for x in items):
+        if value is not None and not (_is_list(value) and all(_is_whole(x) for x in value)):
             raise ValueError("must be a list of integers")
         return value
 
@@ -175,16 +179,13 @@ def levels(doc: str) -> Option:
 def groups(doc: str) -> Option:
     """A list of lists of effector indices or names (default ``None``)."""
 
+    def is_effector(e: Any) -> bool:
+        return isinstance(e, (str, Integral)) and not isinstance(e, bool)
+
     def check(value: Any) -> Any:
-        if value is None:
-            return None
-        if isinstance(value, (str, bytes)) or not isinstance(value, (Sequence, np.ndarray)):
+        if value is not None and not (_is_list(value) and all(_is_list(g) and all(is_effector(e) for e in g)
+                                                               for g in value)):
             raise ValueError("must be a list of lists of effector indices or names")
-        for g in value:
-            if isinstance(g, (str, bytes)) or not isinstance(g, (Sequence, np.ndarray)):
-                raise ValueError("must be a list of lists of effector indices or names")
-            if not all(isinstance(e, (str, Integral)) and not isinstance(e, bool) for e in g):
-                raise ValueError("must be a list of lists of effector indices or names")
         return value
 
     return Option("groups", None, doc, check, "list of lists of effector indices or names")
