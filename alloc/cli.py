@@ -1,7 +1,7 @@
 """The ``alloc`` command line: allocate, inspect methods and attainable sets, simulate,
 benchmark, and serve.  Every command has ``--help``; most print JSON with ``--json``.
 
-The library's own commands (``methods``, ``allocate``, ``ams``) live here and in
+The library's own commands (``methods``, ``vehicles``, ``allocate``, ``ams``) live here and in
 :mod:`alloc.ams.cli`.  Commands of the packages built on the library (``sim``, ``bench``,
 ``serve``) register themselves as entry points of the group ``alloc.commands`` (declared in
 ``pyproject.toml``, the way pytest and Dask discover plugins): the core never imports them,
@@ -170,9 +170,9 @@ app = typer.Typer(
 
 
 @app.callback()
-def _root(version: bool = typer.Option(False, "--version", callback=_version, is_eager=True,
-                                       help="print the version and exit")) -> None:
-    """Control allocation for over-actuated aircraft (seed section 1.3.4)."""
+def _root(show_version: bool = typer.Option(False, "--version", callback=_version, is_eager=True,
+                                            help="print the version and exit")) -> None:
+    """The options every sub-command shares (the help text is the app's)."""
 
 
 def _vehicle(name: str) -> alloc.Problem:

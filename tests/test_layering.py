@@ -160,3 +160,46 @@ def test_cli_help_imports_no_plugin_and_no_kernel():
                            "try:\n    app()\nexcept SystemExit:\n    pass")
     assert [m for m in loaded if m.split(".")[0] in {"sim", "service", "benchmarks", "numba", "scipy"}] == []
     assert "alloc.api" not in loaded and "alloc.ams" not in loaded
+
+
+# ------------------------------------------------------- the alloc command's plugins
+def test_version_is_the_package_version():
+    from typer.testing import CliRunner
+
+    import alloc
+    from alloc.cli import app
+
+    out = CliRunner().invoke(app, ["--version"])
+    assert out.exit_code == 0 and out.output.strip() == f"alloc {alloc.__version__}"
+
+
+def test_plugins_are_the_declared_entry_points():
+    """pyproject.toml declares sim, bench, serve; the installed metadata must match it."""
+    import tomllib
+
+    from alloc.cli import command_entry_points
+
+    declared = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["entry-points"]["alloc.commands"]
+    found = {name: ep.value for name, ep in command_entry_points().items() if name != "ams"}
+    assert found == declared, "reinstall the project (pip install -e .): its entry points changed"
+    for value in declared.values():
+        module = value.split(":")[0]
+        assert module.split(".")[0] in {"sim", "service", "benchmarks"}
+
+
+def test_missing_extra_is_named():
+    from importlib.metadata import EntryPoint
+
+    from alloc.cli import missing_requirements
+
+    class Dist:
+        requires = ['fastapi>=0.1; extra == "service"', 'surely-absent-pkg-1e9>=1; extra == "service"',
+                    'alloc[service,sim]; extra == "bench"', 'also-absent-pkg-1e9; extra == "sim"', "numpy>=1"]
+        metadata = {"Name": "alloc"}
+
+    def ep(extra: str) -> EntryPoint:
+        return EntryPoint("x", f"service.cli:serve_command [{extra}]", "alloc.commands")._for(Dist())
+
+    assert missing_requirements(ep("service")) == ["surely-absent-pkg-1e9"]
+    assert missing_requirements(ep("bench")) == ["also-absent-pkg-1e9", "surely-absent-pkg-1e9"]
+    assert missing_requirements(EntryPoint("x", "service.cli:serve_command", "alloc.commands")) == []
