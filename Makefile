@@ -1,10 +1,11 @@
-# `make test` and `make run` work on a fresh machine: they create .venv and install the project.
+# `make test` and `make run` work on a fresh machine: they create .venv and install the project
+# with every extra ([dev]).  `make check-core`: the core alone installs and allocates in a clean venv.
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: install test test-all run bench clean
+.PHONY: install test test-all run bench check-core clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -25,6 +26,9 @@ run: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python -m benchmarks.bench_alloc
+
+check-core:
+	PYTHON=$(PYTHON) .ci/check-core-install
 
 clean:
 	rm -rf $(VENV) .pytest_cache build *.egg-info

@@ -9,9 +9,20 @@ position and rate limits, preferences and weights, find effector commands ``u`` 
 >>> r = alloc.allocate(p, [1.0], method="pinv")
 >>> r.status.value, r.u.round(3).tolist()
 ('exact', [0.444, 0.444, 0.222])
+
+The public names below are loaded on first use (the scientific Python "lazy loading"
+convention, SPEC 1): ``import alloc`` is cheap, so the ``alloc`` command's ``--help`` and
+the packages built on the library (simulator, service) do not pay for the compiled
+kernels until they allocate.  The method modules load on the first registry look-up.
 """
 
-from .api import Allocator, allocate, allocate_batch, make_allocator
+from __future__ import annotations
+
+import importlib
+import sys
+import types
+from typing import TYPE_CHECKING, Any
+
 from .exceptions import (
     AllocError,
     DemandError,
@@ -20,10 +31,22 @@ from .exceptions import (
     SolverError,
     UnknownMethodError,
 )
-from .health import EffectorHealth, FailureEvent, FailureKind
-from .problem import Problem
-from .registry import method_info, methods, register
-from .result import EXACT_RTOL, BatchResult, Result, Status
+
+if TYPE_CHECKING:  # the lazily loaded names, for type checkers and IDEs
+    from .api import Allocator, allocate, allocate_batch, make_allocator
+    from .health import EffectorHealth, FailureEvent, FailureKind
+    from .problem import Problem
+    from .registry import method_info, methods, register
+    from .result import EXACT_RTOL, BatchResult, Result, Status
+
+#: public name -> the submodule defining it (loaded on first attribute access)
+_LAZY: dict[str, str] = {
+    "Allocator": "api", "allocate": "api", "allocate_batch": "api", "make_allocator": "api",
+    "EffectorHealth": "health", "FailureEvent": "health", "FailureKind": "health",
+    "Problem": "problem",
+    "method_info": "registry", "register": "registry",
+    "EXACT_RTOL": "result", "BatchResult": "result", "Result": "result", "Status": "result",
+}
 
 __all__ = [
     "Problem", "EffectorHealth", "FailureEvent", "FailureKind", "Result", "BatchResult", "Status", "EXACT_RTOL",
@@ -31,4 +54,40 @@ __all__ = [
     "methods", "method_info", "register",
     "AllocError", "ProblemError", "DemandError", "OptionError", "UnknownMethodError", "SolverError",
 ]
+#: the one definition of the version (pyproject.toml reads it: ``[tool.setuptools.dynamic]``)
 __version__ = "0.1.0"
+
+
+def __getattr__(name: str) -> Any:
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'alloc' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{module}", __name__), name)
+    globals()[name] = value  # later look-ups skip this function
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))
+
+
+class _Package(types.ModuleType):
+    """The ``alloc`` module object: ``alloc.methods`` stays the registry's function.
+
+    The sub-package :mod:`alloc.methods` has the same name; importing it makes the import
+    system bind it on its parent, which would hide the function.  The binding is ignored
+    here (the sub-package is always reachable as ``sys.modules["alloc.methods"]``).
+    """
+
+    @property
+    def methods(self) -> Any:
+        from .registry import methods
+
+        return methods
+
+    @methods.setter
+    def methods(self, value: Any) -> None:
+        pass
+
+
+sys.modules[__name__].__class__ = _Package

@@ -23,6 +23,16 @@ def all_finite(x):  # pragma: no cover - compiled
     return True
 
 
+@njit(cache=True, nogil=True, inline="always")
+def clip_scalar(y, lo, hi):  # pragma: no cover - compiled
+    """``min(max(y, lo), hi)`` for one value (a NaN stays NaN); inlined where it is called."""
+    if y < lo:
+        y = lo
+    if y > hi:
+        y = hi
+    return y
+
+
 @njit(cache=True, nogil=True)
 def affine(c, P, v):  # pragma: no cover - compiled
     """``c + P v`` for a small dense ``P``."""
@@ -48,12 +58,7 @@ def finish(B, u, lo, hi, v, v_ach, rtol):  # pragma: no cover - compiled
         if not np.isfinite(u[j]):
             return 2
     for j in range(m):
-        x = u[j]
-        if x < lo[j]:
-            x = lo[j]
-        if x > hi[j]:
-            x = hi[j]
-        u[j] = x
+        u[j] = clip_scalar(u[j], lo[j], hi[j])
     err = 0.0
     vmax = 1.0
     for i in range(k):
@@ -171,12 +176,7 @@ def clip(x, lo, hi):  # pragma: no cover - compiled
     m = x.shape[0]
     out = np.empty(m)
     for j in range(m):
-        y = x[j]
-        if y < lo[j]:
-            y = lo[j]
-        if y > hi[j]:
-            y = hi[j]
-        out[j] = y
+        out[j] = clip_scalar(x[j], lo[j], hi[j])
     return out
 
 
@@ -366,12 +366,7 @@ def cascade(B, up, v, lo, hi, keys, slots, bank, u, free, it0):  # pragma: no co
         if nf < k:  # (3) Eq 1.24, then clip
             for q in range(nf):
                 j = F[q]
-                y = uF[q]
-                if y < lo[j]:
-                    y = lo[j]
-                if y > hi[j]:
-                    y = hi[j]
-                u[j] = y
+                u[j] = clip_scalar(uF[q], lo[j], hi[j])
             return it, 0
         hit = False
         for q in range(nf):

@@ -10,7 +10,6 @@ from numpy.typing import ArrayLike
 
 from ._kernels import all_finite, finish, fused_affine
 from .exceptions import DemandError, SolverError
-from .methods.pseudo_inverse import SafeCommand
 from .problem import Problem
 from .registry import FloatArray, build
 from .result import EXACT_RTOL, BatchResult, Result, Status
@@ -35,6 +34,7 @@ class Allocator:
         self.problem = problem
         self.method = method
         self.impl = build(problem, method, options)
+        from .methods.pseudo_inverse import SafeCommand  # loaded with the registry's methods, not with alloc
         self._safe = SafeCommand(problem)
         self._B = problem.B
         self._lo, self._hi = problem.umin, problem.umax

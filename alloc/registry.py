@@ -9,13 +9,15 @@ bounds of Eq 1.28).  Adding a method is one new module plus one decorator.
 
 from __future__ import annotations
 
+import importlib
 from abc import ABC, abstractmethod
 from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
 
-from .exceptions import OptionError, UnknownMethodError
+from .exceptions import UnknownMethodError
+from .options import Option, validate
 from .problem import Problem
 
 __all__ = ["Method", "register", "get_method", "methods", "method_info"]
@@ -40,8 +42,9 @@ class Method(ABC):
     equation: ClassVar[str] = ""
     #: one line: what the method optimises
     summary: ClassVar[str] = ""
-    #: accepted options: name -> description (shown by ``alloc methods`` and the service)
-    options: ClassVar[dict[str, str]] = {}
+    #: accepted options: name -> typed specification (:mod:`alloc.options`), validated once by
+    #: :func:`build`; shown by ``alloc methods`` and the service
+    options: ClassVar[dict[str, Option]] = {}
 
     # Capabilities, declared at registration (``@register(name, affine=True, ...)``) and read
     # by the service, the coverage tools and the benchmarks; never guessed from module names.
@@ -85,6 +88,14 @@ class Method(ABC):
         """Vectorised allocation of the rows of ``V`` (N, k); ``None`` if not vectorised."""
         return None
 
+    def affine_map(self) -> tuple[FloatArray, FloatArray] | None:
+        """``(c, P)`` when, without rate limits, the method returns ``u = c + P v`` wherever
+        that is admissible (and something else, never ``B u = v``, where it is not); ``None``
+        for any other method.  The coverage tools compute such a method's exact region as a
+        polytope (:func:`alloc.ams.coverage`).  Default: the :attr:`fused` map.
+        """
+        return self.fused
+
 
 _CAPABILITIES = ("affine", "needs_ams", "supports_priorities", "supports_batch")
 
@@ -112,9 +123,10 @@ def register(name: str, **capabilities: bool):
 
 
 def _load_builtin() -> None:
-    # Importing the package registers the built-in methods (one module per family).
-    from . import methods as _methods  # noqa: F401
-    from . import ams as _ams  # noqa: F401  (facet-search direct allocation)
+    # Importing the packages registers the built-in methods (one module per family).  By
+    # full name: ``from . import methods`` would find the function ``alloc.methods``.
+    importlib.import_module("alloc.methods")
+    importlib.import_module("alloc.ams")  # facet-search direct allocation
 
 
 def get_method(name: str) -> type[Method]:
@@ -132,19 +144,26 @@ def methods() -> list[str]:
 
 
 def method_info(name: str) -> dict[str, Any]:
-    """Name, seed equation, summary and options of a method (for the CLI and the service)."""
+    """Name, seed equation, summary, options and capabilities of a method (CLI and service).
+
+    ``options`` maps each option to one descriptive line; ``option_specs`` gives the typed
+    specification (type, default, constraint, doc).
+    """
     cls = get_method(name)
-    return {"name": name, "equation": cls.equation, "summary": cls.summary, "options": dict(cls.options),
+    return {"name": name, "equation": cls.equation, "summary": cls.summary,
+            "options": {opt: spec.describe() for opt, spec in cls.options.items()},
+            "option_specs": {opt: spec.to_dict() for opt, spec in cls.options.items()},
             "capabilities": {cap: bool(getattr(cls, cap)) for cap in _CAPABILITIES}}
 
 
 def build(problem: Problem, name: str, options: dict[str, Any]) -> Method:
-    """Construct method ``name`` for ``problem``; unknown options raise OptionError (a TypeError)."""
+    """Construct method ``name`` for ``problem`` with validated options.
+
+    Unknown options and inadmissible values raise :class:`~alloc.exceptions.OptionError`
+    (a ``TypeError``) naming the option (:func:`alloc.options.validate`).
+    """
     cls = get_method(name)
-    unknown = sorted(set(options) - set(cls.options))
-    if unknown:
-        allowed = ", ".join(sorted(cls.options)) or "none"
-        raise OptionError(f"{name}: unknown option(s) {unknown}; accepted: {allowed}")
+    values = validate(name, cls.options, options)
     if not isinstance(problem, Problem):
         raise TypeError(f"problem: expected alloc.Problem, got {type(problem).__name__}")
-    return cls(problem, **options)
+    return cls(problem, **values)

@@ -1,4 +1,19 @@
-"""Allocation data of the seed's aircraft (effectiveness, limits, rate limits).
+"""The one catalogue of named allocation problems: the seed's aircraft.
+
+Effectiveness, limits and rate limits of the seed's aircraft, and :data:`CATALOGUE`, the
+names every command line and benchmark uses for them (``alloc allocate --vehicle NAME``,
+``alloc ams summary --problem NAME``, the comparison sweep):
+
+========== ============================================================ ======
+name       problem                                                      k x m
+========== ============================================================ ======
+ice        ICE, axes (alpha, p, beta), seed section 4.7                 3 x 11
+ice-design ICE design problem of seed Eq 4.24 (SSD out of pitch, Wu)    3 x 11
+ice-mid    ICE with AMT/SSD preferring mid-range (30 deg)               3 x 11
+harv       F-18/HARV lateral-directional, seed Eq 4.16 (``harv_latdir``) 3 x 5
+========== ============================================================ ======
+
+Each entry also carries its daisy-chain groups (seed Eq 1.25).
 
 Transcribed from the seed (OCR'd: decimal points restored where the scan lost them, e.g.
 ``-0009123567`` -> ``-0.009123567``) and checked by reproducing the seed's printed
@@ -9,14 +24,19 @@ derivatives per degree of deflection.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import dataclass
+
 import numpy as np
 
+from .exceptions import ProblemError
 from .problem import Problem
 
 __all__ = [
-    "ICE_B_FULL", "ICE_EFFECTORS", "ICE_STATES", "ICE_BK_SEED", "ice",
+    "ICE_B_FULL", "ICE_EFFECTORS", "ICE_STATES", "ICE_BK_SEED", "ice", "ice_mid",
     "HARV_LATDIR_B", "HARV_LATDIR_EFFECTORS", "HARV_LATDIR_BK_SEED", "harv_latdir",
-    "ice_daisy_groups",
+    "ICE_DAISY_GROUPS", "HARV_LATDIR_DAISY_GROUPS", "ice_daisy_groups",
+    "NamedProblem", "CATALOGUE", "names", "lookup", "problem", "daisy_groups",
 ]
 
 # seed section 4.7, B' (11 effectors x 8 states), flight condition M = 0.3, h = 15,000 ft.
@@ -79,14 +99,31 @@ def ice(*, design: bool = False) -> Problem:
     )
 
 
+def ice_mid() -> Problem:
+    """ICE with the one-sided effectors (AMT, SSD: 0..60 deg) preferring mid-range (30 deg).
+
+    With ``up = 0`` they rest on a limit and the pseudo-inverse family can only push them one
+    way; mid-range preferences are what the AMS coverage comparison of section 1.3.4.9 uses.
+    """
+    p = ice()
+    up = p.up.copy()
+    one_sided = p.umin >= 0
+    up[one_sided] = (p.umin[one_sided] + p.umax[one_sided]) / 2
+    return p.replace(up=up)
+
+
+#: Daisy-chain groups for ICE in the spirit of seed Eq 1.25: aerodynamic surfaces first,
+#: then the innovative effectors, then thrust vectoring.
+ICE_DAISY_GROUPS = (
+    ("elevon_l", "elevon_r", "pitch_flap", "lef_l", "lef_r"),
+    ("amt_l", "amt_r", "ssd_l", "ssd_r"),
+    ("pitch_tv", "yaw_tv"),
+)
+
+
 def ice_daisy_groups() -> list[list[str]]:
-    """Daisy-chain groups for ICE in the spirit of seed Eq 1.25: aerodynamic surfaces
-    first, then the innovative effectors, then thrust vectoring."""
-    return [
-        ["elevon_l", "elevon_r", "pitch_flap", "lef_l", "lef_r"],
-        ["amt_l", "amt_r", "ssd_l", "ssd_r"],
-        ["pitch_tv", "yaw_tv"],
-    ]
+    """:data:`ICE_DAISY_GROUPS` as lists (the ``groups`` option of ``daisy``)."""
+    return [list(g) for g in ICE_DAISY_GROUPS]
 
 
 # seed Eq 4.16: F-18/HARV lateral-directional, x = [beta p r], u = [DT AI RU RTV YTV].
@@ -111,3 +148,58 @@ def harv_latdir() -> Problem:
         HARV_LATDIR_B, -_HARV_UMAX, _HARV_UMAX, rate_min=-_HARV_RATE, rate_max=_HARV_RATE,
         names=HARV_LATDIR_EFFECTORS, axes=("beta", "p", "r"),
     )
+
+
+#: Daisy-chain groups for the HARV lateral-directional suite: surfaces, then thrust vectoring.
+HARV_LATDIR_DAISY_GROUPS = (("diff_tail", "aileron", "rudder"), ("roll_tv", "yaw_tv"))
+
+
+# --------------------------------------------------------------------------- catalogue
+@dataclass(frozen=True)
+class NamedProblem:
+    """An entry of the catalogue: a named problem, where it comes from, its daisy groups."""
+
+    name: str
+    title: str
+    source: str
+    make: Callable[[], Problem]
+    daisy_groups: tuple[tuple[str, ...], ...]
+    aliases: tuple[str, ...] = ()
+
+    def problem(self) -> Problem:
+        return self.make()
+
+
+#: name -> entry; the one place named problems are defined
+CATALOGUE: dict[str, NamedProblem] = {entry.name: entry for entry in (
+    NamedProblem("ice", "ICE", "seed section 4.7, Table 4-5", ice, ICE_DAISY_GROUPS),
+    NamedProblem("ice-design", "ICE design problem", "seed Eq 4.24", lambda: ice(design=True), ICE_DAISY_GROUPS),
+    NamedProblem("ice-mid", "ICE (AMT/SSD prefer 30 deg)", "seed section 4.7, up at mid-range", ice_mid,
+                 ICE_DAISY_GROUPS),
+    NamedProblem("harv", "F-18/HARV lat-dir", "seed Eq 4.16, Table 4-3", harv_latdir, HARV_LATDIR_DAISY_GROUPS,
+                 aliases=("harv_latdir", "harv-latdir")),
+)}
+_BY_NAME = {**{a: e for e in CATALOGUE.values() for a in e.aliases}, **CATALOGUE}
+
+
+def names() -> list[str]:
+    """The catalogue's names (aliases aside), in catalogue order."""
+    return list(CATALOGUE)
+
+
+def lookup(name: str) -> NamedProblem:
+    """The entry named ``name`` (or one of its aliases); unknown names list the known ones."""
+    entry = _BY_NAME.get(name) if isinstance(name, str) else None
+    if entry is None:
+        raise ProblemError(f"vehicle: unknown {name!r}; known: {', '.join(CATALOGUE)}", field="vehicle")
+    return entry
+
+
+def problem(name: str) -> Problem:
+    """The allocation problem named ``name`` (see :data:`CATALOGUE`)."""
+    return lookup(name).problem()
+
+
+def daisy_groups(name: str) -> list[list[str]]:
+    """Daisy-chain groups (effector names, priority order) of the problem named ``name``."""
+    return [list(g) for g in lookup(name).daisy_groups]

@@ -16,7 +16,6 @@ import numpy as np
 import alloc
 from alloc import vehicles
 from alloc.ams import AttainableSet, coverage
-from alloc.ams.cli import HARV_DAISY_GROUPS, ice_mid_up
 
 
 def timed(fn, n: int) -> np.ndarray:
@@ -161,7 +160,7 @@ def batch_rate(n: int) -> None:
 def coverage_tables(samples: int) -> None:
     problems = {
         "ICE (up = 0: AMT/SSD parked at their 0 deg limit)": ("ice", vehicles.ice()),
-        "ICE (AMT/SSD prefer 30 deg)": ("ice-mid", ice_mid_up()),
+        "ICE (AMT/SSD prefer 30 deg)": ("ice-mid", vehicles.ice_mid()),
         "F-18/HARV lateral-directional": ("harv", vehicles.harv_latdir()),
     }
     print(f"## Coverage of the AMS (Bordignon-Durham), Monte Carlo N = {samples}, seed 0\n")
@@ -170,7 +169,7 @@ def coverage_tables(samples: int) -> None:
         for meth in alloc.methods():
             opts = {}
             if meth == "daisy":
-                opts = {"groups": vehicles.ice_daisy_groups() if key.startswith("ice") else HARV_DAISY_GROUPS}
+                opts = {"groups": vehicles.daisy_groups(key)}
             r = coverage(p, meth, samples=samples, seed=0, **opts)
             se = "exact" if r.estimator == "polytope" else f"{100 * r.stderr:.2f}"
             ci = "-" if r.estimator == "polytope" else f"{100 * r.ci95[0]:.2f} - {100 * r.ci95[1]:.2f}"

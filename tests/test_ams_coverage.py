@@ -8,15 +8,7 @@ import pytest
 import alloc
 from alloc.ams import AttainableSet, coverage, sample_ams
 from alloc.vehicles import harv_latdir, ice
-
-
-def ice_mid_up() -> alloc.Problem:
-    """ICE with the one-sided effectors (AMT, SSD: 0..60 deg) preferring mid-range."""
-    p = ice()
-    up = p.up.copy()
-    one_sided = p.umin >= 0
-    up[one_sided] = (p.umin[one_sided] + p.umax[one_sided]) / 2
-    return p.replace(up=up)
+from alloc.vehicles import ice_mid as ice_mid_up
 
 
 @pytest.mark.parametrize("method", ["pinv", "pinv_scale", "ganging"])

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 import alloc
 from alloc.methods.pseudo_inverse import distribution_matrix
@@ -55,3 +56,45 @@ def test_harv_ganging_is_eq_4_19():
     G[:, 0], G[:, 1] = HARV_LATDIR_BK_SEED[:, 0], HARV_LATDIR_BK_SEED[:, 1]
     r = alloc.allocate(p, [1.0, 2.0, 0.0], "ganging", G=G)
     np.testing.assert_allclose(r.u, [1.2, 2.0, 1.0, 1.2, 0.6])
+
+
+# ------------------------------------------------------------------ the catalogue
+def test_every_command_names_the_same_problems_the_same_way():
+    """alloc allocate --vehicle, alloc ams --problem and the sweep use one catalogue."""
+    import json
+
+    from typer.testing import CliRunner
+
+    from alloc import vehicles
+    from alloc.ams.cli import app as ams_app
+    from alloc.cli import app
+
+    runner = CliRunner()
+    listed = json.loads(runner.invoke(app, ["vehicles", "--json"]).output)
+    assert [row["name"] for row in listed] == vehicles.names() == ["ice", "ice-design", "ice-mid", "harv"]
+    for name in vehicles.names() + ["harv_latdir"]:
+        p = vehicles.problem(name)
+        out = runner.invoke(app, ["allocate", "--vehicle", name, "--v", ",".join(["0.1"] * p.k), "--json"])
+        assert out.exit_code == 0, out.output
+        assert json.loads(out.output)["names"] == list(p.names)
+        out = runner.invoke(ams_app, ["summary", "--problem", name, "--json"])
+        assert out.exit_code == 0, out.output
+    bad = runner.invoke(app, ["allocate", "--vehicle", "f22", "--v", "0"], env={"COLUMNS": "200"})
+    assert bad.exit_code == 2 and "unknown 'f22'; known: ice, ice-design, ice-mid, harv" in bad.output
+
+
+def test_catalogue_entries_and_aliases():
+    from alloc import vehicles
+
+    np.testing.assert_array_equal(vehicles.problem("harv_latdir").B, vehicles.harv_latdir().B)
+    np.testing.assert_array_equal(vehicles.problem("ice-design").B, vehicles.ice(design=True).B)
+    mid = vehicles.problem("ice-mid")
+    np.testing.assert_array_equal(mid.up[mid.umin >= 0], 30.0)  # AMT/SSD 0..60 deg prefer mid-range
+    for name in vehicles.names():
+        p = vehicles.problem(name)
+        groups = vehicles.daisy_groups(name)
+        assert sorted(e for g in groups for e in g) == sorted(p.names)  # each effector in one group
+        assert alloc.allocate(p, p.B @ p.up, "daisy", groups=groups).status.value == "exact"
+    with pytest.raises(alloc.ProblemError, match="vehicle: unknown 'x'") as info:
+        vehicles.problem("x")
+    assert info.value.field == "vehicle"

@@ -8,43 +8,30 @@ from pathlib import Path
 import typer
 
 from .. import vehicles
+from ..exceptions import ProblemError
 from ..problem import Problem
 from ..registry import methods as registered_methods
 
 app = typer.Typer(help="Attainable moment set: geometry summary, 3-D pictures, method coverage.",
                   no_args_is_help=True)
 
-HARV_DAISY_GROUPS = [["diff_tail", "aileron", "rudder"], ["roll_tv", "yaw_tv"]]
-
-
-def ice_mid_up() -> Problem:
-    """ICE with the one-sided effectors (AMT, SSD: 0..60 deg) preferring mid-range (30 deg)."""
-    p = vehicles.ice()
-    up = p.up.copy()
-    one_sided = p.umin >= 0
-    up[one_sided] = (p.umin[one_sided] + p.umax[one_sided]) / 2
-    return p.replace(up=up)
-
-
-PROBLEMS = {"ice": vehicles.ice, "ice-mid": ice_mid_up, "harv": vehicles.harv_latdir}
-PROBLEM_TITLES = {"ice": "ICE", "ice-mid": "ICE (AMT/SSD prefer 30 deg)", "harv": "F-18/HARV lat-dir"}
-
-
 def get_problem(name: str) -> Problem:
-    if name not in PROBLEMS:
-        raise typer.BadParameter(f"unknown problem {name!r}; choose one of {sorted(PROBLEMS)}")
-    return PROBLEMS[name]()
+    try:
+        return vehicles.problem(name)
+    except ProblemError as exc:
+        raise typer.BadParameter(str(exc), param_hint="--problem") from None
 
 
 def default_options(problem: str, method: str) -> dict:
-    """Daisy chaining needs groups: aerodynamic surfaces first, thrust vectoring last (Eq 1.25)."""
-    if method != "daisy":
-        return {}
-    return {"groups": vehicles.ice_daisy_groups() if problem.startswith("ice") else HARV_DAISY_GROUPS}
+    """Daisy chaining needs groups: the catalogue's, surfaces first (Eq 1.25)."""
+    return {"groups": vehicles.daisy_groups(problem)} if method == "daisy" else {}
+
+
+_PROBLEM_HELP = "a named problem: " + " | ".join(vehicles.names())
 
 
 @app.command()
-def summary(problem: str = typer.Option("ice", help="ice | ice-mid | harv"),
+def summary(problem: str = typer.Option("ice", help=_PROBLEM_HELP),
             as_json: bool = typer.Option(False, "--json", help="print JSON")) -> None:
     """Volume, facets, vertices of the AMS."""
     from .geometry import AttainableSet
@@ -58,7 +45,7 @@ def summary(problem: str = typer.Option("ice", help="ice | ice-mid | harv"),
 
 
 @app.command()
-def plot(problem: str = typer.Option("ice", help="ice | ice-mid | harv"),
+def plot(problem: str = typer.Option("ice", help=_PROBLEM_HELP),
          method: str = typer.Option("pinv", help="method whose reached region is drawn inside"),
          out: Path = typer.Option(..., "--out",
                                help="PNG file to write (required: a run never overwrites a tracked picture)"),
@@ -67,13 +54,13 @@ def plot(problem: str = typer.Option("ice", help="ice | ice-mid | harv"),
     """3-D picture of the AMS (2-D for k = 2) with the method's reached region inside."""
     from .plot import plot_ams
 
-    plot_ams(get_problem(problem), method, out, samples=samples, seed=seed, name=PROBLEM_TITLES[problem],
+    plot_ams(get_problem(problem), method, out, samples=samples, seed=seed, name=vehicles.lookup(problem).title,
              **default_options(problem, method))
     typer.echo(f"wrote {out}")
 
 
 @app.command("coverage")
-def coverage_cmd(problem: str = typer.Option("ice", help="ice | ice-mid | harv"),
+def coverage_cmd(problem: str = typer.Option("ice", help=_PROBLEM_HELP),
                  method: list[str] = typer.Option(None, help="methods (default: all registered)"),
                  samples: int = typer.Option(20_000, help="Monte Carlo sample size"),
                  seed: int = typer.Option(0),

@@ -76,19 +76,11 @@ def sample_ams(ams: AttainableSet, n: int, rng: np.random.Generator) -> FloatArr
 
 
 def _affine_map(impl: Any, problem: Problem) -> tuple[FloatArray, FloatArray] | None:
-    """``(c, P)`` with ``u(v) = c + P v`` when the method is the affine pseudo-inverse family."""
-    from ..methods.ganging import Ganging
-    from ..methods.pseudo_inverse import Pinv, PinvScale
-
-    if isinstance(impl, Pinv):
-        c, P = impl.c, impl.P
-    elif isinstance(impl, PinvScale):
-        base = np.minimum(np.maximum(problem.up, problem.umin), problem.umax)
-        c, P = base - impl.P @ (problem.B @ base), impl.P
-    elif isinstance(impl, Ganging):
-        c, P = problem.up, impl.G
-    else:
+    """``(c, P)`` with ``u(v) = c + P v`` where admissible (:meth:`alloc.registry.Method.affine_map`)."""
+    affine = impl.affine_map()
+    if affine is None:
         return None
+    c, P = affine
     if np.abs(problem.B @ P - np.eye(problem.k)).max() > 1e-9:
         return None  # B P != I: exact only on a lower-dimensional set -> estimate instead
     return c, P

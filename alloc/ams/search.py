@@ -40,6 +40,7 @@ import time
 import numpy as np
 
 from ..exceptions import OptionError
+from ..options import integer
 from ..problem import Problem
 from ..registry import FloatArray, Method, register
 from . import _kernels
@@ -57,7 +58,7 @@ class FacetSearch(Method):
 
     equation = _EQ
     summary = "direct allocation: sequential facet search over stored facet inverses (Eq 1.16-1.17)"
-    options: dict[str, str] = {}
+    options = {}
 
     def __init__(self, problem: Problem) -> None:
         super().__init__(problem)
@@ -227,8 +228,8 @@ class EdgeBisect(FacetSearch):
     """Direct allocation by Durham's edge-bisecting facet search (k = 3)."""
 
     summary = "direct allocation: Durham's edge-bisecting facet search, cost ~linear in m (Eq 1.16-1.17)"
-    options = {"angles": "rotation angles tried per round (1 = plain bisection; default 16)",
-               "max_rounds": "rounds before falling back to the sequential search (default 40)"}
+    options = {"angles": integer(16, "rotation angles tried per round (1 = plain bisection)", low=1),
+               "max_rounds": integer(40, "rounds before falling back to the sequential search", low=1)}
 
     def __init__(self, problem: Problem, *, angles: int = 16, max_rounds: int = 40) -> None:
         if not isinstance(angles, int) or angles < 1:
@@ -400,7 +401,7 @@ class SphericalTable(FacetSearch):
     """Direct allocation with a spherical (azimuth, elevation) look-up table of facets (k = 3)."""
 
     summary = "direct allocation: quantised azimuth/elevation table of facets, sequential check as backup"
-    options = {"resolution": "elevation cells (azimuth gets twice as many; default 64)"}
+    options = {"resolution": integer(64, "elevation cells (azimuth gets twice as many)", low=2)}
     _CANDIDATES = 5
 
     def __init__(self, problem: Problem, *, resolution: int = 64) -> None:

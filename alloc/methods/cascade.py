@@ -9,6 +9,8 @@ import numpy as np
 from .._kernels import _FREE_BITS, cascade, daisy_chain, free_set_insert, free_set_pinv
 from .._linalg import ABS_FLOOR, RCOND, max_scale, priority_groups, sqrt_factor, weighted_pinv
 from ..exceptions import ProblemError
+from ..options import groups as groups_option
+from ..options import levels, real
 from ..problem import Problem
 from ..registry import FloatArray, Method, register
 
@@ -49,8 +51,8 @@ class CascadedGeneralizedInverse(Method):
     equation = "Eqs 1.23-1.24"
     summary = "cascade: saturate violators, remove, re-solve Eq 1.23 (Eq 1.24 when few remain)"
     options = {
-        "rcond": f"relative singular-value cut-off (default {RCOND:g})",
-        "priorities": "priority level per axis; larger levels are met first",
+        "rcond": real(RCOND, "relative singular-value cut-off", low=0.0, high=1.0, high_open=True),
+        "priorities": levels("priority level per axis; larger levels are met first"),
     }
     _CACHE_LIMIT = 4096
 
@@ -186,8 +188,8 @@ class DaisyChain(Method):
     equation = "Eqs 1.25-1.27"
     summary = "effector groups used one after another, each held where it saturates"
     options = {
-        "groups": "list of lists of effector indices (or names), in priority order",
-        "rcond": f"relative singular-value cut-off (default {RCOND:g})",
+        "groups": groups_option("list of lists of effector indices (or names), in priority order"),
+        "rcond": real(RCOND, "relative singular-value cut-off", low=0.0, high=1.0, high_open=True),
     }
 
     def __init__(self, problem: Problem, *, groups=None, rcond: float = RCOND) -> None:

@@ -30,6 +30,7 @@ import math
 import numpy as np
 
 from .._kernels import facet_polish
+from ..options import choice
 from ..problem import Problem
 from ..registry import Method, register
 from ..solvers import backends, make_backend
@@ -46,8 +47,8 @@ FACET_LIMIT = 20_000
 class DirectAllocation(Method):
     equation = "Eqs 1.15-1.17"
     summary = "largest admissible moment along v (AMS boundary), scaled back when attainable"
-    options = {"backend": "'auto' (default: facet search when C(m, k-1) <= 20,000, else LP), "
-                          "'facet', or an LP solver: 'daqp', 'highs'"}
+    options = {"backend": choice("auto", f"'auto': facet search when C(m, k-1) <= {FACET_LIMIT:,}, else LP; "
+                                         "'facet'; or an LP solver", lambda: ["auto", "facet", *backends(lp=True)])}
 
     @classmethod
     def facet_subsets(cls, problem: Problem, options: dict[str, Any]) -> int:

@@ -6,6 +6,7 @@ import numpy as np
 
 from .._kernels import affine
 from ..exceptions import ProblemError
+from ..options import matrix
 from ..problem import Problem
 from ..registry import Method, register
 from .pseudo_inverse import distribution_matrix
@@ -24,7 +25,7 @@ class Ganging(Method):
 
     equation = "section 1.3.4.1"
     summary = "static distribution matrix G (default: Eq 1.23 frozen at design time), clipped"
-    options = {"G": "static distribution matrix, shape (m, k)"}
+    options = {"G": matrix("static distribution matrix, shape (m, k); default: Eq 1.23 at design time")}
 
     def __init__(self, problem: Problem, *, G=None) -> None:
         super().__init__(problem)

@@ -20,6 +20,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..exceptions import SolverError
+from ..options import choice, levels
 from ..problem import Problem
 from ..registry import Method, register
 from ..result import exact_tolerance
@@ -34,8 +35,8 @@ class TwoStageLP(Method):
     equation = "Eqs 1.18-1.19"
     summary = "stage 1 min weighted 1-norm moment error, stage 2 min weighted 1-norm |u-up|"
     options = {
-        "backend": "LP solver: 'daqp' (default) or 'highs'",
-        "priorities": "priority level per axis; larger levels are met first",
+        "backend": choice("daqp", "LP solver", lambda: backends(lp=True)),
+        "priorities": levels("priority level per axis; larger levels are met first"),
     }
 
     def __init__(self, problem: Problem, *, backend: str = "daqp", priorities: Sequence[int] | None = None) -> None:

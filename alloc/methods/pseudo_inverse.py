@@ -27,12 +27,13 @@ import numpy as np
 
 from .._kernels import affine, scaled_increment
 from .._linalg import RCOND, max_scale, weighted_pinv
+from ..options import flag, real
 from ..problem import Problem
 from ..registry import FloatArray, Method, register
 
 _OPTIONS = {
-    "rcond": f"relative singular-value cut-off of the inverse (default {RCOND:g})",
-    "incremental": "bias at u_prev instead of up when u_prev is given (discrete-time pseudo-inverse)",
+    "rcond": real(RCOND, "relative singular-value cut-off of the inverse", low=0.0, high=1.0, high_open=True),
+    "incremental": flag(False, "bias at u_prev instead of up when u_prev is given (discrete-time pseudo-inverse)"),
 }
 
 
@@ -96,6 +97,11 @@ class PinvScale(_PinvBase):
 
     def _base(self, lo: FloatArray, hi: FloatArray, u_prev: FloatArray | None) -> FloatArray:
         return np.minimum(np.maximum(self._bias(u_prev), lo), hi)
+
+    def affine_map(self):
+        # unscaled where admissible: u = base + P (v - B base), base = up clipped to the limits
+        base = self._base(self.problem.umin, self.problem.umax, None)
+        return base - self.P @ (self.problem.B @ base), self.P
 
     def solve(self, v, lo, hi, u_prev):
         return scaled_increment(self.P, self.problem.B, self._bias(u_prev), v, lo, hi), 0

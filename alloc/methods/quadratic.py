@@ -23,6 +23,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..exceptions import SolverError
+from ..options import choice, levels, real
 from ..problem import Problem
 from ..registry import FloatArray, Method, register
 from ..result import exact_tolerance
@@ -32,14 +33,14 @@ from .cascade import check_priorities
 
 STAGE1_RIDGE = 1e-10
 
-_BACKEND_DOC = "solver backend: 'daqp' (default) or a qpsolvers name such as 'osqp', 'clarabel'"
+_BACKEND = choice("daqp", "solver backend: 'daqp' or a qpsolvers name such as 'osqp', 'clarabel'", backends)
 
 
 @register("qp", supports_priorities=True)
 class TwoStageQP(Method):
     equation = "Eqs 1.20-1.21"
     summary = "stage 1 min moment error (Wv), stage 2 min (u-up)'Wu(u-up) at that moment"
-    options = {"backend": _BACKEND_DOC, "priorities": "priority level per axis; larger levels are met first"}
+    options = {"backend": _BACKEND, "priorities": levels("priority level per axis; larger levels are met first")}
 
     def __init__(self, problem: Problem, *, backend: str = "daqp", priorities: Sequence[int] | None = None) -> None:
         super().__init__(problem)
@@ -112,7 +113,7 @@ class TwoStageQP(Method):
 class WeightedLeastSquares(Method):
     equation = "Eqs 1.20-1.21 (single-stage weighted form)"
     summary = "min (Bu-v)'Wv(Bu-v) + gamma^2 (u-up)'Wu(u-up) over the limits"
-    options = {"backend": _BACKEND_DOC, "gamma": "weight of the preference term (default 1e-4)"}
+    options = {"backend": _BACKEND, "gamma": real(1e-4, "weight of the preference term", low=0.0, low_open=True)}
 
     def __init__(self, problem: Problem, *, backend: str = "daqp", gamma: float = 1e-4) -> None:
         super().__init__(problem)

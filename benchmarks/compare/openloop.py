@@ -40,9 +40,11 @@ TRAJ_DT = 0.01
 #: seed of the random problem suite (problem ``random<i>`` uses ``[RANDOM_SUITE_SEED, i]``)
 RANDOM_SUITE_SEED = 2024
 
-# Daisy chaining needs groups (Eq 1.25): aerodynamic surfaces first, thrust vectoring last.
-_ICE_DAISY = [[vehicles.ICE_EFFECTORS.index(n) for n in g] for g in vehicles.ice_daisy_groups()]
-_HARV_DAISY = [[0, 1, 2], [3, 4]]
+# Daisy chaining needs groups (Eq 1.25): the catalogue's, as indices (harv_lon has 5 effectors too).
+_ICE_DAISY = [[vehicles.ICE_EFFECTORS.index(n) for n in g] for g in vehicles.daisy_groups("ice")]
+_HARV_DAISY = [[vehicles.HARV_LATDIR_EFFECTORS.index(n) for n in g] for g in vehicles.daisy_groups("harv")]
+#: the sweep's ICE rows use the problem the ICE loop's allocator is given (Eq 4.24)
+_CATALOGUE_NAME = {"ice": "ice-design"}
 
 
 def problem_by_name(name: str) -> alloc.Problem:
@@ -51,15 +53,14 @@ def problem_by_name(name: str) -> alloc.Problem:
     with limits, preferences, weights and rate limits; ``Wv`` reduced to its diagonal
     because ``lp`` accepts only weight vectors, Eqs 1.18-1.19)."""
 
-    if name == "ice":
-        return vehicles.ice(design=True)
-    if name == "harv_latdir":
-        return vehicles.harv_latdir()
     if name.startswith("random") and name[6:].isdigit():
         rng = np.random.default_rng([RANDOM_SUITE_SEED, int(name[6:])])
         p = random_problem(rng, 3, 8, "general")
         return p.replace(Wv=np.diag(np.diag(p.Wv)))
-    raise KeyError(f"problem: unknown {name!r}; ice, harv_latdir or random<i>")
+    try:
+        return vehicles.problem(_CATALOGUE_NAME.get(name, name))
+    except alloc.ProblemError:
+        raise KeyError(f"problem: unknown {name!r}; ice, harv_latdir or random<i>") from None
 
 
 def method_options(problem: str, method: str) -> dict[str, Any]:
