@@ -14,6 +14,7 @@
 ``ALLOC_BUILD_WORKERS``      concurrent allocator builds (default 1)
 ``ALLOC_BUILD_QUEUE``        builds waiting beyond those, then 429 (default 8)
 ``ALLOC_WARMUP``             compile the numba kernels at start-up (default true)
+``ALLOC_REQUEST_TIMEOUT_S``  seconds for a request's headers and body to arrive (10)
 ===========================  ========================================================
 
 The size caps (``MAX_EFFECTORS``, ``MAX_AXES``, ``MAX_BATCH``, ``MAX_MAGNITUDE``) are part
@@ -74,6 +75,7 @@ class Settings(BaseSettings):
     build_workers: int = Field(default=1, ge=1, le=16)
     build_queue: int = Field(default=8, ge=0, le=1024)
     warmup: bool = True
+    request_timeout_s: float = Field(default=10.0, gt=0, le=600)  # read by service.server
 
     @field_validator("api_key")
     @classmethod

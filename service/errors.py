@@ -123,7 +123,8 @@ _TYPE_TAGS = frozenset({"str", "int", "float", "bool", "list", "dict", "none"})
 
 
 def _is_union_tag(step: str | int) -> bool:
-    return isinstance(step, str) and ("[" in step or step in _TYPE_TAGS or step in EVENT_KINDS)
+    return isinstance(step, str) and ("[" in step or step in _TYPE_TAGS or step in EVENT_KINDS
+                                      or step.startswith(("constrained-", "function-")))
 
 
 def _strip_tags(loc: list[str | int], body: Any) -> list[str | int]:

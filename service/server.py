@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import os
 from typing import Any
 
 from uvicorn.protocols.http.httptools_impl import HttpToolsProtocol
@@ -21,8 +22,8 @@ from .errors import PROBLEM_JSON
 
 __all__ = ["GuardedHttpToolsProtocol", "REQUEST_TIMEOUT_S", "problem_bytes"]
 
-#: seconds for a whole request (headers and body) to arrive
-REQUEST_TIMEOUT_S = 10.0
+#: seconds for a whole request (headers and body) to arrive (``ALLOC_REQUEST_TIMEOUT_S``)
+REQUEST_TIMEOUT_S = float(os.environ.get("ALLOC_REQUEST_TIMEOUT_S", "10"))
 
 _REASONS = {400: "Bad Request", 408: "Request Timeout"}
 

@@ -56,7 +56,7 @@ import alloc
 from .config import OPTION_CAPS
 from .cost import FACET_SECONDS, build_seconds, estimate_bytes
 from .db import EventRow, VehicleRow, utcnow
-from .errors import Conflict, InvalidRequest, NotFound, TooManyRequests, field_error
+from .errors import Conflict, InvalidRequest, NotFound, ServiceError, TooManyRequests, field_error
 from .health import Health, apply_event, dump_health, load_health, to_problem
 from .schemas import EventIn, VehicleCreate
 
@@ -69,6 +69,8 @@ _MAX_RETRIES = 100
 PREBUILD_LIMIT = 4
 #: an allocator built for an inline problem larger than this is not cached
 INLINE_ENTRY_BYTES = 4 * 1024 * 1024
+#: builds predicted faster than this (seconds) run in the fast lane of the Builder
+FAST_BUILD_S = 0.05
 #: vehicle states kept per process (a state is a few KiB)
 _STATE_ENTRIES = 4096
 
@@ -131,36 +133,50 @@ def build_allocator(problem: alloc.Problem, method: str, options: dict[str, Any]
         raise _reject("options", f"{method}: invalid option value ({type(exc).__name__}: {exc})") from exc
 
 
-class Builder:
-    """A bounded pool of build threads with a bounded queue and single-flight per key.
+class _Lane:
+    """One bounded pool of build threads with a bounded queue."""
 
-    At most ``workers`` builds run at once (each is at most the build budget, by the cost
-    check); at most ``queue`` more wait; beyond that a request gets 429.  Two requests for
-    the same key share one build.
+    def __init__(self, name: str, workers: int, queue: int) -> None:
+        self.name, self.workers, self.limit = name, workers, workers + queue
+        self.pool: ThreadPoolExecutor | None = None
+        self.inflight = 0
+
+
+class Builder:
+    """Bounded build pools with bounded queues, and single-flight per key.
+
+    Two lanes, so that a flood of expensive builds never delays a cheap one (the
+    allocation that must follow a failure is usually a millisecond build):
+
+    * ``slow``: builds predicted (:func:`service.cost.build_seconds`) above
+      :data:`FAST_BUILD_S`; ``workers`` threads, ``queue`` more waiting, then 429;
+    * ``fast``: everything else (an SVD, a QP set-up); 2 threads, 64 waiting, then 429.
     """
 
     def __init__(self, workers: int, queue: int) -> None:
-        self._workers = workers
-        self._pool: ThreadPoolExecutor | None = None
-        self._limit = workers + queue
-        self._inflight: dict[Hashable, Future[alloc.Allocator]] = {}
+        self._lanes = {"slow": _Lane("slow", workers, queue), "fast": _Lane("fast", 2, 64)}
+        self._inflight: dict[Hashable, Future[Any]] = {}
         self._lock = threading.Lock()
 
-    def submit(self, key: Hashable, build: Callable[[], alloc.Allocator]) -> Future[alloc.Allocator]:
+    def submit(self, key: Hashable, build: Callable[[], Any], seconds: float = 0.0) -> Future[Any]:
+        lane = self._lanes["slow" if seconds > FAST_BUILD_S else "fast"]
         with self._lock:
             fut = self._inflight.get(key)
             if fut is not None:
                 return fut
-            if len(self._inflight) >= self._limit:
-                raise TooManyRequests(f"the service is building {len(self._inflight)} allocators; retry shortly")
-            if self._pool is None:
-                self._pool = ThreadPoolExecutor(max_workers=self._workers, thread_name_prefix="alloc-build")
-            fut = self._pool.submit(build)
+            if lane.inflight >= lane.limit:
+                raise TooManyRequests(f"the service is running {lane.inflight} {lane.name} builds (the most it "
+                                      f"queues); retry shortly")
+            if lane.pool is None:
+                lane.pool = ThreadPoolExecutor(max_workers=lane.workers, thread_name_prefix=f"alloc-{lane.name}")
+            fut = lane.pool.submit(build)
             self._inflight[key] = fut
+            lane.inflight += 1
 
-        def done(_: Future[alloc.Allocator]) -> None:
+        def done(_: Future[Any]) -> None:
             with self._lock:
                 self._inflight.pop(key, None)
+                lane.inflight -= 1
         fut.add_done_callback(done)
         return fut
 
@@ -175,11 +191,14 @@ class Builder:
         return False
 
     def shutdown(self) -> None:
-        """Stop the pool (queued builds are cancelled); a later submit starts a new one."""
+        """Stop the pools (queued builds are cancelled); a later submit starts new ones."""
         with self._lock:
-            pool, self._pool = self._pool, None
-        if pool is not None:
-            pool.shutdown(wait=False, cancel_futures=True)
+            pools = [lane.pool for lane in self._lanes.values()]
+            for lane in self._lanes.values():
+                lane.pool = None
+        for pool in pools:
+            if pool is not None:
+                pool.shutdown(wait=False, cancel_futures=True)
 
 
 class AllocatorCache:
@@ -440,13 +459,13 @@ class VehicleStore:
                 continue
             seen.add((method, okey))
             options = json.loads(okey)
+            key = (new.id, new.version, method, okey)
             try:
-                self.builder.submit((new.id, new.version, method, okey),
-                                    self._build_and_cache((new.id, new.version, method, okey), new.problem,
-                                                          method, options))
+                seconds = check_build_cost(new.problem, method, options, self.build_budget)
+                self.builder.submit(key, self._build_and_cache(key, new.problem, method, options), seconds)
                 started += 1
-            except InvalidRequest:
-                continue  # the next request for it reports the error
+            except ServiceError:
+                continue  # refused or the pools are full: the next request builds it (or reports why)
         self.allocators.drop(stale)
         return started
 
@@ -479,8 +498,9 @@ class VehicleStore:
         if found is not None:
             return found
         p = problem()
-        check_build_cost(p, method, options, self.build_budget)  # refuse before queueing
-        return await asyncio.wrap_future(self.builder.submit(key, self._build_and_cache(key, p, method, options)))
+        seconds = check_build_cost(p, method, options, self.build_budget)  # refuse before queueing
+        return await asyncio.wrap_future(
+            self.builder.submit(key, self._build_and_cache(key, p, method, options), seconds))
 
     async def vehicle_allocator(self, state: VehicleState, method: str, options: dict[str, Any]) -> alloc.Allocator:
         key = (state.id, state.version, method, options_key(options))
@@ -493,14 +513,14 @@ class VehicleStore:
 
     async def fresh_allocator(self, problem: alloc.Problem, method: str, options: dict[str, Any]) -> alloc.Allocator:
         """A private allocator (batches mutate nothing shared but run off the loop): built on the pool, not cached."""
-        check_build_cost(problem, method, options, self.build_budget)
+        seconds = check_build_cost(problem, method, options, self.build_budget)
         key = ("private", uuid.uuid4().hex)
         return await asyncio.wrap_future(self.builder.submit(
-            key, lambda: build_allocator(problem, method, options, self.build_budget)))
+            key, lambda: build_allocator(problem, method, options, self.build_budget), seconds))
 
     async def run_bounded(self, work: Callable[[], Any]) -> Any:
-        """Run ``work`` on the build pool (bounded concurrency and queue, 429 beyond)."""
-        return await asyncio.wrap_future(self.builder.submit(("work", uuid.uuid4().hex), work))
+        """Run ``work`` in the slow lane of the build pool (bounded concurrency and queue, 429 beyond)."""
+        return await asyncio.wrap_future(self.builder.submit(("work", uuid.uuid4().hex), work, float("inf")))
 
     def ping(self) -> None:
         """A committed read through the version probe (raises if the database is unreachable)."""
