@@ -377,7 +377,8 @@ class VehicleStore:
         """The vehicle at its committed health (the version read from the database now)."""
         version = self._probe.version(vehicle_id)
         if version is None:
-            self._forget(vehicle_id)
+            if vehicle_id in self._states:  # deleted by any process: drop what this one holds
+                self._forget(vehicle_id)
             raise _not_found(vehicle_id)
         with self._states_lock:
             state = self._states.get(vehicle_id)
