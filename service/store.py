@@ -342,10 +342,26 @@ class VehicleStore:
         self.allocators = AllocatorCache(cache_size, cache_bytes, inline_cache_bytes)
         self.builder = Builder(build_workers, build_queue)
         self.build_budget = build_budget
+        # Writes (events, deletes) get threads of their own: they never queue behind the
+        # shared thread pool of the sync routes or behind builds.
+        self._writers: ThreadPoolExecutor | None = None
+        self._writers_lock = threading.Lock()
+
+    async def write(self, fn: Callable[..., Any], *args: Any) -> Any:
+        """Run the write ``fn(*args)`` on the dedicated writer threads."""
+        with self._writers_lock:
+            if self._writers is None:
+                self._writers = ThreadPoolExecutor(max_workers=4, thread_name_prefix="alloc-write")
+            pool = self._writers
+        return await asyncio.wrap_future(pool.submit(fn, *args))
 
     def close(self) -> None:
         self.builder.shutdown()
         self._probe.close()
+        with self._writers_lock:
+            writers, self._writers = self._writers, None
+        if writers is not None:
+            writers.shutdown(wait=True)
 
     # ------------------------------------------------------------ states
     def _remember(self, state: VehicleState) -> VehicleState:

@@ -69,17 +69,19 @@ def get_vehicle(vehicle_id: VehicleId, store: StoreDep) -> VehicleOut:
 
 @router.delete("/{vehicle_id}", status_code=status.HTTP_204_NO_CONTENT, dependencies=WriteAccess,
                responses=UNAUTHORIZED, summary="Delete a vehicle and its history")
-def delete_vehicle(vehicle_id: VehicleId, store: StoreDep) -> Response:
-    store.delete(vehicle_id)
+async def delete_vehicle(vehicle_id: VehicleId, store: StoreDep) -> Response:
+    await store.write(store.delete, vehicle_id)
     return Response(status_code=status.HTTP_204_NO_CONTENT)
 
 
 @router.post("/{vehicle_id}/events", response_model=EventRecorded, status_code=status.HTTP_201_CREATED,
              dependencies=WriteAccess, responses=UNAUTHORIZED, summary="Record a failure or repair of one effector")
-def record_event(vehicle_id: VehicleId, body: EventIn, store: StoreDep, tasks: BackgroundTasks) -> EventRecorded:
-    # Committed (fsync'd) and visible to every process before the response; the allocators
-    # that were in use are rebuilt after it (bounded, this vehicle only, on the build pool).
-    event, state, _ = store.record_event(vehicle_id, body)
+async def record_event(vehicle_id: VehicleId, body: EventIn, store: StoreDep,
+                       tasks: BackgroundTasks) -> EventRecorded:
+    # Committed (fsync'd) on the writer threads and visible to every process before the
+    # response; the allocators that were in use are rebuilt after it (bounded, this
+    # vehicle only, on the build pool).
+    event, state, _ = await store.write(store.record_event, vehicle_id, body)
     tasks.add_task(store.prebuild, state)
     return EventRecorded(event=_event_out(event), health=_health_out(state))
 
