@@ -10,7 +10,8 @@
 ``ALLOC_CACHE_SIZE``         built allocators kept in memory (default 512)
 ``ALLOC_CACHE_BYTES``        ... and their total size (default 128 MiB)
 ``ALLOC_INLINE_CACHE_BYTES`` the share of inline problems in it (default 32 MiB)
-``ALLOC_BUILD_BUDGET_S``     predicted build time above which a build is refused (3 s)
+``ALLOC_BUILD_BUDGET_S``     predicted build time above which a build is refused (3 s: the
+                             library's FACET_LIMIT priced by the cost model, service.cost)
 ``ALLOC_BUILD_WORKERS``      concurrent allocator builds (default 1)
 ``ALLOC_BUILD_QUEUE``        builds waiting beyond those, then 429 (default 8)
 ``ALLOC_WARMUP``             compile the numba kernels at start-up (default true)
@@ -32,6 +33,8 @@ from pathlib import Path
 
 from pydantic import Field, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
+
+from .cost import DEFAULT_BUILD_BUDGET_S
 
 __all__ = ["Settings", "MAX_EFFECTORS", "MAX_AXES", "MAX_BATCH", "MAX_DIRECTIONS", "MAX_MAGNITUDE",
            "MIN_WEIGHT", "OPTION_CAPS"]
@@ -71,7 +74,7 @@ class Settings(BaseSettings):
     cache_size: int = Field(default=512, gt=0)
     cache_bytes: int = Field(default=128 * 1024 * 1024, gt=0)
     inline_cache_bytes: int = Field(default=32 * 1024 * 1024, ge=0)
-    build_budget_s: float = Field(default=3.0, gt=0, le=600)
+    build_budget_s: float = Field(default=DEFAULT_BUILD_BUDGET_S, gt=0, le=600)
     build_workers: int = Field(default=1, ge=1, le=16)
     build_queue: int = Field(default=8, ge=0, le=1024)
     warmup: bool = True

@@ -50,10 +50,14 @@ import alloc
 from alloc.methods.direct import FACET_LIMIT
 from alloc.registry import get_method
 
-__all__ = ["FACET_SECONDS", "build_seconds", "estimate_bytes", "FACET_LIMIT"]
+__all__ = ["FACET_SECONDS", "DEFAULT_BUILD_BUDGET_S", "build_seconds", "estimate_bytes"]
 
 #: seconds per facet generator subset enumerated by a ``needs_ams`` build (measured <= 142 us)
 FACET_SECONDS = 150e-6
+#: the default build budget: the predicted time of a facet enumeration at the library's own
+#: limit (:data:`alloc.methods.direct.FACET_LIMIT`, 20,000 subsets -> 3.0 s), so the service
+#: admits every build the library's ``backend="auto"`` would choose, and nothing larger
+DEFAULT_BUILD_BUDGET_S = round(FACET_SECONDS * FACET_LIMIT, 6)
 #: the k = 3 look-up table of ``da_table``: seconds per cell, and per cell and subset
 _TABLE_CELL_SECONDS, _TABLE_CELL_SUBSET_SECONDS = 270e-6, 0.75e-6
 #: methods whose build adds a (resolution x resolution) table at k = 3, and its option

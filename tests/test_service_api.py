@@ -4,7 +4,6 @@ equality with the library, durability settings, allocator cache, concurrency."""
 from __future__ import annotations
 
 import json
-import os
 import threading
 
 import numpy as np
@@ -461,3 +460,22 @@ def test_facet_methods_refused_above_the_build_cap(client, method):
 def test_costly_option_values_are_capped(client, method, option, value):
     body = {**ice().to_dict(), "v": [0.5, 1.0, 0.2], "method": method, "options": {option: value}}
     assert_problem(client.post("/v1/allocate", json=body), 422, f"/options/{option}", "cap")
+
+
+def test_event_kinds_are_the_library_failure_kinds():
+    """One vocabulary: the JSON event kinds are exactly alloc.health.FailureKind."""
+    import typing
+
+    from alloc.health import FailureKind
+    from service.schemas import EVENT_KINDS, EventIn
+    union = typing.get_args(typing.get_args(EventIn)[0])
+    assert {typing.get_args(m.model_fields["kind"].annotation)[0] for m in union} == {k.value for k in FailureKind}
+    assert EVENT_KINDS == {k.value for k in FailureKind}
+
+
+def test_hardover_event_holds_the_upper_stop(client):
+    vid = vehicle(client)
+    r = event(client, vid, effector="elevon_l", kind="hardover")
+    assert r.status_code == 201, r.text
+    assert r.json()["event"]["params"] == {"position": 30.0}
+    assert client.post(f"/v1/vehicles/{vid}/allocate", json={"v": [0.1, 0.2, 0.0]}).json()["u"][0] == 30.0
