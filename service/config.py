@@ -22,7 +22,7 @@ The size caps (``MAX_EFFECTORS``, ``MAX_AXES``, ``MAX_BATCH``, ``MAX_MAGNITUDE``
 of the API contract (they appear in the OpenAPI schema) and are therefore constants.
 
 Memory bound (documented, checked by ``tests/test_service_limits.py``): the process's
-start-up RSS plus ``ALLOC_CACHE_BYTES``, plus ``ALLOC_BUILD_WORKERS`` builds in flight of
+start-up RSS plus ``ALLOC_CACHE_BYTES``, plus up to 1,024 vehicle states (~70 MiB at m = 64), plus ``ALLOC_BUILD_WORKERS`` builds in flight of
 at most ~90 MiB each (a facet enumeration at the cost cap, see :mod:`service.cost`), plus
 the request bodies in flight (``ALLOC_MAX_BODY_BYTES`` each, at most ``limit_concurrency``).
 """

@@ -71,8 +71,9 @@ PREBUILD_LIMIT = 4
 INLINE_ENTRY_BYTES = 4 * 1024 * 1024
 #: builds predicted faster than this (seconds) run in the fast lane of the Builder
 FAST_BUILD_S = 0.05
-#: vehicle states kept per process (a state is a few KiB)
-_STATE_ENTRIES = 4096
+#: vehicle states kept per process: a state holds two problems, at most ~70 KiB at m = 64
+#: (Wu is m x m), so at most ~70 MiB; part of the documented memory bound
+_STATE_ENTRIES = 1024
 
 
 def options_key(options: dict[str, Any]) -> str:
