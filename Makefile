@@ -21,8 +21,11 @@ test: $(STAMP)
 test-all: $(STAMP)
 	$(BIN)/pytest -q -m ''
 
+# The README's curl story uses this key; override with `ALLOC_API_KEY=... make run`.
+ALLOC_API_KEY ?= s3cret
+WORKERS ?= 1
 run: $(STAMP)
-	$(BIN)/alloc serve --host 127.0.0.1 --port 8000
+	ALLOC_API_KEY='$(ALLOC_API_KEY)' $(BIN)/python -m service.main --host 127.0.0.1 --port 8000 --workers $(WORKERS)
 
 bench: $(STAMP)
 	$(BIN)/python -m benchmarks.bench_alloc

@@ -9,8 +9,15 @@ database, then measures for ``pinv`` and ``qp`` on the ICE problem (k = 3, m = 1
 4. open loop at a fixed arrival rate (default 300 requests/s): latency measured from each
    request's *scheduled* send time (no coordinated omission), p50/p99/max, goal p99 < 5 ms;
 5. the per-request overhead of the service over the library call, as a ratio of medians;
-6. reconfiguration: latency of recording an event (committed with fsync, allocators
-   rebuilt before the response) and of the first allocation after it (no rebuild pause).
+6. reconfiguration: latency of recording an event (committed with fsync; the allocators
+   in use are rebuilt after the response) and of the first allocation after it;
+7. across processes: a second service process on the same database; an event through A,
+   then allocations through B: event-to-visible latency (event sent -> first allocation
+   from B that applies it returned) and how many of B's first allocations were stale (0);
+8. under attack: event latency while 16 unauthenticated clients flood distinct-option
+   ``da_table`` builds (goal p99 < 50 ms), ``/v1/health`` latency while the issue's hostile
+   request (1e300 B, Wu 1e-20) is repeated (goal < 100 ms), and the RSS growth after 25
+   distinct inline ``da_facet`` problems at k = 6, m = 20 (bound: cache 128 MiB + one build).
 
 Client and server share the machine (2 cores here): the latencies include the client.
 The ``srv`` columns are the service's own time per request, from its ``Server-Timing``
@@ -25,11 +32,14 @@ import asyncio
 import gc
 import http.client
 import json
+import multiprocessing
 import os
 import tempfile
+import threading
 import time
 from collections import deque
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -225,6 +235,148 @@ def bench_events(port: int, vid: str, n: int = 40) -> tuple[Stats, Stats]:
             Stats("first qp allocate after event", n, seconds, first_lat, 1, 0, first_srv))
 
 
+def bench_cross_process(port_a: int, port_b: int, vid: str, n: int = 60) -> tuple[Stats, int]:
+    """Event through A, then allocations through B until one applies it."""
+    a, b = Connection(port_a), Connection(port_b)
+    body = json.dumps({"v": [0.5, 1.0, 0.2], "method": "qp"}).encode()
+    b.post(f"/v1/vehicles/{vid}/allocate", body)
+    lat = np.empty(n)
+    stale = 0
+    t_start = time.perf_counter()
+    for i in range(n):
+        ev = ({"effector": "elevon_l", "kind": "jam", "position": 5.0 + i % 7} if i % 2 == 0
+              else {"effector": "elevon_l", "kind": "repair"})
+        t0 = time.perf_counter()
+        status, reply = a.post(f"/v1/vehicles/{vid}/events", json.dumps(ev).encode())
+        version = json.loads(reply)["health"]["health_version"]
+        first = True
+        while True:
+            _, out = b.post(f"/v1/vehicles/{vid}/allocate", body)
+            if json.loads(out)["health_version"] >= version:
+                break
+            stale += first
+            first = False
+        lat[i] = time.perf_counter() - t0
+    seconds = time.perf_counter() - t_start
+    a.close()
+    b.close()
+    return Stats("event via A -> applied by B's allocation", n, seconds, lat), stale
+
+
+def _flood(port: int, path_body: list[tuple[str, bytes]], statuses: list[int], stop: threading.Event) -> None:
+    conn = Connection(port)
+    for path, body in path_body:
+        if stop.is_set():
+            break
+        try:
+            status, _ = conn.post(path, body)
+        except (OSError, http.client.HTTPException):
+            conn.close()
+            conn = Connection(port)
+            status = -1
+        statuses.append(status)
+    conn.close()
+
+
+def _flood_process(port: int, jobs: list[list[tuple[str, bytes]]], out: Any, stop: Any) -> None:
+    """The attackers, in a process of their own (their threads must not share the measuring
+    client's GIL): one thread per job list; the status codes are sent back through ``out``."""
+    statuses: list[int] = []
+    flag = threading.Event()
+    threads = [threading.Thread(target=_flood, args=(port, job, statuses, flag)) for job in jobs]
+    for t in threads:
+        t.start()
+    stop.wait()
+    flag.set()
+    for t in threads:
+        t.join()
+    out.put(statuses)
+
+
+class Attack:
+    """Start ``jobs`` (lists of (path, body)) in a forked process; ``stop()`` returns the status counts."""
+
+    def __init__(self, port: int, jobs: list[list[tuple[str, bytes]]]) -> None:
+        ctx = multiprocessing.get_context("fork")
+        self._out, self._stop = ctx.Queue(), ctx.Event()
+        self._proc = ctx.Process(target=_flood_process, args=(port, jobs, self._out, self._stop))
+        self._proc.start()
+
+    def stop(self) -> dict[int, int]:
+        self._stop.set()
+        statuses = self._out.get(timeout=600)
+        self._proc.join(timeout=60)
+        return {code: statuses.count(code) for code in sorted(set(statuses))}
+
+
+def bench_events_under_flood(port: int, vid: str, n: int = 40, clients: int = 16) -> tuple[Stats, dict[int, int]]:
+    """Events (with the API key) while unauthenticated clients request distinct da_table options."""
+    jobs = [[(f"/v1/vehicles/{vid}/allocate",
+              json.dumps({"v": [0.5, 1.0, 0.2], "method": "da_table", "options": {"resolution": 8 + c * 40 + j}}
+                         ).encode()) for j in range(40)] for c in range(clients)]
+    attack = Attack(port, jobs)
+    time.sleep(0.5)
+    conn = Connection(port)
+    lat = np.empty(n)
+    errors = 0
+    t_start = time.perf_counter()
+    for i in range(n):
+        ev = ({"effector": "elevon_l", "kind": "jam", "position": 5.0 + i % 7} if i % 2 == 0
+              else {"effector": "elevon_l", "kind": "repair"})
+        t0 = time.perf_counter()
+        status, _ = conn.post(f"/v1/vehicles/{vid}/events", json.dumps(ev).encode())
+        lat[i] = time.perf_counter() - t0
+        errors += status != 201
+        time.sleep(0.05)
+    seconds = time.perf_counter() - t_start
+    counts = attack.stop()
+    conn.close()
+    return Stats(f"event during {clients}-client option flood", n, seconds, lat, 1, errors), counts
+
+
+def bench_health_under_hostile(port: int, seconds: float = 5.0) -> tuple[Stats, dict[int, int]]:
+    hostile = json.dumps({"B": [[1e300, 1, 2, 0.5], [1e300, 3, 1, 0.1], [1e300, -1, 2, 3]],
+                          "umin": [-1, -1, -1, -1], "umax": [1, 1, 1, 1], "Wu": [1e-20, 1, 1, 1],
+                          "v": [1, 2, 3]}).encode()
+    attack = Attack(port, [[("/v1/allocate", hostile)] * 100_000 for _ in range(4)])
+    conn = http.client.HTTPConnection("127.0.0.1", port, timeout=30)
+    lat: list[float] = []
+    t_end = time.perf_counter() + seconds
+    while time.perf_counter() < t_end:
+        t0 = time.perf_counter()
+        conn.request("GET", "/v1/health")
+        r = conn.getresponse()
+        r.read()
+        lat.append(time.perf_counter() - t0)
+        time.sleep(0.01)
+    counts = attack.stop()
+    conn.close()
+    return Stats("GET /v1/health during hostile requests", len(lat), seconds, np.array(lat)), counts
+
+
+def _rss(pid: int) -> int:
+    with open(f"/proc/{pid}/status") as f:
+        for line in f:
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) * 1024
+    return 0
+
+
+def bench_memory_attack(port: int, pid: int, n: int = 25) -> tuple[int, int, int, float]:
+    """(RSS before, RSS after, peak RSS seen, seconds) for n distinct inline da_facet problems, k = 6, m = 20."""
+    rng = np.random.default_rng(12)
+    conn = Connection(port)
+    before = peak = _rss(pid)
+    t0 = time.perf_counter()
+    for _ in range(n):
+        body = json.dumps({"B": rng.normal(size=(6, 20)).tolist(), "umin": [-1.0] * 20, "umax": [1.0] * 20,
+                           "v": [0.1] * 6, "method": "da_facet"}).encode()
+        conn.post("/v1/allocate", body)
+        peak = max(peak, _rss(pid))
+    conn.close()
+    return before, _rss(pid), peak, time.perf_counter() - t0
+
+
 def bench_noise_floor(n: int = 2000) -> Stats:
     """How late ``sleep(0.5 ms)`` wakes up: the machine's own scheduling noise, a floor
     under any latency measured here (other jobs on the same cores show up in it)."""
@@ -254,6 +406,7 @@ def main() -> None:
     parser.add_argument("--nice", type=int, default=0,
                         help="niceness increment of the client and the server (negative needs root): "
                              "shows the latency of a rig that gives the service priority over other jobs")
+    parser.add_argument("--attacks-only", action="store_true", help="skip the open-loop cases")
     args = parser.parse_args()
     if args.nice:
         os.nice(args.nice)
@@ -287,8 +440,12 @@ def main() -> None:
                 batch.append(bench_closed(server.port, f"POST /v1/allocate/batch {method} x{size}",
                                           "/v1/allocate/batch", bodies, per_request=size))
         reconfig = bench_events(server.port, vid)
+        if args.attacks_only:
+            open_loop_methods: tuple[str, ...] = ()
+        else:
+            open_loop_methods = METHODS
         open_loop: list[Stats] = []
-        for method in METHODS:
+        for method in open_loop_methods:
             if time.monotonic() - started > DEADLINE_S:
                 break
             bodies = [json.dumps({"v": v.tolist(), "method": method}).encode() for v in V[:n_open]]
@@ -297,6 +454,11 @@ def main() -> None:
             bodies = [json.dumps({**problem, "v": v.tolist(), "method": method}).encode() for v in V[:n_open]]
             open_loop.extend(bench_open(server.port, f"{args.rate:g}/s inline {method}",
                                         "/v1/allocate", bodies, args.rate))
+        with ServiceProcess(tmp) as second:  # a replica on the same database
+            cross, stale = bench_cross_process(server.port, second.port, vid)
+        flood, flood_counts = bench_events_under_flood(server.port, vid)
+        hostile, hostile_counts = bench_health_under_hostile(server.port)
+        memory = bench_memory_attack(server.port, server.proc.pid)
 
     print(f"niceness increment of client and server: {args.nice}")
     print("\nScheduling noise floor of this machine (client process)")
@@ -323,6 +485,22 @@ def main() -> None:
     print(HEADER)
     for s in reconfig:
         print(s.row())
+    print("\nAcross processes (two service processes on one SQLite file)")
+    print(HEADER)
+    print(cross.row())
+    print(f"B's first allocation after the event's response was stale: {stale} of {cross.n} (must be 0)")
+    print("\nUnder attack")
+    print(HEADER + "  goal")
+    p99 = float(np.percentile(flood.lat, 99)) * 1e3
+    print(flood.row() + (f"  p99 < 50 ms {'met' if p99 < 50 else 'MISSED'}"))
+    print(f"  flood answers by status: {flood_counts}; floor (no flood): event p50/p99 "
+          f"{np.percentile(reconfig[0].lat, 50) * 1e3:.2f}/{np.percentile(reconfig[0].lat, 99) * 1e3:.2f} ms")
+    worst = float(hostile.lat.max()) * 1e3
+    print(hostile.row() + (f"  max < 100 ms {'met' if worst < 100 else 'MISSED'}"))
+    print(f"  hostile answers by status: {hostile_counts}")
+    before, after, peak, secs = memory
+    print(f"memory attack: 25 distinct inline da_facet k=6 m=20 in {secs:.1f} s: RSS {before / 2**20:.0f} MiB -> "
+          f"{after / 2**20:.0f} MiB (peak {peak / 2**20:.0f} MiB; bound: start + 128 MiB cache + ~100 MiB build)")
     print("\nPer-request overhead over the library call (ratio of medians, closed loop)")
     print(f"{'case':<40} {'service p50 us':>15} {'library p50 us':>15} {'ratio':>8} {'overhead us':>12}")
     for s in single:

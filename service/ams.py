@@ -1,87 +1,38 @@
 """Attainable moment set (AMS) summary: volume and the largest moment along directions.
 
+All numerics are the library's (:mod:`alloc.ams`, :mod:`alloc.methods.direct`); this
+module only picks the formulation a shared service can afford and shapes the answer.
+
 Convention (the core's ``da`` and :class:`alloc.ams.AttainableSet`): rays start at the
 base point ``B u0``, ``u0`` the preferred position clipped into the limits (0 by default);
 ``scale`` is the largest ``a`` with ``B u0 + a d`` attainable and ``moment`` that point.
 
-:class:`alloc.ams.AttainableSet` answers when it is available and the problem is small
-enough for its facet enumeration (``MAX_FACET_SUBSETS`` subsets of ``k - 1`` effectors,
-about a second).  Otherwise this module answers with its own small formulation:
-
-* the largest moment along ``d`` is an LP (seed Eqs 1.15-1.17): maximise ``a`` subject
-  to ``B (u - u0) = a d``, ``umin <= u <= umax``, ``a >= 0``;
-* the AMS is a zonotope with generators ``g_j = (umax_j - umin_j) b_j``, so its volume
-  is ``sum over k-subsets S of |det G_S|`` (exact; computed only when there are at most
-  ``MAX_SUBSETS`` subsets, else ``null``).
+* Small enough to enumerate the facets within the build budget (``service.cost``):
+  :class:`alloc.ams.AttainableSet` answers both (exact volume, facet ray exit, Eq 1.15).
+* Larger: the volume from :func:`alloc.ams.zonotope_volume` while its ``C(n, k)``
+  determinants stay under ``MAX_SUBSETS`` (else ``null``), and each direction from the
+  direct-allocation LP of :class:`alloc.methods.direct.DirectAllocation` (seed Eqs 1.15-1.17).
 """
 
 from __future__ import annotations
 
-from itertools import combinations
 from math import comb
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import linprog
 
 import alloc
+from alloc.ams import AttainableSet, zonotope_volume
+from alloc.methods.direct import DirectAllocation
 
-from .config import MAX_FACET_SUBSETS
+from .cost import FACET_SECONDS
 from .errors import InvalidRequest, field_error
 from .schemas import AmsOut, DirectionOut
 
 __all__ = ["summarize", "MAX_SUBSETS"]
 
+#: generator k-subsets the zonotope volume may sum (200,000 determinants: ~0.3 s measured)
 MAX_SUBSETS = 200_000
-_CHUNK = 20_000
-
-
-def _library_set(problem: alloc.Problem):  # -> alloc.ams.AttainableSet | None
-    try:
-        from alloc.ams import AttainableSet
-    except ImportError:
-        return None
-    moving = int((problem.umax > problem.umin).sum())
-    if comb(moving, problem.k - 1) > MAX_FACET_SUBSETS:
-        return None  # facet enumeration would take seconds to minutes: answer with the LP
-    return AttainableSet(problem)
-
-
-def zonotope_volume(problem: alloc.Problem) -> tuple[float | None, str]:
-    """``(volume, note)`` of the AMS as a zonotope (Minkowski sum of segments)."""
-    G = problem.B * (problem.umax - problem.umin)  # generator j = column j times its range
-    G = G[:, np.abs(G).max(axis=0) > 0]
-    k, n = G.shape
-    if n < k or np.linalg.matrix_rank(G) < k:
-        return 0.0, "exact (zonotope): the AMS is flat in some direction"
-    count = comb(n, k)
-    if count > MAX_SUBSETS:
-        return None, f"not computed: {count} generator subsets exceed the cap of {MAX_SUBSETS}"
-    total = 0.0
-    subsets = combinations(range(n), k)
-    while True:
-        idx = np.array([s for _, s in zip(range(_CHUNK), subsets)], dtype=np.intp)
-        if idx.size == 0:
-            break
-        total += float(np.abs(np.linalg.det(G[:, idx].transpose(1, 0, 2))).sum())
-    if not np.isfinite(total):
-        return None, "not computed: the determinants overflow for this problem's scale"
-    return total, "exact (zonotope sum of |det| over generator subsets)"
-
-
-def max_in_direction(problem: alloc.Problem, d: NDArray[np.float64]) -> tuple[float | None, NDArray[np.float64] | None]:
-    """Largest ``a`` with ``B u0 + a d`` attainable, and an admissible ``u`` reaching it."""
-    k, m = problem.k, problem.m
-    u0 = np.minimum(np.maximum(problem.up, problem.umin), problem.umax)
-    c = np.zeros(m + 1)
-    c[-1] = -1.0
-    A_eq = np.hstack([problem.B, -d[:, None]])
-    bounds = [*zip(problem.umin, problem.umax), (0.0, None)]
-    res = linprog(c, A_eq=A_eq, b_eq=problem.B @ u0, bounds=bounds, method="highs")
-    if res.status != 0:  # not expected (a = 0, u = u0 is feasible): report "not found"
-        return None, None
-    u = np.minimum(np.maximum(res.x[:m], problem.umin), problem.umax)
-    return float(res.x[-1]), u
 
 
 def _directions(problem: alloc.Problem, directions: list[list[float]] | None) -> list[NDArray[np.float64]]:
@@ -101,21 +52,39 @@ def _directions(problem: alloc.Problem, directions: list[list[float]] | None) ->
     return out
 
 
-def summarize(problem: alloc.Problem, directions: list[list[float]] | None) -> AmsOut:
+def _facet_subsets(problem: alloc.Problem) -> int:
+    return comb(int((problem.umax > problem.umin).sum()), max(problem.k - 1, 0))
+
+
+def summarize(problem: alloc.Problem, directions: list[list[float]] | None, budget: float = 3.0) -> AmsOut:
+    """Volume and ray exits of the AMS of ``problem``; ``budget`` seconds of facet enumeration at most."""
     ds = _directions(problem, directions)
-    ams = _library_set(problem)
-    if ams is not None:
+    u0 = np.minimum(np.maximum(problem.up, problem.umin), problem.umax)
+    if FACET_SECONDS * _facet_subsets(problem) <= budget:
+        ams = AttainableSet(problem)
         volume, note = float(ams.volume), "alloc.ams.AttainableSet"
         found = [ams.max_in_direction(d) for d in ds]
     else:
-        volume, note = zonotope_volume(problem)
-        found = [max_in_direction(problem, d) for d in ds]
-    base = problem.B @ np.minimum(np.maximum(problem.up, problem.umin), problem.umax)
+        G = problem.B * (problem.umax - problem.umin)
+        n = int((np.abs(G).max(axis=0) > 0).sum())
+        if comb(n, problem.k) > MAX_SUBSETS:
+            volume, note = None, (f"not computed: {comb(n, problem.k)} generator subsets exceed the cap of "
+                                  f"{MAX_SUBSETS}")
+        else:
+            volume, note = zonotope_volume(problem.B, problem.umin, problem.umax), "alloc.ams.zonotope_volume"
+            if not np.isfinite(volume):
+                volume, note = None, "not computed: the determinants overflow for this problem's scale"
+        lp = DirectAllocation(problem, backend="highs")
+        found = []
+        for d in ds:
+            a, u, _ = lp.boundary(d, u0, problem.umin, problem.umax)
+            found.append((a, u))
+    base = problem.B @ u0
     rows = []
     for d, (a, u) in zip(ds, found):
         if a is None or not np.isfinite(a):
             rows.append(DirectionOut(direction=d.tolist(), scale=None, moment=None, u=None))
         else:
-            rows.append(DirectionOut(direction=d.tolist(), scale=a, moment=(base + a * d).tolist(),
+            rows.append(DirectionOut(direction=d.tolist(), scale=float(a), moment=(base + a * d).tolist(),
                                      u=np.asarray(u).tolist()))
     return AmsOut(volume=volume, volume_note=note, directions=rows)

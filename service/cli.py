@@ -21,9 +21,12 @@ def serve_command(
     data_dir: Optional[Path] = typer.Option(None, help="where the embedded SQLite database lives (ALLOC_DATA_DIR)"),
     database_url: Optional[str] = typer.Option(None, help="SQLAlchemy URL, e.g. postgresql+psycopg://... (ALLOC_DATABASE_URL)"),
     api_key: Optional[str] = typer.Option(None, help="require this X-API-Key on write endpoints (ALLOC_API_KEY)"),
+    workers: int = typer.Option(1, min=1, help="worker processes on this port; any number (and any number of "
+                                               "replicas) may share one database"),
     access_log: bool = typer.Option(False, "--access-log", help="log every request"),
 ) -> None:
     """Start the allocation and reconfiguration HTTP service (OpenAPI docs at /docs)."""
     from service.main import serve
 
-    serve(host=host, port=port, data_dir=data_dir, database_url=database_url, api_key=api_key, access_log=access_log)
+    serve(host=host, port=port, data_dir=data_dir, database_url=database_url, api_key=api_key, workers=workers,
+          access_log=access_log)

@@ -1,5 +1,10 @@
 """Storage: SQLAlchemy 2.x tables for vehicles and their event history.
 
+The schema is created and changed only by the Alembic migrations in
+``service/migrations`` (:func:`migrate`, run at start-up under a lock so that workers and
+replicas starting together migrate once): ``alembic -c service/alembic.ini`` is not
+needed, the service upgrades to ``head`` itself.
+
 The default is an embedded SQLite file in WAL mode with ``synchronous=FULL``, so a
 transaction is on disk when ``commit()`` returns: a response sent after the commit
 survives a SIGKILL of the service.  The same code runs on PostgreSQL given
@@ -12,11 +17,20 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from sqlalchemy import JSON, DateTime, ForeignKey, Integer, String, TypeDecorator, create_engine, event
+import fcntl
+from contextlib import contextmanager
+from collections.abc import Iterator
+
+from sqlalchemy import (
+    JSON, DateTime, ForeignKey, Integer, String, TypeDecorator, UniqueConstraint, create_engine, event, inspect,
+    text,
+)
 from sqlalchemy.engine import Engine, make_url
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, sessionmaker
 
-__all__ = ["Base", "VehicleRow", "EventRow", "make_engine", "make_sessionmaker", "utcnow"]
+__all__ = ["Base", "VehicleRow", "EventRow", "make_engine", "make_sessionmaker", "migrate", "utcnow"]
+
+MIGRATIONS = Path(__file__).resolve().parent / "migrations"
 
 
 def utcnow() -> datetime:
@@ -55,6 +69,7 @@ class VehicleRow(Base):
 
 class EventRow(Base):
     __tablename__ = "events"
+    __table_args__ = (UniqueConstraint("vehicle_id", "seq", name="uq_events_vehicle_seq"),)
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
     vehicle_id: Mapped[str] = mapped_column(ForeignKey("vehicles.id", ondelete="CASCADE"), index=True)
@@ -84,9 +99,51 @@ def make_engine(url: str) -> Engine:
         engine = create_engine(url, connect_args={"check_same_thread": False})
         event.listen(engine, "connect", _sqlite_pragmas)
     else:
-        engine = create_engine(url, pool_pre_ping=True)
-    Base.metadata.create_all(engine)
+        engine = create_engine(url, pool_pre_ping=True, pool_size=10, max_overflow=20)
+    migrate(engine)
     return engine
+
+
+@contextmanager
+def _migration_lock(engine: Engine) -> Iterator[None]:
+    """One migrator at a time: a file lock beside a SQLite file, an advisory lock on PostgreSQL."""
+    if engine.dialect.name == "sqlite":
+        path = engine.url.database
+        if not path or path == ":memory:":
+            yield
+            return
+        with open(f"{path}.migrate.lock", "w") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)
+            try:
+                yield
+            finally:
+                fcntl.flock(lock, fcntl.LOCK_UN)
+    elif engine.dialect.name == "postgresql":
+        with engine.connect() as conn:
+            conn.execute(text("SELECT pg_advisory_lock(72412)"))
+            try:
+                yield
+            finally:
+                conn.execute(text("SELECT pg_advisory_unlock(72412)"))
+                conn.commit()
+    else:  # pragma: no cover - other backends: no concurrent start-up protection
+        yield
+
+
+def migrate(engine: Engine) -> None:
+    """Upgrade the schema to the latest Alembic revision (a database made by an older
+    ``create_all`` release, tables present but no version, is stamped as revision 0001)."""
+    from alembic import command
+    from alembic.config import Config
+
+    cfg = Config()
+    cfg.set_main_option("script_location", str(MIGRATIONS))
+    with _migration_lock(engine), engine.begin() as conn:
+        cfg.attributes["connection"] = conn
+        tables = set(inspect(conn).get_table_names())
+        if "vehicles" in tables and "alembic_version" not in tables:
+            command.stamp(cfg, "0001")
+        command.upgrade(cfg, "head")
 
 
 def make_sessionmaker(engine: Engine) -> sessionmaker:

@@ -15,7 +15,6 @@ request body when the error is in the body.
 from __future__ import annotations
 
 import logging
-import re
 from collections.abc import Sequence
 from typing import Any
 
@@ -29,7 +28,7 @@ import alloc
 from .schemas import EVENT_KINDS
 
 __all__ = [
-    "ServiceError", "NotFound", "Conflict", "Unauthorized", "PayloadTooLarge", "InvalidRequest",
+    "ServiceError", "NotFound", "Conflict", "Unauthorized", "PayloadTooLarge", "InvalidRequest", "TooManyRequests",
     "problem_response", "install_handlers", "PROBLEM_JSON",
 ]
 
@@ -62,6 +61,12 @@ class Unauthorized(ServiceError):
     status, slug, title = 401, "unauthorized", "Missing or wrong API key"
 
 
+class TooManyRequests(ServiceError):
+    """The build pool and its queue are full (a bounded resource, not an error of the request)."""
+
+    status, slug, title = 429, "too-many-requests", "Too many concurrent builds"
+
+
 class PayloadTooLarge(ServiceError):
     status, slug, title = 413, "payload-too-large", "Request body too large"
 
@@ -92,9 +97,6 @@ def problem_response(
     return JSONResponse(content, status_code=status, media_type=PROBLEM_JSON, headers=headers)
 
 
-# Library messages start with the field they are about: "umin/umax: umin[2] = 3 > ...".
-_FIELD = re.compile(r"^([A-Za-z_][A-Za-z0-9_]*)(?:/[A-Za-z_]+)?(?:\[[^\]]*\])?:")
-
 _LIBRARY_ERRORS: tuple[tuple[type[Exception], int, str, str], ...] = (
     (alloc.UnknownMethodError, 422, "unknown-method", "Unknown allocation method"),
     (alloc.OptionError, 422, "invalid-option", "Invalid method option"),
@@ -105,10 +107,11 @@ _LIBRARY_ERRORS: tuple[tuple[type[Exception], int, str, str], ...] = (
 
 
 def library_error_fields(exc: Exception, prefix: Sequence[str | int] = ("body",)) -> list[dict[str, Any]]:
-    """The ``errors`` entry of a library exception, its field taken from the message."""
+    """The ``errors`` entry of a library exception, against the field it names (``exc.field``)."""
     message = str(exc)
-    match = _FIELD.match(message)
-    field = match.group(1) if match else None
+    field = getattr(exc, "field", None)
+    if field:
+        field = field.split("/", 1)[0]  # "umin/umax": the error concerns both; point at the first
     if isinstance(exc, alloc.UnknownMethodError):
         field = "method"
     elif isinstance(exc, alloc.OptionError):
@@ -120,7 +123,8 @@ _TYPE_TAGS = frozenset({"str", "int", "float", "bool", "list", "dict", "none"})
 
 
 def _is_union_tag(step: str | int) -> bool:
-    return isinstance(step, str) and ("[" in step or step in _TYPE_TAGS or step in EVENT_KINDS)
+    return isinstance(step, str) and ("[" in step or step in _TYPE_TAGS or step in EVENT_KINDS
+                                      or step.startswith(("constrained-", "function-")))
 
 
 def _strip_tags(loc: list[str | int], body: Any) -> list[str | int]:
@@ -157,7 +161,8 @@ def install_handlers(app: FastAPI) -> None:
 
     @app.exception_handler(ServiceError)
     async def _service(request: Request, exc: ServiceError) -> JSONResponse:
-        headers = {"WWW-Authenticate": 'ApiKey header="X-API-Key"'} if exc.status == 401 else None
+        headers = ({"WWW-Authenticate": 'ApiKey header="X-API-Key"'} if exc.status == 401
+                   else {"Retry-After": "1"} if exc.status == 429 else None)
         return problem_response(exc.status, exc.slug, exc.title, exc.detail, exc.errors, headers)
 
     @app.exception_handler(alloc.AllocError)

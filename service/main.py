@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 import gc
+import logging
+import os
+import sys
 import time
 from contextlib import asynccontextmanager
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from fastapi import FastAPI
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
@@ -15,11 +19,15 @@ import alloc
 
 from .config import MAX_AXES, MAX_BATCH, MAX_EFFECTORS, Settings
 from .db import make_engine, make_sessionmaker
+from .docs import install_docs
 from .errors import PROBLEM_JSON, PayloadTooLarge, install_handlers, problem_response
 from .routes import allocation, ams, methods, system, vehicles
+from .server import GuardedHttpToolsProtocol
 from .store import VehicleStore
 
-__all__ = ["create_app", "serve", "BodySizeLimit", "ServerTiming"]
+__all__ = ["create_app", "serve", "warm_up", "BodySizeLimit", "ServerTiming", "UVICORN_DEFAULTS"]
+
+_log = logging.getLogger("service")
 
 DESCRIPTION = f"""
 Control allocation over HTTP: allocate for an inline problem or for a stored vehicle at its
@@ -29,7 +37,10 @@ current health, record failures and repairs, read the history.
   request bodies are limited (``ALLOC_MAX_BODY_BYTES``, 413 beyond).
 * Numbers must be finite; an unlimited rate is ``null``.
 * Errors are RFC 9457 ``{PROBLEM_JSON}`` with an ``errors`` list (``loc``, ``pointer``, ``reason``).
+* Numbers at most 1e9 in magnitude, non-zero weights at least 1e-9; types are strict.
 * Write endpoints need ``X-API-Key`` when ``ALLOC_API_KEY`` is set.
+* Any number of worker processes and replicas may share one database: every request reads
+  the vehicle's committed health version.
 """
 
 
@@ -113,52 +124,105 @@ class ServerTiming:
         await self.app(scope, receive, timed_send)
 
 
+_warmed = False
+
+
+def warm_up() -> float:
+    """Build and call every registered method once on a small problem (and a batch), so the
+    numba kernels are compiled (or loaded from their on-disk cache) before the first request,
+    not during a user's call.  Returns the seconds spent."""
+    global _warmed
+    t0 = time.perf_counter()
+    if _warmed:
+        return 0.0
+    B = np.array([[1.0, -1.0, 0.5, 0.2], [0.3, 0.4, -1.0, 0.8], [0.2, 0.1, 0.3, -1.0]])
+    problem = alloc.Problem(B, [-1.0] * 4, [1.0] * 4, rate_min=[-5.0] * 4, rate_max=[5.0] * 4)
+    v = np.array([0.3, -0.2, 0.1])
+    for name in alloc.methods():
+        try:
+            options = {"resolution": 8} if "resolution" in alloc.method_info(name)["options"] else {}
+            allocator = alloc.make_allocator(problem, name, **options)
+        except alloc.AllocError:
+            continue  # a method that needs options this problem cannot give (none today)
+        allocator(v)
+        allocator(v, u_prev=np.zeros(4), dt=0.01)
+        allocator.batch(np.stack([v, -v]))
+    _warmed = True
+    return time.perf_counter() - t0
+
+
 def create_app(settings: Settings | None = None) -> FastAPI:
-    """Build the application: database, store, routers, error handlers, body limit."""
+    """Build the application: database (migrated), store, routers, error handlers, body limit."""
     settings = settings or Settings()
     engine = make_engine(settings.resolved_database_url)
-    store = VehicleStore(make_sessionmaker(engine), settings.cache_size)
+    store = VehicleStore(engine, make_sessionmaker(engine), cache_size=settings.cache_size,
+                         cache_bytes=settings.cache_bytes, inline_cache_bytes=settings.inline_cache_bytes,
+                         build_budget=settings.build_budget_s, build_workers=settings.build_workers,
+                         build_queue=settings.build_queue)
 
     @asynccontextmanager
     async def lifespan(app: FastAPI):  # type: ignore[no-untyped-def]
+        if settings.warmup:
+            _log.info("numba kernels warmed in %.2f s", warm_up())
+        # A thread waiting for the GIL (an event's writer thread, a build finishing) gets it
+        # within 1 ms instead of 5 ms: an event does a dozen GIL hand-offs, and under a
+        # request flood each one would otherwise wait the full interval.
+        sys.setswitchinterval(0.001)
         # Move everything allocated at start-up (numpy, scipy, pydantic models, ...) out of
         # the collector's reach: full collections then scan only per-request garbage,
         # which keeps GC pauses out of the latency tail.
         gc.collect()
         gc.freeze()
         yield
+        store.close()
         engine.dispose()
 
-    app = FastAPI(title="alloc service", version=alloc.__version__, description=DESCRIPTION, lifespan=lifespan)
+    app = FastAPI(title="alloc service", version=alloc.__version__, description=DESCRIPTION, lifespan=lifespan,
+                  docs_url=None, redoc_url=None)
     app.state.settings = settings
     app.state.store = store
     for module in (allocation, methods, ams, vehicles, system):
         app.include_router(module.router)
+    install_docs(app)
     install_handlers(app)
     app.add_middleware(BodySizeLimit, limit=settings.max_body_bytes)
     app.add_middleware(ServerTiming)  # outermost: includes the body limit's buffering
     return app
 
 
-def serve(host: str = "127.0.0.1", port: int = 8000, data_dir: str | Path | None = None,
-          database_url: str | None = None, api_key: str | None = None, **uvicorn_options: Any) -> None:
-    """Run the service with uvicorn (one process: see :mod:`service.store` on why).
+#: uvicorn's connection settings (see service/README.md, "Connection hygiene")
+UVICORN_DEFAULTS: dict[str, Any] = {
+    "access_log": False,  # a log line per request costs about as much as a pseudo-inverse allocation
+    "timeout_keep_alive": 5,  # idle keep-alive connections closed after 5 s
+    "limit_concurrency": 512,  # connections + tasks per process; 503 beyond
+    "backlog": 1024,
+    "h11_max_incomplete_event_size": 16 * 1024,
+    "timeout_graceful_shutdown": 10,
+}
 
-    Access logs are off unless ``access_log=True`` is passed: a log line per request
-    costs about as much as a pseudo-inverse allocation.
+
+def serve(host: str = "127.0.0.1", port: int = 8000, data_dir: str | Path | None = None,
+          database_url: str | None = None, api_key: str | None = None, workers: int = 1,
+          **uvicorn_options: Any) -> None:
+    """Run the service with uvicorn: ``workers`` processes on one port and one database.
+
+    Any number of workers (and of replicas on the same database) is safe: every request
+    reads the vehicle's health version from the database (:mod:`service.store`).  The
+    settings are passed to the workers through the ``ALLOC_*`` environment.
     """
     import uvicorn
 
-    uvicorn_options.setdefault("access_log", False)
-    overrides: dict[str, Any] = {}
     if data_dir is not None:
-        overrides["data_dir"] = Path(data_dir)
+        os.environ["ALLOC_DATA_DIR"] = str(Path(data_dir).resolve())
     if database_url is not None:
-        overrides["database_url"] = database_url
+        os.environ["ALLOC_DATABASE_URL"] = database_url
     if api_key is not None:
-        overrides["api_key"] = api_key
-    app = create_app(Settings(**overrides))
-    uvicorn.run(app, host=host, port=port, workers=1, **uvicorn_options)
+        os.environ["ALLOC_API_KEY"] = api_key
+    settings = Settings()  # validated here once: an empty key stops the start, before any worker
+    make_engine(settings.resolved_database_url).dispose()  # migrate once, before the workers start
+    options = {**UVICORN_DEFAULTS, **uvicorn_options}
+    uvicorn.run("service.main:create_app", factory=True, host=host, port=port, workers=workers,
+                http=GuardedHttpToolsProtocol, **options)
 
 
 def _main() -> None:
@@ -167,12 +231,13 @@ def _main() -> None:
     parser = argparse.ArgumentParser(description="Run the alloc HTTP service.")
     parser.add_argument("--host", default="127.0.0.1")
     parser.add_argument("--port", type=int, default=8000)
+    parser.add_argument("--workers", type=int, default=1, help="worker processes (one database, one truth)")
     parser.add_argument("--data-dir", default=None)
     parser.add_argument("--database-url", default=None)
     parser.add_argument("--log-level", default="info")
     parser.add_argument("--access-log", action="store_true", help="log every request")
     args = parser.parse_args()
-    serve(args.host, args.port, args.data_dir, args.database_url, log_level=args.log_level,
+    serve(args.host, args.port, args.data_dir, args.database_url, workers=args.workers, log_level=args.log_level,
           access_log=args.access_log)
 
 

@@ -29,7 +29,8 @@ class ServiceProcess:
     """``python -m service.main`` on 127.0.0.1 with ``ALLOC_*`` settings from ``env``."""
 
     def __init__(self, data_dir: str | Path, *, api_key: str | None = None, port: int | None = None,
-                 env: dict[str, str] | None = None, log_level: str = "warning", nice: int = 0) -> None:
+                 env: dict[str, str] | None = None, log_level: str = "warning", nice: int = 0,
+                 database_url: str | None = None, workers: int = 1) -> None:
         self.data_dir = Path(data_dir)
         self.port = port or free_port()
         self.url = f"http://127.0.0.1:{self.port}"
@@ -37,18 +38,21 @@ class ServiceProcess:
         self.env = {**inherited, "ALLOC_DATA_DIR": str(self.data_dir), **(env or {})}
         if api_key is not None:
             self.env["ALLOC_API_KEY"] = api_key
+        if database_url is not None:
+            self.env["ALLOC_DATABASE_URL"] = database_url
+        self.workers = workers
         self.log_level = log_level
         self.nice = nice  # scheduling priority increment of the server process (negative: root only)
         self.proc: subprocess.Popen[bytes] | None = None
 
-    def start(self, timeout: float = 30.0) -> ServiceProcess:
+    def start(self, timeout: float = 90.0) -> ServiceProcess:
         root = Path(__file__).resolve().parent.parent
         self.data_dir.mkdir(parents=True, exist_ok=True)
         self.log_path = self.data_dir / "service.log"
         log = open(self.log_path, "ab")  # a file, not a pipe: a full pipe would stall the server
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "service.main", "--host", "127.0.0.1", "--port", str(self.port),
-             "--log-level", self.log_level],
+             "--log-level", self.log_level, "--workers", str(self.workers)],
             cwd=root, env=self.env, stdout=subprocess.DEVNULL, stderr=log,
             preexec_fn=(lambda: os.nice(self.nice)) if self.nice else None,
         )

@@ -2,9 +2,11 @@
 
 Sizes are capped in the schema so the caps are visible in the OpenAPI document:
 ``m <= 64`` effectors, ``k <= 6`` axes, batches of at most 10,000 demands, AMS
-requests of at most 256 directions.  Numbers must be finite: JSON has no NaN or
+requests of at most 256 directions.  Numbers must be finite and at most ``1e9`` in
+magnitude (``MAX_MAGNITUDE``), non-zero weights at least ``1e-9``: JSON has no NaN or
 infinity, and the literals ``NaN``/``Infinity`` (which Python's parser accepts) are
-rejected with 422.  An unlimited rate is written ``null``.
+rejected with 422.  Types are strict: ``true`` is not a number and not an effector
+index, ``"1.5"`` is not a number.  An unlimited rate is written ``null``.
 """
 
 from __future__ import annotations
@@ -13,24 +15,35 @@ from datetime import datetime
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, StrictInt
 
 import alloc
+from alloc.health import FailureKind
 
-from .config import MAX_AXES, MAX_BATCH, MAX_DIRECTIONS, MAX_EFFECTORS
+from .config import MAX_AXES, MAX_BATCH, MAX_DIRECTIONS, MAX_EFFECTORS, MAX_MAGNITUDE, MIN_WEIGHT
 
-Finite = Annotated[float, Field(allow_inf_nan=False)]
-Rate = Annotated[float | None, Field(allow_inf_nan=False, description="units/s; null = unlimited")]
+Finite = Annotated[float, Field(strict=True, allow_inf_nan=False, ge=-MAX_MAGNITUDE, le=MAX_MAGNITUDE)]
+Rate = Annotated[float | None, Field(strict=True, allow_inf_nan=False, ge=-MAX_MAGNITUDE, le=MAX_MAGNITUDE,
+                                     description="units/s; null = unlimited")]
+
+
+def _weight_entry(w: float) -> float:
+    if w != 0.0 and abs(w) < MIN_WEIGHT:
+        raise ValueError(f"a non-zero weight must be at least {MIN_WEIGHT:g} in magnitude, got {w:g}")
+    return w
+
+
+WeightEntry = Annotated[Finite, AfterValidator(_weight_entry)]
 EffectorVector = Annotated[list[Finite], Field(min_length=1, max_length=MAX_EFFECTORS)]
 AxisVector = Annotated[list[Finite], Field(min_length=1, max_length=MAX_AXES)]
-SquareRow = Annotated[list[Finite], Field(min_length=1, max_length=MAX_EFFECTORS)]
-Weight = EffectorVector | Annotated[list[SquareRow], Field(min_length=1, max_length=MAX_EFFECTORS)]
+WeightVector = Annotated[list[WeightEntry], Field(min_length=1, max_length=MAX_EFFECTORS)]
+Weight = WeightVector | Annotated[list[WeightVector], Field(min_length=1, max_length=MAX_EFFECTORS)]
 # Printable text only: a NUL byte, accepted by SQLite, is an error in PostgreSQL text columns.
 _PRINTABLE = r"^[^\x00-\x1f\x7f]*$"
-Label = Annotated[str, Field(min_length=1, max_length=64, pattern=_PRINTABLE)]
-MethodName = Annotated[str, Field(min_length=1, max_length=64, examples=["pinv", "qp"])]
+Label = Annotated[str, Field(strict=True, min_length=1, max_length=64, pattern=_PRINTABLE)]
+MethodName = Annotated[str, Field(strict=True, min_length=1, max_length=64, examples=["pinv", "qp"])]
 Options = Annotated[dict[str, Any], Field(max_length=16, description="method options, see GET /v1/methods")]
-EffectorRef = Label | Annotated[int, Field(ge=0, lt=MAX_EFFECTORS)]
+EffectorRef = Label | Annotated[StrictInt, Field(ge=0, lt=MAX_EFFECTORS)]
 
 
 class _In(BaseModel):
@@ -91,7 +104,7 @@ class _Demand(_In):
 class _Single(_Demand):
     v: AxisVector = Field(description="demand (virtual control), k values")
     u_prev: EffectorVector | None = Field(default=None, description="previous command, for rate limits")
-    dt: Annotated[float, Field(gt=0, le=3600, allow_inf_nan=False)] | None = Field(
+    dt: Annotated[float, Field(strict=True, gt=0, le=3600, allow_inf_nan=False)] | None = Field(
         default=None, description="time step in s, for rate limits (with u_prev)")
 
 
@@ -178,6 +191,8 @@ class MethodOut(BaseModel):
     equation: str
     summary: str
     options: dict[str, str]
+    capabilities: dict[str, bool] = Field(default_factory=dict,
+                                          description="declared by the method: affine, needs_ams, ...")
 
 
 # -------------------------------------------------------------------- AMS
@@ -281,7 +296,7 @@ class EffectivenessEvent(_Event):
     model_config = _examples({"effector": "right", "kind": "effectiveness", "fraction": 0.6})
 
     kind: Literal["effectiveness"]
-    fraction: Annotated[float, Field(ge=0.0, le=1.0)]
+    fraction: Annotated[float, Field(strict=True, ge=0.0, le=1.0)]
 
 
 class LimitsEvent(_Event):
@@ -300,12 +315,21 @@ class RateLimitsEvent(_Event):
     model_config = _examples({"effector": "left", "kind": "rate_limits", "rate_min": -20.0, "rate_max": 20.0})
 
     kind: Literal["rate_limits"]
-    rate_min: Annotated[float, Field(le=0.0, allow_inf_nan=False)]
-    rate_max: Annotated[float, Field(ge=0.0, allow_inf_nan=False)]
+    rate_min: Annotated[float, Field(strict=True, le=0.0, ge=-MAX_MAGNITUDE, allow_inf_nan=False)]
+    rate_max: Annotated[float, Field(strict=True, ge=0.0, le=MAX_MAGNITUDE, allow_inf_nan=False)]
+
+
+class HardoverEvent(_Event):
+    """The effector ran to a stop and stays there: a jam at ``position`` (default its nominal upper limit)."""
+
+    model_config = _examples({"effector": "left", "kind": "hardover"})
+
+    kind: Literal["hardover"]
+    position: Finite | None = None
 
 
 class FloatEvent(_Event):
-    """A floating surface: produces no moment and is not commanded (see service.health)."""
+    """A floating surface: produces no moment and is not commanded (see alloc.health)."""
 
     model_config = _examples({"effector": "centre", "kind": "float"})
 
@@ -321,12 +345,13 @@ class RepairEvent(_Event):
 
 
 EventIn = Annotated[
-    JamEvent | EffectivenessEvent | LimitsEvent | RateLimitsEvent | FloatEvent | RepairEvent,
+    JamEvent | HardoverEvent | EffectivenessEvent | LimitsEvent | RateLimitsEvent | FloatEvent | RepairEvent,
     Field(discriminator="kind"),
 ]
 
 
-EVENT_KINDS = frozenset({"jam", "effectiveness", "limits", "rate_limits", "float", "repair"})
+#: the event kinds: exactly the library's failure kinds (alloc.health.FailureKind)
+EVENT_KINDS = frozenset(k.value for k in FailureKind)
 
 
 class EventOut(BaseModel):

@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
+from anyio import to_thread
 from fastapi import APIRouter, Response
 
 from ..deps import StoreDep
 from ..responses import allocation_response, batch_response
 from ..schemas import PROBLEM_RESPONSES, AllocateRequest, AllocationOut, BatchAllocateRequest, BatchOut, ProblemIn
-from ..store import build_allocator
 
 router = APIRouter(prefix="/v1/allocate", tags=["allocation"], responses=PROBLEM_RESPONSES)
 
@@ -24,9 +24,9 @@ async def allocate(body: AllocateRequest, store: StoreDep) -> Response:
     return allocation_response(allocator(body.v, u_prev=body.u_prev, dt=body.dt))
 
 
-# sync (thread pool): a 10,000-demand batch must not block the event loop; it builds its
-# own allocator, since cached ones are only ever called from the event loop.
+# A 10,000-demand batch must not block the event loop: it builds its own allocator on the
+# build pool (cached ones are only ever called from the event loop) and runs in a thread.
 @router.post("/batch", response_model=BatchOut, summary="Allocate many demands for one inline problem")
-def allocate_batch(body: BatchAllocateRequest) -> Response:
-    allocator = build_allocator(body.to_problem(), body.method, body.options)
-    return batch_response(allocator.batch(body.V))
+async def allocate_batch(body: BatchAllocateRequest, store: StoreDep) -> Response:
+    allocator = await store.fresh_allocator(body.to_problem(), body.method, body.options)
+    return batch_response(await to_thread.run_sync(allocator.batch, body.V))

@@ -5,11 +5,14 @@ from __future__ import annotations
 from fastapi import APIRouter
 
 from .. import ams
+from ..deps import StoreDep
 from ..schemas import PROBLEM_RESPONSES, AmsOut, AmsRequest
 
 router = APIRouter(prefix="/v1/ams", tags=["ams"], responses=PROBLEM_RESPONSES)
 
 
 @router.post("", response_model=AmsOut, summary="AMS volume and largest moments along directions")
-def ams_summary(body: AmsRequest) -> AmsOut:
-    return ams.summarize(body.to_problem(), body.directions)
+async def ams_summary(body: AmsRequest, store: StoreDep) -> AmsOut:
+    # on the bounded build pool: a facet enumeration is a build (time and memory bounded there)
+    problem = body.to_problem()
+    return await store.run_bounded(lambda: ams.summarize(problem, body.directions, store.build_budget))

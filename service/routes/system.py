@@ -13,6 +13,8 @@ router = APIRouter(prefix="/v1", tags=["system"], responses=PROBLEM_RESPONSES)
 
 
 @router.get("/health", response_model=ServiceHealth, summary="Service health check")
-def health(store: StoreDep) -> ServiceHealth:
+async def health(store: StoreDep) -> ServiceHealth:
+    # async, one committed read through the version probe: answers even when the thread
+    # pool is busy with sync routes
     store.ping()
     return ServiceHealth(status="ok", version=alloc.__version__, database="ok", methods=len(alloc.methods()))

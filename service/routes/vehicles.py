@@ -8,7 +8,8 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, Depends, Path, Query, Response, status
+from anyio import to_thread
+from fastapi import APIRouter, BackgroundTasks, Depends, Path, Query, Response, status
 
 from .. import ams
 from ..db import EventRow
@@ -21,7 +22,7 @@ from ..schemas import (
     HealthOut, ProblemOut, VehicleAllocateRequest, VehicleBatchRequest, VehicleCreate, VehicleList,
     VehicleOut, VehicleSummary,
 )
-from ..store import VehicleState, build_allocator
+from ..store import VehicleState
 
 router = APIRouter(prefix="/v1/vehicles", tags=["vehicles"], responses={**PROBLEM_RESPONSES, **NOT_FOUND})
 VehicleId = Annotated[str, Path(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_-]+$",
@@ -68,16 +69,20 @@ def get_vehicle(vehicle_id: VehicleId, store: StoreDep) -> VehicleOut:
 
 @router.delete("/{vehicle_id}", status_code=status.HTTP_204_NO_CONTENT, dependencies=WriteAccess,
                responses=UNAUTHORIZED, summary="Delete a vehicle and its history")
-def delete_vehicle(vehicle_id: VehicleId, store: StoreDep) -> Response:
-    store.delete(vehicle_id)
+async def delete_vehicle(vehicle_id: VehicleId, store: StoreDep) -> Response:
+    await store.write(store.delete, vehicle_id)
     return Response(status_code=status.HTTP_204_NO_CONTENT)
 
 
 @router.post("/{vehicle_id}/events", response_model=EventRecorded, status_code=status.HTTP_201_CREATED,
              dependencies=WriteAccess, responses=UNAUTHORIZED, summary="Record a failure or repair of one effector")
-def record_event(vehicle_id: VehicleId, body: EventIn, store: StoreDep) -> EventRecorded:
-    # Committed (fsync'd) before the response; allocators in use are rebuilt before it too.
-    event, state = store.record_event(vehicle_id, body)
+async def record_event(vehicle_id: VehicleId, body: EventIn, store: StoreDep,
+                       tasks: BackgroundTasks) -> EventRecorded:
+    # Committed (fsync'd) on the writer threads and visible to every process before the
+    # response; the allocators that were in use are rebuilt after it (bounded, this
+    # vehicle only, on the build pool).
+    event, state, _ = await store.write(store.record_event, vehicle_id, body)
+    tasks.add_task(store.prebuild, state)
     return EventRecorded(event=_event_out(event), health=_health_out(state))
 
 
@@ -102,14 +107,15 @@ async def allocate(vehicle_id: VehicleId, body: VehicleAllocateRequest, store: S
 
 @router.post("/{vehicle_id}/allocate/batch", response_model=BatchOut,
              summary="Allocate many demands at the vehicle's current health")
-def allocate_batch(vehicle_id: VehicleId, body: VehicleBatchRequest, store: StoreDep) -> Response:
+async def allocate_batch(vehicle_id: VehicleId, body: VehicleBatchRequest, store: StoreDep) -> Response:
     state = store.get(vehicle_id)
-    allocator = build_allocator(state.problem, body.method, body.options)
-    return batch_response(allocator.batch(body.V), vehicle_id=state.id, health_version=state.version)
+    allocator = await store.fresh_allocator(state.problem, body.method, body.options)
+    result = await to_thread.run_sync(allocator.batch, body.V)
+    return batch_response(result, vehicle_id=state.id, health_version=state.version)
 
 
 @router.post("/{vehicle_id}/ams", response_model=AmsOut, summary="AMS summary at the vehicle's current health")
-def ams_summary(vehicle_id: VehicleId, body: AmsVehicleRequest, store: StoreDep) -> AmsOut:
+async def ams_summary(vehicle_id: VehicleId, body: AmsVehicleRequest, store: StoreDep) -> AmsOut:
     state = store.get(vehicle_id)
-    out = ams.summarize(state.problem, body.directions)
+    out = await store.run_bounded(lambda: ams.summarize(state.problem, body.directions, store.build_budget))
     return out.model_copy(update={"vehicle_id": state.id, "health_version": state.version})

@@ -1,0 +1,12 @@
+"""Alembic environment: run by :func:`service.db.migrate` with an open connection."""
+
+from __future__ import annotations
+
+from alembic import context
+
+from service.db import Base
+
+connection = context.config.attributes["connection"]
+context.configure(connection=connection, target_metadata=Base.metadata, render_as_batch=True)
+with context.begin_transaction():
+    context.run_migrations()

@@ -1,0 +1,213 @@
+"""The service protects itself: hostile inputs, floods, memory, connections, strict types.
+
+Real uvicorn processes.  Latencies under these attacks are measured by
+``benchmarks/bench_service.py`` (no timed assertions here); these tests check the
+contracts: 4xx answers naming the cause, no 5xx, the health endpoint answering
+throughout, the event path unaffected, and the process's memory under its bound.
+"""
+
+from __future__ import annotations
+
+import json
+import socket
+import threading
+import time
+from concurrent.futures import ThreadPoolExecutor
+
+import httpx
+import numpy as np
+import pytest
+
+from alloc.vehicles import ice
+from service.process import ServiceProcess
+
+KEY = "limits-key"
+H = {"X-API-Key": KEY}
+HOSTILE = {"B": [[1e300, 1, 2, 0.5], [1e300, 3, 1, 0.1], [1e300, -1, 2, 3]], "umin": [-1, -1, -1, -1],
+           "umax": [1, 1, 1, 1], "Wu": [1e-20, 1, 1, 1], "v": [1, 2, 3]}
+MiB = 1024 * 1024
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory):
+    proc = ServiceProcess(tmp_path_factory.mktemp("limits"), api_key=KEY,
+                          env={"ALLOC_REQUEST_TIMEOUT_S": "1.5"}).start(timeout=180.0)
+    yield proc
+    proc.stop()
+
+
+def rss(proc: ServiceProcess) -> int:
+    for line in open(f"/proc/{proc.proc.pid}/status"):
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) * 1024
+    raise AssertionError("no VmRSS")
+
+
+def problem_json(r: httpx.Response, status: int) -> dict:
+    assert r.status_code == status, r.text
+    assert r.headers["content-type"].startswith("application/problem+json")
+    return r.json()
+
+
+def test_hostile_magnitudes_get_422_and_health_keeps_answering(server):
+    stop = threading.Event()
+    health: list[int] = []
+
+    def poll() -> None:
+        with httpx.Client(base_url=server.url, timeout=5.0) as c:
+            while not stop.is_set():
+                health.append(c.get("/v1/health").status_code)
+                time.sleep(0.01)
+    t = threading.Thread(target=poll)
+    t.start()
+    try:
+        with httpx.Client(base_url=server.url, timeout=30.0) as c:
+            for method in ("pinv", "qp", "wls", "cgi", "da"):
+                body = problem_json(c.post("/v1/allocate", json={**HOSTILE, "method": method}), 422)
+                pointers = {e["pointer"] for e in body["errors"]}
+                assert "/B/0/0" in pointers and "/Wu/0" in pointers, body
+            # within the magnitude bound, a tiny (non-zero) weight is refused too
+            body = problem_json(c.post("/v1/allocate", json={**HOSTILE, "B": [[1, 1, 2, 0.5], [1, 3, 1, 0.1],
+                                                                          [1, -1, 2, 3]]}), 422)
+            assert "/Wu/0" in [e["pointer"] for e in body["errors"]]
+            assert "at least 1e-09" in body["detail"]
+    finally:
+        stop.set()
+        t.join()
+    assert health and set(health) == {200}
+
+
+def test_strict_json_types(server):
+    with httpx.Client(base_url=server.url, timeout=30.0) as c:
+        vid = c.post("/v1/vehicles", json=ice().to_dict(), headers=H).json()["id"]
+        r = c.post(f"/v1/vehicles/{vid}/events", json={"effector": True, "kind": "jam", "position": 1.0}, headers=H)
+        assert "/effector" in {e["pointer"] for e in problem_json(r, 422)["errors"]}
+        r = c.post(f"/v1/vehicles/{vid}/allocate", json={"v": [0.1, 0.2, 0.0], "u_prev": [0.0] * 11, "dt": True})
+        assert "/dt" in {e["pointer"] for e in problem_json(r, 422)["errors"]}
+        r = c.post(f"/v1/vehicles/{vid}/allocate", json={"v": [0.1, "0.2", 0.0]})
+        assert "/v/1" in {e["pointer"] for e in problem_json(r, 422)["errors"]}
+        r = c.post(f"/v1/vehicles/{vid}/allocate", json={"v": [0.1, True, 0.0]})
+        assert "/v/1" in {e["pointer"] for e in problem_json(r, 422)["errors"]}
+        assert c.post(f"/v1/vehicles/{vid}/events", json={"effector": 0, "kind": "jam", "position": 1},
+                      headers=H).status_code == 201  # an integer is a number
+
+
+def _raw(server: ServiceProcess, data: bytes, timeout: float = 10.0) -> bytes:
+    with socket.create_connection(("127.0.0.1", server.port), timeout=timeout) as s:
+        s.sendall(data)
+        chunks = []
+        while True:
+            try:
+                chunk = s.recv(65536)
+            except TimeoutError:
+                break
+            if not chunk:
+                break
+            chunks.append(chunk)
+        return b"".join(chunks)
+
+
+def test_framing_errors_are_problem_json(server):
+    for request in (b"POST /v1/allocate HTTP/1.1\r\nHost: x\r\nContent-Length: abc\r\n\r\n{}",
+                    b"GARBAGE\r\n\r\n",
+                    b"POST /v1/allocate HTTP/1.1\r\nHost: x\r\nContent-Length: 2\r\nContent-Length: 3\r\n\r\n{}"):
+        reply = _raw(server, request)
+        head, _, body = reply.partition(b"\r\n\r\n")
+        assert head.startswith(b"HTTP/1.1 400"), reply
+        assert b"content-type: application/problem+json" in head.lower()
+        assert json.loads(body)["status"] == 400
+
+
+def test_half_sent_requests_are_closed(server):
+    """A request whose headers or body never finish is answered 408 and closed (ALLOC_REQUEST_TIMEOUT_S = 1.5)."""
+    socks = []
+    for i in range(200):
+        s = socket.create_connection(("127.0.0.1", server.port), timeout=10.0)
+        s.sendall(b"POST /v1/allocate HTTP/1.1\r\nHost: x\r\n" if i % 2 else
+                  b"POST /v1/allocate HTTP/1.1\r\nHost: x\r\nContent-Length: 100\r\n\r\n{\"B\"")
+        socks.append(s)
+    t0 = time.monotonic()
+    closed = 0
+    for s in socks:
+        data = b""
+        while True:
+            chunk = s.recv(65536)
+            if not chunk:
+                break
+            data += chunk
+        assert data.startswith(b"HTTP/1.1 408") and b"problem+json" in data, data
+        closed += 1
+        s.close()
+    assert closed == 200 and time.monotonic() - t0 < 30.0
+    assert httpx.get(f"{server.url}/v1/health").status_code == 200
+
+
+def test_empty_api_key_refuses_to_start(tmp_path):
+    with pytest.raises(RuntimeError, match="empty"):
+        ServiceProcess(tmp_path / "data", api_key="").start(timeout=120.0)
+
+
+def test_build_cost_refused_before_it_starts(server):
+    rng = np.random.default_rng(1)
+    B = rng.normal(size=(3, 64)).tolist()
+    body = {"B": B, "umin": [-1.0] * 64, "umax": [1.0] * 64, "v": [0.1, 0.1, 0.1], "method": "da_table",
+            "options": {"resolution": 256}}
+    with httpx.Client(base_url=server.url, timeout=30.0) as c:
+        t0 = time.monotonic()
+        out = problem_json(c.post("/v1/allocate", json=body), 422)
+        assert time.monotonic() - t0 < 5.0  # refused, not built (the build takes about a minute)
+        assert out["errors"][0]["pointer"] == "/options/resolution"
+        assert "predicted build time" in out["detail"] and "budget" in out["detail"]
+
+
+def test_option_flood_does_not_block_events(server):
+    """100 unauthenticated allocations with distinct options while events are recorded:
+    every event commits, nothing answers 5xx (the flood gets 200, 422 or 429)."""
+    with httpx.Client(base_url=server.url, timeout=60.0) as c:
+        vid = c.post("/v1/vehicles", json=ice().to_dict(), headers=H).json()["id"]
+    flood_status: list[int] = []
+
+    def flood(i: int) -> None:
+        with httpx.Client(base_url=server.url, timeout=120.0) as c:
+            r = c.post(f"/v1/vehicles/{vid}/allocate", json={"v": [0.1, 0.2, 0.0], "method": "da_table",
+                                                             "options": {"resolution": 8 + i}})
+            flood_status.append(r.status_code)
+    with ThreadPoolExecutor(16) as pool:
+        futures = [pool.submit(flood, i) for i in range(100)]
+        with httpx.Client(base_url=server.url, timeout=60.0) as c:
+            for k in range(10):
+                r = c.post(f"/v1/vehicles/{vid}/events", json={"effector": "elevon_l", "kind": "jam",
+                                                                "position": float(k)}, headers=H)
+                assert r.status_code == 201
+                body = c.post(f"/v1/vehicles/{vid}/allocate", json={"v": [0.1, 0.2, 0.0]}).json()
+                assert body["health_version"] == k + 1 and body["u"][0] == float(k)
+        for f in futures:
+            f.result()
+    assert set(flood_status) <= {200, 422, 429} and 200 in flood_status, flood_status
+
+
+def test_inline_memory_attack_stays_bounded(server):
+    """Distinct inline da_facet problems at k = 6, m = 20 (~60-70 MiB each when built): not
+    kept, so RSS stays under start + cache budget (128 MiB) + one build in flight (~100 MiB)."""
+    rng = np.random.default_rng(9)
+    base = rss(server)
+    with httpx.Client(base_url=server.url, timeout=120.0) as c:
+        for _ in range(6):
+            body = {"B": rng.normal(size=(6, 20)).tolist(), "umin": [-1.0] * 20, "umax": [1.0] * 20,
+                    "v": [0.1] * 6, "method": "da_facet"}
+            assert c.post("/v1/allocate", json=body).status_code in (200, 429)
+    grown = rss(server) - base
+    assert grown < 128 * MiB + 100 * MiB, grown / MiB
+
+
+def test_docs_are_offline(server):
+    with httpx.Client(base_url=server.url, timeout=30.0) as c:
+        for page in ("/docs", "/redoc"):
+            html = c.get(page).text
+            assert "http://" not in html and "https://" not in html.replace("https://github", ""), page
+            import re
+            refs = re.findall(r'(?:src|href)="([^"]+)"', html) + re.findall(r"url: '([^']+)'", html)
+            assert refs, html
+            for ref in refs:
+                assert ref.startswith("/"), ref
+                assert c.get(ref).status_code == 200, ref
