@@ -25,7 +25,8 @@ from typing import Any
 import numpy as np
 
 from sim.blocks import DEFAULT_DT, ActuatorFailure, ActuatorSpec, HedgeTerm, sum_of_sines
-from sim.loop import Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle, simulate
+from sim.loop import Failure, LoopShapedDesign, LoopSpec, Pilot, SMCDesign, Vehicle, simulate
+from sim.pilot import pilot_parameters
 from sim.result import SimResult
 from sim.scenarios import register_scenario
 
@@ -142,6 +143,11 @@ def loop_shaped_design() -> LoopShapedDesign:
     ))
 
 
+# What the roll pilot flies, stick to bank angle: the ps reference model, then
+# phi = int(p + tan(alpha0) r) = int(ps) / cos(alpha0) for a velocity-vector roll (beta = 0).
+PILOT_ELEMENT = (list(np.array(ROLL_MODEL[0]) / np.cos(ALPHA0)), list(np.polymul(ROLL_MODEL[1], [1.0, 0.0])))
+
+
 @register_scenario(
     "harv_latdir",
     description="F-18/HARV lat-dir MIMO SMC, ps and beta tracking, five effectors (seed 4.6)",
@@ -165,10 +171,16 @@ def run(
     actuators: bool = True,
     noise: bool = True,
     failure_time: float | None = None,
-    pilot_gain: float = 2.0,
-    pilot_delay: float = 0.2,
+    pilot_gain: float | None = None,
+    pilot_delay: float | None = None,
     record_every: int = 10,
     method_options: dict | None = None,
+    pilot: str = "standin",
+    frame_period: float | None = None,
+    rate_aware: bool = True,
+    u_prev_source: str = "command",
+    preferred: str = "mid",
+    step_times: list | None = None,
 ) -> SimResult:
     """Run the HARV lat-dir scenario (``controller``: ``"smc"`` or ``"loopshape"``)."""
     duration = 50.0 if duration is None else float(duration)
@@ -181,14 +193,17 @@ def run(
         raise ValueError(f"controller={controller!r}; expected 'smc' or 'loopshape'")
     n = int(round(duration / dt)) + 1
     row = np.array([0.0, 1.0, np.tan(ALPHA0), 0.0])
-    pilot = Pilot(
-        channel=1, row=row, integrate=True, name="phi", gain=pilot_gain, delay=pilot_delay,
+    stick = Pilot(
+        channel=1, row=row, integrate=True, name="phi",
+        **pilot_parameters(pilot, PILOT_ELEMENT, gain=pilot_gain, delay=pilot_delay),
         attitude_command=lambda tt: sum_of_sines(tt, 6.0),  # seed section 4.6: xi = 6
     )
-    return simulate(
+    spec = LoopSpec(
         scenario="harv_latdir", vehicle=vehicle(), references=REFERENCES, controller=ctl,
-        commands=np.zeros((n, 2)), pilots=(pilot,), failure=fail, method=method,
+        commands=np.zeros((n, 2)), pilots=(stick,), failure=fail, method=method,
         method_options=method_options, allocator_knows_failure=allocator_knows_failure,
         actuators=actuators, noise=noise, duration=duration, dt=dt, seed=seed,
-        output_bound=OUTPUT_BOUND, record_every=record_every, progress=progress,
+        output_bound=OUTPUT_BOUND, record_every=record_every,
+        frame_period=frame_period, rate_aware=rate_aware, u_prev_source=u_prev_source, preferred=preferred,
     )
+    return simulate(spec, progress=progress, step_times=step_times)

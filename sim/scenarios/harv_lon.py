@@ -24,7 +24,8 @@ from typing import Any
 import numpy as np
 
 from sim.blocks import DEFAULT_DT, ActuatorFailure, ActuatorSpec, HedgeTerm, sum_of_sines
-from sim.loop import Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle, simulate
+from sim.loop import Failure, LoopShapedDesign, LoopSpec, Pilot, SMCDesign, Vehicle, simulate
+from sim.pilot import pilot_parameters
 from sim.result import SimResult
 from sim.scenarios import register_scenario
 
@@ -119,6 +120,10 @@ def loop_shaped_design() -> LoopShapedDesign:
     return LoopShapedDesign(compensators=((np.polymul([-2.5], [1.0, 0.8, 1.2]), [1.0, 0.3, 0.0]),))
 
 
+# What the pitch pilot flies, stick to pitch attitude: the q reference model, then theta = int(q).
+PILOT_ELEMENT = ([100.0], [1.0, 25.0, 100.0, 0.0])
+
+
 @register_scenario(
     "harv_lon",
     description="F-18/HARV longitudinal pitch-rate SMC, stabilator + pitch thrust vector (seed 4.5)",
@@ -142,10 +147,16 @@ def run(
     actuators: bool = True,
     noise: bool = True,
     failure_time: float = 10.0,
-    pilot_gain: float = 2.0,
-    pilot_delay: float = 0.2,
+    pilot_gain: float | None = None,
+    pilot_delay: float | None = None,
     record_every: int = 10,
     method_options: dict | None = None,
+    pilot: str = "standin",
+    frame_period: float | None = None,
+    rate_aware: bool = True,
+    u_prev_source: str = "command",
+    preferred: str = "mid",
+    step_times: list | None = None,
 ) -> SimResult:
     """Run the HARV longitudinal scenario (``controller``: ``"smc"`` or ``"loopshape"``)."""
     duration = 30.0 if duration is None else float(duration)
@@ -157,14 +168,17 @@ def run(
     else:
         raise ValueError(f"controller={controller!r}; expected 'smc' or 'loopshape'")
     n = int(round(duration / dt)) + 1
-    pilot = Pilot(
-        channel=0, row=np.array([0.0, 1.0]), integrate=True, name="theta", gain=pilot_gain, delay=pilot_delay,
+    stick = Pilot(
+        channel=0, row=np.array([0.0, 1.0]), integrate=True, name="theta",
+        **pilot_parameters(pilot, PILOT_ELEMENT, gain=pilot_gain, delay=pilot_delay),
         attitude_command=lambda tt: sum_of_sines(tt, 5.0),  # seed Eq 4.13, xi = 5
     )
-    return simulate(
+    spec = LoopSpec(
         scenario="harv_lon", vehicle=vehicle(), references=REFERENCES, controller=ctl,
-        commands=np.zeros((n, 1)), pilots=(pilot,), failure=fail, method=method,
+        commands=np.zeros((n, 1)), pilots=(stick,), failure=fail, method=method,
         method_options=method_options, allocator_knows_failure=allocator_knows_failure,
         actuators=actuators, noise=noise, duration=duration, dt=dt, seed=seed,
-        output_bound=OUTPUT_BOUND, record_every=record_every, progress=progress,
+        output_bound=OUTPUT_BOUND, record_every=record_every,
+        frame_period=frame_period, rate_aware=rate_aware, u_prev_source=u_prev_source, preferred=preferred,
     )
+    return simulate(spec, progress=progress, step_times=step_times)

@@ -24,7 +24,8 @@ import numpy as np
 from alloc.vehicles import ICE_B_FULL, ICE_BK_SEED
 
 from sim.blocks import DEFAULT_DT, ActuatorFailure, ActuatorSpec, HedgeTerm, sum_of_sines
-from sim.loop import Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle, simulate
+from sim.loop import Failure, LoopShapedDesign, LoopSpec, Pilot, SMCDesign, Vehicle, simulate
+from sim.pilot import pilot_parameters
 from sim.result import SimResult
 from sim.scenarios import register_scenario
 
@@ -215,6 +216,11 @@ OUTPUT_BOUND = np.array([45.0, 200.0, 30.0])
 FAILURES = {"seed": "t = 20 s: " + failure().description}
 
 
+# What the roll pilot flies, stick to bank angle: the p reference model, then phi = int(ps)
+# (wings level, small alpha).  Sets the crossover pilot's gain (sim.pilot).
+PILOT_ELEMENT = ([100.0], [1.0, 20.0, 100.0, 0.0])
+
+
 @register_scenario(
     "ice",
     description="ICE 6-DOF, 11 effectors, observer-based SMC with hedging, alpha/ps/beta tracking (seed 4.7)",
@@ -239,6 +245,12 @@ def run(
     failure_time: float = 20.0,
     record_every: int = 10,
     method_options: dict | None = None,
+    pilot: str = "standin",
+    frame_period: float | None = None,
+    rate_aware: bool = True,
+    u_prev_source: str = "command",
+    preferred: str = "mid",
+    step_times: list | None = None,
     pilot_gain: float = 2.0,
     pilot_delay: float = 0.2,
 ) -> SimResult:
@@ -262,16 +274,18 @@ def run(
     row = np.zeros(len(OUTPUTS))
     row[OUTPUTS.index("phi")] = 1.0
     roll_pilot = Pilot(
-        channel=1, row=row, name="phi", gain=pilot_gain, delay=pilot_delay,
+        channel=1, row=row, name="phi", **pilot_parameters(pilot, PILOT_ELEMENT, gain=pilot_gain, delay=pilot_delay),
         attitude_command=lambda tt: sum_of_sines(tt, 10.0, phase_step=np.pi / 4),  # xi = 10, i*pi/4
     )
-    return simulate(
+    spec = LoopSpec(
         scenario="ice", vehicle=vehicle(), references=REFERENCES, controller=design,
         commands=commands, pilots=(roll_pilot,), failure=fail, method=method,
         method_options=method_options, allocator_knows_failure=allocator_knows_failure,
         actuators=actuators, noise=noise, duration=duration, dt=dt, seed=seed,
-        output_bound=OUTPUT_BOUND, record_every=record_every, progress=progress,
+        output_bound=OUTPUT_BOUND, record_every=record_every,
+        frame_period=frame_period, rate_aware=rate_aware, u_prev_source=u_prev_source, preferred=preferred,
     )
+    return simulate(spec, progress=progress, step_times=step_times)
 
 
 def _failure_by_name(name: str | None, time: float) -> Failure | None:
