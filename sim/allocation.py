@@ -18,17 +18,17 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from sim.result import STATUS_NAMES
+
 if TYPE_CHECKING:
     from sim.loop import Failure, Vehicle
 
-__all__ = ["LoopAllocator", "STATIC", "STATUS_NAMES", "PREFERRED_POSITIONS", "allocation_problem",
-           "build_allocator", "health_events", "preferred_positions"]
+__all__ = ["LoopAllocator", "STATIC", "PREFERRED_POSITIONS", "RATE_HORIZONS", "actuator_lag", "allocation_problem",
+           "build_allocator", "health_events", "preferred_positions", "rate_horizon_scale"]
 
 #: Name of the seed's printed static distribution (not a registry method).
 STATIC = "static"
 
-#: Allocator status codes recorded per frame (index = code; alloc.Status values).
-STATUS_NAMES = ("exact", "unattainable", "fallback")
 _STATUS_CODE = {name: code for code, name in enumerate(STATUS_NAMES)}
 
 #: ``(v, u_prev, dt) -> (u_cmd, v_achieved, status code)``; the loop records ``v - v_achieved``
@@ -126,6 +126,24 @@ def allocation_problem(vehicle: Vehicle, failure: Failure | None = None, *, pref
     return problem.with_health(health)
 
 
+#: Horizons of the Eq 1.28 rate box (see :func:`build_allocator`).
+RATE_HORIZONS = ("actuator", "frame")
+
+
+def actuator_lag(vehicle: Vehicle) -> np.ndarray:
+    """Ramp-following lag (s) of each nominal actuator: ``c1 / wn2`` (second order), ``1 / a`` (first)."""
+    return np.array([a.c1 / a.wn2 if a.order == 2 else 1.0 / a.c1 for a in vehicle.actuators])
+
+
+def rate_horizon_scale(vehicle: Vehicle, frame_period: float, horizon: str) -> np.ndarray:
+    """Factor on each rate limit so the Eq 1.28 box at ``dt = T`` spans ``max(T, lag)`` (``horizon="actuator"``)."""
+    if horizon not in RATE_HORIZONS:
+        raise ValueError(f"rate_horizon: {horizon!r}; expected one of {RATE_HORIZONS}")
+    if horizon == "frame":
+        return np.ones(len(vehicle.actuators))
+    return np.maximum(1.0, actuator_lag(vehicle) / frame_period)
+
+
 def build_allocator(
     vehicle: Vehicle,
     method: str,
@@ -134,6 +152,8 @@ def build_allocator(
     failure: Failure | None = None,
     rate_aware: bool = True,
     preferred: str = "mid",
+    frame_period: float | None = None,
+    rate_horizon: str = "actuator",
 ) -> LoopAllocator:
     """Allocator callable for the loop.
 
@@ -141,9 +161,21 @@ def build_allocator(
     For ``ganging`` the seed's distribution ``B_k`` (in demand units) is the default gang.
 
     With ``rate_aware`` (default) every call passes ``u_prev`` and the frame
-    period ``dt = T``, so seed Eq 1.28 bounds each command change by
-    ``rate * T``; ``u_prev`` is clipped into the (told) position limits first,
-    since a jammed effector's previous command may lie outside its point limits.
+    period ``dt = T`` (seed Eq 1.28); ``u_prev`` is clipped into the (told)
+    position limits first, since a jammed effector's previous command may lie
+    outside its point limits.
+
+    ``rate_horizon``: Eq 1.28 bounds what the *surface* can reach before the
+    allocator acts again, and assumes the actuator reaches its command within
+    the frame.  A linear actuator follows a command ramp only after its lag
+    (:func:`actuator_lag`: 35 ms for the ICE surfaces); with ``T`` shorter than
+    that, a box of ``rate * T`` around the previous command turns the allocator
+    into a command rate limiter in series with the actuator's own rate limit,
+    which adds the actuator lag once more in every saturated episode (the cause
+    of the ICE divergence with rate-aware ``pinv``/``qp`` told of the failure).
+    ``"actuator"`` (default) spans ``max(T, lag)`` per effector (rate limits
+    scaled by :func:`rate_horizon_scale`); ``"frame"`` is Eq 1.28 with ``dt = T``
+    literally.  With ``T >= lag`` the two coincide.
     """
     if method == STATIC:
         if options:
@@ -165,6 +197,9 @@ def build_allocator(
         # alloc's gang acts on the demand v = demand_map u_c: G = B_k demand_map^-1.
         opts["G"] = vehicle.Bk_seed @ np.linalg.inv(vehicle.demand_map)
     problem = allocation_problem(vehicle, failure, preferred=preferred)
+    if rate_aware and frame_period is not None:
+        scale = rate_horizon_scale(vehicle, frame_period, rate_horizon)
+        problem = problem.replace(rate_min=scale * problem.rate_min, rate_max=scale * problem.rate_max)
     solve = alloc.make_allocator(problem, method, **opts)
     lo, hi = problem.umin, problem.umax
     code = _STATUS_CODE

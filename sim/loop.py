@@ -84,6 +84,8 @@ class Vehicle:
     Bk_seed: np.ndarray
     demand_map: np.ndarray
     Wu: np.ndarray | None = None
+    #: effector names as the library names them (``alloc.vehicles``); default the actuator names
+    names: tuple[str, ...] | None = None
 
     @property
     def channels(self) -> list[str]:
@@ -91,7 +93,7 @@ class Vehicle:
 
     @property
     def effector_names(self) -> list[str]:
-        return [a.name for a in self.actuators]
+        return list(self.names) if self.names is not None else [a.name for a in self.actuators]
 
     @property
     def umin(self) -> np.ndarray:
@@ -711,6 +713,8 @@ class LoopSpec:
     u_prev_source: str = "command"
     #: preferred-position rule for one-sided effectors (:func:`sim.allocation.preferred_positions`)
     preferred: str = "mid"
+    #: horizon of the Eq 1.28 rate box, ``"actuator"`` or ``"frame"`` (:func:`sim.allocation.build_allocator`)
+    rate_horizon: str = "actuator"
     actuators: bool = True
     noise: bool = True
     frame_period: float | None = None
@@ -793,8 +797,9 @@ def simulate(
     )
     bank = ActuatorBank(vehicle.actuators, dt)
     delay = DelayLine(m, dt, 0.0)
-    allocator: LoopAllocator = build_allocator(vehicle, method, method_options or {}, rate_aware=rate_aware,
-                                               preferred=spec.preferred)
+    alloc_options = dict(rate_aware=rate_aware, preferred=spec.preferred, frame_period=tframe,
+                         rate_horizon=spec.rate_horizon)
+    allocator: LoopAllocator = build_allocator(vehicle, method, method_options or {}, **alloc_options)
     position_feedback = spec.u_prev_source == "position"
 
     smc = isinstance(controller, SMCDesign)
@@ -866,8 +871,7 @@ def simulate(
         if actuators:
             packed.view(FloatSlot.UACT)[:] = bank.pos  # a jammed surface is at its jam position at once
         if allocator_knows_failure:
-            return build_allocator(vehicle, method, method_options or {}, failure=failure, rate_aware=rate_aware,
-                                   preferred=spec.preferred)
+            return build_allocator(vehicle, method, method_options or {}, failure=failure, **alloc_options)
         return allocator
 
     if fail_step == 0:
@@ -905,6 +909,7 @@ def simulate(
     result.allocator_status = call_status[:n_calls].copy()
     result.settings = {
         "frame_period": tframe, "dt": dt, "rate_aware": bool(rate_aware), "u_prev_source": spec.u_prev_source,
+        "rate_horizon": spec.rate_horizon,
         "preferred": spec.preferred, "allocator_knows_failure": bool(allocator_knows_failure), "noise": bool(noise), "seed": int(seed),
         "pilots": [p.describe() for p in pilots],
     }

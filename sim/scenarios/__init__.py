@@ -34,6 +34,7 @@ SCENARIO_MODULES: dict[str, str] = {
     "ice": "sim.scenarios.ice",
     "harv_lon": "sim.scenarios.harv_lon",
     "harv_latdir": "sim.scenarios.harv_latdir",
+    "harv_latdir_failure2": "sim.scenarios.harv_latdir",
 }
 
 

@@ -24,6 +24,8 @@ from typing import Any
 
 import numpy as np
 
+from alloc.vehicles import HARV_LATDIR_EFFECTORS
+
 from sim.blocks import DEFAULT_DT, ActuatorFailure, ActuatorSpec, HedgeTerm, sum_of_sines
 from sim.loop import Failure, LoopShapedDesign, LoopSpec, Pilot, SMCDesign, Vehicle, simulate
 from sim.pilot import pilot_parameters
@@ -75,7 +77,7 @@ def vehicle() -> Vehicle:
         name="harv_latdir", A=A, B=B, C=C, D=np.zeros((4, 5)), output_names=OUTPUTS,
         actuators=_actuators(), controlled=(0, 3), measured=(0, 1, 2),
         noise_gains=np.array([0.0707, 0.1414, 0.1414]),  # seed section 4.6
-        B_alloc=B_alloc, Bk_seed=SEED_BK, demand_map=B_alloc @ SEED_BK,
+        B_alloc=B_alloc, Bk_seed=SEED_BK, demand_map=B_alloc @ SEED_BK, names=HARV_LATDIR_EFFECTORS,
     )
 
 
@@ -143,6 +145,36 @@ def loop_shaped_design() -> LoopShapedDesign:
     ))
 
 
+#: seed section 4.6, Failure #2 input: "a series of steps filtered by
+#: (100/(s^2+20s+100)) (1/(s^2+2s+1))".  Step times and sizes are in Fig 4-81 (an image):
+#: ours, bank-angle steps (deg) of a roll-reversal sequence.
+STEP_TIMES = (1.0, 11.0, 21.0, 31.0)
+STEP_LEVELS = (20.0, -20.0, 10.0, 0.0)
+STEP_FILTER = ([100.0], np.polymul([1.0, 20.0, 100.0], [1.0, 2.0, 1.0]))
+
+
+def filtered_steps(t: np.ndarray) -> np.ndarray:
+    """The Failure #2 bank-angle command: :data:`STEP_LEVELS` at :data:`STEP_TIMES`, through :data:`STEP_FILTER`."""
+    from scipy import signal
+
+    t = np.asarray(t, dtype=float)
+    steps = np.zeros_like(t)
+    for when, level in zip(STEP_TIMES, STEP_LEVELS, strict=True):
+        steps[t >= when] = level
+    if t.size < 2:
+        return np.zeros_like(t)
+    _, y, _ = signal.lsim(signal.lti(*STEP_FILTER), steps, t)
+    return np.asarray(y, dtype=float)
+
+
+def _phi_command(kind: str):
+    if kind == "sines":
+        return lambda tt: sum_of_sines(tt, 6.0)  # seed section 4.6: xi = 6
+    if kind == "filtered_steps":
+        return filtered_steps
+    raise ValueError(f"phi_command: {kind!r}; expected 'sines' or 'filtered_steps'")
+
+
 # What the roll pilot flies, stick to bank angle: the ps reference model, then
 # phi = int(p + tan(alpha0) r) = int(ps) / cos(alpha0) for a velocity-vector roll (beta = 0).
 PILOT_ELEMENT = (list(np.array(ROLL_MODEL[0]) / np.cos(ALPHA0)), list(np.polymul(ROLL_MODEL[1], [1.0, 0.0])))
@@ -173,6 +205,7 @@ def run(
     failure_time: float | None = None,
     pilot_gain: float | None = None,
     pilot_delay: float | None = None,
+    phi_command: str = "sines",
     record_every: int = 10,
     method_options: dict | None = None,
     pilot: str = "standin",
@@ -180,6 +213,7 @@ def run(
     rate_aware: bool = True,
     u_prev_source: str = "command",
     preferred: str = "mid",
+    rate_horizon: str = "actuator",
     step_times: list | None = None,
 ) -> SimResult:
     """Run the HARV lat-dir scenario (``controller``: ``"smc"`` or ``"loopshape"``)."""
@@ -196,7 +230,7 @@ def run(
     stick = Pilot(
         channel=1, row=row, integrate=True, name="phi",
         **pilot_parameters(pilot, PILOT_ELEMENT, gain=pilot_gain, delay=pilot_delay),
-        attitude_command=lambda tt: sum_of_sines(tt, 6.0),  # seed section 4.6: xi = 6
+        attitude_command=_phi_command(phi_command),
     )
     spec = LoopSpec(
         scenario="harv_latdir", vehicle=vehicle(), references=REFERENCES, controller=ctl,
@@ -205,5 +239,20 @@ def run(
         actuators=actuators, noise=noise, duration=duration, dt=dt, seed=seed,
         output_bound=OUTPUT_BOUND, record_every=record_every,
         frame_period=frame_period, rate_aware=rate_aware, u_prev_source=u_prev_source, preferred=preferred,
+        rate_horizon=rate_horizon,
     )
     return simulate(spec, progress=progress, step_times=step_times)
+
+
+@register_scenario(
+    "harv_latdir_failure2",
+    description="F-18/HARV lat-dir, Failure #2 at t = 0 (yaw thrust vector 10 %, +-3 deg, 6 deg/s) with the "
+    "seed's filtered-step bank-angle input (seed 4.6, Fig 4-81)",
+    failures={"failure2": FAILURES["failure2"]},
+    default_duration=40.0,
+    default_method="ganging",
+)
+def run_failure2(*, failure: str | None = "failure2", duration: float | None = None, **options: Any) -> SimResult:
+    """HARV lat-dir with Failure #2 and the filtered-step input (``failure=None``: nominal, same input)."""
+    return run(failure=failure, duration=40.0 if duration is None else duration, phi_command="filtered_steps",
+               **options)

@@ -156,6 +156,7 @@ def run(
     rate_aware: bool = True,
     u_prev_source: str = "command",
     preferred: str = "mid",
+    rate_horizon: str = "actuator",
     step_times: list | None = None,
 ) -> SimResult:
     """Run the HARV longitudinal scenario (``controller``: ``"smc"`` or ``"loopshape"``)."""
@@ -180,5 +181,6 @@ def run(
         actuators=actuators, noise=noise, duration=duration, dt=dt, seed=seed,
         output_bound=OUTPUT_BOUND, record_every=record_every,
         frame_period=frame_period, rate_aware=rate_aware, u_prev_source=u_prev_source, preferred=preferred,
+        rate_horizon=rate_horizon,
     )
     return simulate(spec, progress=progress, step_times=step_times)

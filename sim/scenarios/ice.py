@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from alloc.vehicles import ICE_B_FULL, ICE_BK_SEED
+from alloc.vehicles import ICE_B_FULL, ICE_BK_SEED, ICE_EFFECTORS
 
 from sim.blocks import DEFAULT_DT, ActuatorFailure, ActuatorSpec, HedgeTerm, sum_of_sines
 from sim.loop import Failure, LoopShapedDesign, LoopSpec, Pilot, SMCDesign, Vehicle, simulate
@@ -120,7 +120,7 @@ def vehicle() -> Vehicle:
     return Vehicle(
         name="ice", A=A, B=B, C=C, D=D, output_names=OUTPUTS, actuators=_actuators(),
         controlled=CONTROLLED, measured=tuple(range(len(OUTPUTS))), noise_gains=gains,
-        B_alloc=B_DESIGN, Bk_seed=SEED_BK, demand_map=np.eye(3), Wu=WU,
+        B_alloc=B_DESIGN, Bk_seed=SEED_BK, demand_map=np.eye(3), Wu=WU, names=ICE_EFFECTORS,
     )
 
 
@@ -250,9 +250,10 @@ def run(
     rate_aware: bool = True,
     u_prev_source: str = "command",
     preferred: str = "mid",
+    rate_horizon: str = "actuator",
     step_times: list | None = None,
-    pilot_gain: float = 2.0,
-    pilot_delay: float = 0.2,
+    pilot_gain: float | None = None,
+    pilot_delay: float | None = None,
 ) -> SimResult:
     """Run the ICE scenario.
 
@@ -284,6 +285,7 @@ def run(
         actuators=actuators, noise=noise, duration=duration, dt=dt, seed=seed,
         output_bound=OUTPUT_BOUND, record_every=record_every,
         frame_period=frame_period, rate_aware=rate_aware, u_prev_source=u_prev_source, preferred=preferred,
+        rate_horizon=rate_horizon,
     )
     return simulate(spec, progress=progress, step_times=step_times)
 
