@@ -26,9 +26,9 @@ import numpy as np
 
 from alloc.vehicles import HARV_LATDIR_EFFECTORS
 
-from sim.blocks import DEFAULT_DT, ActuatorFailure, ActuatorSpec, HedgeTerm, sum_of_sines
-from sim.loop import Failure, LoopShapedDesign, LoopSpec, Pilot, SMCDesign, Vehicle, simulate
-from sim.pilot import pilot_parameters
+from sim.blocks import ActuatorFailure, ActuatorSpec, HedgeTerm, sum_of_sines
+from sim.loop import Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle
+from sim.scenarios.mimo import MimoScenario, run_mimo
 from sim.result import SimResult
 from sim.scenarios import register_scenario
 
@@ -180,6 +180,21 @@ def _phi_command(kind: str):
 PILOT_ELEMENT = (list(np.array(ROLL_MODEL[0]) / np.cos(ALPHA0)), list(np.polymul(ROLL_MODEL[1], [1.0, 0.0])))
 
 
+def _roll_pilot(params: dict[str, Any], phi_command: str = "sines") -> Pilot:
+    return Pilot(
+        channel=1, row=np.array([0.0, 1.0, np.tan(ALPHA0), 0.0]), integrate=True, name="phi", **params,
+        attitude_command=_phi_command(phi_command),
+    )
+
+
+SCENARIO = MimoScenario(
+    name="harv_latdir", vehicle=vehicle, references=REFERENCES, smc_design=smc_design,
+    loop_shaped_design=loop_shaped_design, failure=failure, pilot=_roll_pilot, pilot_element=PILOT_ELEMENT,
+    commands=lambda t: np.zeros((t.size, 2)), output_bound=OUTPUT_BOUND, default_duration=50.0,
+    default_method="ganging", design_options=("observer", "hedge", "cross_hedge"), input_options=("phi_command",),
+)
+
+
 @register_scenario(
     "harv_latdir",
     description="F-18/HARV lat-dir MIMO SMC, ps and beta tracking, five effectors (seed 4.6)",
@@ -187,61 +202,11 @@ PILOT_ELEMENT = (list(np.array(ROLL_MODEL[0]) / np.cos(ALPHA0)), list(np.polymul
     default_duration=50.0,
     default_method="ganging",
 )
-def run(
-    *,
-    method: str = "ganging",
-    failure: str | None = None,
-    duration: float | None = None,
-    seed: int = 0,
-    dt: float = DEFAULT_DT,
-    allocator_knows_failure: bool = False,
-    progress: bool = False,
-    controller: str = "smc",
-    observer: bool = True,
-    hedge: bool = True,
-    cross_hedge: bool = True,
-    actuators: bool = True,
-    noise: bool = True,
-    failure_time: float | None = None,
-    pilot_gain: float | None = None,
-    pilot_delay: float | None = None,
-    phi_command: str = "sines",
-    record_every: int = 10,
-    method_options: dict | None = None,
-    pilot: str = "standin",
-    frame_period: float | None = None,
-    rate_aware: bool = True,
-    u_prev_source: str = "command",
-    preferred: str = "mid",
-    rate_horizon: str = "actuator",
-    step_times: list | None = None,
-) -> SimResult:
-    """Run the HARV lat-dir scenario (``controller``: ``"smc"`` or ``"loopshape"``)."""
-    duration = 50.0 if duration is None else float(duration)
-    fail = None if failure is None else globals()["failure"](failure, failure_time)
-    if controller == "smc":
-        ctl: SMCDesign | LoopShapedDesign = smc_design(observer=observer, hedge=hedge, cross_hedge=cross_hedge)
-    elif controller == "loopshape":
-        ctl = loop_shaped_design()
-    else:
-        raise ValueError(f"controller={controller!r}; expected 'smc' or 'loopshape'")
-    n = int(round(duration / dt)) + 1
-    row = np.array([0.0, 1.0, np.tan(ALPHA0), 0.0])
-    stick = Pilot(
-        channel=1, row=row, integrate=True, name="phi",
-        **pilot_parameters(pilot, PILOT_ELEMENT, gain=pilot_gain, delay=pilot_delay),
-        attitude_command=_phi_command(phi_command),
-    )
-    spec = LoopSpec(
-        scenario="harv_latdir", vehicle=vehicle(), references=REFERENCES, controller=ctl,
-        commands=np.zeros((n, 2)), pilots=(stick,), failure=fail, method=method,
-        method_options=method_options, allocator_knows_failure=allocator_knows_failure,
-        actuators=actuators, noise=noise, duration=duration, dt=dt, seed=seed,
-        output_bound=OUTPUT_BOUND, record_every=record_every,
-        frame_period=frame_period, rate_aware=rate_aware, u_prev_source=u_prev_source, preferred=preferred,
-        rate_horizon=rate_horizon,
-    )
-    return simulate(spec, progress=progress, step_times=step_times)
+def run(**options: Any) -> SimResult:
+    """Run the HARV lat-dir scenario: :func:`sim.scenarios.mimo.run_mimo` options, plus ``observer``,
+    ``hedge``, ``cross_hedge`` and ``phi_command`` (``"sines"``, the seed's xi = 6 sum of sines, or
+    ``"filtered_steps"``, the Failure #2 input)."""
+    return run_mimo(SCENARIO, **options)
 
 
 @register_scenario(
@@ -254,5 +219,5 @@ def run(
 )
 def run_failure2(*, failure: str | None = "failure2", duration: float | None = None, **options: Any) -> SimResult:
     """HARV lat-dir with Failure #2 and the filtered-step input (``failure=None``: nominal, same input)."""
-    return run(failure=failure, duration=40.0 if duration is None else duration, phi_command="filtered_steps",
-               **options)
+    return run_mimo(SCENARIO, failure=failure, duration=40.0 if duration is None else duration,
+                    phi_command="filtered_steps", **options)

@@ -23,9 +23,9 @@ from typing import Any
 
 import numpy as np
 
-from sim.blocks import DEFAULT_DT, ActuatorFailure, ActuatorSpec, HedgeTerm, sum_of_sines
-from sim.loop import Failure, LoopShapedDesign, LoopSpec, Pilot, SMCDesign, Vehicle, simulate
-from sim.pilot import pilot_parameters
+from sim.blocks import ActuatorFailure, ActuatorSpec, HedgeTerm, sum_of_sines
+from sim.loop import Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle
+from sim.scenarios.mimo import MimoScenario, run_mimo
 from sim.result import SimResult
 from sim.scenarios import register_scenario
 
@@ -124,6 +124,23 @@ def loop_shaped_design() -> LoopShapedDesign:
 PILOT_ELEMENT = ([100.0], [1.0, 25.0, 100.0, 0.0])
 
 
+def _pitch_pilot(params: dict[str, Any]) -> Pilot:
+    return Pilot(
+        channel=0, row=np.array([0.0, 1.0]), integrate=True, name="theta", **params,
+        attitude_command=lambda tt: sum_of_sines(tt, 5.0),  # seed Eq 4.13, xi = 5
+    )
+
+
+SCENARIO = MimoScenario(
+    name="harv_lon", vehicle=vehicle, references=REFERENCES, smc_design=smc_design,
+    loop_shaped_design=loop_shaped_design,
+    failure=lambda name, time: failure(name, 10.0 if time is None else time),
+    pilot=_pitch_pilot, pilot_element=PILOT_ELEMENT, commands=lambda t: np.zeros((t.size, 1)),
+    output_bound=OUTPUT_BOUND, default_duration=30.0, default_method="ganging",
+    design_options=("design", "observer", "hedge"),
+)
+
+
 @register_scenario(
     "harv_lon",
     description="F-18/HARV longitudinal pitch-rate SMC, stabilator + pitch thrust vector (seed 4.5)",
@@ -131,56 +148,7 @@ PILOT_ELEMENT = ([100.0], [1.0, 25.0, 100.0, 0.0])
     default_duration=30.0,
     default_method="ganging",
 )
-def run(
-    *,
-    method: str = "ganging",
-    failure: str | None = None,
-    duration: float | None = None,
-    seed: int = 0,
-    dt: float = DEFAULT_DT,
-    allocator_knows_failure: bool = False,
-    progress: bool = False,
-    controller: str = "smc",
-    design: str = "modified",
-    observer: bool = True,
-    hedge: bool = True,
-    actuators: bool = True,
-    noise: bool = True,
-    failure_time: float = 10.0,
-    pilot_gain: float | None = None,
-    pilot_delay: float | None = None,
-    record_every: int = 10,
-    method_options: dict | None = None,
-    pilot: str = "standin",
-    frame_period: float | None = None,
-    rate_aware: bool = True,
-    u_prev_source: str = "command",
-    preferred: str = "mid",
-    rate_horizon: str = "actuator",
-    step_times: list | None = None,
-) -> SimResult:
-    """Run the HARV longitudinal scenario (``controller``: ``"smc"`` or ``"loopshape"``)."""
-    duration = 30.0 if duration is None else float(duration)
-    fail = None if failure is None else globals()["failure"](failure, failure_time)
-    if controller == "smc":
-        ctl: SMCDesign | LoopShapedDesign = smc_design(design, observer=observer, hedge=hedge)
-    elif controller == "loopshape":
-        ctl = loop_shaped_design()
-    else:
-        raise ValueError(f"controller={controller!r}; expected 'smc' or 'loopshape'")
-    n = int(round(duration / dt)) + 1
-    stick = Pilot(
-        channel=0, row=np.array([0.0, 1.0]), integrate=True, name="theta",
-        **pilot_parameters(pilot, PILOT_ELEMENT, gain=pilot_gain, delay=pilot_delay),
-        attitude_command=lambda tt: sum_of_sines(tt, 5.0),  # seed Eq 4.13, xi = 5
-    )
-    spec = LoopSpec(
-        scenario="harv_lon", vehicle=vehicle(), references=REFERENCES, controller=ctl,
-        commands=np.zeros((n, 1)), pilots=(stick,), failure=fail, method=method,
-        method_options=method_options, allocator_knows_failure=allocator_knows_failure,
-        actuators=actuators, noise=noise, duration=duration, dt=dt, seed=seed,
-        output_bound=OUTPUT_BOUND, record_every=record_every,
-        frame_period=frame_period, rate_aware=rate_aware, u_prev_source=u_prev_source, preferred=preferred,
-        rate_horizon=rate_horizon,
-    )
-    return simulate(spec, progress=progress, step_times=step_times)
+def run(**options: Any) -> SimResult:
+    """Run the HARV longitudinal scenario: :func:`sim.scenarios.mimo.run_mimo` options, plus
+    ``design`` (``"slow"``, ``"fast"``, ``"modified"``), ``observer`` and ``hedge``."""
+    return run_mimo(SCENARIO, **options)

@@ -23,9 +23,9 @@ import numpy as np
 
 from alloc.vehicles import ICE_B_FULL, ICE_BK_SEED, ICE_EFFECTORS
 
-from sim.blocks import DEFAULT_DT, ActuatorFailure, ActuatorSpec, HedgeTerm, sum_of_sines
-from sim.loop import Failure, LoopShapedDesign, LoopSpec, Pilot, SMCDesign, Vehicle, simulate
-from sim.pilot import pilot_parameters
+from sim.blocks import ActuatorFailure, ActuatorSpec, HedgeTerm, sum_of_sines
+from sim.loop import Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle
+from sim.scenarios.mimo import MimoScenario, run_mimo
 from sim.result import SimResult
 from sim.scenarios import register_scenario
 
@@ -221,6 +221,30 @@ FAILURES = {"seed": "t = 20 s: " + failure().description}
 PILOT_ELEMENT = ([100.0], [1.0, 20.0, 100.0, 0.0])
 
 
+def _commands(t: np.ndarray) -> np.ndarray:
+    """Direct commands: the alpha sum-of-sines into the alpha reference model (seed section 4.7, xi = 5)."""
+    commands = np.zeros((t.size, 3))
+    commands[:, 0] = sum_of_sines(t, 5.0)
+    return commands
+
+
+def _roll_pilot(params: dict[str, Any]) -> Pilot:
+    row = np.zeros(len(OUTPUTS))
+    row[OUTPUTS.index("phi")] = 1.0
+    return Pilot(
+        channel=1, row=row, name="phi", **params,
+        attitude_command=lambda tt: sum_of_sines(tt, 10.0, phase_step=np.pi / 4),  # xi = 10, i*pi/4
+    )
+
+
+SCENARIO = MimoScenario(
+    name="ice", vehicle=vehicle, references=REFERENCES, smc_design=smc_design,
+    loop_shaped_design=loop_shaped_design, failure=lambda name, time: _failure_by_name(name, time),
+    pilot=_roll_pilot, pilot_element=PILOT_ELEMENT, commands=_commands, output_bound=OUTPUT_BOUND,
+    default_duration=40.0, default_method="pinv",
+)
+
+
 @register_scenario(
     "ice",
     description="ICE 6-DOF, 11 effectors, observer-based SMC with hedging, alpha/ps/beta tracking (seed 4.7)",
@@ -228,71 +252,16 @@ PILOT_ELEMENT = ([100.0], [1.0, 20.0, 100.0, 0.0])
     default_duration=40.0,
     default_method="pinv",
 )
-def run(
-    *,
-    method: str = "pinv",
-    failure: str | None = None,
-    duration: float | None = None,
-    seed: int = 0,
-    dt: float = DEFAULT_DT,
-    allocator_knows_failure: bool = False,
-    progress: bool = False,
-    controller: str = "smc",
-    observer: bool = True,
-    hedge: bool = True,
-    actuators: bool = True,
-    noise: bool = True,
-    failure_time: float = 20.0,
-    record_every: int = 10,
-    method_options: dict | None = None,
-    pilot: str = "standin",
-    frame_period: float | None = None,
-    rate_aware: bool = True,
-    u_prev_source: str = "command",
-    preferred: str = "mid",
-    rate_horizon: str = "actuator",
-    step_times: list | None = None,
-    pilot_gain: float | None = None,
-    pilot_delay: float | None = None,
-) -> SimResult:
-    """Run the ICE scenario.
+def run(**options: Any) -> SimResult:
+    """Run the ICE scenario: :func:`sim.scenarios.mimo.run_mimo` options, plus ``observer`` and ``hedge``.
 
     ``controller`` is ``"smc"`` (Eq 4.27 with Table 4-6 observers/hedges,
     switchable off with ``observer``/``hedge``) or ``"loopshape"`` (Eq 4.28).
     """
-    duration = 40.0 if duration is None else float(duration)
-    fail = _failure_by_name(failure, failure_time)
-    if controller == "smc":
-        design: SMCDesign | LoopShapedDesign = smc_design(observer=observer, hedge=hedge)
-    elif controller == "loopshape":
-        design = loop_shaped_design()
-    else:
-        raise ValueError(f"controller={controller!r}; expected 'smc' or 'loopshape'")
-    n = int(round(duration / dt)) + 1
-    t = np.arange(n) * dt
-    commands = np.zeros((n, 3))
-    commands[:, 0] = sum_of_sines(t, 5.0)  # seed section 4.7: alpha channel xi = 5
-    row = np.zeros(len(OUTPUTS))
-    row[OUTPUTS.index("phi")] = 1.0
-    roll_pilot = Pilot(
-        channel=1, row=row, name="phi", **pilot_parameters(pilot, PILOT_ELEMENT, gain=pilot_gain, delay=pilot_delay),
-        attitude_command=lambda tt: sum_of_sines(tt, 10.0, phase_step=np.pi / 4),  # xi = 10, i*pi/4
-    )
-    spec = LoopSpec(
-        scenario="ice", vehicle=vehicle(), references=REFERENCES, controller=design,
-        commands=commands, pilots=(roll_pilot,), failure=fail, method=method,
-        method_options=method_options, allocator_knows_failure=allocator_knows_failure,
-        actuators=actuators, noise=noise, duration=duration, dt=dt, seed=seed,
-        output_bound=OUTPUT_BOUND, record_every=record_every,
-        frame_period=frame_period, rate_aware=rate_aware, u_prev_source=u_prev_source, preferred=preferred,
-        rate_horizon=rate_horizon,
-    )
-    return simulate(spec, progress=progress, step_times=step_times)
+    return run_mimo(SCENARIO, **options)
 
 
-def _failure_by_name(name: str | None, time: float) -> Failure | None:
-    if name is None:
-        return None
+def _failure_by_name(name: str, time: float | None) -> Failure:
     if name == "seed":
-        return failure(time)
+        return failure(20.0 if time is None else time)
     raise KeyError(f"unknown ICE failure {name!r}; known: {sorted(FAILURES)}")
