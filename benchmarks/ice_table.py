@@ -55,7 +55,11 @@ def main() -> None:
     parser.add_argument("--methods", nargs="*", default=["static"] + alloc.methods())
     parser.add_argument("--jobs", type=int, default=1)
     parser.add_argument("--out", type=Path, default=Path("benchmarks/results/ice_table.csv"))
+    parser.add_argument("--markdown", action="store_true", help="only print the markdown table of --out")
     args = parser.parse_args()
+    if args.markdown:
+        print(markdown(args.out))
+        return
     jobs = []
     for hz in args.rates:
         for method in args.methods:
@@ -71,6 +75,22 @@ def main() -> None:
                 writer.writerow(row)
                 fh.flush()
                 print(row, flush=True)
+
+
+def markdown(path: Path) -> str:
+    """The CSV as a markdown table: RMS before -> after per channel, fractions of allocator calls."""
+    lines = ["| frame Hz | method | allocator | Eq 1.28 | diverged at (s) | alpha (deg) | p_s (deg/s) | beta (deg) "
+             "| unattainable | fallback |", "|---|---|---|---|---|---|---|---|---|---|"]
+    with path.open() as fh:
+        for row in csv.DictReader(fh):
+            def pair(key: str) -> str:
+                b, a = row[f"{key}_before"], row[f"{key}_after"]
+                return f"{b} -> {a}" if a else (f"{b} -> -" if b else "-")
+            told = "-" if row["method"] == "static" else ("told" if row["told"] == "True" else "blind")
+            aware = "-" if row["method"] == "static" else ("on" if row["rate_aware"] == "True" else "off")
+            lines.append(f"| {float(row['rate_hz']):g} | {row['method']} | {told} | {aware} | {row['diverged_at'] or '-'} "
+                         f"| {pair('alpha')} | {pair('ps')} | {pair('beta')} | {row['unattainable']} | {row['fallback']} |")
+    return "\n".join(lines)
 
 
 if __name__ == "__main__":
