@@ -1,6 +1,12 @@
 """Closed-loop engine shared by the MIMO scenarios (ICE, F-18/HARV).
 
-Signal flow per step (seed Figs 3-26, 3-32, 4-85)::
+Multi-rate: plant, actuators and delay integrate every step ``dt`` (the
+seed's 0.5 ms); the flight-control computer -- pilot sampling, reference
+models, observers, SMC, hedges and the allocator -- runs once per frame
+``T = LoopSpec.frame_period`` (a multiple of ``dt``), its outputs held in
+between.  ``T = dt`` is the seed's single-rate loop, bit for bit.
+
+Signal flow per frame (seed Figs 3-26, 3-32, 4-85)::
 
     pilot -> command -> reference models -> r
     plant outputs + noise -> z -> observers (+ hedge) -> y_hat_h

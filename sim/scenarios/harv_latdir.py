@@ -14,8 +14,9 @@ bank angle ``phi = int(p + tan(alpha0) r)`` (level flight, theta0 = alpha0).
 
 Substitutions (ours): the beta reference model is not printed (beta_c = 0),
 the roll model is reused; the pilot (Fig 4-41, an image) is a crossover-model
-pilot ``p_c = 2 (phi_c - phi)`` delayed 0.2 s; failure #2 uses the sum-of-sines
-input, not the filtered steps of the seed's reference work.
+pilot ``p_c = 2 (phi_c - phi)`` delayed 0.2 s (or the crossover pilot, :mod:`sim.pilot`).
+Failure #2 with the seed's filtered-step input (Fig 4-81) is the scenario
+``harv_latdir_failure2``; its step times and sizes are ours (the figure is an image).
 """
 
 from __future__ import annotations
