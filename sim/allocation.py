@@ -18,34 +18,100 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from sim.result import STATUS_NAMES
+
 if TYPE_CHECKING:
     from sim.loop import Failure, Vehicle
 
-__all__ = ["LoopAllocator", "STATIC", "allocation_problem", "build_allocator"]
+__all__ = ["LoopAllocator", "STATIC", "PREFERRED_POSITIONS", "RATE_HORIZONS", "actuator_lag", "allocation_problem",
+           "build_allocator", "health_events", "preferred_positions", "rate_horizon_scale"]
 
 #: Name of the seed's printed static distribution (not a registry method).
 STATIC = "static"
 
-#: ``(v, u_prev, dt) -> (u_cmd, v_achieved)``; the loop records ``v - v_achieved`` as unallocated.
-LoopAllocator = Callable[[np.ndarray, np.ndarray, float], tuple[np.ndarray, np.ndarray]]
+_STATUS_CODE = {name: code for code, name in enumerate(STATUS_NAMES)}
+
+#: ``(v, u_prev, dt) -> (u_cmd, v_achieved, status code)``; the loop records ``v - v_achieved``
+#: as unallocated and the code (:data:`STATUS_NAMES`) per frame.
+LoopAllocator = Callable[[np.ndarray, np.ndarray, float], tuple[np.ndarray, np.ndarray, int]]
+
+#: Preferred-position rules for effectors with a limit at 0 (one-sided: ICE tips and
+#: spoiler-slot deflectors, 0..60 deg): ``"mid"`` (default) mid-range, ``"zero"`` the
+#: seed's ``up = 0`` (on ICE, ``daisy`` and ``pinv_scale`` then have no room and fly u = 0).
+PREFERRED_POSITIONS = ("mid", "zero")
 
 
-def allocation_problem(vehicle: Vehicle, failure: Failure | None = None) -> Any:
+def preferred_positions(vehicle: Vehicle, rule: str = "mid") -> np.ndarray:
+    """Preferred positions ``up``: 0 for two-sided effectors; one-sided ones by ``rule``.
+
+    A one-sided effector (a position limit at 0) preferred at that limit can
+    only move one way from it; direction-preserving methods (``pinv_scale``,
+    ``daisy``) then scale every command to the base point.  Mid-range gives
+    them room both ways (the remedy the README recommends since the AMS study).
+    """
+    if rule not in PREFERRED_POSITIONS:
+        raise ValueError(f"preferred: {rule!r}; expected one of {PREFERRED_POSITIONS}")
+    lo, hi = vehicle.umin, vehicle.umax
+    up = np.clip(np.zeros_like(lo), lo, hi)
+    if rule == "mid":
+        one_sided = (lo == 0.0) | (hi == 0.0)
+        up[one_sided] = 0.5 * (lo[one_sided] + hi[one_sided])
+    return up
+
+
+def health_events(vehicle: Vehicle, failure: Failure) -> list[Any]:
+    """The failure's effector events in the one health vocabulary (:mod:`alloc.health`).
+
+    Simulator ``ActuatorFailure`` kinds map one to one on :class:`alloc.health.FailureKind`
+    (``limits`` with a ``rate`` gives a ``limits`` and a ``rate_limits`` event);
+    ``bandwidth`` (and the failure's added delay) change actuator *dynamics*,
+    which a static problem cannot express: they are simulator-only and never told.
+    """
+    from alloc.health import FailureEvent, FailureKind
+
+    events = []
+    for f in failure.actuators:
+        name = vehicle.effector_names[f.index]
+        if f.kind == "bandwidth":
+            continue
+        if f.kind in (FailureKind.JAM, FailureKind.HARDOVER):
+            events.append(FailureEvent(name, f.kind, position=f.position))
+        elif f.kind == FailureKind.FLOAT:
+            events.append(FailureEvent(name, FailureKind.FLOAT))
+        elif f.kind == FailureKind.EFFECTIVENESS:
+            events.append(FailureEvent(name, FailureKind.EFFECTIVENESS, fraction=float(f.fraction)))
+        elif f.kind == FailureKind.LIMITS:
+            if f.lo is not None or f.hi is not None:
+                lo = vehicle.umin[f.index] if f.lo is None else f.lo
+                hi = vehicle.umax[f.index] if f.hi is None else f.hi
+                events.append(FailureEvent(name, FailureKind.LIMITS, lo=lo, hi=hi))
+            if f.rate is not None:
+                events.append(FailureEvent(name, FailureKind.RATE_LIMITS, rate_min=-f.rate, rate_max=f.rate))
+        else:  # pragma: no cover - ActuatorFailure validates its kind
+            raise ValueError(f"kind: unknown actuator failure kind {f.kind!r}")
+    return events
+
+
+def allocation_problem(vehicle: Vehicle, failure: Failure | None = None, *, preferred: str = "mid") -> Any:
     """The vehicle's :class:`alloc.Problem`; with ``failure``, as told of the failed effectors.
 
     Plant-level failures (A, B scaling) are unknown to the allocator by
-    design (seed: "sudden, unknown failure"); effector failures are told as:
-    jam -> ``umin = umax = position``; hard-over -> jam at the hard-over
-    position; float -> zero effectiveness; limits -> new position/rate limits;
-    effectiveness -> scaled column.  Reduced bandwidth and delays are not
-    expressible in a static Problem and are not told.
+    design (seed: "sudden, unknown failure"); effector failures are told
+    through :meth:`alloc.Problem.with_health` with the meanings of
+    :mod:`alloc.health` (see :func:`health_events`): jam and hard-over hold the
+    surface at its position, float means zero effectiveness *and* held at its
+    preferred position, limits and rate limits shrink the box, effectiveness
+    scales the column.  Bandwidth and delay failures are never told.
+    ``preferred``: rule for the preferred positions (:func:`preferred_positions`).
     """
     import alloc
+    from alloc.health import apply_event
 
     problem = alloc.Problem(
         vehicle.B_alloc,
         vehicle.umin,
         vehicle.umax,
+        up=preferred_positions(vehicle, preferred),
         Wu=None if vehicle.Wu is None else np.asarray(vehicle.Wu, dtype=float),
         rate_min=-vehicle.rate_max,
         rate_max=vehicle.rate_max,
@@ -54,25 +120,28 @@ def allocation_problem(vehicle: Vehicle, failure: Failure | None = None) -> Any:
     )
     if failure is None:
         return problem
-    for f in failure.actuators:
-        i = f.index
-        if f.kind in ("jam", "hardover"):
-            pos = f.position if f.position is not None else vehicle.umax[i]
-            problem = problem.with_jam(i, pos)
-        elif f.kind == "float":
-            problem = problem.with_effectiveness(i, 0.0)
-        elif f.kind == "effectiveness":
-            problem = problem.with_effectiveness(i, float(f.fraction))
-        elif f.kind == "limits":
-            if f.lo is not None or f.hi is not None:
-                lo = problem.umin[i] if f.lo is None else f.lo
-                hi = problem.umax[i] if f.hi is None else f.hi
-                problem = problem.with_limits(i, lo, hi)
-            if f.rate is not None:
-                rmin, rmax = problem.rate_min.copy(), problem.rate_max.copy()
-                rmin[i], rmax[i] = -f.rate, f.rate
-                problem = problem.replace(rate_min=rmin, rate_max=rmax)
-    return problem
+    health: dict[str, Any] = {}
+    for event in health_events(vehicle, failure):
+        _, health = apply_event(problem, health, event)
+    return problem.with_health(health)
+
+
+#: Horizons of the Eq 1.28 rate box (see :func:`build_allocator`).
+RATE_HORIZONS = ("actuator", "frame")
+
+
+def actuator_lag(vehicle: Vehicle) -> np.ndarray:
+    """Ramp-following lag (s) of each nominal actuator: ``c1 / wn2`` (second order), ``1 / a`` (first)."""
+    return np.array([a.c1 / a.wn2 if a.order == 2 else 1.0 / a.c1 for a in vehicle.actuators])
+
+
+def rate_horizon_scale(vehicle: Vehicle, frame_period: float, horizon: str) -> np.ndarray:
+    """Factor on each rate limit so the Eq 1.28 box at ``dt = T`` spans ``max(T, lag)`` (``horizon="actuator"``)."""
+    if horizon not in RATE_HORIZONS:
+        raise ValueError(f"rate_horizon: {horizon!r}; expected one of {RATE_HORIZONS}")
+    if horizon == "frame":
+        return np.ones(len(vehicle.actuators))
+    return np.maximum(1.0, actuator_lag(vehicle) / frame_period)
 
 
 def build_allocator(
@@ -81,20 +150,32 @@ def build_allocator(
     options: dict[str, Any],
     *,
     failure: Failure | None = None,
-    u_prev: np.ndarray | None = None,
-    rate_aware: bool = False,
+    rate_aware: bool = True,
+    preferred: str = "mid",
+    frame_period: float | None = None,
+    rate_horizon: str = "actuator",
 ) -> LoopAllocator:
     """Allocator callable for the loop.
 
     ``static`` ignores the failure (a fixed matrix cannot be told anything).
     For ``ganging`` the seed's distribution ``B_k`` (in demand units) is the default gang.
 
-    With ``rate_aware`` the allocator gets ``u_prev`` (its previous command)
-    and the integration step, so Eq 1.28 limits each command change to
-    ``rate * dt``.  Off by default: at dt = 0.5 ms this turns the allocator
-    into a command rate limiter ahead of actuators that already enforce their
-    rate limits, and measured tracking collapses (HARV lat-dir ps RMS 0.7 ->
-    17.9 deg/s with ganging); the seed's static distribution has no such stage.
+    With ``rate_aware`` (default) every call passes ``u_prev`` and the frame
+    period ``dt = T`` (seed Eq 1.28); ``u_prev`` is clipped into the (told)
+    position limits first, since a jammed effector's previous command may lie
+    outside its point limits.
+
+    ``rate_horizon``: Eq 1.28 bounds what the *surface* can reach before the
+    allocator acts again, and assumes the actuator reaches its command within
+    the frame.  A linear actuator follows a command ramp only after its lag
+    (:func:`actuator_lag`: 35 ms for the ICE surfaces); with ``T`` shorter than
+    that, a box of ``rate * T`` around the previous command turns the allocator
+    into a command rate limiter in series with the actuator's own rate limit,
+    which adds the actuator lag once more in every saturated episode (the cause
+    of the ICE divergence with rate-aware ``pinv``/``qp`` told of the failure).
+    ``"actuator"`` (default) spans ``max(T, lag)`` per effector (rate limits
+    scaled by :func:`rate_horizon_scale`); ``"frame"`` is Eq 1.28 with ``dt = T``
+    literally.  With ``T >= lag`` the two coincide.
     """
     if method == STATIC:
         if options:
@@ -103,9 +184,9 @@ def build_allocator(
         Bk = vehicle.Bk_seed @ np.linalg.inv(vehicle.demand_map)
         B = vehicle.B_alloc
 
-        def static(v: np.ndarray, u_prev: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        def static(v: np.ndarray, u_prev: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray, int]:
             u = Bk @ v
-            return u, B @ u
+            return u, B @ u, 0  # a fixed matrix, no limits: exact by construction (B Bk = I)
 
         return static
 
@@ -115,17 +196,20 @@ def build_allocator(
     if method == "ganging" and "G" not in opts:
         # alloc's gang acts on the demand v = demand_map u_c: G = B_k demand_map^-1.
         opts["G"] = vehicle.Bk_seed @ np.linalg.inv(vehicle.demand_map)
-    problem = allocation_problem(vehicle, failure)
+    problem = allocation_problem(vehicle, failure, preferred=preferred)
+    if rate_aware and frame_period is not None:
+        scale = rate_horizon_scale(vehicle, frame_period, rate_horizon)
+        problem = problem.replace(rate_min=scale * problem.rate_min, rate_max=scale * problem.rate_max)
     solve = alloc.make_allocator(problem, method, **opts)
     lo, hi = problem.umin, problem.umax
+    code = _STATUS_CODE
 
-    def registry(v: np.ndarray, u_prev: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    def registry(v: np.ndarray, u_prev: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray, int]:
         res = solve(v)
-        return res.u, res.v_achieved
+        return res.u, res.v_achieved, code[res.status.value]
 
-    def registry_rate_aware(v: np.ndarray, u_prev: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
-        # A jammed effector's previous command may lie outside its new (point) limits.
-        res = solve(v, u_prev=np.minimum(np.maximum(u_prev, lo), hi), dt=dt)
-        return res.u, res.v_achieved
+    def registry_rate_aware(v: np.ndarray, u_prev: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray, int]:
+        res = solve(v, u_prev=np.minimum(np.maximum(u_prev, lo), hi), dt=dt)  # seed Eq 1.28
+        return res.u, res.v_achieved, code[res.status.value]
 
     return registry_rate_aware if rate_aware else registry

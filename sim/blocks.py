@@ -20,6 +20,8 @@ import numpy as np
 from numba import njit
 from scipy import signal
 
+from alloc.health import FailureKind
+
 __all__ = [
     "DEFAULT_DT",
     "DiscreteLTI",
@@ -189,13 +191,15 @@ class ActuatorSpec:
 class ActuatorFailure:
     """Failure of one effector, applied at the scenario's failure time.
 
-    kind
-        ``"jam"`` (stuck at ``position``), ``"hardover"`` (command stuck at
-        ``position``, normally a limit, reached at the rate limit), ``"float"``
-        (zero effectiveness: the surface trails, produces no moment),
-        ``"bandwidth"`` (natural frequency ``wn``), ``"limits"`` (new ``lo``,
-        ``hi`` and/or ``rate``), ``"effectiveness"`` (control power scaled by
-        ``fraction``).
+    The kinds are :class:`alloc.health.FailureKind` values with their one
+    meaning (``jam``, ``hardover``, ``float``, ``effectiveness``, ``limits``;
+    here ``limits`` also carries a new symmetric ``rate``, i.e. the health
+    model's ``rate_limits``), plus the simulator-only ``bandwidth`` (natural
+    frequency ``wn``), a change of actuator dynamics that is never told to an
+    allocator (:func:`sim.allocation.health_events`).  In the plant, ``float``
+    and ``effectiveness`` scale the effector's control power (0 and
+    ``fraction``); ``hardover`` drives the surface to ``position`` (default the
+    upper limit) at its rate limit.
     """
 
     index: int
@@ -207,7 +211,9 @@ class ActuatorFailure:
     rate: float | None = None
     fraction: float | None = None
 
-    KINDS = ("jam", "hardover", "float", "bandwidth", "limits", "effectiveness")
+    KINDS = tuple(k.value for k in FailureKind if k not in (FailureKind.RATE_LIMITS, FailureKind.REPAIR)) + (
+        "bandwidth",
+    )
 
     def __post_init__(self) -> None:
         if self.kind not in self.KINDS:

@@ -1,6 +1,12 @@
 """Closed-loop engine shared by the MIMO scenarios (ICE, F-18/HARV).
 
-Signal flow per step (seed Figs 3-26, 3-32, 4-85)::
+Multi-rate: plant, actuators and delay integrate every step ``dt`` (the
+seed's 0.5 ms); the flight-control computer -- pilot sampling, reference
+models, observers, SMC, hedges and the allocator -- runs once per frame
+``T = LoopSpec.frame_period`` (a multiple of ``dt``), its outputs held in
+between.  ``T = dt`` is the seed's single-rate loop, bit for bit.
+
+Signal flow per frame (seed Figs 3-26, 3-32, 4-85)::
 
     pilot -> command -> reference models -> r
     plant outputs + noise -> z -> observers (+ hedge) -> y_hat_h
@@ -26,9 +32,10 @@ numpy's ``@`` makes), so results are identical to the last bit.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from enum import IntEnum, auto
+from typing import Any
 
 import numpy as np
 from numba import njit
@@ -52,7 +59,7 @@ from sim.blocks import (
 )
 from sim.result import SimResult
 
-__all__ = ["Vehicle", "Failure", "SMCDesign", "LoopShapedDesign", "Pilot", "simulate", "step_timer"]
+__all__ = ["Vehicle", "Failure", "SMCDesign", "LoopShapedDesign", "Pilot", "LoopSpec", "simulate", "FloatSlot", "IntSlot", "Misc"]
 
 TF = tuple[Sequence[float], Sequence[float]]
 
@@ -83,6 +90,8 @@ class Vehicle:
     Bk_seed: np.ndarray
     demand_map: np.ndarray
     Wu: np.ndarray | None = None
+    #: effector names as the library names them (``alloc.vehicles``); default the actuator names
+    names: tuple[str, ...] | None = None
 
     @property
     def channels(self) -> list[str]:
@@ -90,7 +99,7 @@ class Vehicle:
 
     @property
     def effector_names(self) -> list[str]:
-        return [a.name for a in self.actuators]
+        return list(self.names) if self.names is not None else [a.name for a in self.actuators]
 
     @property
     def umin(self) -> np.ndarray:
@@ -147,11 +156,17 @@ class LoopShapedDesign:
 
 @dataclass(frozen=True)
 class Pilot:
-    """Crossover-model stand-in for the seed's pilot (Figs 4-6, 4-41, 4-86 are images).
+    """Compensatory pilot on one channel (the seed's pilot models, Figs 4-6, 4-41, 4-86, are images).
 
-    ``command[channel] = gain * (att_cmd(t - delay) - att(t - delay))`` with
-    ``att = row @ y_measured`` (integrated if ``integrate``).  Not the seed's
-    structural pilot model: its parameters are ours and documented where used.
+    McRuer's precision model of the human operator::
+
+        command[channel] = gain (lead s + 1) / ((lag s + 1)(neuromuscular s + 1)) e^{-delay s} error
+        error = att_cmd - att,  att = row @ y_measured  (integrated if ``integrate``)
+
+    With ``lead = lag = neuromuscular = 0`` this is the project's original
+    stand-in, ``gain (att_cmd - att)`` delayed (gain 2, 0.2 s by default).
+    :mod:`sim.pilot` sets the parameters by the crossover-model rule.  The
+    pilot is sampled by the flight-control computer once per frame.
     """
 
     channel: int
@@ -161,6 +176,25 @@ class Pilot:
     gain: float = 2.0
     delay: float = 0.2
     integrate: bool = False
+    lead: float = 0.0
+    lag: float = 0.0
+    neuromuscular: float = 0.0
+    #: label of the rule that set the parameters ("standin", "crossover", ...)
+    model: str = "standin"
+
+    @property
+    def filtered(self) -> bool:
+        """True when the pilot has lead, lag or neuromuscular dynamics (not a pure gain)."""
+        return bool(self.lead or self.lag or self.neuromuscular)
+
+    def transfer_function(self) -> TF:
+        """``(lead s + 1) / ((lag s + 1)(neuromuscular s + 1))`` (gain and delay excluded)."""
+        return [self.lead, 1.0] if self.lead else [1.0], np.polymul([self.lag, 1.0], [self.neuromuscular, 1.0])
+
+    def describe(self) -> dict[str, Any]:
+        """Parameters as JSON-ready numbers."""
+        return {"name": self.name, "model": self.model, "gain": float(self.gain), "delay": float(self.delay),
+                "lead": float(self.lead), "lag": float(self.lag), "neuromuscular": float(self.neuromuscular)}
 
 
 def _controller_system(
@@ -220,29 +254,119 @@ def _controller_system(
 # ``s`` is described by ``I[3 s : 3 s + 3] = (offset, rows, cols)``; float
 # slots index ``F``, int slots (numbered after them) index ``I``.
 
-# plant: state, ZOH matrices, output matrices, effector positions it sees
-(_F_X, _F_AD, _F_BD, _F_C, _F_D, _F_UACT,
- # controller: SMC system (reference models, observers, hedge) or, loop-shaped,
- # the reference models (XC..CC) and the compensators (XK..DK)
- _F_XC, _F_ADC, _F_BDC, _F_CC, _F_XK, _F_AK, _F_BK, _F_CK, _F_DK,
- _F_INTEG, _F_K0, _F_KM1, _F_RHO, _F_EPS, _F_DEMAND, _F_BOUND, _F_DT,
- # actuator bank (ActuatorBank arrays) and the actuator delay ring buffer
- _F_POS, _F_RATE, _F_RATE_OUT, _F_WN2, _F_C1, _F_LO, _F_HI, _F_RMAX, _F_JAM_POS, _F_HARD_POS, _F_DBUF,
- # pilots: output rows, gains, attitudes, delay ring buffers (one column each)
- _F_PROW, _F_PGAIN, _F_PATT, _F_PBUF,
- # signals of the current step
- _F_Y, _F_Z, _F_CMD, _F_R, _F_E, _F_UC, _F_V, _F_W, _F_UDEL,
- # controller outputs [r, y_hat, y_f]; two scratch rows for matrix-vector products
- _F_O, _F_SCRATCH,
- _N_FLOAT_SLOTS) = range(50)
+class FloatSlot(IntEnum):
+    """Float arrays of the compiled step (slots of ``F``), in buffer order."""
 
-(_I_FIRST, _I_JAMMED, _I_HARDOVER, _I_DN, _I_DSTATE,
- _I_PN, _I_PLEN, _I_PIDX, _I_PCHAN, _I_PINT, _I_MEAS, _I_CTRL, _I_MISC,
- _N_SLOTS) = range(_N_FLOAT_SLOTS, _N_FLOAT_SLOTS + 14)
+    # plant: state, ZOH matrices, output matrices, effector positions it sees
+    X = 0
+    AD = auto()
+    BD = auto()
+    C = auto()
+    D = auto()
+    UACT = auto()
+    # controller: SMC system (reference models, observers, hedge) or, loop-shaped,
+    # the reference models (XC..CC) and the compensators (XK..DK)
+    XC = auto()
+    ADC = auto()
+    BDC = auto()
+    CC = auto()
+    XK = auto()
+    AK = auto()
+    BK = auto()
+    CK = auto()
+    DK = auto()
+    INTEG = auto()
+    K0 = auto()
+    KM1 = auto()
+    RHO = auto()
+    EPS = auto()
+    DEMAND = auto()
+    BOUND = auto()
+    #: integration step (plant, actuators) and flight-control frame period
+    DT = auto()
+    TFRAME = auto()
+    # actuator bank (ActuatorBank arrays) and the actuator delay ring buffer
+    POS = auto()
+    RATE = auto()
+    RATE_OUT = auto()
+    WN2 = auto()
+    C1 = auto()
+    LO = auto()
+    HI = auto()
+    RMAX = auto()
+    JAM_POS = auto()
+    HARD_POS = auto()
+    DBUF = auto()
+    # pilots: output rows, gains, attitudes, delay ring buffers (one column each)
+    PROW = auto()
+    PGAIN = auto()
+    PATT = auto()
+    PBUF = auto()
+    # pilot lead-lag / neuromuscular filters (block diagonal, input and output: one per pilot)
+    PXF = auto()
+    PAF = auto()
+    PBF = auto()
+    PCF = auto()
+    PDF = auto()
+    PERR = auto()
+    # signals of the current step
+    Y = auto()
+    Z = auto()
+    CMD = auto()
+    R = auto()
+    E = auto()
+    UC = auto()
+    V = auto()
+    W = auto()
+    UDEL = auto()
+    # controller outputs [r, y_hat, y_f]; two scratch rows for matrix-vector products
+    O = auto()  # noqa: E741
+    SCRATCH = auto()
 
-# _I_MISC entries
-(_M_N_STEPS, _M_RECORD_EVERY, _M_FAIL_STEP, _M_SMC, _M_OBSERVED, _M_SIGN, _M_ACTUATORS, _N_MISC) = range(8)
-# _I_DSTATE entries: ring index, ring length (DelayLine semantics)
+
+_N_FLOAT_SLOTS = len(FloatSlot)
+
+
+class IntSlot(IntEnum):
+    """Integer arrays of the compiled step (slots of ``I``), numbered after the float slots."""
+
+    FIRST = _N_FLOAT_SLOTS
+    JAMMED = auto()
+    HARDOVER = auto()
+    DN = auto()
+    DSTATE = auto()
+    PN = auto()
+    PLEN = auto()
+    PIDX = auto()
+    PCHAN = auto()
+    PINT = auto()
+    MEAS = auto()
+    CTRL = auto()
+    MISC = auto()
+
+
+_N_SLOTS = _N_FLOAT_SLOTS + len(IntSlot)
+
+
+class Misc(IntEnum):
+    """Entries of the ``IntSlot.MISC`` array (run constants and switches)."""
+
+    N_STEPS = 0
+    RECORD_EVERY = auto()
+    FAIL_STEP = auto()
+    SMC = auto()
+    OBSERVED = auto()
+    SIGN = auto()
+    ACTUATORS = auto()
+    #: integration steps per flight-control frame
+    FRAME = auto()
+    #: pilots have lead-lag / neuromuscular dynamics
+    PFILTER = auto()
+
+
+_N_MISC = len(Misc)
+
+# IntSlot.DSTATE entries: ring index, ring length (DelayLine semantics)
 _D_INDEX, _D_LENGTH = 0, 1
 
 # step status
@@ -324,18 +448,17 @@ def _observe(step: int, F: np.ndarray, I: np.ndarray, inputs: np.ndarray) -> int
     in the order of the reference formulation, so results match it exactly.
     Returns ``_DIVERGED`` (see :func:`sim.result.divergence_check`) or ``_OK``.
     """
-    misc = _vec(I, I, _I_MISC)
-    dt = F[I[3 * _F_DT]]
-    x = _vec(F, I, _F_X)
-    y = _vec(F, I, _F_Y)
-    z = _vec(F, I, _F_Z)
-    ctrl = _vec(I, I, _I_CTRL)
-    bound = _vec(F, I, _F_BOUND)
-    cmd = _vec(F, I, _F_CMD)
+    misc = _vec(I, I, IntSlot.MISC)
+    x = _vec(F, I, FloatSlot.X)
+    y = _vec(F, I, FloatSlot.Y)
+    z = _vec(F, I, FloatSlot.Z)
+    ctrl = _vec(I, I, IntSlot.CTRL)
+    bound = _vec(F, I, FloatSlot.BOUND)
+    cmd = _vec(F, I, FloatSlot.CMD)
     k = ctrl.size
     ny = y.size
-    scratch = _mat(F, I, _F_SCRATCH)
-    _affine(_mat(F, I, _F_C), x, _mat(F, I, _F_D), _vec(F, I, _F_UACT), y, scratch)
+    scratch = _mat(F, I, FloatSlot.SCRATCH)
+    _affine(_mat(F, I, FloatSlot.C), x, _mat(F, I, FloatSlot.D), _vec(F, I, FloatSlot.UACT), y, scratch)
     for i in range(ny):
         z[i] = y[i] + inputs[step, k + i]
     for i in range(k):
@@ -345,15 +468,20 @@ def _observe(step: int, F: np.ndarray, I: np.ndarray, inputs: np.ndarray) -> int
     for xi in x:
         if not np.isfinite(xi):
             return _DIVERGED
+    if step % misc[Misc.FRAME] != 0:
+        return _OK  # between frames the flight-control computer's outputs are held
+    dt = F[I[3 * FloatSlot.TFRAME]]  # pilot sampling and controller integration: one frame
     for i in range(k):
         cmd[i] = inputs[step, i]
     # Pilots: crossover model on the measured outputs, through their delay lines.
-    prow = _mat(F, I, _F_PROW)
-    patt = _vec(F, I, _F_PATT)
-    pbuf = _mat(F, I, _F_PBUF)
-    pgain = _vec(F, I, _F_PGAIN)
-    pn, plen, pidx = _vec(I, I, _I_PN), _vec(I, I, _I_PLEN), _vec(I, I, _I_PIDX)
-    pchan, pint = _vec(I, I, _I_PCHAN), _vec(I, I, _I_PINT)
+    prow = _mat(F, I, FloatSlot.PROW)
+    patt = _vec(F, I, FloatSlot.PATT)
+    pbuf = _mat(F, I, FloatSlot.PBUF)
+    pgain = _vec(F, I, FloatSlot.PGAIN)
+    pn, plen, pidx = _vec(I, I, IntSlot.PN), _vec(I, I, IntSlot.PLEN), _vec(I, I, IntSlot.PIDX)
+    pchan, pint = _vec(I, I, IntSlot.PCHAN), _vec(I, I, IntSlot.PINT)
+    perr = _vec(F, I, FloatSlot.PERR)[: patt.size]
+    patt_out = _vec(F, I, FloatSlot.PERR)[patt.size :]
     for j in range(patt.size):
         att = np.dot(prow[j], z)
         if pint[j]:
@@ -368,35 +496,43 @@ def _observe(step: int, F: np.ndarray, I: np.ndarray, inputs: np.ndarray) -> int
             err = pbuf[(i0 - pn[j]) % plen[j], j]
             pidx[j] = (i0 + 1) % plen[j]
         cmd[pchan[j]] = pgain[j] * err
-    r = _vec(F, I, _F_R)
-    e = _vec(F, I, _F_E)
-    uc = _vec(F, I, _F_UC)
-    xc = _vec(F, I, _F_XC)
-    if misc[_M_SMC]:
+        perr[j] = err
+    if misc[Misc.PFILTER]:
+        # lead-lag and neuromuscular lag (McRuer precision model) on the delayed error
+        pxf = _vec(F, I, FloatSlot.PXF)
+        _affine(_mat(F, I, FloatSlot.PCF), pxf, _mat(F, I, FloatSlot.PDF), perr, patt_out, scratch)
+        _affine(_mat(F, I, FloatSlot.PAF), pxf, _mat(F, I, FloatSlot.PBF), perr, pxf, scratch)
+        for j in range(patt.size):
+            cmd[pchan[j]] = pgain[j] * patt_out[j]
+    r = _vec(F, I, FloatSlot.R)
+    e = _vec(F, I, FloatSlot.E)
+    uc = _vec(F, I, FloatSlot.UC)
+    xc = _vec(F, I, FloatSlot.XC)
+    if misc[Misc.SMC]:
         # sigma = K0 e + K_-1 int(e), u_c = rho sat(sigma / eps) (seed Eq 4.2, 4.8)
-        o = _vec(F, I, _F_O)
-        _matvec(_mat(F, I, _F_CC), xc, o)
-        integ = _vec(F, I, _F_INTEG)
-        K0, Km1 = _vec(F, I, _F_K0), _vec(F, I, _F_KM1)
-        rho, eps = _vec(F, I, _F_RHO), _vec(F, I, _F_EPS)
+        o = _vec(F, I, FloatSlot.O)
+        _matvec(_mat(F, I, FloatSlot.CC), xc, o)
+        integ = _vec(F, I, FloatSlot.INTEG)
+        K0, Km1 = _vec(F, I, FloatSlot.K0), _vec(F, I, FloatSlot.KM1)
+        rho, eps = _vec(F, I, FloatSlot.RHO), _vec(F, I, FloatSlot.EPS)
         for i in range(k):
-            y_fb = o[k + i] if misc[_M_OBSERVED] else z[ctrl[i]]
+            y_fb = o[k + i] if misc[Misc.OBSERVED] else z[ctrl[i]]
             r[i] = o[i]
             e[i] = o[i] - (y_fb + o[2 * k + i])
             sigma = K0[i] * e[i] + Km1[i] * integ[i]
-            if misc[_M_SIGN]:
+            if misc[Misc.SIGN]:
                 uc[i] = rho[i] * np.sign(sigma)
             else:
                 uc[i] = rho[i] * min(max(sigma / eps[i], -1.0), 1.0)
     else:
-        _matvec(_mat(F, I, _F_CC), xc, r)
+        _matvec(_mat(F, I, FloatSlot.CC), xc, r)
         for i in range(k):
             e[i] = r[i] - z[ctrl[i]]
-        xk = _vec(F, I, _F_XK)
-        _affine(_mat(F, I, _F_CK), xk, _mat(F, I, _F_DK), e, uc, scratch)
-        _affine(_mat(F, I, _F_AK), xk, _mat(F, I, _F_BK), e, xk, scratch)
-        _affine(_mat(F, I, _F_ADC), xc, _mat(F, I, _F_BDC), cmd, xc, scratch)
-    _matvec(_mat(F, I, _F_DEMAND), uc, _vec(F, I, _F_V))
+        xk = _vec(F, I, FloatSlot.XK)
+        _affine(_mat(F, I, FloatSlot.CK), xk, _mat(F, I, FloatSlot.DK), e, uc, scratch)
+        _affine(_mat(F, I, FloatSlot.AK), xk, _mat(F, I, FloatSlot.BK), e, xk, scratch)
+        _affine(_mat(F, I, FloatSlot.ADC), xc, _mat(F, I, FloatSlot.BDC), cmd, xc, scratch)
+    _matvec(_mat(F, I, FloatSlot.DEMAND), uc, _vec(F, I, FloatSlot.V))
     # A reference that leaves the same validity bound is a pilot-loop runaway (the pilot
     # keeps asking for more while the plant output stays bounded): loss of control too.
     for i in range(k):
@@ -418,23 +554,23 @@ def _advance(
     Returns the status of :func:`_observe`, or ``_PENDING`` when the next
     step is past the end or is the failure step (Python injects it first).
     """
-    misc = _vec(I, I, _I_MISC)
-    dt = F[I[3 * _F_DT]]
-    ctrl = _vec(I, I, _I_CTRL)
+    misc = _vec(I, I, IntSlot.MISC)
+    dt = F[I[3 * FloatSlot.DT]]
+    ctrl = _vec(I, I, IntSlot.CTRL)
     k = ctrl.size
-    y = _vec(F, I, _F_Y)
-    uact = _vec(F, I, _F_UACT)
-    cmd, r, e, uc = _vec(F, I, _F_CMD), _vec(F, I, _F_R), _vec(F, I, _F_E), _vec(F, I, _F_UC)
-    rate_out = _vec(F, I, _F_RATE_OUT)
-    lo, hi, rmax = _vec(F, I, _F_LO), _vec(F, I, _F_HI), _vec(F, I, _F_RMAX)
-    patt = _vec(F, I, _F_PATT)
+    y = _vec(F, I, FloatSlot.Y)
+    uact = _vec(F, I, FloatSlot.UACT)
+    cmd, r, e, uc = _vec(F, I, FloatSlot.CMD), _vec(F, I, FloatSlot.R), _vec(F, I, FloatSlot.E), _vec(F, I, FloatSlot.UC)
+    rate_out = _vec(F, I, FloatSlot.RATE_OUT)
+    lo, hi, rmax = _vec(F, I, FloatSlot.LO), _vec(F, I, FloatSlot.HI), _vec(F, I, FloatSlot.RMAX)
+    patt = _vec(F, I, FloatSlot.PATT)
     m = uact.size
-    if step % misc[_M_RECORD_EVERY] == 0:
+    if step % misc[Misc.RECORD_EVERY] == 0:
         # column order of _record_columns
-        row = rec[step // misc[_M_RECORD_EVERY]]
+        row = rec[step // misc[Misc.RECORD_EVERY]]
         row[0] = step * dt
         c = 1
-        v = _vec(F, I, _F_V)
+        v = _vec(F, I, FloatSlot.V)
         for i in range(k):
             row[c + i] = r[i]
             row[c + k + i] = y[ctrl[i]]
@@ -453,11 +589,12 @@ def _advance(
         for j in range(patt.size):
             row[c + 2 * j] = inputs[step, k + ny + j]
             row[c + 2 * j + 1] = patt[j]
-    if misc[_M_SMC]:
-        # controller input w = [command, u_cmd, z_measured, u_c]
-        w = _vec(F, I, _F_W)
-        z = _vec(F, I, _F_Z)
-        meas = _vec(I, I, _I_MEAS)
+    if misc[Misc.SMC] and step % misc[Misc.FRAME] == 0:
+        # controller input w = [command, u_cmd, z_measured, u_c], sampled once per frame
+        tframe = F[I[3 * FloatSlot.TFRAME]]
+        w = _vec(F, I, FloatSlot.W)
+        z = _vec(F, I, FloatSlot.Z)
+        meas = _vec(I, I, IntSlot.MEAS)
         nz = meas.size
         for i in range(k):
             w[i] = cmd[i]
@@ -466,34 +603,34 @@ def _advance(
             w[k + i] = u_cmd[i]
         for i in range(nz):
             w[k + m + i] = z[meas[i]]
-        xc = _vec(F, I, _F_XC)
-        _affine(_mat(F, I, _F_ADC), xc, _mat(F, I, _F_BDC), w, xc, _mat(F, I, _F_SCRATCH))
-        integ = _vec(F, I, _F_INTEG)
+        xc = _vec(F, I, FloatSlot.XC)
+        _affine(_mat(F, I, FloatSlot.ADC), xc, _mat(F, I, FloatSlot.BDC), w, xc, _mat(F, I, FloatSlot.SCRATCH))
+        integ = _vec(F, I, FloatSlot.INTEG)
         for i in range(k):
-            integ[i] += dt * e[i]
-    x = _vec(F, I, _F_X)
-    _affine(_mat(F, I, _F_AD), x, _mat(F, I, _F_BD), uact, x, _mat(F, I, _F_SCRATCH))
+            integ[i] += tframe * e[i]
+    x = _vec(F, I, FloatSlot.X)
+    _affine(_mat(F, I, FloatSlot.AD), x, _mat(F, I, FloatSlot.BD), uact, x, _mat(F, I, FloatSlot.SCRATCH))
     # Actuator delay (DelayLine.push): the command pushed n[c] steps ago.
-    udel = _vec(F, I, _F_UDEL)
-    dstate = _vec(I, I, _I_DSTATE)
+    udel = _vec(F, I, FloatSlot.UDEL)
+    dstate = _vec(I, I, IntSlot.DSTATE)
     length = dstate[_D_LENGTH]
     if length == 1:
         for c in range(m):
             udel[c] = u_cmd[c]
     else:
-        dbuf = _mat(F, I, _F_DBUF)
-        dn = _vec(I, I, _I_DN)
+        dbuf = _mat(F, I, FloatSlot.DBUF)
+        dn = _vec(I, I, IntSlot.DN)
         i0 = dstate[_D_INDEX]
         for c in range(m):
             dbuf[i0, c] = u_cmd[c]
             udel[c] = dbuf[(i0 - dn[c]) % length, c]
         dstate[_D_INDEX] = (i0 + 1) % length
-    if misc[_M_ACTUATORS]:
-        pos = _vec(F, I, _F_POS)
+    if misc[Misc.ACTUATORS]:
+        pos = _vec(F, I, FloatSlot.POS)
         actuator_heun_step(
-            pos, _vec(F, I, _F_RATE), rate_out, udel, _vec(I, I, _I_FIRST), _vec(F, I, _F_WN2),
-            _vec(F, I, _F_C1), lo, hi, rmax, _vec(I, I, _I_JAMMED), _vec(F, I, _F_JAM_POS),
-            _vec(I, I, _I_HARDOVER), _vec(F, I, _F_HARD_POS), dt,
+            pos, _vec(F, I, FloatSlot.RATE), rate_out, udel, _vec(I, I, IntSlot.FIRST), _vec(F, I, FloatSlot.WN2),
+            _vec(F, I, FloatSlot.C1), lo, hi, rmax, _vec(I, I, IntSlot.JAMMED), _vec(F, I, FloatSlot.JAM_POS),
+            _vec(I, I, IntSlot.HARDOVER), _vec(F, I, FloatSlot.HARD_POS), dt,
         )
         for i in range(m):
             uact[i] = pos[i]
@@ -502,35 +639,9 @@ def _advance(
             uact[i] = min(max(udel[i], lo[i]), hi[i])
             rate_out[i] = 0.0
     nxt = step + 1
-    if nxt > misc[_M_N_STEPS] or nxt == misc[_M_FAIL_STEP]:
+    if nxt > misc[Misc.N_STEPS] or nxt == misc[Misc.FAIL_STEP]:
         return _PENDING
     return _observe(nxt, F, I, inputs)
-
-
-#: Per-step wall times collected by :func:`step_timer` (None: not timing).
-_step_times: list[np.ndarray] | None = None
-
-
-@contextmanager
-def step_timer() -> Iterator[list[np.ndarray]]:
-    """Collect the wall time of every step of every :func:`simulate` run inside the block.
-
-    For benchmarks: each run appends an array (seconds, one entry per step
-    simulated) timing the allocator call plus the compiled step; set-up and
-    failure injection are not included.  Timing adds two clock reads per step.
-
-    Examples
-    --------
-    >>> with step_timer() as times:
-    ...     result = get_scenario("ice")(duration=1.0)
-    >>> per_step_us = 1e6 * np.median(times[0])
-    """
-    global _step_times
-    outer, _step_times = _step_times, []
-    try:
-        yield _step_times
-    finally:
-        _step_times = outer
 
 
 def _record_columns(k: int, m: int, n_pilots: int) -> dict[str, slice]:
@@ -544,47 +655,135 @@ def _record_columns(k: int, m: int, n_pilots: int) -> dict[str, slice]:
     return cols
 
 
-def simulate(
-    *,
-    scenario: str,
-    vehicle: Vehicle,
-    references: Sequence[TF],
-    controller: SMCDesign | LoopShapedDesign,
-    commands: np.ndarray,
-    pilots: Sequence[Pilot] = (),
-    failure: Failure | None,
-    method: str,
-    method_options: dict | None = None,
-    allocator_knows_failure: bool = False,
-    rate_aware: bool = False,
-    actuators: bool = True,
-    noise: bool = True,
-    duration: float,
-    dt: float,
-    seed: int,
-    output_bound: float | np.ndarray = 1.0e3,
-    record_every: int = 10,
-    progress: bool = False,
-) -> SimResult:
-    """Run one closed loop.
+@dataclass(frozen=True)
+class LoopSpec:
+    """Everything one closed-loop run needs (the argument of :func:`simulate`).
 
-    Per step, one compiled call (:func:`_advance`) records the step,
-    integrates the plant, controller, delay and actuators, and evaluates the
-    next step up to the allocator demand ``v``; the allocator (a plug-in) is
-    called from Python in between.
-
-    Parameters
+    Attributes
     ----------
+    scenario : str
+        Name recorded in the result.
+    vehicle, references, controller, pilots, failure
+        The vehicle, the reference models (one transfer function per channel),
+        the SMC or loop-shaped design, the pilot models and the failure (or None).
     commands : ndarray (N, k)
         Direct commands into the reference models for channels without a
         pilot (precomputed on the integration grid); pilot channels overwrite
         their column.
+    method, method_options
+        Allocation method (any registry method, or ``static``) and its options.
+    allocator_knows_failure : bool
+        Rebuild the allocator on the "told" problem at the failure
+        (:func:`sim.allocation.allocation_problem`).
+    rate_aware : bool
+        Give the allocator ``u_prev`` and ``dt = frame_period`` so seed Eq 1.28
+        bounds each command change by ``rate * T``.
+    u_prev_source : {"command", "position"}
+        What the allocator is told as ``u_prev``: its own previous command (the
+        seed's reading of Eq 1.28, ``u_k`` being the last commanded control; the
+        seed's controllers have no effector position feedback) or the measured
+        actuator positions at the frame.
     actuators : bool
         False replaces the actuator bank by ideal effectors (command = position,
         limits still applied) -- the seed's "SMC without parasitic dynamics".
-    output_bound : float
+    noise : bool
+        Band-limited sensor noise on the measured outputs (seed gains).
+    duration, dt
+        Simulated seconds and the integration step of plant and actuators.
+    frame_period : float or None
+        Period ``T`` of the flight-control computer (pilot sampling, reference
+        models, observers, SMC, hedges, allocator); a multiple of ``dt``,
+        outputs held between frames.  None: ``T = dt`` (the seed's single-rate loop).
+    seed : int
+        Noise seed.
+    output_bound : float or ndarray
         Divergence bound on ``|controlled output|`` (see :mod:`sim.result`).
+    record_every : int
+        Record every n-th integration step.
     """
+
+    scenario: str
+    vehicle: Vehicle
+    references: Sequence[TF]
+    controller: SMCDesign | LoopShapedDesign
+    commands: np.ndarray
+    failure: Failure | None
+    method: str
+    duration: float
+    dt: float
+    seed: int
+    pilots: Sequence[Pilot] = ()
+    method_options: dict | None = None
+    allocator_knows_failure: bool = False
+    rate_aware: bool = True
+    u_prev_source: str = "command"
+    #: preferred-position rule for one-sided effectors (:func:`sim.allocation.preferred_positions`)
+    preferred: str = "mid"
+    #: horizon of the Eq 1.28 rate box, ``"actuator"`` or ``"frame"`` (:func:`sim.allocation.build_allocator`)
+    rate_horizon: str = "actuator"
+    actuators: bool = True
+    noise: bool = True
+    frame_period: float | None = None
+    output_bound: float | np.ndarray = 1.0e3
+    record_every: int = 10
+
+    def frame_steps(self) -> int:
+        """Integration steps per flight-control frame (``T / dt``, an integer >= 1)."""
+        if self.frame_period is None:
+            return 1
+        ratio = self.frame_period / self.dt
+        n = int(round(ratio))
+        if n < 1 or abs(ratio - n) > 1e-9 * max(1.0, ratio):
+            raise ValueError(f"frame_period: {self.frame_period!r} s is not a positive multiple of dt = {self.dt!r} s")
+        return n
+
+
+#: ``u_prev`` the allocator may be told (see :class:`LoopSpec`).
+U_PREV_SOURCES = ("command", "position")
+
+
+def simulate(
+    spec: LoopSpec | None = None,
+    *,
+    progress: bool = False,
+    step_times: list[np.ndarray] | None = None,
+    **fields: Any,
+) -> SimResult:
+    """Run one closed loop.
+
+    Multi-rate (seed 0.5 ms plant, frame ``T`` flight-control computer): at
+    each frame the compiled :func:`_observe` samples the pilot and the noisy
+    outputs, advances the SMC and produces the demand ``v``; the allocator (a
+    plug-in, called from Python) turns it into ``u_cmd`` with ``u_prev`` and
+    ``dt = T`` (seed Eq 1.28); one compiled :func:`_advance` per integration
+    step records, integrates the controller (at frames), plant, delay and
+    actuators with ``u_cmd`` held.  With ``T = dt`` this is the seed's single-
+    rate loop, bit for bit.
+
+    Parameters
+    ----------
+    spec : LoopSpec
+        The run; alternatively its fields as keywords (``simulate(**fields)``).
+    progress : bool
+        Show a progress bar.
+    step_times : list or None
+        When given, one array is appended: the wall time (s) of every
+        integration step (allocator call, when due, plus the compiled step);
+        set-up and failure injection are not included.
+    """
+    if spec is None:
+        spec = LoopSpec(**fields)
+    elif fields:
+        raise TypeError(f"simulate: give a LoopSpec or keywords, not both (got {sorted(fields)})")
+    if spec.u_prev_source not in U_PREV_SOURCES:
+        raise ValueError(f"u_prev_source: {spec.u_prev_source!r}; expected one of {U_PREV_SOURCES}")
+    frame = spec.frame_steps()
+    scenario, vehicle, references, controller = spec.scenario, spec.vehicle, spec.references, spec.controller
+    commands, pilots, failure, method = spec.commands, spec.pilots, spec.failure, spec.method
+    method_options, allocator_knows_failure, rate_aware = spec.method_options, spec.allocator_knows_failure, spec.rate_aware
+    actuators, noise, duration, dt, seed = spec.actuators, spec.noise, spec.duration, spec.dt, spec.seed
+    output_bound, record_every = spec.output_bound, spec.record_every
+    tframe = frame * dt
     k = len(vehicle.controlled)
     m = len(vehicle.actuators)
     n_steps = int(round(duration / dt))
@@ -604,13 +803,16 @@ def simulate(
     )
     bank = ActuatorBank(vehicle.actuators, dt)
     delay = DelayLine(m, dt, 0.0)
-    allocator: LoopAllocator = build_allocator(vehicle, method, method_options or {}, rate_aware=rate_aware)
+    alloc_options = dict(rate_aware=rate_aware, preferred=spec.preferred, frame_period=tframe,
+                         rate_horizon=spec.rate_horizon)
+    allocator: LoopAllocator = build_allocator(vehicle, method, method_options or {}, **alloc_options)
+    position_feedback = spec.u_prev_source == "position"
 
     smc = isinstance(controller, SMCDesign)
-    controller_slots = _controller_slots(vehicle, controller, references, dt)
+    controller_slots = _controller_slots(vehicle, controller, references, tframe)
     n_pilots = len(pilots)
     t_grid = np.arange(n_steps + 1) * dt
-    pilot_floats, pilot_ints = _pilot_slots(pilots, ny, dt)
+    pilot_floats, pilot_ints = _pilot_slots(pilots, ny, tframe)
     inputs = np.hstack([
         np.asarray(commands, dtype=float)[: n_steps + 1],
         noise_all,
@@ -628,48 +830,54 @@ def simulate(
         ring = int(DelayLine(m, dt, failure.delay).n.max()) + 1
 
     misc = np.zeros(_N_MISC, dtype=np.int64)
-    misc[[_M_N_STEPS, _M_RECORD_EVERY, _M_FAIL_STEP]] = n_steps, record_every, fail_step
-    misc[_M_SMC] = smc
-    misc[_M_OBSERVED] = smc and controller.observer_poles is not None
-    misc[_M_SIGN] = smc and controller.eps is None
-    misc[_M_ACTUATORS] = actuators
-    nx, nc, nk = vehicle.A.shape[0], controller_slots[_F_ADC].shape[0], controller_slots[_F_AK].shape[0]
+    misc[[Misc.N_STEPS, Misc.RECORD_EVERY, Misc.FAIL_STEP]] = n_steps, record_every, fail_step
+    misc[Misc.SMC] = smc
+    misc[Misc.OBSERVED] = smc and controller.observer_poles is not None
+    misc[Misc.SIGN] = smc and controller.eps is None
+    misc[Misc.ACTUATORS] = actuators
+    misc[Misc.FRAME] = frame
+    misc[Misc.PFILTER] = any(p.filtered for p in pilots)
+    nx, nc, nk = vehicle.A.shape[0], controller_slots[FloatSlot.ADC].shape[0], controller_slots[FloatSlot.AK].shape[0]
     packed = _Packed(
         floats={
-            _F_X: np.zeros(nx), _F_AD: plant.Ad, _F_BD: plant.Bd, _F_C: plant.C, _F_D: plant.D, _F_UACT: bank.pos,
+            FloatSlot.X: np.zeros(nx), FloatSlot.AD: plant.Ad, FloatSlot.BD: plant.Bd, FloatSlot.C: plant.C, FloatSlot.D: plant.D, FloatSlot.UACT: bank.pos,
             **controller_slots,
-            _F_INTEG: np.zeros(k), _F_DEMAND: vehicle.demand_map, _F_BOUND: np.broadcast_to(output_bound, (k,)),
-            _F_DT: np.array(dt),
-            _F_POS: bank.pos, _F_RATE: bank.rate, _F_RATE_OUT: np.zeros(m), _F_WN2: bank.wn2, _F_C1: bank.c1,
-            _F_LO: bank.lo, _F_HI: bank.hi, _F_RMAX: bank.rmax, _F_JAM_POS: bank.jam_pos,
-            _F_HARD_POS: bank.hard_pos, _F_DBUF: np.zeros((ring, m)),
+            FloatSlot.INTEG: np.zeros(k), FloatSlot.DEMAND: vehicle.demand_map, FloatSlot.BOUND: np.broadcast_to(output_bound, (k,)),
+            FloatSlot.DT: np.array(dt), FloatSlot.TFRAME: np.array(tframe),
+            FloatSlot.POS: bank.pos, FloatSlot.RATE: bank.rate, FloatSlot.RATE_OUT: np.zeros(m), FloatSlot.WN2: bank.wn2, FloatSlot.C1: bank.c1,
+            FloatSlot.LO: bank.lo, FloatSlot.HI: bank.hi, FloatSlot.RMAX: bank.rmax, FloatSlot.JAM_POS: bank.jam_pos,
+            FloatSlot.HARD_POS: bank.hard_pos, FloatSlot.DBUF: np.zeros((ring, m)),
             **pilot_floats,
-            _F_Y: np.zeros(ny), _F_Z: np.zeros(ny), _F_CMD: np.zeros(k), _F_R: np.zeros(k),
-            _F_E: np.zeros(k), _F_UC: np.zeros(k), _F_V: np.zeros(k), _F_UDEL: np.zeros(m), _F_O: np.zeros(3 * k),
-            _F_SCRATCH: np.zeros((2, max(nx, ny, nc, nk, k))),
+            FloatSlot.Y: np.zeros(ny), FloatSlot.Z: np.zeros(ny), FloatSlot.CMD: np.zeros(k), FloatSlot.R: np.zeros(k),
+            FloatSlot.E: np.zeros(k), FloatSlot.UC: np.zeros(k), FloatSlot.V: np.zeros(k), FloatSlot.UDEL: np.zeros(m), FloatSlot.O: np.zeros(3 * k),
+            FloatSlot.SCRATCH: np.zeros((2, max(nx, ny, nc, nk, k, *pilot_floats[FloatSlot.PAF].shape, n_pilots))),
         },
         ints={
-            _I_FIRST: bank.first, _I_JAMMED: bank.jammed, _I_HARDOVER: bank.hardover,
-            _I_DN: delay.n, _I_DSTATE: np.array([0, 1]), **pilot_ints,
-            _I_MEAS: meas, _I_CTRL: np.asarray(vehicle.controlled), _I_MISC: misc,
+            IntSlot.FIRST: bank.first, IntSlot.JAMMED: bank.jammed, IntSlot.HARDOVER: bank.hardover,
+            IntSlot.DN: delay.n, IntSlot.DSTATE: np.array([0, 1]), **pilot_ints,
+            IntSlot.MEAS: meas, IntSlot.CTRL: np.asarray(vehicle.controlled), IntSlot.MISC: misc,
         },
     )
     # The bank's position and rate live in the packed buffer (failures write there).
-    bank.pos, bank.rate = packed.view(_F_POS), packed.view(_F_RATE)
+    bank.pos, bank.rate = packed.view(FloatSlot.POS), packed.view(FloatSlot.RATE)
     F, I = packed.F, packed.I
-    v = packed.view(_F_V)
+    v = packed.view(FloatSlot.V)
 
     cols = _record_columns(k, m, n_pilots)
     rec = np.zeros((n_steps // record_every + 1, cols["extra"].stop))
     u_cmd = np.zeros(m)
+    v_achieved = np.zeros(k)
+    positions = packed.view(FloatSlot.UACT)
+    # allocator status of every frame (STATUS_NAMES codes; -1: not reached)
+    call_status = np.full(n_steps // frame + 1, -1, dtype=np.int8)
     n_done = n_steps + 1
 
     def fail_now(u_last: np.ndarray) -> LoopAllocator:
         _inject(failure, plant, bank, delay, packed, u_last)
         if actuators:
-            packed.view(_F_UACT)[:] = bank.pos  # a jammed surface is at its jam position at once
+            packed.view(FloatSlot.UACT)[:] = bank.pos  # a jammed surface is at its jam position at once
         if allocator_knows_failure:
-            return build_allocator(vehicle, method, method_options or {}, failure=failure, rate_aware=rate_aware)
+            return build_allocator(vehicle, method, method_options or {}, failure=failure, **alloc_options)
         return allocator
 
     if fail_step == 0:
@@ -678,7 +886,7 @@ def simulate(
     iterator = range(n_steps + 1)
     if progress:
         iterator = tqdm(iterator, total=n_steps + 1, unit="step", mininterval=0.5, desc=scenario)
-    timed = _step_times is not None
+    timed = step_times is not None
     times = np.full(n_steps + 1, np.nan) if timed else None
     clock = time.perf_counter
     last_before_failure = fail_step - 1 if failure is not None else -1
@@ -689,7 +897,9 @@ def simulate(
             break
         if timed:
             t0 = clock()
-        u_cmd, v_achieved = allocator(v, u_cmd, dt)
+        if step % frame == 0:
+            u_prev = positions.copy() if position_feedback else u_cmd
+            u_cmd, v_achieved, call_status[step // frame] = allocator(v, u_prev, tframe)
         status = advance(step, u_cmd, v_achieved, F, I, inputs, rec)
         if timed:
             times[step] = clock() - t0
@@ -697,9 +907,19 @@ def simulate(
             allocator = fail_now(u_cmd)
             status = _observe(step + 1, F, I, inputs)
     if timed:
-        _step_times.append(times[:n_done])
+        step_times.append(times[:n_done])
     n = (n_done + record_every - 1) // record_every  # samples recorded before step n_done
-    return _result(rec[:n], cols, scenario, method, vehicle, failure, pilots, diverged=n_done <= n_steps)
+    n_calls = (n_done + frame - 1) // frame
+    result = _result(rec[:n], cols, scenario, method, vehicle, failure, pilots, diverged=n_done <= n_steps)
+    result.allocator_t = np.arange(n_calls) * tframe
+    result.allocator_status = call_status[:n_calls].copy()
+    result.settings = {
+        "frame_period": tframe, "dt": dt, "rate_aware": bool(rate_aware), "u_prev_source": spec.u_prev_source,
+        "rate_horizon": spec.rate_horizon,
+        "preferred": spec.preferred, "allocator_knows_failure": bool(allocator_knows_failure), "noise": bool(noise), "seed": int(seed),
+        "pilots": [p.describe() for p in pilots],
+    }
+    return result
 
 
 def _result(
@@ -747,33 +967,44 @@ def _controller_slots(
         ctl, n_in = _controller_system(vehicle, controller, references, dt)
         eps = np.ones(k) if controller.eps is None else controller.eps  # unused with sign (eps None)
         return {
-            _F_XC: ctl.x, _F_ADC: ctl.Ad, _F_BDC: ctl.Bd, _F_CC: ctl.C, _F_W: np.zeros(n_in),
-            _F_XK: np.zeros(0), _F_AK: np.zeros((0, 0)), _F_BK: np.zeros((0, k)), _F_CK: np.zeros((k, 0)),
-            _F_DK: np.zeros((k, k)),
-            _F_K0: controller.K0, _F_KM1: controller.Km1, _F_RHO: controller.rho, _F_EPS: eps,
+            FloatSlot.XC: ctl.x, FloatSlot.ADC: ctl.Ad, FloatSlot.BDC: ctl.Bd, FloatSlot.CC: ctl.C, FloatSlot.W: np.zeros(n_in),
+            FloatSlot.XK: np.zeros(0), FloatSlot.AK: np.zeros((0, 0)), FloatSlot.BK: np.zeros((0, k)), FloatSlot.CK: np.zeros((k, 0)),
+            FloatSlot.DK: np.zeros((k, k)),
+            FloatSlot.K0: controller.K0, FloatSlot.KM1: controller.Km1, FloatSlot.RHO: controller.rho, FloatSlot.EPS: eps,
         }
     ref = DiscreteLTI(*_diagonal_system(references, k), dt=dt)
     comp = DiscreteLTI(*_diagonal_system(controller.compensators, k), dt=dt)
     return {
-        _F_XC: ref.x, _F_ADC: ref.Ad, _F_BDC: ref.Bd, _F_CC: ref.C, _F_W: np.zeros(0),
-        _F_XK: comp.x, _F_AK: comp.Ad, _F_BK: comp.Bd, _F_CK: comp.C, _F_DK: comp.D,
-        _F_K0: np.zeros(k), _F_KM1: np.zeros(k), _F_RHO: np.zeros(k), _F_EPS: np.zeros(k),
+        FloatSlot.XC: ref.x, FloatSlot.ADC: ref.Ad, FloatSlot.BDC: ref.Bd, FloatSlot.CC: ref.C, FloatSlot.W: np.zeros(0),
+        FloatSlot.XK: comp.x, FloatSlot.AK: comp.Ad, FloatSlot.BK: comp.Bd, FloatSlot.CK: comp.C, FloatSlot.DK: comp.D,
+        FloatSlot.K0: np.zeros(k), FloatSlot.KM1: np.zeros(k), FloatSlot.RHO: np.zeros(k), FloatSlot.EPS: np.zeros(k),
     }
 
 
 def _pilot_slots(pilots: Sequence[Pilot], ny: int, dt: float) -> tuple[dict[int, np.ndarray], dict[int, np.ndarray]]:
-    """Packed arrays of the pilots (float slots, int slots); each delay is a DelayLine ring of its own."""
+    """Packed arrays of the pilots (float slots, int slots) at the frame period ``dt``.
+
+    Each delay is a DelayLine ring of its own; lead-lag / neuromuscular
+    filters are stacked block-diagonally and discretised once (ZOH).
+    """
     n = len(pilots)
     length = np.array([int(DelayLine(1, dt, p.delay).n[0]) + 1 for p in pilots], dtype=np.int64)
+    if any(p.filtered for p in pilots):
+        filt = DiscreteLTI(*_diagonal_system([p.transfer_function() for p in pilots], n), dt=dt)
+        pf = (filt.x, filt.Ad, filt.Bd, filt.C, filt.D)
+    else:
+        pf = (np.zeros(0), np.zeros((0, 0)), np.zeros((0, n)), np.zeros((n, 0)), np.zeros((n, n)))
     floats = {
-        _F_PROW: np.array([p.row for p in pilots], dtype=float).reshape(n, ny),
-        _F_PGAIN: np.array([p.gain for p in pilots], dtype=float),
-        _F_PATT: np.zeros(n),
-        _F_PBUF: np.zeros((int(length.max(initial=1)), n)),
+        FloatSlot.PROW: np.array([p.row for p in pilots], dtype=float).reshape(n, ny),
+        FloatSlot.PGAIN: np.array([p.gain for p in pilots], dtype=float),
+        FloatSlot.PATT: np.zeros(n),
+        FloatSlot.PBUF: np.zeros((int(length.max(initial=1)), n)),
+        FloatSlot.PXF: pf[0], FloatSlot.PAF: pf[1], FloatSlot.PBF: pf[2], FloatSlot.PCF: pf[3],
+        FloatSlot.PDF: pf[4], FloatSlot.PERR: np.zeros(2 * n),
     }
     ints = {
-        _I_PN: length - 1, _I_PLEN: length, _I_PIDX: np.zeros(n),
-        _I_PCHAN: np.array([p.channel for p in pilots]), _I_PINT: np.array([p.integrate for p in pilots]),
+        IntSlot.PN: length - 1, IntSlot.PLEN: length, IntSlot.PIDX: np.zeros(n),
+        IntSlot.PCHAN: np.array([p.channel for p in pilots]), IntSlot.PINT: np.array([p.integrate for p in pilots]),
     }
     return floats, ints
 
@@ -802,17 +1033,17 @@ def _inject(
         else:
             bank.apply_failure(f)  # a jam writes pos/rate straight into the packed buffer
     plant.fail(effectiveness=eff)
-    packed.view(_F_AD)[:] = plant.Ad
-    packed.view(_F_BD)[:] = plant.Bd
-    packed.view(_F_D)[:] = plant.D
-    for slot, a in ((_F_WN2, bank.wn2), (_F_C1, bank.c1), (_F_LO, bank.lo), (_F_HI, bank.hi),
-                    (_F_RMAX, bank.rmax), (_F_JAM_POS, bank.jam_pos), (_F_HARD_POS, bank.hard_pos),
-                    (_I_FIRST, bank.first), (_I_JAMMED, bank.jammed), (_I_HARDOVER, bank.hardover)):
+    packed.view(FloatSlot.AD)[:] = plant.Ad
+    packed.view(FloatSlot.BD)[:] = plant.Bd
+    packed.view(FloatSlot.D)[:] = plant.D
+    for slot, a in ((FloatSlot.WN2, bank.wn2), (FloatSlot.C1, bank.c1), (FloatSlot.LO, bank.lo), (FloatSlot.HI, bank.hi),
+                    (FloatSlot.RMAX, bank.rmax), (FloatSlot.JAM_POS, bank.jam_pos), (FloatSlot.HARD_POS, bank.hard_pos),
+                    (IntSlot.FIRST, bank.first), (IntSlot.JAMMED, bank.jammed), (IntSlot.HARDOVER, bank.hardover)):
         packed.view(slot)[:] = a
     if failure.delay is not None:
         # DelayLine.set_delay: the ring restarts, pre-filled with the last command pushed.
         delay.set_delay(failure.delay)
         length = int(delay.n.max()) + 1
-        packed.view(_I_DN)[:] = delay.n
-        packed.view(_I_DSTATE)[:] = 0, length
-        packed.view(_F_DBUF)[:length] = u_last
+        packed.view(IntSlot.DN)[:] = delay.n
+        packed.view(IntSlot.DSTATE)[:] = 0, length
+        packed.view(FloatSlot.DBUF)[:length] = u_last

@@ -37,7 +37,10 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["SimResult", "divergence_check", "tracking_metrics"]
+__all__ = ["SimResult", "STATUS_NAMES", "divergence_check", "tracking_metrics"]
+
+#: allocator status codes (index = code), as :class:`alloc.Status` values
+STATUS_NAMES = ("exact", "unattainable", "fallback")
 
 # An effector counts as "in saturation" when within this fraction of its
 # position (or rate) range of the limit; exact equality is fragile with
@@ -107,6 +110,12 @@ class SimResult:
     diverged: bool = False
     unallocated: np.ndarray | None = None
     extra: dict[str, np.ndarray] = field(default_factory=dict)
+    #: time (s) of every allocator call (one per flight-control frame)
+    allocator_t: np.ndarray | None = None
+    #: status of every allocator call, codes into :data:`STATUS_NAMES`
+    allocator_status: np.ndarray | None = None
+    #: the run's settings (frame period, rate-aware, told, noise, pilot, ...), JSON-ready
+    settings: dict[str, Any] = field(default_factory=dict)
 
     # ------------------------------------------------------------------ metrics
     @property
@@ -146,6 +155,12 @@ class SimResult:
         """Seconds during which any effector moves at its rate limit."""
         return self._time_in_saturation(self.effector_rates, self.rate_limits)
 
+    def status_fraction(self, name: str) -> float | None:
+        """Fraction of allocator calls that returned status ``name`` (None: no calls recorded)."""
+        if self.allocator_status is None or self.allocator_status.size == 0:
+            return None
+        return float(np.mean(self.allocator_status == STATUS_NAMES.index(name)))
+
     def summary(self) -> dict[str, Any]:
         """JSON-serialisable metrics (see module docstring for definitions)."""
         err = self.error
@@ -174,7 +189,43 @@ class SimResult:
             "channels": channels,
             "time_in_position_saturation": self.time_in_position_saturation,
             "time_in_rate_saturation": self.time_in_rate_saturation,
+            "allocator_calls": None if self.allocator_status is None else int(self.allocator_status.size),
+            "fallback_fraction": self.status_fraction("fallback"),
+            "unattainable_fraction": self.status_fraction("unattainable"),
+            "settings": self.settings,
         }
+
+    def to_csv(self, path: str | Path) -> Path:
+        """Write the time histories as CSV, one row per recorded sample.
+
+        Columns: ``t``; per channel ``ref_``, ``out_``, ``cmd_``, ``pseudo_``,
+        ``unalloc_``; per effector ``pos_`` and ``rate_``; per pilot its command
+        and attitude; ``alloc_status``, the status of the allocator call in
+        force at the sample (``exact``/``unattainable``/``fallback``).
+        """
+        columns: dict[str, np.ndarray] = {"t": self.t}
+        for prefix, arr in (("ref", self.reference), ("out", self.output), ("cmd", self.command),
+                            ("pseudo", self.pseudo), ("unalloc", self.unallocated)):
+            if arr is not None:
+                for j, name in enumerate(self.channels):
+                    columns[f"{prefix}_{name}"] = arr[:, j]
+        for prefix, arr in (("pos", self.effectors), ("rate", self.effector_rates)):
+            if arr is not None:
+                for j, name in enumerate(self.effector_names):
+                    columns[f"{prefix}_{name}"] = arr[:, j]
+        for name, arr in self.extra.items():
+            columns[name] = arr
+        status = None
+        if self.allocator_status is not None and self.allocator_t is not None and self.allocator_status.size:
+            idx = np.searchsorted(self.allocator_t, self.t + 1e-12, side="right") - 1
+            status = [STATUS_NAMES[c] if c >= 0 else "" for c in self.allocator_status[np.clip(idx, 0, None)]]
+        out = Path(path)
+        with out.open("w") as fh:
+            fh.write(",".join(list(columns) + (["alloc_status"] if status else [])) + "\n")
+            table = np.column_stack(list(columns.values()))
+            for i, row in enumerate(table):
+                fh.write(",".join(f"{x:.9g}" for x in row) + (f",{status[i]}" if status else "") + "\n")
+        return out
 
     def to_json(self, path: str | Path) -> None:
         """Write :meth:`summary` to ``path`` as indented JSON."""

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 import json
 
@@ -267,7 +268,7 @@ def _reference_loop(*, vehicle, references, controller, commands, pilots, failur
         e = r - (o[k : 2 * k] + o[2 * k :])
         uc = smc_control(controller.K0 * e + controller.Km1 * integ, controller.rho, controller.eps)
         v = vehicle.demand_map @ uc
-        u_cmd, v_achieved = allocator(v, u_cmd, dt)
+        u_cmd, v_achieved, _ = allocator(v, u_cmd, dt)
         unalloc = v - v_achieved
         if step % record_every == 0:
             for name, value in zip(rec, (r, y_all[ctrl], cmd, uc, unalloc, u_act, rate_out if step else 0 * u_act)):
@@ -291,12 +292,12 @@ def _reference_loop(*, vehicle, references, controller, commands, pilots, failur
 def test_compiled_loop_matches_reference_loop_bit_for_bit(monkeypatch, name, options):
     import sim.loop
 
-    module = importlib.import_module(sim.scenarios.SCENARIO_MODULES[name])
+    module = importlib.import_module("sim.scenarios.mimo")  # the one MIMO runner calls simulate
     captured = {}
 
-    def capture(**kwargs):
-        captured.update(kwargs)
-        return sim.loop.simulate(**kwargs)
+    def capture(spec, **kwargs):
+        captured.update({f.name: getattr(spec, f.name) for f in dataclasses.fields(spec)})
+        return sim.loop.simulate(spec, **kwargs)
 
     monkeypatch.setattr(module, "simulate", capture)
     result = get_scenario(name)(method="static", record_every=1, **options)

@@ -57,3 +57,44 @@ def test_latdir_smc_survives_failure_1_loop_shaped_does_not():
     assert smc["channels"]["beta"]["max_after"] < 2.0  # seed: beta excursions about 1 deg
     # measured: ps RMS after 25.8 deg/s 10 s after the failure (growing; 265 over 25 s)
     assert ls.diverged or ls.summary()["channels"]["ps"]["rms_after"] > 5 * smc["channels"]["ps"]["rms_after"]
+
+
+# --------------------------------------------------------------- lat-dir Failure #2 (seed Fig 4-81)
+lat2 = get_scenario("harv_latdir_failure2")
+
+
+def _phi_error_rms(r):
+    e = r.extra["phi_command"] - r.extra["phi"]
+    return float(np.sqrt(np.mean(e**2)))
+
+
+def test_latdir_failure2_input_is_the_seed_filtered_steps():
+    # seed 4.6: steps filtered by (100/(s^2+20s+100)) (1/(s^2+2s+1)), unit DC gain
+    t = np.arange(0.0, 40.0, 0.01)
+    phi_c = harv_latdir.filtered_steps(t)
+    assert phi_c[0] == 0.0
+    assert phi_c[np.searchsorted(t, 10.9)] == pytest.approx(harv_latdir.STEP_LEVELS[0], abs=0.05)
+    assert np.max(np.abs(np.diff(phi_c))) < 0.5  # smooth (a raw 40-deg reversal would jump 40)
+
+
+def test_latdir_filtered_steps_tracked_without_failure():
+    r = lat2(failure=None)
+    assert not r.diverged
+    assert _phi_error_rms(r) < 5.0  # measured 2.3 deg
+
+
+def test_latdir_failure2_is_the_told_effector_failure():
+    from sim.allocation import allocation_problem
+
+    p = allocation_problem(harv_latdir.vehicle(), harv_latdir.failure("failure2"))
+    assert p.B[:, 4] == pytest.approx(0.1 * harv_latdir.vehicle().B_alloc[:, 4])
+    assert (p.umin[4], p.umax[4], p.rate_max[4]) == (-3.0, 3.0, 6.0)
+
+
+@pytest.mark.xfail(strict=True, reason="measured: with the filtered steps and the stand-in pilot (gain 2, 0.2 s) "
+                   "the SMC loses the bank-angle loop under Failure #2 and diverges near t = 27 s (ganging, "
+                   "static, qp told alike); seed Fig 4-81 shows it tracking as well as the reconfigured QFT design")
+def test_latdir_smc_tracks_failure2_fig_4_81():
+    r = lat2()
+    assert not r.diverged
+    assert _phi_error_rms(r) < 10.0

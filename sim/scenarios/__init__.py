@@ -7,6 +7,8 @@ A scenario is a callable with the signature::
         allocator_knows_failure: bool = False, progress: bool = False,
         **options) -> sim.result.SimResult
 
+(the MIMO scenarios take every option of :func:`sim.scenarios.mimo.run_mimo`:
+frame period, Eq 1.28 on/off, ``u_prev`` source, pilot model, noise, ...)
 registered with :func:`register_scenario`, which also attaches the metadata
 attributes ``name``, ``description``, ``failures`` (failure name ->
 description), ``default_duration`` and ``default_method``.
@@ -34,6 +36,7 @@ SCENARIO_MODULES: dict[str, str] = {
     "ice": "sim.scenarios.ice",
     "harv_lon": "sim.scenarios.harv_lon",
     "harv_latdir": "sim.scenarios.harv_latdir",
+    "harv_latdir_failure2": "sim.scenarios.harv_latdir",
 }
 
 

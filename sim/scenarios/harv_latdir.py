@@ -14,8 +14,9 @@ bank angle ``phi = int(p + tan(alpha0) r)`` (level flight, theta0 = alpha0).
 
 Substitutions (ours): the beta reference model is not printed (beta_c = 0),
 the roll model is reused; the pilot (Fig 4-41, an image) is a crossover-model
-pilot ``p_c = 2 (phi_c - phi)`` delayed 0.2 s; failure #2 uses the sum-of-sines
-input, not the filtered steps of the seed's reference work.
+pilot ``p_c = 2 (phi_c - phi)`` delayed 0.2 s (or the crossover pilot, :mod:`sim.pilot`).
+Failure #2 with the seed's filtered-step input (Fig 4-81) is the scenario
+``harv_latdir_failure2``; its step times and sizes are ours (the figure is an image).
 """
 
 from __future__ import annotations
@@ -24,8 +25,11 @@ from typing import Any
 
 import numpy as np
 
-from sim.blocks import DEFAULT_DT, ActuatorFailure, ActuatorSpec, HedgeTerm, sum_of_sines
-from sim.loop import Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle, simulate
+from alloc.vehicles import HARV_LATDIR_EFFECTORS
+
+from sim.blocks import ActuatorFailure, ActuatorSpec, HedgeTerm, sum_of_sines
+from sim.loop import Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle
+from sim.scenarios.mimo import MimoScenario, run_mimo
 from sim.result import SimResult
 from sim.scenarios import register_scenario
 
@@ -74,7 +78,7 @@ def vehicle() -> Vehicle:
         name="harv_latdir", A=A, B=B, C=C, D=np.zeros((4, 5)), output_names=OUTPUTS,
         actuators=_actuators(), controlled=(0, 3), measured=(0, 1, 2),
         noise_gains=np.array([0.0707, 0.1414, 0.1414]),  # seed section 4.6
-        B_alloc=B_alloc, Bk_seed=SEED_BK, demand_map=B_alloc @ SEED_BK,
+        B_alloc=B_alloc, Bk_seed=SEED_BK, demand_map=B_alloc @ SEED_BK, names=HARV_LATDIR_EFFECTORS,
     )
 
 
@@ -142,6 +146,56 @@ def loop_shaped_design() -> LoopShapedDesign:
     ))
 
 
+#: seed section 4.6, Failure #2 input: "a series of steps filtered by
+#: (100/(s^2+20s+100)) (1/(s^2+2s+1))".  Step times and sizes are in Fig 4-81 (an image):
+#: ours, bank-angle steps (deg) of a roll-reversal sequence.
+STEP_TIMES = (1.0, 11.0, 21.0, 31.0)
+STEP_LEVELS = (20.0, -20.0, 10.0, 0.0)
+STEP_FILTER = ([100.0], np.polymul([1.0, 20.0, 100.0], [1.0, 2.0, 1.0]))
+
+
+def filtered_steps(t: np.ndarray) -> np.ndarray:
+    """The Failure #2 bank-angle command: :data:`STEP_LEVELS` at :data:`STEP_TIMES`, through :data:`STEP_FILTER`."""
+    from scipy import signal
+
+    t = np.asarray(t, dtype=float)
+    steps = np.zeros_like(t)
+    for when, level in zip(STEP_TIMES, STEP_LEVELS, strict=True):
+        steps[t >= when] = level
+    if t.size < 2:
+        return np.zeros_like(t)
+    _, y, _ = signal.lsim(signal.lti(*STEP_FILTER), steps, t)
+    return np.asarray(y, dtype=float)
+
+
+def _phi_command(kind: str):
+    if kind == "sines":
+        return lambda tt: sum_of_sines(tt, 6.0)  # seed section 4.6: xi = 6
+    if kind == "filtered_steps":
+        return filtered_steps
+    raise ValueError(f"phi_command: {kind!r}; expected 'sines' or 'filtered_steps'")
+
+
+# What the roll pilot flies, stick to bank angle: the ps reference model, then
+# phi = int(p + tan(alpha0) r) = int(ps) / cos(alpha0) for a velocity-vector roll (beta = 0).
+PILOT_ELEMENT = (list(np.array(ROLL_MODEL[0]) / np.cos(ALPHA0)), list(np.polymul(ROLL_MODEL[1], [1.0, 0.0])))
+
+
+def _roll_pilot(params: dict[str, Any], phi_command: str = "sines") -> Pilot:
+    return Pilot(
+        channel=1, row=np.array([0.0, 1.0, np.tan(ALPHA0), 0.0]), integrate=True, name="phi", **params,
+        attitude_command=_phi_command(phi_command),
+    )
+
+
+SCENARIO = MimoScenario(
+    name="harv_latdir", vehicle=vehicle, references=REFERENCES, smc_design=smc_design,
+    loop_shaped_design=loop_shaped_design, failure=failure, pilot=_roll_pilot, pilot_element=PILOT_ELEMENT,
+    commands=lambda t: np.zeros((t.size, 2)), output_bound=OUTPUT_BOUND, default_duration=50.0,
+    default_method="ganging", design_options=("observer", "hedge", "cross_hedge"), input_options=("phi_command",),
+)
+
+
 @register_scenario(
     "harv_latdir",
     description="F-18/HARV lat-dir MIMO SMC, ps and beta tracking, five effectors (seed 4.6)",
@@ -149,46 +203,22 @@ def loop_shaped_design() -> LoopShapedDesign:
     default_duration=50.0,
     default_method="ganging",
 )
-def run(
-    *,
-    method: str = "ganging",
-    failure: str | None = None,
-    duration: float | None = None,
-    seed: int = 0,
-    dt: float = DEFAULT_DT,
-    allocator_knows_failure: bool = False,
-    progress: bool = False,
-    controller: str = "smc",
-    observer: bool = True,
-    hedge: bool = True,
-    cross_hedge: bool = True,
-    actuators: bool = True,
-    noise: bool = True,
-    failure_time: float | None = None,
-    pilot_gain: float = 2.0,
-    pilot_delay: float = 0.2,
-    record_every: int = 10,
-    method_options: dict | None = None,
-) -> SimResult:
-    """Run the HARV lat-dir scenario (``controller``: ``"smc"`` or ``"loopshape"``)."""
-    duration = 50.0 if duration is None else float(duration)
-    fail = None if failure is None else globals()["failure"](failure, failure_time)
-    if controller == "smc":
-        ctl: SMCDesign | LoopShapedDesign = smc_design(observer=observer, hedge=hedge, cross_hedge=cross_hedge)
-    elif controller == "loopshape":
-        ctl = loop_shaped_design()
-    else:
-        raise ValueError(f"controller={controller!r}; expected 'smc' or 'loopshape'")
-    n = int(round(duration / dt)) + 1
-    row = np.array([0.0, 1.0, np.tan(ALPHA0), 0.0])
-    pilot = Pilot(
-        channel=1, row=row, integrate=True, name="phi", gain=pilot_gain, delay=pilot_delay,
-        attitude_command=lambda tt: sum_of_sines(tt, 6.0),  # seed section 4.6: xi = 6
-    )
-    return simulate(
-        scenario="harv_latdir", vehicle=vehicle(), references=REFERENCES, controller=ctl,
-        commands=np.zeros((n, 2)), pilots=(pilot,), failure=fail, method=method,
-        method_options=method_options, allocator_knows_failure=allocator_knows_failure,
-        actuators=actuators, noise=noise, duration=duration, dt=dt, seed=seed,
-        output_bound=OUTPUT_BOUND, record_every=record_every, progress=progress,
-    )
+def run(**options: Any) -> SimResult:
+    """Run the HARV lat-dir scenario: :func:`sim.scenarios.mimo.run_mimo` options, plus ``observer``,
+    ``hedge``, ``cross_hedge`` and ``phi_command`` (``"sines"``, the seed's xi = 6 sum of sines, or
+    ``"filtered_steps"``, the Failure #2 input)."""
+    return run_mimo(SCENARIO, **options)
+
+
+@register_scenario(
+    "harv_latdir_failure2",
+    description="F-18/HARV lat-dir, Failure #2 at t = 0 (yaw thrust vector 10 %, +-3 deg, 6 deg/s) with the "
+    "seed's filtered-step bank-angle input (seed 4.6, Fig 4-81)",
+    failures={"failure2": FAILURES["failure2"]},
+    default_duration=40.0,
+    default_method="ganging",
+)
+def run_failure2(*, failure: str | None = "failure2", duration: float | None = None, **options: Any) -> SimResult:
+    """HARV lat-dir with Failure #2 and the filtered-step input (``failure=None``: nominal, same input)."""
+    return run_mimo(SCENARIO, failure=failure, duration=40.0 if duration is None else duration,
+                    phi_command="filtered_steps", **options)

@@ -23,8 +23,9 @@ from typing import Any
 
 import numpy as np
 
-from sim.blocks import DEFAULT_DT, ActuatorFailure, ActuatorSpec, HedgeTerm, sum_of_sines
-from sim.loop import Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle, simulate
+from sim.blocks import ActuatorFailure, ActuatorSpec, HedgeTerm, sum_of_sines
+from sim.loop import Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle
+from sim.scenarios.mimo import MimoScenario, run_mimo
 from sim.result import SimResult
 from sim.scenarios import register_scenario
 
@@ -119,6 +120,27 @@ def loop_shaped_design() -> LoopShapedDesign:
     return LoopShapedDesign(compensators=((np.polymul([-2.5], [1.0, 0.8, 1.2]), [1.0, 0.3, 0.0]),))
 
 
+# What the pitch pilot flies, stick to pitch attitude: the q reference model, then theta = int(q).
+PILOT_ELEMENT = ([100.0], [1.0, 25.0, 100.0, 0.0])
+
+
+def _pitch_pilot(params: dict[str, Any]) -> Pilot:
+    return Pilot(
+        channel=0, row=np.array([0.0, 1.0]), integrate=True, name="theta", **params,
+        attitude_command=lambda tt: sum_of_sines(tt, 5.0),  # seed Eq 4.13, xi = 5
+    )
+
+
+SCENARIO = MimoScenario(
+    name="harv_lon", vehicle=vehicle, references=REFERENCES, smc_design=smc_design,
+    loop_shaped_design=loop_shaped_design,
+    failure=lambda name, time: failure(name, 10.0 if time is None else time),
+    pilot=_pitch_pilot, pilot_element=PILOT_ELEMENT, commands=lambda t: np.zeros((t.size, 1)),
+    output_bound=OUTPUT_BOUND, default_duration=30.0, default_method="ganging",
+    design_options=("design", "observer", "hedge"),
+)
+
+
 @register_scenario(
     "harv_lon",
     description="F-18/HARV longitudinal pitch-rate SMC, stabilator + pitch thrust vector (seed 4.5)",
@@ -126,45 +148,7 @@ def loop_shaped_design() -> LoopShapedDesign:
     default_duration=30.0,
     default_method="ganging",
 )
-def run(
-    *,
-    method: str = "ganging",
-    failure: str | None = None,
-    duration: float | None = None,
-    seed: int = 0,
-    dt: float = DEFAULT_DT,
-    allocator_knows_failure: bool = False,
-    progress: bool = False,
-    controller: str = "smc",
-    design: str = "modified",
-    observer: bool = True,
-    hedge: bool = True,
-    actuators: bool = True,
-    noise: bool = True,
-    failure_time: float = 10.0,
-    pilot_gain: float = 2.0,
-    pilot_delay: float = 0.2,
-    record_every: int = 10,
-    method_options: dict | None = None,
-) -> SimResult:
-    """Run the HARV longitudinal scenario (``controller``: ``"smc"`` or ``"loopshape"``)."""
-    duration = 30.0 if duration is None else float(duration)
-    fail = None if failure is None else globals()["failure"](failure, failure_time)
-    if controller == "smc":
-        ctl: SMCDesign | LoopShapedDesign = smc_design(design, observer=observer, hedge=hedge)
-    elif controller == "loopshape":
-        ctl = loop_shaped_design()
-    else:
-        raise ValueError(f"controller={controller!r}; expected 'smc' or 'loopshape'")
-    n = int(round(duration / dt)) + 1
-    pilot = Pilot(
-        channel=0, row=np.array([0.0, 1.0]), integrate=True, name="theta", gain=pilot_gain, delay=pilot_delay,
-        attitude_command=lambda tt: sum_of_sines(tt, 5.0),  # seed Eq 4.13, xi = 5
-    )
-    return simulate(
-        scenario="harv_lon", vehicle=vehicle(), references=REFERENCES, controller=ctl,
-        commands=np.zeros((n, 1)), pilots=(pilot,), failure=fail, method=method,
-        method_options=method_options, allocator_knows_failure=allocator_knows_failure,
-        actuators=actuators, noise=noise, duration=duration, dt=dt, seed=seed,
-        output_bound=OUTPUT_BOUND, record_every=record_every, progress=progress,
-    )
+def run(**options: Any) -> SimResult:
+    """Run the HARV longitudinal scenario: :func:`sim.scenarios.mimo.run_mimo` options, plus
+    ``design`` (``"slow"``, ``"fast"``, ``"modified"``), ``observer`` and ``hedge``."""
+    return run_mimo(SCENARIO, **options)

@@ -21,10 +21,11 @@ from typing import Any
 
 import numpy as np
 
-from alloc.vehicles import ICE_B_FULL, ICE_BK_SEED
+from alloc.vehicles import ICE_B_FULL, ICE_BK_SEED, ICE_EFFECTORS
 
-from sim.blocks import DEFAULT_DT, ActuatorFailure, ActuatorSpec, HedgeTerm, sum_of_sines
-from sim.loop import Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle, simulate
+from sim.blocks import ActuatorFailure, ActuatorSpec, HedgeTerm, sum_of_sines
+from sim.loop import Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle
+from sim.scenarios.mimo import MimoScenario, run_mimo
 from sim.result import SimResult
 from sim.scenarios import register_scenario
 
@@ -119,7 +120,7 @@ def vehicle() -> Vehicle:
     return Vehicle(
         name="ice", A=A, B=B, C=C, D=D, output_names=OUTPUTS, actuators=_actuators(),
         controlled=CONTROLLED, measured=tuple(range(len(OUTPUTS))), noise_gains=gains,
-        B_alloc=B_DESIGN, Bk_seed=SEED_BK, demand_map=np.eye(3), Wu=WU,
+        B_alloc=B_DESIGN, Bk_seed=SEED_BK, demand_map=np.eye(3), Wu=WU, names=ICE_EFFECTORS,
     )
 
 
@@ -215,6 +216,35 @@ OUTPUT_BOUND = np.array([45.0, 200.0, 30.0])
 FAILURES = {"seed": "t = 20 s: " + failure().description}
 
 
+# What the roll pilot flies, stick to bank angle: the p reference model, then phi = int(ps)
+# (wings level, small alpha).  Sets the crossover pilot's gain (sim.pilot).
+PILOT_ELEMENT = ([100.0], [1.0, 20.0, 100.0, 0.0])
+
+
+def _commands(t: np.ndarray) -> np.ndarray:
+    """Direct commands: the alpha sum-of-sines into the alpha reference model (seed section 4.7, xi = 5)."""
+    commands = np.zeros((t.size, 3))
+    commands[:, 0] = sum_of_sines(t, 5.0)
+    return commands
+
+
+def _roll_pilot(params: dict[str, Any]) -> Pilot:
+    row = np.zeros(len(OUTPUTS))
+    row[OUTPUTS.index("phi")] = 1.0
+    return Pilot(
+        channel=1, row=row, name="phi", **params,
+        attitude_command=lambda tt: sum_of_sines(tt, 10.0, phase_step=np.pi / 4),  # xi = 10, i*pi/4
+    )
+
+
+SCENARIO = MimoScenario(
+    name="ice", vehicle=vehicle, references=REFERENCES, smc_design=smc_design,
+    loop_shaped_design=loop_shaped_design, failure=lambda name, time: _failure_by_name(name, time),
+    pilot=_roll_pilot, pilot_element=PILOT_ELEMENT, commands=_commands, output_bound=OUTPUT_BOUND,
+    default_duration=40.0, default_method="pinv",
+)
+
+
 @register_scenario(
     "ice",
     description="ICE 6-DOF, 11 effectors, observer-based SMC with hedging, alpha/ps/beta tracking (seed 4.7)",
@@ -222,61 +252,16 @@ FAILURES = {"seed": "t = 20 s: " + failure().description}
     default_duration=40.0,
     default_method="pinv",
 )
-def run(
-    *,
-    method: str = "pinv",
-    failure: str | None = None,
-    duration: float | None = None,
-    seed: int = 0,
-    dt: float = DEFAULT_DT,
-    allocator_knows_failure: bool = False,
-    progress: bool = False,
-    controller: str = "smc",
-    observer: bool = True,
-    hedge: bool = True,
-    actuators: bool = True,
-    noise: bool = True,
-    failure_time: float = 20.0,
-    record_every: int = 10,
-    method_options: dict | None = None,
-    pilot_gain: float = 2.0,
-    pilot_delay: float = 0.2,
-) -> SimResult:
-    """Run the ICE scenario.
+def run(**options: Any) -> SimResult:
+    """Run the ICE scenario: :func:`sim.scenarios.mimo.run_mimo` options, plus ``observer`` and ``hedge``.
 
     ``controller`` is ``"smc"`` (Eq 4.27 with Table 4-6 observers/hedges,
     switchable off with ``observer``/``hedge``) or ``"loopshape"`` (Eq 4.28).
     """
-    duration = 40.0 if duration is None else float(duration)
-    fail = _failure_by_name(failure, failure_time)
-    if controller == "smc":
-        design: SMCDesign | LoopShapedDesign = smc_design(observer=observer, hedge=hedge)
-    elif controller == "loopshape":
-        design = loop_shaped_design()
-    else:
-        raise ValueError(f"controller={controller!r}; expected 'smc' or 'loopshape'")
-    n = int(round(duration / dt)) + 1
-    t = np.arange(n) * dt
-    commands = np.zeros((n, 3))
-    commands[:, 0] = sum_of_sines(t, 5.0)  # seed section 4.7: alpha channel xi = 5
-    row = np.zeros(len(OUTPUTS))
-    row[OUTPUTS.index("phi")] = 1.0
-    roll_pilot = Pilot(
-        channel=1, row=row, name="phi", gain=pilot_gain, delay=pilot_delay,
-        attitude_command=lambda tt: sum_of_sines(tt, 10.0, phase_step=np.pi / 4),  # xi = 10, i*pi/4
-    )
-    return simulate(
-        scenario="ice", vehicle=vehicle(), references=REFERENCES, controller=design,
-        commands=commands, pilots=(roll_pilot,), failure=fail, method=method,
-        method_options=method_options, allocator_knows_failure=allocator_knows_failure,
-        actuators=actuators, noise=noise, duration=duration, dt=dt, seed=seed,
-        output_bound=OUTPUT_BOUND, record_every=record_every, progress=progress,
-    )
+    return run_mimo(SCENARIO, **options)
 
 
-def _failure_by_name(name: str | None, time: float) -> Failure | None:
-    if name is None:
-        return None
+def _failure_by_name(name: str, time: float | None) -> Failure:
     if name == "seed":
-        return failure(time)
+        return failure(20.0 if time is None else time)
     raise KeyError(f"unknown ICE failure {name!r}; known: {sorted(FAILURES)}")

@@ -1,0 +1,135 @@
+"""The one runner of the MIMO scenarios (ICE, F-18/HARV lon and lat-dir).
+
+A MIMO scenario is data: a :class:`MimoScenario` (vehicle, reference models,
+SMC and loop-shaped designs, failures, pilot, direct commands, divergence
+bound).  :func:`run_mimo` turns it and the run options into a
+:class:`sim.loop.LoopSpec` and flies it.  Adding a scenario is one module that
+builds a ``MimoScenario`` and registers ``lambda **o: run_mimo(SCENARIO, **o)``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from sim.blocks import DEFAULT_DT
+from sim.loop import TF, Failure, LoopShapedDesign, LoopSpec, Pilot, SMCDesign, Vehicle, simulate
+from sim.pilot import pilot_parameters
+from sim.result import SimResult
+
+__all__ = ["MimoScenario", "run_mimo"]
+
+
+@dataclass(frozen=True)
+class MimoScenario:
+    """What differs between the MIMO scenarios.
+
+    Attributes
+    ----------
+    name : str
+        Registered scenario name.
+    vehicle : callable
+        ``() -> Vehicle``.
+    references : sequence of TF
+        Reference model per channel.
+    smc_design : callable
+        ``(**design_options) -> SMCDesign``; its keyword names are the scenario's design options.
+    loop_shaped_design : callable
+        ``() -> LoopShapedDesign`` (the seed's baseline).
+    failure : callable
+        ``(name, time or None) -> Failure``; ``time`` None means the seed's failure time.
+    pilot : callable
+        ``(pilot parameters, **input_options) -> Pilot`` for the scenario's pilot channel.
+    pilot_element : (num, den)
+        What the pilot flies, stick to attitude (sets the crossover pilot, :mod:`sim.pilot`).
+    commands : callable
+        ``(t grid) -> (N, k)`` direct commands into the reference models.
+    output_bound : ndarray
+        Divergence bound per channel (:mod:`sim.result`).
+    default_duration : float
+    default_method : str
+    design_options, input_options : tuple of str
+        Extra run options forwarded to ``smc_design`` and to ``pilot``.
+    """
+
+    name: str
+    vehicle: Callable[[], Vehicle]
+    references: Sequence[TF]
+    smc_design: Callable[..., SMCDesign]
+    loop_shaped_design: Callable[[], LoopShapedDesign]
+    failure: Callable[[str, float | None], Failure]
+    pilot: Callable[..., Pilot]
+    pilot_element: TF
+    commands: Callable[[np.ndarray], np.ndarray]
+    output_bound: np.ndarray
+    default_duration: float
+    default_method: str
+    design_options: tuple[str, ...] = ("observer", "hedge")
+    input_options: tuple[str, ...] = ()
+
+
+def run_mimo(
+    scenario: MimoScenario,
+    *,
+    method: str | None = None,
+    failure: str | None = None,
+    duration: float | None = None,
+    seed: int = 0,
+    dt: float = DEFAULT_DT,
+    allocator_knows_failure: bool = False,
+    progress: bool = False,
+    controller: str = "smc",
+    actuators: bool = True,
+    noise: bool = True,
+    failure_time: float | None = None,
+    pilot: str = "standin",
+    pilot_gain: float | None = None,
+    pilot_delay: float | None = None,
+    record_every: int = 10,
+    method_options: dict | None = None,
+    frame_period: float | None = None,
+    rate_aware: bool = True,
+    u_prev_source: str = "command",
+    preferred: str = "mid",
+    rate_horizon: str = "actuator",
+    step_times: list | None = None,
+    **options: Any,
+) -> SimResult:
+    """Fly ``scenario`` with these run options (see :class:`sim.loop.LoopSpec` for their meaning).
+
+    ``controller`` is ``"smc"`` (the seed's observer-based SMC with hedging; its
+    design options, e.g. ``observer``, ``hedge``, pass through) or ``"loopshape"``
+    (the seed's loop-shaped baseline).  ``pilot`` names a pilot model of
+    :mod:`sim.pilot`; ``pilot_gain`` / ``pilot_delay`` override its values.
+    """
+    unknown = set(options) - set(scenario.design_options) - set(scenario.input_options)
+    if unknown:
+        known = sorted(scenario.design_options + scenario.input_options)
+        raise TypeError(f"{scenario.name}: unknown option(s) {sorted(unknown)}; scenario options: {known}")
+    duration = scenario.default_duration if duration is None else float(duration)
+    fail = None if failure is None else scenario.failure(failure, failure_time)
+    if controller == "smc":
+        design: SMCDesign | LoopShapedDesign = scenario.smc_design(
+            **{k: v for k, v in options.items() if k in scenario.design_options})
+    elif controller == "loopshape":
+        design = scenario.loop_shaped_design()
+    else:
+        raise ValueError(f"controller={controller!r}; expected 'smc' or 'loopshape'")
+    n = int(round(duration / dt)) + 1
+    stick = scenario.pilot(
+        pilot_parameters(pilot, scenario.pilot_element, gain=pilot_gain, delay=pilot_delay),
+        **{k: v for k, v in options.items() if k in scenario.input_options},
+    )
+    spec = LoopSpec(
+        scenario=scenario.name, vehicle=scenario.vehicle(), references=scenario.references, controller=design,
+        commands=scenario.commands(np.arange(n) * dt), pilots=(stick,), failure=fail,
+        method=scenario.default_method if method is None else method, method_options=method_options,
+        allocator_knows_failure=allocator_knows_failure, actuators=actuators, noise=noise, duration=duration,
+        dt=dt, seed=seed, output_bound=scenario.output_bound, record_every=record_every,
+        frame_period=frame_period, rate_aware=rate_aware, u_prev_source=u_prev_source, preferred=preferred,
+        rate_horizon=rate_horizon,
+    )
+    return simulate(spec, progress=progress, step_times=step_times)
