@@ -1,6 +1,6 @@
 """ICE with the seed failure: every registry method, at the seed rate and at slower frame rates.
 
-Run: ``python -m benchmarks.ice_table [--rates 2000 400 100] [--methods ...] [--out FILE.csv]``.
+Run: ``python -m benchmarks.ice_table [--rates 2000 400 100] [--methods ...] --out FILE.csv``.
 
 Setting: seed failure at t = 20 s, 40 s, stand-in pilot gain 1 (0.2 s), noise off
 (the band in which Fig 4-110 holds, see docs/robustness.md), preferred mid-range

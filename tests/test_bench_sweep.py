@@ -10,9 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from benchmarks.compare.failures import KINDS, catalogue_names, inject_failure, make_failure
+from benchmarks.compare.failures import KINDS, catalogue_names, make_failure
 from benchmarks.compare.sweep import (
-    FRAME_RATE, STATIC, check_simulator_support, closed_spec, full_sweep, setting_tag,
+    FRAME_PERIOD, STATIC, check_simulator_support, closed_spec, full_sweep, setting_tag,
 )
 
 
@@ -47,11 +47,11 @@ def test_a_catalogue_failure_reaches_the_loop_and_the_told_allocator() -> None:
     import sim.scenarios.ice as ice
     from benchmarks.compare.closedloop import simulate_spec
     from sim.allocation import allocation_problem
+    from sim.scenarios import get_scenario
 
-    original = ice.simulate
     kw = dict(seed=1, duration=1.0, failure_time=0.5, sim={"pilot_gain": 1.0})
     jam = simulate_spec(closed_spec("ice", "jam1", "pinv", told=False, **kw))
-    assert ice.simulate is original  # the injection is undone
+    assert get_scenario("ice").accepts_failure_objects  # handed over directly, no injection
     assert jam.failure == "jam1"
     after = jam.t >= 0.5
     assert np.all(jam.effectors[after, 0] == 15.0)  # elevon_l jammed at hi / 2 from the failure on
@@ -60,8 +60,6 @@ def test_a_catalogue_failure_reaches_the_loop_and_the_told_allocator() -> None:
     assert np.array_equal(nominal.output[~after], jam.output[~after])  # same run until the failure
     told = allocation_problem(ice.vehicle(), make_failure("ice", "jam1", 0.5))
     assert told.umin[0] == told.umax[0] == 15.0
-    with pytest.raises(RuntimeError, match="already built a failure"), inject_failure("ice", make_failure("ice", "jam1", 0.5)):
-        ice.run(failure="seed", duration=0.01)
 
 
 def test_simulator_settings_pass_through_by_name_or_are_refused_before_running() -> None:
@@ -77,12 +75,7 @@ def test_simulator_settings_pass_through_by_name_or_are_refused_before_running()
         check_simulator_support([dict(ok, failure="nope")])
     from sim.scenarios import get_scenario
 
-    frame = dict(ok, sim={FRAME_RATE: 100.0})
-    if FRAME_RATE in inspect.signature(get_scenario("ice")).parameters:
-        check_simulator_support([frame])
-    else:  # this checkout's simulator has no multi-rate loop: a clear refusal, naming the way out
-        with pytest.raises(ValueError, match="--frame-rates seed"):
-            check_simulator_support([frame])
+    check_simulator_support([dict(ok, sim={FRAME_PERIOD: 0.01, "pilot": "crossover"})])  # the multi-rate loop
 
 
 def test_full_sweep_axes() -> None:
@@ -92,9 +85,9 @@ def test_full_sweep_axes() -> None:
     ids = [s["id"] for s in specs]
     assert len(ids) == len(set(ids))
     methods = 1 + len(alloc.methods())
-    per_cell = (2 * methods - 1) * 10 * 3 * 2  # modes (static blind only) x seeds x pilots x frame rates
+    per_cell = (2 * methods - 1) * 10 * 4 * 2  # modes (static blind only) x seeds x pilots x frame rates
     assert len(specs) == per_cell * ((1 + 10) + (2 + 10))  # ICE: seed + catalogue; HARV: 2 + catalogue
-    assert {s["sim"].get(FRAME_RATE) for s in specs} == {None, 100.0}
+    assert {s["sim"].get(FRAME_PERIOD) for s in specs} == {None, 0.01}
     assert not any(s["method"] == STATIC and s["told"] for s in specs)
 
 

@@ -37,7 +37,7 @@ import numpy as np
 from sim.result import SimResult
 from sim.scenarios import get_scenario
 
-from .failures import inject_failure, is_catalogue, make_failure
+from .failures import is_catalogue, make_failure
 from .openloop import method_options
 from .sweep import STATIC, Spec, setting_tag
 
@@ -60,10 +60,9 @@ def simulate_spec(spec: Spec) -> SimResult:
     if not is_catalogue(spec["failure"]):
         return run(failure=spec["failure"], **kwargs)
     failure = make_failure(scenario, spec["failure"], spec["failure_time"])
-    if getattr(run, "accepts_failure_objects", False):
-        return run(failure=failure, **kwargs)
-    with inject_failure(scenario, failure):
-        return run(failure=None, **kwargs)
+    if not getattr(run, "accepts_failure_objects", False):
+        raise ValueError(f"failure {spec['failure']!r}: scenario {scenario!r} does not take catalogue failures")
+    return run(failure=failure, **kwargs)
 
 
 def recovery_time(t: np.ndarray, err: np.ndarray, failure_time: float, rms_before: np.ndarray) -> float:

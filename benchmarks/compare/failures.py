@@ -24,24 +24,19 @@ HARV lat-dir -- single: aileron; double: aileron and rudder.
 A *told* allocator is given the same failure as a changed :class:`alloc.Problem`
 (:func:`sim.allocation.allocation_problem`); a *blind* one keeps the nominal problem.
 
-Injection: today's scenarios accept only their own failure names, so a catalogue failure is
-handed to the engine by wrapping the scenario module's ``simulate`` for the duration of one
-run (:func:`inject_failure`): the scenario builds everything as usual and ``simulate`` receives
-the catalogue :class:`sim.loop.Failure` instead of ``None``.  A scenario that accepts a
-``Failure`` object itself (attribute ``accepts_failure_objects``) gets it directly.
+A catalogue failure is a :class:`sim.loop.Failure`, handed to scenarios that take failure
+objects (attribute ``accepts_failure_objects``: the MIMO scenarios of ``sim.scenarios.mimo``).
 """
 
 from __future__ import annotations
 
 import importlib
 import re
-from collections.abc import Iterator
-from contextlib import contextmanager
 from typing import Any
 
 import numpy as np
 
-__all__ = ["KINDS", "FAILED_EFFECTORS", "catalogue_names", "is_catalogue", "make_failure", "inject_failure"]
+__all__ = ["KINDS", "FAILED_EFFECTORS", "catalogue_names", "is_catalogue", "make_failure"]
 
 #: failure kinds of the catalogue, in report order
 KINDS = ("jam", "hardover", "float", "loe", "limits")
@@ -107,27 +102,6 @@ def make_failure(scenario: str, name: str, time: float) -> Any:
     names = ", ".join(vehicle.effector_names[i] for i in FAILED_EFFECTORS[scenario][:count])
     return Failure(name=name, time=float(time), description=f"{kind} of {names} at t = {time:g} s",
                    actuators=tuple(failures))
-
-
-@contextmanager
-def inject_failure(scenario: str, failure: Any) -> Iterator[None]:
-    """Within the block, the scenario's engine call receives ``failure`` (see module docstring)."""
-    module = importlib.import_module(f"sim.scenarios.{scenario}")
-    original = getattr(module, "simulate", None)
-    if original is None:
-        raise RuntimeError(f"scenario module {module.__name__} has no 'simulate' to hand a catalogue failure to")
-
-    def simulate_with_failure(*args: Any, **kwargs: Any) -> Any:
-        if kwargs.get("failure") is not None:
-            raise RuntimeError(f"scenario {scenario!r} already built a failure; catalogue failures need failure=None")
-        kwargs["failure"] = failure
-        return original(*args, **kwargs)
-
-    module.simulate = simulate_with_failure
-    try:
-        yield
-    finally:
-        module.simulate = original
 
 
 def failure_effectors(scenario: str, name: str) -> np.ndarray:

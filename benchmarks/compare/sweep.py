@@ -7,8 +7,8 @@ unique string; CSV rows are sorted by it.
 Closed-loop axes: scenario x failure x method x allocator told/blind x simulator setting x
 noise seed.  A *simulator setting* (``spec["sim"]``) is a dict of keyword arguments handed
 unchanged to the scenario (``sim.scenarios.get_scenario(name)(**spec["sim"], ...)``): the
-pilot (``pilot_gain``, ``pilot_delay`` today; a pilot model by name when the simulator has
-one) and the flight-control frame rate (:data:`FRAME_RATE`).  Settings are built as the
+pilot (``pilot_gain``, ``pilot_delay``, or ``pilot="crossover"``, the simulator's McRuer model)
+and the flight-control frame period (:data:`FRAME_PERIOD`).  Settings are built as the
 product of *axes* (lists of dicts, merged); :func:`check_simulator_support` refuses, before
 any run starts, a setting the simulator in this checkout does not accept.
 
@@ -30,7 +30,7 @@ import alloc
 from .failures import catalogue_names, is_catalogue
 
 __all__ = [
-    "Spec", "STATIC", "FRAME_RATE", "PILOT_SETTINGS", "open_spec", "closed_spec", "closed_grid",
+    "Spec", "STATIC", "FRAME_PERIOD", "PILOT_SETTINGS", "open_spec", "closed_spec", "closed_grid",
     "setting_tag", "quick_sweep", "full_sweep", "tiny_sweep", "smoke_sweep", "check_simulator_support", "SCENARIO_TIMES",
 ]
 
@@ -39,17 +39,18 @@ Spec = dict[str, Any]
 #: The seed's printed static distribution (a simulator method, not a registry one).
 STATIC = "static"
 
-#: Scenario keyword for the flight-control frame rate (Hz) -- the multi-rate loop of issue 13.
-#: Absent from the spec = the scenario's default (the seed's 0.5 ms step).
-FRAME_RATE = "frame_rate"
+#: Scenario keyword for the flight-control frame period (s) of the multi-rate loop; the sweep's
+#: frame-rate axis (Hz) is written as this period.  Absent = the seed's 0.5 ms step.
+FRAME_PERIOD = "frame_period"
 
 #: Pilot settings of the full sweep (scenario keywords).  The stand-in pilot at gain 1 (the
 #: setting in which the seed's Fig 4-110 reproduces), at its default gain 2, and slower with
-#: more delay.  A principled pilot model joins here by name when the simulator offers one.
+#: more delay, and the McRuer crossover-model pilot at its stated rule (``sim.pilot``).
 PILOT_SETTINGS: tuple[dict[str, Any], ...] = (
     {"pilot_gain": 1.0},
     {"pilot_gain": 2.0},
     {"pilot_gain": 1.5, "pilot_delay": 0.3},
+    {"pilot": "crossover"},
 )
 
 #: duration and failure time (s) of each scenario's closed-loop runs (the seed's)
@@ -151,7 +152,7 @@ def full_sweep(*, seeds: int = 10, frame_rates: Sequence[float | None] = (None, 
     scenario's own failures and every catalogue failure (5 kinds, single and double);
     blind and told; frame rates (``None`` = the seed's rate) x pilot settings; ``seeds``
     noise seeds.  Open loop on 10 random problems with 20,000 coverage samples."""
-    frame_axis = [{} if f is None else {FRAME_RATE: float(f)} for f in frame_rates]
+    frame_axis = [{} if f is None else {FRAME_PERIOD: 1.0 / float(f)} for f in frame_rates]
     settings = settings_product(pilots, frame_axis)
     seed_list = list(range(1, seeds + 1))
     specs: list[Spec] = []
@@ -187,8 +188,17 @@ def tiny_sweep() -> list[Spec]:
 def _accepted(scenario: str) -> tuple[set[str], bool]:
     from sim.scenarios import get_scenario
 
-    params = inspect.signature(get_scenario(scenario)).parameters
-    return set(params), any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values())
+    fn = get_scenario(scenario)
+    params = inspect.signature(fn).parameters
+    var_kw = any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values())
+    mimo = getattr(inspect.getmodule(fn), "SCENARIO", None)
+    if var_kw and mimo is not None:  # a MIMO scenario: run_mimo's keywords plus the scenario's declared ones
+        from sim.scenarios.mimo import run_mimo
+
+        names = {n for n, p in inspect.signature(run_mimo).parameters.items()
+                 if p.kind is not inspect.Parameter.VAR_KEYWORD and n != "scenario"}
+        return names | set(mimo.design_options) | set(mimo.input_options), False
+    return set(params), var_kw
 
 
 def check_simulator_support(specs: Sequence[Spec]) -> None:
@@ -208,7 +218,7 @@ def check_simulator_support(specs: Sequence[Spec]) -> None:
             seen.add((scenario, key))
             if key not in accepted and not var_kw:
                 hint = (" (the multi-rate loop of issue 13 is not in this checkout's simulator; run with the "
-                        "seed rate only, e.g. --frame-rates seed)") if key == FRAME_RATE else ""
+                        "seed rate only, e.g. --frame-rates seed)") if key == FRAME_PERIOD else ""
                 raise ValueError(f"sweep axis {key!r}: scenario {scenario!r} does not accept it{hint}; "
                                  f"it accepts {sorted(accepted)}")
         failure = spec["failure"]

@@ -222,3 +222,7 @@ def run_failure2(*, failure: str | None = "failure2", duration: float | None = N
     """HARV lat-dir with Failure #2 and the filtered-step input (``failure=None``: nominal, same input)."""
     return run_mimo(SCENARIO, failure=failure, duration=40.0 if duration is None else duration,
                     phi_command="filtered_steps", **options)
+
+
+#: run_mimo takes a sim.loop.Failure as well as a failure name (the benchmark catalogue uses it)
+run.accepts_failure_objects = True  # type: ignore[attr-defined]

@@ -152,3 +152,7 @@ def run(**options: Any) -> SimResult:
     """Run the HARV longitudinal scenario: :func:`sim.scenarios.mimo.run_mimo` options, plus
     ``design`` (``"slow"``, ``"fast"``, ``"modified"``), ``observer`` and ``hedge``."""
     return run_mimo(SCENARIO, **options)
+
+
+#: run_mimo takes a sim.loop.Failure as well as a failure name (the benchmark catalogue uses it)
+run.accepts_failure_objects = True  # type: ignore[attr-defined]

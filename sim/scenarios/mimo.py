@@ -75,7 +75,7 @@ def run_mimo(
     scenario: MimoScenario,
     *,
     method: str | None = None,
-    failure: str | None = None,
+    failure: str | Failure | None = None,
     duration: float | None = None,
     seed: int = 0,
     dt: float = DEFAULT_DT,
@@ -110,7 +110,8 @@ def run_mimo(
         known = sorted(scenario.design_options + scenario.input_options)
         raise TypeError(f"{scenario.name}: unknown option(s) {sorted(unknown)}; scenario options: {known}")
     duration = scenario.default_duration if duration is None else float(duration)
-    fail = None if failure is None else scenario.failure(failure, failure_time)
+    # a failure by the scenario's name, or any sim.loop.Failure (e.g. the benchmark's catalogue)
+    fail = failure if isinstance(failure, Failure) or failure is None else scenario.failure(failure, failure_time)
     if controller == "smc":
         design: SMCDesign | LoopShapedDesign = scenario.smc_design(
             **{k: v for k, v in options.items() if k in scenario.design_options})
