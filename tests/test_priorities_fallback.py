@@ -59,10 +59,22 @@ def test_solver_failure_returns_admissible_fallback(method, failure, monkeypatch
 def test_daqp_iteration_cap_yields_fallback_not_exception():
     """A real backend hitting its iteration cap: DAQP limited to one iteration."""
     p = ice()
-    allocate = alloc.make_allocator(p, "wls")
-    allocate.impl._model._model.settings = {"iter_limit": 1}
+    allocate = alloc.make_allocator(p, "wls", backend="daqp")
+    allocate.impl._impl._model._model.settings = {"iter_limit": 1}
     statuses = {allocate(v).status for v in np.random.default_rng(0).normal(size=(20, 3)) * [30, 100, 5]}
     assert alloc.Status.FALLBACK in statuses
+
+
+@pytest.mark.parametrize("method", ["qp", "wls"])
+def test_active_set_iteration_cap_yields_fallback_not_exception(method):
+    """The compiled active set limited to one iteration per level reports a fallback."""
+    p = ice()
+    allocate = alloc.make_allocator(p, method)
+    allocate.impl._impl.maxit = 1
+    V = np.random.default_rng(0).normal(size=(20, 3)) * [30, 100, 5]
+    results = [allocate(v) for v in V]
+    assert alloc.Status.FALLBACK in {r.status for r in results}
+    assert all("iteration cap" in r.message for r in results if r.fallback)
 
 
 finite = st.floats(-50, 50, allow_nan=False, allow_infinity=False)
