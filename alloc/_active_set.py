@@ -197,13 +197,14 @@ def _level(A, b, r0, r1, gam, Wu, diag, up, lo, hi, u, free, pinned, maxit):  # 
             _lsolve_col(L, nf, diag, Ya, i)
             for q in range(nf):
                 ref = max(ref, abs(Ya[q, i]))
-            for c in range(nc):
-                if sc[c] > 0.0:
-                    acc = 0.0
-                    for q in range(nf):
-                        acc += Yc[q, c] * Ya[q, i]
-                    for q in range(nf):
-                        Ya[q, i] -= acc * Yc[q, c]
+            for _twice in range(2):  # Gram-Schmidt twice: rows nearly in the span lose digits
+                for c in range(nc):
+                    if sc[c] > 0.0:
+                        acc = 0.0
+                        for q in range(nf):
+                            acc += Yc[q, c] * Ya[q, i]
+                        for q in range(nf):
+                            Ya[q, i] -= acc * Yc[q, c]
         if nl > 0:
             _jacobi(Ya, nf, nl, Va, sa, ref)
         # --- step y = -P h + Ua z   (P: projector onto null(Ct) and null(At)),
@@ -228,6 +229,13 @@ def _level(A, b, r0, r1, gam, Wu, diag, up, lo, hi, u, free, pinned, maxit):  # 
                 z = (sa[i] * ve - gam2 * uh) / (sa[i] * sa[i] + gam2)
                 for q in range(nf):
                     y[q] += (uh + z) * Ya[q, i]
+        for c in range(nc):  # y in null(Ct) to round-off: the held moments do not drift
+            if sc[c] > 0.0:
+                acc = 0.0
+                for q in range(nf):
+                    acc += Yc[q, c] * y[q]
+                for q in range(nf):
+                    y[q] -= acc * Yc[q, c]
         _ltsolve(L, nf, diag, y)  # p_F = L^-T y
         # --- ratio test
         alpha = 1.0
