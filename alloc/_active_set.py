@@ -110,7 +110,8 @@ def _jacobi(X, n, p, V, sig, ref):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def _level(A, b, r0, r1, gam, Wu, diag, up, lo, hi, u, free, pinned, maxit):  # pragma: no cover - compiled
+def _level(A, b, r0, r1, gam, Wu, diag, up, lo, hi, u, free, pinned, maxit,
+           F, L, Yc, Vc, sc, Ya, Va, sa, e, g, h, y, tmp, lam, tabu, scale):  # pragma: no cover - compiled
     """Solve one level in place on ``u`` (feasible on entry) and ``free`` (working set).
 
     Rows ``A[r0:r1]`` are this level's least-squares rows, rows ``A[:r0]`` its equality
@@ -119,29 +120,14 @@ def _level(A, b, r0, r1, gam, Wu, diag, up, lo, hi, u, free, pinned, maxit):  # 
     nonzero, unique multiplier); on return this level adds its own.  Without pinning, the
     stage-2 multipliers at a stage-1 vertex are not unique and a minimum-norm estimate
     frees effectors that cannot move.  An effector freed and then blocked by a zero step
-    (a degenerate multiplier) is not freed again until the iterate moves.  Returns the
-    iteration count, or -1 when the cap was hit.
+    (a degenerate multiplier) is not freed again until the iterate moves.  The remaining
+    arguments are work arrays (allocated once per call by :func:`lexico_ls`).  Returns
+    the iteration count, or -1 when the cap was hit.
     """
     m = u.shape[0]
     nl = r1 - r0
     nc = r0
-    F = np.empty(m, dtype=np.int64)
-    L = np.zeros((m, m))
-    Yc = np.empty((m, max(nc, 1)))
-    Vc = np.empty((max(nc, 1), max(nc, 1)))
-    sc = np.empty(max(nc, 1))
-    Ya = np.empty((m, max(nl, 1)))
-    Va = np.empty((max(nl, 1), max(nl, 1)))
-    sa = np.empty(max(nl, 1))
-    e = np.empty(max(nl, 1))
-    g = np.empty(m)
-    h = np.empty(m)
-    y = np.empty(m)
-    p = np.empty(m)
-    tmp = np.empty(m)
-    lam = np.empty(max(nc, 1))
-    tabu = np.zeros(m, dtype=np.bool_)
-    scale = np.empty(m)
+    tabu[:] = False
     last = -1
     gam2 = gam * gam
     for it in range(maxit):
@@ -375,13 +361,14 @@ def _ltsolve(L, n, diag, x):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def lexico_ls(A, T, perm, starts, gammas, final, Wu, diag, up, v, lo, hi, maxit):  # pragma: no cover - compiled
+def lexico_ls(A, T, perm, starts, gammas, final, Wu, diag, up, B0, P0, v, lo, hi, maxit):  # pragma: no cover - compiled
     """All levels for one demand: ``b = T v[perm]``; returns ``(u, iterations, ok)``.
 
     ``A`` (n x m) stacks the levels' rows (level ``l`` is ``A[starts[l]:starts[l+1]]``,
     weight ``gammas[l]``); ``final`` adds the preference level ``min (u-up)'Wu(u-up)``
-    holding all rows of ``A`` (stage 2 of ``qp``).  The start is ``up`` clipped into
-    ``[lo, hi]`` with the effectors at a bound held there.
+    holding all rows of ``A`` (stage 2 of ``qp``).  The start is the pseudo-inverse
+    answer ``up + P0 (v - B0 up)`` clipped into ``[lo, hi]``, the effectors clipped held
+    at their bound (a deterministic start: the answer depends on the data alone).
     """
     n, m = A.shape
     b = np.empty(n)
@@ -393,18 +380,48 @@ def lexico_ls(A, T, perm, starts, gammas, final, Wu, diag, up, v, lo, hi, maxit)
     u = np.empty(m)
     free = np.empty(m, dtype=np.bool_)
     pinned = np.zeros(m, dtype=np.bool_)
+    # start: the Eq 1.23 pseudo-inverse answer u0 = up + P0 (v - B0 up), clipped
+    k0 = B0.shape[0]
+    r = np.empty(k0)
+    for i in range(k0):
+        acc = v[i]
+        for j in range(m):
+            acc -= B0[i, j] * up[j]
+        r[i] = acc
     for j in range(m):
-        x = min(max(up[j], lo[j]), hi[j])
+        x = up[j]
+        for i in range(k0):
+            x += P0[j, i] * r[i]
+        x = min(max(x, lo[j]), hi[j])
         u[j] = x
         free[j] = lo[j] < x < hi[j]
+    nw = max(n, 1)
+    F = np.empty(m, dtype=np.int64)
+    L = np.zeros((m, m))
+    Yc = np.empty((m, nw))
+    Vc = np.empty((nw, nw))
+    sc = np.zeros(nw)
+    Ya = np.empty((m, nw))
+    Va = np.empty((nw, nw))
+    sa = np.zeros(nw)
+    e = np.empty(nw)
+    g = np.empty(m)
+    h = np.empty(m)
+    y = np.empty(m)
+    tmp = np.empty(m)
+    lam = np.empty(nw)
+    tabu = np.zeros(m, dtype=np.bool_)
+    scale = np.empty(m)
     total = 0
     for l in range(starts.shape[0] - 1):
-        it = _level(A, b, starts[l], starts[l + 1], gammas[l], Wu, diag, up, lo, hi, u, free, pinned, maxit)
+        it = _level(A, b, starts[l], starts[l + 1], gammas[l], Wu, diag, up, lo, hi, u, free, pinned, maxit,
+                    F, L, Yc, Vc, sc, Ya, Va, sa, e, g, h, y, tmp, lam, tabu, scale)
         if it < 0:
             return u, total + maxit, False
         total += it
     if final:
-        it = _level(A, b, n, n, 1.0, Wu, diag, up, lo, hi, u, free, pinned, maxit)
+        it = _level(A, b, n, n, 1.0, Wu, diag, up, lo, hi, u, free, pinned, maxit,
+                    F, L, Yc, Vc, sc, Ya, Va, sa, e, g, h, y, tmp, lam, tabu, scale)
         if it < 0:
             return u, total + maxit, False
         total += it
@@ -412,14 +429,14 @@ def lexico_ls(A, T, perm, starts, gammas, final, Wu, diag, up, v, lo, hi, maxit)
 
 
 @njit(cache=True, nogil=True)
-def lexico_ls_batch(A, T, perm, starts, gammas, final, Wu, diag, up, V, lo, hi, maxit):  # pragma: no cover - compiled
+def lexico_ls_batch(A, T, perm, starts, gammas, final, Wu, diag, up, B0, P0, V, lo, hi, maxit):  # pragma: no cover - compiled
     """:func:`lexico_ls` over the rows of ``V``; ``ok[i]`` False where a level hit its cap."""
     N = V.shape[0]
     m = A.shape[1]
     U = np.empty((N, m))
     ok = np.empty(N, dtype=np.bool_)
     for i in range(N):
-        u, _it, good = lexico_ls(A, T, perm, starts, gammas, final, Wu, diag, up, V[i], lo, hi, maxit)
+        u, _it, good = lexico_ls(A, T, perm, starts, gammas, final, Wu, diag, up, B0, P0, V[i], lo, hi, maxit)
         U[i] = u
         ok[i] = good
     return U, ok

@@ -31,6 +31,7 @@ from ..result import exact_tolerance
 from ..solvers import backends, make_backend
 from ._common import KEEP_RTOL, check_backend, row_basis
 from .cascade import check_priorities
+from .pseudo_inverse import distribution_matrix
 
 STAGE1_RIDGE = 1e-10
 
@@ -178,18 +179,21 @@ class LexicoLS:
         self.Wu = np.ascontiguousarray(Wu, dtype=float)
         self.diag = _is_diagonal(self.Wu)
         self.up = np.ascontiguousarray(p.up, dtype=float)
+        self.B = np.ascontiguousarray(p.B)
+        # start of every call: the Eq 1.23 weighted pseudo-inverse in the same Wu metric
+        self.P0 = np.ascontiguousarray(distribution_matrix(p if Wu is p.Wu else p.replace(Wu=Wu)))
         self.maxit = int(50 + 10 * (p.m + p.k))
 
     def solve(self, v: FloatArray, lo: FloatArray, hi: FloatArray, up: FloatArray | None = None) -> tuple[FloatArray, int]:
         u, it, ok = lexico_ls(self.A, self.T, self.perm, self.starts, self.gammas, self.final, self.Wu,
-                              self.diag, self.up if up is None else up, v, lo, hi, self.maxit)
+                              self.diag, self.up if up is None else up, self.B, self.P0, v, lo, hi, self.maxit)
         if not ok:
             raise SolverError(f"active set: iteration cap ({self.maxit} per level) reached")
         return u, it
 
     def solve_batch(self, V: FloatArray, lo: FloatArray, hi: FloatArray) -> FloatArray:
         U, ok = lexico_ls_batch(self.A, self.T, self.perm, self.starts, self.gammas, self.final, self.Wu,
-                                self.diag, self.up, np.ascontiguousarray(V), lo, hi, self.maxit)
+                                self.diag, self.up, self.B, self.P0, np.ascontiguousarray(V), lo, hi, self.maxit)
         U[~ok] = np.nan  # the allocator re-runs those rows one by one (fallback per row)
         return U
 
