@@ -35,7 +35,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["lexico_ls", "lexico_ls_batch", "SIGMA_RTOL", "MU_EPS"]
+__all__ = ["lexico_ls", "lexico_ls_batch", "lexico_packed", "lexico_packed_batch", "pack", "SIGMA_RTOL", "MU_EPS"]
 
 #: Singular values below this fraction of the largest are round-off (dropped).
 SIGMA_RTOL = 1e-12
@@ -397,21 +397,36 @@ def lexico_ls(A, T, perm, starts, gammas, final, Wu, diag, up, B0, P0, v, lo, hi
         free[j] = lo[j] < x < hi[j]
     nw = max(n, 1)
     F = np.empty(m, dtype=np.int64)
-    L = np.zeros((m, m))
-    Yc = np.empty((m, nw))
-    Vc = np.empty((nw, nw))
-    sc = np.zeros(nw)
-    Ya = np.empty((m, nw))
-    Va = np.empty((nw, nw))
-    sa = np.zeros(nw)
-    e = np.empty(nw)
-    g = np.empty(m)
-    h = np.empty(m)
-    y = np.empty(m)
-    tmp = np.empty(m)
-    lam = np.empty(nw)
     tabu = np.zeros(m, dtype=np.bool_)
-    scale = np.empty(m)
+    work = np.zeros(m * m + 2 * m * nw + 2 * nw * nw + 4 * nw + 5 * m)
+    o = 0
+    L = work[o:o + m * m].reshape((m, m))
+    o += m * m
+    Yc = work[o:o + m * nw].reshape((m, nw))
+    o += m * nw
+    Ya = work[o:o + m * nw].reshape((m, nw))
+    o += m * nw
+    Vc = work[o:o + nw * nw].reshape((nw, nw))
+    o += nw * nw
+    Va = work[o:o + nw * nw].reshape((nw, nw))
+    o += nw * nw
+    sc = work[o:o + nw]
+    o += nw
+    sa = work[o:o + nw]
+    o += nw
+    e = work[o:o + nw]
+    o += nw
+    lam = work[o:o + nw]
+    o += nw
+    g = work[o:o + m]
+    o += m
+    h = work[o:o + m]
+    o += m
+    y = work[o:o + m]
+    o += m
+    tmp = work[o:o + m]
+    o += m
+    scale = work[o:o + m]
     total = 0
     for l in range(starts.shape[0] - 1):
         it = _level(A, b, starts[l], starts[l + 1], gammas[l], Wu, diag, up, lo, hi, u, free, pinned, maxit,
@@ -438,5 +453,69 @@ def lexico_ls_batch(A, T, perm, starts, gammas, final, Wu, diag, up, B0, P0, V, 
     for i in range(N):
         u, _it, good = lexico_ls(A, T, perm, starts, gammas, final, Wu, diag, up, B0, P0, V[i], lo, hi, maxit)
         U[i] = u
+        ok[i] = good
+    return U, ok
+
+
+# --- packed entry points: one compiled call with few arguments --------------------------
+#
+# numba unboxes every array argument on each call (~0.1 us each) and every np.empty in a
+# call is an allocation; the hot path therefore passes the solver's data packed in one
+# float and one int array and carves its work arrays out of one allocation.
+
+#: int header: n, m, k0, levels, final, diag, maxit, then perm (n), then starts (levels + 1)
+_HDR = 7
+
+
+def pack(A, T, perm, starts, gammas, final, Wu, diag, up, B0, P0, maxit):
+    """The solver data as ``(fdata, idata)`` for :func:`lexico_packed`."""
+    n, m = A.shape
+    k0 = B0.shape[0]
+    idata = np.concatenate([[n, m, k0, len(starts) - 1, int(final), int(diag), int(maxit)],
+                            np.asarray(perm), np.asarray(starts)]).astype(np.int64)
+    fdata = np.concatenate([np.ravel(A), np.ravel(T), np.ravel(Wu), np.ravel(up), np.ravel(B0),
+                            np.ravel(P0), np.asarray(gammas, dtype=float)]).astype(float)
+    return np.ascontiguousarray(fdata), np.ascontiguousarray(idata)
+
+
+@njit(cache=True, nogil=True)
+def lexico_packed(fdata, idata, up, v, lo, hi):  # pragma: no cover - compiled
+    """:func:`lexico_ls` on packed data; ``up`` is the preference point of this call."""
+    n = idata[0]
+    m = idata[1]
+    k0 = idata[2]
+    nlev = idata[3]
+    final = idata[4] != 0
+    diag = idata[5] != 0
+    maxit = idata[6]
+    perm = idata[_HDR:_HDR + n]
+    starts = idata[_HDR + n:_HDR + n + nlev + 1]
+    o = 0
+    A = fdata[o:o + n * m].reshape((n, m))
+    o += n * m
+    T = fdata[o:o + n * n].reshape((n, n))
+    o += n * n
+    Wu = fdata[o:o + m * m].reshape((m, m))
+    o += m * m
+    o += m  # the build-time up (the caller passes the call's up)
+    B0 = fdata[o:o + k0 * m].reshape((k0, m))
+    o += k0 * m
+    P0 = fdata[o:o + m * k0].reshape((m, k0))
+    o += m * k0
+    gammas = fdata[o:o + nlev]
+    return lexico_ls(A, T, perm, starts, gammas, final, Wu, diag, up, B0, P0, v, lo, hi, maxit)
+
+
+@njit(cache=True, nogil=True)
+def lexico_packed_batch(fdata, idata, up, V, lo, hi):  # pragma: no cover - compiled
+    """:func:`lexico_packed` over the rows of ``V``; ``ok[i]`` False where a level hit its cap."""
+    N = V.shape[0]
+    m = idata[1]
+    U = np.empty((N, m))
+    ok = np.empty(N, dtype=np.bool_)
+    for i in range(N):
+        u, _it, good = lexico_packed(fdata, idata, up, V[i], lo, hi)
+        for j in range(m):
+            U[i, j] = u[j]
         ok[i] = good
     return U, ok

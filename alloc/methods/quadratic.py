@@ -22,7 +22,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from .._active_set import lexico_ls, lexico_ls_batch
+from .._active_set import lexico_packed, lexico_packed_batch, pack
 from ..exceptions import OptionError, SolverError
 from ..problem import Problem
 from ..registry import FloatArray, Method
@@ -182,18 +182,26 @@ class LexicoLS:
         self.B = np.ascontiguousarray(p.B)
         # start of every call: the Eq 1.23 weighted pseudo-inverse in the same Wu metric
         self.P0 = np.ascontiguousarray(distribution_matrix(p if Wu is p.Wu else p.replace(Wu=Wu)))
-        self.maxit = int(50 + 10 * (p.m + p.k))
+        self._fdata, self._idata = pack(self.A, self.T, self.perm, self.starts, self.gammas, self.final,
+                                        self.Wu, self.diag, self.up, self.B, self.P0, 50 + 10 * (p.m + p.k))
+
+    @property
+    def maxit(self) -> int:
+        """Iteration cap per level."""
+        return int(self._idata[6])
+
+    @maxit.setter
+    def maxit(self, value: int) -> None:
+        self._idata[6] = int(value)
 
     def solve(self, v: FloatArray, lo: FloatArray, hi: FloatArray, up: FloatArray | None = None) -> tuple[FloatArray, int]:
-        u, it, ok = lexico_ls(self.A, self.T, self.perm, self.starts, self.gammas, self.final, self.Wu,
-                              self.diag, self.up if up is None else up, self.B, self.P0, v, lo, hi, self.maxit)
+        u, it, ok = lexico_packed(self._fdata, self._idata, self.up if up is None else up, v, lo, hi)
         if not ok:
             raise SolverError(f"active set: iteration cap ({self.maxit} per level) reached")
         return u, it
 
     def solve_batch(self, V: FloatArray, lo: FloatArray, hi: FloatArray) -> FloatArray:
-        U, ok = lexico_ls_batch(self.A, self.T, self.perm, self.starts, self.gammas, self.final, self.Wu,
-                                self.diag, self.up, self.B, self.P0, np.ascontiguousarray(V), lo, hi, self.maxit)
+        U, ok = lexico_packed_batch(self._fdata, self._idata, self.up, np.ascontiguousarray(V), lo, hi)
         U[~ok] = np.nan  # the allocator re-runs those rows one by one (fallback per row)
         return U
 
