@@ -276,9 +276,12 @@ def _level(A, b, r0, r1, gam, Wu, diag, up, lo, hi, u, free, pinned, maxit,
                 scale[j] += abs(A[r0 + i, j]) * mag
         if gam2 > 0.0:
             for j in range(m):
-                acc = 0.0
-                for s in range(m):
-                    acc += abs(Wu[j, s]) * (abs(u[s]) + abs(up[s]))
+                if diag:
+                    acc = abs(Wu[j, j]) * (abs(u[j]) + abs(up[j]))
+                else:
+                    acc = 0.0
+                    for s in range(m):
+                        acc += abs(Wu[j, s]) * (abs(u[s]) + abs(up[s]))
                 scale[j] += gam2 * acc
         if nc > 0:
             # lam = -Vc diag(1/sc) Uc' L^-1 g_F
