@@ -131,6 +131,22 @@ def _level(A, b, r0, r1, gam, Wu, diag, up, lo, hi, u, free, pinned, maxit,
     last = -1
     gam2 = gam * gam
     for it in range(maxit):
+        # --- residual e = b - A u of this level's rows.  A pure least-squares level whose
+        # residual is zero to round-off is at its global minimum (the objective is >= 0):
+        # done, with zero multipliers (the common attainable case from the Eq 1.23 start).
+        zero = nl > 0 and gam2 == 0.0
+        for i in range(nl):
+            acc = b[r0 + i]
+            mag = abs(b[r0 + i])
+            for j in range(m):
+                t = A[r0 + i, j] * u[j]
+                acc -= t
+                mag += abs(t)
+            e[i] = acc
+            if abs(acc) > MU_EPS * mag:
+                zero = False
+        if zero:
+            return it + 1
         nf = 0
         for j in range(m):
             if free[j]:
@@ -150,12 +166,7 @@ def _level(A, b, r0, r1, gam, Wu, diag, up, lo, hi, u, free, pinned, maxit,
                         L[q, q] = np.sqrt(max(acc, 1e-300))
                     else:
                         L[q, s] = acc / L[s, s]
-        # --- residual e = b - A u (this level's rows) and the preference gradient Wu (u - up)
-        for i in range(nl):
-            acc = b[r0 + i]
-            for j in range(m):
-                acc -= A[r0 + i, j] * u[j]
-            e[i] = acc
+        # --- the preference gradient Wu (u - up)
         for j in range(m):
             tmp[j] = u[j] - up[j]
         for q in range(nf):

@@ -13,7 +13,11 @@
     approaches ``qp`` as ``gamma -> 0``; for attainable demands ``B u`` differs from ``v``
     by O(gamma^2), so tiny gammas are needed for an ``exact`` status.
 
-Both run on DAQP models built once (``backend="daqp"``), or on any qpsolvers backend.
+Both run by default on the compiled lexicographic least-squares active set of
+:mod:`alloc._active_set` (``backend="active_set"``: Härkegård's sequential least squares,
+KKT-exact, one compiled call per allocation, a compiled loop for ``allocate_batch``).
+``backend="daqp"`` (DAQP models built once; stage 1 on ``B'WvB`` plus a ridge, stage 2 in
+a band) or any qpsolvers name keep the previous formulation as cross-checks.
 """
 
 from __future__ import annotations
