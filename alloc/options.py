@@ -29,7 +29,7 @@ import numpy as np
 
 from .exceptions import OptionError
 
-__all__ = ["Option", "real", "integer", "flag", "choice", "matrix", "levels", "groups", "validate"]
+__all__ = ["Option", "real", "integer", "flag", "choice", "matrix", "weight", "levels", "groups", "validate"]
 
 
 @dataclass(frozen=True)
@@ -154,6 +154,28 @@ def matrix(doc: str) -> Option:
         return value
 
     return Option("matrix", None, doc, check, "finite 2-D array")
+
+
+def weight(doc: str) -> Option:
+    """A finite weight given as a scalar, a vector (a diagonal) or a matrix (default ``None``);
+    its size is the method's to check."""
+
+    def check(value: Any) -> Any:
+        if value is None:
+            return None
+        if isinstance(value, (bool, str)):
+            raise ValueError("must be a number, vector or matrix")
+        try:
+            arr = np.asarray(value, dtype=float)
+        except (TypeError, ValueError, OverflowError):
+            raise ValueError("must be a number, vector or matrix") from None
+        if arr.ndim > 2:
+            raise ValueError(f"must be a scalar, vector or matrix, got {arr.ndim}-D")
+        if not np.isfinite(arr).all():
+            raise ValueError("must have finite entries")
+        return value
+
+    return Option("weight", None, doc, check, "finite scalar, vector or matrix")
 
 
 def _is_list(value: Any) -> bool:

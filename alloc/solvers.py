@@ -124,6 +124,9 @@ class _Daqp:
         if singular:
             settings["eps_prox"] = 1e-6
         self._model.settings = settings
+        self._settings = settings
+        self._daqp = daqp
+        self._cold = H is None
         self._base_sense = self._sense.copy()
         self._last_lb = self._last_ub = None
         self._bupper_src = np.array(ub, dtype=float)
@@ -155,7 +158,20 @@ class _Daqp:
             upd["bupper"] = self._bupper
         if A is not None:
             upd["A"] = A if A.flags.c_contiguous and A.flags.writeable else np.array(A, dtype=float, order="C")
-        if upd:
+        if self._cold:
+            # LPs (proximal-point iterations): DAQP keeps iterate state across solves, so a
+            # degenerate LP's vertex would depend on the call history; a new workspace per
+            # call makes the answer a function of the data alone.
+            if "f" in upd:
+                self._f = np.array(upd["f"], dtype=float)
+            if A is not None:
+                self._A = np.array(A, dtype=float, order="C")
+            self._model = self._daqp.Model()
+            flag, _ = self._model.setup(self._H, self._f, self._A, self._bupper, self._blower, self._base_sense)
+            if flag < 0:
+                raise SolverError(f"daqp setup failed with exit flag {flag}")
+            self._model.settings = self._settings
+        elif upd:
             upd["sense"] = self._base_sense  # cold start: no stale active set across updates
             flag = self._model.update(**upd)
             if flag < 0:
@@ -238,6 +254,7 @@ class _Highs:
             for r, c in changed:
                 h.changeCoeff(int(r), int(c), float(A[r, c]))
             self._A = np.array(A, dtype=float)
+        h.clearSolver()  # cold start: a kept basis makes degenerate LPs' answers depend on call history
         h.run()
         status = h.getModelStatus()
         if status != self._hs.HighsModelStatus.kOptimal:

@@ -1,11 +1,18 @@
-"""Allocation latency on ICE (3 x 11), warm, through the make_allocator path.
+"""Allocation latency through the ``make_allocator`` path, as ratios to a floor.
 
-Prints, per method, the median and p99 microseconds per call and the ratio to a floor
-measured in the same run (a precomputed 11 x 3 numpy matrix-vector product), with and
-without rate limits; then allocate_batch throughput (allocations per second) for N
-demands.  Usage::
+One run prints, for ICE (3 x 11) and a 6 x 12 tilt-rotor hexacopter, on two demand
+sequences (independent random demands, half of them unattainable; and a sum of sines
+sampled at 2 kHz, the way a flight controller calls), each registry method's median and
+p99 microseconds per call and the ratio of the median to a floor measured next to it (a
+precomputed m x k numpy matrix-vector product).  Reference lines: DAQP's own Python API
+(``daqp.Model``, built once, linear term updated and solved per call) on the same
+``wls`` problem, cold and keeping its active set.  Then ``allocate_batch`` against a Python
+loop of single calls, a scaling table over m = 8..64 for k = 3 and 6, and the goals of
+issue 11 marked met or not.  Usage::
 
-    python -m benchmarks.bench_alloc [--calls 5000] [--batch 100000] [--json out.json]
+    python -m benchmarks.bench_alloc [--calls 3000] [--json out.json] [--quick]
+
+The machine these numbers come from is shared and noisy: compare ratios within one run.
 """
 
 from __future__ import annotations
@@ -19,79 +26,221 @@ import time
 import numpy as np
 
 import alloc
+from alloc.testing import random_problem
 from alloc.vehicles import ice
 
+SINES_HZ = 2000.0
 
-def timed(fn, V, n: int) -> np.ndarray:
-    ts = np.empty(n)
+
+def hexacopter() -> alloc.Problem:
+    """6 x 12 tilt-rotor hexacopter: six thrusts (0..1) and six tangential tilt forces (+-0.3).
+
+    Rows Fx, Fy, Fz, Mx, My, Mz; arm 0.25, yaw-moment coefficient 0.02 alternating."""
+    arm, kappa = 0.25, 0.02
+    B = np.zeros((6, 12))
+    for i in range(6):
+        th = np.pi / 3 * i
+        x, y = arm * np.cos(th), arm * np.sin(th)
+        spin = 1.0 if i % 2 == 0 else -1.0
+        B[:, i] = [0.0, 0.0, -1.0, -y, x, spin * kappa]  # thrust along -z
+        tx, ty = -np.sin(th), np.cos(th)
+        B[:, 6 + i] = [tx, ty, 0.0, 0.0, 0.0, arm]  # tangential force: yaw moment arm * F
+    umin = np.r_[np.zeros(6), -0.3 * np.ones(6)]
+    umax = np.r_[np.ones(6), 0.3 * np.ones(6)]
+    return alloc.Problem(B, umin, umax, up=np.r_[0.5 * np.ones(6), np.zeros(6)],
+                         rate_min=-np.full(12, 20.0), rate_max=np.full(12, 20.0))
+
+
+def random_sequence(p: alloc.Problem, n: int, seed: int = 0) -> np.ndarray:
+    """Half attainable (B u, u admissible), half scaled 2.5x past the attainable set."""
+    rng = np.random.default_rng(seed)
+    V = rng.uniform(p.umin, p.umax, size=(n, p.m)) @ p.B.T
+    V[n // 2:] *= 2.5
+    rng.shuffle(V)
+    return V
+
+
+def sines_sequence(p: alloc.Problem, n: int, seed: int = 0) -> np.ndarray:
+    """Sum of three sines per axis (0.3-3 Hz) sampled at 2 kHz, peaking ~1.2x the AMS extent."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) / SINES_HZ
+    reach = np.abs(p.B) @ (p.umax - p.umin) / 2
+    centre = p.B @ (p.umax + p.umin) / 2
+    V = np.zeros((n, p.k))
+    for i in range(p.k):
+        f = rng.uniform(0.3, 3.0, 3)
+        ph = rng.uniform(0, 2 * np.pi, 3)
+        V[:, i] = centre[i] + 0.4 * reach[i] * np.sin(2 * np.pi * np.outer(t, f) + ph).sum(axis=1)
+    return V
+
+
+def timed(fn, V: np.ndarray) -> np.ndarray:
+    ts = np.empty(len(V))
     clock = time.perf_counter_ns
-    for i in range(n):
-        v = V[i % len(V)]
+    for i in range(len(V)):
+        v = V[i]
         t0 = clock()
         fn(v)
         ts[i] = clock() - t0
     return ts / 1e3
 
 
-def demands(p: alloc.Problem, n: int, seed: int = 0) -> np.ndarray:
-    """Half attainable (B u, u admissible), half scaled past the AMS, as flight sees both."""
-    rng = np.random.default_rng(seed)
-    V = rng.uniform(p.umin, p.umax, size=(n, p.m)) @ p.B.T
-    V[n // 2:] *= 2.5
-    return V
+def floor_of(p: alloc.Problem, V: np.ndarray) -> float:
+    P = np.ascontiguousarray(np.linalg.pinv(p.B))
+    return float(np.median(timed(lambda v: P @ v, V)))
+
+
+def daqp_reference(p: alloc.Problem, gamma: float = 1e-4, keep_active_set: bool = False):
+    """DAQP's own Python API on the ``wls`` problem: one Model, f updated per call."""
+    import daqp
+
+    H = p.B.T @ p.Wv @ p.B + gamma**2 * p.Wu
+    BW = p.B.T @ p.Wv
+    f0 = -gamma**2 * (p.Wu @ p.up)
+    model = daqp.Model()
+    A = np.zeros((0, p.m))
+    bu, bl = np.array(p.umax, dtype=float), np.array(p.umin, dtype=float)
+    sense = np.zeros(p.m, dtype=np.int32)
+    model.setup(np.array(H), f0.copy(), A, bu, bl, sense)
+
+    def call(v):
+        if keep_active_set:
+            model.update(f=f0 - BW @ v)
+        else:
+            model.update(f=f0 - BW @ v, sense=sense)
+        return model.solve()[0]
+
+    return call
+
+
+def latency_rows(p: alloc.Problem, V: np.ndarray, methods: list[tuple[str, dict]], warm: int = 50) -> list[dict]:
+    rows = []
+    for label, (name, opts) in methods:
+        f = alloc.make_allocator(p, name, **opts)
+        for v in V[:warm]:
+            f(v)
+        fl = floor_of(p, V)
+        ts = timed(f, V)
+        fb = sum(f(v).status is alloc.Status.FALLBACK for v in V[:500])
+        rows.append(dict(method=label, median_us=float(np.median(ts)), p99_us=float(np.percentile(ts, 99)),
+                         floor_us=fl, ratio=float(np.median(ts)) / fl, fallbacks_per_500=int(fb)))
+    for label, keep in (("daqp.Model wls (reference), cold", False), ("daqp.Model wls (reference), warm", True)):
+        call = daqp_reference(p, keep_active_set=keep)
+        for v in V[:warm]:
+            call(v)
+        fl = floor_of(p, V)
+        ts = timed(call, V)
+        rows.append(dict(method=label, median_us=float(np.median(ts)), p99_us=float(np.percentile(ts, 99)),
+                         floor_us=fl, ratio=float(np.median(ts)) / fl, fallbacks_per_500=0))
+    return rows
+
+
+def print_rows(title: str, rows: list[dict]) -> None:
+    print(f"\n## {title}")
+    print(f"| {'method':<34} | {'median us':>9} | {'p99 us':>8} | {'floor us':>8} | {'x floor':>7} | {'p99/med':>7} | fallbacks/500 |")
+    print(f"|{'-' * 36}|{'-' * 11}|{'-' * 10}|{'-' * 10}|{'-' * 9}|{'-' * 9}|---------------|")
+    for r in rows:
+        print(f"| {r['method']:<34} | {r['median_us']:>9.2f} | {r['p99_us']:>8.1f} | {r['floor_us']:>8.2f} | "
+              f"{r['ratio']:>7.1f} | {r['p99_us'] / r['median_us']:>7.1f} | {r['fallbacks_per_500']:>13} |")
+
+
+def batch_rows(p: alloc.Problem, n: int) -> list[dict]:
+    V = random_sequence(p, n, seed=3)
+    out = []
+    for name in ("qp", "wls", "pinv", "da"):
+        f = alloc.make_allocator(p, name)
+        f.batch(V[:10])
+        t0 = time.perf_counter()
+        f.batch(V)
+        tb = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        for v in V:
+            f(v)
+        tl = time.perf_counter() - t0
+        out.append(dict(method=name, n=n, batch_s=tb, loop_s=tl, speedup=tl / tb))
+    return out
+
+
+def scaling_rows(calls: int) -> list[dict]:
+    rng = np.random.default_rng(64)
+    out = []
+    for k in (3, 6):
+        for m in (8, 16, 32, 64):
+            p = random_problem(rng, k, m, "general", rates=False)
+            p = p.replace(Wv=np.diagonal(p.Wv))
+            V = random_sequence(p, calls, seed=m)
+            fl = floor_of(p, V)
+            row = dict(k=k, m=m, floor_us=fl)
+            for name in ("qp", "wls", "lp", "da"):
+                f = alloc.make_allocator(p, name)
+                for v in V[:10]:
+                    f(v)
+                row[name] = float(np.median(timed(f, V)))
+            out.append(row)
+    return out
 
 
 def main(argv: list[str] | None = None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--calls", type=int, default=5000, help="timed calls per method")
-    ap.add_argument("--batch", type=int, default=100_000, help="N for allocate_batch throughput")
+    ap.add_argument("--calls", type=int, default=3000, help="timed calls per method and sequence")
+    ap.add_argument("--batch", type=int, default=20000, help="N for allocate_batch vs a loop")
+    ap.add_argument("--scaling-calls", type=int, default=300, help="calls per cell of the scaling table")
+    ap.add_argument("--quick", action="store_true", help="fewer calls (a smoke run)")
     ap.add_argument("--json", help="write the tables as JSON here")
     args = ap.parse_args(argv)
+    if args.quick:
+        args.calls, args.batch, args.scaling_calls = 300, 2000, 50
 
-    p = ice()
-    V = demands(p, 2000)
-    P = np.ascontiguousarray(alloc.make_allocator(p, "pinv").impl.P)
-    floor = timed(lambda v: P @ v, V, args.calls)
-    f_med = float(np.median(floor))
-    print(f"# ICE 3 x 11, {args.calls} warm calls per method, {platform.processor() or platform.machine()}, "
-          f"{os.cpu_count()} cores, numpy {np.__version__}")
-    print(f"floor (P @ v, 11 x 3): median {f_med:.2f} us, p99 {np.percentile(floor, 99):.2f} us\n")
-    print("(the floor is re-measured just before each method: this machine drifts between quiet")
-    print(" and noisy states within a run, and a ratio to a distant floor would mislead)\n")
-    print(f"{'method':<11} {'median us':>10} {'p99 us':>9} {'floor us':>9} {'x floor':>8} | "
-          f"{'rate-limited median':>20} {'p99':>8} | fallbacks")
-    rows = []
-    u_prev = np.zeros(p.m)
-    for name in alloc.methods():
-        allocate = alloc.make_allocator(p, name)
-        for v in V[:50]:
-            allocate(v)
-            allocate(v, u_prev=u_prev, dt=0.0005)
-        near = float(np.median(timed(lambda v: P @ v, V, args.calls)))
-        plain = timed(allocate, V, args.calls)
-        rated = timed(lambda v: allocate(v, u_prev=u_prev, dt=0.0005), V, args.calls)
-        fallbacks = sum(allocate(v).status is alloc.Status.FALLBACK for v in V[:1000])
-        row = dict(method=name, median_us=float(np.median(plain)), p99_us=float(np.percentile(plain, 99)),
-                   floor_us=near, ratio=float(np.median(plain)) / near, rate_median_us=float(np.median(rated)),
-                   rate_p99_us=float(np.percentile(rated, 99)), fallbacks_per_1000=int(fallbacks))
-        rows.append(row)
-        print(f"{name:<11} {row['median_us']:>10.1f} {row['p99_us']:>9.1f} {near:>9.2f} {row['ratio']:>8.1f} | "
-              f"{row['rate_median_us']:>20.1f} {row['rate_p99_us']:>8.1f} | {fallbacks}")
+    print(f"# bench_alloc: {args.calls} warm calls per method and sequence; "
+          f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, numpy {np.__version__}, "
+          f"load average {os.getloadavg()[0]:.1f} (a shared, noisy machine: compare ratios within this run)")
+    methods = [(m, (m, {})) for m in alloc.methods()]
+    methods += [("qp backend=daqp", ("qp", {"backend": "daqp"})), ("wls backend=daqp", ("wls", {"backend": "daqp"})),
+                ("lp backend=highs", ("lp", {"backend": "highs"}))]
+    out: dict = {"latency": {}, "goals": []}
+    for pname, p in (("ICE 3x11", ice()), ("hexacopter 6x12", hexacopter())):
+        for sname, maker in (("random", random_sequence), ("sines 2 kHz", sines_sequence)):
+            rows = latency_rows(p, maker(p, args.calls), methods)
+            out["latency"][f"{pname}, {sname}"] = rows
+            print_rows(f"{pname}, {sname}", rows)
 
-    print(f"\nallocate_batch, N = {args.batch}")
-    print(f"{'method':<11} {'seconds':>8} {'allocations/s':>14}")
-    VB = demands(p, args.batch, seed=1)
-    batch_rows = []
-    for name in ("pinv", "pinv_clip", "pinv_scale", "ganging", "da", "da_facet"):
-        if name not in alloc.methods():
-            continue
-        n = args.batch
-        t0 = time.perf_counter()
-        alloc.allocate_batch(p, VB[:n], name)
-        dt = time.perf_counter() - t0
-        batch_rows.append(dict(method=name, n=n, seconds=dt, per_second=n / dt))
-        print(f"{name:<11} {dt:>8.3f} {n / dt:>14,.0f}" + ("  (N = %d, one call each)" % n if n != args.batch else ""))
-    out = dict(floor_median_us=f_med, calls=rows, batch=batch_rows)
+    print(f"\n## allocate_batch vs a Python loop of single calls (ICE, N = {args.batch})")
+    brows = batch_rows(ice(), args.batch)
+    out["batch"] = brows
+    print("| method | batch s | loop s | speed-up |\n|---|---|---|---|")
+    for r in brows:
+        print(f"| {r['method']} | {r['batch_s']:.3f} | {r['loop_s']:.3f} | {r['speedup']:.1f}x |")
+
+    print("\n## scaling: median us per call, random general problems (no rate limits)")
+    srows = scaling_rows(args.scaling_calls)
+    out["scaling"] = srows
+    print("| k | m | floor us | qp | wls | lp | da |\n|---|---|---|---|---|---|---|")
+    for r in srows:
+        print(f"| {r['k']} | {r['m']} | {r['floor_us']:.2f} | {r['qp']:.1f} | {r['wls']:.1f} | {r['lp']:.1f} | {r['da']:.1f} |")
+
+    ice_r = {r["method"]: r for r in out["latency"]["ICE 3x11, random"]}
+    ice_s = {r["method"]: r for r in out["latency"]["ICE 3x11, sines 2 kHz"]}
+    bat = {r["method"]: r for r in brows}
+    s64 = [r for r in srows if r["k"] == 3 and r["m"] == 64]
+    goals = [
+        ("pinv <= 2x floor (ICE random)", ice_r["pinv"]["ratio"], 2.0),
+        ("pinv_scale <= 3x floor", ice_r["pinv_scale"]["ratio"], 3.0),
+        ("qp <= 6x floor", ice_r["qp"]["ratio"], 6.0),
+        ("wls <= 5x floor", ice_r["wls"]["ratio"], 5.0),
+        ("qp p99 <= 3x median", ice_r["qp"]["p99_us"] / ice_r["qp"]["median_us"], 3.0),
+        ("wls p99 <= 3x median", ice_r["wls"]["p99_us"] / ice_r["wls"]["median_us"], 3.0),
+        ("qp <= 4x floor (sines)", ice_s["qp"]["ratio"], 4.0),
+        ("wls <= 4x floor (sines)", ice_s["wls"]["ratio"], 4.0),
+        ("lp <= 30 us median (ICE)", ice_r["lp"]["median_us"], 30.0),
+        ("lp <= 300 us at 3x64", s64[0]["lp"] if s64 else float("nan"), 300.0),
+        ("allocate_batch qp >= 3x loop", 1.0 / bat["qp"]["speedup"], 1.0 / 3.0),
+        ("allocate_batch wls >= 3x loop", 1.0 / bat["wls"]["speedup"], 1.0 / 3.0),
+    ]
+    print("\n## goals (issue 11)\n| goal | measured | met |\n|---|---|---|")
+    for name, val, lim in goals:
+        shown = f"{1.0 / val:.1f}x" if "batch" in name else f"{val:.2f}"
+        print(f"| {name} | {shown} | {'met' if val <= lim else 'NOT met'} |")
+        out["goals"].append(dict(goal=name, value=val, limit=lim, met=bool(val <= lim)))
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(out, fh, indent=2)

@@ -59,7 +59,7 @@ def test_method_info_lists_json_specs(method):
         ("pinv", {"incremental": "yes"}, "incremental: must be true or false, got 'yes'"),
         ("wls", {"gamma": 0.0}, "gamma: must be in (0, inf), got 0.0"),
         ("wls", {"gamma": "big"}, "gamma: must be a finite number, got 'big'"),
-        ("qp", {"backend": "nope"}, "backend: must be one of daqp"),
+        ("qp", {"backend": "nope"}, "backend: must be one of active_set, daqp"),
         ("lp", {"backend": "osqp"}, "backend: must be one of daqp, highs, got 'osqp'"),
         ("da", {"backend": "simplex"}, "backend: must be one of auto, facet, daqp, highs, got 'simplex'"),
         ("da_bisect", {"angles": 0}, "angles: must be >= 1, got 0"),

@@ -59,10 +59,22 @@ def test_solver_failure_returns_admissible_fallback(method, failure, monkeypatch
 def test_daqp_iteration_cap_yields_fallback_not_exception():
     """A real backend hitting its iteration cap: DAQP limited to one iteration."""
     p = ice()
-    allocate = alloc.make_allocator(p, "wls")
-    allocate.impl._model._model.settings = {"iter_limit": 1}
+    allocate = alloc.make_allocator(p, "wls", backend="daqp")
+    allocate.impl._impl._model._model.settings = {"iter_limit": 1}
     statuses = {allocate(v).status for v in np.random.default_rng(0).normal(size=(20, 3)) * [30, 100, 5]}
     assert alloc.Status.FALLBACK in statuses
+
+
+@pytest.mark.parametrize("method", ["qp", "wls"])
+def test_active_set_iteration_cap_yields_fallback_not_exception(method):
+    """The compiled active set limited to one iteration per level reports a fallback."""
+    p = ice()
+    allocate = alloc.make_allocator(p, method)
+    allocate.impl._impl.maxit = 1
+    V = np.random.default_rng(0).normal(size=(20, 3)) * [30, 100, 5]
+    results = [allocate(v) for v in V]
+    assert alloc.Status.FALLBACK in {r.status for r in results}
+    assert all("iteration cap" in r.message for r in results if r.fallback)
 
 
 finite = st.floats(-50, 50, allow_nan=False, allow_infinity=False)
@@ -88,3 +100,45 @@ def test_property_admissible_and_exact_iff_met(k, m, data, method):
     if r.status is not alloc.Status.FALLBACK:
         met = np.abs(B @ r.u - v).max() <= alloc.EXACT_RTOL * max(1.0, np.abs(v).max())
         assert (r.status is alloc.Status.EXACT) == met
+
+
+def priority_levels(k: int, levels: int) -> list[int] | None:
+    """``levels`` distinct priority levels over ``k`` axes (axis 0 most important)."""
+    if k < levels:
+        return None
+    return [levels - min(i, levels - 1) for i in range(k)]
+
+
+@pytest.mark.parametrize("levels", [1, 2, 3])
+def test_qp_priorities_fallback_rate_on_the_shared_random_suite(levels):
+    """The shared random suite (test_methods' generator: every degenerate kind, half the
+    calls rate-limited) with 1, 2 or 3 priority levels: no more than 0.1 % fallbacks, and
+    the top level meets what it alone can (its error no larger than a plain qp on its rows)."""
+    from alloc.testing import KINDS, random_demands, random_problem
+
+    rng = np.random.default_rng(12345)
+    cases = fallbacks = 0
+    for i in range(300):
+        k = int(rng.integers(levels, 7))
+        m = int(rng.integers(k + 1, 31))
+        p = random_problem(rng, k, m, KINDS[i % len(KINDS)])
+        pr = priority_levels(k, levels)
+        f = alloc.make_allocator(p, "qp", priorities=pr)
+        top = np.flatnonzero(np.asarray(pr) == max(pr)) if pr else np.arange(k)
+        alone = alloc.make_allocator(p.replace(B=p.B[top], Wv=p.Wv[np.ix_(top, top)], axes=None), "qp")
+        for j, v in enumerate(random_demands(rng, p, 12)):
+            kw = {}
+            if j % 2:
+                kw = dict(u_prev=rng.uniform(p.umin, p.umax), dt=float(rng.choice([0.0005, 0.01, 0.1])))
+            r = f(v, **kw)
+            cases += 1
+            if r.status is alloc.Status.FALLBACK:
+                fallbacks += 1
+                continue
+            ref = alone(v[top], **kw)
+            S = np.linalg.cholesky(p.Wv[np.ix_(top, top)]).T
+            e_top = np.linalg.norm(S @ r.unallocated[top])
+            e_ref = np.linalg.norm(S @ ref.unallocated)
+            assert e_top <= e_ref + 1e-9 * max(1.0, np.abs(v).max())
+    assert cases >= 3000
+    assert fallbacks <= 0.001 * cases, f"{fallbacks} fallbacks in {cases} cases"

@@ -14,8 +14,8 @@ the demanded direction (status ``unattainable``).
 
 Backends: the exact facet search of :mod:`alloc.ams` (``da_facet``: precomputed facet
 inverses, compiled) and this module's LP on a persistent DAQP (or HiGHS) model, polished
-on the facet it finds.  ``backend="auto"`` picks the facet search while the attainable set
-is small enough to enumerate (``C(m, k-1) <= FACET_LIMIT``) and the LP beyond.  With a rank-deficient ``B`` the ray
+on the facet it finds.  ``backend="auto"`` picks the backend a measured cost model says is
+cheaper per call (:func:`facet_is_cheaper`; never the facet search beyond ``FACET_LIMIT``).  With a rank-deficient ``B`` the ray
 follows the part of ``d`` in the range of ``B``; the rest is reported as unallocated.  When the ray leaves the AMS through an
 edge or a degenerate facet, ``u*`` is not unique (the moment is).  The facet-search
 versions (``da_facet``, ``da_bisect``) live in :mod:`alloc.ams`.
@@ -43,19 +43,30 @@ from ._common import check_backend, row_basis
 FACET_LIMIT = 20_000
 
 
+def facet_is_cheaper(m: int, k: int) -> bool:
+    """The measured per-call cost model of ``backend="auto"``.
+
+    Linear fits to ``benchmarks/bench_da_cost.py`` (median us per call, k = 1..6,
+    m = 8..64): facet search ``-1.7 + 0.078 C(m, k-1)``, LP ``31 + 4.2 m - 6.6 k``.  On
+    every measured cell the model picks the cheaper backend (k = 6, m = 16: LP).
+    """
+    facets = math.comb(m, max(k - 1, 0))
+    return facets <= FACET_LIMIT and -1.7 + 0.078 * facets <= 31.1 + 4.23 * m - 6.56 * k
+
+
 @register("da", supports_batch=True)
 class DirectAllocation(Method):
     equation = "Eqs 1.15-1.17"
     summary = "largest admissible moment along v (AMS boundary), scaled back when attainable"
-    options = {"backend": choice("auto", f"'auto': facet search when C(m, k-1) <= {FACET_LIMIT:,}, else LP; "
-                                         "'facet'; or an LP solver", lambda: ["auto", "facet", *backends(lp=True)])}
+    options = {"backend": choice("auto", "'auto': the cheaper of facet search and LP by a measured cost "
+                                         "model; 'facet'; or an LP solver", lambda: ["auto", "facet", *backends(lp=True)])}
 
     @classmethod
     def facet_subsets(cls, problem: Problem, options: dict[str, Any]) -> int:
         """Subsets the build enumerates: only with ``backend="facet"`` or ``"auto"`` under the limit."""
         backend = options.get("backend", "auto")
         n = math.comb(int((problem.umax > problem.umin).sum()), max(problem.k - 1, 0))
-        if backend == "facet" or (backend == "auto" and math.comb(problem.m, max(problem.k - 1, 0)) <= FACET_LIMIT):
+        if backend == "facet" or (backend == "auto" and facet_is_cheaper(problem.m, problem.k)):
             return n
         return 0
 
@@ -63,7 +74,7 @@ class DirectAllocation(Method):
         super().__init__(problem)
         self._facet = None
         if backend in ("auto", "facet"):
-            if backend == "facet" or math.comb(problem.m, max(problem.k - 1, 0)) <= FACET_LIMIT:
+            if backend == "facet" or facet_is_cheaper(problem.m, problem.k):
                 from ..ams.search import FacetSearch  # the compiled exact facet search (alloc.ams)
 
                 self._facet = FacetSearch(problem)

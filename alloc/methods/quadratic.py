@@ -13,7 +13,11 @@
     approaches ``qp`` as ``gamma -> 0``; for attainable demands ``B u`` differs from ``v``
     by O(gamma^2), so tiny gammas are needed for an ``exact`` status.
 
-Both run on DAQP models built once (``backend="daqp"``), or on any qpsolvers backend.
+Both run by default on the compiled lexicographic least-squares active set of
+:mod:`alloc._active_set` (``backend="active_set"``: Härkegård's sequential least squares,
+KKT-exact, one compiled call per allocation, a compiled loop for ``allocate_batch``).
+``backend="daqp"`` (DAQP models built once; stage 1 on ``B'WvB`` plus a ridge, stage 2 in
+a band) or any qpsolvers name keep the previous formulation as cross-checks.
 """
 
 from __future__ import annotations
@@ -22,7 +26,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ..exceptions import SolverError
+from .._active_set import lexico_packed, lexico_packed_batch, pack
+from ..exceptions import OptionError, SolverError
 from ..options import choice, levels, real
 from ..problem import Problem
 from ..registry import FloatArray, Method, register
@@ -30,14 +35,14 @@ from ..result import exact_tolerance
 from ..solvers import backends, make_backend
 from ._common import KEEP_RTOL, check_backend, row_basis
 from .cascade import check_priorities
+from .pseudo_inverse import distribution_matrix
 
 STAGE1_RIDGE = 1e-10
 
 _BACKEND = choice("daqp", "solver backend: 'daqp' or a qpsolvers name such as 'osqp', 'clarabel'", backends)
 
 
-@register("qp", supports_priorities=True)
-class TwoStageQP(Method):
+class _SolverTwoStageQP(Method):
     equation = "Eqs 1.20-1.21"
     summary = "stage 1 min moment error (Wv), stage 2 min (u-up)'Wu(u-up) at that moment"
     options = {"backend": _BACKEND, "priorities": levels("priority level per axis; larger levels are met first")}
@@ -109,8 +114,7 @@ class TwoStageQP(Method):
         return u, it1 + it2
 
 
-@register("wls")
-class WeightedLeastSquares(Method):
+class _SolverWLS(Method):
     equation = "Eqs 1.20-1.21 (single-stage weighted form)"
     summary = "min (Bu-v)'Wv(Bu-v) + gamma^2 (u-up)'Wu(u-up) over the limits"
     options = {"backend": _BACKEND, "gamma": real(1e-4, "weight of the preference term", low=0.0, low_open=True)}
@@ -131,3 +135,140 @@ class WeightedLeastSquares(Method):
 
     def solve(self, v, lo, hi, u_prev):
         return self._model.solve(f=self._f0 - self._BWv @ v, lb=lo, ub=hi)
+
+
+# --------------------------------------------------------------------------------------
+# The compiled sequential least-squares path (default backend "active_set").
+
+ACTIVE_SET = "active_set"
+
+
+def _is_diagonal(W: FloatArray) -> bool:
+    return not np.count_nonzero(W - np.diag(np.diagonal(W)))
+
+
+def _upper_sqrt(W: FloatArray) -> FloatArray:
+    """``S`` with ``S' S = W`` (``S = L'`` for the Cholesky factor ``W = L L'``)."""
+    if _is_diagonal(W):
+        return np.diag(np.sqrt(np.diagonal(W)))
+    return np.linalg.cholesky(W).T
+
+
+class LexicoLS:
+    """Data of the compiled lexicographic least-squares solver (:mod:`alloc._active_set`).
+
+    Level ``l`` is ``min ||S_l (B_l u - v_l)||^2 + gammas[l]^2 (u - up)' Wu (u - up)`` with
+    ``S_l' S_l = Wv[rows_l, rows_l]``, the earlier levels' moments held; ``final`` adds
+    ``min (u - up)' Wu (u - up)`` with every moment held (stage 2, Eq 1.21).
+    """
+
+    def __init__(self, problem: Problem, groups: Sequence[np.ndarray], gammas: Sequence[float],
+                 final: bool, Wu: FloatArray | None = None) -> None:
+        p = problem
+        perm = np.concatenate([np.asarray(g, dtype=np.int64) for g in groups])
+        T = np.zeros((p.k, p.k))
+        starts = [0]
+        for rows in groups:
+            a = starts[-1]
+            n = len(rows)
+            T[a:a + n, a:a + n] = _upper_sqrt(p.Wv[np.ix_(rows, rows)])
+            starts.append(a + n)
+        self.perm = perm
+        self.T = np.ascontiguousarray(T)
+        self.A = np.ascontiguousarray(T @ p.B[perm])  # rows S_l B_l, level by level
+        self.starts = np.array(starts, dtype=np.int64)
+        self.gammas = np.array(gammas, dtype=float)
+        self.final = bool(final)
+        Wu = p.Wu if Wu is None else Wu
+        self.Wu = np.ascontiguousarray(Wu, dtype=float)
+        self.diag = _is_diagonal(self.Wu)
+        self.up = np.ascontiguousarray(p.up, dtype=float)
+        self.B = np.ascontiguousarray(p.B)
+        # start of every call: the Eq 1.23 weighted pseudo-inverse in the same Wu metric
+        self.P0 = np.ascontiguousarray(distribution_matrix(p if Wu is p.Wu else p.replace(Wu=Wu)))
+        self._fdata, self._idata = pack(self.A, self.T, self.perm, self.starts, self.gammas, self.final,
+                                        self.Wu, self.diag, self.up, self.B, self.P0, 50 + 10 * (p.m + p.k))
+
+    @property
+    def maxit(self) -> int:
+        """Iteration cap per level."""
+        return int(self._idata[6])
+
+    @maxit.setter
+    def maxit(self, value: int) -> None:
+        self._idata[6] = int(value)
+
+    def solve(self, v: FloatArray, lo: FloatArray, hi: FloatArray, up: FloatArray | None = None) -> tuple[FloatArray, int]:
+        u, it, ok = lexico_packed(self._fdata, self._idata, self.up if up is None else up, v, lo, hi)
+        if not ok:
+            raise SolverError(f"active set: iteration cap ({self.maxit} per level) reached")
+        return u, it
+
+    def solve_batch(self, V: FloatArray, lo: FloatArray, hi: FloatArray) -> FloatArray:
+        U, ok = lexico_packed_batch(self._fdata, self._idata, self.up, np.ascontiguousarray(V), lo, hi)
+        U[~ok] = np.nan  # the allocator re-runs those rows one by one (fallback per row)
+        return U
+
+
+def _backend_choice(backend: object, method: str) -> str:
+    return ACTIVE_SET if backend == ACTIVE_SET else check_backend(backend, [ACTIVE_SET] + backends(), method)
+
+
+_AS_BACKEND = choice(ACTIVE_SET, "solver: 'active_set' (default, compiled sequential least squares), 'daqp' or a "
+                                 "qpsolvers name such as 'quadprog', 'osqp' (cross-checks)",
+                     lambda: [ACTIVE_SET, *backends()])
+
+
+@register("qp", supports_priorities=True, supports_batch=True)
+class TwoStageQP(Method):
+    equation = "Eqs 1.20-1.21"
+    summary = "stage 1 min moment error (Wv), stage 2 min (u-up)'Wu(u-up) at that moment"
+    options = {"backend": _AS_BACKEND, "priorities": levels("priority level per axis; larger levels are met first")}
+
+    def __init__(self, problem: Problem, *, backend: str = ACTIVE_SET, priorities: Sequence[int] | None = None) -> None:
+        super().__init__(problem)
+        self.backend = _backend_choice(backend, "qp")
+        self.groups = check_priorities(priorities, problem.k) or [np.arange(problem.k)]
+        if self.backend != ACTIVE_SET:
+            self._impl = _SolverTwoStageQP(problem, backend=self.backend, priorities=priorities)
+            return
+        self._impl = LexicoLS(problem, self.groups, [0.0] * len(self.groups), final=True)
+
+    def solve(self, v, lo, hi, u_prev):
+        if self.backend != ACTIVE_SET:
+            return self._impl.solve(v, lo, hi, u_prev)
+        return self._impl.solve(v, lo, hi)
+
+    def solve_batch(self, V, lo, hi):
+        return self._impl.solve_batch(V, lo, hi) if self.backend == ACTIVE_SET else None
+
+
+@register("wls", supports_batch=True)
+class WeightedLeastSquares(Method):
+    equation = "Eqs 1.20-1.21 (single-stage weighted form)"
+    summary = "min (Bu-v)'Wv(Bu-v) + gamma^2 (u-up)'Wu(u-up) over the limits"
+    options = {"backend": _AS_BACKEND,
+               "gamma": real(1e-4, "weight of the preference term", low=0.0, low_open=True)}
+
+    def __init__(self, problem: Problem, *, backend: str = ACTIVE_SET, gamma: float = 1e-4) -> None:
+        super().__init__(problem)
+        self.backend = _backend_choice(backend, "wls")
+        try:
+            g = float(gamma)
+        except (TypeError, ValueError):
+            raise OptionError(f"gamma: must be a positive number, got {gamma!r}") from None
+        if not (np.isfinite(g) and g > 0):
+            raise ValueError(f"gamma: must be positive and finite, got {gamma!r}")
+        self.gamma = g
+        if self.backend != ACTIVE_SET:
+            self._impl = _SolverWLS(problem, backend=self.backend, gamma=g)
+            return
+        self._impl = LexicoLS(problem, [np.arange(problem.k)], [g], final=False)
+
+    def solve(self, v, lo, hi, u_prev):
+        if self.backend != ACTIVE_SET:
+            return self._impl.solve(v, lo, hi, u_prev)
+        return self._impl.solve(v, lo, hi)
+
+    def solve_batch(self, V, lo, hi):
+        return self._impl.solve_batch(V, lo, hi) if self.backend == ACTIVE_SET else None

@@ -1,0 +1,103 @@
+"""Dynamic control allocation (Härkegård 2002, "Dynamic control allocation using
+constrained quadratic programming", AIAA GNC; after seed Eqs 1.20-1.21).
+
+``dynamic``
+    Two-stage like ``qp``.  Stage 1 (Eq 1.20): the moments closest to ``v`` in the ``Wv``
+    norm over the (rate-limited) box.  Stage 2: over the commands achieving that moment,
+
+        minimise  ||W1 (u - u_s)||^2 + ||W2 (u - u_prev)||^2,
+
+    where ``u_s = up + P (v - B up)`` is the static distribution (Eq 1.23, the weighted
+    pseudo-inverse of the problem's ``Wu``) and ``u_prev`` the previous command.  The
+    ``W2`` term penalises movement, so actuator usage becomes frequency dependent: without
+    active limits the part of ``u`` that does not change the moment is a first-order filter
+    of ``u_s`` (for scalar weights, ``u_N(t) = a u_N(t-T) + (1-a) u_s,N(t)`` with
+    ``a = w2^2 / (w1^2 + w2^2)``), so slow demands are met with the static distribution
+    and fast ones by whichever effectors the weights make cheap to move.
+
+    The cost is ``(u - c)' Wd (u - c)`` plus a constant, ``Wd = W1'W1 + W2'W2``,
+    ``c = Wd^-1 (W1'W1 u_s + W2'W2 u_prev)``: stage 2 of ``qp`` with ``Wu = Wd`` and
+    ``up = c``, solved by the same compiled active set (:mod:`alloc._active_set`).
+    Without ``u_prev`` (the first call) the ``W2`` term is absent and ``u`` is the
+    two-stage allocation closest to ``u_s``.  The method keeps no state between calls:
+    the caller (the simulator's loop) passes ``u_prev``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .._linalg import sqrt_factor
+from ..exceptions import OptionError, SolverError
+from ..problem import Problem
+from ..options import weight
+from ..registry import FloatArray, Method, register
+from .pseudo_inverse import distribution_matrix
+from .quadratic import LexicoLS
+
+
+def _weight(value: object, m: int, field: str) -> FloatArray:
+    """``W`` (m x m) from None (identity), a positive scalar, a vector (diagonal) or a matrix."""
+    if value is None:
+        return np.eye(m)
+    try:
+        arr = np.array(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise OptionError(f"{field}: not a number, vector or matrix ({exc})") from None
+    if arr.ndim == 0:
+        arr = np.full(m, float(arr))
+    if arr.ndim == 1:
+        if arr.shape != (m,) or not np.all(np.isfinite(arr)) or np.any(arr <= 0):
+            raise OptionError(f"{field}: expected {m} positive finite weights, got {arr.tolist()}")
+        return np.diag(arr)
+    if arr.shape != (m, m) or not np.all(np.isfinite(arr)):
+        raise OptionError(f"{field}: expected a finite {m} x {m} matrix, got shape {arr.shape}")
+    if np.linalg.matrix_rank(arr) < m:
+        raise OptionError(f"{field}: matrix must be nonsingular")
+    return arr
+
+
+@register("dynamic")
+class DynamicAllocation(Method):
+    equation = "Eqs 1.20-1.21 with Härkegård (2002) dynamic cost"
+    summary = "stage 1 min moment error, stage 2 min ||W1(u-u_s)||^2 + ||W2(u-u_prev)||^2 at that moment"
+    options = {
+        "W1": weight("weight of the distance to the static distribution u_s (scalar, vector or matrix; default I)"),
+        "W2": weight("weight of the movement from u_prev (scalar, vector or matrix; default I)"),
+    }
+
+    def __init__(self, problem: Problem, *, W1: object = None, W2: object = None) -> None:
+        super().__init__(problem)
+        p = problem
+        m = p.m
+        W1m = _weight(W1, m, "W1")
+        W2m = _weight(W2, m, "W2")
+        Q1, Q2 = W1m.T @ W1m, W2m.T @ W2m
+        Wd = Q1 + Q2
+        Wd = 0.5 * (Wd + Wd.T)
+        sqrt_factor(Wd)  # raises LinAlgError if not positive definite (cannot happen: W1 nonsingular)
+        self.P = distribution_matrix(p)  # the static distribution u_s = up + P (v - B up)
+        Wd_inv = np.linalg.inv(Wd)
+        self._M1 = Wd_inv @ Q1
+        self._M2 = Wd_inv @ Q2
+        self._static = LexicoLS(p, [np.arange(p.k)], [0.0], final=True, Wu=Q1)  # no u_prev
+        self._dynamic = LexicoLS(p, [np.arange(p.k)], [0.0], final=True, Wu=Wd)
+
+    def static_command(self, v: FloatArray) -> FloatArray:
+        """``u_s``: the static distribution of Eq 1.23 (not clipped)."""
+        up = self.problem.up
+        return up + self.P @ (v - self.problem.B @ up)
+
+    def target(self, v: FloatArray, u_prev: FloatArray | None) -> FloatArray:
+        """``c``: the unconstrained minimiser of the stage-2 cost."""
+        us = self.static_command(v)
+        if u_prev is None:
+            return us
+        return self._M1 @ us + self._M2 @ u_prev
+
+    def solve(self, v, lo, hi, u_prev):
+        c = np.ascontiguousarray(self.target(v, u_prev))
+        if not np.all(np.isfinite(c)):
+            raise SolverError("dynamic: non-finite target (u_prev or the static distribution)")
+        model = self._static if u_prev is None else self._dynamic
+        return model.solve(v, lo, hi, up=c)
