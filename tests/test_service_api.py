@@ -71,7 +71,7 @@ def assert_problem(r, status: int, pointer: str | None, reason_part: str = "") -
     ({**SIMPLE, "v": [1.0, 2.0]}, "/v", "shape"),                                        # demand length
     ({**SIMPLE, "umin": [-1.0, 2.0, -1.0], "v": [1.0]}, "/umin", "umin[1] = 2 > umax[1] = 1"),  # order
     ({**SIMPLE, "v": [1.0], "method": "simplex"}, "/method", "registered: "),           # unknown method
-    ({**SIMPLE, "v": [1.0], "options": {"tolerance": 1}}, "/options", "unknown option"),
+    ({**SIMPLE, "v": [1.0], "options": {"tolerance": 1}}, "/options/tolerance", "unknown option"),
     ({**SIMPLE, "v": [1.0], "method": "ganging", "options": {"G": [[1.0, 2.0]]}}, "/options/G", "shape"),
     ({**SIMPLE, "v": [1.0], "u_prev": [0.0, 0.0, 0.0]}, "/u_prev", "both"),            # dt missing
     ({**SIMPLE, "v": [1.0], "dt": -0.1, "u_prev": [0, 0, 0]}, "/dt", "greater than 0"),
