@@ -32,10 +32,8 @@ def plot_ams(problem: Problem, method: str | None = None, out: str | Path | None
 
     Returns the matplotlib figure.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    # A bare Figure (no pyplot): the library never chooses the caller's matplotlib backend.
+    from matplotlib.figure import Figure
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
     from scipy.spatial import ConvexHull
 
@@ -58,7 +56,7 @@ def plot_ams(problem: Problem, method: str | None = None, out: str | Path | None
             reached_pts = V[impl.batch(V).status == "exact"]
     axes = problem.axes
     if k == 3:
-        fig = plt.figure(figsize=(8, 7))
+        fig = Figure(figsize=(8, 7))
         ax = fig.add_subplot(projection="3d")
         faces = [f.vertices for f in ams.facets]
         ax.add_collection3d(Poly3DCollection(faces, facecolor="tab:blue", edgecolor="navy", linewidths=0.4,
@@ -79,7 +77,8 @@ def plot_ams(problem: Problem, method: str | None = None, out: str | Path | None
         ax.set_ylabel(axes[1])
         ax.set_zlabel(axes[2])
     else:
-        fig, ax = plt.subplots(figsize=(7, 6))
+        fig = Figure(figsize=(7, 6))
+        ax = fig.add_subplot()
         poly = _ordered_polygon(ams.vertices)
         ax.fill(*poly.T, facecolor="tab:blue", alpha=0.15, edgecolor="navy", label="AMS")
         if reached_poly is not None and len(reached_poly) >= 3:
