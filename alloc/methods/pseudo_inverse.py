@@ -26,7 +26,8 @@ from __future__ import annotations
 import numpy as np
 
 from .._kernels import affine, scaled_increment
-from .._linalg import RCOND, max_scale, weighted_pinv
+from .._linalg import RCOND, check_rcond, max_scale, weighted_pinv
+from ..exceptions import OptionError, SolverError
 from ..problem import Problem
 from ..registry import FloatArray, Method, register
 
@@ -51,10 +52,10 @@ class _PinvBase(Method):
 
     def __init__(self, problem: Problem, *, rcond: float = RCOND, incremental: bool = False) -> None:
         super().__init__(problem)
-        rcond = float(rcond)
-        if not (0.0 <= rcond < 1.0):
-            raise ValueError(f"rcond: must be in [0, 1), got {rcond!r}")
+        rcond = check_rcond(rcond, self.name)
         self.P = distribution_matrix(problem, rcond)
+        if not isinstance(incremental, (bool, np.bool_)):
+            raise OptionError(f"{self.name}: incremental must be True or False, got {incremental!r}")
         self.incremental = bool(incremental)
         # u = c + P v with c = up - P B up: one matrix-vector product per call.
         self.c = problem.up - self.P @ (problem.B @ problem.up)
@@ -121,11 +122,19 @@ class SafeCommand:
 
     The weighted pseudo-inverse of Eq 1.23 clipped to the call's bounds: closed form,
     always finite and admissible, and close to the optimisers' answers for attainable
-    demands.
+    demands.  It never raises: where even the pseudo-inverse cannot be formed (or its
+    command is not finite) the answer is the preferred position clipped to the bounds.
     """
 
     def __init__(self, problem: Problem) -> None:
-        self._pinv = Pinv(problem)
+        self._up = problem.up
+        try:
+            self._pinv: Pinv | None = Pinv(problem)
+        except SolverError:
+            self._pinv = None
 
     def __call__(self, v: FloatArray, lo: FloatArray, hi: FloatArray) -> FloatArray:
-        return np.minimum(np.maximum(self._pinv.solve(v, lo, hi, None)[0], lo), hi)
+        u = self._up if self._pinv is None else self._pinv.solve(v, lo, hi, None)[0]
+        if not np.isfinite(u).all():
+            u = self._up
+        return np.minimum(np.maximum(u, lo), hi)
