@@ -290,6 +290,36 @@ def daisy_chain(B, up, v, lo, hi, idx, start, Pcat):  # pragma: no cover - compi
     return u, used
 
 
+@njit(cache=True, nogil=True)
+def affine_clip_batch(c, P, V, lo, hi):  # pragma: no cover - compiled
+    """Rows ``clip(c + P v)`` for the rows ``v`` of ``V``: the arithmetic of
+    :func:`fused_affine` (same order of operations), so a batch equals its single calls."""
+    n, k = V.shape
+    m = c.shape[0]
+    U = np.empty((n, m))
+    for r in range(n):
+        for j in range(m):
+            s = c[j]
+            for i in range(k):
+                s += P[j, i] * V[r, i]
+            if s < lo[j]:
+                s = lo[j]
+            if s > hi[j]:
+                s = hi[j]
+            U[r, j] = s
+    return U
+
+
+@njit(cache=True, nogil=True)
+def scaled_increment_batch(P, B, b, V, lo, hi):  # pragma: no cover - compiled
+    """:func:`scaled_increment` for each row of ``V`` (bitwise the single-call answer)."""
+    n = V.shape[0]
+    U = np.empty((n, B.shape[1]))
+    for r in range(n):
+        U[r] = scaled_increment(P, B, b, V[r], lo, hi)
+    return U
+
+
 # Free sets of the cascade are keys into an open-addressing hash table held in numpy
 # arrays: ``keys[h]`` (the set as bit words, 63 effectors a word), ``slots[h]`` (-1 when
 # empty) the index into ``bank``, where ``bank[slot, :|F|]`` is that set's pseudo-inverse.

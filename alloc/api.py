@@ -11,7 +11,7 @@ from numpy.typing import ArrayLike
 from ._kernels import finish, fused_affine, in_domain
 from .exceptions import AllocError, DemandError, SolverError
 from .methods.pseudo_inverse import SafeCommand
-from .problem import MAX_MAGNITUDE, Problem, _float_array, check_magnitude
+from .problem import MAX_MAGNITUDE, Problem, as_float_array, check_magnitude
 from .registry import FloatArray, Method, build
 from .result import EXACT_RTOL, BatchResult, Result, Status
 
@@ -132,7 +132,7 @@ class Allocator:
         vouch for that (non-finite output, an exception) the rows are allocated one by one.
         """
         problem = self.problem
-        Varr = _float_array("V", V, DemandError)
+        Varr = as_float_array("V", V, DemandError)
         if Varr.ndim != 2 or Varr.shape[1] != problem.k:
             raise DemandError(f"V: expected shape (N, {problem.k}), got {Varr.shape}")
         check_magnitude("V", Varr, DemandError)

@@ -39,7 +39,7 @@ MAX_AXES = 32
 MAX_EFFECTORS = 512
 
 
-def _float_array(name: str, value: Any, error: type[Exception] = ProblemError, *,
+def as_float_array(name: str, value: Any, error: type[Exception] = ProblemError, *,
                  none_as: float | None = None) -> FloatArray:
     """``value`` as a new float array, or ``error`` naming ``name`` (ragged, text, big ints).
 
@@ -78,7 +78,7 @@ def check_magnitude(name: str, arr: FloatArray, error: type[Exception] = Problem
 def _as_array(name: str, value: ArrayLike, shape: tuple[int, ...], *, allow_inf: bool = False,
               none_as: float | None = None) -> FloatArray:
     """Return ``value`` as a read-only float array of ``shape`` or raise ProblemError."""
-    arr = _float_array(name, value, none_as=none_as)
+    arr = as_float_array(name, value, none_as=none_as)
     if arr.shape != shape:
         raise ProblemError(f"{name}: expected shape {shape}, got {arr.shape}")
     check_magnitude(name, arr, allow_inf=allow_inf)
@@ -95,7 +95,7 @@ def _as_weight(name: str, value: ArrayLike | None, n: int) -> FloatArray:
         w = np.eye(n)
         w.setflags(write=False)
         return w
-    arr = _float_array(name, value)
+    arr = as_float_array(name, value)
     if arr.ndim == 1:
         arr = _as_array(name, arr, (n,))
         if (arr < MIN_WEIGHT).any():
@@ -176,7 +176,7 @@ class Problem:
         names: Sequence[str] | None = None,
         axes: Sequence[str] | None = None,
     ) -> None:
-        B_arr = _float_array("B", B)
+        B_arr = as_float_array("B", B)
         if B_arr.ndim == 1:
             B_arr = B_arr[np.newaxis, :]
         if B_arr.ndim != 2 or B_arr.shape[0] < 1 or B_arr.shape[1] < 1:
@@ -322,7 +322,7 @@ class Problem:
     # ------------------------------------------------------------ rate limits
     def check_demand(self, v: ArrayLike) -> FloatArray:
         """Validate a demand vector; return it as a float array of shape (k,)."""
-        arr = _float_array("v", v, DemandError)
+        arr = as_float_array("v", v, DemandError)
         if arr.shape != (self.k,):
             if arr.size == self.k and arr.ndim <= 2:
                 arr = arr.reshape(self.k)
@@ -367,7 +367,7 @@ class Problem:
 
     def check_u_prev(self, u_prev: ArrayLike) -> FloatArray:
         """Validate the previous command: shape (m,), finite, within the domain (not the limits)."""
-        up = _float_array("u_prev", u_prev, DemandError)
+        up = as_float_array("u_prev", u_prev, DemandError)
         if up.shape != (self.m,):
             raise DemandError(f"u_prev: expected shape ({self.m},), got {up.shape}")
         check_magnitude("u_prev", up, DemandError)

@@ -89,7 +89,9 @@ class CascadedGeneralizedInverse(Method):
         Wu = problem.Wu
         self._diagonal_Wu = np.count_nonzero(Wu - np.diag(np.diagonal(Wu))) == 0
         S = sqrt_factor(problem.Wv) if problem.Wv is not None else np.eye(k)
-        self._S, self._SB, self._rdiag = S, S @ problem.B, 1.0 / np.sqrt(np.diagonal(Wu))
+        # contiguous writable copies: one compiled signature whatever the layout of the factors
+        f64 = np.ascontiguousarray
+        self._S, self._SB, self._rdiag = f64(S), f64(S @ problem.B), f64(1.0 / np.sqrt(np.diagonal(Wu)))
 
     def _pinv(self, free: np.ndarray) -> FloatArray:
         key = free.tobytes()

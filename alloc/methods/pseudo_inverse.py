@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._kernels import affine, scaled_increment
+from .._kernels import affine, affine_clip_batch, scaled_increment, scaled_increment_batch
 from .._linalg import RCOND, check_rcond, max_scale, weighted_pinv
 from ..exceptions import OptionError, SolverError
 from ..problem import Problem
@@ -59,7 +59,10 @@ class _PinvBase(Method):
         self.incremental = bool(incremental)
         # u = c + P v with c = up - P B up: one matrix-vector product per call.
         self.c = problem.up - self.P @ (problem.B @ problem.up)
-        self._PT = np.ascontiguousarray(self.P.T)
+        self._P = np.ascontiguousarray(self.P)
+        # writable contiguous copies: the compiled kernels see one array type (no recompiles)
+        self._B = np.array(problem.B)
+        self._up = np.array(problem.up)
 
     def _unconstrained(self, v: FloatArray, u_prev: FloatArray | None) -> FloatArray:
         if self.incremental and u_prev is not None:
@@ -73,14 +76,14 @@ class Pinv(_PinvBase):
 
     def __init__(self, problem: Problem, **options) -> None:
         super().__init__(problem, **options)
-        self.fused = (self.c, np.ascontiguousarray(self.P))
+        self.fused = (self.c, self._P)
 
     def solve(self, v, lo, hi, u_prev):
         # clipping to [lo, hi] is done by the allocator's compiled finish step
         return self._unconstrained(v, u_prev), 0
 
     def solve_batch(self, V, lo, hi):
-        return np.minimum(np.maximum(self.c + V @ self._PT, lo), hi)
+        return affine_clip_batch(self.c, self._P, np.ascontiguousarray(V), lo, hi)
 
 
 @register("pinv_clip")
@@ -93,13 +96,13 @@ class PinvScale(_PinvBase):
     summary = "direction-preserving weighted pseudo-inverse: the increment scaled by one factor"
 
     def _bias(self, u_prev: FloatArray | None) -> FloatArray:
-        return u_prev if (self.incremental and u_prev is not None) else self.problem.up
+        return u_prev if (self.incremental and u_prev is not None) else self._up
 
     def _base(self, lo: FloatArray, hi: FloatArray, u_prev: FloatArray | None) -> FloatArray:
         return np.minimum(np.maximum(self._bias(u_prev), lo), hi)
 
     def solve(self, v, lo, hi, u_prev):
-        return scaled_increment(self.P, self.problem.B, self._bias(u_prev), v, lo, hi), 0
+        return scaled_increment(self._P, self._B, self._bias(u_prev), v, lo, hi), 0
 
     def _solve_reference(self, v, lo, hi, u_prev):
         """The scaling in numpy (what :func:`alloc._kernels.scaled_increment` computes, compiled)."""
@@ -108,13 +111,7 @@ class PinvScale(_PinvBase):
         return base + max_scale(base, du, lo, hi) * du, 0
 
     def solve_batch(self, V, lo, hi):
-        base = np.minimum(np.maximum(self.problem.up, lo), hi)
-        dU = (V - self.problem.B @ base) @ self._PT
-        with np.errstate(divide="ignore", invalid="ignore"):
-            s_up = np.where(dU > 0, (hi - base) / dU, np.inf)
-            s_dn = np.where(dU < 0, (lo - base) / dU, np.inf)
-        s = np.clip(np.minimum(s_up, s_dn).min(axis=1), 0.0, 1.0)
-        return base + s[:, None] * dU
+        return scaled_increment_batch(self._P, self._B, self._up, np.ascontiguousarray(V), lo, hi)
 
 
 class SafeCommand:
