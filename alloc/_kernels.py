@@ -441,13 +441,13 @@ def fused_affine(W, v, rtol, vmax_domain):  # pragma: no cover - compiled
 
     ``W`` packs everything constant, one row per effector: ``[c | P (k) | B' (k) | umin | umax]``
     (numba charges per argument, so one packed array is measurably cheaper than five).
-    Returns ``out`` of length ``m + k + 1``: ``u``, ``B u`` and a code (0 exact,
+    Returns ``out`` of length ``m + 2 k + 1``: ``u``, ``B u``, a code (0 exact,
     1 unattainable, 2 non-finite ``u`` or ``B u``, 3 ``v`` outside the valid domain:
-    non-finite or ``|v| > vmax_domain``).
+    non-finite or ``|v| > vmax_domain``) and a copy of ``v`` (one allocation for the result).
     """
     m = W.shape[0]
     k = v.shape[0]
-    out = np.empty(m + k + 1)
+    out = np.empty(m + 2 * k + 1)
     vmax = 1.0
     for i in range(k):
         a = abs(v[i])
@@ -455,6 +455,7 @@ def fused_affine(W, v, rtol, vmax_domain):  # pragma: no cover - compiled
             out[m + k] = 3.0
             return out
         vmax = max(vmax, a)
+        out[m + k + 1 + i] = v[i]  # the result's own copy of the demand
     for j in range(m):
         s = W[j, 0]
         for i in range(k):

@@ -81,8 +81,8 @@ class Allocator:
                 out = fused_affine(self._W, v, EXACT_RTOL, MAX_MAGNITUDE)
                 code = out[self._mk]
                 if code < 2.0:
-                    out.setflags(write=False)  # u and B u below are read-only views of it
-                    return Result(out[:self._m], _frozen(v.copy()), out[self._m:self._mk],
+                    out.setflags(write=False)  # u, B u and the copy of v are read-only views of it
+                    return Result(out[:self._m], out[self._mk + 1:], out[self._m:self._mk],
                                   _EXACT if code == 0.0 else _UNATT, self.method, 0, time.perf_counter() - t0, "")
             v = v.copy()  # the result owns its demand: the caller may reuse the array
             if not in_domain(v, MAX_MAGNITUDE):

@@ -38,12 +38,16 @@ from typing import Any
 
 import numpy as np
 
+DEADLINE: float | None = None  # epoch seconds: the command line's --minutes stops taking cases
 CALL_LIMIT = 1.0  # seconds: a call (or a build) slower than this is a failure
 PROBLEM_FIELDS = ("B", "umin", "umax", "up", "Wu", "Wv", "rate_min", "rate_max", "names", "axes")
 DEMAND_FIELDS = ("v", "u_prev", "dt", "V")
 #: batch row vs single call, relative to the moments' scale: vectorised arithmetic differs
 #: from the compiled single call only in rounding order
 BATCH_RTOL = 1e-9
+#: methods whose solver carries state (warm starts) from call to call: batch and singles
+#: are compared on fresh allocators given the same demands in the same order
+STATEFUL = ("qp", "wls", "lp", "da")
 
 
 # ----------------------------------------------------------------------------- generator
@@ -373,10 +377,11 @@ def check(c: dict[str, Any]) -> dict[str, Any]:
         # call to call) given the same demands in the same order, one row by row.
         V = np.array([r.v for r in singles])
         try:
-            f_single = alloc.make_allocator(p, c["method"], **c["options"])
-            f_batch = alloc.make_allocator(p, c["method"], **c["options"])
-            singles = [f_single(v) for v in V]
-            br = f_batch.batch(V)
+            if c["method"] in STATEFUL:
+                f_single = alloc.make_allocator(p, c["method"], **c["options"])
+                singles = [f_single(v) for v in V]
+                f = alloc.make_allocator(p, c["method"], **c["options"])
+            br = f.batch(V)
         except Exception as exc:  # noqa: BLE001 - valid demands: batch must not raise
             fail.append(f"escaped at batch: {type(exc).__name__}: {exc}")
         else:
@@ -595,6 +600,7 @@ def _run_part(seeds: list[int], shrink_failures: bool, log: Any = None) -> dict[
 
 def _merge(report: dict[str, Any], part: dict[str, Any]) -> None:
     report["cases"] += part["cases"]
+    report["stopped_at_deadline"] = report.get("stopped_at_deadline", False) or part.get("stopped_at_deadline", False)
     report["refused"].update(part["refused"])
     report["fail"].extend(part["fail"])
     for name, cnt in part["by_method"].items():
@@ -607,6 +613,9 @@ def _run_chunk(seeds: list[int], report: dict[str, Any], shrink_failures: bool, 
     dog = Watchdog()
     try:
         for n, seed in enumerate(seeds):
+            if DEADLINE is not None and time.time() > DEADLINE:
+                report["stopped_at_deadline"] = True
+                break
             c = case(seed)
             res = dog.run(c)
             report["cases"] += 1
@@ -616,8 +625,11 @@ def _run_chunk(seeds: list[int], report: dict[str, Any], shrink_failures: bool, 
             for msg in res.get("messages", []):
                 report["fallback_reasons"][c["method"]][re.sub(r"[-+]?\d[\d.e+-]*", "#", msg)[:80]] += 1
             if res["fail"]:
-                small = shrink(c, res["fail"], dog) if shrink_failures else c
+                slow_only = all(s.startswith("slow call") for s in res["fail"])
+                small = shrink(c, res["fail"], dog) if shrink_failures and not slow_only else c
                 report["fail"].append({"seed": seed, "fail": res["fail"][:3], "minimal": small})
+                if log is not None:
+                    print("FAIL " + json.dumps(report["fail"][-1], default=str), file=log, flush=True)
             if log is not None and n % 1000 == 999:
                 print(f"{n + 1} cases, {len(report['fail'])} failing", file=log, flush=True)
     finally:
@@ -630,12 +642,16 @@ def main() -> None:  # pragma: no cover - command line
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--json", help="write the report here")
+    ap.add_argument("--minutes", type=float, help="stop taking new cases after this long (report what ran)")
     a = ap.parse_args()
     t0 = time.time()
+    global DEADLINE
+    DEADLINE = None if a.minutes is None else t0 + 60 * a.minutes
     rep = run(range(a.seed, a.seed + a.cases), a.workers, log=sys.stderr)
     rep["seconds"] = round(time.time() - t0, 1)
     calls = {m: dict(c) for m, c in rep["by_method"].items()}
-    print(json.dumps({"cases": rep["cases"], "seconds": rep["seconds"], "refused": dict(rep["refused"]),
+    print(json.dumps({"cases": rep["cases"], "seconds": rep["seconds"],
+                      "stopped_at_deadline": rep.get("stopped_at_deadline", False), "refused": dict(rep["refused"]),
                       "failures": len(rep["fail"]), "calls_by_method": calls}, indent=1))
     for f in rep["fail"][:20]:
         print(json.dumps(f, default=str)[:2000])

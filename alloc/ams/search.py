@@ -102,11 +102,6 @@ class FacetSearch(Method):
         self._p0 = ams.base_v
         self._umin, self._umax = p.umin, p.umax
         self._flat = ams.rank < p.k or ams.rank == 0
-        # The vectorised batch picks the facet in support-function form, the single call by
-        # Eq 1.17 on the tiles: on an ill-conditioned B (facet inverses near singular) the
-        # two can pick different points, so the batch then runs the single-call search per row.
-        sv = np.linalg.svd(p.B, compute_uv=False) if p.B.size else np.zeros(1)
-        self._batch_ok = bool(sv.size and sv[-1] > 1e-6 * sv[0])
         if self._flat:
             # as the core's ``da``: the ray follows the part of d in the range of B
             U, sv, _ = np.linalg.svd(p.B, full_matrices=False)
@@ -206,10 +201,22 @@ class FacetSearch(Method):
         return ustar, 1
 
     def solve_batch(self, V, lo, hi):
-        """Vectorised over demands.  The facet is picked in support-function form (one
+        """The compiled single-call search over the rows of ``V`` (one call, no Python loop):
+        a batch row is bitwise the single call ``solve(V[i])``.  Subclasses with their own
+        nominal search (``da_bisect``, ``da_table``) return ``None``: the allocator then
+        runs their single calls row by row, so batch equals single for them too."""
+        if (self._lp is not None or self._flat or type(self)._solve_nominal is not FacetSearch._solve_nominal
+                or not self._nominal(lo, hi)):
+            return None
+        return _kernels.facet_solve_batch(np.ascontiguousarray(V), self._kp0, self._ku0, self._kNz,
+                                          self._kMinv, self._kU, self._kS)
+
+    def _solve_batch_support(self, V, lo, hi):
+        """Vectorised over demands in numpy (kept as a reference; :meth:`solve_batch` is
+        the compiled per-row search).  The facet is picked in support-function form (one
         (N, F) product: ``a* = min gap / (n . d)``), then Eq 1.16 runs on that facet's tiles
         only; testing every tile for every demand would touch (N, T, k) arrays."""
-        if self._lp is not None or self._flat or not self._batch_ok or not self._nominal(lo, hi):
+        if self._lp is not None or self._flat or not self._nominal(lo, hi):
             return None
         if not hasattr(self, "_facet_pad"):
             self._pad_tiles()
