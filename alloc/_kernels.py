@@ -83,6 +83,17 @@ def finish(B, u, lo, hi, v, v_ach, rtol):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
+def finish_batch(B, U, lo, hi, V, Vach, rtol):  # pragma: no cover - compiled
+    """:func:`finish` on each row (``U`` clipped in place): a batch row's ``B u`` and status
+    are bitwise those of its single call.  Returns the codes (N,)."""
+    n = U.shape[0]
+    codes = np.empty(n, dtype=np.int64)
+    for r in range(n):
+        codes[r] = finish(B, U[r], lo, hi, V[r], Vach[r], rtol)
+    return codes
+
+
+@njit(cache=True, nogil=True)
 def rate_window(umin, umax, rate_min, rate_max, u_prev, dt):  # pragma: no cover - compiled
     """Eq 1.28 bounds; where the rate window misses the position box, the nearest limit."""
     m = umin.shape[0]

@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._kernels import finish, fused_affine, in_domain
+from ._kernels import finish, finish_batch, fused_affine, in_domain
 from .exceptions import AllocError, DemandError, SolverError
 from .methods.pseudo_inverse import SafeCommand
 from .problem import MAX_MAGNITUDE, Problem, as_float_array, check_magnitude
@@ -144,13 +144,12 @@ class Allocator:
                 U = self.impl.solve_batch(Varr, self._lo, self._hi)
             except Exception:  # noqa: BLE001 - the per-row path below handles every failure
                 U = None
-        if U is not None and U.shape == (len(Varr), problem.m) and np.isfinite(U).all():
-            U = np.minimum(np.maximum(U, self._lo), self._hi)
-            Vach = U @ self._B.T
-            if np.isfinite(Vach).all():
-                err = np.abs(Vach - Varr).max(axis=1) if len(Varr) else np.zeros(0)
-                tol = EXACT_RTOL * np.maximum(1.0, np.abs(Varr).max(axis=1)) if len(Varr) else np.zeros(0)
-                status = np.where(err <= tol, _EXACT.value, _UNATT.value)
+        if U is not None and U.shape == (len(Varr), problem.m):
+            U = np.array(U, dtype=float)  # own, contiguous: clipped in place by the kernel
+            Vach = np.empty((len(Varr), problem.k))
+            codes = finish_batch(self._B, U, self._lo, self._hi, Varr, Vach, EXACT_RTOL)
+            if not (codes == 2).any():  # the single call's kernel: same B u, same status
+                status = np.where(codes == 0, _EXACT.value, _UNATT.value)
                 return BatchResult(_frozen(U), Varr, _frozen(Vach), _frozen(status), self.method,
                                    time.perf_counter() - t0)
         results = [self._solve(np.array(v), None, None) for v in Varr]
