@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["all_finite", "affine", "finish", "fused_affine", "rate_window", "facet_polish"]
+__all__ = ["all_finite", "in_domain", "affine", "finish", "fused_affine", "rate_window", "facet_polish"]
 
 FINISH_EXACT, FINISH_UNATTAINABLE, FINISH_NONFINITE = 0, 1, 2
 
@@ -34,6 +34,15 @@ def clip_scalar(y, lo, hi):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
+def in_domain(x, bound):  # pragma: no cover - compiled
+    """True when every ``|x[i]| <= bound`` (False for NaN and inf)."""
+    for i in range(x.shape[0]):
+        if not abs(x[i]) <= bound:
+            return False
+    return True
+
+
+@njit(cache=True, nogil=True)
 def affine(c, P, v):  # pragma: no cover - compiled
     """``c + P v`` for a small dense ``P``."""
     m, k = P.shape
@@ -51,7 +60,8 @@ def finish(B, u, lo, hi, v, v_ach, rtol):  # pragma: no cover - compiled
     """Clip ``u`` onto ``[lo, hi]`` in place, write ``B u`` into ``v_ach``, and classify.
 
     Returns 0 when ``max|B u - v| <= rtol * max(1, max|v|)`` (exact), 1 otherwise, and 2
-    when ``u`` holds a non-finite value (then nothing is written).
+    when ``u`` or ``B u`` holds a non-finite value.  Every comparison is written so that a
+    NaN fails it: a NaN can never be classified exact.
     """
     k, m = B.shape
     for j in range(m):
@@ -67,12 +77,25 @@ def finish(B, u, lo, hi, v, v_ach, rtol):  # pragma: no cover - compiled
             s += B[i, j] * u[j]
         v_ach[i] = s
         e = abs(s - v[i])
-        if e > err:
+        if not e <= err:  # NaN-safe: a NaN error becomes the error
             err = e
         a = abs(v[i])
-        if a > vmax:
+        if not a <= vmax:
             vmax = a
+    if not (np.isfinite(err) and np.isfinite(vmax)):
+        return 2
     return 0 if err <= rtol * vmax else 1
+
+
+@njit(cache=True, nogil=True)
+def finish_batch(B, U, lo, hi, V, Vach, rtol):  # pragma: no cover - compiled
+    """:func:`finish` on each row (``U`` clipped in place): a batch row's ``B u`` and status
+    are bitwise those of its single call.  Returns the codes (N,)."""
+    n = U.shape[0]
+    codes = np.empty(n, dtype=np.int64)
+    for r in range(n):
+        codes[r] = finish(B, U[r], lo, hi, V[r], Vach[r], rtol)
+    return codes
 
 
 @njit(cache=True, nogil=True)
@@ -278,6 +301,36 @@ def daisy_chain(B, up, v, lo, hi, idx, start, Pcat):  # pragma: no cover - compi
     return u, used
 
 
+@njit(cache=True, nogil=True)
+def affine_clip_batch(c, P, V, lo, hi):  # pragma: no cover - compiled
+    """Rows ``clip(c + P v)`` for the rows ``v`` of ``V``: the arithmetic of
+    :func:`fused_affine` (same order of operations), so a batch equals its single calls."""
+    n, k = V.shape
+    m = c.shape[0]
+    U = np.empty((n, m))
+    for r in range(n):
+        for j in range(m):
+            s = c[j]
+            for i in range(k):
+                s += P[j, i] * V[r, i]
+            if s < lo[j]:
+                s = lo[j]
+            if s > hi[j]:
+                s = hi[j]
+            U[r, j] = s
+    return U
+
+
+@njit(cache=True, nogil=True)
+def scaled_increment_batch(P, B, b, V, lo, hi):  # pragma: no cover - compiled
+    """:func:`scaled_increment` for each row of ``V`` (bitwise the single-call answer)."""
+    n = V.shape[0]
+    U = np.empty((n, B.shape[1]))
+    for r in range(n):
+        U[r] = scaled_increment(P, B, b, V[r], lo, hi)
+    return U
+
+
 # Free sets of the cascade are keys into an open-addressing hash table held in numpy
 # arrays: ``keys[h]`` (the set as bit words, 63 effectors a word), ``slots[h]`` (-1 when
 # empty) the index into ``bank``, where ``bank[slot, :|F|]`` is that set's pseudo-inverse.
@@ -389,23 +442,26 @@ def cascade(B, up, v, lo, hi, keys, slots, bank, u, free, it0):  # pragma: no co
 
 
 @njit(cache=True, nogil=True)
-def fused_affine(W, v, rtol):  # pragma: no cover - compiled
+def fused_affine(W, v, rtol, vmax_domain):  # pragma: no cover - compiled
     """One call for ``u = clip(c + P v)``, ``B u`` and the status, without rate limits.
 
     ``W`` packs everything constant, one row per effector: ``[c | P (k) | B' (k) | umin | umax]``
     (numba charges per argument, so one packed array is measurably cheaper than five).
-    Returns ``out`` of length ``m + k + 1``: ``u``, ``B u`` and a code (0 exact,
-    1 unattainable, 2 non-finite ``u``, 3 non-finite ``v``).
+    Returns ``out`` of length ``m + 2 k + 1``: ``u``, ``B u``, a code (0 exact,
+    1 unattainable, 2 non-finite ``u`` or ``B u``, 3 ``v`` outside the valid domain:
+    non-finite or ``|v| > vmax_domain``) and a copy of ``v`` (one allocation for the result).
     """
     m = W.shape[0]
     k = v.shape[0]
-    out = np.empty(m + k + 1)
+    out = np.empty(m + 2 * k + 1)
     vmax = 1.0
     for i in range(k):
-        if not np.isfinite(v[i]):
+        a = abs(v[i])
+        if not a <= vmax_domain:  # also NaN
             out[m + k] = 3.0
             return out
-        vmax = max(vmax, abs(v[i]))
+        vmax = max(vmax, a)
+        out[m + k + 1 + i] = v[i]  # the result's own copy of the demand
     for j in range(m):
         s = W[j, 0]
         for i in range(k):
@@ -426,8 +482,13 @@ def fused_affine(W, v, rtol):  # pragma: no cover - compiled
         for j in range(m):
             s += W[j, 1 + k + i] * out[j]
         out[m + i] = s
-        err = max(err, abs(s - v[i]))
-    out[m + k] = 0.0 if err <= rtol * vmax else 1.0
+        e = abs(s - v[i])
+        if not e <= err:  # NaN-safe
+            err = e
+    if not np.isfinite(err):
+        out[m + k] = 2.0
+    else:
+        out[m + k] = 0.0 if err <= rtol * vmax else 1.0
     return out
 
 

@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import NDArray
+
+from .exceptions import OptionError, SolverError
 
 FloatArray = NDArray[np.float64]
 
@@ -13,6 +16,27 @@ FloatArray = NDArray[np.float64]
 #: so an axis no effector can reach (a failed effector, a nearly singular B) gets no
 #: command instead of a huge one; the unreached part of ``v`` is reported as unallocated.
 RCOND = 1e-6
+
+
+def check_real_option(value: object, method: str, field: str, lo: float, hi: float, *,
+                      open_lo: bool = False, open_hi: bool = False) -> float:
+    """A real-valued option in ``[lo, hi]`` (ends open if asked); OptionError naming it otherwise."""
+    lb, rb = "(" if open_lo else "[", ")" if open_hi else "]"
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise OptionError(f"{method}: {field} must be a real number in {lb}{lo:g}, {hi:g}{rb}, got {value!r}")
+    try:
+        x = float(value)
+    except OverflowError:
+        x = math.inf
+    ok = (lo < x if open_lo else lo <= x) and (x < hi if open_hi else x <= hi)
+    if not ok:
+        raise OptionError(f"{method}: {field} must be in {lb}{lo:g}, {hi:g}{rb}, got {value!r}")
+    return x
+
+
+def check_rcond(rcond: object, method: str) -> float:
+    """The ``rcond`` option as a float in ``[0, 1)``; OptionError naming it otherwise."""
+    return check_real_option(rcond, method, "rcond", 0.0, 1.0, open_hi=True)
 
 
 def inv_sqrt_factor(W: FloatArray) -> FloatArray:
@@ -35,22 +59,52 @@ def sqrt_factor(W: FloatArray) -> FloatArray:
 ABS_FLOOR = 1e-150
 
 
+def _checked_svd(A: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """``np.linalg.svd(A, full_matrices=False)`` guarded at the LAPACK boundary.
+
+    A non-finite matrix never reaches LAPACK (its SVD can spin forever holding the GIL);
+    it and a LAPACK failure raise :class:`~alloc.exceptions.SolverError`, which an
+    allocator turns into the safe answer with ``status="fallback"``.
+    """
+    if not np.isfinite(A).all():
+        raise SolverError("SVD: non-finite matrix (magnitudes beyond the float range)")
+    try:
+        return np.linalg.svd(A, full_matrices=False)
+    except np.linalg.LinAlgError as exc:
+        raise SolverError(f"SVD: {exc}") from exc
+
+
 def truncated_pinv(A: FloatArray, atol: float) -> FloatArray:
     """Moore-Penrose pseudo-inverse ignoring singular values ``<= max(atol, ABS_FLOOR)``."""
+    return _truncated_pinv(A, max(atol, ABS_FLOOR))
+
+
+def _truncated_pinv(A: FloatArray, cut: float) -> FloatArray:
     if A.size == 0:
         return np.zeros((A.shape[1], A.shape[0]))
-    U, s, Vt = np.linalg.svd(A, full_matrices=False)
-    keep = s > max(atol, ABS_FLOOR)
+    U, s, Vt = _checked_svd(A)
+    keep = s > cut
     return (Vt[keep].T / s[keep]) @ U[:, keep].T
 
 
-def priority_groups(priorities: Sequence[int] | None, k: int) -> list[NDArray[np.intp]]:
-    """Axis index groups, most important first (a larger priority number is more important)."""
+def _pow2(X: FloatArray) -> int:
+    """Exponent ``e`` with ``max|X| / 2**e`` in [0.5, 1) (0 for a zero matrix): exact scaling."""
+    amax = float(np.abs(X).max()) if X.size else 0.0
+    if not (0.0 < amax < np.inf):
+        return 0
+    return math.frexp(amax)[1]
+
+
+def priority_groups(priorities: Sequence[float] | None, k: int) -> list[NDArray[np.intp]]:
+    """Axis index groups, most important first (a larger priority number is more important).
+
+    Only the order of the levels matters (any real numbers; compared exactly, never cast).
+    """
     if priorities is None:
         return [np.arange(k)]
-    pr = np.asarray(priorities)
-    levels = sorted(set(pr.tolist()), reverse=True)
-    return [np.flatnonzero(pr == lv) for lv in levels]
+    pr = list(priorities.tolist() if isinstance(priorities, np.ndarray) else priorities)
+    levels = sorted(set(pr), reverse=True)
+    return [np.array([i for i, x in enumerate(pr) if x == lv], dtype=np.intp) for lv in levels]
 
 
 def weighted_pinv(
@@ -75,23 +129,44 @@ def weighted_pinv(
         return np.zeros((0, k))
     R = inv_sqrt_factor(Wu)
     S = sqrt_factor(Wv) if Wv is not None else np.eye(k)
-    A = S @ B @ R  # in z = R^-1 (u - up) and weighted-moment coordinates
-    smax = np.linalg.norm(A, 2) if A.size else 0.0
-    atol = rcond * smax
+    # Each factor is scaled by a power of two (exact) so that A = S B R is formed without
+    # overflow or underflow whatever the magnitudes of B and the weights (1e300 columns
+    # with 1e-20 weights must not reach the SVD as inf): P = R A^+ S = 2**-eb Rs As^+ Ss.
+    es, eb, er = _pow2(S), _pow2(B), _pow2(R)
+    Ss, Bs, Rs = np.ldexp(S, -es), np.ldexp(B, -eb), np.ldexp(R, -er)
+    A = Ss @ Bs @ Rs  # in z = R^-1 (u - up) and weighted-moment coordinates, scaled
+    with np.errstate(over="ignore", under="ignore"):
+        floor = float(np.ldexp(ABS_FLOOR, -(es + eb + er)))  # ABS_FLOOR in the unscaled A
     if groups is None or len(groups) <= 1:
-        return R @ truncated_pinv(A, atol) @ S
+        if A.size == 0:
+            return np.zeros((m, k))
+        U, s, Vt = _checked_svd(A)
+        keep = s > max(rcond * (s[0] if s.size else 0.0), floor)
+        Z = (Vt[keep].T / s[keep]) @ U[:, keep].T
+        return _unscale(Rs @ Z @ Ss, eb)
+    smax = float(_checked_svd(A)[1][0]) if A.size else 0.0
+    cut = max(rcond * smax, floor)
     n = A.shape[1]
     Z = np.zeros((n, k))
     N = np.eye(n)
     for rows in groups:
         Al = A[rows]
         AN = Al @ N
-        Pl = truncated_pinv(AN, atol)
+        Pl = _truncated_pinv(AN, cut)
         E = np.zeros((len(rows), k))
         E[np.arange(len(rows)), rows] = 1.0
         Z = Z + Pl @ (E - Al @ Z)
         N = N - Pl @ AN
-    return R @ Z @ S
+    return _unscale(Rs @ Z @ Ss, eb)
+
+
+def _unscale(Ps: FloatArray, eb: int) -> FloatArray:
+    """``2**-eb Ps``; a product the float range cannot carry raises SolverError."""
+    with np.errstate(over="ignore", under="ignore"):
+        P = np.ldexp(Ps, -eb)
+    if not np.isfinite(P).all():
+        raise SolverError("pseudo-inverse: gains beyond the float range")
+    return P
 
 
 def max_scale(base: FloatArray, du: FloatArray, lo: FloatArray, hi: FloatArray) -> float:

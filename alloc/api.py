@@ -8,10 +8,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._kernels import all_finite, finish, fused_affine
-from .exceptions import DemandError, SolverError
-from .problem import Problem
-from .registry import FloatArray, build
+from ._kernels import finish, finish_batch, fused_affine, in_domain
+from .exceptions import AllocError, DemandError, SolverError
+from .problem import MAX_MAGNITUDE, Problem, as_float_array, check_magnitude
+from .registry import FloatArray, Method, build
 from .result import EXACT_RTOL, BatchResult, Result, Status
 
 __all__ = ["Allocator", "make_allocator", "allocate", "allocate_batch"]
@@ -19,102 +19,146 @@ __all__ = ["Allocator", "make_allocator", "allocate", "allocate_batch"]
 _EXACT, _UNATT, _FALLBACK = Status.EXACT, Status.UNATTAINABLE, Status.FALLBACK
 
 
+def _frozen(a: np.ndarray) -> np.ndarray:
+    a.setflags(write=False)
+    return a
+
+
+def _reason(exc: BaseException) -> str:
+    """A fallback's message: the backend's own words, or the exception's type and text."""
+    return str(exc) if isinstance(exc, SolverError) else f"{type(exc).__name__}: {exc}"
+
+
 class Allocator:
     """A method built once for a problem; call it with demands.
 
     ``allocator(v, u_prev=None, dt=None) -> Result``.  With ``u_prev`` and ``dt`` the
     command also respects the rate limits over that step (Eq 1.28).  The output is always
-    finite and within the bounds: when the method's backend fails, the safe answer of
-    :class:`~alloc.methods.pseudo_inverse.SafeCommand` is returned with status ``fallback``.
+    finite and within the bounds.  Inside the valid input domain (README, :mod:`alloc.problem`)
+    neither the build nor a call raises: invalid input raises an :class:`~alloc.exceptions.AllocError`
+    naming the field (``OptionError``, a TypeError, for options), and anything else a method's
+    backend raises -- at build or at call -- becomes the safe answer of
+    :class:`~alloc.methods.pseudo_inverse.SafeCommand` with status ``fallback`` and the reason.
     """
 
-    __slots__ = ("problem", "method", "impl", "_safe", "_B", "_lo", "_hi", "_kshape", "_W", "_m", "_mk")
+    __slots__ = ("problem", "method", "impl", "build_error", "_safe", "_B", "_lo", "_hi", "_kshape",
+                 "_W", "_m", "_mk")
 
     def __init__(self, problem: Problem, method: str, **options: Any) -> None:
         self.problem = problem
         self.method = method
-        self.impl = build(problem, method, options)
+        #: why the method could not be built (every call is then a fallback), or ""
+        self.build_error = ""
+        try:
+            self.impl: Method | None = build(problem, method, options)
+        except SolverError as exc:
+            self.impl, self.build_error = None, _reason(exc)
+        except AllocError:
+            raise  # bad problem, option or method name: the caller's error, naming the field
+        except Exception as exc:  # noqa: BLE001 - a backend failing on a valid problem
+            self.impl, self.build_error = None, _reason(exc)
         from .methods.pseudo_inverse import SafeCommand  # loaded with the registry's methods, not with alloc
+
         self._safe = SafeCommand(problem)
         self._B = problem.B
         self._lo, self._hi = problem.umin, problem.umax
         self._kshape = (problem.k,)
         self._m, self._mk = problem.m, problem.m + problem.k
         self._W = None
-        if self.impl.fused is not None:  # closed-form u = clip(c + P v): one packed compiled call
-            c, P = self.impl.fused
-            self._W = np.ascontiguousarray(
-                np.column_stack([c, P, problem.B.T, problem.umin, problem.umax]), dtype=float)
+        fused = None if self.impl is None else self.impl.fused
+        if fused is not None:  # closed-form u = clip(c + P v): one packed compiled call
+            c, P = fused
+            W = np.column_stack([c, P, problem.B.T, problem.umin, problem.umax])
+            if np.isfinite(W).all():
+                self._W = np.ascontiguousarray(W, dtype=float)
 
     def __repr__(self) -> str:
         return f"Allocator(method={self.method!r}, {self.problem!r})"
 
     def __call__(self, v: ArrayLike, *, u_prev: ArrayLike | None = None, dt: float | None = None) -> Result:
-        if self._W is not None and u_prev is None and dt is None:
-            t0 = time.perf_counter()
-            if type(v) is np.ndarray and v.shape == self._kshape and v.dtype == np.float64:
-                out = fused_affine(self._W, v, EXACT_RTOL)
+        if type(v) is np.ndarray and v.shape == self._kshape and v.dtype == np.float64:
+            if self._W is not None and u_prev is None and dt is None:
+                t0 = time.perf_counter()
+                out = fused_affine(self._W, v, EXACT_RTOL, MAX_MAGNITUDE)
                 code = out[self._mk]
                 if code < 2.0:
-                    return Result(out[:self._m], v, out[self._m:self._mk], _EXACT if code == 0.0 else _UNATT,
-                                  self.method, 0, time.perf_counter() - t0, "")
+                    out.setflags(write=False)  # u, B u and the copy of v are read-only views of it
+                    return Result(out[:self._m], out[self._mk + 1:], out[self._m:self._mk],
+                                  _EXACT if code == 0.0 else _UNATT, self.method, 0, time.perf_counter() - t0, "")
+            v = v.copy()  # the result owns its demand: the caller may reuse the array
+            if not in_domain(v, MAX_MAGNITUDE):
+                self.problem.check_demand(v)  # raises DemandError naming v
+        else:
+            v = self.problem.check_demand(v)
+        return self._solve(v, u_prev, dt)
+
+    def _solve(self, v: FloatArray, u_prev: ArrayLike | None, dt: float | None) -> Result:
+        """Allocate a validated demand (owned copy) through the method, or the safe answer."""
         problem = self.problem
-        try:
-            v = np.asarray(v, dtype=float)
-        except (TypeError, ValueError):
-            v = problem.check_demand(v)  # raises DemandError naming v
-        if v.shape != self._kshape or not all_finite(v):
-            v = problem.check_demand(v)
         if u_prev is None and dt is None:
             lo, hi, up = self._lo, self._hi, None
         else:
             lo, hi = problem.effective_bounds(u_prev, dt)
-            up = np.asarray(u_prev, dtype=float)
+            up = problem.check_u_prev(u_prev)
         t0 = time.perf_counter()
-        message = ""
-        try:
-            u, iterations = self.impl.solve(v, lo, hi, up)
-            u = np.array(u, dtype=float)  # own copy: clipped in place below
-            v_ach = np.empty(problem.k)
-            code = finish(self._B, u, lo, hi, v, v_ach, EXACT_RTOL)
-            if code == 2:
-                raise SolverError(f"{self.method} produced non-finite commands")
-            status = _EXACT if code == 0 else _UNATT
-        except SolverError as exc:
-            u, iterations, status, message = self._safe(v, lo, hi), 0, _FALLBACK, str(exc)
-            if not all_finite(u):  # last resort: the preferred position, clipped
-                u = np.array(problem.up)
-            u = np.minimum(np.maximum(u, lo), hi)
+        message = self.build_error
+        u: FloatArray | None = None
+        if self.impl is not None:
+            try:
+                u_m, iterations = self.impl.solve(v, lo, hi, up)
+                u = np.array(u_m, dtype=float)  # own copy: clipped in place below
+                if u.shape != (self._m,):
+                    raise SolverError(f"{self.method} returned a command of shape {u.shape}")
+                iterations = int(iterations)
+                v_ach = np.empty(problem.k)
+                code = finish(self._B, u, lo, hi, v, v_ach, EXACT_RTOL)
+                if code == 2:
+                    raise SolverError(f"{self.method} produced non-finite commands")
+                status = _EXACT if code == 0 else _UNATT
+            except Exception as exc:  # noqa: BLE001 - any backend failure becomes the safe answer
+                u, message = None, _reason(exc)
+        if u is None:
+            u, iterations, status = self._safe(v, lo, hi), 0, _FALLBACK
             v_ach = self._B @ u
-        return Result(u, v, v_ach, status, self.method, iterations, time.perf_counter() - t0, message)
+            if not np.isfinite(v_ach).all():  # unreachable inside the valid domain; never report NaN
+                u = np.minimum(np.maximum(problem.up, lo), hi)
+                v_ach = self._B @ u
+        return Result(_frozen(u), _frozen(v), _frozen(v_ach), status, self.method, iterations,
+                      time.perf_counter() - t0, message)
 
     def batch(self, V: ArrayLike) -> BatchResult:
-        """Allocate each row of ``V`` (N, k) without rate limits; vectorised where the method allows."""
+        """Allocate each row of ``V`` (N, k) without rate limits; vectorised where the method allows.
+
+        Row ``i`` equals ``self(V[i])`` (status included); where the vectorised path cannot
+        vouch for that (non-finite output, an exception) the rows are allocated one by one.
+        """
         problem = self.problem
-        try:
-            Varr = np.asarray(V, dtype=float)
-        except (TypeError, ValueError) as exc:
-            raise DemandError(f"V: not a numeric array ({exc})") from exc
+        Varr = as_float_array("V", V, DemandError)
         if Varr.ndim != 2 or Varr.shape[1] != problem.k:
             raise DemandError(f"V: expected shape (N, {problem.k}), got {Varr.shape}")
-        if not np.isfinite(Varr).all():
-            bad = np.argwhere(~np.isfinite(Varr))[0]
-            raise DemandError(f"V: non-finite value at row {bad[0]}, column {bad[1]}")
+        check_magnitude("V", Varr, DemandError)
+        Varr.setflags(write=False)
         t0 = time.perf_counter()
-        U = self.impl.solve_batch(Varr, self._lo, self._hi)
-        if U is not None and np.isfinite(U).all():
-            U = np.minimum(np.maximum(U, self._lo), self._hi)
-            Vach = U @ self._B.T
-            err = np.abs(Vach - Varr).max(axis=1) if len(Varr) else np.zeros(0)
-            tol = EXACT_RTOL * np.maximum(1.0, np.abs(Varr).max(axis=1)) if len(Varr) else np.zeros(0)
-            status = np.where(err <= tol, _EXACT.value, _UNATT.value)
-            return BatchResult(U, Varr, Vach, status, self.method, time.perf_counter() - t0)
-        results = [self(v) for v in Varr]
+        U = None
+        if self.impl is not None:
+            try:
+                U = self.impl.solve_batch(Varr, self._lo, self._hi)
+            except Exception:  # noqa: BLE001 - the per-row path below handles every failure
+                U = None
+        if U is not None and U.shape == (len(Varr), problem.m):
+            U = np.array(U, dtype=float)  # own, contiguous: clipped in place by the kernel
+            Vach = np.empty((len(Varr), problem.k))
+            codes = finish_batch(self._B, U, self._lo, self._hi, Varr, Vach, EXACT_RTOL)
+            if not (codes == 2).any():  # the single call's kernel: same B u, same status
+                status = np.where(codes == 0, _EXACT.value, _UNATT.value)
+                return BatchResult(_frozen(U), Varr, _frozen(Vach), _frozen(status), self.method,
+                                   time.perf_counter() - t0)
+        results = [self._solve(np.array(v), None, None) for v in Varr]
         m = problem.m
         U = np.array([r.u for r in results]).reshape(len(results), m)
         Vach = np.array([r.v_achieved for r in results]).reshape(len(results), problem.k)
         status = np.array([r.status.value for r in results], dtype="<U12")
-        return BatchResult(U, Varr, Vach, status, self.method, time.perf_counter() - t0)
+        return BatchResult(_frozen(U), Varr, _frozen(Vach), _frozen(status), self.method, time.perf_counter() - t0)
 
 
 def make_allocator(problem: Problem, method: str = "pinv", **options: Any) -> Allocator:

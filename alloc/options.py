@@ -40,7 +40,7 @@ class Option:
     ----------
     type : str
         What the value is, for people and the service's method listing (``"float"``,
-        ``"int"``, ``"bool"``, ``"str"``, ``"matrix"``, ``"int list"``, ``"groups"``).
+        ``"int"``, ``"bool"``, ``"str"``, ``"matrix"``, ``"weight"``, ``"real list"``, ``"groups"``).
     default : Any
         The value the method uses when the option is not given (JSON-able).
     doc : str
@@ -187,22 +187,33 @@ def _is_whole(value: Any) -> bool:
     return _is_real(value) and math.isfinite(float(value)) and float(value) == round(float(value))
 
 
+def _is_level(value: Any) -> bool:
+    """A real number used only by comparison: any size of Python int, a finite float."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, Real):
+        return False
+    return isinstance(value, Integral) or math.isfinite(float(value))
+
+
 def levels(doc: str) -> Option:
-    """A list of integers (default ``None``), e.g. one priority level per axis."""
+    """A list of real numbers (default ``None``), e.g. one priority level per axis.
+
+    Levels are compared exactly (ranks), never cast: ``[1e20, 1]`` and ``[2**63, 1]`` keep
+    their order."""
 
     def check(value: Any) -> Any:
-        if value is not None and not (_is_list(value) and all(_is_whole(x) for x in value)):
-            raise ValueError("must be a list of integers")
+        if value is not None and not (_is_list(value) and all(_is_level(x) for x in value)):
+            raise ValueError("must be a list of finite real numbers")
         return value
 
-    return Option("int list", None, doc, check, "list of integers")
+    return Option("real list", None, doc, check, "list of finite real numbers")
 
 
 def groups(doc: str) -> Option:
     """A list of lists of effector indices or names (default ``None``)."""
 
-    def is_effector(e: Any) -> bool:
-        return isinstance(e, (str, Integral)) and not isinstance(e, bool)
+    def is_effector(e: Any) -> bool:  # a whole float (2.0) is index 2; 1.7 is refused
+        return isinstance(e, (str, Integral)) and not isinstance(e, bool) or (
+            isinstance(e, (float, np.floating)) and _is_whole(e))
 
     def check(value: Any) -> Any:
         if value is not None and not (_is_list(value) and all(_is_list(g) and all(is_effector(e) for e in g)

@@ -10,14 +10,13 @@ preference cost is ``(u - up)' Wu (u - up)`` and the moment-error cost is
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ._kernels import all_finite, rate_window
+from ._kernels import rate_window
 from .exceptions import DemandError, ProblemError
 
 __all__ = ["Problem"]
@@ -25,35 +24,84 @@ __all__ = ["Problem"]
 FloatArray = NDArray[np.float64]
 
 
-def _as_array(name: str, value: ArrayLike, shape: tuple[int, ...], *, allow_inf: bool = False) -> FloatArray:
-    """Return ``value`` as a read-only float array of ``shape`` or raise ProblemError."""
+#: The valid input domain (README "Valid input domain").  Every number a problem or a call
+#: carries -- B, the limits, ``up``, finite rate limits, the entries of ``Wu``/``Wv``, the
+#: demand ``v``, ``u_prev`` and ``dt`` -- is finite with ``|x| <= MAX_MAGNITUDE``; subnormal
+#: and zero values are allowed everywhere except as a weight's eigenvalue, which must be at
+#: least ``MIN_WEIGHT``.  With these caps the products the methods form (``B u``, ``B Wu^-1
+#: B'``, squared norms of moments, the facet inverses) stay below 1e300, so no stage can
+#: overflow to ``inf``/``NaN``; physical allocation problems are many orders inside them.
+MAX_MAGNITUDE = 1e50
+#: Smallest eigenvalue of a weight matrix (``Wu``, ``Wv``); ``1 / MAX_MAGNITUDE``.
+MIN_WEIGHT = 1e-50
+#: Size caps: virtual-control axes ``k`` and effectors ``m``.
+MAX_AXES = 32
+MAX_EFFECTORS = 512
+
+
+def as_float_array(name: str, value: Any, error: type[Exception] = ProblemError, *,
+                 none_as: float | None = None) -> FloatArray:
+    """``value`` as a new float array, or ``error`` naming ``name`` (ragged, text, big ints).
+
+    With ``none_as`` a ``None`` element (JSON ``null``) stands for that value.
+    """
+    if none_as is not None and not isinstance(value, np.ndarray) and value is not None:
+        try:
+            value = [none_as if x is None else x for x in value]
+        except TypeError:
+            pass  # not iterable: np.array below reports it
     try:
         arr = np.array(value, dtype=float)
+    except OverflowError as exc:
+        raise error(f"{name}: a number is too large for a float (|x| <= {MAX_MAGNITUDE:g} required)") from exc
     except (TypeError, ValueError) as exc:
-        raise ProblemError(f"{name}: not a numeric array ({exc})") from exc
-    if arr.shape != shape:
-        raise ProblemError(f"{name}: expected shape {shape}, got {arr.shape}")
-    bad = np.isnan(arr) if allow_inf else ~np.isfinite(arr)
+        raise error(f"{name}: not a numeric array of consistent shape ({exc})") from exc
+    return arr
+
+
+def check_magnitude(name: str, arr: FloatArray, error: type[Exception] = ProblemError, *,
+                    allow_inf: bool = False) -> None:
+    """Raise ``error`` naming ``name`` unless every value is finite (``inf`` if allowed) and
+    within ``MAX_MAGNITUDE``."""
+    if allow_inf:
+        bad = np.isnan(arr) | (np.isfinite(arr) & (np.abs(arr) > MAX_MAGNITUDE))
+    else:
+        bad = ~(np.abs(arr) <= MAX_MAGNITUDE)
     if bad.any():
         idx = tuple(int(i) for i in np.argwhere(bad)[0])
-        what = "NaN" if allow_inf else "non-finite"
-        raise ProblemError(f"{name}: {what} value at index {idx if len(idx) > 1 else idx[0]}")
+        x = arr[idx]
+        what = "NaN" if np.isnan(x) else ("non-finite" if not np.isfinite(x) else f"|{x:g}| > {MAX_MAGNITUDE:g}")
+        where = idx if len(idx) > 1 else (idx[0] if idx else "")
+        raise error(f"{name}: {what} value at index {where} (valid domain: finite, |x| <= {MAX_MAGNITUDE:g})")
+
+
+def _as_array(name: str, value: ArrayLike, shape: tuple[int, ...], *, allow_inf: bool = False,
+              none_as: float | None = None) -> FloatArray:
+    """Return ``value`` as a read-only float array of ``shape`` or raise ProblemError."""
+    arr = as_float_array(name, value, none_as=none_as)
+    if arr.shape != shape:
+        raise ProblemError(f"{name}: expected shape {shape}, got {arr.shape}")
+    check_magnitude(name, arr, allow_inf=allow_inf)
     arr.setflags(write=False)
     return arr
 
 
 def _as_weight(name: str, value: ArrayLike | None, n: int) -> FloatArray:
-    """A symmetric positive definite ``n x n`` weight; a 1-D input is a diagonal."""
+    """A symmetric positive definite ``n x n`` weight; a 1-D input is a diagonal.
+
+    Eigenvalues must lie in ``[MIN_WEIGHT, MAX_MAGNITUDE]`` (the valid input domain).
+    """
     if value is None:
         w = np.eye(n)
         w.setflags(write=False)
         return w
-    arr = np.array(value, dtype=float) if not isinstance(value, np.ndarray) else value.astype(float)
+    arr = as_float_array(name, value)
     if arr.ndim == 1:
         arr = _as_array(name, arr, (n,))
-        if (arr <= 0).any():
-            i = int(np.argmax(arr <= 0))
-            raise ProblemError(f"{name}: diagonal weight {name}[{i}] = {arr[i]:g} is not positive")
+        if (arr < MIN_WEIGHT).any():
+            i = int(np.argmax(arr < MIN_WEIGHT))
+            why = "is not positive" if arr[i] <= 0 else f"is below the smallest weight {MIN_WEIGHT:g}"
+            raise ProblemError(f"{name}: diagonal weight {name}[{i}] = {arr[i]:g} {why}")
         out = np.diag(arr)
         out.setflags(write=False)
         return out
@@ -65,6 +113,10 @@ def _as_weight(name: str, value: ArrayLike | None, n: int) -> FloatArray:
         np.linalg.cholesky(arr)
     except np.linalg.LinAlgError as exc:
         raise ProblemError(f"{name}: weight matrix is not positive definite") from exc
+    lam = float(np.linalg.eigvalsh((arr + arr.T) / 2.0).min())
+    if lam < MIN_WEIGHT:
+        raise ProblemError(f"{name}: weight matrix's smallest eigenvalue {lam:g} is below {MIN_WEIGHT:g} "
+                           "(not positive definite within the valid domain)")
     return arr
 
 
@@ -124,15 +176,14 @@ class Problem:
         names: Sequence[str] | None = None,
         axes: Sequence[str] | None = None,
     ) -> None:
-        try:
-            B_arr = np.array(B, dtype=float)
-        except (TypeError, ValueError) as exc:
-            raise ProblemError(f"B: not a numeric matrix ({exc})") from exc
+        B_arr = as_float_array("B", B)
         if B_arr.ndim == 1:
             B_arr = B_arr[np.newaxis, :]
         if B_arr.ndim != 2 or B_arr.shape[0] < 1 or B_arr.shape[1] < 1:
             raise ProblemError(f"B: expected a 2-D matrix (k x m), got shape {B_arr.shape}")
         k, m = B_arr.shape
+        if k > MAX_AXES or m > MAX_EFFECTORS:
+            raise ProblemError(f"B: {k} x {m} exceeds the size caps (k <= {MAX_AXES}, m <= {MAX_EFFECTORS})")
         B_arr = _as_array("B", B_arr, (k, m))
         lo = _as_array("umin", umin, (m,))
         hi = _as_array("umax", umax, (m,))
@@ -150,8 +201,10 @@ class Problem:
                 raise ProblemError(
                     f"up: up[{i}] = {up_arr[i]:g} outside the limits [{lo[i]:g}, {hi[i]:g}]"
                 )
-        rmin = _as_array("rate_min", np.full(m, -np.inf) if rate_min is None else rate_min, (m,), allow_inf=True)
-        rmax = _as_array("rate_max", np.full(m, np.inf) if rate_max is None else rate_max, (m,), allow_inf=True)
+        rmin = _as_array("rate_min", np.full(m, -np.inf) if rate_min is None else rate_min, (m,),
+                         allow_inf=True, none_as=-np.inf)
+        rmax = _as_array("rate_max", np.full(m, np.inf) if rate_max is None else rate_max, (m,),
+                         allow_inf=True, none_as=np.inf)
         if (rmin > 0).any():
             i = int(np.argmax(rmin > 0))
             raise ProblemError(f"rate_min: rate_min[{i}] = {rmin[i]:g} must be <= 0")
@@ -221,7 +274,14 @@ class Problem:
                 return self.names.index(effector)
             except ValueError:
                 raise ProblemError(f"effector: unknown name {effector!r}; known: {list(self.names)}") from None
-        i = int(effector)
+        if isinstance(effector, (bool, np.bool_)):
+            raise ProblemError(f"effector: expected an index or a name, got {effector!r}")
+        if isinstance(effector, (int, np.integer)):
+            i = int(effector)
+        elif isinstance(effector, (float, np.floating)) and float(effector).is_integer():
+            i = int(effector)  # 2.0 from JSON; 1.7 is an error, never truncated
+        else:
+            raise ProblemError(f"effector: {effector!r} is not an integer index or a name")
         if not 0 <= i < self.m:
             raise ProblemError(f"effector: index {i} out of range 0..{self.m - 1}")
         return i
@@ -271,17 +331,13 @@ class Problem:
     # ------------------------------------------------------------ rate limits
     def check_demand(self, v: ArrayLike) -> FloatArray:
         """Validate a demand vector; return it as a float array of shape (k,)."""
-        try:
-            arr = np.asarray(v, dtype=float)
-        except (TypeError, ValueError) as exc:
-            raise DemandError(f"v: not a numeric vector ({exc})") from exc
+        arr = as_float_array("v", v, DemandError)
         if arr.shape != (self.k,):
             if arr.size == self.k and arr.ndim <= 2:
                 arr = arr.reshape(self.k)
             else:
                 raise DemandError(f"v: expected shape ({self.k},), got {arr.shape}")
-        if not np.isfinite(arr).all():
-            raise DemandError(f"v: non-finite value at index {int(np.argmax(~np.isfinite(arr)))}")
+        check_magnitude("v", arr, DemandError)
         return arr
 
     def effective_bounds(self, u_prev: ArrayLike | None = None, dt: float | None = None) -> tuple[FloatArray, FloatArray]:
@@ -300,21 +356,31 @@ class Problem:
             return self.umin, self.umax
         if u_prev is None or dt is None:
             raise DemandError("u_prev/dt: rate limits need both u_prev and dt (or neither)")
+        return rate_window(self.umin, self.umax, self.rate_min, self.rate_max,
+                           self.check_u_prev(u_prev), self.check_dt(dt))
+
+    @staticmethod
+    def check_dt(dt: Any) -> float:
+        """Validate a time step: a real number in ``(0, MAX_MAGNITUDE]``."""
+        if isinstance(dt, (bool, np.bool_)):
+            raise DemandError(f"dt: expected a number, got {dt!r}")
         try:
             dt_f = float(dt)
+        except OverflowError as exc:
+            raise DemandError(f"dt: too large for a float (must be <= {MAX_MAGNITUDE:g})") from exc
         except (TypeError, ValueError) as exc:
             raise DemandError(f"dt: not a number ({dt!r})") from exc
-        if not math.isfinite(dt_f) or dt_f <= 0.0:
-            raise DemandError(f"dt: time step must be positive and finite, got {dt!r}")
-        try:
-            up = np.asarray(u_prev, dtype=float)
-        except (TypeError, ValueError) as exc:
-            raise DemandError(f"u_prev: not a numeric vector ({exc})") from exc
+        if not (0.0 < dt_f <= MAX_MAGNITUDE):
+            raise DemandError(f"dt: time step must be positive, finite and <= {MAX_MAGNITUDE:g}, got {dt!r}")
+        return dt_f
+
+    def check_u_prev(self, u_prev: ArrayLike) -> FloatArray:
+        """Validate the previous command: shape (m,), finite, within the domain (not the limits)."""
+        up = as_float_array("u_prev", u_prev, DemandError)
         if up.shape != (self.m,):
             raise DemandError(f"u_prev: expected shape ({self.m},), got {up.shape}")
-        if not all_finite(up):
-            raise DemandError(f"u_prev: non-finite value at index {int(np.argmax(~np.isfinite(up)))}")
-        return rate_window(self.umin, self.umax, self.rate_min, self.rate_max, up, dt_f)
+        check_magnitude("u_prev", up, DemandError)
+        return up
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-serialisable description (lists of floats; infinite rates as None)."""

@@ -17,7 +17,7 @@ Backends
     and LPs: a few microseconds on allocation-sized problems; LPs and singular
     Hessians use its proximal-point iterations).
 ``highs``
-    HiGHS (highspy) with the model kept between calls; LPs only.
+    HiGHS (highspy), the model passed afresh per call (history-independent); LPs only.
 any name in ``qpsolvers.available_solvers`` (``osqp``, ``clarabel``, ``proxqp``, ...)
     Through qpsolvers, which rebuilds the solver each call: slow, for cross-checks.
 """
@@ -209,52 +209,43 @@ class _Chain:
 
 
 class _Highs:
-    """HiGHS LP kept between calls; bounds and costs are changed in place."""
+    """HiGHS LP, passed afresh on every solve.
+
+    A kept model (even with ``clearSolver``) remembers the sparsity pattern and bounds of
+    earlier calls, and where the LP optimum is not unique (a ray through an AMS edge) the
+    simplex then lands on another vertex: answers would depend on call history.  Passing
+    the model anew makes every answer a function of this call's data alone.
+    """
 
     def __init__(self, f, A, bl, bu, lb, ub) -> None:
         import highspy
 
         self._hs = highspy
-        h = highspy.Highs()
+        self._f = np.array(f, dtype=float)
+        self._A = np.array(A, dtype=float)
+        self._bl, self._bu = np.array(bl, dtype=float), np.array(bu, dtype=float)
+        self._lb, self._ub = np.array(lb, dtype=float), np.array(ub, dtype=float)
+
+    def _model(self):
+        hs = self._hs
+        h = hs.Highs()
         h.setOptionValue("output_flag", False)
-        lp = highspy.HighsLp()
-        n, mA = int(f.size), int(A.shape[0])
+        lp = hs.HighsLp()
+        n, mA = int(self._f.size), int(self._A.shape[0])
         lp.num_col_, lp.num_row_ = n, mA
-        lp.col_cost_ = np.asarray(f, dtype=float)
-        lp.col_lower_ = np.asarray(lb, dtype=float)
-        lp.col_upper_ = np.asarray(ub, dtype=float)
-        lp.row_lower_ = np.asarray(bl, dtype=float)
-        lp.row_upper_ = np.asarray(bu, dtype=float)
-        Acsc = _to_csc(A)
-        lp.a_matrix_.format_ = highspy.MatrixFormat.kColwise
-        lp.a_matrix_.start_, lp.a_matrix_.index_, lp.a_matrix_.value_ = Acsc
+        lp.col_cost_, lp.col_lower_, lp.col_upper_ = self._f, self._lb, self._ub
+        lp.row_lower_, lp.row_upper_ = self._bl, self._bu
+        lp.a_matrix_.format_ = hs.MatrixFormat.kColwise
+        lp.a_matrix_.start_, lp.a_matrix_.index_, lp.a_matrix_.value_ = _to_csc(self._A)
         lp.a_matrix_.num_col_, lp.a_matrix_.num_row_ = n, mA
         h.passModel(lp)
-        self._h, self._n, self._mA = h, n, mA
-        self._cols = np.arange(n, dtype=np.int32)
-        self._rows = np.arange(mA, dtype=np.int32)
-        self._A = np.array(A, dtype=float)
+        return h
 
     def solve(self, f=None, lb=None, ub=None, bl=None, bu=None, A=None):
-        h = self._h
-        if f is not None:
-            h.changeColsCost(self._n, self._cols, np.asarray(f, dtype=float))
-        if lb is not None or ub is not None:
-            info = h.getLp()
-            lo = np.asarray(lb if lb is not None else info.col_lower_, dtype=float)
-            hi = np.asarray(ub if ub is not None else info.col_upper_, dtype=float)
-            h.changeColsBounds(self._n, self._cols, lo, hi)
-        if bl is not None or bu is not None:
-            info = h.getLp()
-            lo = np.asarray(bl if bl is not None else info.row_lower_, dtype=float)
-            hi = np.asarray(bu if bu is not None else info.row_upper_, dtype=float)
-            h.changeRowsBounds(self._mA, self._rows, lo, hi)
-        if A is not None:
-            changed = np.argwhere(A != self._A)
-            for r, c in changed:
-                h.changeCoeff(int(r), int(c), float(A[r, c]))
-            self._A = np.array(A, dtype=float)
-        h.clearSolver()  # cold start: a kept basis makes degenerate LPs' answers depend on call history
+        for name, value in (("_f", f), ("_lb", lb), ("_ub", ub), ("_bl", bl), ("_bu", bu), ("_A", A)):
+            if value is not None:
+                setattr(self, name, np.array(value, dtype=float))
+        h = self._model()
         h.run()
         status = h.getModelStatus()
         if status != self._hs.HighsModelStatus.kOptimal:

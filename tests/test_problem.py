@@ -84,7 +84,7 @@ def test_unknown_option_is_a_type_error(method):
         ("daisy", dict(groups=[[0, 1], [1, 2]]), "groups"),
         ("daisy", dict(groups=[[0, 7]]), "effector"),
         ("cgi", dict(priorities=[1, 2, 3]), "priorities"),
-        ("qp", dict(priorities=[1.5, 2]), "priorities"),
+        ("qp", dict(priorities=[1.5, float("nan")]), "priorities"),
         ("qp", dict(backend="nope"), "backend"),
         ("lp", dict(backend="osqp"), "backend"),
     ],

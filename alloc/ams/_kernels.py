@@ -144,6 +144,17 @@ def facet_solve(v, p0, u0, Nz, Minv, U, S):  # pragma: no cover - compiled
     return _eq_1_15(u0, a, ustar), 1
 
 
+@njit(cache=True, nogil=True)
+def facet_solve_batch(V, p0, u0, Nz, Minv, U, S):  # pragma: no cover - compiled
+    """:func:`facet_solve` for each row of ``V``: a batch row is bitwise its single call."""
+    n = V.shape[0]
+    out = np.empty((n, u0.shape[0]))
+    for r in range(n):
+        u, _ = facet_solve(V[r], p0, u0, Nz, Minv, U, S)
+        out[r] = u
+    return out
+
+
 # ---------------------------------------------------------------- Durham's edge bisection
 @njit(cache=True, nogil=True)
 def _sign(x):  # pragma: no cover - compiled

@@ -49,7 +49,17 @@ from .geometry import AttainableSet
 __all__ = ["FacetSearch", "EdgeBisect", "SphericalTable"]
 
 _EQ = "Eqs 1.15-1.17"
+#: Largest C(m, k-1) the facet-search methods enumerate at build; beyond it they use the
+#: LP formulation (build time and memory grow with the number of facets).
+FACET_BUILD_LIMIT = 100_000
 _TOL = 1e-10  # Eq 1.17 slack, relative (rays through an edge satisfy two tiles up to round-off)
+
+
+def _int_option(value: object, field: str, lo: int, hi: int, method: str = "da_bisect") -> int:
+    """An integer option in ``[lo, hi]`` (bounded: it sizes build-time tables); OptionError otherwise."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or not lo <= value <= hi:
+        raise OptionError(f"{method}: {field} must be an integer in [{lo}, {hi}], got {value!r}")
+    return int(value)
 
 
 @register("da_facet", needs_ams=True, supports_batch=True)
@@ -63,10 +73,28 @@ class FacetSearch(Method):
     def __init__(self, problem: Problem) -> None:
         super().__init__(problem)
         t0 = time.perf_counter()
-        self.ams = AttainableSet(problem)
-        self._prepare()
-        self.build_time = time.perf_counter() - t0
         self.fallbacks = 0
+        #: the LP formulation of Eqs 1.15-1.17 (``da``'s LP backend) when the facet search
+        #: cannot be built: a set too large to enumerate, or degenerate geometry (nearly
+        #: rank-deficient or coplanar beyond tolerance) that the exact search cannot tile
+        self._lp: Method | None = None
+        self.lp_reason = ""
+        n_sets = math.comb(problem.m, max(problem.k - 1, 0))
+        if n_sets > FACET_BUILD_LIMIT:
+            self._use_lp(f"C(m, k-1) = {n_sets} facet generator sets exceed {FACET_BUILD_LIMIT}")
+        else:
+            try:
+                self.ams = AttainableSet(problem)
+                self._prepare()
+            except Exception as exc:  # noqa: BLE001 - degenerate geometry: handled, not refused
+                self._use_lp(f"{type(exc).__name__}: {exc}")
+        self.build_time = time.perf_counter() - t0
+
+    def _use_lp(self, reason: str) -> None:
+        from ..methods.direct import DirectAllocation  # the LP formulation of the same problem
+
+        self._lp = DirectAllocation(self.problem, backend="daqp")
+        self.lp_reason = reason
 
     # ------------------------------------------------------------ tables
     def _prepare(self) -> None:
@@ -137,6 +165,8 @@ class FacetSearch(Method):
 
     def solve(self, v, lo, hi, u_prev):
         """Compiled search (:mod:`alloc.ams._kernels`); answers as :meth:`_solve_reference`."""
+        if self._lp is not None:
+            return self._lp.solve(v, lo, hi, u_prev)
         if self._flat:
             return self._solve_reference(v, lo, hi, u_prev)
         if not self._nominal(lo, hi):
@@ -149,6 +179,8 @@ class FacetSearch(Method):
     def _solve_reference(self, v, lo, hi, u_prev):
         """The numpy implementation the kernels reproduce (kept for tests and flat sets)."""
         p = self.problem
+        if self._lp is not None:
+            return self._lp.solve(v, lo, hi, u_prev)
         if self._flat or not self._nominal(lo, hi):
             u0 = np.minimum(np.maximum(p.up, lo), hi)
             d = v - p.B @ u0
@@ -170,10 +202,22 @@ class FacetSearch(Method):
         return ustar, 1
 
     def solve_batch(self, V, lo, hi):
-        """Vectorised over demands.  The facet is picked in support-function form (one
+        """The compiled single-call search over the rows of ``V`` (one call, no Python loop):
+        a batch row is bitwise the single call ``solve(V[i])``.  Subclasses with their own
+        nominal search (``da_bisect``, ``da_table``) return ``None``: the allocator then
+        runs their single calls row by row, so batch equals single for them too."""
+        if (self._lp is not None or self._flat or type(self)._solve_nominal is not FacetSearch._solve_nominal
+                or not self._nominal(lo, hi)):
+            return None
+        return _kernels.facet_solve_batch(np.ascontiguousarray(V), self._kp0, self._ku0, self._kNz,
+                                          self._kMinv, self._kU, self._kS)
+
+    def _solve_batch_support(self, V, lo, hi):
+        """Vectorised over demands in numpy (kept as a reference; :meth:`solve_batch` is
+        the compiled per-row search).  The facet is picked in support-function form (one
         (N, F) product: ``a* = min gap / (n . d)``), then Eq 1.16 runs on that facet's tiles
         only; testing every tile for every demand would touch (N, T, k) arrays."""
-        if self._flat or not self._nominal(lo, hi):
+        if self._lp is not None or self._flat or not self._nominal(lo, hi):
             return None
         if not hasattr(self, "_facet_pad"):
             self._pad_tiles()
@@ -228,14 +272,12 @@ class EdgeBisect(FacetSearch):
     """Direct allocation by Durham's edge-bisecting facet search (k = 3)."""
 
     summary = "direct allocation: Durham's edge-bisecting facet search, cost ~linear in m (Eq 1.16-1.17)"
-    options = {"angles": integer(16, "rotation angles tried per round (1 = plain bisection)", low=1),
-               "max_rounds": integer(40, "rounds before falling back to the sequential search", low=1)}
+    options = {"angles": integer(16, "rotation angles tried per round (1 = plain bisection)", low=1, high=1024),
+               "max_rounds": integer(40, "rounds before falling back to the sequential search", low=1, high=1000)}
 
     def __init__(self, problem: Problem, *, angles: int = 16, max_rounds: int = 40) -> None:
-        if not isinstance(angles, int) or angles < 1:
-            raise OptionError(f"da_bisect: angles must be a positive integer, got {angles!r}")
-        if not isinstance(max_rounds, int) or max_rounds < 1:
-            raise OptionError(f"da_bisect: max_rounds must be a positive integer, got {max_rounds!r}")
+        angles = _int_option(angles, "angles", 1, 1024)
+        max_rounds = _int_option(max_rounds, "max_rounds", 1, 1000)
         self.angles, self.max_rounds = angles, max_rounds
         super().__init__(problem)
         self.rounds = 0
@@ -405,8 +447,7 @@ class SphericalTable(FacetSearch):
     _CANDIDATES = 5
 
     def __init__(self, problem: Problem, *, resolution: int = 64) -> None:
-        if not isinstance(resolution, int) or resolution < 2:
-            raise OptionError(f"da_table: resolution must be an integer >= 2, got {resolution!r}")
+        resolution = _int_option(resolution, "resolution", 2, 256, "da_table")
         self.resolution = resolution
         super().__init__(problem)
         self.hits = 0

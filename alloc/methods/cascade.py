@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import math
+import numbers
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
 from .._kernels import _FREE_BITS, cascade, daisy_chain, free_set_insert, free_set_pinv
-from .._linalg import ABS_FLOOR, RCOND, max_scale, priority_groups, sqrt_factor, weighted_pinv
+from .._linalg import ABS_FLOOR, RCOND, check_rcond, max_scale, priority_groups, sqrt_factor, weighted_pinv
 from ..exceptions import ProblemError
 from ..options import groups as groups_option
 from ..options import levels, real
@@ -15,19 +18,36 @@ from ..problem import Problem
 from ..registry import FloatArray, Method, register
 
 
-def check_priorities(priorities, k: int) -> list[np.ndarray] | None:
-    """Validate the ``priorities`` option: one integer level per axis, larger = more important."""
+def priority_ranks(priorities: Any, k: int) -> list[int] | None:
+    """The ``priorities`` option as ranks ``0 .. L-1`` (larger = more important).
+
+    Levels may be any finite real numbers (Python big integers included); only their order
+    matters, and it is compared exactly (``1e20`` and ``2**63`` are never cast to a machine
+    integer, which would wrap).  Raises ProblemError naming the field otherwise.
+    """
     if priorities is None:
         return None
+    if isinstance(priorities, (str, bytes, dict)):
+        raise ProblemError(f"priorities: expected a sequence of {k} real numbers, got {type(priorities).__name__}")
     try:
-        pr = np.asarray(priorities)
-    except (TypeError, ValueError) as exc:
-        raise ProblemError(f"priorities: not a sequence of integers ({exc})") from exc
-    if pr.shape != (k,):
-        raise ProblemError(f"priorities: expected {k} levels (one per axis), got shape {pr.shape}")
-    if not np.issubdtype(pr.dtype, np.number) or not np.all(np.isfinite(pr)) or not np.all(pr == np.round(pr)):
-        raise ProblemError(f"priorities: levels must be integers, got {pr.tolist()}")
-    return priority_groups(pr.astype(int).tolist(), k)
+        vals = list(priorities.tolist() if isinstance(priorities, np.ndarray) else priorities)
+    except TypeError as exc:
+        raise ProblemError(f"priorities: expected a sequence of {k} real numbers ({exc})") from exc
+    if len(vals) != k:
+        raise ProblemError(f"priorities: expected {k} levels (one per axis), got {len(vals)}")
+    for i, x in enumerate(vals):
+        x = x.item() if isinstance(x, np.generic) else x
+        if isinstance(x, bool) or not isinstance(x, numbers.Real) or (isinstance(x, float) and not math.isfinite(x)):
+            raise ProblemError(f"priorities: priorities[{i}] = {x!r} is not a finite real number")
+        vals[i] = x
+    rank = {lv: r for r, lv in enumerate(sorted(set(vals)))}
+    return [rank[x] for x in vals]
+
+
+def check_priorities(priorities: Any, k: int) -> list[np.ndarray] | None:
+    """Validate the ``priorities`` option; the axis groups, most important first (or None)."""
+    ranks = priority_ranks(priorities, k)
+    return None if ranks is None else priority_groups(ranks, k)
 
 
 @register("cgi", supports_priorities=True)
@@ -58,7 +78,7 @@ class CascadedGeneralizedInverse(Method):
 
     def __init__(self, problem: Problem, *, rcond: float = RCOND, priorities: Sequence[int] | None = None) -> None:
         super().__init__(problem)
-        self.rcond = float(rcond)
+        self.rcond = check_rcond(rcond, "cgi")
         self.groups = check_priorities(priorities, problem.k)
         self._cache: dict[bytes, FloatArray] = {}
         # the compiled cascade's cache: free set -> slot of ``_bank`` (see _kernels.cascade)
@@ -71,7 +91,9 @@ class CascadedGeneralizedInverse(Method):
         Wu = problem.Wu
         self._diagonal_Wu = np.count_nonzero(Wu - np.diag(np.diagonal(Wu))) == 0
         S = sqrt_factor(problem.Wv) if problem.Wv is not None else np.eye(k)
-        self._S, self._SB, self._rdiag = S, S @ problem.B, 1.0 / np.sqrt(np.diagonal(Wu))
+        # contiguous writable copies: one compiled signature whatever the layout of the factors
+        f64 = np.ascontiguousarray
+        self._S, self._SB, self._rdiag = f64(S), f64(S @ problem.B), f64(1.0 / np.sqrt(np.diagonal(Wu)))
 
     def _pinv(self, free: np.ndarray) -> FloatArray:
         key = free.tobytes()
@@ -194,11 +216,12 @@ class DaisyChain(Method):
 
     def __init__(self, problem: Problem, *, groups=None, rcond: float = RCOND) -> None:
         super().__init__(problem)
+        rcond = check_rcond(rcond, "daisy")
         self.groups = self._check_groups(problem, groups)
         self.P = []
         for g in self.groups:
             gf = g[~problem.jammed[g]]
-            Pg = weighted_pinv(problem.B[:, gf], problem.Wu[np.ix_(gf, gf)], problem.Wv, rcond=float(rcond))
+            Pg = weighted_pinv(problem.B[:, gf], problem.Wu[np.ix_(gf, gf)], problem.Wv, rcond=rcond)
             self.P.append((gf, Pg))
         # the same groups packed for the compiled chain: indices, offsets, stacked inverses
         self._idx = np.concatenate([gf for gf, _ in self.P]).astype(np.int64)
@@ -215,7 +238,10 @@ class DaisyChain(Method):
         for gi, g in enumerate(groups):
             if isinstance(g, (str, bytes)) or not hasattr(g, "__iter__"):
                 raise ProblemError(f"groups[{gi}]: expected a list of effector indices")
-            idx = [problem.index(e) for e in g]
+            try:
+                idx = [problem.index(e) for e in g]
+            except ProblemError as exc:
+                raise ProblemError(f"groups[{gi}]: {exc}") from exc
             if not idx:
                 raise ProblemError(f"groups[{gi}]: empty group")
             dup = seen.intersection(idx)

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._kernels import affine
+from .._kernels import affine, affine_clip_batch
 from ..exceptions import ProblemError
 from ..options import matrix
-from ..problem import Problem
+from ..problem import Problem, as_float_array, check_magnitude
 from ..registry import Method, register
 from .pseudo_inverse import distribution_matrix
 
@@ -32,20 +32,16 @@ class Ganging(Method):
         if G is None:
             G_arr = distribution_matrix(problem)
         else:
-            try:
-                G_arr = np.array(G, dtype=float)
-            except (TypeError, ValueError) as exc:
-                raise ProblemError(f"G: not a numeric matrix ({exc})") from exc
+            G_arr = as_float_array("G", G)
             if G_arr.shape != (problem.m, problem.k):
                 raise ProblemError(f"G: expected shape ({problem.m}, {problem.k}), got {G_arr.shape}")
-            if not np.isfinite(G_arr).all():
-                raise ProblemError("G: non-finite values")
+            check_magnitude("G", G_arr)  # the valid input domain, as for B
         self.G = G_arr
-        self._GT = np.ascontiguousarray(G_arr.T)
-        self.fused = (np.array(problem.up), np.ascontiguousarray(G_arr))
+        self._up, self._G = np.array(problem.up), np.ascontiguousarray(G_arr)
+        self.fused = (self._up, self._G)
 
     def solve(self, v, lo, hi, u_prev):
         return affine(self.problem.up, self.G, v), 0  # clipped by the allocator
 
     def solve_batch(self, V, lo, hi):
-        return np.minimum(np.maximum(self.problem.up + V @ self._GT, lo), hi)
+        return affine_clip_batch(self._up, self._G, np.ascontiguousarray(V), lo, hi)

@@ -25,8 +25,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._kernels import affine, scaled_increment
-from .._linalg import RCOND, max_scale, weighted_pinv
+from .._kernels import affine, affine_clip_batch, scaled_increment, scaled_increment_batch
+from .._linalg import RCOND, check_rcond, max_scale, weighted_pinv
+from ..exceptions import OptionError, SolverError
 from ..options import flag, real
 from ..problem import Problem
 from ..registry import FloatArray, Method, register
@@ -52,14 +53,17 @@ class _PinvBase(Method):
 
     def __init__(self, problem: Problem, *, rcond: float = RCOND, incremental: bool = False) -> None:
         super().__init__(problem)
-        rcond = float(rcond)
-        if not (0.0 <= rcond < 1.0):
-            raise ValueError(f"rcond: must be in [0, 1), got {rcond!r}")
+        rcond = check_rcond(rcond, self.name)
         self.P = distribution_matrix(problem, rcond)
+        if not isinstance(incremental, (bool, np.bool_)):
+            raise OptionError(f"{self.name}: incremental must be True or False, got {incremental!r}")
         self.incremental = bool(incremental)
         # u = c + P v with c = up - P B up: one matrix-vector product per call.
         self.c = problem.up - self.P @ (problem.B @ problem.up)
-        self._PT = np.ascontiguousarray(self.P.T)
+        self._P = np.ascontiguousarray(self.P)
+        # writable contiguous copies: the compiled kernels see one array type (no recompiles)
+        self._B = np.array(problem.B)
+        self._up = np.array(problem.up)
 
     def _unconstrained(self, v: FloatArray, u_prev: FloatArray | None) -> FloatArray:
         if self.incremental and u_prev is not None:
@@ -73,14 +77,14 @@ class Pinv(_PinvBase):
 
     def __init__(self, problem: Problem, **options) -> None:
         super().__init__(problem, **options)
-        self.fused = (self.c, np.ascontiguousarray(self.P))
+        self.fused = (self.c, self._P)
 
     def solve(self, v, lo, hi, u_prev):
         # clipping to [lo, hi] is done by the allocator's compiled finish step
         return self._unconstrained(v, u_prev), 0
 
     def solve_batch(self, V, lo, hi):
-        return np.minimum(np.maximum(self.c + V @ self._PT, lo), hi)
+        return affine_clip_batch(self.c, self._P, np.ascontiguousarray(V), lo, hi)
 
 
 @register("pinv_clip", affine=True, supports_batch=True)
@@ -93,7 +97,7 @@ class PinvScale(_PinvBase):
     summary = "direction-preserving weighted pseudo-inverse: the increment scaled by one factor"
 
     def _bias(self, u_prev: FloatArray | None) -> FloatArray:
-        return u_prev if (self.incremental and u_prev is not None) else self.problem.up
+        return u_prev if (self.incremental and u_prev is not None) else self._up
 
     def _base(self, lo: FloatArray, hi: FloatArray, u_prev: FloatArray | None) -> FloatArray:
         return np.minimum(np.maximum(self._bias(u_prev), lo), hi)
@@ -104,7 +108,7 @@ class PinvScale(_PinvBase):
         return base - self.P @ (self.problem.B @ base), self.P
 
     def solve(self, v, lo, hi, u_prev):
-        return scaled_increment(self.P, self.problem.B, self._bias(u_prev), v, lo, hi), 0
+        return scaled_increment(self._P, self._B, self._bias(u_prev), v, lo, hi), 0
 
     def _solve_reference(self, v, lo, hi, u_prev):
         """The scaling in numpy (what :func:`alloc._kernels.scaled_increment` computes, compiled)."""
@@ -113,13 +117,7 @@ class PinvScale(_PinvBase):
         return base + max_scale(base, du, lo, hi) * du, 0
 
     def solve_batch(self, V, lo, hi):
-        base = np.minimum(np.maximum(self.problem.up, lo), hi)
-        dU = (V - self.problem.B @ base) @ self._PT
-        with np.errstate(divide="ignore", invalid="ignore"):
-            s_up = np.where(dU > 0, (hi - base) / dU, np.inf)
-            s_dn = np.where(dU < 0, (lo - base) / dU, np.inf)
-        s = np.clip(np.minimum(s_up, s_dn).min(axis=1), 0.0, 1.0)
-        return base + s[:, None] * dU
+        return scaled_increment_batch(self._P, self._B, self._up, np.ascontiguousarray(V), lo, hi)
 
 
 class SafeCommand:
@@ -127,11 +125,19 @@ class SafeCommand:
 
     The weighted pseudo-inverse of Eq 1.23 clipped to the call's bounds: closed form,
     always finite and admissible, and close to the optimisers' answers for attainable
-    demands.
+    demands.  It never raises: where even the pseudo-inverse cannot be formed (or its
+    command is not finite) the answer is the preferred position clipped to the bounds.
     """
 
     def __init__(self, problem: Problem) -> None:
-        self._pinv = Pinv(problem)
+        self._up = problem.up
+        try:
+            self._pinv: Pinv | None = Pinv(problem)
+        except SolverError:
+            self._pinv = None
 
     def __call__(self, v: FloatArray, lo: FloatArray, hi: FloatArray) -> FloatArray:
-        return np.minimum(np.maximum(self._pinv.solve(v, lo, hi, None)[0], lo), hi)
+        u = self._up if self._pinv is None else self._pinv.solve(v, lo, hi, None)[0]
+        if not np.isfinite(u).all():
+            u = self._up
+        return np.minimum(np.maximum(u, lo), hi)

@@ -34,6 +34,7 @@ from ..registry import FloatArray, Method, register
 from ..result import exact_tolerance
 from ..solvers import backends, make_backend
 from ._common import KEEP_RTOL, check_backend, row_basis
+from .._linalg import check_real_option
 from .cascade import check_priorities
 from .pseudo_inverse import distribution_matrix
 
@@ -122,9 +123,7 @@ class _SolverWLS(Method):
     def __init__(self, problem: Problem, *, backend: str = "daqp", gamma: float = 1e-4) -> None:
         super().__init__(problem)
         name = check_backend(backend, backends(), "wls")
-        g = float(gamma)
-        if not (np.isfinite(g) and g > 0):
-            raise ValueError(f"gamma: must be positive and finite, got {gamma!r}")
+        g = check_real_option(gamma, "wls", "gamma", 0.0, 1e6, open_lo=True)  # OptionError naming gamma
         p = self.problem
         self.gamma = g
         H = p.B.T @ p.Wv @ p.B + g * g * p.Wu

@@ -1,0 +1,104 @@
+"""The standing adversarial suite (issue 9): seeded hostile problems against the contract.
+
+The generator, the contract check, the watchdog subprocesses and the shrinker live in
+``tests/hostile.py``.  The default run covers ``DEFAULT_CASES`` seeds; the slow run
+(``pytest -m slow``) covers ``SLOW_CASES``, and its result is recorded in the README
+("Adversarial suite").  A failure prints the shrunk minimal case, reproducible with
+``hostile.check(case)`` or from its seed with ``hostile.case(seed)``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+
+import pytest
+
+import hostile
+
+DEFAULT_CASES = int(os.environ.get("ALLOC_HOSTILE_CASES", "1500"))
+SLOW_CASES = 100_000
+WORKERS = 2
+
+#: Open item owned by alloc/solvers.py (not this suite's files), listed so it stays
+#: visible: qpsolvers' first-order backends (SCS, OSQP, Clarabel) run without a time limit
+#: and take seconds, SCS sometimes more than the watchdog's budget, on badly scaled QPs
+#: (B ~ 1e47).  Only a slow call or a time-out with one of these *explicitly chosen*
+#: backends is tolerated; every other failure, and any slow call on a default backend,
+#: fails the test.
+SLOW_THIRD_PARTY = ("scs", "osqp", "clarabel")
+
+
+def _tolerated(f: dict) -> bool:
+    backend = f["minimal"]["options"].get("backend") if isinstance(f["minimal"]["options"], dict) else None
+    return backend in SLOW_THIRD_PARTY and all(s.startswith(("slow call", "hang")) for s in f["fail"])
+
+
+def _assert_contract(report: dict) -> None:
+    hard = [f for f in report["fail"] if not _tolerated(f)]
+    soft = [f for f in report["fail"] if _tolerated(f)]
+    if soft:
+        print(f"{len(soft)} slow calls on third-party first-order backends (see SLOW_THIRD_PARTY)")
+    assert not hard, "contract violations (shrunk):\n" + "\n".join(
+        json.dumps(f, default=str)[:3000] for f in hard[:5])
+
+
+def test_generator_is_reproducible():
+    assert hostile.case(123) == hostile.case(123)
+    assert hostile.case(123) != hostile.case(124)
+
+
+def test_contract_check_catches_a_planted_violation(monkeypatch):
+    """The checker can fail: a method returning a NaN-moment 'exact' would be caught."""
+    import numpy as np
+
+    import alloc
+    from alloc.result import Result, Status
+
+    c = {"seed": -1, "method": "pinv", "options": {},
+         "fields": {"B": [[1.0, 1.0]], "umin": [-1, -1], "umax": [1, 1]}, "calls": [{"v": [5.0]}]}
+    hostile.check(c)  # loads the compiled kernels (a first call in a process may be slow)
+    assert hostile.check(c)["fail"] == []
+
+    def lying(self, v, *, u_prev=None, dt=None):
+        u = np.zeros(2)
+        u.setflags(write=False)
+        vv = np.array(v, dtype=float)
+        vv.setflags(write=False)
+        return Result(u, vv, u[:1], Status.EXACT, "pinv")
+
+    monkeypatch.setattr(alloc.Allocator, "__call__", lying)
+    assert any("dishonest exact" in s for s in hostile.check(c)["fail"])
+
+
+def test_shrinker_reduces_a_failing_case(monkeypatch):
+    import numpy as np
+
+    c = next(c for c in map(hostile.case, range(200))
+             if c["method"] == "pinv" and np.array(c["fields"]["B"], dtype=object).ndim == 2
+             and len(c["fields"]["B"][0]) >= 4 and len(c["calls"]) >= 2)
+
+    def fake_check(case):  # a synthetic failure: any B with more than two columns "fails"
+        wide = len(case["fields"]["B"][0]) > 2
+        return {"fail": ["wide: B"] if wide else [], "status": {}, "refused": ""}
+
+    monkeypatch.setattr(hostile, "check", fake_check)
+    small = hostile.shrink(c, ["wide: B"])
+    assert len(small["fields"]["B"][0]) == 3  # the smallest B that still fails
+    assert len(small["calls"]) == 1
+
+
+def test_adversarial_default_run():
+    report = hostile.run(range(DEFAULT_CASES), workers=WORKERS)
+    assert report["cases"] == DEFAULT_CASES
+    _assert_contract(report)
+    # the run must exercise the methods, not only their input checks
+    for name, counts in report["by_method"].items():
+        assert sum(counts.values()) > 0, name
+
+
+@pytest.mark.slow
+def test_adversarial_large_run():
+    report = hostile.run(range(10_000_000, 10_000_000 + SLOW_CASES), workers=WORKERS)
+    assert report["cases"] == SLOW_CASES
+    _assert_contract(report)
