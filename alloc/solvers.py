@@ -301,11 +301,17 @@ class _Qpsolvers:
         return np.asarray(x, dtype=float), 0
 
 
+#: Wall-clock bound (s) handed to the iterative qpsolvers backends: on badly scaled problems
+#: (B ~ 1e47) OSQP and SCS otherwise iterate for seconds to minutes (adversarial suite); a
+#: time-out is a SolverError, so the allocator answers with its fallback.
+QP_TIME_LIMIT_S = 0.5
+
 # Stock tolerances of first-order/interior-point solvers do not resolve the small
-# regularisation terms of allocation QPs (SOLVER-NOTES); tighten them.
+# regularisation terms of allocation QPs (SOLVER-NOTES); tighten them, and bound their time.
 _TIGHT = {
-    "osqp": {"eps_abs": 1e-9, "eps_rel": 1e-9, "polish": True, "max_iter": 200000},
-    "clarabel": {"tol_gap_abs": 1e-10, "tol_gap_rel": 1e-10, "tol_feas": 1e-10},
+    "osqp": {"eps_abs": 1e-9, "eps_rel": 1e-9, "polish": True, "max_iter": 200000, "time_limit": QP_TIME_LIMIT_S},
+    "clarabel": {"tol_gap_abs": 1e-10, "tol_gap_rel": 1e-10, "tol_feas": 1e-10, "time_limit": QP_TIME_LIMIT_S},
+    "scs": {"time_limit_secs": QP_TIME_LIMIT_S},
 }
 
 
