@@ -301,10 +301,11 @@ class _Qpsolvers:
         return np.asarray(x, dtype=float), 0
 
 
-#: Wall-clock bound (s) handed to the iterative qpsolvers backends: on badly scaled problems
+#: Wall-clock bound (s) per solve handed to the iterative qpsolvers backends (a qp call with
+#: priorities solves up to k + 1 stages, so at most 0.7 s a call): on badly scaled problems
 #: (B ~ 1e47) OSQP and SCS otherwise iterate for seconds to minutes (adversarial suite); a
 #: time-out is a SolverError, so the allocator answers with its fallback.
-QP_TIME_LIMIT_S = 0.5
+QP_TIME_LIMIT_S = 0.1
 
 # Stock tolerances of first-order/interior-point solvers do not resolve the small
 # regularisation terms of allocation QPs (SOLVER-NOTES); tighten them, and bound their time.
