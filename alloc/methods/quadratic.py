@@ -22,11 +22,14 @@ a band) or any qpsolvers name keep the previous formulation as cross-checks.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
 from .._active_set import lexico_packed, lexico_packed_batch, pack
+from .._linalg import check_real_option
 from ..exceptions import OptionError, SolverError
 from ..options import choice, levels, real
 from ..problem import Problem
@@ -34,7 +37,6 @@ from ..registry import FloatArray, Method, register
 from ..result import exact_tolerance
 from ..solvers import backends, make_backend
 from ._common import KEEP_RTOL, check_backend, row_basis
-from .._linalg import check_real_option
 from .cascade import check_priorities
 from .pseudo_inverse import distribution_matrix
 
@@ -218,8 +220,24 @@ _AS_BACKEND = choice(ACTIVE_SET, "solver: 'active_set' (default, compiled sequen
                      lambda: [ACTIVE_SET, *backends()])
 
 
+class _ActiveSetOrBackend(Method):
+    """Dispatch of the QP methods: the compiled active set (``self._impl`` a :class:`LexicoLS`,
+    batch-capable) or a solver backend kept for cross-checks."""
+
+    backend: str
+    _impl: Any
+
+    def solve(self, v, lo, hi, u_prev):
+        if self.backend != ACTIVE_SET:
+            return self._impl.solve(v, lo, hi, u_prev)
+        return self._impl.solve(v, lo, hi)
+
+    def solve_batch(self, V, lo, hi):
+        return self._impl.solve_batch(V, lo, hi) if self.backend == ACTIVE_SET else None
+
+
 @register("qp", supports_priorities=True, supports_batch=True)
-class TwoStageQP(Method):
+class TwoStageQP(_ActiveSetOrBackend):
     equation = "Eqs 1.20-1.21"
     summary = "stage 1 min moment error (Wv), stage 2 min (u-up)'Wu(u-up) at that moment"
     options = {"backend": _AS_BACKEND, "priorities": levels("priority level per axis; larger levels are met first")}
@@ -233,17 +251,10 @@ class TwoStageQP(Method):
             return
         self._impl = LexicoLS(problem, self.groups, [0.0] * len(self.groups), final=True)
 
-    def solve(self, v, lo, hi, u_prev):
-        if self.backend != ACTIVE_SET:
-            return self._impl.solve(v, lo, hi, u_prev)
-        return self._impl.solve(v, lo, hi)
-
-    def solve_batch(self, V, lo, hi):
-        return self._impl.solve_batch(V, lo, hi) if self.backend == ACTIVE_SET else None
 
 
 @register("wls", supports_batch=True)
-class WeightedLeastSquares(Method):
+class WeightedLeastSquares(_ActiveSetOrBackend):
     equation = "Eqs 1.20-1.21 (single-stage weighted form)"
     summary = "min (Bu-v)'Wv(Bu-v) + gamma^2 (u-up)'Wu(u-up) over the limits"
     options = {"backend": _AS_BACKEND,
@@ -254,20 +265,13 @@ class WeightedLeastSquares(Method):
         self.backend = _backend_choice(backend, "wls")
         try:
             g = float(gamma)
-        except (TypeError, ValueError):
-            raise OptionError(f"gamma: must be a positive number, got {gamma!r}") from None
-        if not (np.isfinite(g) and g > 0):
-            raise ValueError(f"gamma: must be positive and finite, got {gamma!r}")
+        except (TypeError, ValueError, OverflowError):
+            g = math.nan
+        if not (math.isfinite(g) and g > 0):
+            raise OptionError(f"gamma: must be positive and finite, got {gamma!r}")
         self.gamma = g
         if self.backend != ACTIVE_SET:
             self._impl = _SolverWLS(problem, backend=self.backend, gamma=g)
             return
         self._impl = LexicoLS(problem, [np.arange(problem.k)], [g], final=False)
 
-    def solve(self, v, lo, hi, u_prev):
-        if self.backend != ACTIVE_SET:
-            return self._impl.solve(v, lo, hi, u_prev)
-        return self._impl.solve(v, lo, hi)
-
-    def solve_batch(self, V, lo, hi):
-        return self._impl.solve_batch(V, lo, hi) if self.backend == ACTIVE_SET else None
