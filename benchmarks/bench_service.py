@@ -219,8 +219,7 @@ def bench_events(port: int, vid: str, n: int = 40) -> tuple[Stats, Stats]:
     errors = 0
     t_start = time.perf_counter()
     for i in range(n):
-        ev = ({"effector": "elevon_l", "kind": "jam", "position": 5.0 + i % 7} if i % 2 == 0
-              else {"effector": "elevon_l", "kind": "repair"})
+        ev = toggle_event(i)
         t0 = time.perf_counter()
         status, _ = conn.post(f"/v1/vehicles/{vid}/events", json.dumps(ev).encode())
         t1 = time.perf_counter()
@@ -235,6 +234,13 @@ def bench_events(port: int, vid: str, n: int = 40) -> tuple[Stats, Stats]:
             Stats("first qp allocate after event", n, seconds, first_lat, 1, 0, first_srv))
 
 
+def toggle_event(i: int) -> dict[str, Any]:
+    """The i-th event of the benchmarks' sequence: jam elevon_l (even i, varying position), repair (odd i)."""
+    if i % 2 == 0:
+        return {"effector": "elevon_l", "kind": "jam", "position": 5.0 + i % 7}
+    return {"effector": "elevon_l", "kind": "repair"}
+
+
 def bench_cross_process(port_a: int, port_b: int, vid: str, n: int = 60) -> tuple[Stats, int]:
     """Event through A, then allocations through B until one applies it."""
     a, b = Connection(port_a), Connection(port_b)
@@ -244,8 +250,7 @@ def bench_cross_process(port_a: int, port_b: int, vid: str, n: int = 60) -> tupl
     stale = 0
     t_start = time.perf_counter()
     for i in range(n):
-        ev = ({"effector": "elevon_l", "kind": "jam", "position": 5.0 + i % 7} if i % 2 == 0
-              else {"effector": "elevon_l", "kind": "repair"})
+        ev = toggle_event(i)
         t0 = time.perf_counter()
         status, reply = a.post(f"/v1/vehicles/{vid}/events", json.dumps(ev).encode())
         version = json.loads(reply)["health"]["health_version"]
@@ -321,8 +326,7 @@ def bench_events_under_flood(port: int, vid: str, n: int = 40, clients: int = 16
     errors = 0
     t_start = time.perf_counter()
     for i in range(n):
-        ev = ({"effector": "elevon_l", "kind": "jam", "position": 5.0 + i % 7} if i % 2 == 0
-              else {"effector": "elevon_l", "kind": "repair"})
+        ev = toggle_event(i)
         t0 = time.perf_counter()
         status, _ = conn.post(f"/v1/vehicles/{vid}/events", json.dumps(ev).encode())
         lat[i] = time.perf_counter() - t0
