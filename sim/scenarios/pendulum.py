@@ -309,7 +309,9 @@ def run(
             z_dot = A @ z + B[:, 0] * (force + d)
         else:
             z_dot = nonlinear_derivative(p, z, force + d)
-        return np.append(z_dot, delta_dot), (u_c, sigma, d)
+        X_dot = np.empty(5)
+        X_dot[:4], X_dot[4] = z_dot, delta_dot
+        return X_dot, (u_c, sigma, d)
 
     flown = run_classic(
         derivative, np.array([x0, math.radians(theta0_deg), 0.0, 0.0, 0.0]), duration=duration, dt=dt,
