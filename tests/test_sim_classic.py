@@ -376,11 +376,15 @@ def test_dc8_control_action_is_unrealistic(dc8_runs):
         ("f16", {"not_an_option": 1}, TypeError, "not_an_option"),
         ("dc8", {"failure": "engine_out"}, ValueError, "aileron_and_stability"),  # the message lists the known
         ("dc8", {"gain": 3.0}, TypeError, "gain"),
+        ("dc8", {"dt": 0.0}, ValueError, "dt"),
+        ("f16", {"dt": float("nan")}, ValueError, "dt"),
+        ("pendulum", {"duration": -1.0}, ValueError, "duration"),
+        ("pendulum", {"duration": float("inf")}, ValueError, "duration"),
     ],
 )
 def test_classic_scenarios_reject_bad_options(scenario, options, error, match):
     with pytest.raises(error, match=match):
-        get_scenario(scenario)(duration=0.01, **options)
+        get_scenario(scenario)(**{"duration": 0.01, **options})
 
 
 @pytest.mark.parametrize("scenario", ["pendulum", "f16", "dc8"])

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import functools
 import inspect
+import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -56,8 +57,7 @@ class ClassicRun:
     states : ndarray, shape (N, n)
         State ``X_k``.
     rates : ndarray, shape (N, n)
-        Predictor slope ``f(t_k, X_k)``; after an ``after_step`` clamp it is the
-        slope the integrator was given, not the clamped one.
+        Predictor slope ``f(t_k, X_k)`` at the recorded state.
     signals : ndarray, shape (N, s)
         The signals ``f(t_k, X_k)`` reported, in its order.
     diverged : bool
@@ -127,7 +127,16 @@ def run_classic(
     Returns
     -------
     ClassicRun
+
+    Raises
+    ------
+    ValueError
+        If ``dt`` is not finite and positive or ``duration`` not finite and non-negative.
     """
+    if not (math.isfinite(dt) and dt > 0):
+        raise ValueError(f"dt must be finite and positive, got {dt!r}")
+    if not (math.isfinite(duration) and duration >= 0):
+        raise ValueError(f"duration must be finite and non-negative, got {duration!r}")
     n_steps = int(round(duration / dt))
     t = np.arange(n_steps + 1) * dt
     x = np.array(x0, dtype=float)
@@ -178,7 +187,7 @@ def classic_scenario(
             *, method: str | None = None, failure: str | None = None, duration: float | None = None, seed: int = 0,
             dt: float = DEFAULT_DT, allocator_knows_failure: bool = False, progress: bool = False, **options: Any,
         ) -> SimResult:
-            del method, allocator_knows_failure, progress  # nothing to allocate, nothing slow
+            del method, allocator_knows_failure, progress  # no allocator to choose or tell; no progress bar
             if failure not in (None, *failures):
                 raise ValueError(f"unknown failure {failure!r} for scenario {name!r}; known: {', '.join(failures)}")
             duration = default_duration if duration is None else float(duration)
