@@ -1,4 +1,5 @@
-"""The seed's classic single-input SMC demonstrations, measured (seed chapters 2 and 3).
+"""The seed's classic single-input SMC demonstrations, measured (seed chapters 2 and 3),
+and the one runner that flies them (:mod:`sim.scenarios.classic`).
 
 Each test states what the seed shows, what this simulator measures, and
 asserts the measurement.  Where the seed's result is not reproduced the test
@@ -8,10 +9,18 @@ measured numbers, so a future change that does reproduce it is noticed.
 
 from __future__ import annotations
 
+import inspect
+import math
+
 import numpy as np
 import pytest
 
+import sim.scenarios
+from sim.blocks import DEFAULT_DT
+from sim.result import SimResult
 from sim.scenarios import get_scenario
+from sim.scenarios.classic import DEFAULT_DT as CLASSIC_DT
+from sim.scenarios.classic import classic_scenario, run_classic
 from sim.scenarios.f16 import DELTA_MAX, RATE_MAX, SEED_CASES
 from sim.scenarios.pendulum import ACTUATOR_CASES, NOMINAL, linear_model, smc_design
 
@@ -162,16 +171,6 @@ def test_pendulum_plant_change_switches_the_plant_at_failure_time():
     assert failed.failure_time == 3.0 and failed.diverged and failed.duration > 3.0
 
 
-def test_pendulum_rejects_unknown_options():
-    run = get_scenario("pendulum")
-    with pytest.raises(ValueError, match="controller"):
-        run(controller="pid", duration=0.01)
-    with pytest.raises(ValueError, match="failure"):
-        run(failure="engine_out", duration=0.01)
-    with pytest.raises(TypeError):
-        run(gain=3.0, duration=0.01)
-
-
 # ------------------------------------------------------------------ F-16
 
 
@@ -314,16 +313,6 @@ def test_f16_unknown_slow_actuator_fails_as_in_seed(f16_slow_actuator_runs):
     assert f16_slow_actuator_runs["fig_3_13"].diverged
 
 
-def test_f16_rejects_unknown_options():
-    run = get_scenario("f16")
-    with pytest.raises(ValueError, match="failure"):
-        run(failure="wing_loss", duration=0.01)
-    with pytest.raises(ValueError, match="boundary_layer"):
-        run(boundary_layer="adaptive", duration=0.01)
-    with pytest.raises(TypeError):
-        run(not_an_option=1, duration=0.01)
-
-
 # ------------------------------------------------------------------ DC-8
 
 
@@ -367,3 +356,138 @@ def test_dc8_control_action_is_unrealistic(dc8_runs):
     healthy, _ = dc8_runs
     assert np.max(np.abs(healthy.effectors[:, 1])) > 0.5
     assert np.max(np.abs(healthy.effector_rates[:, 1])) > 10.0
+
+
+# ------------------------------------------------------------------ the classic runner and registration
+
+
+@pytest.mark.parametrize(
+    ("scenario", "options", "error", "match"),
+    [
+        ("pendulum", {"controller": "pid"}, ValueError, "controller"),
+        ("pendulum", {"model": "quadratic"}, ValueError, "model"),
+        ("pendulum", {"epsilon": 0.0}, ValueError, "epsilon"),
+        ("pendulum", {"actuator_bandwidth": -1.0}, ValueError, "actuator_bandwidth"),
+        ("pendulum", {"failure": "engine_out"}, ValueError, "engine_out"),
+        ("pendulum", {"gain": 3.0}, TypeError, "gain"),
+        ("f16", {"failure": "wing_loss"}, ValueError, "wing_loss"),
+        ("f16", {"boundary_layer": "adaptive"}, ValueError, "boundary_layer"),
+        ("f16", {"design_bandwidth": 0.0}, ValueError, "bandwidth"),
+        ("f16", {"not_an_option": 1}, TypeError, "not_an_option"),
+        ("dc8", {"failure": "engine_out"}, ValueError, "aileron_and_stability"),  # the message lists the known
+        ("dc8", {"gain": 3.0}, TypeError, "gain"),
+        ("dc8", {"dt": 0.0}, ValueError, "dt"),
+        ("f16", {"dt": float("nan")}, ValueError, "dt"),
+        ("pendulum", {"duration": -1.0}, ValueError, "duration"),
+        ("pendulum", {"duration": float("inf")}, ValueError, "duration"),
+    ],
+)
+def test_classic_scenarios_reject_bad_options(scenario, options, error, match):
+    with pytest.raises(error, match=match):
+        get_scenario(scenario)(**{"duration": 0.01, **options})
+
+
+@pytest.mark.parametrize("scenario", ["pendulum", "f16", "dc8"])
+def test_classic_scenarios_take_and_ignore_the_registry_arguments(scenario):
+    """method, allocator_knows_failure and progress change nothing; the default duration is the registry's."""
+    run = get_scenario(scenario)
+    plain = run(duration=0.05)
+    other = run(duration=0.05, method="qp", allocator_knows_failure=True, progress=True)
+    assert plain.method is None and other.method is None
+    np.testing.assert_array_equal(plain.output, other.output)
+    np.testing.assert_array_equal(plain.effectors, other.effectors)
+    assert plain.t.size == round(0.05 / DEFAULT_DT) + 1
+    params = list(inspect.signature(run).parameters)
+    assert params[:7] == ["method", "failure", "duration", "seed", "dt", "allocator_knows_failure", "progress"]
+    assert inspect.signature(run).parameters["dt"].default == DEFAULT_DT
+    assert run.default_method is None and run.default_duration == {"pendulum": 10.0, "f16": 12.0, "dc8": 80.0}[scenario]
+
+
+def test_classic_default_step_is_the_engines():
+    """classic.DEFAULT_DT is a copy (sim.blocks loads numba); they must not drift apart."""
+    assert CLASSIC_DT == DEFAULT_DT == 0.0005
+
+
+def test_run_classic_is_heun_with_held_inputs_and_records_every_step():
+    """x' = -a x + w with w held per step: Heun's step multiplies x by 1 - h a + (h a)^2 / 2 and adds
+    h w (1 - h a / 2), exactly the trapezoid of the Euler-predicted slopes."""
+    a, dt = 3.0, 0.01
+    held_at: list[float] = []
+
+    def hold(t):
+        held_at.append(float(t))
+        return 0.5 if t >= 0.1 else 0.0
+
+    def derivative(t, x, w):
+        return -a * x + w, (w, 2.0 * x[0])
+
+    run = run_classic(derivative, np.array([1.0]), duration=0.2, dt=dt, n_signals=2, outputs=[0], output_bound=10.0,
+                      hold=hold)
+    assert not run.diverged and run.t.size == 21
+    np.testing.assert_array_equal(run.t, np.arange(21) * dt)
+    assert held_at == pytest.approx(list(run.t))  # once per step, never at the corrector's t + dt
+    x = [1.0]
+    for k in range(20):
+        w = 0.5 if k * dt >= 0.1 else 0.0
+        x.append(x[-1] * (1 - dt * a + (dt * a) ** 2 / 2) + dt * w * (1 - dt * a / 2))
+    np.testing.assert_allclose(run.states[:, 0], x, rtol=1e-13)
+    np.testing.assert_allclose(run.rates[:, 0], -a * run.states[:, 0] + run.signals[:, 0], rtol=1e-13)
+    np.testing.assert_array_equal(run.signals[:, 1], 2.0 * run.states[:, 0])
+
+
+def test_run_classic_stops_at_the_first_sample_outside_the_bound_and_applies_after_step():
+    """x' = x from 1 leaves |x| <= 2 at t = ln 2 (Heun's error is O(dt^2)); a clamp on x[1] holds it."""
+
+    def clamp(x):
+        x[1] = min(x[1], 0.25)
+
+    run = run_classic(lambda t, x, held: (np.array([x[0], 1.0]), ()), np.array([1.0, 0.0]), duration=5.0, dt=0.001,
+                      n_signals=0, outputs=slice(0, 1), output_bound=2.0, after_step=clamp)
+    assert run.diverged
+    assert run.states[-1, 0] > 2.0 and np.all(run.states[:-1, 0] <= 2.0)
+    assert run.t[-1] == pytest.approx(math.log(2.0), abs=2e-3)
+    assert np.max(run.states[:, 1]) == 0.25 and run.states[-1, 1] == 0.25
+    assert run.signals.shape == (run.t.size, 0)
+
+
+def test_add_a_classic_scenario_walkthrough(monkeypatch):
+    """docs/ARCHITECTURE.md "Add a scenario", classic branch: a PD-regulated double integrator
+    x'' = g u, u = -2 x - 3 x' (poles -1, -2, so x = 2 e^-t - e^-2t from x = 1), registered by name."""
+    monkeypatch.setattr(sim.scenarios, "_REGISTRY", dict(sim.scenarios._REGISTRY))  # registration undone after
+
+    @classic_scenario("_double_integrator", failures={"half_gain": "g = 1/2 from 1 s"}, default_duration=3.0,
+                      description="double integrator, PD regulator")
+    def run(*, failure: str | None, duration: float, dt: float, seed: int, gain: float = 1.0) -> SimResult:
+        def derivative(t, x, g):
+            u = -2.0 * x[0] - 3.0 * x[1]
+            return np.array([x[1], g * u]), (u,)
+
+        flown = run_classic(derivative, np.array([1.0, 0.0]), duration=duration, dt=dt, n_signals=1, outputs=[0],
+                            output_bound=10.0, hold=lambda t: gain / 2 if failure and t >= 1.0 else gain)
+        return flown.result("_double_integrator", failure, 1.0, channels=["x"], reference=np.zeros((flown.t.size, 1)),
+                            output=flown.states[:, :1], command=np.zeros((flown.t.size, 1)), pseudo=flown.signals)
+
+    res = get_scenario("_double_integrator")(method="ignored")
+    assert res.method is None and res.failure_time is None and not res.diverged
+    assert res.t[-1] == pytest.approx(3.0)
+    np.testing.assert_allclose(res.output[:, 0], 2 * np.exp(-res.t) - np.exp(-2 * res.t), atol=1e-6)
+    failed = get_scenario("_double_integrator")(failure="half_gain")
+    assert failed.failure_time == 1.0
+    before, after = failed.t < 1.0, failed.t >= 1.0
+    np.testing.assert_array_equal(failed.output[before], res.output[before])
+    # from t = 1: x'' + 1.5 x' + x = 0 (poles -0.75 +- 0.661j) from the nominal state at 1 s
+    x1, v1, w = 2 * math.exp(-1) - math.exp(-2), -2 * math.exp(-1) + 2 * math.exp(-2), math.sqrt(1 - 0.75**2)
+    tau = failed.t[after] - 1.0
+    expected = np.exp(-0.75 * tau) * (x1 * np.cos(w * tau) + (v1 + 0.75 * x1) / w * np.sin(w * tau))
+    np.testing.assert_allclose(failed.output[after, 0], expected, atol=1e-6)
+    with pytest.raises(ValueError, match="half_gain"):
+        get_scenario("_double_integrator")(failure="stuck")
+
+
+@pytest.mark.parametrize("module", ["ice", "harv_lon", "harv_latdir"])
+def test_mimo_scenarios_register_their_own_defaults(module):
+    """sim.scenarios.mimo.mimo_scenario takes the registry's defaults from the MimoScenario (one place)."""
+    mod = __import__(f"sim.scenarios.{module}", fromlist=["SCENARIO"])
+    run = get_scenario(module)
+    assert run is mod.run and run.accepts_failure_objects
+    assert (run.default_duration, run.default_method) == (mod.SCENARIO.default_duration, mod.SCENARIO.default_method)

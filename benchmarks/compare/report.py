@@ -248,13 +248,16 @@ def coverage_agreement(cells: Sequence[Row], open_rows: Sequence[Row]) -> list[R
 
 
 # ----------------------------------------------------------------------------- plots
-def _plt() -> Any:
-    import matplotlib
+def _subplots(*grid: int, **kwargs: Any) -> tuple[Any, Any]:
+    """A bare :class:`matplotlib.figure.Figure` and its axes (``Figure.subplots`` arguments).
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    No pyplot: no backend is chosen here, and ``savefig`` renders a PNG through Agg
+    with or without a display.
+    """
+    from matplotlib.figure import Figure
 
-    return plt
+    fig = Figure(figsize=kwargs.pop("figsize"))
+    return fig, fig.subplots(*grid, **kwargs)
 
 
 def heatmap_data(cells: Sequence[Row]) -> list[Row]:
@@ -269,14 +272,13 @@ def _method_order(cells: Sequence[Row]) -> list[str]:
 
 
 def _plot_heatmap(cells: Sequence[Row], failures: Sequence[str], out: Path, name: str, title: str) -> str:
-    plt = _plt()
     from matplotlib.colors import LogNorm
 
     data = heatmap_data(cells)
     _write_csv(out / f"{name}.csv", data)
     methods = _method_order(cells)
     value = {(d["method"], d["mode"], d["failure"]): d["score"] for d in data}
-    fig, axes = plt.subplots(1, 2, figsize=(2.0 + 0.75 * len(failures) * 2, 1.2 + 0.32 * len(methods)), sharey=True)
+    fig, axes = _subplots(1, 2, figsize=(2.0 + 0.75 * len(failures) * 2, 1.2 + 0.32 * len(methods)), sharey=True)
     norm = LogNorm(vmin=0.25, vmax=4.0)
     for ax, mode in zip(axes, ("blind", "told")):
         grid = np.array([[value.get((m, mode, f), math.nan) for f in failures] for m in methods])
@@ -293,18 +295,16 @@ def _plot_heatmap(cells: Sequence[Row], failures: Sequence[str], out: Path, name
                                                      fontsize=7)
     fig.suptitle(title, fontsize=9, y=1.0 + 0.3 / (1.2 + 0.32 * len(methods)))
     fig.savefig(out / f"{name}.png", dpi=DPI, bbox_inches="tight")
-    plt.close(fig)
     return f"{name}.png"
 
 
 def _plot_forest(ratios: Sequence[Row], failures: Sequence[str], out: Path, name: str, title: str) -> str:
-    plt = _plt()
     data = [{k: r[k] for k in ("failure", "method", "pairs", "ratio", "ratio_lo", "ratio_hi")} for r in ratios]
     _write_csv(out / f"{name}.csv", data)
     methods = sorted({r["method"] for r in ratios})
     cols = min(4, len(failures))
     nrows = math.ceil(len(failures) / cols)
-    fig, axes = plt.subplots(nrows, cols, figsize=(3.0 * cols, 1.0 + nrows * (0.5 + 0.2 * len(methods))),
+    fig, axes = _subplots(nrows, cols, figsize=(3.0 * cols, 1.0 + nrows * (0.5 + 0.2 * len(methods))),
                              sharey=True, squeeze=False)
     lookup = {(r["failure"], r["method"]): r for r in ratios}
     for k, ax in enumerate(axes.flat):
@@ -331,7 +331,6 @@ def _plot_forest(ratios: Sequence[Row], failures: Sequence[str], out: Path, name
                  fontsize=8)
     fig.tight_layout(rect=(0, 0, 1, 1 - 0.45 / fig.get_figheight()))
     fig.savefig(out / f"{name}.png", dpi=DPI)
-    plt.close(fig)
     return f"{name}.png"
 
 
@@ -356,13 +355,12 @@ def history_data(out: Path, row_ids: Sequence[str], labels: Sequence[str]) -> tu
 
 
 def _plot_history(out: Path, picked: Sequence[Row], name: str, title: str) -> str:
-    plt = _plt()
     labels = [f"{r['method']} ({_mode(r)})" for r in picked]
     data, channels = history_data(out, [r["id"] for r in picked], labels)
     _write_csv(out / f"{name}.csv", data)
     t = np.array([d["t"] for d in data])
     t_fail = float(picked[0]["failure_time"])
-    fig, axes = plt.subplots(len(channels), 1, figsize=(8, 1.9 * len(channels)), sharex=True, squeeze=False)
+    fig, axes = _subplots(len(channels), 1, figsize=(8, 1.9 * len(channels)), sharex=True, squeeze=False)
     colours = ("k", "tab:red", "tab:blue", "tab:green")
     for ax, c in zip(axes[:, 0], channels):
         for label, colour in zip(labels, colours):
@@ -376,7 +374,6 @@ def _plot_history(out: Path, picked: Sequence[Row], name: str, title: str) -> st
     fig.suptitle(title, fontsize=9)
     fig.tight_layout()
     fig.savefig(out / f"{name}.png", dpi=DPI)
-    plt.close(fig)
     return f"{name}.png"
 
 
@@ -574,12 +571,11 @@ def _open_section(rows: list[Row], spec: Spec) -> str:
 
 
 def _plot_coverage(rows: Sequence[Row], out: Path) -> str:
-    plt = _plt()
     groups, pivot = _open_pivot(rows, "coverage")
     methods = sorted(pivot)
     _write_csv(out / "coverage.csv", [{"method": m, **{g: pivot[m].get(g, math.nan) for g in groups}}
                                       for m in methods])
-    fig, ax = plt.subplots(figsize=(9, 3.4))
+    fig, ax = _subplots(figsize=(9, 3.4))
     width = 0.8 / len(groups)
     for j, g in enumerate(groups):
         vals = 100 * np.array([pivot[m].get(g, math.nan) for m in methods])
@@ -590,7 +586,6 @@ def _plot_coverage(rows: Sequence[Row], out: Path) -> str:
     ax.grid(axis="y", alpha=0.3)
     fig.tight_layout()
     fig.savefig(out / "coverage.png", dpi=DPI)
-    plt.close(fig)
     return "coverage.png"
 
 

@@ -7,11 +7,21 @@ A scenario is a callable with the signature::
         allocator_knows_failure: bool = False, progress: bool = False,
         **options) -> sim.result.SimResult
 
-(the MIMO scenarios take every option of :func:`sim.scenarios.mimo.run_mimo`:
-frame period, Eq 1.28 on/off, ``u_prev`` source, pilot model, noise, ...)
 registered with :func:`register_scenario`, which also attaches the metadata
 attributes ``name``, ``description``, ``failures`` (failure name ->
 description), ``default_duration`` and ``default_method``.
+
+Two runners fly every scenario:
+
+* :func:`sim.scenarios.mimo.run_mimo` flies a :class:`~sim.scenarios.mimo.MimoScenario`
+  (vehicle, allocator, actuators, pilot; ICE and F-18/HARV) through the compiled
+  engine :mod:`sim.loop`; such a scenario takes every option of ``run_mimo``
+  (frame period, Eq 1.28 on/off, ``u_prev`` source, pilot model, noise, ...) and
+  registers with :func:`sim.scenarios.mimo.mimo_scenario`.
+* :func:`sim.scenarios.classic.run_classic` integrates a hand-written right-hand
+  side with no allocator (the seed's chapter 2-3 pendulum, F-16 and DC-8
+  demonstrations); such a scenario registers with
+  :func:`sim.scenarios.classic.classic_scenario`.
 
 Scenario modules are imported lazily: :data:`SCENARIO_MODULES` maps each name
 to the module that registers it, so importing :mod:`sim.scenarios` stays cheap

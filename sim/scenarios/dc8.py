@@ -36,7 +36,8 @@ square wave of amplitude ``command_amplitude`` (default 0.2 rad) and period
 ``command_period`` (default 20 s).  No actuator limits are modelled (the seed
 states that with limits this design fails, without showing it).  The
 ``method`` argument of the registry is ignored: the design is a square,
-decentralised SMC with no allocation.
+decentralised SMC with no allocation.  The loop is flown by
+:func:`sim.scenarios.classic.run_classic`.
 """
 
 from __future__ import annotations
@@ -45,8 +46,8 @@ import numpy as np
 from scipy import signal
 
 from sim.boundary_layer import static_boundary_layer
-from sim.result import SimResult, divergence_check
-from sim.scenarios import register_scenario
+from sim.result import SimResult
+from sim.scenarios.classic import classic_scenario, run_classic
 
 __all__ = ["A", "B", "run", "bank_command", "outer_loop_compensator"]
 
@@ -93,38 +94,25 @@ def bank_command(t: float, amplitude: float, period: float) -> float:
     return amplitude if (t % period) < period / 2 else -amplitude
 
 
-@register_scenario(
-    "dc8",
-    description="DC-8 bank-angle tracking: loop-shaped outer loop, postfilter rate SMC, "
-    "actuator-loop SMC (seed section 3.2.2)",
-    failures=FAILURES,
-    default_duration=80.0,
-    default_method=None,
-)
-def run(
-    *,
-    method: str | None = None,
-    failure: str | None = None,
-    duration: float | None = None,
-    seed: int = 0,
-    dt: float = 0.0005,
-    allocator_knows_failure: bool = False,
-    progress: bool = False,
-    command_amplitude: float = 0.2,
-    command_period: float = 20.0,
-    failure_time: float = FAILURE_TIME,
-) -> SimResult:
+@classic_scenario("dc8", failures=FAILURES, default_duration=80.0, description="DC-8 bank-angle tracking: "
+                  "loop-shaped outer loop, postfilter rate SMC, actuator-loop SMC (seed section 3.2.2)")
+def run(*, failure: str | None, duration: float, dt: float, seed: int, command_amplitude: float = 0.2,
+        command_period: float = 20.0, failure_time: float = FAILURE_TIME) -> SimResult:
     """Simulate DC-8 bank-angle tracking.
+
+    The registry arguments ``method``, ``allocator_knows_failure`` and
+    ``progress`` are accepted and ignored (square decentralised design,
+    nothing to allocate; see :func:`sim.scenarios.classic.classic_scenario`).
 
     Parameters
     ----------
-    method, seed, allocator_knows_failure, progress
-        Registry arguments; ignored (square decentralised design, no noise).
     failure : {None, "aileron_and_stability"}
-    duration : float, optional
-        Seconds; default 80.
+    duration : float
+        Seconds; the registry's default is 80.
     dt : float
         Fixed Heun (ODE2) step, seed default 0.0005 s.
+    seed : int
+        Ignored: the scenario has no noise.
     command_amplitude, command_period : float
         Square-wave bank command (rad, s).
     failure_time : float
@@ -138,11 +126,7 @@ def run(
         ``effectors`` the surfaces, ``extra`` the actuator inputs
         (``u_delta_a``, ``u_delta_r``), ``p``, ``p_r`` and the rate surfaces.
     """
-    del method, seed, allocator_knows_failure, progress  # see module docstring
-    if failure not in (None, *FAILURES):
-        raise ValueError(f"unknown failure {failure!r} for scenario 'dc8'; known: {', '.join(FAILURES)}")
-    duration = run.default_duration if duration is None else float(duration)  # type: ignore[attr-defined]
-    n_steps = int(round(duration / dt))
+    del seed  # no noise
     Ag, Bg, Cg, Dg = outer_loop_compensator()
     Cg, Dg = Cg[0], float(Dg[0, 0])
     A_fail = A.copy()
@@ -153,14 +137,16 @@ def run(
     failed = (A_fail, B_fail, np.array([ACTUATOR_BANDWIDTH * FAIL_AILERON_BANDWIDTH, ACTUATOR_BANDWIDTH]))
     ng = Ag.shape[0]
     # State X = [x(4), delta(2), int(delta_c - delta)(2), int(eta)(2), p_r, p_r', x_g(3)]
-    i_x, i_d, i_ai, i_ei, i_pr, i_g = slice(0, 4), slice(4, 6), slice(6, 8), slice(8, 10), slice(10, 12), slice(12, 12 + ng)
+    i_x, i_d, i_ai, i_ei, i_g = slice(0, 4), slice(4, 6), slice(6, 8), slice(8, 10), slice(12, 12 + ng)
 
-    def derivative(t: float, X: np.ndarray, plant: tuple[np.ndarray, np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    # Signals: phi_c, delta_c(2), u_act(2), sigma(2).
+    def derivative(t: float, X: np.ndarray, plant: tuple[np.ndarray, np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
         Ap, Bp, bw = plant
         x, delta = X[i_x], X[i_d]
         x_dot = Ap @ x + Bp @ delta
         # outer loop: p_c = G_c (phi_c - phi); roll-rate reference model
-        e_phi = bank_command(t, command_amplitude, command_period) - x[3]
+        phi_c = bank_command(t, command_amplitude, command_period)
+        e_phi = phi_c - x[3]
         xg = X[i_g]
         p_c = float(Cg @ xg) + Dg * e_phi
         pr, pr_dot = X[10], X[11]
@@ -175,50 +161,30 @@ def run(
         u_act = static_boundary_layer(e_act + ACT_INTEGRAL * X[i_ai], ACT_RHO, ACT_EPSILON)
         delta_dot = bw * (u_act - delta)
         X_dot = np.concatenate([x_dot, delta_dot, e_act, eta, [pr_dot, pr_ddot], Ag @ xg + Bg[:, 0] * e_phi])
-        return X_dot, delta_c, u_act, sigma
+        return X_dot, np.concatenate([[phi_c], delta_c, u_act, sigma])
 
-    t = np.arange(n_steps + 1) * dt
-    log = np.full((n_steps + 1, 15), np.nan)
-    X = np.zeros(12 + ng)
-    diverged = False
-    last = n_steps
-    for k in range(n_steps + 1):
-        tk = t[k]
-        plant = failed if (failure is not None and tk >= failure_time) else healthy
-        k1, delta_c, u_act, sigma = derivative(tk, X, plant)
-        phi_c = bank_command(tk, command_amplitude, command_period)
-        log[k] = (phi_c, X[3], X[2], X[1], X[10], *X[i_d], *delta_c, *u_act, *sigma, *k1[i_d])
-        if divergence_check(X[[3, 2]], OUTPUT_BOUND, X):
-            diverged, last = True, k
-            break
-        if k == n_steps:
-            break
-        k2 = derivative(tk + dt, X + dt * k1, plant)[0]  # Heun (ODE2)
-        X = X + 0.5 * dt * (k1 + k2)
-
-    sl = slice(0, last + 1)
-    ref = np.column_stack([log[sl, 0], np.zeros(last + 1)])
-    return SimResult(
-        scenario="dc8",
-        method=None,
-        failure=failure,
-        t=t[sl],
+    flown = run_classic(
+        derivative, np.zeros(12 + ng), duration=duration, dt=dt, n_signals=7, outputs=[3, 2],
+        output_bound=OUTPUT_BOUND, hold=lambda t: failed if (failure is not None and t >= failure_time) else healthy,
+    )
+    X, signal = flown.states, flown.signals
+    ref = np.column_stack([signal[:, 0], np.zeros(flown.t.size)])
+    return flown.result(
+        "dc8", failure, failure_time,
         channels=["phi", "r"],
         reference=ref,
-        output=log[sl, 1:3],
+        output=X[:, [3, 2]],
         command=ref.copy(),
-        pseudo=log[sl, 7:9],
-        effectors=log[sl, 5:7],
-        effector_rates=log[sl, 13:15],
+        pseudo=signal[:, 1:3],
+        effectors=X[:, i_d],
+        effector_rates=flown.rates[:, i_d],
         effector_names=["aileron", "rudder"],
-        failure_time=failure_time if failure is not None else None,
-        diverged=diverged,
         extra={
-            "p": log[sl, 3],
-            "p_r": log[sl, 4],
-            "u_delta_a": log[sl, 9],
-            "u_delta_r": log[sl, 10],
-            "sigma_p": log[sl, 11],
-            "sigma_r": log[sl, 12],
+            "p": X[:, 1],
+            "p_r": X[:, 10],
+            "u_delta_a": signal[:, 3],
+            "u_delta_r": signal[:, 4],
+            "sigma_p": signal[:, 5],
+            "sigma_r": signal[:, 6],
         },
     )

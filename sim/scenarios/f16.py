@@ -30,7 +30,8 @@ anyway, seed section 3.2).
 
 :data:`SEED_CASES` maps each of the seed's figures to the keyword arguments
 reproducing it.  The ``method`` argument of the registry is ignored: one
-elevator, nothing to allocate.
+elevator, nothing to allocate.  The loop is flown by
+:func:`sim.scenarios.classic.run_classic`.
 """
 
 from __future__ import annotations
@@ -38,8 +39,8 @@ from __future__ import annotations
 import numpy as np
 
 from sim.boundary_layer import DynamicBoundaryLayer, static_boundary_layer
-from sim.result import SimResult, divergence_check
-from sim.scenarios import register_scenario
+from sim.result import SimResult
+from sim.scenarios.classic import classic_scenario, run_classic
 
 __all__ = ["A_N", "B_N", "DELTA_A", "DELTA_B", "A_REF", "B_REF", "SEED_CASES", "pilot_command", "run"]
 
@@ -93,23 +94,11 @@ def pilot_command(t: float, amplitude: float) -> float:
     return 0.0
 
 
-@register_scenario(
-    "f16",
-    description="F-16 short-period pitch-rate tracking, postfilter SMC with static or dynamic "
-    "boundary layer (seed section 3.2.1, Figs 3-7..3-13 via SEED_CASES)",
-    failures=FAILURES,
-    default_duration=12.0,
-    default_method=None,
-)
+@classic_scenario("f16", failures=FAILURES, default_duration=12.0, description="F-16 short-period pitch-rate "
+                  "tracking, postfilter SMC with static or dynamic boundary layer (seed section 3.2.1, Figs 3-7..3-13 "
+                  "via SEED_CASES)")
 def run(
-    *,
-    method: str | None = None,
-    failure: str | None = None,
-    duration: float | None = None,
-    seed: int = 0,
-    dt: float = 0.0005,
-    allocator_knows_failure: bool = False,
-    progress: bool = False,
+    *, failure: str | None, duration: float, dt: float, seed: int,
     pulse_amplitude: float = 0.1,
     limits: bool = True,
     boundary_layer: str = "static",
@@ -118,16 +107,20 @@ def run(
 ) -> SimResult:
     """Simulate F-16 pitch-rate tracking.
 
+    The registry arguments ``method``, ``allocator_knows_failure`` and
+    ``progress`` are accepted and ignored (one elevator, nothing to allocate;
+    see :func:`sim.scenarios.classic.classic_scenario`).
+
     Parameters
     ----------
-    method, seed, allocator_knows_failure, progress
-        Registry arguments; ignored (one elevator and no noise).
     failure : {None, "tail_loss"}
         Seed Eq 3.5 failure at 5 s.
-    duration : float, optional
-        Seconds; default 12 (the last pulse ends at 10 s).
+    duration : float
+        Seconds; the registry's default is 12 (the last pulse ends at 10 s).
     dt : float
         Fixed Heun (ODE2) step, seed default 0.0005 s.
+    seed : int
+        Ignored: the scenario has no noise.
     pulse_amplitude : float
         Pilot pulse amplitude, rad/s (seed: 0.1, or 0.2 to hit the limits).
     limits : bool
@@ -147,15 +140,11 @@ def run(
         holds ``sigma``, ``epsilon`` (boundary-layer thickness), ``alpha`` and
         ``delta_c``.
     """
-    del method, seed, allocator_knows_failure, progress  # see module docstring
-    if failure not in (None, *FAILURES):
-        raise ValueError(f"unknown failure {failure!r} for scenario 'f16'; known: {', '.join(FAILURES)}")
+    del seed  # no noise
     if boundary_layer not in ("static", "dynamic"):
         raise ValueError(f"boundary_layer must be 'static' or 'dynamic', got {boundary_layer!r}")
     if actuator_bandwidth <= 0 or design_bandwidth <= 0:
         raise ValueError(f"bandwidths must be positive, got actuator_bandwidth={actuator_bandwidth!r}, design_bandwidth={design_bandwidth!r}")
-    duration = run.default_duration if duration is None else float(duration)  # type: ignore[attr-defined]
-    n_steps = int(round(duration / dt))
     delta_max = DELTA_MAX if limits else np.inf
     rate_max = RATE_MAX if limits else np.inf
     dynamic = (
@@ -165,8 +154,8 @@ def run(
     )
     plants = {False: (A_N, B_N), True: (A_N + DELTA_A, B_N + DELTA_B)}
 
-    # State X = [alpha, q, delta, alpha_r, q_r, int(e)].
-    def derivative(t: float, X: np.ndarray, failed: bool) -> tuple[np.ndarray, float, float, float, float]:
+    # State X = [alpha, q, delta, alpha_r, q_r, int(e)]; signals u_p, v, sigma, eps, delta_c.
+    def derivative(t: float, X: np.ndarray, failed: bool) -> tuple[np.ndarray, tuple[float, float, float, float, float]]:
         A, B = plants[failed]
         x, delta, xr = X[:2], X[2], X[3:5]
         u_p = pilot_command(t, pulse_amplitude)
@@ -184,47 +173,29 @@ def run(
         if (delta >= delta_max and rate > 0.0) or (delta <= -delta_max and rate < 0.0):
             rate = 0.0
         X_dot = np.array([x_dot[0], x_dot[1], rate, xr_dot[0], xr_dot[1], e])
-        return X_dot, v, sigma, eps, delta_c
+        return X_dot, (u_p, v, sigma, eps, delta_c)
 
-    t = np.arange(n_steps + 1) * dt
-    log = np.full((n_steps + 1, 10), np.nan)  # alpha q delta q_r u_p v sigma eps delta_c rate
-    X = np.zeros(6)
-    diverged = False
-    last = n_steps
-    for k in range(n_steps + 1):
-        tk = t[k]
-        failed = failure == "tail_loss" and tk >= FAILURE_TIME
-        k1, v, sigma, eps, delta_c = derivative(tk, X, failed)
-        log[k] = (X[0], X[1], X[2], X[4], pilot_command(tk, pulse_amplitude), v, sigma, eps, delta_c, k1[2])
-        if divergence_check(X[1:2], OUTPUT_BOUND, X):
-            diverged, last = True, k
-            break
-        if k == n_steps:
-            break
-        # Heun (ODE2); the position limit is an integrator clamp, re-applied after the step.
-        k2 = derivative(tk + dt, X + dt * k1, failed)[0]
-        X = X + 0.5 * dt * (k1 + k2)
+    def clamp_elevator(X: np.ndarray) -> None:
+        """The position limit is an integrator clamp, re-applied after each step."""
         X[2] = min(max(X[2], -delta_max), delta_max)
 
-    sl = slice(0, last + 1)
-    lim = (np.array([-delta_max]), np.array([delta_max])) if limits else None
-    rlim = (np.array([-rate_max]), np.array([rate_max])) if limits else None
-    return SimResult(
-        scenario="f16",
-        method=None,
-        failure=failure,
-        t=t[sl],
+    flown = run_classic(
+        derivative, np.zeros(6), duration=duration, dt=dt, n_signals=5, outputs=slice(1, 2),
+        output_bound=OUTPUT_BOUND, hold=lambda t: failure == "tail_loss" and t >= FAILURE_TIME,
+        after_step=clamp_elevator,
+    )
+    X, signal = flown.states, flown.signals
+    return flown.result(
+        "f16", failure, FAILURE_TIME,
         channels=["q"],
-        reference=log[sl, 3:4],
-        output=log[sl, 1:2],
-        command=log[sl, 4:5],
-        pseudo=log[sl, 5:6],
-        effectors=log[sl, 2:3],
-        effector_rates=log[sl, 9:10],
+        reference=X[:, 4:5],
+        output=X[:, 1:2],
+        command=signal[:, 0:1],
+        pseudo=signal[:, 1:2],
+        effectors=X[:, 2:3],
+        effector_rates=flown.rates[:, 2:3],
         effector_names=["elevator"],
-        effector_limits=lim,
-        rate_limits=rlim,
-        failure_time=FAILURE_TIME if failure is not None else None,
-        diverged=diverged,
-        extra={"sigma": log[sl, 6], "epsilon": log[sl, 7], "alpha": log[sl, 0], "delta_c": log[sl, 8]},
+        effector_limits=(np.array([-delta_max]), np.array([delta_max])) if limits else None,
+        rate_limits=(np.array([-rate_max]), np.array([rate_max])) if limits else None,
+        extra={"sigma": signal[:, 2], "epsilon": signal[:, 3], "alpha": X[:, 0], "delta_c": signal[:, 4]},
     )

@@ -29,7 +29,7 @@ from alloc.vehicles import HARV_LATDIR_EFFECTORS
 
 from sim.blocks import ActuatorFailure, ActuatorSpec, HedgeTerm, sum_of_sines
 from sim.loop import Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle
-from sim.scenarios.mimo import MimoScenario, run_mimo
+from sim.scenarios.mimo import MimoScenario, mimo_scenario, run_mimo
 from sim.result import SimResult
 from sim.scenarios import register_scenario
 
@@ -196,13 +196,8 @@ SCENARIO = MimoScenario(
 )
 
 
-@register_scenario(
-    "harv_latdir",
-    description="F-18/HARV lat-dir MIMO SMC, ps and beta tracking, five effectors (seed 4.6)",
-    failures=FAILURES,
-    default_duration=50.0,
-    default_method="ganging",
-)
+@mimo_scenario(SCENARIO, failures=FAILURES,
+               description="F-18/HARV lat-dir MIMO SMC, ps and beta tracking, five effectors (seed 4.6)")
 def run(**options: Any) -> SimResult:
     """Run the HARV lat-dir scenario: :func:`sim.scenarios.mimo.run_mimo` options, plus ``observer``,
     ``hedge``, ``cross_hedge`` and ``phi_command`` (``"sines"``, the seed's xi = 6 sum of sines, or
@@ -222,7 +217,3 @@ def run_failure2(*, failure: str | None = "failure2", duration: float | None = N
     """HARV lat-dir with Failure #2 and the filtered-step input (``failure=None``: nominal, same input)."""
     return run_mimo(SCENARIO, failure=failure, duration=40.0 if duration is None else duration,
                     phi_command="filtered_steps", **options)
-
-
-#: run_mimo takes a sim.loop.Failure as well as a failure name (the benchmark catalogue uses it)
-run.accepts_failure_objects = True  # type: ignore[attr-defined]

@@ -25,9 +25,8 @@ import numpy as np
 
 from sim.blocks import ActuatorFailure, ActuatorSpec, HedgeTerm, sum_of_sines
 from sim.loop import Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle
-from sim.scenarios.mimo import MimoScenario, run_mimo
+from sim.scenarios.mimo import MimoScenario, mimo_scenario, run_mimo
 from sim.result import SimResult
-from sim.scenarios import register_scenario
 
 __all__ = ["A", "B", "A_FAIL", "B_FAIL", "SEED_BK", "vehicle", "allocation_problem", "failure", "run"]
 
@@ -141,18 +140,9 @@ SCENARIO = MimoScenario(
 )
 
 
-@register_scenario(
-    "harv_lon",
-    description="F-18/HARV longitudinal pitch-rate SMC, stabilator + pitch thrust vector (seed 4.5)",
-    failures=FAILURES,
-    default_duration=30.0,
-    default_method="ganging",
-)
+@mimo_scenario(SCENARIO, failures=FAILURES,
+               description="F-18/HARV longitudinal pitch-rate SMC, stabilator + pitch thrust vector (seed 4.5)")
 def run(**options: Any) -> SimResult:
     """Run the HARV longitudinal scenario: :func:`sim.scenarios.mimo.run_mimo` options, plus
     ``design`` (``"slow"``, ``"fast"``, ``"modified"``), ``observer`` and ``hedge``."""
     return run_mimo(SCENARIO, **options)
-
-
-#: run_mimo takes a sim.loop.Failure as well as a failure name (the benchmark catalogue uses it)
-run.accepts_failure_objects = True  # type: ignore[attr-defined]

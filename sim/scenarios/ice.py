@@ -25,9 +25,8 @@ from alloc.vehicles import ICE_B_FULL, ICE_BK_SEED, ICE_EFFECTORS
 
 from sim.blocks import ActuatorFailure, ActuatorSpec, HedgeTerm, sum_of_sines
 from sim.loop import Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle
-from sim.scenarios.mimo import MimoScenario, run_mimo
+from sim.scenarios.mimo import MimoScenario, mimo_scenario, run_mimo
 from sim.result import SimResult
-from sim.scenarios import register_scenario
 
 __all__ = [
     "A", "B", "C", "D", "B_DESIGN", "SEED_BK", "WU", "EFFECTORS", "OUTPUTS",
@@ -245,13 +244,8 @@ SCENARIO = MimoScenario(
 )
 
 
-@register_scenario(
-    "ice",
-    description="ICE 6-DOF, 11 effectors, observer-based SMC with hedging, alpha/ps/beta tracking (seed 4.7)",
-    failures=FAILURES,
-    default_duration=40.0,
-    default_method="pinv",
-)
+@mimo_scenario(SCENARIO, failures=FAILURES,
+               description="ICE 6-DOF, 11 effectors, observer-based SMC with hedging, alpha/ps/beta tracking (seed 4.7)")
 def run(**options: Any) -> SimResult:
     """Run the ICE scenario: :func:`sim.scenarios.mimo.run_mimo` options, plus ``observer`` and ``hedge``.
 
@@ -265,7 +259,3 @@ def _failure_by_name(name: str, time: float | None) -> Failure:
     if name == "seed":
         return failure(20.0 if time is None else time)
     raise KeyError(f"unknown ICE failure {name!r}; known: {sorted(FAILURES)}")
-
-
-#: run_mimo takes a sim.loop.Failure as well as a failure name (the benchmark catalogue uses it)
-run.accepts_failure_objects = True  # type: ignore[attr-defined]

@@ -4,12 +4,13 @@ A MIMO scenario is data: a :class:`MimoScenario` (vehicle, reference models,
 SMC and loop-shaped designs, failures, pilot, direct commands, divergence
 bound).  :func:`run_mimo` turns it and the run options into a
 :class:`sim.loop.LoopSpec` and flies it.  Adding a scenario is one module that
-builds a ``MimoScenario`` and registers ``lambda **o: run_mimo(SCENARIO, **o)``.
+builds a ``MimoScenario`` and registers a ``run(**options)`` that calls
+``run_mimo(SCENARIO, **options)`` with :func:`mimo_scenario`.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -19,8 +20,9 @@ from sim.blocks import DEFAULT_DT
 from sim.loop import TF, Failure, LoopShapedDesign, LoopSpec, Pilot, SMCDesign, Vehicle, simulate
 from sim.pilot import pilot_parameters
 from sim.result import SimResult
+from sim.scenarios import Scenario, register_scenario
 
-__all__ = ["MimoScenario", "run_mimo"]
+__all__ = ["MimoScenario", "run_mimo", "mimo_scenario"]
 
 
 @dataclass(frozen=True)
@@ -134,3 +136,24 @@ def run_mimo(
         rate_horizon=rate_horizon,
     )
     return simulate(spec, progress=progress, step_times=step_times)
+
+
+def mimo_scenario(
+    scenario: MimoScenario, *, description: str, failures: Mapping[str, str]
+) -> Callable[[Callable[..., SimResult]], Scenario]:
+    """Register ``run(**options)`` (which calls :func:`run_mimo` on ``scenario``) as ``scenario.name``.
+
+    The registry's default duration and method are the scenario's.  ``run``
+    is marked ``accepts_failure_objects``: :func:`run_mimo` takes a
+    :class:`sim.loop.Failure` as well as a failure name (the benchmark
+    catalogue hands its failures over that way).
+    """
+
+    def decorate(run: Callable[..., SimResult]) -> Scenario:
+        run.accepts_failure_objects = True  # type: ignore[attr-defined]
+        return register_scenario(
+            scenario.name, description=description, failures=dict(failures),
+            default_duration=scenario.default_duration, default_method=scenario.default_method,
+        )(run)
+
+    return decorate

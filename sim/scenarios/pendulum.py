@@ -41,6 +41,7 @@ The seed's section 3.1 actuator-bandwidth demonstration is
 
 The ``method`` argument of the scenario registry is accepted and ignored: a
 single force input has no allocation problem (``SimResult.method`` is None).
+The loop is flown by :func:`sim.scenarios.classic.run_classic`.
 """
 
 from __future__ import annotations
@@ -52,8 +53,8 @@ import numpy as np
 
 from sim.boundary_layer import static_boundary_layer
 from sim.design import equivalent_control_gain, lq_sliding_surface, lqr_gain
-from sim.result import SimResult, divergence_check
-from sim.scenarios import register_scenario
+from sim.result import SimResult
+from sim.scenarios.classic import classic_scenario, run_classic
 
 __all__ = [
     "PendulumParameters",
@@ -196,23 +197,11 @@ def smc_design(p: PendulumParameters = NOMINAL) -> SMCDesign:
     )
 
 
-@register_scenario(
-    "pendulum",
-    description="Inverted pendulum on a cart, single-input regular-form SMC or LQR "
-    "(seed sections 2.2 and 3.1; actuator_bandwidth=None/20/13 reproduces Figs 3-1..3-3)",
-    failures=FAILURES,
-    default_duration=10.0,
-    default_method=None,
-)
+@classic_scenario("pendulum", failures=FAILURES, default_duration=10.0, description="Inverted pendulum on a "
+                  "cart, single-input regular-form SMC or LQR (seed sections 2.2 and 3.1; actuator_bandwidth=None/20/13 "
+                  "reproduces Figs 3-1..3-3)")
 def run(
-    *,
-    method: str | None = None,
-    failure: str | None = None,
-    duration: float | None = None,
-    seed: int = 0,
-    dt: float = 0.0005,
-    allocator_knows_failure: bool = False,
-    progress: bool = False,
+    *, failure: str | None, duration: float, dt: float, seed: int,
     controller: str = "smc",
     rho: float = 50.0,
     epsilon: float = 0.1,
@@ -229,19 +218,21 @@ def run(
 ) -> SimResult:
     """Simulate the cart-pendulum regulator.
 
+    The registry arguments ``method``, ``allocator_knows_failure`` and
+    ``progress`` are accepted and ignored (one input, nothing to allocate; see
+    :func:`sim.scenarios.classic.classic_scenario`).
+
     Parameters
     ----------
-    method, allocator_knows_failure, progress
-        Registry arguments; ignored (one input, nothing to allocate).
     failure : {None, "plant_change"}
         ``"plant_change"`` switches the plant (not the controller) to
         :data:`AFTER_FAILURE` at ``failure_time``.
-    duration : float, optional
-        Seconds; default 10.
-    seed : int
-        Seed of the control-input noise generator.
+    duration : float
+        Seconds; the registry's default is 10.
     dt : float
         Fixed Heun (ODE2) step, seed default 0.0005 s.
+    seed : int
+        Seed of the control-input noise generator.
     controller : {"smc", "lqr"}
     rho, epsilon : float
         Switching gain and boundary-layer thickness of
@@ -275,19 +266,14 @@ def run(
         actuator, before the disturbance); ``extra`` holds ``sigma``,
         ``x_dot``, ``theta_dot`` and ``disturbance``.
     """
-    del method, allocator_knows_failure, progress  # see module docstring
     if controller not in ("smc", "lqr"):
         raise ValueError(f"controller must be 'smc' or 'lqr', got {controller!r}")
     if model not in ("linear", "nonlinear"):
         raise ValueError(f"model must be 'linear' or 'nonlinear', got {model!r}")
-    if failure not in (None, *FAILURES):
-        raise ValueError(f"unknown failure {failure!r} for scenario 'pendulum'; known: {', '.join(FAILURES)}")
     if actuator_bandwidth is not None and actuator_bandwidth <= 0:
         raise ValueError(f"actuator_bandwidth must be positive or None, got {actuator_bandwidth!r}")
     if epsilon <= 0:
         raise ValueError(f"epsilon must be positive, got {epsilon!r}")
-    duration = run.default_duration if duration is None else float(duration)  # type: ignore[attr-defined]
-    n_steps = int(round(duration / dt))
     rng = np.random.default_rng(seed)
 
     design = smc_design(NOMINAL)
@@ -303,7 +289,16 @@ def run(
             u += float(static_boundary_layer(sigma, rho, epsilon))
         return u, sigma
 
-    def derivative(t: float, z: np.ndarray, delta: float, p: PendulumParameters, d: float) -> tuple[np.ndarray, float, float, float]:
+    def hold(t: float) -> tuple[PendulumParameters, float]:
+        """Plant and force disturbance over the step; one noise sample per step."""
+        p = AFTER_FAILURE if (failure == "plant_change" and t >= failure_time) else NOMINAL
+        d = (disturbance_bias if t >= disturbance_time else 0.0) + (noise_std * rng.standard_normal() if noise_std else 0.0)
+        return p, d
+
+    # State X = [x, theta, x_dot, theta_dot, delta] (delta: actuator output, 0 without actuator).
+    def derivative(t: float, X: np.ndarray, held: tuple[PendulumParameters, float]) -> tuple[np.ndarray, tuple[float, float, float]]:
+        p, d = held
+        z, delta = X[:4], X[4]
         u_c, sigma = control(t, z)
         if actuator_bandwidth is None:
             force, delta_dot = u_c, 0.0
@@ -314,54 +309,25 @@ def run(
             z_dot = A @ z + B[:, 0] * (force + d)
         else:
             z_dot = nonlinear_derivative(p, z, force + d)
-        return z_dot, delta_dot, u_c, sigma
+        X_dot = np.empty(5)
+        X_dot[:4], X_dot[4] = z_dot, delta_dot
+        return X_dot, (u_c, sigma, d)
 
-    t = np.arange(n_steps + 1) * dt
-    Z = np.full((n_steps + 1, 4), np.nan)
-    U_c = np.full(n_steps + 1, np.nan)
-    F = np.full(n_steps + 1, np.nan)
-    F_dot = np.full(n_steps + 1, np.nan)
-    SIG = np.full(n_steps + 1, np.nan)
-    DIST = np.full(n_steps + 1, np.nan)
-    z = np.array([x0, math.radians(theta0_deg), 0.0, 0.0])
-    delta = 0.0
-    diverged = False
-    last = n_steps
-    for k in range(n_steps + 1):
-        tk = t[k]
-        p = AFTER_FAILURE if (failure == "plant_change" and tk >= failure_time) else NOMINAL
-        d = (disturbance_bias if tk >= disturbance_time else 0.0) + (noise_std * rng.standard_normal() if noise_std else 0.0)
-        k1, dd1, u_c, sigma = derivative(tk, z, delta, p, d)
-        Z[k], U_c[k], SIG[k], DIST[k] = z, u_c, sigma, d
-        F[k] = u_c if actuator_bandwidth is None else delta
-        F_dot[k] = dd1
-        if divergence_check(z[:2], OUTPUT_BOUND, z):
-            diverged, last = True, k
-            break
-        if k == n_steps:
-            break
-        # Heun (ODE2): Euler predictor, trapezoidal corrector; noise held over the step.
-        k2, dd2, _, _ = derivative(tk + dt, z + dt * k1, delta + dt * dd1, p, d)
-        z = z + 0.5 * dt * (k1 + k2)
-        delta = delta + 0.5 * dt * (dd1 + dd2)
-
-    sl = slice(0, last + 1)
-    zeros = np.zeros((last + 1, 2))
-    return SimResult(
-        scenario="pendulum",
-        method=None,
-        failure=failure,
-        t=t[sl],
+    flown = run_classic(
+        derivative, np.array([x0, math.radians(theta0_deg), 0.0, 0.0, 0.0]), duration=duration, dt=dt,
+        n_signals=3, outputs=slice(0, 2), output_bound=OUTPUT_BOUND, hold=hold,
+    )
+    X, u_c = flown.states, flown.signals[:, 0]
+    zeros = np.zeros((flown.t.size, 2))
+    return flown.result(
+        "pendulum", failure, failure_time,
         channels=["x", "theta"],
         reference=zeros,
-        output=Z[sl, :2],
+        output=X[:, :2],
         command=zeros.copy(),
-        pseudo=U_c[sl, None],
-        effectors=F[sl, None],
-        effector_rates=F_dot[sl, None],
+        pseudo=u_c[:, None],
+        effectors=(u_c if actuator_bandwidth is None else X[:, 4])[:, None],
+        effector_rates=flown.rates[:, 4:5],
         effector_names=["force"],
-        failure_time=failure_time if failure is not None else None,
-        diverged=diverged,
-        extra={"sigma": SIG[sl], "x_dot": Z[sl, 2], "theta_dot": Z[sl, 3], "disturbance": DIST[sl]},
+        extra={"sigma": flown.signals[:, 1], "x_dot": X[:, 2], "theta_dot": X[:, 3], "disturbance": flown.signals[:, 2]},
     )
-
