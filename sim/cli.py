@@ -43,6 +43,10 @@ def sim_command(
     rate_aware: Optional[bool] = typer.Option(
         None, "--rate-aware/--rate-blind", help="allocator gets u_prev and dt = frame period (seed Eq 1.28; default on)"
     ),
+    boundary_layer: Optional[str] = typer.Option(
+        None, "--boundary-layer",
+        help="SMC boundary layer at the frame rate: 'frame' (default, eps * max(1, T / 0.5 ms)) or 'fixed' (seed eps)",
+    ),
     u_prev: Optional[str] = typer.Option(None, "--u-prev", help="'command' (default, the seed's) or 'position'"),
     preferred: Optional[str] = typer.Option(
         None, "--preferred", help="one-sided effectors' preferred position: 'mid' (default) or 'zero' (seed up = 0)"
@@ -69,6 +73,7 @@ def sim_command(
         method=method, failure_time=failure_time, noise=noise, controller=controller, pilot=pilot,
         pilot_gain=pilot_gain, pilot_delay=pilot_delay, rate_aware=rate_aware, u_prev_source=u_prev,
         preferred=preferred, frame_period=None if frame_rate is None else 1.0 / frame_rate,
+        boundary_layer=boundary_layer,
     )
     kwargs.update({k: v for k, v in optional.items() if v is not None})
     simulated = run.default_duration if duration is None else duration
@@ -98,7 +103,8 @@ def command_line(scenario: str, **options: Any) -> str:
     flags = {"method": "--method", "failure": "--failure", "failure_time": "--failure-time",
              "duration": "--duration", "seed": "--seed", "controller": "--controller", "pilot": "--pilot",
              "pilot_gain": "--pilot-gain", "pilot_delay": "--pilot-delay", "u_prev_source": "--u-prev",
-             "preferred": "--preferred"}
+             "preferred": "--preferred",
+             "boundary_layer": "--boundary-layer"}
     words = ["alloc", "sim", scenario]
     for key, value in options.items():
         if value is None:

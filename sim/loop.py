@@ -44,6 +44,7 @@ from tqdm import tqdm
 from sim.allocation import LoopAllocator, build_allocator
 from sim.blocks import (
     ActuatorBank,
+    DEFAULT_DT,
     ActuatorFailure,
     ActuatorSpec,
     DelayLine,
@@ -59,7 +60,7 @@ from sim.blocks import (
 )
 from sim.result import SimResult
 
-__all__ = ["Vehicle", "Failure", "SMCDesign", "LoopShapedDesign", "Pilot", "LoopSpec", "simulate", "FloatSlot", "IntSlot", "Misc"]
+__all__ = ["Vehicle", "Failure", "SMCDesign", "LoopShapedDesign", "Pilot", "LoopSpec", "simulate", "boundary_layer_at", "BOUNDARY_LAYER_RULES", "FloatSlot", "IntSlot", "Misc"]
 
 TF = tuple[Sequence[float], Sequence[float]]
 
@@ -694,6 +695,10 @@ class LoopSpec:
         Period ``T`` of the flight-control computer (pilot sampling, reference
         models, observers, SMC, hedges, allocator); a multiple of ``dt``,
         outputs held between frames.  None: ``T = dt`` (the seed's single-rate loop).
+    boundary_layer : {"frame", "fixed"}
+        SMC boundary layer at ``T``: scaled to keep the seed's per-frame
+        switching gain (``eps * max(1, T / 0.5 ms)``, default) or the seed's
+        ``eps`` unchanged (:func:`boundary_layer_at`).
     seed : int
         Noise seed.
     output_bound : float or ndarray
@@ -721,6 +726,8 @@ class LoopSpec:
     preferred: str = "mid"
     #: horizon of the Eq 1.28 rate box, ``"actuator"`` or ``"frame"`` (:func:`sim.allocation.build_allocator`)
     rate_horizon: str = "actuator"
+    #: boundary layer at the frame period, ``"frame"`` or ``"fixed"`` (:func:`boundary_layer_at`)
+    boundary_layer: str = "frame"
     actuators: bool = True
     noise: bool = True
     frame_period: float | None = None
@@ -740,6 +747,37 @@ class LoopSpec:
 
 #: ``u_prev`` the allocator may be told (see :class:`LoopSpec`).
 U_PREV_SOURCES = ("command", "position")
+
+#: Rules for the SMC boundary layer at a frame period ``T`` (see :func:`boundary_layer_at`).
+BOUNDARY_LAYER_RULES = ("frame", "fixed")
+
+#: Frame period the seed's boundary layers were chosen at: its Simulink step (seed section 4.5,
+#: "fixed time step of dt = 0.0005 sec"; section 4.3 step 6 picks eps in that simulation).
+SEED_FRAME_PERIOD = DEFAULT_DT
+
+
+def boundary_layer_at(eps: np.ndarray, frame_period: float, rule: str = "frame") -> np.ndarray:
+    """Boundary-layer thickness of the SMC at frame period ``T``.
+
+    Sampled at ``T`` and held, the linear region of ``u_c = rho sat(sigma / eps)``
+    is a discrete loop ``sigma_{j+1} ~ (1 - T g rho / eps) sigma_j`` (``g``: the
+    sliding variable's rate per unit ``u_c``); quasi-sliding is stable only for
+    ``T g rho / eps < 2``.  The seed chose ``eps`` at ``T_seed = 0.5 ms``
+    (section 4.3 step 6, section 4.5), where that per-frame gain is 0.45-0.51
+    on ICE; at 100 Hz it is 9-10 and the loop chatters and diverges.
+
+    ``"frame"`` (default) keeps the seed's per-frame gain:
+    ``eps_T = eps * max(1, T / T_seed)`` (``rho`` unchanged, so the
+    continuous-time equivalent gain ``rho / eps`` falls as ``1 / T``);
+    ``"fixed"`` keeps the seed's ``eps`` at every rate.  At ``T <= T_seed``
+    both return ``eps`` itself (seed runs bit-identical).
+    """
+    if rule not in BOUNDARY_LAYER_RULES:
+        raise ValueError(f"boundary_layer: {rule!r}; expected one of {BOUNDARY_LAYER_RULES}")
+    ratio = frame_period / SEED_FRAME_PERIOD
+    if rule == "fixed" or ratio <= 1.0 + 1e-9:
+        return eps
+    return eps * ratio
 
 
 def simulate(
@@ -777,6 +815,8 @@ def simulate(
         raise TypeError(f"simulate: give a LoopSpec or keywords, not both (got {sorted(fields)})")
     if spec.u_prev_source not in U_PREV_SOURCES:
         raise ValueError(f"u_prev_source: {spec.u_prev_source!r}; expected one of {U_PREV_SOURCES}")
+    if spec.boundary_layer not in BOUNDARY_LAYER_RULES:
+        raise ValueError(f"boundary_layer: {spec.boundary_layer!r}; expected one of {BOUNDARY_LAYER_RULES}")
     frame = spec.frame_steps()
     scenario, vehicle, references, controller = spec.scenario, spec.vehicle, spec.references, spec.controller
     commands, pilots, failure, method = spec.commands, spec.pilots, spec.failure, spec.method
@@ -809,7 +849,7 @@ def simulate(
     position_feedback = spec.u_prev_source == "position"
 
     smc = isinstance(controller, SMCDesign)
-    controller_slots = _controller_slots(vehicle, controller, references, tframe)
+    controller_slots = _controller_slots(vehicle, controller, references, tframe, spec.boundary_layer)
     n_pilots = len(pilots)
     t_grid = np.arange(n_steps + 1) * dt
     pilot_floats, pilot_ints = _pilot_slots(pilots, ny, tframe)
@@ -915,7 +955,7 @@ def simulate(
     result.allocator_status = call_status[:n_calls].copy()
     result.settings = {
         "frame_period": tframe, "dt": dt, "rate_aware": bool(rate_aware), "u_prev_source": spec.u_prev_source,
-        "rate_horizon": spec.rate_horizon,
+        "rate_horizon": spec.rate_horizon, "boundary_layer": spec.boundary_layer,
         "preferred": spec.preferred, "allocator_knows_failure": bool(allocator_knows_failure), "noise": bool(noise), "seed": int(seed),
         "pilots": [p.describe() for p in pilots],
     }
@@ -959,13 +999,18 @@ def _result(
 
 
 def _controller_slots(
-    vehicle: Vehicle, controller: SMCDesign | LoopShapedDesign, references: Sequence[TF], dt: float
+    vehicle: Vehicle, controller: SMCDesign | LoopShapedDesign, references: Sequence[TF], dt: float,
+    boundary_layer: str = "frame",
 ) -> dict[int, np.ndarray]:
-    """Packed arrays of the controller: the SMC system and gains, or reference models and compensators."""
+    """Packed arrays of the controller: the SMC system and gains, or reference models and compensators.
+
+    ``dt`` is the frame period; ``boundary_layer`` the rule of :func:`boundary_layer_at`.
+    """
     k = len(vehicle.controlled)
     if isinstance(controller, SMCDesign):
         ctl, n_in = _controller_system(vehicle, controller, references, dt)
-        eps = np.ones(k) if controller.eps is None else controller.eps  # unused with sign (eps None)
+        # unused with sign (eps None)
+        eps = np.ones(k) if controller.eps is None else boundary_layer_at(controller.eps, dt, boundary_layer)
         return {
             FloatSlot.XC: ctl.x, FloatSlot.ADC: ctl.Ad, FloatSlot.BDC: ctl.Bd, FloatSlot.CC: ctl.C, FloatSlot.W: np.zeros(n_in),
             FloatSlot.XK: np.zeros(0), FloatSlot.AK: np.zeros((0, 0)), FloatSlot.BK: np.zeros((0, k)), FloatSlot.CK: np.zeros((k, 0)),
