@@ -57,6 +57,9 @@ def sim_command(
     ),
     json_path: Optional[Path] = typer.Option(None, "--json", help="write the JSON summary here"),
     csv_path: Optional[Path] = typer.Option(None, "--csv", help="write the time histories here (CSV)"),
+    parquet_path: Optional[Path] = typer.Option(
+        None, "--parquet", help="write the time histories here (Parquet, full precision; needs pyarrow)"
+    ),
     plot_path: Optional[Path] = typer.Option(None, "--plot", help="write a PNG plot here"),
 ) -> None:
     """Run SCENARIO in closed loop and print its JSON summary (exit 1 if it diverged)."""
@@ -89,6 +92,8 @@ def sim_command(
         result.to_json(json_path)
     if csv_path is not None:
         result.to_csv(csv_path)
+    if parquet_path is not None:
+        result.to_parquet(parquet_path)
     if plot_path is not None:
         from sim.plots import plot_result
 
