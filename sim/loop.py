@@ -58,9 +58,11 @@ from sim.blocks import (
     stack_lti,
     tf_to_ss,
 )
+from alloc.result import EXACT_RTOL
 from sim.result import SimResult
 
-__all__ = ["Vehicle", "Failure", "SMCDesign", "LoopShapedDesign", "Pilot", "LoopSpec", "simulate", "boundary_layer_at", "BOUNDARY_LAYER_RULES", "FloatSlot", "IntSlot", "Misc"]
+__all__ = ["Vehicle", "Failure", "SMCDesign", "LoopShapedDesign", "Pilot", "LoopSpec", "simulate", "boundary_layer_at", "BOUNDARY_LAYER_RULES",
+           "anti_windup_on", "ANTI_WINDUP_RULES", "FloatSlot", "IntSlot", "Misc"]
 
 TF = tuple[Sequence[float], Sequence[float]]
 
@@ -363,12 +365,17 @@ class Misc(IntEnum):
     FRAME = auto()
     #: pilots have lead-lag / neuromuscular dynamics
     PFILTER = auto()
+    #: conditional integration of the SMC's integral term (:func:`anti_windup_on`)
+    ANTI_WINDUP = auto()
 
 
 _N_MISC = len(Misc)
 
 # IntSlot.DSTATE entries: ring index, ring length (DelayLine semantics)
 _D_INDEX, _D_LENGTH = 0, 1
+
+# a demand met to this relative tolerance is met (alloc.result.EXACT_RTOL, the library's exact status)
+_EXACT_RTOL = EXACT_RTOL
 
 # step status
 _OK, _DIVERGED, _PENDING = 0, 1, 2
@@ -543,6 +550,16 @@ def _observe(step: int, F: np.ndarray, I: np.ndarray, inputs: np.ndarray) -> int
 
 
 @njit(cache=True)
+def _short_of_demand(v: np.ndarray, v_achieved: np.ndarray) -> bool:
+    """True when the allocator fell short: ``max|v - B u| > rtol max(1, max|v|)`` (``alloc``'s exact test)."""
+    err, vmax = 0.0, 1.0
+    for i in range(v.size):
+        err = max(err, abs(v_achieved[i] - v[i]))
+        vmax = max(vmax, abs(v[i]))
+    return not err <= _EXACT_RTOL * vmax
+
+
+@njit(cache=True)
 def _advance(
     step: int, u_cmd: np.ndarray, v_achieved: np.ndarray, F: np.ndarray, I: np.ndarray,
     inputs: np.ndarray, rec: np.ndarray,
@@ -607,8 +624,9 @@ def _advance(
         xc = _vec(F, I, FloatSlot.XC)
         _affine(_mat(F, I, FloatSlot.ADC), xc, _mat(F, I, FloatSlot.BDC), w, xc, _mat(F, I, FloatSlot.SCRATCH))
         integ = _vec(F, I, FloatSlot.INTEG)
-        for i in range(k):
-            integ[i] += tframe * e[i]
+        if not (misc[Misc.ANTI_WINDUP] and _short_of_demand(_vec(F, I, FloatSlot.V), v_achieved)):
+            for i in range(k):
+                integ[i] += tframe * e[i]
     x = _vec(F, I, FloatSlot.X)
     _affine(_mat(F, I, FloatSlot.AD), x, _mat(F, I, FloatSlot.BD), uact, x, _mat(F, I, FloatSlot.SCRATCH))
     # Actuator delay (DelayLine.push): the command pushed n[c] steps ago.
@@ -695,6 +713,11 @@ class LoopSpec:
         Period ``T`` of the flight-control computer (pilot sampling, reference
         models, observers, SMC, hedges, allocator); a multiple of ``dt``,
         outputs held between frames.  None: ``T = dt`` (the seed's single-rate loop).
+    rate_window : {"binding", "always"}
+        When the allocator is given the Eq 1.28 box (:func:`sim.allocation.build_allocator`).
+    anti_windup : {"auto", "on", "off"}
+        Hold the SMC's integral term in frames the allocator fell short
+        (:func:`anti_windup_on`; ``"auto"``: on slower than the seed's rate).
     boundary_layer : {"frame", "fixed"}
         SMC boundary layer at ``T``: scaled to keep the seed's per-frame
         switching gain (``eps * max(1, T / 0.5 ms)``, default) or the seed's
@@ -726,6 +749,10 @@ class LoopSpec:
     preferred: str = "mid"
     #: horizon of the Eq 1.28 rate box, ``"actuator"`` or ``"frame"`` (:func:`sim.allocation.build_allocator`)
     rate_horizon: str = "actuator"
+    #: when the allocator is given the Eq 1.28 box, ``"binding"`` or ``"always"`` (:func:`sim.allocation.build_allocator`)
+    rate_window: str = "binding"
+    #: conditional integration of the SMC integral term, ``"auto"``, ``"on"`` or ``"off"`` (:func:`anti_windup_on`)
+    anti_windup: str = "auto"
     #: boundary layer at the frame period, ``"frame"`` or ``"fixed"`` (:func:`boundary_layer_at`)
     boundary_layer: str = "frame"
     actuators: bool = True
@@ -754,6 +781,32 @@ BOUNDARY_LAYER_RULES = ("frame", "fixed")
 #: Frame period the seed's boundary layers were chosen at: its Simulink step (seed section 4.5,
 #: "fixed time step of dt = 0.0005 sec"; section 4.3 step 6 picks eps in that simulation).
 SEED_FRAME_PERIOD = DEFAULT_DT
+
+
+#: Rules for the SMC's integral term when the allocator falls short (see :func:`anti_windup_on`).
+ANTI_WINDUP_RULES = ("auto", "on", "off")
+
+
+def anti_windup_on(rule: str, frame_period: float) -> bool:
+    """Whether the SMC integrates its error in a frame where the allocator fell short of ``v``.
+
+    ``sigma = K0 e + K_-1 int(e)`` (seed Eq 4.7) integrates the tracking error of
+    the observer, which is driven by the command actually allocated.  When the
+    allocator cannot meet the demand (Eq 1.28's rate box binding, position
+    limits), ``e`` persists, ``int(e)`` winds up and ``u_c`` rails at ``rho``:
+    the seed's hedging is driven by ``u_c`` (Eqs 3.17-3.18), not by the
+    allocator's shortfall, so nothing in the seed's loop unwinds it.  ``"on"``
+    is conditional integration, the textbook anti-windup: ``int(e)`` is held in
+    every frame whose allocation was not exact (``alloc``'s test,
+    ``max|v - B u| <= 1e-6 max(1, max|v|)``).  ``"off"`` is the seed's law.
+    ``"auto"`` (default): on when the frame period is longer than the seed's
+    0.5 ms, off at the seed's rate (seed runs bit-identical).
+    """
+    if rule not in ANTI_WINDUP_RULES:
+        raise ValueError(f"anti_windup: {rule!r}; expected one of {ANTI_WINDUP_RULES}")
+    if rule == "auto":
+        return frame_period > SEED_FRAME_PERIOD * (1.0 + 1e-9)
+    return rule == "on"
 
 
 def boundary_layer_at(eps: np.ndarray, frame_period: float, rule: str = "frame") -> np.ndarray:
@@ -815,6 +868,8 @@ def simulate(
         raise TypeError(f"simulate: give a LoopSpec or keywords, not both (got {sorted(fields)})")
     if spec.u_prev_source not in U_PREV_SOURCES:
         raise ValueError(f"u_prev_source: {spec.u_prev_source!r}; expected one of {U_PREV_SOURCES}")
+    if spec.anti_windup not in ANTI_WINDUP_RULES:
+        raise ValueError(f"anti_windup: {spec.anti_windup!r}; expected one of {ANTI_WINDUP_RULES}")
     if spec.boundary_layer not in BOUNDARY_LAYER_RULES:
         raise ValueError(f"boundary_layer: {spec.boundary_layer!r}; expected one of {BOUNDARY_LAYER_RULES}")
     frame = spec.frame_steps()
@@ -844,7 +899,7 @@ def simulate(
     bank = ActuatorBank(vehicle.actuators, dt)
     delay = DelayLine(m, dt, 0.0)
     alloc_options = dict(rate_aware=rate_aware, preferred=spec.preferred, frame_period=tframe,
-                         rate_horizon=spec.rate_horizon)
+                         rate_horizon=spec.rate_horizon, rate_window=spec.rate_window)
     allocator: LoopAllocator = build_allocator(vehicle, method, method_options or {}, **alloc_options)
     position_feedback = spec.u_prev_source == "position"
 
@@ -877,6 +932,7 @@ def simulate(
     misc[Misc.ACTUATORS] = actuators
     misc[Misc.FRAME] = frame
     misc[Misc.PFILTER] = any(p.filtered for p in pilots)
+    misc[Misc.ANTI_WINDUP] = smc and anti_windup_on(spec.anti_windup, tframe)
     nx, nc, nk = vehicle.A.shape[0], controller_slots[FloatSlot.ADC].shape[0], controller_slots[FloatSlot.AK].shape[0]
     packed = _Packed(
         floats={
@@ -955,7 +1011,8 @@ def simulate(
     result.allocator_status = call_status[:n_calls].copy()
     result.settings = {
         "frame_period": tframe, "dt": dt, "rate_aware": bool(rate_aware), "u_prev_source": spec.u_prev_source,
-        "rate_horizon": spec.rate_horizon, "boundary_layer": spec.boundary_layer,
+        "rate_horizon": spec.rate_horizon, "rate_window": spec.rate_window, "anti_windup": spec.anti_windup,
+        "boundary_layer": spec.boundary_layer,
         "preferred": spec.preferred, "allocator_knows_failure": bool(allocator_knows_failure), "noise": bool(noise), "seed": int(seed),
         "pilots": [p.describe() for p in pilots],
     }
