@@ -351,22 +351,12 @@ class IntSlot(IntEnum):
 _N_SLOTS = _N_FLOAT_SLOTS + len(IntSlot)
 
 
-class Misc(IntEnum):
-    """Entries of the ``IntSlot.MISC`` array (run constants and switches)."""
-
-    N_STEPS = 0
-    RECORD_EVERY = auto()
-    FAIL_STEP = auto()
-    SMC = auto()
-    OBSERVED = auto()
-    SIGN = auto()
-    ACTUATORS = auto()
-    #: integration steps per flight-control frame
-    FRAME = auto()
-    #: pilots have lead-lag / neuromuscular dynamics
-    PFILTER = auto()
-    #: conditional integration of the SMC's integral term (:func:`anti_windup_on`)
-    ANTI_WINDUP = auto()
+#: Entries of the ``IntSlot.MISC`` array (run constants and switches): steps in the run,
+#: record every n-th step, failure step, SMC (else loop-shaped), observers in use, sign law
+#: (no boundary layer), actuator dynamics on, integration steps per flight-control frame,
+#: pilots with lead-lag / neuromuscular dynamics, conditional integration (:func:`anti_windup_on`).
+Misc = IntEnum("Misc", ["N_STEPS", "RECORD_EVERY", "FAIL_STEP", "SMC", "OBSERVED", "SIGN", "ACTUATORS", "FRAME",
+                        "PFILTER", "ANTI_WINDUP"], start=0, module=__name__)
 
 
 _N_MISC = len(Misc)
