@@ -135,14 +135,16 @@ RATE_WINDOWS = ("binding", "always")
 
 
 @njit(cache=True)
-def _inside_rate_window(u: np.ndarray, u_prev: np.ndarray, lo: np.ndarray, hi: np.ndarray, rate_min: np.ndarray,
-                        rate_max: np.ndarray, dt: float, base: np.ndarray) -> bool:
-    """``base = clip(u_prev, lo, hi)``; True when ``u`` (inside ``[lo, hi]``) is inside its Eq 1.28 box."""
+def _inside_rate_window(u: np.ndarray, u_prev: np.ndarray, limits: np.ndarray, dt: float, base: np.ndarray) -> bool:
+    """``base = clip(u_prev, lo, hi)``; True when ``u`` (inside ``[lo, hi]``) is inside its Eq 1.28 box.
+
+    ``limits`` rows: ``lo, hi, rate_min, rate_max`` (one array: one argument to unbox per call).
+    """
     inside = True
     for j in range(u.size):
-        b = min(max(u_prev[j], lo[j]), hi[j])
+        b = min(max(u_prev[j], limits[0, j]), limits[1, j])
         base[j] = b
-        if u[j] < b + rate_min[j] * dt or u[j] > b + rate_max[j] * dt:
+        if u[j] < b + limits[2, j] * dt or u[j] > b + limits[3, j] * dt:
             inside = False
     return inside
 
@@ -236,7 +238,7 @@ def build_allocator(
         raise ValueError(f"rate_window: {rate_window!r}; expected one of {RATE_WINDOWS}")
     solve = alloc.make_allocator(problem, method, **opts)
     lo, hi = problem.umin, problem.umax
-    rate_min, rate_max = np.array(problem.rate_min), np.array(problem.rate_max)
+    limits = np.array([lo, hi, problem.rate_min, problem.rate_max])
     base = np.empty(problem.m)
     code = _STATUS_CODE
 
@@ -250,7 +252,7 @@ def build_allocator(
 
     def registry_rate_binding(v: np.ndarray, u_prev: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray, int]:
         res = solve(v)
-        if not _inside_rate_window(res.u, u_prev, lo, hi, rate_min, rate_max, dt, base):
+        if not _inside_rate_window(res.u, u_prev, limits, dt, base):
             res = solve(v, u_prev=base, dt=dt)  # seed Eq 1.28, where it binds
         return res.u, res.v_achieved, code[res.status.value]
 
