@@ -225,6 +225,7 @@ def build_allocator(
         return static
 
     import alloc
+    from alloc.result import Status
 
     opts = dict(options)
     if method == "ganging" and "G" not in opts:
@@ -240,21 +241,22 @@ def build_allocator(
     lo, hi = problem.umin, problem.umax
     limits = np.array([lo, hi, problem.rate_min, problem.rate_max])
     base = np.empty(problem.m)
-    code = _STATUS_CODE
+    # status member -> STATUS_NAMES code, looked up by identity (cheaper per call than .value)
+    code = {status: _STATUS_CODE[status.value] for status in Status}
 
     def registry(v: np.ndarray, u_prev: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray, int]:
         res = solve(v)
-        return res.u, res.v_achieved, code[res.status.value]
+        return res.u, res.v_achieved, code[res.status]
 
     def registry_rate_aware(v: np.ndarray, u_prev: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray, int]:
         res = solve(v, u_prev=np.minimum(np.maximum(u_prev, lo), hi), dt=dt)  # seed Eq 1.28
-        return res.u, res.v_achieved, code[res.status.value]
+        return res.u, res.v_achieved, code[res.status]
 
     def registry_rate_binding(v: np.ndarray, u_prev: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray, int]:
         res = solve(v)
         if not _inside_rate_window(res.u, u_prev, limits, dt, base):
             res = solve(v, u_prev=base, dt=dt)  # seed Eq 1.28, where it binds
-        return res.u, res.v_achieved, code[res.status.value]
+        return res.u, res.v_achieved, code[res.status]
 
     if not rate_aware:
         return registry
