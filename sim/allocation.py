@@ -201,9 +201,9 @@ def build_allocator(
     (default) first allocates within the position limits and keeps that answer
     when it lies inside the rate box around ``u_prev``; only an answer that
     would break a rate limit is replaced by the method's answer within the box.
-    ``"always"`` gives every call the box.  The two agree for the methods that
-    optimise over the box (``pinv``, ``qp``, ``wls``: the unique optimum does not
-    move when a constraint is inactive), but not for the heuristics (``cgi``,
+    ``"always"`` gives every call the box.  The two agree for ``pinv`` (a clip)
+    and for the methods that optimise over the box (``qp``, ``wls``: the unique
+    optimum does not move when a constraint is inactive), but not for the heuristics (``cgi``,
     ``daisy``, ``pinv_scale``, ``da``, ``lp``, ...): their answer depends on the box
     even where it does not bind (``cgi`` starts from the preferred point clipped
     to it, ``pinv_scale``/``daisy`` scale from that clipped point), so with

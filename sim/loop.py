@@ -41,10 +41,11 @@ import numpy as np
 from numba import njit
 from tqdm import tqdm
 
+from alloc.result import EXACT_RTOL
 from sim.allocation import LoopAllocator, build_allocator
 from sim.blocks import (
-    ActuatorBank,
     DEFAULT_DT,
+    ActuatorBank,
     ActuatorFailure,
     ActuatorSpec,
     DelayLine,
@@ -58,11 +59,11 @@ from sim.blocks import (
     stack_lti,
     tf_to_ss,
 )
-from alloc.result import EXACT_RTOL
 from sim.result import SimResult
 
-__all__ = ["Vehicle", "Failure", "SMCDesign", "LoopShapedDesign", "Pilot", "LoopSpec", "simulate", "boundary_layer_at", "BOUNDARY_LAYER_RULES",
-           "anti_windup_on", "ANTI_WINDUP_RULES", "FloatSlot", "IntSlot", "Misc"]
+__all__ = ["Vehicle", "Failure", "SMCDesign", "LoopShapedDesign", "Pilot", "LoopSpec", "simulate",
+           "boundary_layer_at", "BOUNDARY_LAYER_RULES", "anti_windup_on", "ANTI_WINDUP_RULES",
+           "FloatSlot", "IntSlot", "Misc"]
 
 TF = tuple[Sequence[float], Sequence[float]]
 
