@@ -57,9 +57,10 @@ def main() -> None:
     parser.add_argument("--out", type=Path, required=True,
                         help="CSV to write (the committed reference is benchmarks/reference/ice_table.csv)")
     parser.add_argument("--markdown", action="store_true", help="only print the markdown table of --out")
+    parser.add_argument("--readme", action="store_true", help="only print the README's compact table of --out")
     args = parser.parse_args()
-    if args.markdown:
-        print(markdown(args.out))
+    if args.markdown or args.readme:
+        print(readme_table(args.out) if args.readme else markdown(args.out))
         return
     jobs = []
     for hz in args.rates:
@@ -92,6 +93,55 @@ def markdown(path: Path) -> str:
             lines.append(f"| {float(row['rate_hz']):g} | {row['method']} | {told} | {aware} | {row['diverged_at'] or '-'} "
                          f"| {pair('alpha')} | {pair('ps')} | {pair('beta')} | {row['unattainable']} | {row['fallback']} |")
     return "\n".join(lines)
+
+
+def readme_table(path: Path) -> str:
+    """One row per method and told/blind: the seed rate (before -> after, unattainable), then the RMS
+    after the failure (alpha / p_s / beta) or the divergence time at each slower rate, Eq 1.28 on and off."""
+    with path.open() as fh:
+        rows = list(csv.DictReader(fh))
+    slow = sorted({float(r["rate_hz"]) for r in rows} - {2000.0}, reverse=True)
+    index = {(float(r["rate_hz"]), r["method"], r["told"], r["rate_aware"]): r for r in rows}
+
+    def after(r: dict[str, str] | None) -> str:
+        if r is None:
+            return "—"
+        if r["diverged_at"]:
+            return f"diverged {float(r['diverged_at']):.1f} s"
+        return " / ".join(f"{float(r[f'{key}_after']):.2f}" for key in ("alpha", "ps", "beta"))
+
+    head = ["method", "allocator", "2 kHz α deg", "2 kHz p_s deg/s", "2 kHz β deg", "unatt."]
+    for hz in slow:
+        head += [f"{hz:g} Hz, Eq 1.28 on", f"{hz:g} Hz, off"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    seen = []
+    for r in rows:
+        key = (r["method"], r["told"])
+        if key in seen:
+            continue
+        seen.append(key)
+        method, told = key
+        seed = index.get((2000.0, method, told, "True"))
+        if seed is None:
+            continue
+        cells = [method, "—" if method == "static" else ("told" if told == "True" else "blind")]
+        if seed["diverged_at"]:
+            cells += [f"diverged {float(seed['diverged_at']):.1f} s", "", ""]
+        else:
+            cells += [f"{seed[f'{k}_before']} → {seed[f'{k}_after']}" for k in ("alpha", "ps", "beta")]
+        cells.append(seed["unattainable"])
+        for hz in slow:
+            cells += [after(index.get((hz, method, told, "True"))),
+                      "—" if method == "static" else after(index.get((hz, method, told, "False")))]
+        # methods whose rows are identical (pinv and pinv_clip, the da family, ...) share one row
+        for line in lines[2:]:
+            head_cells = line.split(" | ")
+            if head_cells[1:] == cells[1:]:
+                lines[lines.index(line)] = " | ".join([head_cells[0] + ", " + method] + cells[1:])
+                break
+        else:
+            lines.append("| " + " | ".join(cells))
+    return "\n".join(line if line.endswith("|") else line + " |" for line in lines)
 
 
 if __name__ == "__main__":

@@ -17,6 +17,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numba import njit
 
 from sim.result import STATUS_NAMES
 
@@ -24,7 +25,7 @@ if TYPE_CHECKING:
     from sim.loop import Failure, Vehicle
 
 __all__ = ["LoopAllocator", "STATIC", "PREFERRED_POSITIONS", "RATE_HORIZONS", "actuator_lag", "allocation_problem",
-           "build_allocator", "health_events", "preferred_positions", "rate_horizon_scale"]
+           "build_allocator", "health_events", "preferred_positions", "rate_horizon_scale", "RATE_WINDOWS"]
 
 #: Name of the seed's printed static distribution (not a registry method).
 STATIC = "static"
@@ -129,6 +130,24 @@ def allocation_problem(vehicle: Vehicle, failure: Failure | None = None, *, pref
 #: Horizons of the Eq 1.28 rate box (see :func:`build_allocator`).
 RATE_HORIZONS = ("actuator", "frame")
 
+#: When the Eq 1.28 rate box is given to the method (see :func:`build_allocator`).
+RATE_WINDOWS = ("binding", "always")
+
+
+@njit(cache=True)
+def _inside_rate_window(u: np.ndarray, u_prev: np.ndarray, limits: np.ndarray, dt: float, base: np.ndarray) -> bool:
+    """``base = clip(u_prev, lo, hi)``; True when ``u`` (inside ``[lo, hi]``) is inside its Eq 1.28 box.
+
+    ``limits`` rows: ``lo, hi, rate_min, rate_max`` (one array: one argument to unbox per call).
+    """
+    inside = True
+    for j in range(u.size):
+        b = min(max(u_prev[j], limits[0, j]), limits[1, j])
+        base[j] = b
+        if u[j] < b + limits[2, j] * dt or u[j] > b + limits[3, j] * dt:
+            inside = False
+    return inside
+
 
 def actuator_lag(vehicle: Vehicle) -> np.ndarray:
     """Ramp-following lag (s) of each nominal actuator: ``c1 / wn2`` (second order), ``1 / a`` (first)."""
@@ -154,6 +173,7 @@ def build_allocator(
     preferred: str = "mid",
     frame_period: float | None = None,
     rate_horizon: str = "actuator",
+    rate_window: str = "binding",
 ) -> LoopAllocator:
     """Allocator callable for the loop.
 
@@ -176,6 +196,20 @@ def build_allocator(
     ``"actuator"`` (default) spans ``max(T, lag)`` per effector (rate limits
     scaled by :func:`rate_horizon_scale`); ``"frame"`` is Eq 1.28 with ``dt = T``
     literally.  With ``T >= lag`` the two coincide.
+
+    ``rate_window``: Eq 1.28 is a constraint on the next command.  ``"binding"``
+    (default) first allocates within the position limits and keeps that answer
+    when it lies inside the rate box around ``u_prev``; only an answer that
+    would break a rate limit is replaced by the method's answer within the box.
+    ``"always"`` gives every call the box.  The two agree for ``pinv`` (a clip)
+    and for the methods that optimise over the box (``qp``, ``wls``: the unique
+    optimum does not move when a constraint is inactive), but not for the heuristics (``cgi``,
+    ``daisy``, ``pinv_scale``, ``da``, ``lp``, ...): their answer depends on the box
+    even where it does not bind (``cgi`` starts from the preferred point clipped
+    to it, ``pinv_scale``/``daisy`` scale from that clipped point), so with
+    ``"always"`` the allocator gets a memory of ``u_prev`` and the command
+    drifts in the null space of ``B`` (ICE ``cgi``: pitch flap 14 deg from its
+    preferred position against 4 rate-blind, at every frame rate).
     """
     if method == STATIC:
         if options:
@@ -191,6 +225,7 @@ def build_allocator(
         return static
 
     import alloc
+    from alloc.result import Status
 
     opts = dict(options)
     if method == "ganging" and "G" not in opts:
@@ -200,16 +235,29 @@ def build_allocator(
     if rate_aware and frame_period is not None:
         scale = rate_horizon_scale(vehicle, frame_period, rate_horizon)
         problem = problem.replace(rate_min=scale * problem.rate_min, rate_max=scale * problem.rate_max)
+    if rate_window not in RATE_WINDOWS:
+        raise ValueError(f"rate_window: {rate_window!r}; expected one of {RATE_WINDOWS}")
     solve = alloc.make_allocator(problem, method, **opts)
     lo, hi = problem.umin, problem.umax
-    code = _STATUS_CODE
+    limits = np.array([lo, hi, problem.rate_min, problem.rate_max])
+    base = np.empty(problem.m)
+    # status member -> STATUS_NAMES code, looked up by identity (cheaper per call than .value)
+    code = {status: _STATUS_CODE[status.value] for status in Status}
 
     def registry(v: np.ndarray, u_prev: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray, int]:
         res = solve(v)
-        return res.u, res.v_achieved, code[res.status.value]
+        return res.u, res.v_achieved, code[res.status]
 
     def registry_rate_aware(v: np.ndarray, u_prev: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray, int]:
         res = solve(v, u_prev=np.minimum(np.maximum(u_prev, lo), hi), dt=dt)  # seed Eq 1.28
-        return res.u, res.v_achieved, code[res.status.value]
+        return res.u, res.v_achieved, code[res.status]
 
-    return registry_rate_aware if rate_aware else registry
+    def registry_rate_binding(v: np.ndarray, u_prev: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray, int]:
+        res = solve(v)
+        if not _inside_rate_window(res.u, u_prev, limits, dt, base):
+            res = solve(v, u_prev=base, dt=dt)  # seed Eq 1.28, where it binds
+        return res.u, res.v_achieved, code[res.status]
+
+    if not rate_aware:
+        return registry
+    return registry_rate_binding if rate_window == "binding" else registry_rate_aware

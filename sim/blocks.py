@@ -289,6 +289,14 @@ class ActuatorBank:
         return self.pos.copy()
 
 
+@njit(cache=True, inline="always")
+def _actuator_slope(first: bool, c1: float, wn2: float, u: float, p: float, r: float, rm: float) -> tuple[float, float]:
+    """Heun stage of one actuator: (rate-limited ``pos'``, ``rate'``) at position ``p``, rate ``r``."""
+    if first:
+        return min(max(c1 * (u - p), -rm), rm), 0.0
+    return min(max(r, -rm), rm), wn2 * (u - p) - c1 * r
+
+
 @njit(cache=True)
 def actuator_heun_step(
     pos: np.ndarray,
@@ -324,22 +332,10 @@ def actuator_heun_step(
         p0 = pos[i]
         r0 = rate[i]
         rm = rmax[i]
-        if first[i]:
-            v1 = c1[i] * (ui - p0)
-            a1 = 0.0
-        else:
-            v1 = r0
-            a1 = wn2[i] * (ui - p0) - c1[i] * r0
-        v1 = min(max(v1, -rm), rm)
+        v1, a1 = _actuator_slope(first[i], c1[i], wn2[i], ui, p0, r0, rm)
         p1 = p0 + dt * v1
         r1 = min(max(r0 + dt * a1, -rm), rm)
-        if first[i]:
-            v2 = c1[i] * (ui - p1)
-            a2 = 0.0
-        else:
-            v2 = r1
-            a2 = wn2[i] * (ui - p1) - c1[i] * r1
-        v2 = min(max(v2, -rm), rm)
+        v2, a2 = _actuator_slope(first[i], c1[i], wn2[i], ui, p1, r1, rm)
         p2 = p0 + 0.5 * dt * (v1 + v2)
         r2 = min(max(r0 + 0.5 * dt * (a1 + a2), -rm), rm)
         if (p2 <= lo[i] and r2 < 0.0) or (p2 >= hi[i] and r2 > 0.0):

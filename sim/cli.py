@@ -43,6 +43,16 @@ def sim_command(
     rate_aware: Optional[bool] = typer.Option(
         None, "--rate-aware/--rate-blind", help="allocator gets u_prev and dt = frame period (seed Eq 1.28; default on)"
     ),
+    rate_window: Optional[str] = typer.Option(
+        None, "--rate-window", help="Eq 1.28 box: 'binding' (default, only where the answer breaks a rate limit) or 'always'"
+    ),
+    anti_windup: Optional[str] = typer.Option(
+        None, "--anti-windup", help="hold the SMC integral while the allocator falls short: 'auto' (default), 'on', 'off'"
+    ),
+    boundary_layer: Optional[str] = typer.Option(
+        None, "--boundary-layer",
+        help="SMC boundary layer at the frame rate: 'frame' (default, eps * max(1, T / 0.5 ms)) or 'fixed' (seed eps)",
+    ),
     u_prev: Optional[str] = typer.Option(None, "--u-prev", help="'command' (default, the seed's) or 'position'"),
     preferred: Optional[str] = typer.Option(
         None, "--preferred", help="one-sided effectors' preferred position: 'mid' (default) or 'zero' (seed up = 0)"
@@ -53,6 +63,9 @@ def sim_command(
     ),
     json_path: Optional[Path] = typer.Option(None, "--json", help="write the JSON summary here"),
     csv_path: Optional[Path] = typer.Option(None, "--csv", help="write the time histories here (CSV)"),
+    parquet_path: Optional[Path] = typer.Option(
+        None, "--parquet", help="write the time histories here (Parquet, full precision; needs pyarrow)"
+    ),
     plot_path: Optional[Path] = typer.Option(None, "--plot", help="write a PNG plot here"),
 ) -> None:
     """Run SCENARIO in closed loop and print its JSON summary (exit 1 if it diverged)."""
@@ -69,6 +82,7 @@ def sim_command(
         method=method, failure_time=failure_time, noise=noise, controller=controller, pilot=pilot,
         pilot_gain=pilot_gain, pilot_delay=pilot_delay, rate_aware=rate_aware, u_prev_source=u_prev,
         preferred=preferred, frame_period=None if frame_rate is None else 1.0 / frame_rate,
+        boundary_layer=boundary_layer, rate_window=rate_window, anti_windup=anti_windup,
     )
     kwargs.update({k: v for k, v in optional.items() if v is not None})
     simulated = run.default_duration if duration is None else duration
@@ -84,6 +98,8 @@ def sim_command(
         result.to_json(json_path)
     if csv_path is not None:
         result.to_csv(csv_path)
+    if parquet_path is not None:
+        result.to_parquet(parquet_path)
     if plot_path is not None:
         from sim.plots import plot_result
 
@@ -98,7 +114,8 @@ def command_line(scenario: str, **options: Any) -> str:
     flags = {"method": "--method", "failure": "--failure", "failure_time": "--failure-time",
              "duration": "--duration", "seed": "--seed", "controller": "--controller", "pilot": "--pilot",
              "pilot_gain": "--pilot-gain", "pilot_delay": "--pilot-delay", "u_prev_source": "--u-prev",
-             "preferred": "--preferred"}
+             "preferred": "--preferred",
+             "boundary_layer": "--boundary-layer", "rate_window": "--rate-window", "anti_windup": "--anti-windup"}
     words = ["alloc", "sim", scenario]
     for key, value in options.items():
         if value is None:

@@ -41,8 +41,10 @@ import numpy as np
 from numba import njit
 from tqdm import tqdm
 
+from alloc.result import EXACT_RTOL
 from sim.allocation import LoopAllocator, build_allocator
 from sim.blocks import (
+    DEFAULT_DT,
     ActuatorBank,
     ActuatorFailure,
     ActuatorSpec,
@@ -59,7 +61,9 @@ from sim.blocks import (
 )
 from sim.result import SimResult
 
-__all__ = ["Vehicle", "Failure", "SMCDesign", "LoopShapedDesign", "Pilot", "LoopSpec", "simulate", "FloatSlot", "IntSlot", "Misc"]
+__all__ = ["Vehicle", "Failure", "SMCDesign", "LoopShapedDesign", "Pilot", "LoopSpec", "simulate",
+           "boundary_layer_at", "BOUNDARY_LAYER_RULES", "anti_windup_on", "ANTI_WINDUP_RULES",
+           "FloatSlot", "IntSlot", "Misc"]
 
 TF = tuple[Sequence[float], Sequence[float]]
 
@@ -348,26 +352,21 @@ class IntSlot(IntEnum):
 _N_SLOTS = _N_FLOAT_SLOTS + len(IntSlot)
 
 
-class Misc(IntEnum):
-    """Entries of the ``IntSlot.MISC`` array (run constants and switches)."""
-
-    N_STEPS = 0
-    RECORD_EVERY = auto()
-    FAIL_STEP = auto()
-    SMC = auto()
-    OBSERVED = auto()
-    SIGN = auto()
-    ACTUATORS = auto()
-    #: integration steps per flight-control frame
-    FRAME = auto()
-    #: pilots have lead-lag / neuromuscular dynamics
-    PFILTER = auto()
+#: Entries of the ``IntSlot.MISC`` array (run constants and switches): steps in the run,
+#: record every n-th step, failure step, SMC (else loop-shaped), observers in use, sign law
+#: (no boundary layer), actuator dynamics on, integration steps per flight-control frame,
+#: pilots with lead-lag / neuromuscular dynamics, conditional integration (:func:`anti_windup_on`).
+Misc = IntEnum("Misc", ["N_STEPS", "RECORD_EVERY", "FAIL_STEP", "SMC", "OBSERVED", "SIGN", "ACTUATORS", "FRAME",
+                        "PFILTER", "ANTI_WINDUP"], start=0, module=__name__)
 
 
 _N_MISC = len(Misc)
 
 # IntSlot.DSTATE entries: ring index, ring length (DelayLine semantics)
 _D_INDEX, _D_LENGTH = 0, 1
+
+# a demand met to this relative tolerance is met (alloc.result.EXACT_RTOL, the library's exact status)
+_EXACT_RTOL = EXACT_RTOL
 
 # step status
 _OK, _DIVERGED, _PENDING = 0, 1, 2
@@ -542,6 +541,16 @@ def _observe(step: int, F: np.ndarray, I: np.ndarray, inputs: np.ndarray) -> int
 
 
 @njit(cache=True)
+def _short_of_demand(v: np.ndarray, v_achieved: np.ndarray) -> bool:
+    """True when the allocator fell short: ``max|v - B u| > rtol max(1, max|v|)`` (``alloc``'s exact test)."""
+    err, vmax = 0.0, 1.0
+    for i in range(v.size):
+        err = max(err, abs(v_achieved[i] - v[i]))
+        vmax = max(vmax, abs(v[i]))
+    return not err <= _EXACT_RTOL * vmax
+
+
+@njit(cache=True)
 def _advance(
     step: int, u_cmd: np.ndarray, v_achieved: np.ndarray, F: np.ndarray, I: np.ndarray,
     inputs: np.ndarray, rec: np.ndarray,
@@ -606,8 +615,9 @@ def _advance(
         xc = _vec(F, I, FloatSlot.XC)
         _affine(_mat(F, I, FloatSlot.ADC), xc, _mat(F, I, FloatSlot.BDC), w, xc, _mat(F, I, FloatSlot.SCRATCH))
         integ = _vec(F, I, FloatSlot.INTEG)
-        for i in range(k):
-            integ[i] += tframe * e[i]
+        if not (misc[Misc.ANTI_WINDUP] and _short_of_demand(_vec(F, I, FloatSlot.V), v_achieved)):
+            for i in range(k):
+                integ[i] += tframe * e[i]
     x = _vec(F, I, FloatSlot.X)
     _affine(_mat(F, I, FloatSlot.AD), x, _mat(F, I, FloatSlot.BD), uact, x, _mat(F, I, FloatSlot.SCRATCH))
     # Actuator delay (DelayLine.push): the command pushed n[c] steps ago.
@@ -694,6 +704,15 @@ class LoopSpec:
         Period ``T`` of the flight-control computer (pilot sampling, reference
         models, observers, SMC, hedges, allocator); a multiple of ``dt``,
         outputs held between frames.  None: ``T = dt`` (the seed's single-rate loop).
+    rate_window : {"binding", "always"}
+        When the allocator is given the Eq 1.28 box (:func:`sim.allocation.build_allocator`).
+    anti_windup : {"auto", "on", "off"}
+        Hold the SMC's integral term in frames the allocator fell short
+        (:func:`anti_windup_on`; ``"auto"``: on slower than the seed's rate).
+    boundary_layer : {"frame", "fixed"}
+        SMC boundary layer at ``T``: scaled to keep the seed's per-frame
+        switching gain (``eps * max(1, T / 0.5 ms)``, default) or the seed's
+        ``eps`` unchanged (:func:`boundary_layer_at`).
     seed : int
         Noise seed.
     output_bound : float or ndarray
@@ -721,6 +740,12 @@ class LoopSpec:
     preferred: str = "mid"
     #: horizon of the Eq 1.28 rate box, ``"actuator"`` or ``"frame"`` (:func:`sim.allocation.build_allocator`)
     rate_horizon: str = "actuator"
+    #: when the allocator is given the Eq 1.28 box, ``"binding"`` or ``"always"`` (:func:`sim.allocation.build_allocator`)
+    rate_window: str = "binding"
+    #: conditional integration of the SMC integral term, ``"auto"``, ``"on"`` or ``"off"`` (:func:`anti_windup_on`)
+    anti_windup: str = "auto"
+    #: boundary layer at the frame period, ``"frame"`` or ``"fixed"`` (:func:`boundary_layer_at`)
+    boundary_layer: str = "frame"
     actuators: bool = True
     noise: bool = True
     frame_period: float | None = None
@@ -740,6 +765,63 @@ class LoopSpec:
 
 #: ``u_prev`` the allocator may be told (see :class:`LoopSpec`).
 U_PREV_SOURCES = ("command", "position")
+
+#: Rules for the SMC boundary layer at a frame period ``T`` (see :func:`boundary_layer_at`).
+BOUNDARY_LAYER_RULES = ("frame", "fixed")
+
+#: Frame period the seed's boundary layers were chosen at: its Simulink step (seed section 4.5,
+#: "fixed time step of dt = 0.0005 sec"; section 4.3 step 6 picks eps in that simulation).
+SEED_FRAME_PERIOD = DEFAULT_DT
+
+
+#: Rules for the SMC's integral term when the allocator falls short (see :func:`anti_windup_on`).
+ANTI_WINDUP_RULES = ("auto", "on", "off")
+
+
+def anti_windup_on(rule: str, frame_period: float) -> bool:
+    """Whether the SMC integrates its error in a frame where the allocator fell short of ``v``.
+
+    ``sigma = K0 e + K_-1 int(e)`` (seed Eq 4.7) integrates the tracking error of
+    the observer, which is driven by the command actually allocated.  When the
+    allocator cannot meet the demand (Eq 1.28's rate box binding, position
+    limits), ``e`` persists, ``int(e)`` winds up and ``u_c`` rails at ``rho``:
+    the seed's hedging is driven by ``u_c`` (Eqs 3.17-3.18), not by the
+    allocator's shortfall, so nothing in the seed's loop unwinds it.  ``"on"``
+    is conditional integration, the textbook anti-windup: ``int(e)`` is held in
+    every frame whose allocation was not exact (``alloc``'s test,
+    ``max|v - B u| <= 1e-6 max(1, max|v|)``).  ``"off"`` is the seed's law.
+    ``"auto"`` (default): on when the frame period is longer than the seed's
+    0.5 ms, off at the seed's rate (seed runs bit-identical).
+    """
+    if rule not in ANTI_WINDUP_RULES:
+        raise ValueError(f"anti_windup: {rule!r}; expected one of {ANTI_WINDUP_RULES}")
+    if rule == "auto":
+        return frame_period > SEED_FRAME_PERIOD * (1.0 + 1e-9)
+    return rule == "on"
+
+
+def boundary_layer_at(eps: np.ndarray, frame_period: float, rule: str = "frame") -> np.ndarray:
+    """Boundary-layer thickness of the SMC at frame period ``T``.
+
+    Sampled at ``T`` and held, the linear region of ``u_c = rho sat(sigma / eps)``
+    is a discrete loop ``sigma_{j+1} ~ (1 - T g rho / eps) sigma_j`` (``g``: the
+    sliding variable's rate per unit ``u_c``); quasi-sliding is stable only for
+    ``T g rho / eps < 2``.  The seed chose ``eps`` at ``T_seed = 0.5 ms``
+    (section 4.3 step 6, section 4.5), where that per-frame gain is 0.45-0.51
+    on ICE; at 100 Hz it is 9-10 and the loop chatters and diverges.
+
+    ``"frame"`` (default) keeps the seed's per-frame gain:
+    ``eps_T = eps * max(1, T / T_seed)`` (``rho`` unchanged, so the
+    continuous-time equivalent gain ``rho / eps`` falls as ``1 / T``);
+    ``"fixed"`` keeps the seed's ``eps`` at every rate.  At ``T <= T_seed``
+    both return ``eps`` itself (seed runs bit-identical).
+    """
+    if rule not in BOUNDARY_LAYER_RULES:
+        raise ValueError(f"boundary_layer: {rule!r}; expected one of {BOUNDARY_LAYER_RULES}")
+    ratio = frame_period / SEED_FRAME_PERIOD
+    if rule == "fixed" or ratio <= 1.0 + 1e-9:
+        return eps
+    return eps * ratio
 
 
 def simulate(
@@ -777,6 +859,10 @@ def simulate(
         raise TypeError(f"simulate: give a LoopSpec or keywords, not both (got {sorted(fields)})")
     if spec.u_prev_source not in U_PREV_SOURCES:
         raise ValueError(f"u_prev_source: {spec.u_prev_source!r}; expected one of {U_PREV_SOURCES}")
+    if spec.anti_windup not in ANTI_WINDUP_RULES:
+        raise ValueError(f"anti_windup: {spec.anti_windup!r}; expected one of {ANTI_WINDUP_RULES}")
+    if spec.boundary_layer not in BOUNDARY_LAYER_RULES:
+        raise ValueError(f"boundary_layer: {spec.boundary_layer!r}; expected one of {BOUNDARY_LAYER_RULES}")
     frame = spec.frame_steps()
     scenario, vehicle, references, controller = spec.scenario, spec.vehicle, spec.references, spec.controller
     commands, pilots, failure, method = spec.commands, spec.pilots, spec.failure, spec.method
@@ -804,12 +890,12 @@ def simulate(
     bank = ActuatorBank(vehicle.actuators, dt)
     delay = DelayLine(m, dt, 0.0)
     alloc_options = dict(rate_aware=rate_aware, preferred=spec.preferred, frame_period=tframe,
-                         rate_horizon=spec.rate_horizon)
+                         rate_horizon=spec.rate_horizon, rate_window=spec.rate_window)
     allocator: LoopAllocator = build_allocator(vehicle, method, method_options or {}, **alloc_options)
     position_feedback = spec.u_prev_source == "position"
 
     smc = isinstance(controller, SMCDesign)
-    controller_slots = _controller_slots(vehicle, controller, references, tframe)
+    controller_slots = _controller_slots(vehicle, controller, references, tframe, spec.boundary_layer)
     n_pilots = len(pilots)
     t_grid = np.arange(n_steps + 1) * dt
     pilot_floats, pilot_ints = _pilot_slots(pilots, ny, tframe)
@@ -837,6 +923,7 @@ def simulate(
     misc[Misc.ACTUATORS] = actuators
     misc[Misc.FRAME] = frame
     misc[Misc.PFILTER] = any(p.filtered for p in pilots)
+    misc[Misc.ANTI_WINDUP] = smc and anti_windup_on(spec.anti_windup, tframe)
     nx, nc, nk = vehicle.A.shape[0], controller_slots[FloatSlot.ADC].shape[0], controller_slots[FloatSlot.AK].shape[0]
     packed = _Packed(
         floats={
@@ -915,7 +1002,8 @@ def simulate(
     result.allocator_status = call_status[:n_calls].copy()
     result.settings = {
         "frame_period": tframe, "dt": dt, "rate_aware": bool(rate_aware), "u_prev_source": spec.u_prev_source,
-        "rate_horizon": spec.rate_horizon,
+        "rate_horizon": spec.rate_horizon, "rate_window": spec.rate_window, "anti_windup": spec.anti_windup,
+        "boundary_layer": spec.boundary_layer,
         "preferred": spec.preferred, "allocator_knows_failure": bool(allocator_knows_failure), "noise": bool(noise), "seed": int(seed),
         "pilots": [p.describe() for p in pilots],
     }
@@ -959,13 +1047,18 @@ def _result(
 
 
 def _controller_slots(
-    vehicle: Vehicle, controller: SMCDesign | LoopShapedDesign, references: Sequence[TF], dt: float
+    vehicle: Vehicle, controller: SMCDesign | LoopShapedDesign, references: Sequence[TF], dt: float,
+    boundary_layer: str = "frame",
 ) -> dict[int, np.ndarray]:
-    """Packed arrays of the controller: the SMC system and gains, or reference models and compensators."""
+    """Packed arrays of the controller: the SMC system and gains, or reference models and compensators.
+
+    ``dt`` is the frame period; ``boundary_layer`` the rule of :func:`boundary_layer_at`.
+    """
     k = len(vehicle.controlled)
     if isinstance(controller, SMCDesign):
         ctl, n_in = _controller_system(vehicle, controller, references, dt)
-        eps = np.ones(k) if controller.eps is None else controller.eps  # unused with sign (eps None)
+        # unused with sign (eps None)
+        eps = np.ones(k) if controller.eps is None else boundary_layer_at(controller.eps, dt, boundary_layer)
         return {
             FloatSlot.XC: ctl.x, FloatSlot.ADC: ctl.Ad, FloatSlot.BDC: ctl.Bd, FloatSlot.CC: ctl.C, FloatSlot.W: np.zeros(n_in),
             FloatSlot.XK: np.zeros(0), FloatSlot.AK: np.zeros((0, 0)), FloatSlot.BK: np.zeros((0, k)), FloatSlot.CK: np.zeros((k, 0)),

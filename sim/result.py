@@ -195,15 +195,16 @@ class SimResult:
             "settings": self.settings,
         }
 
-    def to_csv(self, path: str | Path) -> Path:
-        """Write the time histories as CSV, one row per recorded sample.
+    def time_histories(self) -> dict[str, np.ndarray | list[str]]:
+        """The recorded time histories by column name, one entry per recorded sample.
 
         Columns: ``t``; per channel ``ref_``, ``out_``, ``cmd_``, ``pseudo_``,
         ``unalloc_``; per effector ``pos_`` and ``rate_``; per pilot its command
-        and attitude; ``alloc_status``, the status of the allocator call in
-        force at the sample (``exact``/``unattainable``/``fallback``).
+        and attitude; ``alloc_status`` (a list of str), the status of the
+        allocator call in force at the sample (``exact``/``unattainable``/
+        ``fallback``), when the run recorded one.
         """
-        columns: dict[str, np.ndarray] = {"t": self.t}
+        columns: dict[str, np.ndarray | list[str]] = {"t": self.t}
         for prefix, arr in (("ref", self.reference), ("out", self.output), ("cmd", self.command),
                             ("pseudo", self.pseudo), ("unalloc", self.unallocated)):
             if arr is not None:
@@ -215,16 +216,38 @@ class SimResult:
                     columns[f"{prefix}_{name}"] = arr[:, j]
         for name, arr in self.extra.items():
             columns[name] = arr
-        status = None
         if self.allocator_status is not None and self.allocator_t is not None and self.allocator_status.size:
             idx = np.searchsorted(self.allocator_t, self.t + 1e-12, side="right") - 1
-            status = [STATUS_NAMES[c] if c >= 0 else "" for c in self.allocator_status[np.clip(idx, 0, None)]]
+            columns["alloc_status"] = [STATUS_NAMES[c] if c >= 0 else "" for c in self.allocator_status[np.clip(idx, 0, None)]]
+        return columns
+
+    def to_csv(self, path: str | Path) -> Path:
+        """Write :meth:`time_histories` as CSV, one row per recorded sample (numbers to 9 digits)."""
+        columns = self.time_histories()
+        status = columns.pop("alloc_status", None)
         out = Path(path)
         with out.open("w") as fh:
             fh.write(",".join(list(columns) + (["alloc_status"] if status else [])) + "\n")
             table = np.column_stack(list(columns.values()))
             for i, row in enumerate(table):
                 fh.write(",".join(f"{x:.9g}" for x in row) + (f",{status[i]}" if status else "") + "\n")
+        return out
+
+    def to_parquet(self, path: str | Path) -> Path:
+        """Write :meth:`time_histories` as Parquet (float64 columns, exact; ``alloc_status`` as string).
+
+        The run's :attr:`settings` and scenario/method/failure go into the file's
+        key-value metadata (``alloc.sim`` key, JSON).  Needs ``pyarrow`` (the ``sim`` extra).
+        """
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        table = pa.table(self.time_histories())
+        meta = {"scenario": self.scenario, "method": self.method, "failure": self.failure,
+                "failure_time": self.failure_time, "diverged": bool(self.diverged), "settings": self.settings}
+        table = table.replace_schema_metadata({"alloc.sim": json.dumps(meta, default=float)})
+        out = Path(path)
+        pq.write_table(table, out)
         return out
 
     def to_json(self, path: str | Path) -> None:

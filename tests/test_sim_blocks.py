@@ -12,21 +12,8 @@ from scipy import signal
 
 import sim.scenarios
 from sim.allocation import build_allocator
-from sim.blocks import (
-    ActuatorBank,
-    ActuatorFailure,
-    ActuatorSpec,
-    DelayLine,
-    DiscreteLTI,
-    HedgeTerm,
-    ScheduledPlant,
-    actuator_heun_step,
-    band_limited_noise,
-    hedge_system,
-    observer_gain,
-    smc_control,
-    sum_of_sines,
-)
+from sim.blocks import ActuatorBank, ActuatorFailure, ActuatorSpec, DelayLine, DiscreteLTI, HedgeTerm, ScheduledPlant
+from sim.blocks import actuator_heun_step, band_limited_noise, hedge_system, observer_gain, smc_control, sum_of_sines
 from sim.loop import _controller_system, _matvec
 from sim.result import SimResult, divergence_check
 from sim.scenarios import get_scenario, scenarios

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
+import pytest
 import typer
 from typer.testing import CliRunner
 
@@ -32,10 +34,33 @@ def test_flags_reach_the_run_and_exports_are_written(tmp_path):
     assert png.stat().st_size > 10_000
 
 
+def test_parquet_round_trips_against_the_csv(tmp_path):
+    pq = pytest.importorskip("pyarrow.parquet")
+    csv, parquet = tmp_path / "r.csv", tmp_path / "r.parquet"
+    res = runner.invoke(app, ["ice", "--method", "qp", "--failure", "seed", "--failure-time", "0.3", "--duration", "0.6",
+                              "--no-noise", "--frame-rate", "400", "--csv", str(csv), "--parquet", str(parquet)])
+    assert res.exit_code == 0, res.output
+    table = pq.read_table(parquet)
+    lines = csv.read_text().splitlines()
+    header = lines[0].split(",")
+    assert table.column_names == header and table.num_rows == len(lines) - 1 == 121
+    rows = [line.split(",") for line in lines[1:]]
+    for j, name in enumerate(header):
+        col = table.column(name).to_pylist()
+        if name == "alloc_status":
+            assert col == [r[j] for r in rows] and set(col) <= {"exact", "unattainable", "fallback"}
+        else:  # the CSV keeps 9 significant digits, Parquet the float64 itself
+            np.testing.assert_allclose(col, [float(r[j]) for r in rows], rtol=1e-8, atol=1e-300)
+    meta = json.loads(table.schema.metadata[b"alloc.sim"])
+    assert meta["scenario"] == "ice" and meta["failure_time"] == 0.3 and meta["settings"]["frame_period"] == 0.0025
+
+
 def test_diverged_run_exits_non_zero():
-    # The seed's ICE SMC sampled at 100 Hz diverges before 5 s (measured 4.05 s): see README.
+    # The seed's ICE SMC law (--boundary-layer fixed --anti-windup off) sampled at 100 Hz diverges
+    # before 5 s (measured 4.05 s): see README, Frame rate.
     res = runner.invoke(app, ["ice", "--method", "pinv", "--duration", "5", "--no-noise", "--pilot-gain", "1",
-                              "--frame-rate", "100", "--rate-blind"])
+                              "--frame-rate", "100", "--rate-blind", "--boundary-layer", "fixed",
+                              "--anti-windup", "off"])
     assert res.exit_code == EXIT_DIVERGED
     assert "diverged at t =" in res.output
 

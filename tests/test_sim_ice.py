@@ -184,3 +184,89 @@ def test_seed_design_reports_exact_allocation_and_csv(tmp_path):
     header = lines[0].split(",")
     assert header[0] == "t" and "pos_elevon_l" in header and header[-1] == "alloc_status"
     assert len(lines) == r.t.size + 1 and lines[1].endswith(",exact")
+
+
+# ---------------------------------------------------------------- frame rate (flight-control computer at T)
+def _quasi_sliding_radius(frame_period: float, rule: str) -> float:
+    """Spectral radius of the SMC's linear-region loop sampled at ``T`` (plant outputs frozen).
+
+    State: the controller (reference models, observers, hedges, ZOH-discretised at ``T``) and the
+    integral of ``e``; ``u_c = rho / eps_T (K0 e + K_-1 int e)``, allocated by the seed's ``B_k``.
+    """
+    from sim.loop import _controller_system, boundary_layer_at
+
+    v, d = ice.vehicle(), ice.smc_design()
+    k, m, nz = 3, 11, 11
+    ctl, n_in = _controller_system(v, d, ice.REFERENCES, frame_period)
+    n = ctl.Ad.shape[0]
+    E = ctl.C[:k] - ctl.C[k : 2 * k] - ctl.C[2 * k :]  # e = r - (y_hat + y_f)
+    uc = np.diag(d.rho / boundary_layer_at(d.eps, frame_period, rule)) @ np.hstack([np.diag(d.K0) @ E, np.diag(d.Km1)])
+    W = np.zeros((n_in, n + k))
+    W[k : k + m] = v.Bk_seed @ uc
+    W[k + m + nz :] = uc
+    M = np.zeros((n + k, n + k))
+    M[:n, :n] = ctl.Ad
+    M[:n] += ctl.Bd @ W
+    M[n:, :n] = frame_period * E
+    M[n:, n:] = np.eye(k)
+    return float(np.max(np.abs(np.linalg.eigvals(M))))
+
+
+def test_seed_boundary_layer_sampled_at_100_hz_is_an_unstable_discrete_loop():
+    """The cause of the 100 Hz divergence: per-frame gain T g rho / eps = 9-10 (stable below 2)."""
+    assert _quasi_sliding_radius(0.0005, "fixed") <= 1.0 + 1e-6  # seed rate (measured 1.000)
+    assert _quasi_sliding_radius(0.0025, "fixed") > 1.4  # 400 Hz (measured 1.52): chatters
+    assert _quasi_sliding_radius(0.01, "fixed") > 10.0  # 100 Hz (measured 11.8): diverges
+    assert _quasi_sliding_radius(0.01, "frame") <= 1.0 + 1e-6  # eps x 20 keeps the seed's per-frame gain
+
+
+def test_boundary_layer_and_anti_windup_rules_are_the_seed_at_the_seed_rate():
+    from sim.loop import anti_windup_on, boundary_layer_at
+
+    eps = np.ones(3)
+    assert boundary_layer_at(eps, 0.0005) is eps and boundary_layer_at(eps, 0.01, "fixed") is eps
+    assert np.all(boundary_layer_at(eps, 0.01) == 20.0) and np.all(boundary_layer_at(eps, 0.0025) == 5.0)
+    assert not anti_windup_on("auto", 0.0005) and anti_windup_on("auto", 0.001) and not anti_windup_on("off", 0.01)
+    base = dict(method="qp", failure="seed", failure_time=0.2, duration=0.5, noise=False, allocator_knows_failure=True)
+    seed = run(boundary_layer="fixed", anti_windup="off", **base)
+    assert np.array_equal(run(**base).output, seed.output)
+
+
+def test_ice_flies_at_100_hz_with_the_frame_boundary_layer():
+    base = dict(method="pinv", duration=8.0, noise=False, pilot_gain=1.0, rate_aware=False)
+    seed_rate = run(**base).summary()["channels"]
+    r = run(frame_period=0.01, **base)
+    fixed = run(frame_period=0.01, boundary_layer="fixed", anti_windup="off", **base)  # the seed's law
+    assert fixed.diverged and fixed.duration < 5.0  # measured 4.05 s
+    assert not r.diverged
+    for ch, s in r.summary()["channels"].items():  # measured 0.18/0.21/0.13 vs 0.19/0.26/0.13 at 2 kHz
+        assert s["rms_before"] <= 1.2 * seed_rate[ch]["rms_before"] + 0.02, ch
+
+
+@pytest.mark.parametrize("method", ["cgi", "pinv_scale", "daisy"])
+def test_rate_box_is_given_only_where_the_answer_breaks_a_rate_limit(method):
+    from sim.allocation import build_allocator
+
+    v, T = ice.vehicle(), 0.01
+    blind = build_allocator(v, method, {}, rate_aware=False)
+    binding = build_allocator(v, method, {}, frame_period=T, rate_horizon="frame")
+    always = build_allocator(v, method, {}, frame_period=T, rate_horizon="frame", rate_window="always")
+    rng = np.random.default_rng(3)
+    moved = 0.0
+    for _ in range(40):
+        d = rng.normal(size=3) * np.array([2.0, 5.0, 0.2])
+        u0 = blind(d, np.zeros(11), T)[0]
+        assert np.array_equal(binding(d, u0, T)[0], u0)  # inside its own box: the position-limited answer
+        moved = max(moved, float(np.abs(always(d, u0, T)[0] - u0).max()))
+        u1 = binding(d + rng.normal(size=3) * 20.0, u0, T)[0]  # a large step breaks a rate limit
+        assert np.all(np.abs(u1 - u0) <= v.rate_max * T + 1e-9)
+    assert moved > 1e-3  # the heuristic's answer moves with the box where it does not bind ("always")
+
+
+def test_anti_windup_holds_the_integral_while_the_allocator_falls_short():
+    kw = dict(method="qp", failure="seed", allocator_knows_failure=True, noise=False, pilot_gain=1.0,
+              frame_period=0.01, duration=32.0)
+    on, off = run(**kw), run(anti_windup="off", **kw)
+    assert off.diverged and 21.0 < off.duration < 32.0
+    assert not on.diverged
+    assert on.summary()["channels"]["ps"]["rms_after"] < 3.0  # measured 2.31 (rate-blind 2.38)

@@ -97,6 +97,9 @@ def run_mimo(
     u_prev_source: str = "command",
     preferred: str = "mid",
     rate_horizon: str = "actuator",
+    rate_window: str = "binding",
+    anti_windup: str = "auto",
+    boundary_layer: str = "frame",
     step_times: list | None = None,
     **options: Any,
 ) -> SimResult:
@@ -133,7 +136,8 @@ def run_mimo(
         allocator_knows_failure=allocator_knows_failure, actuators=actuators, noise=noise, duration=duration,
         dt=dt, seed=seed, output_bound=scenario.output_bound, record_every=record_every,
         frame_period=frame_period, rate_aware=rate_aware, u_prev_source=u_prev_source, preferred=preferred,
-        rate_horizon=rate_horizon,
+        rate_horizon=rate_horizon, rate_window=rate_window, anti_windup=anti_windup,
+        boundary_layer=boundary_layer,
     )
     return simulate(spec, progress=progress, step_times=step_times)
 
