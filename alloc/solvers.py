@@ -314,12 +314,14 @@ class _Chain:
 
 
 class _Highs:
-    """HiGHS LP, passed afresh on every solve.
+    """HiGHS LP: one kept model while ``A`` is fixed, its solver state cleared before each
+    solve (``clearSolver``: no basis, no factorisation carried from call to call), so each
+    answer is a function of this call's costs and bounds alone.
 
-    A kept model (even with ``clearSolver``) remembers the sparsity pattern and bounds of
-    earlier calls, and where the LP optimum is not unique (a ray through an AMS edge) the
-    simplex then lands on another vertex: answers would depend on call history.  Passing
-    the model anew makes every answer a function of this call's data alone.
+    When ``A`` changes (direct allocation's ray) the model is passed anew: changing
+    coefficients one by one keeps the earlier sparsity pattern (explicit zeros), and where
+    the LP optimum is not unique (a ray through an AMS edge) the simplex then lands on
+    another vertex than a fresh model would.
     """
 
     def __init__(self, f, A, bl, bu, lb, ub) -> None:
@@ -330,6 +332,9 @@ class _Highs:
         self._A = np.array(A, dtype=float)
         self._bl, self._bu = np.array(bl, dtype=float), np.array(bu, dtype=float)
         self._lb, self._ub = np.array(lb, dtype=float), np.array(ub, dtype=float)
+        self._h = self._model()
+        self._cols = np.arange(self._f.size, dtype=np.int32)
+        self._rows = np.arange(self._A.shape[0], dtype=np.int32)
 
     def _model(self):
         hs = self._hs
@@ -350,7 +355,18 @@ class _Highs:
         for name, value in (("_f", f), ("_lb", lb), ("_ub", ub), ("_bl", bl), ("_bu", bu), ("_A", A)):
             if value is not None:
                 setattr(self, name, np.array(value, dtype=float))
-        h = self._model()
+        if A is not None:
+            h = self._h = self._model()
+        else:
+            h = self._h
+            n, mA = self._cols.size, self._rows.size
+            if f is not None:
+                h.changeColsCost(n, self._cols, self._f)
+            if lb is not None or ub is not None:
+                h.changeColsBounds(n, self._cols, self._lb, self._ub)
+            if (bl is not None or bu is not None) and mA:
+                h.changeRowsBounds(mA, self._rows, self._bl, self._bu)
+            h.clearSolver()
         h.run()
         status = h.getModelStatus()
         if status != self._hs.HighsModelStatus.kOptimal:
