@@ -60,6 +60,7 @@ class TwoStageLP(Method):
         if name == "simplex":
             self._lex = LexicographicL1(p.B, p.umin, p.umax, p.up, self.wv, self.wu, self.groups)
             return
+        self._Bpos, self._Bneg = np.maximum(p.B, 0.0), np.minimum(p.B, 0.0)
         inf = np.full(2 * k, np.inf)
         A1 = np.hstack([p.B, -np.eye(k), np.eye(k)])
         z = np.zeros(k)
@@ -94,11 +95,20 @@ class TwoStageLP(Method):
         lb1[:m], ub1[:m] = lo, hi
         iters = 0
         x = None
+        # A demand component beyond the row's range over the box [bot, top] adds a constant
+        # to its error term (|B_i u - v_i| = v_i - B_i u for every admissible u): clamping it
+        # to [bot - w, top + w] (w = top - bot) keeps the minimisers and keeps the moment rows
+        # on the scale of B u (a demand 1e30 times the attainable set otherwise reaches the
+        # solver as bounds that HiGHS reads as infinite, >= 1e20).
+        Bp, Bn = self._Bpos, self._Bneg
+        top, bot = Bp @ hi + Bn @ lo, Bp @ lo + Bn @ hi
+        w = top - bot
+        v1 = np.minimum(np.maximum(v, bot - w), top + w)
         for rows in self.groups:
             c = np.zeros(m + 2 * k)
             c[m + rows] = self.wv[rows]
             c[m + k + rows] = self.wv[rows]
-            x, it = self._stage1.solve(f=c, lb=lb1, ub=ub1, bl=v, bu=v)
+            x, it = self._stage1.solve(f=c, lb=lb1, ub=ub1, bl=v1, bu=v1)
             iters += it
             # freeze this level's errors for the levels after it
             for off in (m, m + k):
