@@ -5,19 +5,22 @@ Every backend solves
     minimise 0.5 x' H x + f' x   subject to  lb <= x <= ub,  bl <= A x <= bu
 
 where ``H`` may be ``None`` (a linear program) and rows with ``bl == bu`` are
-equalities.  A backend is set up once (the solver model is kept) and each call
-only updates the data that change (cost vector, bounds, sometimes ``A``), so
-the hot path never rebuilds a model.  Measured costs are in
-``benchmarks/bench_alloc.py`` and the README.
+equalities.  A backend is set up once and each call passes only the data that change
+(cost vector, bounds, sometimes ``A``).  Every backend solves the problem's
+:class:`Equilibration` (variables scaled to their bound widths around their centre, rows
+of ``A`` and the cost to unit largest entry) and the answer is mapped back, so
+magnitudes from 1e-30 to 1e48 in the allocation data reach the solver as O(1) numbers.
+Every backend's answer is a function of the call's data alone (no warm state carried
+from call to call).  Measured costs are in ``benchmarks/bench_alloc.py`` and the README.
 
 Backends
 --------
 ``daqp``
-    DAQP's dual active-set solver through a persistent ``daqp.Model`` (default for QPs
-    and LPs: a few microseconds on allocation-sized problems; LPs and singular
-    Hessians use its proximal-point iterations).
+    DAQP's dual active-set solver, a ``daqp.Model`` set up per solve (LPs and singular
+    Hessians use its proximal-point iterations); LPs chain to HiGHS on DAQP's failure.
 ``highs``
-    HiGHS (highspy), the model passed afresh per call (history-independent); LPs only.
+    HiGHS (highspy), one model kept while ``A`` is fixed, its solver state cleared
+    before each solve; LPs only.
 any name in ``qpsolvers.available_solvers`` (``osqp``, ``clarabel``, ``proxqp``, ...)
     Through qpsolvers, which rebuilds the solver each call: slow, for cross-checks.
 """
