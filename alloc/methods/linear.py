@@ -3,7 +3,10 @@
 Stage 1 (Eq 1.18) minimises the weighted 1-norm of the moment error
 ``sum_i wv_i |(B u - v)_i|`` over the limits; stage 2 (Eq 1.19) minimises the
 weighted 1-norm distance to the preferred position ``sum_j wu_j |u_j - up_j|``
-subject to the limits and ``B u =`` the moment stage 1 reached.  The weights are the
+over the minimisers of stage 1 (``simplex``), or subject to the limits and ``B u =`` the
+moment stage 1 reached (``daqp``, ``highs``).  The two are the same set whenever stage 1's
+optimal moment is unique (every attainable demand); where an L1 stage 1 leaves a face of
+equally good moments, ``simplex``'s stage-2 optimum is never worse.  The weights are the
 diagonals of ``Wv`` and ``Wu`` (the seed's weight vectors).  With ``priorities``,
 stage 1 runs per level, most important first, earlier levels keeping their errors.
 
