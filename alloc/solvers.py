@@ -5,19 +5,22 @@ Every backend solves
     minimise 0.5 x' H x + f' x   subject to  lb <= x <= ub,  bl <= A x <= bu
 
 where ``H`` may be ``None`` (a linear program) and rows with ``bl == bu`` are
-equalities.  A backend is set up once (the solver model is kept) and each call
-only updates the data that change (cost vector, bounds, sometimes ``A``), so
-the hot path never rebuilds a model.  Measured costs are in
-``benchmarks/bench_alloc.py`` and the README.
+equalities.  A backend is set up once and each call passes only the data that change
+(cost vector, bounds, sometimes ``A``).  Every backend solves the problem's
+:class:`Equilibration` (variables scaled to their bound widths around their centre, rows
+of ``A`` and the cost to unit largest entry) and the answer is mapped back, so
+magnitudes from 1e-30 to 1e48 in the allocation data reach the solver as O(1) numbers.
+Every backend's answer is a function of the call's data alone (no warm state carried
+from call to call).  Measured costs are in ``benchmarks/bench_alloc.py`` and the README.
 
 Backends
 --------
 ``daqp``
-    DAQP's dual active-set solver through a persistent ``daqp.Model`` (default for QPs
-    and LPs: a few microseconds on allocation-sized problems; LPs and singular
-    Hessians use its proximal-point iterations).
+    DAQP's dual active-set solver, a ``daqp.Model`` set up per solve (LPs and singular
+    Hessians use its proximal-point iterations); LPs chain to HiGHS on DAQP's failure.
 ``highs``
-    HiGHS (highspy), the model passed afresh per call (history-independent); LPs only.
+    HiGHS (highspy), one model kept while ``A`` is fixed, its solver state cleared
+    before each solve; LPs only.
 any name in ``qpsolvers.available_solvers`` (``osqp``, ``clarabel``, ``proxqp``, ...)
     Through qpsolvers, which rebuilds the solver each call: slow, for cross-checks.
 """
@@ -75,11 +78,25 @@ def make_backend(
     *,
     singular: bool = False,
 ) -> Backend:
-    """Build backend ``name`` for the given problem structure.
+    """Build backend ``name`` for the given problem structure, on equilibrated data.
 
     ``singular`` says the Hessian is only positive semidefinite (DAQP then uses its
-    proximal-point iterations).
+    proximal-point iterations).  Every backend sees the problem through :class:`Equilibration`
+    (variables scaled to their bound widths, rows of ``A`` to unit largest entry, the cost to
+    unit largest entry), so magnitudes from 1e-30 to 1e48 in ``B`` and the limits reach the
+    solver as O(1) numbers; answers are mapped back.
     """
+    lp = H is None
+    if name == "highs" and not lp:
+        raise OptionError("backend: 'highs' is used for linear programs only (it returns wrong QP answers, see SOLVER-NOTES)")
+    if name not in ("daqp", "highs") and lp:
+        raise OptionError(f"backend: {name!r} is not an LP backend; use one of {backends(lp=True)}")
+    eq = Equilibration(H, f, A, bl, bu, lb, ub)
+    return _ScaledBackend(_make_raw(name, eq.H, eq.f, eq.A, eq.bl, eq.bu, eq.lb, eq.ub, singular), eq,
+                          np.asarray(bl, dtype=float), np.asarray(bu, dtype=float))
+
+
+def _make_raw(name, H, f, A, bl, bu, lb, ub, singular):
     lp = H is None
     if name == "daqp":
         primary = _Daqp(H, f, A, bl, bu, lb, ub, singular=singular or lp)
@@ -91,22 +108,144 @@ def make_backend(
                           dict(f=f, A=A, bl=bl, bu=bu, lb=lb, ub=ub))
         return primary
     if name == "highs":
-        if not lp:
-            raise OptionError("backend: 'highs' is used for linear programs only (it returns wrong QP answers, see SOLVER-NOTES)")
         return _Highs(f, A, bl, bu, lb, ub)
-    if lp:
-        raise OptionError(f"backend: {name!r} is not an LP backend; use one of {backends(lp=True)}")
     return _Qpsolvers(name, H, f, A, bl, bu, lb, ub)
 
 
+class Equilibration:
+    """``x = c + s * y``, rows of ``A`` divided by ``r``, the cost by ``sigma``.
+
+    ``c`` is the centre of each variable's bounds (its finite bound when one-sided, 0 when
+    free) and ``s`` its half-width, so bounded variables live in ``[-1, 1]``; a variable
+    with an infinite bound gets the scale that gives its column of the row-scaled ``A`` a
+    largest entry of 1.  ``r`` makes every row of ``A diag(s)`` have largest entry 1, and
+    ``sigma`` the largest entry of the scaled ``H`` (a QP; fixed at set-up since the backend
+    keeps ``H``) or of the scaled cost vector of each call (an LP).  The scaled problem has
+    the same minimisers (mapped by ``x = c + s y``).  ``A`` may change per call (direct
+    allocation's ray): its row scales are then recomputed with ``s`` and ``c`` kept.
+    """
+
+    def __init__(self, H, f, A, bl, bu, lb, ub) -> None:
+        lb, ub = np.asarray(lb, dtype=float), np.asarray(ub, dtype=float)
+        A = np.asarray(A, dtype=float)
+        lo_f, hi_f = np.isfinite(lb), np.isfinite(ub)
+        both = lo_f & hi_f
+        with np.errstate(over="ignore", invalid="ignore"):
+            width = (ub - lb) / 2.0
+            self.c = np.where(both, lb + width, np.where(lo_f, lb, np.where(hi_f, ub, 0.0)))
+            s = np.where(both & (width > 0) & np.isfinite(width), width, 1.0)
+        s = np.where(s > 0, s, 1.0)
+        free = ~both
+        if free.any() and A.size:
+            r = _row_scales(A[:, ~free] * s[~free]) if (~free).any() else np.ones(A.shape[0])
+            col = np.abs(A[:, free] / r[:, None]).max(axis=0)
+            s[free] = np.where((col > 0) & np.isfinite(col), 1.0 / np.where(col > 0, col, 1.0), 1.0)
+        self.s = s
+        self._Ac = A @ self.c if A.size else np.zeros(A.shape[0])
+        self.r = _row_scales(A * s)
+        self.A = np.ascontiguousarray(A * s / self.r[:, None])
+        self.qp = H is not None
+        if self.qp:
+            Hs = np.asarray(H, dtype=float) * s[:, None] * s[None, :]
+            top = float(np.abs(Hs).max()) if Hs.size else 0.0
+            self.sigma = top if top > 0 and np.isfinite(top) else 1.0
+            self.H = Hs / self.sigma
+            self._Hc = np.asarray(H, dtype=float) @ self.c
+        else:
+            self.sigma = 1.0
+            self.H, self._Hc = None, None
+        self.f = self.cost(f)
+        self.lb, self.ub = self.lower(lb), self.upper(ub)
+        self.bl, self.bu = self.rows(bl), self.rows(bu)
+
+    def cost(self, f: FloatArray) -> FloatArray:
+        fy = self.s * (np.asarray(f, dtype=float) if self._Hc is None else f + self._Hc)
+        if self.qp:
+            return fy / self.sigma
+        top = float(np.abs(fy).max()) if fy.size else 0.0
+        return fy / top if top > 0 and np.isfinite(top) else fy
+
+    def lower(self, lb: FloatArray) -> FloatArray:
+        return (lb - self.c) / self.s
+
+    upper = lower
+
+    def rows(self, b: FloatArray) -> FloatArray:
+        return (b - self._Ac) / self.r
+
+    def matrix(self, A: FloatArray) -> FloatArray:
+        """A new constraint matrix (row scales and ``A c`` recomputed)."""
+        As = A * self.s
+        self.r = _row_scales(As)
+        self._Ac = A @ self.c
+        return np.ascontiguousarray(As / self.r[:, None])
+
+
+def _row_scales(M: FloatArray) -> FloatArray:
+    """Largest absolute entry of each row (1 for zero or non-finite rows)."""
+    if M.shape[1] == 0:
+        return np.ones(M.shape[0])
+    r = np.abs(M).max(axis=1)
+    return np.where((r > 0) & np.isfinite(r), r, 1.0)
+
+
+class _ScaledBackend:
+    """A backend solving the :class:`Equilibration` of the caller's problem."""
+
+    def __init__(self, inner, eq: Equilibration, bl: FloatArray, bu: FloatArray) -> None:
+        self._inner, self._eq = inner, eq
+        self._bl, self._bu = bl, bu  # the caller's row bounds (unscaled), last sent
+        # read-only bound arrays passed again unchanged (the problem's limits) are mapped once
+        self._memo: dict[str, tuple[object, FloatArray]] = {}
+
+    def _bound(self, key: str, value, fn):
+        if value is None:
+            return None
+        hit = self._memo.get(key)
+        if hit is not None and hit[0] is value and not value.flags.writeable:
+            return hit[1]
+        out = fn(value)
+        if isinstance(value, np.ndarray) and not value.flags.writeable:
+            out.setflags(write=False)
+            self._memo[key] = (value, out)
+        return out
+
+    def solve(self, f=None, lb=None, ub=None, bl=None, bu=None, A=None):
+        eq = self._eq
+        As = None
+        if A is not None:
+            As = eq.matrix(np.asarray(A, dtype=float))
+            # the row bounds are scaled with the rows: re-send them on a new matrix
+            bl = self._bl if bl is None else bl
+            bu = self._bu if bu is None else bu
+        self._bl = self._bl if bl is None else bl
+        self._bu = self._bu if bu is None else bu
+        y, it = self._inner.solve(
+            f=None if f is None else eq.cost(f),
+            lb=self._bound("lb", lb, eq.lower), ub=self._bound("ub", ub, eq.upper),
+            bl=None if bl is None else eq.rows(bl), bu=None if bu is None else eq.rows(bu), A=As)
+        x = eq.c + eq.s * y
+        if not np.all(np.isfinite(x)):
+            raise SolverError("backend answer is not finite after unscaling")
+        return x, it
+
+
 class _Daqp:
-    """Persistent DAQP workspace (``daqp.Model``)."""
+    """DAQP (``daqp.Model``), a new workspace per solve.
+
+    DAQP keeps iterate state across solves (the proximal iterations of an LP; the working
+    set of a QP, even with the sense flags reset on update), and where the optimum is weakly
+    determined (an LP's optimal face, stage 1's ridge-regularised minimiser) the answer
+    would then depend on the call history.  Setting up afresh makes every answer a function
+    of this call's data alone (measured cost in ``benchmarks/bench_alloc.py``).
+    """
 
     _EQ = 5  # DAQP sense flag of an equality constraint
 
     def __init__(self, H, f, A, bl, bu, lb, ub, *, singular: bool) -> None:
         import daqp
 
+        self._daqp = daqp
         self._n = int(f.size)
         # daqp.Model needs a matrix: an LP is a QP with H = 0 solved by proximal-point iterations.
         self._H = np.zeros((f.size, f.size)) if H is None else np.array(H, dtype=float, order="C")
@@ -116,67 +255,36 @@ class _Daqp:
         self._sense = np.zeros(self._bupper.size, dtype=np.int32)
         self._sense[self._n:][bl == bu] = self._EQ
         self._f = np.array(f, dtype=float)
-        self._model = daqp.Model()
-        flag, _ = self._model.setup(self._H, self._f, self._A, self._bupper, self._blower, self._sense)
+        self._ub = np.array(ub, dtype=float)
+        self._settings = {"iter_limit": 2000}
+        if singular:
+            self._settings["eps_prox"] = 1e-6
+        self._setup()
+
+    def _setup(self):
+        model = self._daqp.Model()
+        flag, _ = model.setup(self._H, self._f, self._A, self._bupper, self._blower, self._sense.copy())
         if flag < 0:
             raise SolverError(f"daqp setup failed with exit flag {flag}")
-        settings = {"iter_limit": 2000}
-        if singular:
-            settings["eps_prox"] = 1e-6
-        self._model.settings = settings
-        self._settings = settings
-        self._daqp = daqp
-        self._cold = H is None
-        self._base_sense = self._sense.copy()
-        self._last_lb = self._last_ub = None
-        self._bupper_src = np.array(ub, dtype=float)
+        model.settings = self._settings
+        return model
 
     def solve(self, f=None, lb=None, ub=None, bl=None, bu=None, A=None):
         n = self._n
-        upd: dict = {}
         if f is not None:
-            upd["f"] = f
-        # Simple bounds are re-sent unless the caller passes the same read-only array as
-        # last time (the problem's position limits, on every call without rate limits);
-        # a writeable array may have been changed in place, so it is always sent.
-        if lb is not None and not (lb is self._last_lb and not lb.flags.writeable):
+            self._f = np.array(f, dtype=float)
+        if lb is not None:
             self._blower[:n] = lb
-            self._last_lb = lb
-            upd["blower"] = self._blower
-            ub = self._bupper_src if ub is None else ub
-            self._last_ub = None
-        if ub is not None and not (ub is self._last_ub and not ub.flags.writeable):
-            self._bupper[:n] = _widen(self._blower[:n], ub)
-            self._bupper_src = ub
-            self._last_ub = ub
-            upd["bupper"] = self._bupper
+        if ub is not None:
+            self._ub = np.array(ub, dtype=float)
+        self._bupper[:n] = _widen(self._blower[:n], self._ub)
         if bl is not None:
             self._blower[n:] = bl
-            upd["blower"] = self._blower
         if bu is not None:
             self._bupper[n:] = bu
-            upd["bupper"] = self._bupper
         if A is not None:
-            upd["A"] = A if A.flags.c_contiguous and A.flags.writeable else np.array(A, dtype=float, order="C")
-        if self._cold:
-            # LPs (proximal-point iterations): DAQP keeps iterate state across solves, so a
-            # degenerate LP's vertex would depend on the call history; a new workspace per
-            # call makes the answer a function of the data alone.
-            if "f" in upd:
-                self._f = np.array(upd["f"], dtype=float)
-            if A is not None:
-                self._A = np.array(A, dtype=float, order="C")
-            self._model = self._daqp.Model()
-            flag, _ = self._model.setup(self._H, self._f, self._A, self._bupper, self._blower, self._base_sense)
-            if flag < 0:
-                raise SolverError(f"daqp setup failed with exit flag {flag}")
-            self._model.settings = self._settings
-        elif upd:
-            upd["sense"] = self._base_sense  # cold start: no stale active set across updates
-            flag = self._model.update(**upd)
-            if flag < 0:
-                raise SolverError(f"daqp update failed with exit flag {flag}")
-        x, _fval, flag, info = self._model.solve()
+            self._A = np.array(A, dtype=float, order="C")
+        x, _fval, flag, info = self._setup().solve()
         if flag < 1 or not np.all(np.isfinite(x)):
             raise SolverError(f"daqp returned exit flag {flag}")
         return x, info["iterations"]
@@ -209,12 +317,14 @@ class _Chain:
 
 
 class _Highs:
-    """HiGHS LP, passed afresh on every solve.
+    """HiGHS LP: one kept model while ``A`` is fixed, its solver state cleared before each
+    solve (``clearSolver``: no basis, no factorisation carried from call to call), so each
+    answer is a function of this call's costs and bounds alone.
 
-    A kept model (even with ``clearSolver``) remembers the sparsity pattern and bounds of
-    earlier calls, and where the LP optimum is not unique (a ray through an AMS edge) the
-    simplex then lands on another vertex: answers would depend on call history.  Passing
-    the model anew makes every answer a function of this call's data alone.
+    When ``A`` changes (direct allocation's ray) the model is passed anew: changing
+    coefficients one by one keeps the earlier sparsity pattern (explicit zeros), and where
+    the LP optimum is not unique (a ray through an AMS edge) the simplex then lands on
+    another vertex than a fresh model would.
     """
 
     def __init__(self, f, A, bl, bu, lb, ub) -> None:
@@ -225,6 +335,9 @@ class _Highs:
         self._A = np.array(A, dtype=float)
         self._bl, self._bu = np.array(bl, dtype=float), np.array(bu, dtype=float)
         self._lb, self._ub = np.array(lb, dtype=float), np.array(ub, dtype=float)
+        self._h = self._model()
+        self._cols = np.arange(self._f.size, dtype=np.int32)
+        self._rows = np.arange(self._A.shape[0], dtype=np.int32)
 
     def _model(self):
         hs = self._hs
@@ -245,7 +358,18 @@ class _Highs:
         for name, value in (("_f", f), ("_lb", lb), ("_ub", ub), ("_bl", bl), ("_bu", bu), ("_A", A)):
             if value is not None:
                 setattr(self, name, np.array(value, dtype=float))
-        h = self._model()
+        if A is not None:
+            h = self._h = self._model()
+        else:
+            h = self._h
+            n, mA = self._cols.size, self._rows.size
+            if f is not None:
+                h.changeColsCost(n, self._cols, self._f)
+            if lb is not None or ub is not None:
+                h.changeColsBounds(n, self._cols, self._lb, self._ub)
+            if (bl is not None or bu is not None) and mA:
+                h.changeRowsBounds(mA, self._rows, self._bl, self._bu)
+            h.clearSolver()
         h.run()
         status = h.getModelStatus()
         if status != self._hs.HighsModelStatus.kOptimal:

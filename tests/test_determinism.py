@@ -21,7 +21,7 @@ from alloc.vehicles import ice
 N_DEMANDS = 1000
 
 VARIANTS = [(m, {}) for m in alloc.methods()]
-VARIANTS += [("lp", {"backend": "highs"}), ("da", {"backend": "daqp"}), ("da", {"backend": "highs"})]
+VARIANTS += [("lp", {"backend": "highs"}), ("lp", {"backend": "daqp"}), ("da", {"backend": "daqp"}), ("da", {"backend": "highs"})]
 VARIANTS += [("qp", {"backend": "daqp"}), ("wls", {"backend": "daqp"})]
 
 

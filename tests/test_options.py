@@ -60,7 +60,7 @@ def test_method_info_lists_json_specs(method):
         ("wls", {"gamma": 0.0}, "gamma: must be in (0, inf), got 0.0"),
         ("wls", {"gamma": "big"}, "gamma: must be a finite number, got 'big'"),
         ("qp", {"backend": "nope"}, "backend: must be one of active_set, daqp"),
-        ("lp", {"backend": "osqp"}, "backend: must be one of daqp, highs, got 'osqp'"),
+        ("lp", {"backend": "osqp"}, "backend: must be one of simplex, daqp, highs, got 'osqp'"),
         ("da", {"backend": "simplex"}, "backend: must be one of auto, facet, daqp, highs, got 'simplex'"),
         ("da_bisect", {"angles": 0}, "angles: must be >= 1 and <= 1024, got 0"),
         ("da_bisect", {"max_rounds": 2.5}, "max_rounds: must be an integer, got 2.5"),

@@ -60,7 +60,7 @@ def test_daqp_iteration_cap_yields_fallback_not_exception():
     """A real backend hitting its iteration cap: DAQP limited to one iteration."""
     p = ice()
     allocate = alloc.make_allocator(p, "wls", backend="daqp")
-    allocate.impl._impl._model._model.settings = {"iter_limit": 1}
+    allocate.impl._impl._model._inner._settings["iter_limit"] = 1  # applied at each solve's set-up
     statuses = {allocate(v).status for v in np.random.default_rng(0).normal(size=(20, 3)) * [30, 100, 5]}
     assert alloc.Status.FALLBACK in statuses
 

@@ -3,11 +3,21 @@
 Stage 1 (Eq 1.18) minimises the weighted 1-norm of the moment error
 ``sum_i wv_i |(B u - v)_i|`` over the limits; stage 2 (Eq 1.19) minimises the
 weighted 1-norm distance to the preferred position ``sum_j wu_j |u_j - up_j|``
-subject to the limits and ``B u =`` the moment stage 1 reached.  The weights are the
+over the minimisers of stage 1 (``simplex``), or subject to the limits and ``B u =`` the
+moment stage 1 reached (``daqp``, ``highs``).  The two are the same set whenever stage 1's
+optimal moment is unique (every attainable demand); where an L1 stage 1 leaves a face of
+equally good moments, ``simplex``'s stage-2 optimum is never worse.  The weights are the
 diagonals of ``Wv`` and ``Wu`` (the seed's weight vectors).  With ``priorities``,
 stage 1 runs per level, most important first, earlier levels keeping their errors.
 
-Slack form: stage 1 has variables ``[u, e+, e-]`` with ``B u - e+ + e- = v``; stage 2
+Backends.  ``simplex`` (default): the compiled lexicographic simplex of
+:mod:`alloc._simplex` -- both stages (and the priority levels) in one compiled call, in
+scaled variables, cold-started from a canonical basis on every call, stage 2 over the
+whole optimal set of stage 1 and a final generic linear tie-break, so that ``u`` is a
+function of the call's data alone (see that module for the canonical choice).  ``daqp``
+and ``highs``: the formulation below, solved by those libraries (the cross-check).
+
+Slack form (``daqp``, ``highs``): stage 1 has variables ``[u, e+, e-]`` with ``B u - e+ + e- = v``; stage 2
 ``[d+, d-]`` with ``u = c + d+ - d-`` (``c`` = ``up`` clipped into the bounds) and
 ``Q' B u = Q' B u1`` (row-reduced), all else simple bounds.  Only
 bounds and costs change between calls, so the solver models are built once.
@@ -19,6 +29,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from .._simplex import OPTIMAL, LexicographicL1
 from ..exceptions import SolverError
 from ..options import choice, levels
 from ..problem import Problem
@@ -35,18 +46,24 @@ class TwoStageLP(Method):
     equation = "Eqs 1.18-1.19"
     summary = "stage 1 min weighted 1-norm moment error, stage 2 min weighted 1-norm |u-up|"
     options = {
-        "backend": choice("daqp", "LP solver", lambda: backends(lp=True)),
+        "backend": choice("simplex", "'simplex' (compiled, canonical) or an LP library",
+                          lambda: ["simplex", *backends(lp=True)]),
         "priorities": levels("priority level per axis; larger levels are met first"),
     }
 
-    def __init__(self, problem: Problem, *, backend: str = "daqp", priorities: Sequence[int] | None = None) -> None:
+    def __init__(self, problem: Problem, *, backend: str = "simplex", priorities: Sequence[int] | None = None) -> None:
         super().__init__(problem)
-        name = check_backend(backend, backends(lp=True), "lp")
+        name = check_backend(backend, ["simplex", *backends(lp=True)], "lp")
         p = problem
         k, m = p.k, p.m
         self.wv = check_diagonal(p.Wv, "Wv", "lp")
         self.wu = check_diagonal(p.Wu, "Wu", "lp")
         self.groups = check_priorities(priorities, k) or [np.arange(k)]
+        self._lex: LexicographicL1 | None = None
+        if name == "simplex":
+            self._lex = LexicographicL1(p.B, p.umin, p.umax, p.up, self.wv, self.wu, self.groups)
+            return
+        self._Bpos, self._Bneg = np.maximum(p.B, 0.0), np.minimum(p.B, 0.0)
         inf = np.full(2 * k, np.inf)
         A1 = np.hstack([p.B, -np.eye(k), np.eye(k)])
         z = np.zeros(k)
@@ -69,17 +86,32 @@ class TwoStageLP(Method):
                                     np.concatenate([p.umax - p.up, p.up - p.umin]))
 
     def solve(self, v, lo, hi, u_prev):
+        if self._lex is not None:
+            u, code, pivots = self._lex.solve(v, lo, hi)
+            if code != OPTIMAL:
+                raise SolverError(f"simplex: {('', 'iteration limit', 'singular basis or non-finite data')[code]} "
+                                  f"after {pivots} pivots")
+            return u, pivots
         p = self.problem
         k, m = p.k, p.m
         lb1, ub1 = self._lb1.copy(), self._ub1.copy()
         lb1[:m], ub1[:m] = lo, hi
         iters = 0
         x = None
+        # A demand component beyond the row's range over the box [bot, top] adds a constant
+        # to its error term (|B_i u - v_i| = v_i - B_i u for every admissible u): clamping it
+        # to [bot - w, top + w] (w = top - bot) keeps the minimisers and keeps the moment rows
+        # on the scale of B u (a demand 1e30 times the attainable set otherwise reaches the
+        # solver as bounds that HiGHS reads as infinite, >= 1e20).
+        Bp, Bn = self._Bpos, self._Bneg
+        top, bot = Bp @ hi + Bn @ lo, Bp @ lo + Bn @ hi
+        w = top - bot
+        v1 = np.minimum(np.maximum(v, bot - w), top + w)
         for rows in self.groups:
             c = np.zeros(m + 2 * k)
             c[m + rows] = self.wv[rows]
             c[m + k + rows] = self.wv[rows]
-            x, it = self._stage1.solve(f=c, lb=lb1, ub=ub1, bl=v, bu=v)
+            x, it = self._stage1.solve(f=c, lb=lb1, ub=ub1, bl=v1, bu=v1)
             iters += it
             # freeze this level's errors for the levels after it
             for off in (m, m + k):
