@@ -132,6 +132,23 @@ def _hyperplanes(R: FloatArray, tol: float = DIRECTION_TOL) -> tuple[FloatArray,
     return n, free
 
 
+def _check_closed(normals: FloatArray, r: int) -> None:
+    """Raise when the hyperplanes cannot bound a rank-``r`` set (their normals span fewer dimensions).
+
+    The set's rank counts singular values of the unit directions above ``1e-10``, the
+    hyperplane search merges directions within ``DIRECTION_TOL`` of a hyperplane: directions
+    whose thinnest dimension lies between the two are "full rank" for the one and coplanar
+    for the other, and every hyperplane then holds all of them -- a slab open along the
+    hyperplane, with no facet ahead of most rays (the issue-9 ``None`` reaching arithmetic
+    in ``point_on_facet``).  Such a structure is refused here; the facet-search methods
+    then use the LP formulation of the same problem.
+    """
+    s = np.linalg.svd(normals, compute_uv=False) if normals.size else np.zeros(0)
+    if len(s) < r or not s[r - 1] > DIRECTION_TOL * s[0]:
+        raise ProblemError(f"B: AMS facet structure not closed (facet normals span fewer than rank {r} "
+                           "dimensions: directions coplanar within DIRECTION_TOL but not flat)")
+
+
 def _plane_basis(n: FloatArray) -> FloatArray:
     """Orthonormal basis (d, d-1) of the hyperplane with unit normal ``n``."""
     return np.linalg.svd(n[:, None])[0][:, 1:]
@@ -326,6 +343,7 @@ class AttainableSet:
     def _build_structure(self, Rr: FloatArray) -> None:
         r, C = Rr.shape
         normals, free = _hyperplanes(Rr)
+        _check_closed(normals, r)
         # each hyperplane bounds the set on both sides
         N = np.concatenate([normals, -normals])
         free_cls = np.concatenate([free, free])
@@ -511,6 +529,8 @@ class AttainableSet:
         ratio[ok] = gap[ok] / nd[ok]
         f = int(np.argmin(ratio))
         a = max(0.0, float(ratio[f]))
+        if a == np.inf:  # unreachable on a closed structure (_check_closed); never return a point at infinity
+            raise ProblemError("AMS: no facet ahead of the ray (degenerate facet structure)")
         if a == 0.0:
             return 0.0, u0.copy(), f
         return a, self.point_on_facet(f, self._Br @ u0 + a * y, lo, hi, u0, nominal=nominal), f
@@ -535,6 +555,8 @@ class AttainableSet:
                 best, best_u = margin, U[i] + np.clip(p, 0.0, 1.0) @ S
             if margin >= -1e-12:
                 break
+        if best_u is None:  # no tile gave a finite margin: q is not a finite point of the facet
+            raise ProblemError(f"AMS: point {q} is not on facet {f}")
         return best_u
 
     @cached_property
