@@ -40,7 +40,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..exceptions import DemandError, ProblemError
 from ..problem import Problem
 
-__all__ = ["AttainableSet", "Facet", "zonotope_volume", "generator_classes"]
+__all__ = ["AttainableSet", "Facet", "FacetTiling", "zonotope_volume", "generator_classes", "DIRECTION_TOL"]
 
 FloatArray = NDArray[np.float64]
 
@@ -269,6 +269,67 @@ class Facet:
         return int(len(self.vertices))
 
 
+def _read_only(a: np.ndarray) -> np.ndarray:
+    view = a.view()
+    view.flags.writeable = False
+    return view
+
+
+@dataclass(frozen=True)
+class FacetTiling:
+    """The set's boundary as arrays, in its own coordinates (rank ``r``; ``r = k`` unless flat).
+
+    Every facet is tiled into parallelepipeds (one per simple facet, a zonotopal tiling of a
+    merged polygon): tile ``t`` is ``corner[t] + sum_i b_i generators[:, span[t, i]]``,
+    ``0 <= b_i <= 1`` (the seed's Eq 1.16 parallelogram for k = 3), reached by the control
+    ``tile_u[t] + sum_i b_i class_steps[span[t, i]]``.  This is what a facet search needs
+    (Eqs 1.16-1.17); read-only views of the set's own arrays, for the nominal box.
+
+    Attributes
+    ----------
+    B : (r, m)
+        ``Q' B``: the columns in the set's coordinates (``Q`` an orthonormal basis of its hull).
+    normals : (F, r)
+        Unit outward facet normals.
+    normal_columns : (F, m)
+        ``normals @ B``: each facet normal against each column.
+    gaps : (F,)
+        Distance from the base point ``B u0`` to each facet along its normal (>= 0).
+    free_classes : (F, C) bool
+        Generator classes lying in each facet.
+    generators : (r, C)
+        Class generators (full length: the class moved from its low to its high end).
+    class_members : (C, m)
+        1 where effector ``j`` belongs to class ``c``.
+    class_steps : (C, m)
+        Change of ``u`` moving each class from its low to its high end.
+    tile_facet : (T,)
+        Facet of each tile (sorted).
+    tile_span : (T, r-1)
+        Classes spanning each tile.
+    tile_hi : (T, m) bool
+        Effectors at their upper limit at the tile's corner.
+    tile_u : (T, m)
+        Control at each tile's corner.
+    tile_corner : (T, r)
+        Each tile's corner point.
+    """
+
+    B: FloatArray
+    normals: FloatArray
+    normal_columns: FloatArray
+    gaps: FloatArray
+    free_classes: NDArray[np.bool_]
+    generators: FloatArray
+    class_members: FloatArray
+    class_steps: FloatArray
+    tile_facet: NDArray[np.intp]
+    tile_span: NDArray[np.intp]
+    tile_hi: NDArray[np.bool_]
+    tile_u: FloatArray
+    tile_corner: FloatArray
+
+
 class AttainableSet:
     """The attainable moment set of a problem (seed section 1.3.4.2), for k = 1..6.
 
@@ -438,6 +499,20 @@ class AttainableSet:
     def offsets(self) -> FloatArray:
         """Facet offsets ``h``: ``normals @ v <= offsets`` for every ``v`` in the set."""
         return self._offsets.copy()
+
+    @cached_property
+    def tiling(self) -> FacetTiling:
+        """The facet tiling as arrays (:class:`FacetTiling`), for facet searches."""
+        r, m, C = self.rank, self.m, self.n_classes
+        if r == 0:
+            zf, zi = np.zeros((0, m)), np.zeros(0, dtype=np.intp)
+            return FacetTiling(*(_read_only(a) for a in (
+                np.zeros((0, m)), np.zeros((0, 0)), zf, np.zeros(0), np.zeros((0, C), dtype=bool), np.zeros((0, C)),
+                self._member, np.zeros((C, m)), zi, np.zeros((0, 0), dtype=np.intp), np.zeros((0, m), dtype=bool),
+                zf, np.zeros((0, 0)))))
+        return FacetTiling(*(_read_only(a) for a in (
+            self._Br, self._Nr, self._NB, self._gap, self._free_cls, self._Er, self._member, self._steps,
+            self._tile_facet, self._tile_span, self._tile_hi, self._tile_u, self._tile_corner)))
 
     @cached_property
     def volume(self) -> float:
