@@ -25,6 +25,8 @@ __all__ = ["Method", "register", "get_method", "methods", "method_info"]
 FloatArray = NDArray[np.float64]
 
 _REGISTRY: dict[str, type[Method]] = {}
+#: seconds: the declared build cost of a method that enumerates nothing (:meth:`Method.build_cost`)
+CHEAP_BUILD_SECONDS = 1e-3
 
 
 class Method(ABC):
@@ -61,8 +63,8 @@ class Method(ABC):
     def facet_subsets(cls, problem: Problem, options: dict[str, Any]) -> int:
         """Facet generator subsets the build enumerates, C(m_free, k-1); 0 if none.
 
-        The service caps builds with it (one definition of the facet limit lives in
-        :data:`alloc.methods.direct.FACET_LIMIT`).
+        The facet-search methods price their build with it (:meth:`build_cost`; the one
+        facet limit is :data:`alloc.methods.facet_search.FACET_LIMIT`).
         """
         if not cls.needs_ams:
             return 0
@@ -70,6 +72,17 @@ class Method(ABC):
 
         free = int((problem.umax > problem.umin).sum())
         return math.comb(free, max(problem.k - 1, 0))
+
+    @classmethod
+    def build_cost(cls, problem: Problem, **options: Any) -> float:
+        """Declared build time of ``cls(problem, **options)`` in seconds (measured on the
+        project's 2-core machine, conservative).  Read by the service before it builds;
+        ``options`` may be unvalidated (an unreadable value counts as its default).
+
+        Default: :data:`CHEAP_BUILD_SECONDS` -- a closed form, an SVD or a QP/LP set-up
+        within the size caps (6 x 64) builds in milliseconds.
+        """
+        return CHEAP_BUILD_SECONDS
 
     #: ``(c, P)`` when the method is ``u = clip(c + P v)`` without rate limits: the
     #: allocator then runs it as one compiled call (pseudo-inverse family, ganging).
@@ -126,7 +139,6 @@ def _load_builtin() -> None:
     # Importing the packages registers the built-in methods (one module per family).  By
     # full name: ``from . import methods`` would find the function ``alloc.methods``.
     importlib.import_module("alloc.methods")
-    importlib.import_module("alloc.ams")  # facet-search direct allocation
 
 
 def get_method(name: str) -> type[Method]:

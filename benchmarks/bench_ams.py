@@ -110,7 +110,7 @@ def latency(suites: dict, n: int) -> None:
 
 
 def compiled_vs_reference(n: int) -> None:
-    """The compiled searches (alloc/ams/_kernels.py) next to the numpy reference they replaced."""
+    """The compiled searches (alloc/methods/_facet_kernels.py) next to the numpy reference they replaced."""
     print("## Compiled search vs numpy reference, solve only, nominal and rate-limited (median / p99 us)\n")
     print("Rate-limited: ``u_prev = 0``, ``dt = 0.0005`` s.  Allocator: ``make_allocator(p, name)(v)``.\n")
     print("| suite | method | compiled | reference | compiled, rated | reference, rated | allocator call |"

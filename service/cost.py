@@ -1,37 +1,17 @@
-"""What a request may cost the service: a measured build-cost model and a byte estimate.
+"""What a request may cost the service: the build-budget policy and a byte estimate.
 
 Allocator builds run off the event loop in a small pool of build threads
 (:class:`service.store.Builder`).  A Python thread cannot be killed, so the wall-clock
-budget is enforced **before** a build starts: :func:`build_seconds` predicts the build
-time from a cost model fitted to measured builds, and a prediction above
-``ALLOC_BUILD_BUDGET_S`` (default 3 s) is refused with 422 naming the predicted cost.
+budget is enforced **before** a build starts: :func:`build_seconds` reads the build time
+each method declares for the problem and options (:meth:`alloc.registry.Method.build_cost`,
+measured numbers with the methods: :mod:`alloc.methods.facet_search`), and a prediction above
+``ALLOC_BUILD_BUDGET_S`` is refused with 422 naming the predicted cost.
 
-Measured on this machine (2 shared cores, 2026-11-30, ``/tmp`` script in the report of
-issue 12; alloc at this commit), seconds per build:
-
-=====================  ======================  =========  =================================
-method                 problem                 build      per facet subset C(m_free, k-1)
-=====================  ======================  =========  =================================
-da_facet               k=6, m=20 (15,504)      0.72 s     46 us
-da_bisect              k=6, m=20 (15,504)      1.13 s     73 us
-da_bisect              k=3, m=64 (2,016)       0.29 s     142 us
-da_table res 64        k=6, m=20 (15,504)      0.95 s     62 us (no table above k = 3)
-da_table res 64        k=3, m=20 (190)         1.72 s     table term dominates
-da_table res 64        k=3, m=64 (2,016)       7.34 s     table term dominates
-da_table res 128/32    k=3, m=20               3.46/0.45 s
-=====================  ======================  =========  =================================
-
-Model (conservative: it over-predicts every measurement above, by up to 2x):
-
-* facet enumeration (methods declaring ``needs_ams``): ``150 us x facet_subsets``, the
-  subsets counted by the method itself (``Method.facet_subsets``).  At the library's
-  :data:`alloc.methods.direct.FACET_LIMIT` (20,000) that is 3.0 s, which is why the default
-  budget is 3 s: the service accepts every build the library's own limit admits, no more.
-* the k = 3 spherical table of ``da_table``: ``resolution^2 x (270 + 0.75 x subsets) us``
-  (two ray casts per cell against every tile): res 64 on m = 64 predicts 7.3 s (refused),
-  res 64 on ICE (m = 11, 55 subsets) 1.3 s.
-* every other method builds in milliseconds within the size caps (an SVD or a QP set-up of
-  at most 6 x 64): cost 0.
+The policy is the service's own: the default budget is the declared cost of a facet
+enumeration at the library's facet limit (:data:`alloc.methods.facet_search.FACET_LIMIT`,
+20,000 subsets -> 3.0 s), so the service admits every build the library's own
+``backend="auto"`` would choose, and nothing larger.  Per-call option caps live in
+:mod:`service.config`.
 
 Memory: a facet-enumerating allocator holds about 4.5 KiB per subset (k = 6, m = 20:
 60-71 MiB measured as RSS growth), so one build at the cap is ~90 MiB transient.  Cached
@@ -47,34 +27,20 @@ from typing import Any
 import numpy as np
 
 import alloc
-from alloc.methods.direct import FACET_LIMIT
+from alloc.methods.facet_search import FACET_LIMIT, FACET_SECONDS, facet_build_seconds
 from alloc.registry import get_method
 
 __all__ = ["FACET_SECONDS", "DEFAULT_BUILD_BUDGET_S", "build_seconds", "estimate_bytes"]
 
-#: seconds per facet generator subset enumerated by a ``needs_ams`` build (measured <= 142 us)
-FACET_SECONDS = 150e-6
-#: the default build budget: the predicted time of a facet enumeration at the library's own
-#: limit (:data:`alloc.methods.direct.FACET_LIMIT`, 20,000 subsets -> 3.0 s), so the service
-#: admits every build the library's ``backend="auto"`` would choose, and nothing larger
-DEFAULT_BUILD_BUDGET_S = round(FACET_SECONDS * FACET_LIMIT, 6)
-#: the k = 3 look-up table of ``da_table``: seconds per cell, and per cell and subset
-_TABLE_CELL_SECONDS, _TABLE_CELL_SUBSET_SECONDS = 270e-6, 0.75e-6
-#: methods whose build adds a (resolution x resolution) table at k = 3, and its option
-_TABLE_METHODS = {"da_table": ("resolution", 64)}
+#: the default build budget: the declared build time of a facet enumeration at the library's
+#: facet limit, so the service admits every build the library's ``backend="auto"`` would choose
+DEFAULT_BUILD_BUDGET_S = round(facet_build_seconds(FACET_LIMIT), 6)
 
 
 def build_seconds(problem: alloc.Problem, method: str, options: Mapping[str, Any]) -> float:
-    """Predicted build time of ``make_allocator(problem, method, **options)`` (seconds, this machine)."""
-    cls = get_method(method)
-    subsets = cls.facet_subsets(problem, dict(options)) if cls.needs_ams else 0
-    seconds = FACET_SECONDS * subsets
-    table = _TABLE_METHODS.get(method)
-    if table is not None and problem.k == 3:
-        res = options.get(table[0], table[1])
-        if isinstance(res, int) and not isinstance(res, bool) and res > 0:
-            seconds += float(res) ** 2 * (_TABLE_CELL_SECONDS + _TABLE_CELL_SUBSET_SECONDS * subsets)
-    return seconds
+    """Predicted build time of ``make_allocator(problem, method, **options)``: the method's
+    declared :meth:`~alloc.registry.Method.build_cost` (seconds, the project's machine)."""
+    return float(get_method(method).build_cost(problem, **dict(options)))
 
 
 def estimate_bytes(obj: object, _limit: int = 100_000) -> int:

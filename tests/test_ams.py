@@ -205,3 +205,26 @@ def test_rate_limited_box_reuses_structure():
         assert a1 == pytest.approx(a2, rel=1e-12, abs=1e-14)
         assert np.allclose(p.B @ u1, p.B @ u0 + a1 * d, atol=1e-9)
         assert (u1 >= lo - 1e-12).all() and (u1 <= hi + 1e-12).all()
+
+
+def test_tiling_is_the_public_facet_table():
+    """``AttainableSet.tiling`` (what the facet searches read): read-only, and each tile is a
+    parallelepiped on its facet's supporting plane, reached by the stated controls (Eq 1.16)."""
+    for p in (ice(), harv_latdir()):
+        ams = AttainableSet(p)
+        t = ams.tiling
+        assert not t.tile_u.flags.writeable and not t.normals.flags.writeable
+        np.testing.assert_allclose(t.tile_u @ t.B.T, t.tile_corner, atol=1e-12)
+        offsets = t.gaps + t.normals @ (t.B @ ams.base_u)  # facet planes: n . v = offset
+        scale = np.abs(ams.vertices).max()
+        for i, f in enumerate(t.tile_facet):
+            n = t.normals[f]
+            assert abs(n @ t.tile_corner[i] - offsets[f]) <= 1e-12 * scale
+            edges = t.generators[:, t.tile_span[i]]
+            np.testing.assert_allclose(n @ edges, 0.0, atol=1e-12 * scale)  # the tile lies in the plane
+            np.testing.assert_allclose(t.B @ t.class_steps[t.tile_span[i]].T, edges, atol=1e-12 * scale)
+        assert len(np.unique(t.tile_facet)) == ams.n_facets
+    flat = AttainableSet(alloc.Problem([[1.0, 2.0], [2.0, 4.0]], [-1, -1], [1, 1]))
+    assert flat.rank == 1 and flat.tiling.B.shape == (1, 2)
+    empty = AttainableSet(alloc.Problem([[0.0, 0.0]], [-1, -1], [1, 1]))
+    assert empty.rank == 0 and empty.tiling.tile_u.shape == (0, 2)

@@ -1,4 +1,4 @@
-"""The compiled facet searches (alloc/ams/_kernels.py) against their numpy reference.
+"""The compiled facet searches (alloc/methods/_facet_kernels.py) against their numpy reference.
 
 Every case calls the method's ``solve`` (compiled) and ``_solve_reference`` (the numpy
 implementation the kernels replaced) on the same demand and box and asserts equal

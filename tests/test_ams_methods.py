@@ -197,3 +197,27 @@ def test_property_admissible_and_exact_iff_attained(seed, m):
         assert np.isfinite(r.u).all() and (r.u >= lo).all() and (r.u <= hi).all()
         assert (r.status.value == "exact") == bool(np.abs(p.B @ r.u - v).max() <= 1e-6 * max(1, np.abs(v).max()))
         assert np.abs(r.v_achieved - exact_reference(ams, v)).max() <= 1e-9 * max(1.0, np.abs(ams.vertices).max())
+
+
+def test_directions_coplanar_within_tolerance_use_the_lp():
+    """Issue 9 regression (hostile seed 10,048,334, shrunk): four unit directions in 4-D whose
+    thinnest dimension (5e-10) is above the rank threshold (1e-10) but below the coplanarity
+    tolerance (DIRECTION_TOL = 1e-9).  Every hyperplane held all four, the facet structure was an
+    open slab, no facet lay ahead of the ray and ``point_on_facet`` returned ``None``
+    (``TypeError: ... 'NoneType' and 'float'`` in the flat case k = 5, a ZeroDivisionError and
+    wrong boundary points at k = 4).  The structure is now refused and da* use the LP."""
+    B4 = np.array([[1, 0, 0, 1], [0, 1, 0, 1], [0, 0, 1, 1], [0, 0, 0, 5e-10]])
+    with pytest.raises(alloc.ProblemError, match="not closed"):
+        AttainableSet(alloc.Problem(B4, [-1] * 4, [1] * 4))
+    for B in (B4, np.vstack([B4, np.zeros((1, 4))])):  # full rank, and flat in k = 5
+        p = alloc.Problem(B, [-1] * 4, [1] * 4)
+        k = p.k
+        for method in FACET_METHODS:
+            f = alloc.make_allocator(p, method)
+            assert "not closed" in f.impl.lp_reason
+            r = f(np.eye(k)[0] * 0.5)  # attainable (u = [0.5, 0, 0, 0])
+            assert r.status.value == "exact"
+            np.testing.assert_allclose(r.v_achieved, np.eye(k)[0] * 0.5, atol=1e-9)
+            r = f(np.eye(k)[0] * 3.0)  # beyond the set along its first axis: boundary at 2
+            assert r.status.value == "unattainable"
+            assert r.v_achieved[0] == pytest.approx(2.0, rel=1e-9)

@@ -84,6 +84,43 @@ def test_imports_point_down_the_layers(path):
     assert not wrong, "imports against the layering:\n" + "\n".join(wrong)
 
 
+#: inside the core: sub-package -> the sibling sub-packages it must not import (geometry is
+#: geometry: the allocation methods build on ``alloc.ams``'s public API, never the reverse)
+FORBIDDEN_INSIDE_CORE: dict[str, set[str]] = {"alloc.ams": {"alloc.methods"}}
+
+
+def _forbidden_core_imports(path: Path) -> list[str]:
+    name = _module_name(path)
+    return [f"{path.relative_to(ROOT)}:{line} imports {target}"
+            for package, banned in FORBIDDEN_INSIDE_CORE.items() if name == package or name.startswith(package + ".")
+            for target, line, _ in _imports(path)
+            if any(target == b or target.startswith(b + ".") for b in banned)]
+
+
+@pytest.mark.parametrize("path", sorted((ROOT / "alloc" / "ams").rglob("*.py")), ids=lambda p: str(p.relative_to(ROOT)))
+def test_geometry_imports_no_allocation_method(path):
+    wrong = _forbidden_core_imports(path)
+    assert not wrong, "alloc.ams is geometry; it must not import the methods:\n" + "\n".join(wrong)
+
+
+def test_geometry_rule_catches_an_import_of_the_methods(monkeypatch):
+    """The rule above fails on a module of ``alloc.ams`` importing ``alloc.methods`` in any form."""
+    fake = ROOT / "alloc" / "ams" / "_layering_probe.py"
+    for src in ("from ..methods.direct import DirectAllocation\n",
+                "def f():\n    from alloc.methods import facet_search\n",
+                "import alloc.methods.facet_search\n"):
+        monkeypatch.setattr(Path, "read_text", lambda self, _src=src, _orig=Path.read_text:
+                            _src if self == fake else _orig(self))
+        assert _forbidden_core_imports(fake), src
+    monkeypatch.undo()
+    assert not _forbidden_core_imports(ROOT / "alloc" / "ams" / "geometry.py")
+
+
+def test_importing_geometry_loads_no_method():
+    loaded = _loaded_after("import alloc.ams")
+    assert [m for m in loaded if m.startswith("alloc.methods")] == []
+
+
 @pytest.mark.parametrize("path", sorted((ROOT / "alloc").rglob("*.py")), ids=lambda p: str(p.relative_to(ROOT)))
 def test_core_imports_only_base_dependencies_at_module_level(path):
     stdlib = set(sys.stdlib_module_names) | {"__future__"}

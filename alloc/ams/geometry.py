@@ -40,7 +40,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..exceptions import DemandError, ProblemError
 from ..problem import Problem
 
-__all__ = ["AttainableSet", "Facet", "zonotope_volume", "generator_classes"]
+__all__ = ["AttainableSet", "Facet", "FacetTiling", "zonotope_volume", "generator_classes", "DIRECTION_TOL"]
 
 FloatArray = NDArray[np.float64]
 
@@ -130,6 +130,23 @@ def _hyperplanes(R: FloatArray, tol: float = DIRECTION_TOL) -> tuple[FloatArray,
         # coplanar directions: the least-squares normal of all of them, not of the first pair
         n[h] = np.linalg.svd(R[:, free[h]])[0][:, -1]
     return n, free
+
+
+def _check_closed(normals: FloatArray, r: int) -> None:
+    """Raise when the hyperplanes cannot bound a rank-``r`` set (their normals span fewer dimensions).
+
+    The set's rank counts singular values of the unit directions above ``1e-10``, the
+    hyperplane search merges directions within ``DIRECTION_TOL`` of a hyperplane: directions
+    whose thinnest dimension lies between the two are "full rank" for the one and coplanar
+    for the other, and every hyperplane then holds all of them -- a slab open along the
+    hyperplane, with no facet ahead of most rays (the issue-9 ``None`` reaching arithmetic
+    in ``point_on_facet``).  Such a structure is refused here; the facet-search methods
+    then use the LP formulation of the same problem.
+    """
+    s = np.linalg.svd(normals, compute_uv=False) if normals.size else np.zeros(0)
+    if len(s) < r or not s[r - 1] > DIRECTION_TOL * s[0]:
+        raise ProblemError(f"B: AMS facet structure not closed (facet normals span fewer than rank {r} "
+                           "dimensions: directions coplanar within DIRECTION_TOL but not flat)")
 
 
 def _plane_basis(n: FloatArray) -> FloatArray:
@@ -252,6 +269,67 @@ class Facet:
         return int(len(self.vertices))
 
 
+def _read_only(a: np.ndarray) -> np.ndarray:
+    view = a.view()
+    view.flags.writeable = False
+    return view
+
+
+@dataclass(frozen=True)
+class FacetTiling:
+    """The set's boundary as arrays, in its own coordinates (rank ``r``; ``r = k`` unless flat).
+
+    Every facet is tiled into parallelepipeds (one per simple facet, a zonotopal tiling of a
+    merged polygon): tile ``t`` is ``corner[t] + sum_i b_i generators[:, span[t, i]]``,
+    ``0 <= b_i <= 1`` (the seed's Eq 1.16 parallelogram for k = 3), reached by the control
+    ``tile_u[t] + sum_i b_i class_steps[span[t, i]]``.  This is what a facet search needs
+    (Eqs 1.16-1.17); read-only views of the set's own arrays, for the nominal box.
+
+    Attributes
+    ----------
+    B : (r, m)
+        ``Q' B``: the columns in the set's coordinates (``Q`` an orthonormal basis of its hull).
+    normals : (F, r)
+        Unit outward facet normals.
+    normal_columns : (F, m)
+        ``normals @ B``: each facet normal against each column.
+    gaps : (F,)
+        Distance from the base point ``B u0`` to each facet along its normal (>= 0).
+    free_classes : (F, C) bool
+        Generator classes lying in each facet.
+    generators : (r, C)
+        Class generators (full length: the class moved from its low to its high end).
+    class_members : (C, m)
+        1 where effector ``j`` belongs to class ``c``.
+    class_steps : (C, m)
+        Change of ``u`` moving each class from its low to its high end.
+    tile_facet : (T,)
+        Facet of each tile (sorted).
+    tile_span : (T, r-1)
+        Classes spanning each tile.
+    tile_hi : (T, m) bool
+        Effectors at their upper limit at the tile's corner.
+    tile_u : (T, m)
+        Control at each tile's corner.
+    tile_corner : (T, r)
+        Each tile's corner point.
+    """
+
+    B: FloatArray
+    normals: FloatArray
+    normal_columns: FloatArray
+    gaps: FloatArray
+    free_classes: NDArray[np.bool_]
+    generators: FloatArray
+    class_members: FloatArray
+    class_steps: FloatArray
+    tile_facet: NDArray[np.intp]
+    tile_span: NDArray[np.intp]
+    tile_hi: NDArray[np.bool_]
+    tile_u: FloatArray
+    tile_corner: FloatArray
+
+
 class AttainableSet:
     """The attainable moment set of a problem (seed section 1.3.4.2), for k = 1..6.
 
@@ -326,6 +404,7 @@ class AttainableSet:
     def _build_structure(self, Rr: FloatArray) -> None:
         r, C = Rr.shape
         normals, free = _hyperplanes(Rr)
+        _check_closed(normals, r)
         # each hyperplane bounds the set on both sides
         N = np.concatenate([normals, -normals])
         free_cls = np.concatenate([free, free])
@@ -422,6 +501,20 @@ class AttainableSet:
         return self._offsets.copy()
 
     @cached_property
+    def tiling(self) -> FacetTiling:
+        """The facet tiling as arrays (:class:`FacetTiling`), for facet searches."""
+        r, m, C = self.rank, self.m, self.n_classes
+        if r == 0:
+            zf, zi = np.zeros((0, m)), np.zeros(0, dtype=np.intp)
+            return FacetTiling(*(_read_only(a) for a in (
+                np.zeros((0, m)), np.zeros((0, 0)), zf, np.zeros(0), np.zeros((0, C), dtype=bool), np.zeros((0, C)),
+                self._member, np.zeros((C, m)), zi, np.zeros((0, 0), dtype=np.intp), np.zeros((0, m), dtype=bool),
+                zf, np.zeros((0, 0)))))
+        return FacetTiling(*(_read_only(a) for a in (
+            self._Br, self._Nr, self._NB, self._gap, self._free_cls, self._Er, self._member, self._steps,
+            self._tile_facet, self._tile_span, self._tile_hi, self._tile_u, self._tile_corner)))
+
+    @cached_property
     def volume(self) -> float:
         """Exact k-dimensional volume (divergence theorem over the facet tiles); 0 when flat.
 
@@ -511,6 +604,8 @@ class AttainableSet:
         ratio[ok] = gap[ok] / nd[ok]
         f = int(np.argmin(ratio))
         a = max(0.0, float(ratio[f]))
+        if a == np.inf:  # unreachable on a closed structure (_check_closed); never return a point at infinity
+            raise ProblemError("AMS: no facet ahead of the ray (degenerate facet structure)")
         if a == 0.0:
             return 0.0, u0.copy(), f
         return a, self.point_on_facet(f, self._Br @ u0 + a * y, lo, hi, u0, nominal=nominal), f
@@ -535,6 +630,8 @@ class AttainableSet:
                 best, best_u = margin, U[i] + np.clip(p, 0.0, 1.0) @ S
             if margin >= -1e-12:
                 break
+        if best_u is None:  # no tile gave a finite margin: q is not a finite point of the facet
+            raise ProblemError(f"AMS: point {q} is not on facet {f}")
         return best_u
 
     @cached_property

@@ -1,8 +1,8 @@
-"""Compiled per-call kernels for the facet searches of :mod:`alloc.ams.search` (numba).
+"""Compiled per-call kernels for the facet searches of :mod:`alloc.methods.facet_search` (numba).
 
 A Durham search round is a dozen numpy calls on arrays of a few dozen floats, each paying
 about a microsecond of dispatch; here a whole call (Eqs 1.15-1.17) is one compiled
-function fed with the tables :class:`~alloc.ams.search.FacetSearch` stores at build time.
+function fed with the tables :class:`~alloc.methods.facet_search.FacetSearch` stores at build time.
 Every kernel follows its numpy reference (``_solve_reference``) operation for operation, so
 the answers agree to round-off (``tests/test_ams_kernels.py``).
 """
@@ -16,7 +16,7 @@ from numba import njit
 
 __all__ = ["facet_solve", "bisect_solve", "ray_exit_solve"]
 
-_TOL = 1e-10  # Eq 1.17 slack, as in search.py
+_TOL = 1e-10  # Eq 1.17 slack, as in facet_search.py
 _EPS = np.finfo(np.float64).eps
 
 

@@ -30,28 +30,63 @@ Rate limits: the facet *structure* depends only on the columns' directions, so w
 recomputed from the call's bounds (:meth:`AttainableSet.ray_exit`): exact, no LP.  Other
 ``k`` than 3 make ``da_bisect``/``da_table`` use the sequential search.  A flat AMS
 (rank B < k) is handled by :class:`AttainableSet` (a demand off its hull has ``a* = 0``).
+
+The geometry is :mod:`alloc.ams`'s public API only (:class:`~alloc.ams.AttainableSet`, its
+:attr:`~alloc.ams.AttainableSet.tiling` and ``ray_exit``); the per-call searches are compiled
+in :mod:`alloc.methods._facet_kernels`.
 """
 
 from __future__ import annotations
 
 import math
 import time
+from typing import Any
 
 import numpy as np
 
+from ..ams import AttainableSet
 from ..exceptions import OptionError
 from ..options import integer
 from ..problem import Problem
 from ..registry import FloatArray, Method, register
-from . import _kernels
-from .geometry import AttainableSet
+from . import _facet_kernels as _kernels
 
-__all__ = ["FacetSearch", "EdgeBisect", "SphericalTable"]
+__all__ = ["FacetSearch", "EdgeBisect", "SphericalTable", "FACET_LIMIT", "FACET_BUILD_LIMIT", "FACET_SECONDS",
+           "facet_build_seconds"]
 
 _EQ = "Eqs 1.15-1.17"
-#: Largest C(m, k-1) the facet-search methods enumerate at build; beyond it they use the
-#: LP formulation (build time and memory grow with the number of facets).
+#: The facet limit: ``da``'s ``backend="auto"`` uses the facet search only up to this many
+#: facet generator subsets C(m, k-1) (k = 6, m = 64 has 7.6 million), and the service's
+#: default build budget is the declared build cost of an enumeration this large (3.0 s).
+FACET_LIMIT = 20_000
+#: Largest C(m, k-1) the facet-search methods enumerate at all (asked for explicitly); beyond
+#: it they use the LP formulation (build time and memory grow with the number of facets).
 FACET_BUILD_LIMIT = 100_000
+_TOL = 1e-10  # Eq 1.17 slack, relative (rays through an edge satisfy two tiles up to round-off)
+
+# Declared build cost (``Method.build_cost``), measured on the project's machine (2 shared
+# cores, 2026-11-30), seconds per build:
+#
+#   method               problem                 build    per facet subset C(m_free, k-1)
+#   da_facet             k=6, m=20 (15,504)      0.72 s   46 us
+#   da_bisect            k=6, m=20 (15,504)      1.13 s   73 us
+#   da_bisect            k=3, m=64 (2,016)       0.29 s   142 us
+#   da_table res 64      k=6, m=20 (15,504)      0.95 s   62 us (no table above k = 3)
+#   da_table res 64      k=3, m=20 (190)         1.72 s   table term dominates
+#   da_table res 64      k=3, m=64 (2,016)       7.34 s   table term dominates
+#   da_table res 128/32  k=3, m=20               3.46/0.45 s
+#
+# The model over-predicts every measurement above, by up to 2x: 150 us per subset; the
+# k = 3 table of da_table adds resolution^2 x (270 + 0.75 x subsets) us (two ray casts per
+# cell against every tile).  Memory: about 4.5 KiB per subset (k = 6, m = 20: 60-71 MiB RSS).
+#: seconds per facet generator subset enumerated at build (measured <= 142 us)
+FACET_SECONDS = 150e-6
+_TABLE_CELL_SECONDS, _TABLE_CELL_SUBSET_SECONDS = 270e-6, 0.75e-6
+
+
+def facet_build_seconds(subsets: int) -> float:
+    """Declared build time (s) of a facet enumeration over ``subsets`` generator subsets."""
+    return FACET_SECONDS * subsets
 _TOL = 1e-10  # Eq 1.17 slack, relative (rays through an edge satisfy two tiles up to round-off)
 
 
@@ -69,6 +104,11 @@ class FacetSearch(Method):
     equation = _EQ
     summary = "direct allocation: sequential facet search over stored facet inverses (Eq 1.16-1.17)"
     options = {}
+
+    @classmethod
+    def build_cost(cls, problem: Problem, **options: Any) -> float:
+        """Enumerating the facets: :data:`FACET_SECONDS` per subset C(m_free, k-1)."""
+        return facet_build_seconds(cls.facet_subsets(problem, options))
 
     def __init__(self, problem: Problem) -> None:
         super().__init__(problem)
@@ -91,7 +131,7 @@ class FacetSearch(Method):
         self.build_time = time.perf_counter() - t0
 
     def _use_lp(self, reason: str) -> None:
-        from ..methods.direct import DirectAllocation  # the LP formulation of the same problem
+        from .direct import DirectAllocation  # the LP formulation of the same problem (imports this module)
 
         self._lp = DirectAllocation(self.problem, backend="daqp")
         self.lp_reason = reason
@@ -110,21 +150,21 @@ class FacetSearch(Method):
             self._range_proj = Qb @ Qb.T
             return
         k = p.k
-        scale = np.abs(ams._NB).sum(axis=1) * np.abs(p.umax - p.umin).max() + 1e-300
-        base = ams._gap <= 1e-12 * scale  # facets through the base point: Eq 1.16 is singular there
-        self._Nz = ams._Nr[base]
-        keep = ~base[ams._tile_facet]
+        scale = np.abs(ams.tiling.normal_columns).sum(axis=1) * np.abs(p.umax - p.umin).max() + 1e-300
+        base = ams.tiling.gaps <= 1e-12 * scale  # facets through the base point: Eq 1.16 is singular there
+        self._Nz = ams.tiling.normals[base]
+        keep = ~base[ams.tiling.tile_facet]
         tiles = np.flatnonzero(keep)
         self._tiles = tiles
-        span = ams._tile_span[tiles]  # (T, k-1)
+        span = ams.tiling.tile_span[tiles]  # (T, k-1)
         M = np.empty((len(tiles), k, k))
-        M[:, :, 0] = ams._tile_corner[tiles] - self._p0
-        M[:, :, 1:] = np.moveaxis(ams._Er[:, span], 0, 1)
+        M[:, :, 0] = ams.tiling.tile_corner[tiles] - self._p0
+        M[:, :, 1:] = np.moveaxis(ams.tiling.generators[:, span], 0, 1)
         self._Minv = np.linalg.inv(M)
         self._Minv2 = self._Minv.reshape(-1, k)  # X = (Minv2 @ d).reshape(T, k): one BLAS call
-        self._U = ams._tile_u[tiles]  # (T, m) corner controls
-        self._S = ams._steps[span]  # (T, k-1, m) edge steps in u
-        self._facet_of_tile = ams._tile_facet[tiles]
+        self._U = ams.tiling.tile_u[tiles]  # (T, m) corner controls
+        self._S = ams.tiling.class_steps[span]  # (T, k-1, m) edge steps in u
+        self._facet_of_tile = ams.tiling.tile_facet[tiles]
         self._prepare_kernels()
 
     def _prepare_kernels(self) -> None:
@@ -134,9 +174,10 @@ class FacetSearch(Method):
         self._kMinv, self._kU, self._kS = f64(self._Minv), f64(self._U), f64(self._S)
         self._kNz, self._kp0, self._ku0 = f64(self._Nz), f64(self._p0), f64(self._u0)
         # rate-limited box: the facet structure with gaps and tiles placed per call
-        self._kray = (f64(self.problem.B), f64(ams._Br), f64(ams._Nr), f64(ams._NB), f64(ams._member),
-                      f64(ams.sign, dtype=float), f64(ams.active), f64(ams._tile_hi), f64(ams._tile_span),
-                      np.searchsorted(ams._tile_facet, np.arange(ams.n_facets + 1)).astype(np.intp))
+        t = ams.tiling
+        self._kray = (f64(self.problem.B), f64(t.B), f64(t.normals), f64(t.normal_columns), f64(t.class_members),
+                      f64(ams.sign, dtype=float), f64(ams.active), f64(t.tile_hi), f64(t.tile_span),
+                      np.searchsorted(t.tile_facet, np.arange(ams.n_facets + 1)).astype(np.intp))
 
     def _nominal(self, lo: FloatArray, hi: FloatArray) -> bool:
         return (lo is self._umin or np.array_equal(lo, self._umin)) and (
@@ -164,7 +205,7 @@ class FacetSearch(Method):
         return a, self._U[t] + b @ self._S[t]
 
     def solve(self, v, lo, hi, u_prev):
-        """Compiled search (:mod:`alloc.ams._kernels`); answers as :meth:`_solve_reference`."""
+        """Compiled search (:mod:`alloc.methods._facet_kernels`); answers as :meth:`_solve_reference`."""
         if self._lp is not None:
             return self._lp.solve(v, lo, hi, u_prev)
         if self._flat:
@@ -230,9 +271,9 @@ class FacetSearch(Method):
             Dc = D[s:s + chunk]
             n = len(Dc)
             rows = np.arange(n)
-            ND = Dc @ ams._Nr.T
+            ND = Dc @ ams.tiling.normals.T
             with np.errstate(divide="ignore", invalid="ignore"):
-                R = np.where(ND > 1e-12 * np.linalg.norm(Dc, axis=1, keepdims=True), ams._gap / ND, np.inf)
+                R = np.where(ND > 1e-12 * np.linalg.norm(Dc, axis=1, keepdims=True), ams.tiling.gaps / ND, np.inf)
             f = np.argmin(R, axis=1)
             a = np.maximum(R[rows, f], 0.0)
             tl = self._facet_pad[f]  # (n, P) tile positions, -1 padded
@@ -288,13 +329,13 @@ class EdgeBisect(FacetSearch):
         self._bisect = not self._flat and self.problem.k == 3 and ams.n_classes >= 2
         if not self._bisect:
             return
-        G = ams._Er / 2.0  # centred class generators
+        G = ams.tiling.generators / 2.0  # centred class generators
         self._R = G / np.linalg.norm(G, axis=0)
         # Search in axes scaled to the set's extent: facet identity is invariant under a
         # linear map, and the angular search is far better conditioned on a round set.
         self._W = 1.0 / np.abs(G).sum(axis=1)
         self._G = G * self._W[:, None]
-        self._c = (ams._Br @ ((ams.lo + ams.hi) / 2.0) - self._p0) * self._W  # centre seen from B u0
+        self._c = (ams.tiling.B @ ((ams.lo + ams.hi) / 2.0) - self._p0) * self._W  # centre seen from B u0
         C = G.shape[1]
         # facet of each (class i, class j, side): side 1 when n . (r_i x r_j) > 0
         lut = np.full((C, C, 2), -1, dtype=np.intp)
@@ -302,8 +343,8 @@ class EdgeBisect(FacetSearch):
         for i, f in enumerate(self._facet_of_tile):
             tiles_of.setdefault(int(f), []).append(i)
         for f, tl in tiles_of.items():
-            F = np.flatnonzero(ams._free_cls[f])
-            n = ams._Nr[f]
+            F = np.flatnonzero(ams.tiling.free_classes[f])
+            n = ams.tiling.normals[f]
             for a in range(len(F)):
                 for b in range(a + 1, len(F)):
                     i, j = F[a], F[b]
@@ -446,6 +487,16 @@ class SphericalTable(FacetSearch):
     options = {"resolution": integer(64, "elevation cells (azimuth gets twice as many)", low=2)}
     _CANDIDATES = 5
 
+    @classmethod
+    def build_cost(cls, problem: Problem, **options: Any) -> float:
+        """The facet enumeration plus, at k = 3, the (resolution x 2 resolution) direction table."""
+        seconds = super().build_cost(problem, **options)
+        res = options.get("resolution", cls.options["resolution"].default)
+        if problem.k == 3 and isinstance(res, int) and not isinstance(res, bool) and res > 0:
+            subsets = cls.facet_subsets(problem, options)
+            seconds += float(res) ** 2 * (_TABLE_CELL_SECONDS + _TABLE_CELL_SUBSET_SECONDS * subsets)
+        return seconds
+
     def __init__(self, problem: Problem, *, resolution: int = 64) -> None:
         resolution = _int_option(resolution, "resolution", 2, 256, "da_table")
         self.resolution = resolution
@@ -461,7 +512,7 @@ class SphericalTable(FacetSearch):
         na = 2 * ne
         # quantise directions of W d, W = 1 / extent of the set per axis: a round set gives
         # facets comparable solid angles (ICE's pitch/roll/yaw extents differ 10x)
-        ext = np.abs(self.ams._Er).sum(axis=1)
+        ext = np.abs(self.ams.tiling.generators).sum(axis=1)
         self._W = 1.0 / ext
         az = np.linspace(-np.pi, np.pi, na + 1)
         el = np.linspace(-np.pi / 2, np.pi / 2, ne + 1)
