@@ -29,7 +29,7 @@ from .schemas import EVENT_KINDS
 
 __all__ = [
     "ServiceError", "NotFound", "Conflict", "Unauthorized", "PayloadTooLarge", "InvalidRequest", "TooManyRequests",
-    "problem_response", "install_handlers", "PROBLEM_JSON",
+    "ServiceUnavailable", "problem_response", "install_handlers", "PROBLEM_JSON",
 ]
 
 PROBLEM_JSON = "application/problem+json"
@@ -65,6 +65,12 @@ class TooManyRequests(ServiceError):
     """The build pool and its queue are full (a bounded resource, not an error of the request)."""
 
     status, slug, title = 429, "too-many-requests", "Too many concurrent builds"
+
+
+class ServiceUnavailable(ServiceError):
+    """A build process stopped (killed, out of memory) during the request's build."""
+
+    status, slug, title = 503, "service-unavailable", "Build process unavailable"
 
 
 class PayloadTooLarge(ServiceError):
@@ -162,7 +168,7 @@ def install_handlers(app: FastAPI) -> None:
     @app.exception_handler(ServiceError)
     async def _service(request: Request, exc: ServiceError) -> JSONResponse:
         headers = ({"WWW-Authenticate": 'ApiKey header="X-API-Key"'} if exc.status == 401
-                   else {"Retry-After": "1"} if exc.status == 429 else None)
+                   else {"Retry-After": "1"} if exc.status in (429, 503) else None)
         return problem_response(exc.status, exc.slug, exc.title, exc.detail, exc.errors, headers)
 
     @app.exception_handler(alloc.AllocError)
