@@ -6,8 +6,8 @@ builds ran on a thread of the service process, an event's commit on the writer t
 p50 30-53 ms instead of 4-23 ms and waited up to 55 ms for the GIL before it started; the
 event's p99 was 140-414 ms.  A build thread cannot be given a lower priority (the GIL
 holder would then stall everybody), a build process can: it holds no lock the service
-needs and runs at niceness +:data:`BUILD_NICE`, so the kernel gives the event's threads
-the CPU first.
+needs and runs at niceness +:data:`BUILD_NICE` under ``SCHED_IDLE`` (Linux), so the kernel
+gives the event's threads the CPU first.
 
 Two lanes, each bounded in concurrency and queue (429 beyond):
 
@@ -165,9 +165,21 @@ def build(problem: alloc.Problem, method: str, options: dict[str, Any], budget: 
     return Built(allocator if nbytes <= keep_bytes else None, nbytes)
 
 
-def _init_build_process(nice: int) -> None:
+def _exit_with_parent(parent: int) -> None:
+    """Exit this build process once the service process is gone (even killed with SIGKILL)."""
+    while os.getppid() == parent:
+        time.sleep(0.5)
+    os._exit(0)
+
+
+def _init_build_process(parent: int, nice: int) -> None:
     """Build process start-up: lower priority, numba kernels loaded before the first build."""
+    threading.Thread(target=_exit_with_parent, args=(parent,), daemon=True, name="alloc-parent").start()
     os.nice(nice)
+    try:  # run only when the service's threads do not want the CPU (Linux; lowering needs no privilege)
+        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+    except (AttributeError, OSError):
+        pass  # niceness alone
     from .main import warm_up
     warm_up()
 
@@ -188,7 +200,8 @@ class _Lane:
         if self.pool is None:
             if self.name == "process":
                 self.pool = ProcessPoolExecutor(self.workers, mp_context=get_context("spawn"),
-                                                initializer=_init_build_process, initargs=(BUILD_NICE,))
+                                                initializer=_init_build_process,
+                                                initargs=(os.getpid(), BUILD_NICE))
             else:
                 self.pool = ThreadPoolExecutor(self.workers, thread_name_prefix=f"alloc-{self.name}")
         return self.pool
