@@ -39,7 +39,7 @@ import tempfile
 import threading
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Any
 
@@ -425,6 +425,14 @@ def _environment() -> str:
     return f"uvicorn 1 worker ({loop}, {parser}); {os.cpu_count()} CPU(s); load average {load}"
 
 
+def table(title: str, rows: Iterable[Stats]) -> None:
+    """Print a titled table of ``rows``."""
+    print(f"\n{title}")
+    print(HEADER)
+    for stats in rows:
+        print(stats.row())
+
+
 def flood_only(runs: int) -> None:
     """Section 8's option flood alone, ``runs`` times: each run's events on a fresh vehicle (so its
     da_table builds are not cached by an earlier run), after the same events without the flood."""
@@ -518,33 +526,17 @@ def main() -> None:
         memory = bench_memory_attack(server)
 
     print(f"niceness increment of client and server: {args.nice}")
-    print("\nScheduling noise floor of this machine (client process)")
-    print(HEADER)
-    print(noise.row())
-    print("\nLibrary call (same machine, no HTTP)")
-    print(HEADER)
-    for s in lib.values():
-        print(s.row())
-    print("\nClosed loop, single requests (one keep-alive connection)")
-    print(HEADER)
-    for s in single:
-        print(s.row())
-    print("\nClosed loop, batch requests (allocs/s counts demands; latency per request)")
-    print(HEADER)
-    for s in batch:
-        print(s.row())
+    table("Scheduling noise floor of this machine (client process)", [noise])
+    table("Library call (same machine, no HTTP)", lib.values())
+    table("Closed loop, single requests (one keep-alive connection)", single)
+    table("Closed loop, batch requests (allocs/s counts demands; latency per request)", batch)
     print(f"\nOpen loop at {args.rate:g} requests/s (latency from the scheduled send time; goal p99 < 5 ms)")
     print(HEADER + "  goal")
     for s in open_loop:
         p99 = float(np.percentile(s.lat, 99)) * 1e3
         print(s.row() + ("  met" if p99 < 5.0 else "  MISSED"))
-    print("\nReconfiguration (event committed with fsync + allocators rebuilt, then the next allocation)")
-    print(HEADER)
-    for s in reconfig:
-        print(s.row())
-    print("\nAcross processes (two service processes on one SQLite file)")
-    print(HEADER)
-    print(cross.row())
+    table("Reconfiguration (event committed with fsync + allocators rebuilt, then the next allocation)", reconfig)
+    table("Across processes (two service processes on one SQLite file)", [cross])
     print(f"B's first allocation after the event's response was stale: {stale} of {cross.n} (must be 0)")
     print("\nUnder attack")
     print(HEADER + "  goal")

@@ -30,6 +30,7 @@ import asyncio
 import copyreg
 import logging
 import os
+import pickle
 import threading
 import time
 import uuid
@@ -160,9 +161,19 @@ def build(problem: alloc.Problem, method: str, options: dict[str, Any], budget: 
         _log.warning("build of %s took %.2f s, over the budget of %.2f s (cost model under-predicted)",
                      method, seconds, budget)
     nbytes = estimate_bytes(allocator)
+    if _in_build_process and nbytes <= keep_bytes and not _picklable(allocator):
+        keep_bytes = -1  # it cannot come back to the service: answer here
     if call is not None and (call.V is not None or nbytes > keep_bytes):
         return Built(None, nbytes, call.token, call.run(allocator))
     return Built(allocator if nbytes <= keep_bytes else None, nbytes)
+
+
+def _picklable(allocator: alloc.Allocator) -> bool:
+    try:
+        pickle.dumps(allocator)  # the methods with a build cost today all pickle (checked by the tests)
+    except (pickle.PicklingError, TypeError, AttributeError):
+        return False
+    return True
 
 
 def _exit_with_parent(parent: int) -> None:
@@ -172,8 +183,13 @@ def _exit_with_parent(parent: int) -> None:
     os._exit(0)
 
 
+_in_build_process = False
+
+
 def _init_build_process(parent: int, nice: int) -> None:
     """Build process start-up: lower priority, numba kernels loaded before the first build."""
+    global _in_build_process
+    _in_build_process = True
     threading.Thread(target=_exit_with_parent, args=(parent,), daemon=True, name="alloc-parent").start()
     os.nice(nice)
     try:  # run only when the service's threads do not want the CPU (Linux; lowering needs no privilege)
