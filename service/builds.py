@@ -17,6 +17,10 @@ Two lanes, each bounded in concurrency and queue (429 beyond):
 * ``thread``: every other build (an SVD or a QP set-up of at most 6 x 64: milliseconds),
   2 threads of the service process.
 
+The build processes start with the first costly build (a few seconds: imports, and the
+numba kernels the service compiled at its start-up, loaded from numba's cache) and stop
+with the store (terminated, not waited for) or with the service process.
+
 An allocator comes back from the build process only when it is small enough to be worth
 keeping (at most :data:`TRANSFER_BYTES`, and what the cache would keep for its key):
 unpickling a ``da_facet`` allocator of k = 6, m = 20 (31,055 arrays, 75 MB) held the
@@ -191,17 +195,13 @@ def _init_build_process(parent: int, nice: int) -> None:
     global _in_build_process
     _in_build_process = True
     threading.Thread(target=_exit_with_parent, args=(parent,), daemon=True, name="alloc-parent").start()
+    from .main import warm_up
+    warm_up()  # at normal priority: a process starved in its initializer is of no use and cannot be stopped
     os.nice(nice)
     try:  # run only when the service's threads do not want the CPU (Linux; lowering needs no privilege)
         os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
     except (AttributeError, OSError):
         pass  # niceness alone
-    from .main import warm_up
-    warm_up()
-
-
-def _ready() -> int:
-    return os.getpid()
 
 
 class _Lane:
@@ -230,11 +230,6 @@ class Builder:
         self._lanes = {"process": _Lane("process", processes, queue), "thread": _Lane("thread", 2, 64)}
         self._inflight: dict[Hashable, Future[Any]] = {}
         self._lock = threading.Lock()
-
-    def start(self) -> None:
-        """Start the build processes now (in the background), not on the first costly request."""
-        with self._lock:
-            self._lanes["process"].executor().submit(_ready)
 
     def submit(self, key: Hashable, lane_name: str, fn: Callable[..., Any], *args: Any,
                then: Callable[[Future[Any]], None] | None = None) -> Future[Any]:
@@ -291,5 +286,13 @@ class Builder:
             for lane in self._lanes.values():
                 lane.pool = None
         for pool in pools:
-            if pool is not None:
-                pool.shutdown(wait=False, cancel_futures=True)
+            if pool is None:
+                continue
+            # a build process still in its initializer (warming kernels at idle priority on a busy
+            # machine) never reads the shutdown sentinel: stop the processes, do not wait for them
+            processes = list((getattr(pool, "_processes", None) or {}).values())
+            pool.shutdown(wait=False, cancel_futures=True)
+            for proc in processes:
+                proc.terminate()
+            for proc in processes:
+                proc.join(timeout=2.0)

@@ -172,7 +172,6 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     async def lifespan(app: FastAPI):  # type: ignore[no-untyped-def]
         if settings.warmup:
             _log.info("numba kernels warmed in %.2f s", warm_up())
-            store.builder.start()  # the build processes load theirs in the background
         # A thread waiting for the GIL (an event's writer thread, a build finishing) gets it
         # within 1 ms instead of 5 ms: an event does a dozen GIL hand-offs, and under a
         # request flood each one would otherwise wait the full interval.

@@ -26,7 +26,7 @@ import time
 from collections import deque
 from collections.abc import Iterable
 
-from starlette.types import ASGIApp, Receive, Scope, Send
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from . import timing
 
@@ -149,7 +149,19 @@ class PriorityMiddleware:
             timing.mark("gate")
             await self.app(scope, receive, send)
             return
+        left = False
+
+        def leave() -> None:
+            nonlocal left
+            if not left:
+                left = True
+                gate.leave()
+
+        async def send_then_leave(message: Message) -> None:
+            await send(message)
+            if message["type"] == "http.response.body" and not message.get("more_body", False):
+                leave()  # answered: background work after the response holds nobody back
         try:
-            await self.app(scope, receive, send)
+            await self.app(scope, receive, send_then_leave)
         finally:
-            gate.leave()
+            leave()

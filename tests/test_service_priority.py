@@ -35,9 +35,12 @@ def server(tmp_path):
 
 
 def test_events_complete_while_every_build_is_blocked(server):
-    workers = server.build_processes()
-    with httpx.Client(base_url=server.url, timeout=60.0) as c:
+    with httpx.Client(base_url=server.url, timeout=120.0) as c:
         vid = c.post("/v1/vehicles", json=ice().to_dict(), headers=H).json()["id"]
+        # the first costly build starts the build process
+        assert c.post(f"/v1/vehicles/{vid}/allocate", json={"v": [0.1, 0.2, 0.0], "method": "da_facet"}
+                      ).status_code == 200
+    workers = server.build_processes()
     flood: list[int] = []
 
     def attacker(resolution: int) -> None:  # a distinct costly da_table build each, no key
