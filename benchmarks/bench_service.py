@@ -15,7 +15,8 @@ database, then measures for ``pinv`` and ``qp`` on the ICE problem (k = 3, m = 1
    then allocations through B: event-to-visible latency (event sent -> first allocation
    from B that applies it returned) and how many of B's first allocations were stale (0);
 8. under attack: event latency while 16 unauthenticated clients flood distinct-option
-   ``da_table`` builds (goal p99 < 50 ms), ``/v1/health`` latency while the issue's hostile
+   ``da_table`` builds (goal p99 < 50 ms; ``--flood-only RUNS`` runs this alone, with the
+   server's ``Server-Timing`` phases of the events: where an event's time went), ``/v1/health`` latency while the issue's hostile
    request (1e300 B, Wu 1e-20) is repeated (goal < 100 ms), and the RSS growth after 25
    distinct inline ``da_facet`` problems at k = 6, m = 20 (bound: cache 128 MiB + one build).
 
@@ -38,6 +39,7 @@ import tempfile
 import threading
 import time
 from collections import deque
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Any
 
@@ -49,6 +51,7 @@ from service.process import ServiceProcess
 
 METHODS = ("pinv", "qp")
 DEADLINE_S = 300.0  # the whole run stops by itself within this
+KEY = "bench-key"  # the service's API key: writes (events) carry it, the attackers do not
 
 
 @dataclass
@@ -60,6 +63,7 @@ class Stats:
     per_request: int = 1  # allocations per request
     errors: int = 0
     server: np.ndarray | None = None  # the service's own time per request (Server-Timing), seconds
+    phases: list[dict[str, float]] | None = None  # each request's Server-Timing phases, ms
 
     @property
     def rate(self) -> float:
@@ -80,17 +84,28 @@ HEADER = (f"{'case':<40} {'reqs':>6} {'allocs/s':>12} {'p50 ms':>9} {'p99 ms':>9
           f" {'srv p50':>9} {'srv p99':>9}")
 
 
+def server_timing(header: str) -> dict[str, float]:
+    """``Server-Timing`` as ``{name: ms}`` (``app``: the whole request; the rest its phases)."""
+    out: dict[str, float] = {}
+    for item in header.split(","):
+        name, _, dur = item.strip().partition(";dur=")
+        if dur:
+            out[name] = float(dur)
+    return out
+
+
 class Connection:
     """A persistent HTTP/1.1 connection (http.client: the lightest client in the stdlib)."""
 
-    def __init__(self, port: int) -> None:
+    def __init__(self, port: int, api_key: str | None = None) -> None:
         self.conn = http.client.HTTPConnection("127.0.0.1", port, timeout=30)
+        self.headers = {"Content-Type": "application/json", **({"X-API-Key": api_key} if api_key else {})}
 
     def post(self, path: str, body: bytes) -> tuple[int, bytes]:
-        self.conn.request("POST", path, body, {"Content-Type": "application/json"})
+        self.conn.request("POST", path, body, self.headers)
         r = self.conn.getresponse()
-        timing = r.getheader("server-timing", "")
-        self.server_ms = float(timing.split("dur=")[1]) if "dur=" in timing else float("nan")
+        self.timing = server_timing(r.getheader("server-timing", ""))
+        self.server_ms = self.timing.get("app", float("nan"))
         return r.status, r.read()
 
     def close(self) -> None:
@@ -168,8 +183,8 @@ async def _open_loop(port: int, path: str, bodies: list[bytes], rate: float, con
             name, _, value = line.decode("latin-1").partition(":")
             if name.lower() == "content-length":
                 length = int(value)
-            elif name.lower() == "server-timing" and "dur=" in value:
-                timing = float(value.split("dur=")[1]) / 1e3
+            elif name.lower() == "server-timing":
+                timing = server_timing(value).get("app", float("nan")) / 1e3
         await reader.readexactly(length)
         done = time.perf_counter()
         from_schedule[i], from_send[i], server[i] = done - scheduled, done - sent, timing
@@ -210,30 +225,6 @@ def bench_open(port: int, label: str, path: str, bodies: list[bytes], rate: floa
             Stats(label + " (from send)", len(bodies), seconds, sent, 1, errors, server))
 
 
-def bench_events(port: int, vid: str, n: int = 40) -> tuple[Stats, Stats]:
-    """Alternate jam / repair events, each followed at once by a qp allocation."""
-    conn = Connection(port)
-    alloc_body = json.dumps({"v": [0.5, 1.0, 0.2], "method": "qp"}).encode()
-    conn.post(f"/v1/vehicles/{vid}/allocate", alloc_body)
-    ev_lat, first_lat, first_srv = np.empty(n), np.empty(n), np.empty(n)
-    errors = 0
-    t_start = time.perf_counter()
-    for i in range(n):
-        ev = toggle_event(i)
-        t0 = time.perf_counter()
-        status, _ = conn.post(f"/v1/vehicles/{vid}/events", json.dumps(ev).encode())
-        t1 = time.perf_counter()
-        status2, _ = conn.post(f"/v1/vehicles/{vid}/allocate", alloc_body)
-        t2 = time.perf_counter()
-        ev_lat[i], first_lat[i] = t1 - t0, t2 - t1
-        first_srv[i] = conn.server_ms / 1e3
-        errors += (status != 201) + (status2 != 200)
-    seconds = time.perf_counter() - t_start
-    conn.close()
-    return (Stats("POST /v1/vehicles/{id}/events", n, seconds, ev_lat, 1, errors),
-            Stats("first qp allocate after event", n, seconds, first_lat, 1, 0, first_srv))
-
-
 def toggle_event(i: int) -> dict[str, Any]:
     """The i-th event of the benchmarks' sequence: jam elevon_l (even i, varying position), repair (odd i)."""
     if i % 2 == 0:
@@ -241,18 +232,53 @@ def toggle_event(i: int) -> dict[str, Any]:
     return {"effector": "elevon_l", "kind": "repair"}
 
 
-def bench_cross_process(port_a: int, port_b: int, vid: str, n: int = 60) -> tuple[Stats, int]:
-    """Event through A, then allocations through B until one applies it."""
-    a, b = Connection(port_a), Connection(port_b)
-    body = json.dumps({"v": [0.5, 1.0, 0.2], "method": "qp"}).encode()
-    b.post(f"/v1/vehicles/{vid}/allocate", body)
-    lat = np.empty(n)
-    stale = 0
+def record_events(conn: Connection, vid: str, n: int, label: str,
+                  after: Callable[[int, bytes, float], None] = lambda i, reply, sent: None) -> Stats:
+    """``n`` events of :func:`toggle_event` through ``conn``, each followed by ``after(i, reply,
+    sent)`` (``sent``: the event's send time); the events' latency and ``Server-Timing``."""
+    lat, server = np.empty(n), np.empty(n)
+    phases: list[dict[str, float]] = []
+    errors = 0
     t_start = time.perf_counter()
     for i in range(n):
-        ev = toggle_event(i)
         t0 = time.perf_counter()
-        status, reply = a.post(f"/v1/vehicles/{vid}/events", json.dumps(ev).encode())
+        status, reply = conn.post(f"/v1/vehicles/{vid}/events", json.dumps(toggle_event(i)).encode())
+        lat[i], server[i] = time.perf_counter() - t0, conn.server_ms / 1e3
+        phases.append(conn.timing)
+        errors += status != 201
+        after(i, reply, t0)
+    return Stats(label, n, time.perf_counter() - t_start, lat, 1, errors, server, phases)
+
+
+def bench_events(port: int, vid: str, n: int = 40) -> tuple[Stats, Stats]:
+    """Alternate jam / repair events, each followed at once by a qp allocation."""
+    conn = Connection(port, KEY)
+    alloc_body = json.dumps({"v": [0.5, 1.0, 0.2], "method": "qp"}).encode()
+    conn.post(f"/v1/vehicles/{vid}/allocate", alloc_body)
+    first_lat, first_srv = np.empty(n), np.empty(n)
+    first_errors = 0
+
+    def allocate(i: int, reply: bytes, sent: float) -> None:
+        nonlocal first_errors
+        t0 = time.perf_counter()
+        status, _ = conn.post(f"/v1/vehicles/{vid}/allocate", alloc_body)
+        first_lat[i], first_srv[i] = time.perf_counter() - t0, conn.server_ms / 1e3
+        first_errors += status != 200
+    events = record_events(conn, vid, n, "POST /v1/vehicles/{id}/events", allocate)
+    conn.close()
+    return events, Stats("first qp allocate after event", n, events.seconds, first_lat, 1, first_errors, first_srv)
+
+
+def bench_cross_process(port_a: int, port_b: int, vid: str, n: int = 60) -> tuple[Stats, int]:
+    """Event through A, then allocations through B until one applies it."""
+    a, b = Connection(port_a, KEY), Connection(port_b)
+    body = json.dumps({"v": [0.5, 1.0, 0.2], "method": "qp"}).encode()
+    b.post(f"/v1/vehicles/{vid}/allocate", body)
+    visible = np.empty(n)
+    stale = 0
+
+    def poll_b(i: int, reply: bytes, sent: float) -> None:
+        nonlocal stale
         version = json.loads(reply)["health"]["health_version"]
         first = True
         while True:
@@ -261,11 +287,11 @@ def bench_cross_process(port_a: int, port_b: int, vid: str, n: int = 60) -> tupl
                 break
             stale += first
             first = False
-        lat[i] = time.perf_counter() - t0
-    seconds = time.perf_counter() - t_start
+        visible[i] = time.perf_counter() - sent
+    events = record_events(a, vid, n, "event", poll_b)
     a.close()
     b.close()
-    return Stats("event via A -> applied by B's allocation", n, seconds, lat), stale
+    return Stats("event via A -> applied by B's allocation", n, events.seconds, visible), stale
 
 
 def _flood(port: int, path_body: list[tuple[str, bytes]], statuses: list[int], stop: threading.Event) -> None:
@@ -315,27 +341,31 @@ class Attack:
 
 
 def bench_events_under_flood(port: int, vid: str, n: int = 40, clients: int = 16) -> tuple[Stats, dict[int, int]]:
-    """Events (with the API key) while unauthenticated clients request distinct da_table options."""
+    """Events (with the API key) while unauthenticated clients request distinct da_table options.
+
+    Client ``c`` asks for resolutions ``8 + c, 24 + c, 40 + c, ...``: every client starts
+    with builds within the budget (about 90 of them up to resolution ~98 on ICE), then
+    goes on with options refused for their cost, until the events are done.
+    """
     jobs = [[(f"/v1/vehicles/{vid}/allocate",
-              json.dumps({"v": [0.5, 1.0, 0.2], "method": "da_table", "options": {"resolution": 8 + c * 40 + j}}
-                         ).encode()) for j in range(40)] for c in range(clients)]
+              json.dumps({"v": [0.5, 1.0, 0.2], "method": "da_table",
+                          "options": {"resolution": 8 + c + clients * j}}).encode()) for j in range(2000)]
+            for c in range(clients)]
     attack = Attack(port, jobs)
     time.sleep(0.5)
-    conn = Connection(port)
-    lat = np.empty(n)
-    errors = 0
-    t_start = time.perf_counter()
-    for i in range(n):
-        ev = toggle_event(i)
-        t0 = time.perf_counter()
-        status, _ = conn.post(f"/v1/vehicles/{vid}/events", json.dumps(ev).encode())
-        lat[i] = time.perf_counter() - t0
-        errors += status != 201
-        time.sleep(0.05)
-    seconds = time.perf_counter() - t_start
+    conn = Connection(port, KEY)
+    events = record_events(conn, vid, n, f"event during {clients}-client option flood",
+                           lambda i, reply, sent: time.sleep(0.05))
     counts = attack.stop()
     conn.close()
-    return Stats(f"event during {clients}-client option flood", n, seconds, lat, 1, errors), counts
+    return events, counts
+
+
+def phase_summary(stats: Stats) -> str:
+    """p50 / max of each Server-Timing phase of ``stats``' requests (ms)."""
+    names = list(dict.fromkeys(name for t in stats.phases or () for name in t))
+    cols = {name: np.array([t.get(name, np.nan) for t in stats.phases or ()]) for name in names}
+    return ", ".join(f"{name} {np.nanpercentile(c, 50):.1f}/{np.nanmax(c):.1f}" for name, c in cols.items())
 
 
 def bench_health_under_hostile(port: int, seconds: float = 5.0) -> tuple[Stats, dict[int, int]]:
@@ -358,27 +388,20 @@ def bench_health_under_hostile(port: int, seconds: float = 5.0) -> tuple[Stats, 
     return Stats("GET /v1/health during hostile requests", len(lat), seconds, np.array(lat)), counts
 
 
-def _rss(pid: int) -> int:
-    with open(f"/proc/{pid}/status") as f:
-        for line in f:
-            if line.startswith("VmRSS:"):
-                return int(line.split()[1]) * 1024
-    return 0
-
-
-def bench_memory_attack(port: int, pid: int, n: int = 25) -> tuple[int, int, int, float]:
-    """(RSS before, RSS after, peak RSS seen, seconds) for n distinct inline da_facet problems, k = 6, m = 20."""
+def bench_memory_attack(server: ServiceProcess, n: int = 25) -> tuple[int, int, int, float]:
+    """(RSS before, RSS after, peak RSS seen, seconds) for n distinct inline da_facet problems, k = 6,
+    m = 20: the RSS of the service process and its build processes together."""
     rng = np.random.default_rng(12)
-    conn = Connection(port)
-    before = peak = _rss(pid)
+    conn = Connection(server.port)
+    before = peak = server.rss()
     t0 = time.perf_counter()
     for _ in range(n):
         body = json.dumps({"B": rng.normal(size=(6, 20)).tolist(), "umin": [-1.0] * 20, "umax": [1.0] * 20,
                            "v": [0.1] * 6, "method": "da_facet"}).encode()
         conn.post("/v1/allocate", body)
-        peak = max(peak, _rss(pid))
+        peak = max(peak, server.rss())
     conn.close()
-    return before, _rss(pid), peak, time.perf_counter() - t0
+    return before, server.rss(), peak, time.perf_counter() - t0
 
 
 def bench_noise_floor(n: int = 2000) -> Stats:
@@ -402,6 +425,39 @@ def _environment() -> str:
     return f"uvicorn 1 worker ({loop}, {parser}); {os.cpu_count()} CPU(s); load average {load}"
 
 
+def table(title: str, rows: Iterable[Stats]) -> None:
+    """Print a titled table of ``rows``."""
+    print(f"\n{title}")
+    print(HEADER)
+    for stats in rows:
+        print(stats.row())
+
+
+def flood_only(runs: int) -> None:
+    """Section 8's option flood alone, ``runs`` times: each run's events on a fresh vehicle (so its
+    da_table builds are not cached by an earlier run), after the same events without the flood."""
+    problem = ice().to_dict()
+    print(f"alloc service benchmark, option flood only ({runs} runs); {_environment()}")
+    print(HEADER + "  goal")
+    with tempfile.TemporaryDirectory(prefix="alloc-bench-") as tmp, ServiceProcess(tmp, api_key=KEY) as server:
+        for run in range(runs):
+            conn = Connection(server.port, KEY)  # a new one per run: the last one idled past the keep-alive
+            vid = json.loads(conn.post("/v1/vehicles", json.dumps({**problem, "name": "ice"}).encode())[1])["id"]
+            floor = record_events(conn, vid, 40, f"run {run + 1}: event, no flood", lambda i, reply, sent: time.sleep(0.05))
+            flood, counts = bench_events_under_flood(server.port, vid)
+            p99 = float(np.percentile(flood.lat, 99)) * 1e3
+            ratio = p99 / (float(np.percentile(floor.lat, 99)) * 1e3)
+            print(floor.row())
+            print(flood.row() + f"  p99 < 50 ms {'met' if p99 < 50 else 'MISSED'}; p99 / floor p99 {ratio:.1f}")
+            print(f"  flood answers by status: {counts}; load average {os.getloadavg()[0]:.2f}")
+            print(f"  server phases, p50/max ms, no flood: {phase_summary(floor)}")
+            print(f"  server phases, p50/max ms, flood:    {phase_summary(flood)}")
+            for w in np.argsort(flood.lat)[-3:]:
+                print(f"  slowest: {flood.lat[w] * 1e3:.1f} ms, server: " +
+                      ", ".join(f"{k} {v:.1f}" for k, v in (flood.phases or [])[w].items()))
+            conn.close()
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--n", type=int, default=2000, help="closed-loop single requests per case")
@@ -411,9 +467,14 @@ def main() -> None:
                         help="niceness increment of the client and the server (negative needs root): "
                              "shows the latency of a rig that gives the service priority over other jobs")
     parser.add_argument("--attacks-only", action="store_true", help="skip the open-loop cases")
+    parser.add_argument("--flood-only", type=int, default=0, metavar="RUNS",
+                        help="only the option flood: RUNS runs, each on a fresh vehicle, each next to a no-flood floor")
     args = parser.parse_args()
     if args.nice:
         os.nice(args.nice)
+    if args.flood_only:
+        flood_only(args.flood_only)
+        return
     n = max(100, min(args.n, 20_000))
     n_open = int(max(1, min(args.seconds, 60.0)) * args.rate)
 
@@ -424,8 +485,8 @@ def main() -> None:
     print(f"alloc service benchmark: ICE problem k={p.k}, m={p.m}; loopback; {_environment()}")
 
     # the server process inherits the client's --nice
-    with tempfile.TemporaryDirectory(prefix="alloc-bench-") as tmp, ServiceProcess(tmp) as server:
-        vid = json.loads(Connection(server.port).post("/v1/vehicles", json.dumps({**problem, "name": "ice"}).encode())[1])["id"]
+    with tempfile.TemporaryDirectory(prefix="alloc-bench-") as tmp, ServiceProcess(tmp, api_key=KEY) as server:
+        vid = json.loads(Connection(server.port, KEY).post("/v1/vehicles", json.dumps({**problem, "name": "ice"}).encode())[1])["id"]
         noise = bench_noise_floor()
         lib: dict[str, Stats] = {}
         single: list[Stats] = []
@@ -458,40 +519,24 @@ def main() -> None:
             bodies = [json.dumps({**problem, "v": v.tolist(), "method": method}).encode() for v in V[:n_open]]
             open_loop.extend(bench_open(server.port, f"{args.rate:g}/s inline {method}",
                                         "/v1/allocate", bodies, args.rate))
-        with ServiceProcess(tmp) as second:  # a replica on the same database
+        with ServiceProcess(tmp, api_key=KEY) as second:  # a replica on the same database
             cross, stale = bench_cross_process(server.port, second.port, vid)
         flood, flood_counts = bench_events_under_flood(server.port, vid)
         hostile, hostile_counts = bench_health_under_hostile(server.port)
-        memory = bench_memory_attack(server.port, server.proc.pid)
+        memory = bench_memory_attack(server)
 
     print(f"niceness increment of client and server: {args.nice}")
-    print("\nScheduling noise floor of this machine (client process)")
-    print(HEADER)
-    print(noise.row())
-    print("\nLibrary call (same machine, no HTTP)")
-    print(HEADER)
-    for s in lib.values():
-        print(s.row())
-    print("\nClosed loop, single requests (one keep-alive connection)")
-    print(HEADER)
-    for s in single:
-        print(s.row())
-    print("\nClosed loop, batch requests (allocs/s counts demands; latency per request)")
-    print(HEADER)
-    for s in batch:
-        print(s.row())
+    table("Scheduling noise floor of this machine (client process)", [noise])
+    table("Library call (same machine, no HTTP)", lib.values())
+    table("Closed loop, single requests (one keep-alive connection)", single)
+    table("Closed loop, batch requests (allocs/s counts demands; latency per request)", batch)
     print(f"\nOpen loop at {args.rate:g} requests/s (latency from the scheduled send time; goal p99 < 5 ms)")
     print(HEADER + "  goal")
     for s in open_loop:
         p99 = float(np.percentile(s.lat, 99)) * 1e3
         print(s.row() + ("  met" if p99 < 5.0 else "  MISSED"))
-    print("\nReconfiguration (event committed with fsync + allocators rebuilt, then the next allocation)")
-    print(HEADER)
-    for s in reconfig:
-        print(s.row())
-    print("\nAcross processes (two service processes on one SQLite file)")
-    print(HEADER)
-    print(cross.row())
+    table("Reconfiguration (event committed with fsync + allocators rebuilt, then the next allocation)", reconfig)
+    table("Across processes (two service processes on one SQLite file)", [cross])
     print(f"B's first allocation after the event's response was stale: {stale} of {cross.n} (must be 0)")
     print("\nUnder attack")
     print(HEADER + "  goal")
@@ -499,6 +544,7 @@ def main() -> None:
     print(flood.row() + (f"  p99 < 50 ms {'met' if p99 < 50 else 'MISSED'}"))
     print(f"  flood answers by status: {flood_counts}; floor (no flood): event p50/p99 "
           f"{np.percentile(reconfig[0].lat, 50) * 1e3:.2f}/{np.percentile(reconfig[0].lat, 99) * 1e3:.2f} ms")
+    print(f"  server phases under the flood, p50/max ms: {phase_summary(flood)}")
     worst = float(hostile.lat.max()) * 1e3
     print(hostile.row() + (f"  max < 100 ms {'met' if worst < 100 else 'MISSED'}"))
     print(f"  hostile answers by status: {hostile_counts}")

@@ -12,8 +12,8 @@
 ``ALLOC_INLINE_CACHE_BYTES`` the share of inline problems in it (default 32 MiB)
 ``ALLOC_BUILD_BUDGET_S``     predicted build time above which a build is refused (3 s: the
                              library's FACET_LIMIT priced by the cost model, service.cost)
-``ALLOC_BUILD_WORKERS``      concurrent allocator builds (default 1)
-``ALLOC_BUILD_QUEUE``        builds waiting beyond those, then 429 (default 8)
+``ALLOC_BUILD_WORKERS``      build processes for costly builds (default 1; service.builds)
+``ALLOC_BUILD_QUEUE``        costly builds waiting beyond those, then 429 (default 8)
 ``ALLOC_WARMUP``             compile the numba kernels at start-up (default true)
 ``ALLOC_REQUEST_TIMEOUT_S``  seconds for a request's headers and body to arrive (10)
 ===========================  ========================================================
@@ -21,10 +21,12 @@
 The size caps (``MAX_EFFECTORS``, ``MAX_AXES``, ``MAX_BATCH``, ``MAX_MAGNITUDE``) are part
 of the API contract (they appear in the OpenAPI schema) and are therefore constants.
 
-Memory bound (documented, checked by ``tests/test_service_limits.py``): the process's
-start-up RSS plus ``ALLOC_CACHE_BYTES``, plus up to 1,024 vehicle states (~70 MiB at m = 64), plus ``ALLOC_BUILD_WORKERS`` builds in flight of
-at most ~90 MiB each (a facet enumeration at the cost cap, see :mod:`service.cost`), plus
-the request bodies in flight (``ALLOC_MAX_BODY_BYTES`` each, at most ``limit_concurrency``).
+Memory bound (documented, checked by ``tests/test_service_limits.py`` on the service and its
+build processes together): the start-up RSS of the service and of its
+``ALLOC_BUILD_WORKERS`` build processes, plus ``ALLOC_CACHE_BYTES``, plus up to 1,024
+vehicle states (~70 MiB at m = 64), plus one build in flight per build process of at most
+~90 MiB (a facet enumeration at the cost cap, see :mod:`service.cost`), plus the request
+bodies in flight (``ALLOC_MAX_BODY_BYTES`` each, at most ``limit_concurrency``).
 """
 
 from __future__ import annotations

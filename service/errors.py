@@ -29,7 +29,7 @@ from .schemas import EVENT_KINDS
 
 __all__ = [
     "ServiceError", "NotFound", "Conflict", "Unauthorized", "PayloadTooLarge", "InvalidRequest", "TooManyRequests",
-    "problem_response", "install_handlers", "PROBLEM_JSON",
+    "ServiceUnavailable", "problem_response", "install_handlers", "PROBLEM_JSON",
 ]
 
 PROBLEM_JSON = "application/problem+json"
@@ -37,11 +37,18 @@ _log = logging.getLogger("service")
 
 
 class ServiceError(Exception):
-    """Base of the service's own errors: an HTTP status, a problem type and title."""
+    """Base of the service's own errors: an HTTP status, a problem type and title.
+
+    A subclass names them as class keywords: ``class NotFound(ServiceError, status=404, ...)``.
+    """
 
     status: int = 400
     slug: str = "bad-request"
     title: str = "Bad request"
+
+    def __init_subclass__(cls, *, status: int, slug: str, title: str, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        cls.status, cls.slug, cls.title = status, slug, title
 
     def __init__(self, detail: str, errors: Sequence[dict[str, Any]] = ()) -> None:
         super().__init__(detail)
@@ -49,32 +56,18 @@ class ServiceError(Exception):
         self.errors = list(errors)
 
 
-class NotFound(ServiceError):
-    status, slug, title = 404, "not-found", "Resource not found"
-
-
-class Conflict(ServiceError):
-    status, slug, title = 409, "conflict", "Concurrent update"
-
-
-class Unauthorized(ServiceError):
-    status, slug, title = 401, "unauthorized", "Missing or wrong API key"
-
-
-class TooManyRequests(ServiceError):
-    """The build pool and its queue are full (a bounded resource, not an error of the request)."""
-
-    status, slug, title = 429, "too-many-requests", "Too many concurrent builds"
-
-
-class PayloadTooLarge(ServiceError):
-    status, slug, title = 413, "payload-too-large", "Request body too large"
-
-
-class InvalidRequest(ServiceError):
+# one line each: the status, the problem type's slug and title, what it means
+class NotFound(ServiceError, status=404, slug="not-found", title="Resource not found"): """An unknown vehicle."""
+class Conflict(ServiceError, status=409, slug="conflict", title="Concurrent update"): """Retried writes lost."""
+class Unauthorized(ServiceError, status=401, slug="unauthorized", title="Missing or wrong API key"): """No key."""
+class TooManyRequests(ServiceError, status=429, slug="too-many-requests", title="Too many concurrent builds"):
+    """The build lanes and their queues are full (a bounded resource, not an error of the request)."""
+class ServiceUnavailable(ServiceError, status=503, slug="service-unavailable", title="Build process unavailable"):
+    """A build process stopped (killed, out of memory) during the request's build."""
+class PayloadTooLarge(ServiceError, status=413, slug="payload-too-large", title="Request body too large"):
+    """A body over ``ALLOC_MAX_BODY_BYTES``."""
+class InvalidRequest(ServiceError, status=422, slug="invalid-request", title="Invalid request"):
     """A request that is well-formed JSON but not a valid allocation request."""
-
-    status, slug, title = 422, "invalid-request", "Invalid request"
 
 
 def _error(loc: Sequence[str | int], reason: str) -> dict[str, Any]:
@@ -162,7 +155,7 @@ def install_handlers(app: FastAPI) -> None:
     @app.exception_handler(ServiceError)
     async def _service(request: Request, exc: ServiceError) -> JSONResponse:
         headers = ({"WWW-Authenticate": 'ApiKey header="X-API-Key"'} if exc.status == 401
-                   else {"Retry-After": "1"} if exc.status == 429 else None)
+                   else {"Retry-After": "1"} if exc.status in (429, 503) else None)
         return problem_response(exc.status, exc.slug, exc.title, exc.detail, exc.errors, headers)
 
     @app.exception_handler(alloc.AllocError)

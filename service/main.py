@@ -17,11 +17,13 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 import alloc
 
+from . import timing
 from .config import MAX_AXES, MAX_BATCH, MAX_EFFECTORS, Settings
 from .db import make_engine, make_sessionmaker
 from .docs import install_docs
 from .errors import PROBLEM_JSON, PayloadTooLarge, install_handlers, problem_response
 from .routes import allocation, ams, methods, system, vehicles
+from .priority import GATE_STATE_KEY, PriorityGate, PriorityMiddleware
 from .server import GuardedHttpToolsProtocol
 from .store import VehicleStore
 
@@ -102,7 +104,8 @@ class ServerTiming:
     """ASGI middleware: a ``Server-Timing: app;dur=<ms>`` header on every response.
 
     The time from the request reaching the application to its response headers, so a
-    client can tell the service's share of a latency from the network's and its own.
+    client can tell the service's share of a latency from the network's and its own;
+    followed by the phases the request's path recorded (:mod:`service.timing`).
     """
 
     def __init__(self, app: ASGIApp) -> None:
@@ -113,12 +116,16 @@ class ServerTiming:
             await self.app(scope, receive, send)
             return
         t0 = time.perf_counter()
+        timeline = timing.start()
+        received = scope.get("alloc.received")
+        if received is not None:
+            timeline.phases.append(("dispatch", t0 - received))
 
         async def timed_send(message: Message) -> None:
             if message["type"] == "http.response.start":
                 ms = (time.perf_counter() - t0) * 1e3
-                message = {**message, "headers": [*message.get("headers", ()),
-                                                  (b"server-timing", f"app;dur={ms:.3f}".encode())]}
+                value = f"app;dur={ms:.3f}" + (", " + timeline.header() if timeline.phases else "")
+                message = {**message, "headers": [*message.get("headers", ()), (b"server-timing", value.encode())]}
             await send(message)
 
         await self.app(scope, receive, timed_send)
@@ -155,6 +162,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     """Build the application: database (migrated), store, routers, error handlers, body limit."""
     settings = settings or Settings()
     engine = make_engine(settings.resolved_database_url)
+    gate = PriorityGate(settings.api_key)
     store = VehicleStore(engine, make_sessionmaker(engine), cache_size=settings.cache_size,
                          cache_bytes=settings.cache_bytes, inline_cache_bytes=settings.inline_cache_bytes,
                          build_budget=settings.build_budget_s, build_workers=settings.build_workers,
@@ -173,7 +181,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         # which keeps GC pauses out of the latency tail.
         gc.collect()
         gc.freeze()
-        yield
+        yield {GATE_STATE_KEY: gate}  # lifespan state: where the HTTP protocol finds the gate
         store.close()
         engine.dispose()
 
@@ -181,11 +189,13 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                   docs_url=None, redoc_url=None)
     app.state.settings = settings
     app.state.store = store
+    app.state.gate = gate
     for module in (allocation, methods, ams, vehicles, system):
         app.include_router(module.router)
     install_docs(app)
     install_handlers(app)
     app.add_middleware(BodySizeLimit, limit=settings.max_body_bytes)
+    app.add_middleware(PriorityMiddleware, gate=gate)  # before anything reads a body
     app.add_middleware(ServerTiming)  # outermost: includes the body limit's buffering
     return app
 

@@ -72,6 +72,32 @@ class ServiceProcess:
         self.stop()
         raise RuntimeError(f"service did not answer on {self.url} within {timeout} s")
 
+    def build_processes(self, timeout: float = 120.0) -> list[int]:
+        """Pids of the service's build processes (:mod:`service.builds`), once started."""
+        assert self.proc is not None
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            found = []
+            for task in Path(f"/proc/{self.proc.pid}/task").iterdir():
+                for child in (task / "children").read_text().split():
+                    cmdline = Path(f"/proc/{child}/cmdline").read_bytes()
+                    if b"spawn_main" in cmdline and b"resource_tracker" not in cmdline:
+                        found.append(int(child))
+            if found:
+                return found
+            time.sleep(0.1)
+        raise RuntimeError(f"no build process started within {timeout} s")
+
+    def rss(self) -> int:
+        """Resident memory (bytes) of the service process and its build processes together."""
+        assert self.proc is not None
+        total = 0
+        for pid in [self.proc.pid, *self.build_processes()]:
+            for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+                if line.startswith("VmRSS:"):
+                    total += int(line.split()[1]) * 1024
+        return total
+
     def kill(self) -> None:
         """SIGKILL: no shutdown handlers, no flushing; what is on disk is what survives."""
         if self.proc is not None and self.proc.poll() is None:

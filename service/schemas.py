@@ -146,6 +146,12 @@ class VehicleBatchRequest(_Batch):
 Status = Literal["exact", "unattainable", "fallback"]
 
 
+def _answer(r: alloc.Result | alloc.BatchResult) -> dict[str, Any]:
+    """The fields a single and a batch answer share (one row or one row per demand)."""
+    return {"u": r.u.tolist(), "v_achieved": r.v_achieved.tolist(), "unallocated": r.unallocated.tolist(),
+            "method": r.method, "solve_time": float(r.solve_time)}
+
+
 class AllocationOut(BaseModel):
     u: list[float] = Field(description="effector commands")
     v: list[float]
@@ -162,10 +168,8 @@ class AllocationOut(BaseModel):
 
     @classmethod
     def of(cls, r: alloc.Result, **extra: Any) -> AllocationOut:
-        return cls(u=r.u.tolist(), v=r.v.tolist(), v_achieved=r.v_achieved.tolist(),
-                   unallocated=r.unallocated.tolist(), status=r.status.value, fallback=r.fallback,
-                   method=r.method, iterations=int(r.iterations), solve_time=float(r.solve_time),
-                   message=r.message, **extra)
+        return cls(**_answer(r), v=r.v.tolist(), status=r.status.value, fallback=r.fallback,
+                   iterations=int(r.iterations), message=r.message, **extra)
 
 
 class BatchOut(BaseModel):
@@ -181,9 +185,7 @@ class BatchOut(BaseModel):
 
     @classmethod
     def of(cls, b: alloc.BatchResult, **extra: Any) -> BatchOut:
-        return cls(u=b.u.tolist(), v_achieved=b.v_achieved.tolist(), unallocated=b.unallocated.tolist(),
-                   status=b.status.tolist(), counts=b.counts(), method=b.method,
-                   solve_time=float(b.solve_time), **extra)
+        return cls(**_answer(b), status=b.status.tolist(), counts=b.counts(), **extra)
 
 
 class MethodOut(BaseModel):

@@ -14,11 +14,13 @@ from __future__ import annotations
 import asyncio
 import json
 import os
+import time
 from typing import Any
 
 from uvicorn.protocols.http.httptools_impl import HttpToolsProtocol
 
 from .errors import PROBLEM_JSON
+from .priority import GATE_STATE_KEY, SCOPE_KEY
 
 __all__ = ["GuardedHttpToolsProtocol", "REQUEST_TIMEOUT_S", "problem_bytes"]
 
@@ -70,6 +72,25 @@ class GuardedHttpToolsProtocol(HttpToolsProtocol):
     def connection_lost(self, exc: Exception | None) -> None:
         self._disarm()
         super().connection_lost(exc)
+
+    def on_message_begin(self) -> None:
+        super().on_message_begin()
+        # when the request's first bytes were parsed: ServerTiming reports the wait from
+        # here to the application starting (a busy event loop shows as "dispatch")
+        self.scope["alloc.received"] = time.perf_counter()  # type: ignore[typeddict-unknown-key]
+
+    def on_headers_complete(self) -> None:
+        # A priority request (service.priority) closes the gate now, before the loop runs
+        # any request task queued ahead of it; not when uvicorn answers 503 itself.
+        gate = self.app_state.get(GATE_STATE_KEY)
+        limit = self.limit_concurrency
+        over = limit is not None and (len(self.connections) >= limit or len(self.tasks) >= limit)
+        super().on_headers_complete()
+        if gate is not None and not over and "path" in self.scope:
+            priority = gate.claims(self.scope["method"], self.scope["path"], self.headers)
+            self.scope[SCOPE_KEY] = priority  # type: ignore[literal-required]
+            if priority:
+                gate.enter()
 
     def data_received(self, data: bytes) -> None:
         if not self._receiving:

@@ -25,9 +25,10 @@ request, keyed by the new version).
 Allocators are cached in a :class:`AllocatorCache` bounded in entries and in bytes
 (measured by :func:`service.cost.estimate_bytes`); inline problems share a smaller byte
 budget and an allocator larger than :data:`INLINE_ENTRY_BYTES` built for an inline
-problem is used once and not kept.  Builds run on :class:`Builder`, a bounded pool of
-threads with a bounded queue, after :func:`check_build_cost` refused anything predicted
-to exceed the build budget (see :mod:`service.cost`).
+problem is used once and not kept.  Builds run on :class:`service.builds.Builder` (costly
+ones in a low-priority build process, cheap ones on threads, both bounded in concurrency
+and queue) after :func:`check_build_cost` refused anything predicted to exceed the build
+budget (see :mod:`service.cost`).
 """
 
 from __future__ import annotations
@@ -37,7 +38,6 @@ import json
 import logging
 import sqlite3
 import threading
-import time
 import uuid
 from collections import OrderedDict
 from collections.abc import Callable, Hashable
@@ -53,15 +53,15 @@ from sqlalchemy.orm import Session, sessionmaker
 
 import alloc
 
-from .config import OPTION_CAPS
-from .cost import FACET_SECONDS, build_seconds, estimate_bytes
+from . import timing
+from .builds import TRANSFER_BYTES, Builder, Built, Call, build, build_allocator, check_build_cost
 from .db import EventRow, VehicleRow, utcnow
-from .errors import Conflict, InvalidRequest, NotFound, ServiceError, TooManyRequests, field_error
+from .errors import Conflict, NotFound, ServiceError
 from .health import Health, apply_event, dump_health, load_health, to_problem
 from .schemas import EventIn, VehicleCreate
 
 __all__ = ["VehicleState", "AllocatorCache", "Builder", "VehicleStore", "VersionProbe", "build_allocator",
-           "check_build_cost", "options_key", "PREBUILD_LIMIT", "INLINE_ENTRY_BYTES"]
+           "check_build_cost", "options_key", "PREBUILD_LIMIT", "INLINE_ENTRY_BYTES"]  # the build API re-exported
 
 _log = logging.getLogger("service")
 _MAX_RETRIES = 100
@@ -69,8 +69,6 @@ _MAX_RETRIES = 100
 PREBUILD_LIMIT = 4
 #: an allocator built for an inline problem larger than this is not cached
 INLINE_ENTRY_BYTES = 4 * 1024 * 1024
-#: builds predicted faster than this (seconds) run in the fast lane of the Builder
-FAST_BUILD_S = 0.05
 #: vehicle states kept per process: a state holds two problems, at most ~70 KiB at m = 64
 #: (Wu is m x m), so at most ~70 MiB; part of the documented memory bound
 _STATE_ENTRIES = 1024
@@ -83,123 +81,6 @@ def options_key(options: dict[str, Any]) -> str:
 def _not_found(vehicle_id: str) -> NotFound:
     return NotFound(f"vehicle {vehicle_id!r} does not exist",
                     [{"loc": ["path", "vehicle_id"], "pointer": None, "reason": "unknown vehicle"}])
-
-
-def _reject(field: str, reason: str) -> InvalidRequest:
-    return InvalidRequest(f"{field}: {reason}", [field_error(field, reason)])
-
-
-def check_build_cost(problem: alloc.Problem, method: str, options: dict[str, Any], budget: float) -> float:
-    """Refuse, before it starts, a build predicted to exceed ``budget`` seconds; return the prediction.
-
-    Per-call option caps (``OPTION_CAPS``: iterations a single allocation may run) are
-    checked too.  The prediction is :func:`service.cost.build_seconds`.
-    """
-    for name, value in options.items():
-        cap = OPTION_CAPS.get((method, name))
-        if cap is not None and isinstance(value, (int, float)) and not isinstance(value, bool) and value > cap:
-            raise _reject(f"options/{name}", f"{method}: option {name} = {value} exceeds the service's cap of {cap}")
-    if method not in alloc.methods():
-        return 0.0  # the library names the unknown method
-    seconds = build_seconds(problem, method, options)
-    if seconds <= budget:
-        return seconds
-    cls = alloc.registry.get_method(method)
-    subsets = cls.facet_subsets(problem, dict(options)) if cls.needs_ams else 0
-    facet_part = FACET_SECONDS * subsets
-    cost = (f"{method}: predicted build time {seconds:.3g} s exceeds the service's build budget of {budget:g} s "
-            f"(cap; {subsets:,} facet subsets C(m_free, k-1) x {FACET_SECONDS * 1e6:g} us")
-    if seconds > facet_part * 1.0001 and "resolution" in cls.options:
-        res = options.get("resolution", 64)
-        raise _reject("options/resolution", f"{cost}, plus a {res} x {2 * res} direction table); "
-                                            f"use a smaller resolution or 'da_facet'")
-    raise _reject("method", f"{cost}); use 'da' (the same allocation as an LP)")
-
-
-def build_allocator(problem: alloc.Problem, method: str, options: dict[str, Any], budget: float) -> alloc.Allocator:
-    """``alloc.make_allocator`` after the cost check, with bad option *values* reported as 422.
-
-    Library errors keep their field (``exc.field``, mapped by the handler); a method
-    constructor given an option of the wrong shape or type that raises a plain
-    ``ValueError``/``TypeError`` from numpy is reported against ``options``.
-    """
-    check_build_cost(problem, method, options, budget)
-    try:
-        return alloc.make_allocator(problem, method, **options)
-    except alloc.AllocError as exc:
-        if exc.field in options:  # an option value the method rejected, e.g. "G: expected shape"
-            raise _reject(f"options/{exc.field}", str(exc)) from exc
-        raise
-    except (ValueError, TypeError, ArithmeticError, IndexError, KeyError, np.linalg.LinAlgError) as exc:
-        raise _reject("options", f"{method}: invalid option value ({type(exc).__name__}: {exc})") from exc
-
-
-class _Lane:
-    """One bounded pool of build threads with a bounded queue."""
-
-    def __init__(self, name: str, workers: int, queue: int) -> None:
-        self.name, self.workers, self.limit = name, workers, workers + queue
-        self.pool: ThreadPoolExecutor | None = None
-        self.inflight = 0
-
-
-class Builder:
-    """Bounded build pools with bounded queues, and single-flight per key.
-
-    Two lanes, so that a flood of expensive builds never delays a cheap one (the
-    allocation that must follow a failure is usually a millisecond build):
-
-    * ``slow``: builds predicted (:func:`service.cost.build_seconds`) above
-      :data:`FAST_BUILD_S`; ``workers`` threads, ``queue`` more waiting, then 429;
-    * ``fast``: everything else (an SVD, a QP set-up); 2 threads, 64 waiting, then 429.
-    """
-
-    def __init__(self, workers: int, queue: int) -> None:
-        self._lanes = {"slow": _Lane("slow", workers, queue), "fast": _Lane("fast", 2, 64)}
-        self._inflight: dict[Hashable, Future[Any]] = {}
-        self._lock = threading.Lock()
-
-    def submit(self, key: Hashable, build: Callable[[], Any], seconds: float = 0.0) -> Future[Any]:
-        lane = self._lanes["slow" if seconds > FAST_BUILD_S else "fast"]
-        with self._lock:
-            fut = self._inflight.get(key)
-            if fut is not None:
-                return fut
-            if lane.inflight >= lane.limit:
-                raise TooManyRequests(f"the service is running {lane.inflight} {lane.name} builds (the most it "
-                                      f"queues); retry shortly")
-            if lane.pool is None:
-                lane.pool = ThreadPoolExecutor(max_workers=lane.workers, thread_name_prefix=f"alloc-{lane.name}")
-            fut = lane.pool.submit(build)
-            self._inflight[key] = fut
-            lane.inflight += 1
-
-        def done(_: Future[Any]) -> None:
-            with self._lock:
-                self._inflight.pop(key, None)
-                lane.inflight -= 1
-        fut.add_done_callback(done)
-        return fut
-
-    def wait_idle(self, timeout: float) -> bool:
-        """Wait until no build is queued or running (tests, benchmarks); ``False`` on timeout."""
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            with self._lock:
-                if not self._inflight:
-                    return True
-            time.sleep(0.005)
-        return False
-
-    def shutdown(self) -> None:
-        """Stop the pools (queued builds are cancelled); a later submit starts new ones."""
-        with self._lock:
-            pools = [lane.pool for lane in self._lanes.values()]
-            for lane in self._lanes.values():
-                lane.pool = None
-        for pool in pools:
-            if pool is not None:
-                pool.shutdown(wait=False, cancel_futures=True)
 
 
 class AllocatorCache:
@@ -238,12 +119,20 @@ class AllocatorCache:
             if self._inline(key):
                 self.inline_bytes -= item[1]
 
+    def keep_limit(self, key: Hashable) -> int:
+        """The largest allocator (bytes) this cache keeps under ``key``."""
+        if isinstance(key, tuple) and key and key[0] == "private":
+            return 0
+        if self._inline(key):
+            return min(INLINE_ENTRY_BYTES, self._inline_max, self._max_bytes // 4)
+        return self._max_bytes // 4
+
     def put(self, key: Hashable, allocator: alloc.Allocator, nbytes: int) -> bool:
         """Cache ``allocator`` (``nbytes`` held); ``False`` when it is too large to keep."""
         inline = self._inline(key)
         with self._lock:
             self.builds += 1
-            if nbytes > self._max_bytes // 4 or (inline and nbytes > min(INLINE_ENTRY_BYTES, self._inline_max)):
+            if nbytes > self.keep_limit(key):
                 return False
             self._pop(key)
             self._items[key] = (allocator, nbytes)
@@ -354,7 +243,21 @@ class VehicleStore:
             if self._writers is None:
                 self._writers = ThreadPoolExecutor(max_workers=4, thread_name_prefix="alloc-write")
             pool = self._writers
-        return await asyncio.wrap_future(pool.submit(fn, *args))
+        timeline = timing.current()
+        if timeline is None:
+            return await asyncio.wrap_future(pool.submit(fn, *args))
+        timeline.mark("route")
+
+        def timed() -> Any:
+            timeline.mark("write-queue")
+            try:
+                return fn(*args)
+            finally:
+                timeline.mark("write")
+        try:
+            return await asyncio.wrap_future(pool.submit(timed))
+        finally:
+            timeline.mark("resume")
 
     def close(self) -> None:
         self.builder.shutdown()
@@ -480,7 +383,7 @@ class VehicleStore:
             key = (new.id, new.version, method, okey)
             try:
                 seconds = check_build_cost(new.problem, method, options, self.build_budget)
-                self.builder.submit(key, self._build_and_cache(key, new.problem, method, options), seconds)
+                self._start_build(key, new.problem, method, options, None, seconds)
                 started += 1
             except ServiceError:
                 continue  # refused or the pools are full: the next request builds it (or reports why)
@@ -497,48 +400,55 @@ class VehicleStore:
             ).all())
 
     # --------------------------------------------------------- allocators
-    def _build_and_cache(self, key: Hashable, problem: alloc.Problem, method: str,
-                         options: dict[str, Any]) -> Callable[[], alloc.Allocator]:
-        def build() -> alloc.Allocator:
-            t0 = time.perf_counter()
-            allocator = build_allocator(problem, method, options, self.build_budget)
-            seconds = time.perf_counter() - t0
-            if seconds > self.build_budget:
-                _log.warning("build of %s took %.2f s, over the budget of %.2f s (cost model under-predicted)",
-                             method, seconds, self.build_budget)
-            self.allocators.put(key, allocator, estimate_bytes(allocator))
-            return allocator
-        return build
+    def _start_build(self, key: Hashable, problem: alloc.Problem, method: str, options: dict[str, Any],
+                     call: Call | None, seconds: float) -> Future[Built]:
+        """Submit a build (a costly one to the build process, a cheap one to a thread); the
+        allocator it returns is cached under ``key``."""
+        lane = "process" if seconds > 0 else "thread"
+        keep = self.allocators.keep_limit(key)
+        if lane == "process":
+            keep = min(keep, TRANSFER_BYTES)
 
-    async def _allocator(self, key: Hashable, problem: Callable[[], alloc.Problem], method: str,
-                         options: dict[str, Any]) -> alloc.Allocator:
+        def cache(fut: Future[Built]) -> None:
+            if not fut.cancelled() and fut.exception() is None and (built := fut.result()).allocator is not None:
+                self.allocators.put(key, built.allocator, built.nbytes)
+        return self.builder.submit(key, lane, build, problem, method, options, self.build_budget, keep, call,
+                                   then=cache)
+
+    async def _allocate(self, key: Hashable, problem: Callable[[], alloc.Problem], method: str,
+                        options: dict[str, Any], call: Call) -> Any:
+        """``call`` answered by the allocator cached under ``key``, built if missing.
+
+        A cached allocator is called here, on the event loop (never concurrently); a batch,
+        or an allocator too large to keep, is answered where it was built.
+        """
         found = self.allocators.lookup(key)
-        if found is not None:
-            return found
+        if found is not None and call.V is None:
+            return call.run(found)
         p = problem()
         seconds = check_build_cost(p, method, options, self.build_budget)  # refuse before queueing
-        return await asyncio.wrap_future(
-            self.builder.submit(key, self._build_and_cache(key, p, method, options), seconds))
+        built: Built = await self.builder.outcome(self._start_build(key, p, method, options, call, seconds))
+        if built.token != call.token and built.allocator is None:
+            # the build in flight answered another request (its allocator too large to keep): our own
+            private = ("private", call.token)
+            built = await self.builder.outcome(self._start_build(private, p, method, options, call, seconds))
+        return built.result if built.allocator is None else call.run(built.allocator)
 
-    async def vehicle_allocator(self, state: VehicleState, method: str, options: dict[str, Any]) -> alloc.Allocator:
-        key = (state.id, state.version, method, options_key(options))
-        return await self._allocator(key, lambda: state.problem, method, options)
+    async def vehicle_allocate(self, state: VehicleState, method: str, options: dict[str, Any],
+                               call: Call) -> Any:
+        """``call`` (one demand or a batch) at the vehicle's health ``state``."""
+        key = (state.id, state.version, method, options_key(options)) if call.V is None else ("private", call.token)
+        return await self._allocate(key, lambda: state.problem, method, options, call)
 
-    async def inline_allocator(self, problem_key: str, build_problem: Callable[[], alloc.Problem],
-                               method: str, options: dict[str, Any]) -> alloc.Allocator:
-        key = ("inline", problem_key, method, options_key(options))
-        return await self._allocator(key, build_problem, method, options)
+    async def inline_allocate(self, problem_key: str, build_problem: Callable[[], alloc.Problem],
+                              method: str, options: dict[str, Any], call: Call) -> Any:
+        """``call`` for an inline problem (``problem_key`` identifies it in the cache)."""
+        key = ("inline", problem_key, method, options_key(options)) if call.V is None else ("private", call.token)
+        return await self._allocate(key, build_problem, method, options, call)
 
-    async def fresh_allocator(self, problem: alloc.Problem, method: str, options: dict[str, Any]) -> alloc.Allocator:
-        """A private allocator (batches mutate nothing shared but run off the loop): built on the pool, not cached."""
-        seconds = check_build_cost(problem, method, options, self.build_budget)
-        key = ("private", uuid.uuid4().hex)
-        return await asyncio.wrap_future(self.builder.submit(
-            key, lambda: build_allocator(problem, method, options, self.build_budget), seconds))
-
-    async def run_bounded(self, work: Callable[[], Any]) -> Any:
-        """Run ``work`` in the slow lane of the build pool (bounded concurrency and queue, 429 beyond)."""
-        return await asyncio.wrap_future(self.builder.submit(("work", uuid.uuid4().hex), work, float("inf")))
+    async def run_bounded(self, work: Callable[..., Any], *args: Any) -> Any:
+        """``work(*args)`` (picklable) in the build process (bounded concurrency and queue, 429 beyond)."""
+        return await self.builder.outcome(self.builder.submit(("work", uuid.uuid4().hex), "process", work, *args))
 
     def ping(self) -> None:
         """A committed read through the version probe (raises if the database is unreachable)."""

@@ -13,6 +13,6 @@ router = APIRouter(prefix="/v1/ams", tags=["ams"], responses=PROBLEM_RESPONSES)
 
 @router.post("", response_model=AmsOut, summary="AMS volume and largest moments along directions")
 async def ams_summary(body: AmsRequest, store: StoreDep) -> AmsOut:
-    # on the bounded build pool: a facet enumeration is a build (time and memory bounded there)
+    # in the build process: a facet enumeration is a build (time and memory bounded there)
     problem = body.to_problem()
-    return await store.run_bounded(lambda: ams.summarize(problem, body.directions, store.build_budget))
+    return await store.run_bounded(ams.summarize, problem, body.directions, store.build_budget)

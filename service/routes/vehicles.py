@@ -8,7 +8,6 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from anyio import to_thread
 from fastapi import APIRouter, BackgroundTasks, Depends, Path, Query, Response, status
 
 from .. import ams
@@ -22,6 +21,7 @@ from ..schemas import (
     HealthOut, ProblemOut, VehicleAllocateRequest, VehicleBatchRequest, VehicleCreate, VehicleList,
     VehicleOut, VehicleSummary,
 )
+from ..builds import Call
 from ..store import VehicleState
 
 router = APIRouter(prefix="/v1/vehicles", tags=["vehicles"], responses={**PROBLEM_RESPONSES, **NOT_FOUND})
@@ -100,8 +100,7 @@ def get_health(vehicle_id: VehicleId, store: StoreDep) -> HealthOut:
              summary="Allocate one demand at the vehicle's current health")
 async def allocate(vehicle_id: VehicleId, body: VehicleAllocateRequest, store: StoreDep) -> Response:
     state = store.get(vehicle_id)
-    allocator = await store.vehicle_allocator(state, body.method, body.options)
-    result = allocator(body.v, u_prev=body.u_prev, dt=body.dt)
+    result = await store.vehicle_allocate(state, body.method, body.options, Call(body.v, body.u_prev, body.dt))
     return allocation_response(result, vehicle_id=state.id, health_version=state.version)
 
 
@@ -109,13 +108,12 @@ async def allocate(vehicle_id: VehicleId, body: VehicleAllocateRequest, store: S
              summary="Allocate many demands at the vehicle's current health")
 async def allocate_batch(vehicle_id: VehicleId, body: VehicleBatchRequest, store: StoreDep) -> Response:
     state = store.get(vehicle_id)
-    allocator = await store.fresh_allocator(state.problem, body.method, body.options)
-    result = await to_thread.run_sync(allocator.batch, body.V)
+    result = await store.vehicle_allocate(state, body.method, body.options, Call(V=body.V))
     return batch_response(result, vehicle_id=state.id, health_version=state.version)
 
 
 @router.post("/{vehicle_id}/ams", response_model=AmsOut, summary="AMS summary at the vehicle's current health")
 async def ams_summary(vehicle_id: VehicleId, body: AmsVehicleRequest, store: StoreDep) -> AmsOut:
     state = store.get(vehicle_id)
-    out = await store.run_bounded(lambda: ams.summarize(state.problem, body.directions, store.build_budget))
+    out = await store.run_bounded(ams.summarize, state.problem, body.directions, store.build_budget)
     return out.model_copy(update={"vehicle_id": state.id, "health_version": state.version})

@@ -1,0 +1,169 @@
+"""Priority for reconfiguration: while an authenticated write is in flight, other requests wait.
+
+The event loop runs ready work first come, first served.  Under a flood of unauthenticated
+requests (each a few hundred microseconds of validation, a version read, a cost check and
+a refusal), an event's request would wait behind every flood request ahead of it, at each
+of its steps: before it starts, and again when its commit returns from the writer thread.
+Measured under the 16-client option flood of ``benchmarks/bench_service.py`` on the shared
+2-core machine (``Server-Timing`` phases): event p99 221-414 ms, of which up to 140 ms
+before the application saw the request (``dispatch``) and up to 205 ms between the commit
+returning and the coroutine resuming (``resume``); with the gate, p50 of both 0.1-2.8 ms.
+
+So a *priority* request (a write: create or delete a vehicle, record an event; carrying
+the right API key, or any write when no key is configured) closes a gate for the time it
+is in flight; every other request waits at the gate before it reads its body or costs
+anything (at most :data:`MAX_WAIT_S`, a safety net).  When no write is in flight the
+others enter :data:`TURNS` per loop iteration, so the loop reads its sockets (and a
+write's headers) between every few of them.  The gate is closed as soon as the request's headers are parsed
+(:class:`service.server.GuardedHttpToolsProtocol`), before the loop runs any request task
+queued ahead of it; without that protocol (an in-process test client) the middleware closes
+it when the request reaches the application.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import hmac
+import time
+from collections import deque
+from collections.abc import Iterable
+
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
+
+from . import timing
+
+__all__ = ["PriorityGate", "PriorityMiddleware", "MAX_WAIT_S", "SCOPE_KEY", "GATE_STATE_KEY"]
+
+#: requests other than writes let into the application per event-loop iteration: between
+#: two reads of the sockets the loop runs at most this many of them (a flood request costs
+#: ~0.6 ms), so a write's bytes are read, and the gate closed, within about a millisecond
+TURNS = 2
+#: the longest a request waits for writes in flight (a bound, not a schedule: writes take ms)
+MAX_WAIT_S = 0.5
+#: scope key set by the protocol: ``True`` when the gate was closed for this request
+SCOPE_KEY = "alloc.priority"
+#: key of the gate in the lifespan state (where the protocol finds it)
+GATE_STATE_KEY = "alloc.gate"
+_VEHICLES = "/v1/vehicles"
+
+
+def _is_write(method: str, path: str) -> bool:
+    """The write endpoints of :mod:`service.routes.vehicles` (those behind the API key)."""
+    if not path.startswith(_VEHICLES):
+        return False
+    if method == "DELETE":
+        return True
+    return method == "POST" and (path in (_VEHICLES, _VEHICLES + "/") or path.endswith("/events"))
+
+
+class PriorityGate:
+    """Counts priority requests in flight; lets the others in a few per loop iteration, and
+    none while a priority request is in flight (for at most :data:`MAX_WAIT_S`)."""
+
+    def __init__(self, api_key: str | None) -> None:
+        self._key = api_key.encode() if api_key else None
+        self.active = 0
+        self.waited = 0  # requests that found the gate closed (tests, benchmarks)
+        self._closed_at = 0.0
+        self._turns = TURNS
+        self._queue: deque[asyncio.Future[None]] = deque()
+        self._refill_pending = False
+
+    def claims(self, method: str, path: str, headers: Iterable[tuple[bytes, bytes]]) -> bool:
+        """``True`` for a write (create, delete, record an event) with the right API key, or
+        with none when no key is configured (allocations and AMS queries are reads)."""
+        if not _is_write(method, path):
+            return False
+        if self._key is None:
+            return True
+        for name, value in headers:
+            if name == b"x-api-key":
+                return hmac.compare_digest(value, self._key)
+        return False
+
+    def enter(self) -> None:
+        """A priority request arrived (called on the event loop)."""
+        if self.active == 0:
+            self._closed_at = time.monotonic()
+            asyncio.get_running_loop().call_later(MAX_WAIT_S, self._schedule_refill)
+        self.active += 1
+
+    def leave(self) -> None:
+        self.active = max(0, self.active - 1)
+        if self.active == 0 and self._queue:
+            self._schedule_refill()
+
+    def _closed(self) -> bool:
+        return self.active > 0 and time.monotonic() - self._closed_at < MAX_WAIT_S
+
+    async def wait(self) -> None:
+        """Return when it is this request's turn: no priority request in flight (or it has
+        been for :data:`MAX_WAIT_S`), and fewer than :data:`TURNS` let in this iteration."""
+        if not self._closed() and self._turns > 0 and not self._queue:
+            self._turns -= 1
+            self._schedule_refill()
+            return
+        self.waited += self.active > 0
+        turn = asyncio.get_running_loop().create_future()
+        self._queue.append(turn)
+        self._schedule_refill()
+        await turn
+
+    def _schedule_refill(self) -> None:
+        if not self._refill_pending:
+            self._refill_pending = True
+            asyncio.get_running_loop().call_soon(self._refill)
+
+    def _refill(self) -> None:
+        """Next loop iteration (after the loop has read its sockets): :data:`TURNS` more, unless
+        a priority request is in flight (its ``leave`` or its deadline refills then)."""
+        self._refill_pending = False
+        if self._closed():
+            return
+        self._turns = TURNS
+        while self._turns and self._queue:
+            turn = self._queue.popleft()
+            if not turn.done():  # a request cancelled while waiting gives its turn away
+                turn.set_result(None)
+                self._turns -= 1
+        if self._queue or self._turns < TURNS:
+            self._schedule_refill()
+
+
+class PriorityMiddleware:
+    """ASGI middleware: priority requests hold the gate while in flight, others wait for it."""
+
+    def __init__(self, app: ASGIApp, gate: PriorityGate) -> None:
+        self.app, self.gate = app, gate
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        gate = self.gate
+        priority = scope.get(SCOPE_KEY)
+        if priority is None:  # not marked by the protocol: classify here
+            priority = gate.claims(scope["method"], scope["path"], scope.get("headers", ()))
+            if priority:
+                gate.enter()
+        if not priority:
+            await gate.wait()
+            timing.mark("gate")
+            await self.app(scope, receive, send)
+            return
+        left = False
+
+        def leave() -> None:
+            nonlocal left
+            if not left:
+                left = True
+                gate.leave()
+
+        async def send_then_leave(message: Message) -> None:
+            await send(message)
+            if message["type"] == "http.response.body" and not message.get("more_body", False):
+                leave()  # answered: background work after the response holds nobody back
+        try:
+            await self.app(scope, receive, send_then_leave)
+        finally:
+            leave()
