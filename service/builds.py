@@ -11,7 +11,7 @@ gives the event's threads the CPU first.
 
 Two lanes, each bounded in concurrency and queue (429 beyond):
 
-* ``process``: builds with a predicted cost (:func:`service.cost.build_seconds` > 0:
+* ``process``: builds predicted costly (:func:`service.cost.is_costly`:
   facet enumerations, direction tables) and other bounded work (AMS summaries), in
   ``ALLOC_BUILD_WORKERS`` spawned processes;
 * ``thread``: every other build (an SVD or a QP set-up of at most 6 x 64: milliseconds),

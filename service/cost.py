@@ -1,7 +1,7 @@
 """What a request may cost the service: the build-budget policy and a byte estimate.
 
-Allocator builds run off the event loop in a small pool of build threads
-(:class:`service.store.Builder`).  A Python thread cannot be killed, so the wall-clock
+Allocator builds run off the event loop (:class:`service.builds.Builder`): costly ones
+(:func:`is_costly`) in a low-priority build process, the rest on two threads.  The wall-clock
 budget is enforced **before** a build starts: :func:`build_seconds` reads the build time
 each method declares for the problem and options (:meth:`alloc.registry.Method.build_cost`,
 measured numbers with the methods: :mod:`alloc.methods.facet_search`), and a prediction above
@@ -28,9 +28,9 @@ import numpy as np
 
 import alloc
 from alloc.methods.facet_search import FACET_LIMIT, FACET_SECONDS, facet_build_seconds
-from alloc.registry import get_method
+from alloc.registry import CHEAP_BUILD_SECONDS, get_method
 
-__all__ = ["FACET_SECONDS", "DEFAULT_BUILD_BUDGET_S", "build_seconds", "estimate_bytes"]
+__all__ = ["FACET_SECONDS", "DEFAULT_BUILD_BUDGET_S", "build_seconds", "estimate_bytes", "is_costly"]
 
 #: the default build budget: the declared build time of a facet enumeration at the library's
 #: facet limit, so the service admits every build the library's ``backend="auto"`` would choose
@@ -41,6 +41,12 @@ def build_seconds(problem: alloc.Problem, method: str, options: Mapping[str, Any
     """Predicted build time of ``make_allocator(problem, method, **options)``: the method's
     declared :meth:`~alloc.registry.Method.build_cost` (seconds, the project's machine)."""
     return float(get_method(method).build_cost(problem, **dict(options)))
+
+
+def is_costly(seconds: float) -> bool:
+    """A build predicted above the library's cheap default (a facet enumeration, a direction
+    table), which goes to the build process rather than a service thread."""
+    return seconds > CHEAP_BUILD_SECONDS
 
 
 def estimate_bytes(obj: object, _limit: int = 100_000) -> int:

@@ -55,6 +55,7 @@ import alloc
 
 from . import timing
 from .builds import TRANSFER_BYTES, Builder, Built, Call, build, build_allocator, check_build_cost
+from .cost import is_costly
 from .db import EventRow, VehicleRow, utcnow
 from .errors import Conflict, NotFound, ServiceError
 from .health import Health, apply_event, dump_health, load_health, to_problem
@@ -404,7 +405,7 @@ class VehicleStore:
                      call: Call | None, seconds: float) -> Future[Built]:
         """Submit a build (a costly one to the build process, a cheap one to a thread); the
         allocator it returns is cached under ``key``."""
-        lane = "process" if seconds > 0 else "thread"
+        lane = "process" if is_costly(seconds) else "thread"
         keep = self.allocators.keep_limit(key)
         if lane == "process":
             keep = min(keep, TRANSFER_BYTES)
