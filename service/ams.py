@@ -25,7 +25,7 @@ import alloc
 from alloc.ams import AttainableSet, zonotope_volume
 from alloc.methods.direct import DirectAllocation
 
-from .cost import FACET_SECONDS
+from .cost import build_seconds
 from .errors import InvalidRequest, field_error
 from .schemas import AmsOut, DirectionOut
 
@@ -52,15 +52,11 @@ def _directions(problem: alloc.Problem, directions: list[list[float]] | None) ->
     return out
 
 
-def _facet_subsets(problem: alloc.Problem) -> int:
-    return comb(int((problem.umax > problem.umin).sum()), max(problem.k - 1, 0))
-
-
 def summarize(problem: alloc.Problem, directions: list[list[float]] | None, budget: float = 3.0) -> AmsOut:
     """Volume and ray exits of the AMS of ``problem``; ``budget`` seconds of facet enumeration at most."""
     ds = _directions(problem, directions)
     u0 = np.minimum(np.maximum(problem.up, problem.umin), problem.umax)
-    if FACET_SECONDS * _facet_subsets(problem) <= budget:
+    if build_seconds(problem, "da_facet", {}) <= budget:  # the facet search's declared enumeration cost
         ams = AttainableSet(problem)
         volume, note = float(ams.volume), "alloc.ams.AttainableSet"
         found = [ams.max_in_direction(d) for d in ds]
