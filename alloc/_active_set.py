@@ -57,11 +57,12 @@ MU_EPS = 1e3 * np.finfo(float).eps
 #
 # numba unboxes every array argument on each call (~0.05 us each), every np.empty in a call
 # is an allocation, and every reshape of a flat buffer costs a helper call; the solver's
-# data and state are therefore six stacked arrays built once (:func:`pack`), each piece a
-# plain index into them: ``mats`` (matrices, top-left corners of one (R, C) stack), ``vecs``
-# (vectors and work rows), ``ivecs`` (header, index data, working sets), the factorisation
-# cache ``bankL`` and ``bank`` (slot 0 is scratch), and its hash table ``table`` (column 0
-# the slot, then the key words).
+# data and state are therefore five stacked arrays built once (:func:`pack`), each piece a
+# plain index into them (no views on the hot path: a view costs two atomic reference
+# counts): ``mats`` (matrices, top-left corners of one (R, C) stack), ``vecs`` (vectors
+# and work rows), ``ivecs`` (header, index data, working sets, then from row ``_TABLE`` the
+# cache's hash table: column 0 the slot, then the key words) and the factorisation cache
+# ``bankL``, ``bank`` (slot 0 is scratch).
 
 #: int header fields (``ivecs[0]``)
 _N, _M, _K, _NLEV, _FINAL, _DIAG, _MAXIT, _WORDS, _DYN, _WARM = range(10)
@@ -71,10 +72,10 @@ _A, _T, _WU, _B, _P0, _KV, _KU = range(7)
 (_UP, _UMIN, _UMAX, _RMIN, _RMAX, _GAM, _UWARM, _U, _LO, _HI, _UPC, _BV, _R, _E, _LAM,
  _G, _H, _Y, _TMP, _SCALE, _CONST, _VLAST) = range(22)
 #: ``ivecs`` rows
-_HEAD, _PERM, _STARTS, _WSTATE, _FREE, _PINNED, _TABU, _FIDX, _KEY, _MISC = range(10)
+_HEAD, _PERM, _STARTS, _WSTATE, _FREE, _PINNED, _TABU, _FIDX, _KEY, _MISC, _TABLE = range(11)
 #: cache budget per allocator, floats, and entry cap (free sets beyond are computed, not kept)
-CACHE_FLOATS = 1 << 19
-CACHE_ENTRIES = 512
+CACHE_FLOATS = 1 << 22
+CACHE_ENTRIES = 1 << 13
 #: warm-start when ``max|v - v_previous| <= WARM_STEP * max(|v|, |v_previous|)``
 WARM_STEP = 0.05
 
@@ -153,7 +154,7 @@ def _lsolve(bankL, s, n, diag, vecs, row):  # pragma: no cover - compiled
         if not diag:
             for t in range(q):
                 acc -= bankL[s, q, t] * vecs[row, t]
-        vecs[row, q] = acc / bankL[s, q, q]
+        vecs[row, q] = acc / bankL[s, q, 0 if diag else q]
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -164,7 +165,7 @@ def _lsolve_col(L, n, diag, X, c):  # pragma: no cover - compiled
         if not diag:
             for s in range(q):
                 acc -= L[q, s] * X[s, c]
-        X[q, c] = acc / L[q, q]
+        X[q, c] = acc / L[q, 0 if diag else q]
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -175,7 +176,7 @@ def _ltsolve(bankL, s, n, diag, vecs, row):  # pragma: no cover - compiled
         if not diag:
             for t in range(q + 1, n):
                 acc -= bankL[s, t, q] * vecs[row, t]
-        vecs[row, q] = acc / bankL[s, q, q]
+        vecs[row, q] = acc / bankL[s, q, 0 if diag else q]
 
 
 @njit(cache=True, nogil=True)
@@ -190,7 +191,7 @@ def _factor(A, r0, r1, Wu, diag, F, nf, L, Yc, Vc, sc, Ya, Va, sa):  # pragma: n
     nc = r0
     if diag:
         for q in range(nf):
-            L[q, q] = np.sqrt(Wu[F[q], F[q]])
+            L[q, 0] = np.sqrt(Wu[F[q], F[q]])  # a diagonal L is stored as a column
     else:
         for q in range(nf):
             for s in range(q + 1):
@@ -227,13 +228,13 @@ def _factor(A, r0, r1, Wu, diag, F, nf, L, Yc, Vc, sc, Ya, Va, sa):  # pragma: n
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _factors(mats, ivecs, bankL, bank, table, r0, r1, lev, diag, nf, m):  # pragma: no cover - compiled
+def _factors(mats, ivecs, bankL, bank, r0, r1, lev, diag, nf, m):  # pragma: no cover - compiled
     """The cache slot holding the factorisation of the current free set (``_factor``'s
     ``L = bankL[s]``, ``Yc, Ya, Vc, Va = bank[s, 0:4]``, ``sc, sa = bank[s, 4, 0:2]``):
     looked up, else computed (and kept while the cache has room; past that, computed into
     the scratch slot 0).  Cached and recomputed factors are bitwise equal, so the cache
-    never changes an answer, only its cost.  The hash table is open addressing as in
-    :func:`alloc._kernels._probe` (column 0 the slot, -1 empty; then the key words).
+    never changes an answer, only its cost.  The hash table (rows ``_TABLE:`` of ``ivecs``)
+    is open addressing as in :func:`alloc._kernels._probe`.
     """
     words = ivecs[_HEAD, _WORDS]
     for w in range(words):
@@ -245,23 +246,23 @@ def _factors(mats, ivecs, bankL, bank, table, r0, r1, lev, diag, nf, m):  # prag
     h = np.int64(0)
     for w in range(words):
         h = (h ^ ivecs[_KEY, w]) * np.int64(-7046029254386353131)  # Fibonacci hashing
-    mask = table.shape[0] - 1
+    mask = ivecs.shape[0] - _TABLE - 1
     pos = (h >> np.int64(29)) & mask
-    while table[pos, 0] >= 0:
+    while ivecs[_TABLE + pos, 0] >= 0:
         same = True
         for w in range(words):
-            if table[pos, 1 + w] != ivecs[_KEY, w]:
+            if ivecs[_TABLE + pos, 1 + w] != ivecs[_KEY, w]:
                 same = False
                 break
         if same:
-            return table[pos, 0]
+            return ivecs[_TABLE + pos, 0]
         pos = (pos + 1) & mask
     s = ivecs[_MISC, 0]
     if s < bankL.shape[0]:
         ivecs[_MISC, 0] = s + 1
         for w in range(words):
-            table[pos, 1 + w] = ivecs[_KEY, w]
-        table[pos, 0] = s
+            ivecs[_TABLE + pos, 1 + w] = ivecs[_KEY, w]
+        ivecs[_TABLE + pos, 0] = s
     else:
         s = 0  # the cache is full: slot 0 is the scratch (never a table entry)
     E = bank[s]
@@ -271,7 +272,7 @@ def _factors(mats, ivecs, bankL, bank, table, r0, r1, lev, diag, nf, m):  # prag
 
 
 @njit(cache=True, nogil=True)
-def _level(mats, vecs, ivecs, bankL, bank, table, r0, r1, lev, gam, diag, iup, ilo, ihi, maxit, m,
+def _level(mats, vecs, ivecs, bankL, bank, r0, r1, lev, gam, diag, iup, ilo, ihi, maxit, m,
            refine):  # pragma: no cover - compiled
     """Solve one level in place on ``u`` (feasible on entry) and ``free`` (working set).
 
@@ -318,7 +319,7 @@ def _level(mats, vecs, ivecs, bankL, bank, table, r0, r1, lev, gam, diag, iup, i
             if ivecs[_FREE, j]:
                 ivecs[_FIDX, nf] = j
                 nf += 1
-        s = _factors(mats, ivecs, bankL, bank, table, r0, r1, lev, diag, nf, m)
+        s = _factors(mats, ivecs, bankL, bank, r0, r1, lev, diag, nf, m)
         # --- the preference gradient Wu (u - up)
         for j in range(m):
             vecs[_TMP, j] = vecs[_U, j] - vecs[iup, j]
@@ -501,19 +502,20 @@ def pack(A, T, perm, starts, gammas, final, Wu, diag, up, B, P0, umin, umax, rat
                  (_CONST, [vmax, rtol])):
         x = np.asarray(x, dtype=float)
         vecs[i, :len(x)] = x
-    ivecs = np.zeros((10, max(m, n, nlev + 1, words, 10)), dtype=np.int64)
+    ivecs = np.zeros((_TABLE, max(m, n, nlev + 1, words + 1, 10)), dtype=np.int64)
     ivecs[_HEAD, :10] = [n, m, k, nlev, int(final), int(diag), int(maxit), words, int(Kv is not None), 1]
     ivecs[_PERM, :n] = perm
     ivecs[_STARTS, :nlev + 1] = starts
     ivecs[_MISC, 0] = 1  # the next free cache slot (slot 0 is scratch)
     R2 = max(m, nw, 2)
-    cap = int(max(4, min(CACHE_ENTRIES, CACHE_FLOATS // (m * m + 5 * R2 * nw) - 1)))
-    bankL = np.empty((cap + 1, m, m))  # untouched pages cost nothing until a free set is cached
+    mL = 1 if diag else m  # a diagonal L is stored as its column of pivots
+    cap = int(max(4, min(CACHE_ENTRIES, CACHE_FLOATS // (m * mL + 5 * R2 * nw) - 1)))
+    bankL = np.empty((cap + 1, m, mL))  # untouched pages cost nothing until a free set is cached
     bank = np.empty((cap + 1, 5, R2, nw))
     size = 1 << int(2 * (cap + 1) - 1).bit_length()  # a power of two, at most half full
-    table = np.zeros((size, words + 1), dtype=np.int64)
+    table = np.zeros((size, ivecs.shape[1]), dtype=np.int64)
     table[:, 0] = -1
-    return mats, vecs, ivecs, bankL, bank, table
+    return mats, vecs, np.vstack([ivecs, table]), bankL, bank
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -550,7 +552,7 @@ def _start(mats, vecs, ivecs, v, ilo, ihi, iup, warm, m, k):  # pragma: no cover
 
 
 @njit(cache=True, nogil=True)
-def _run(mats, vecs, ivecs, bankL, bank, table, v, ilo, ihi, iup):  # pragma: no cover - compiled
+def _run(mats, vecs, ivecs, bankL, bank, v, ilo, ihi, iup):  # pragma: no cover - compiled
     """All levels for one demand, into ``vecs[_U]``; returns ``(iterations, ok)``.
 
     ``b = T v[perm]``; level ``l`` is rows ``A[starts[l]:starts[l+1]]`` with weight
@@ -588,7 +590,7 @@ def _run(mats, vecs, ivecs, bankL, bank, table, v, ilo, ihi, iup):  # pragma: no
                 r0, r1, gam = ivecs[_STARTS, l], ivecs[_STARTS, l + 1], vecs[_GAM, l]
             else:
                 r0, r1, gam = n, n, 1.0
-            it = _level(mats, vecs, ivecs, bankL, bank, table, r0, r1, l, gam, diag, iup, ilo, ihi, maxit, m, warm)
+            it = _level(mats, vecs, ivecs, bankL, bank, r0, r1, l, gam, diag, iup, ilo, ihi, maxit, m, warm)
             if it < 0:
                 total += maxit
                 ok = False
@@ -627,7 +629,7 @@ def _target(mats, vecs, ivecs, v, u_prev, rate):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def lexico_call(mats, vecs, ivecs, bankL, bank, table, v, u_prev, dt):  # pragma: no cover - compiled
+def lexico_call(mats, vecs, ivecs, bankL, bank, v, u_prev, dt):  # pragma: no cover - compiled
     """One allocation in one compiled call, for the allocator's fast path.
 
     Checks the demand (and ``u_prev`` when ``dt > 0``) against the valid domain, forms the
@@ -652,7 +654,7 @@ def lexico_call(mats, vecs, ivecs, bankL, bank, table, v, u_prev, dt):  # pragma
     iup = _target(mats, vecs, ivecs, v, u_prev, rate)
     if iup < 0:
         return out, 2, 0
-    it, ok = _run(mats, vecs, ivecs, bankL, bank, table, v, ilo, ihi, iup)
+    it, ok = _run(mats, vecs, ivecs, bankL, bank, v, ilo, ihi, iup)
     if not ok:
         return out, 5, it
     for j in range(m):
@@ -663,7 +665,7 @@ def lexico_call(mats, vecs, ivecs, bankL, bank, table, v, u_prev, dt):  # pragma
 
 
 @njit(cache=True)
-def lexico_solve(mats, vecs, ivecs, bankL, bank, table, v, lo, hi, u_prev, rate):  # pragma: no cover - compiled
+def lexico_solve(mats, vecs, ivecs, bankL, bank, v, lo, hi, u_prev, rate):  # pragma: no cover - compiled
     """The method's ``solve``: ``(u, iterations, ok)`` within ``[lo, hi]`` (the caller's
     bounds, copied into the state); ``u_prev`` enters only the ``dynamic`` preference
     point, when ``rate``; ``iterations`` is -1 when that point is not finite."""
@@ -674,12 +676,12 @@ def lexico_solve(mats, vecs, ivecs, bankL, bank, table, v, lo, hi, u_prev, rate)
     iup = _target(mats, vecs, ivecs, v, u_prev, rate)
     if iup < 0:
         return vecs[_UPC, :m].copy(), -1, False
-    it, ok = _run(mats, vecs, ivecs, bankL, bank, table, v, _LO, _HI, iup)
+    it, ok = _run(mats, vecs, ivecs, bankL, bank, v, _LO, _HI, iup)
     return vecs[_U, :m].copy(), it, ok
 
 
 @njit(cache=True)
-def lexico_batch(mats, vecs, ivecs, bankL, bank, table, V):  # pragma: no cover - compiled
+def lexico_batch(mats, vecs, ivecs, bankL, bank, V):  # pragma: no cover - compiled
     """:func:`lexico_solve` over the rows of ``V`` within the position limits, in order (a
     compiled loop: row ``i`` is what the ``i``-th single call would return); ``ok[i]`` False
     where a level hit its cap."""
@@ -689,7 +691,7 @@ def lexico_batch(mats, vecs, ivecs, bankL, bank, table, V):  # pragma: no cover 
     ok = np.empty(N, dtype=np.bool_)
     for i in range(N):
         iup = _target(mats, vecs, ivecs, V[i], V[i], False)
-        good = iup >= 0 and _run(mats, vecs, ivecs, bankL, bank, table, V[i], _UMIN, _UMAX, iup)[1]
+        good = iup >= 0 and _run(mats, vecs, ivecs, bankL, bank, V[i], _UMIN, _UMAX, iup)[1]
         for j in range(m):
             U[i, j] = vecs[_U, j]
         ok[i] = good
