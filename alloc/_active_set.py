@@ -319,7 +319,7 @@ def _level(mats, vecs, ivecs, bankL, bank, r0, r1, lev, gam, diag, iup, ilo, ihi
             if ivecs[_FREE, j]:
                 ivecs[_FIDX, nf] = j
                 nf += 1
-        s = _factors(mats, ivecs, bankL, bank, r0, r1, lev, diag, nf, m)
+        slot = _factors(mats, ivecs, bankL, bank, r0, r1, lev, diag, nf, m)
         # --- the preference gradient Wu (u - up)
         for j in range(m):
             vecs[_TMP, j] = vecs[_U, j] - vecs[iup, j]
@@ -332,37 +332,37 @@ def _level(mats, vecs, ivecs, bankL, bank, r0, r1, lev, gam, diag, iup, ilo, ihi
                 for s in range(m):
                     acc += mats[_WU, j, s] * vecs[_TMP, s]
             vecs[_H, q] = acc
-        _lsolve(bankL, s, nf, diag, vecs, _H)  # h = L^-1 (Wu (u - up))_F
+        _lsolve(bankL, slot, nf, diag, vecs, _H)  # h = L^-1 (Wu (u - up))_F
         # --- step y = -P h + Ua z   (P: projector onto null(Ct) and null(At)),
         #     z_i = (s_i (Va' e)_i - gam^2 (Ua' h)_i) / (s_i^2 + gam^2)
         for q in range(nf):
             vecs[_Y, q] = -vecs[_H, q]
         for c in range(nc):
-            if bank[s, 4, 0, c] > 0.0:
+            if bank[slot, 4, 0, c] > 0.0:
                 acc = 0.0
                 for q in range(nf):
-                    acc += bank[s, 0, q, c] * vecs[_H, q]
+                    acc += bank[slot, 0, q, c] * vecs[_H, q]
                 for q in range(nf):
-                    vecs[_Y, q] += acc * bank[s, 0, q, c]
+                    vecs[_Y, q] += acc * bank[slot, 0, q, c]
         for i in range(nl):
-            if bank[s, 4, 1, i] > 0.0:
+            if bank[slot, 4, 1, i] > 0.0:
                 uh = 0.0
                 for q in range(nf):
-                    uh += bank[s, 1, q, i] * vecs[_H, q]
+                    uh += bank[slot, 1, q, i] * vecs[_H, q]
                 ve = 0.0
                 for r in range(nl):
-                    ve += bank[s, 3, r, i] * vecs[_E, r]
-                z = (bank[s, 4, 1, i] * ve - gam2 * uh) / (bank[s, 4, 1, i] * bank[s, 4, 1, i] + gam2)
+                    ve += bank[slot, 3, r, i] * vecs[_E, r]
+                z = (bank[slot, 4, 1, i] * ve - gam2 * uh) / (bank[slot, 4, 1, i] * bank[slot, 4, 1, i] + gam2)
                 for q in range(nf):
-                    vecs[_Y, q] += (uh + z) * bank[s, 1, q, i]
+                    vecs[_Y, q] += (uh + z) * bank[slot, 1, q, i]
         for c in range(nc):  # y in null(Ct) to round-off: the held moments do not drift
-            if bank[s, 4, 0, c] > 0.0:
+            if bank[slot, 4, 0, c] > 0.0:
                 acc = 0.0
                 for q in range(nf):
-                    acc += bank[s, 0, q, c] * vecs[_Y, q]
+                    acc += bank[slot, 0, q, c] * vecs[_Y, q]
                 for q in range(nf):
-                    vecs[_Y, q] -= acc * bank[s, 0, q, c]
-        _ltsolve(bankL, s, nf, diag, vecs, _Y)  # p_F = L^-T y
+                    vecs[_Y, q] -= acc * bank[slot, 0, q, c]
+        _ltsolve(bankL, slot, nf, diag, vecs, _Y)  # p_F = L^-T y
         # --- ratio test
         alpha = 1.0
         block = -1
@@ -433,17 +433,17 @@ def _level(mats, vecs, ivecs, bankL, bank, r0, r1, lev, gam, diag, iup, ilo, ihi
             # lam = -Vc diag(1/sc) Uc' L^-1 g_F
             for q in range(nf):
                 vecs[_H, q] = vecs[_G, ivecs[_FIDX, q]]
-            _lsolve(bankL, s, nf, diag, vecs, _H)
+            _lsolve(bankL, slot, nf, diag, vecs, _H)
             for c in range(nc):
                 vecs[_LAM, c] = 0.0
             for c in range(nc):
-                if bank[s, 4, 0, c] > 0.0:
+                if bank[slot, 4, 0, c] > 0.0:
                     acc = 0.0
                     for q in range(nf):
-                        acc += bank[s, 0, q, c] * vecs[_H, q]
-                    acc /= bank[s, 4, 0, c]
+                        acc += bank[slot, 0, q, c] * vecs[_H, q]
+                    acc /= bank[slot, 4, 0, c]
                     for r in range(nc):
-                        vecs[_LAM, r] -= bank[s, 2, r, c] * acc
+                        vecs[_LAM, r] -= bank[slot, 2, r, c] * acc
             for c in range(nc):
                 for j in range(m):
                     t = mats[_A, c, j] * vecs[_LAM, c]
@@ -451,7 +451,7 @@ def _level(mats, vecs, ivecs, bankL, bank, r0, r1, lev, gam, diag, iup, ilo, ihi
                     vecs[_SCALE, j] += abs(t)
         unique = True
         for c in range(nc):
-            if bank[s, 4, 0, c] == 0.0:
+            if bank[slot, 4, 0, c] == 0.0:
                 unique = False
         worst = -1
         wv = 0.0

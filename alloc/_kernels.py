@@ -262,6 +262,32 @@ def scaled_increment(P, B, b, v, lo, hi):  # pragma: no cover - compiled
     return u
 
 
+@njit(cache=True)
+def fused_scaled(P, B, base, lo, hi, rtol, vmax_domain, v, u_prev, dt):  # pragma: no cover - compiled
+    """``pinv_scale`` without rate limits as one call (the allocator's packed fast path;
+    ``u_prev`` and ``dt`` unused): :func:`scaled_increment` from the clipped bias ``base``,
+    then :func:`finish`, into a :func:`packed_out` array.  Returns ``(out, code, 0)``
+    (code 3: ``v`` outside the valid domain)."""
+    k, m = B.shape
+    out = packed_out(m, k)
+    if not copy_demand(v, out, m, vmax_domain):
+        return out, 3, 0
+    r = out[m + 2 * k:]  # scratch until close_out writes v - B u there
+    _residual(B, base, v, r)
+    du = out[:m]
+    for j in range(m):
+        s = 0.0
+        for i in range(k):
+            s += P[j, i] * r[i]
+        du[j] = s
+    s = _scale_to_box(base, du, lo, hi, np.arange(m), m)
+    for j in range(m):
+        du[j] = base[j] + s * du[j]
+    code = finish(B, du, lo, hi, v, out[m:m + k], rtol)
+    close_out(out, m, k)
+    return out, code, 0
+
+
 @njit(cache=True, nogil=True)
 def daisy_chain(B, up, v, lo, hi, idx, start, Pcat):  # pragma: no cover - compiled
     """Daisy chaining (Eqs 1.25-1.27) over groups ``idx[start[g]:start[g+1]]`` whose
