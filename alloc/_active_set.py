@@ -28,6 +28,15 @@ pick the right active set (SOLVER-NOTES, "Lessons").
 
 Every loop is bounded; a level that hits its iteration cap returns ``ok = False`` and the
 caller raises :class:`~alloc.exceptions.SolverError` (the allocator's safe fallback).
+
+Speed (measured in ``benchmarks/bench_alloc.py``): the factorisation of a free set depends
+on the level and the set alone, so it is cached per (level, free set) in the allocator's
+packed state (bitwise equal to a recomputation: the cache changes the cost, never the
+answer); each call warm-starts from the previous call's working set (a slowly varying
+demand then takes 0-1 pivots; the optimum is unique, so the answer agrees with a cold
+start to round-off, and a warm start that hits the cap is retried cold); all work arrays
+live in the packed state (no allocation per call but the result).  The entry points that
+mutate that state hold the GIL (no ``nogil``): an allocator shared by threads stays safe.
 """
 
 from __future__ import annotations
@@ -35,12 +44,40 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["lexico_ls", "lexico_ls_batch", "lexico_packed", "lexico_packed_batch", "pack", "SIGMA_RTOL", "MU_EPS"]
+from ._kernels import _FREE_BITS, close_out, copy_demand, finish, packed_out, rate_window_into
+
+__all__ = ["pack", "lexico_call", "lexico_solve", "lexico_batch", "SIGMA_RTOL", "MU_EPS"]
 
 #: Singular values below this fraction of the largest are round-off (dropped).
 SIGMA_RTOL = 1e-12
 #: Multiplier tolerance in units of the round-off bound of the multiplier's computation.
 MU_EPS = 1e3 * np.finfo(float).eps
+
+# --- packed solver: a few stacked arrays per allocator ---------------------------------
+#
+# numba unboxes every array argument on each call (~0.05 us each), every np.empty in a call
+# is an allocation, and every reshape of a flat buffer costs a helper call; the solver's
+# data and state are therefore five stacked arrays built once (:func:`pack`), each piece a
+# plain index into them (no views on the hot path: a view costs two atomic reference
+# counts): ``mats`` (matrices, top-left corners of one (R, C) stack), ``vecs`` (vectors
+# and work rows), ``ivecs`` (header, index data, working sets, then from row ``_TABLE`` the
+# cache's hash table: column 0 the slot, then the key words) and the factorisation cache
+# ``bankL``, ``bank`` (slot 0 is scratch).
+
+#: int header fields (``ivecs[0]``)
+_N, _M, _K, _NLEV, _FINAL, _DIAG, _MAXIT, _WORDS, _DYN, _WARM = range(10)
+#: ``mats`` rows
+_A, _T, _WU, _B, _P0, _KV, _KU = range(7)
+#: ``vecs`` rows
+(_UP, _UMIN, _UMAX, _RMIN, _RMAX, _GAM, _UWARM, _U, _LO, _HI, _UPC, _BV, _R, _E, _LAM,
+ _G, _H, _Y, _TMP, _SCALE, _CONST, _VLAST) = range(22)
+#: ``ivecs`` rows
+_HEAD, _PERM, _STARTS, _WSTATE, _FREE, _PINNED, _TABU, _FIDX, _KEY, _MISC, _TABLE = range(11)
+#: cache budget per allocator, floats, and entry cap (free sets beyond are computed, not kept)
+CACHE_FLOATS = 1 << 22
+CACHE_ENTRIES = 1 << 13
+#: warm-start when ``max|v - v_previous| <= WARM_STEP * max(|v|, |v_previous|)``
+WARM_STEP = 0.05
 
 
 @njit(cache=True, nogil=True)
@@ -109,9 +146,134 @@ def _jacobi(X, n, p, V, sig, ref):  # pragma: no cover - compiled
             sig[j] = 0.0
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _lsolve(bankL, s, n, diag, vecs, row):  # pragma: no cover - compiled
+    """``x[:n] = L^-1 x[:n]`` (forward substitution), ``L = bankL[s]``, ``x = vecs[row]``."""
+    for q in range(n):
+        acc = vecs[row, q]
+        if not diag:
+            for t in range(q):
+                acc -= bankL[s, q, t] * vecs[row, t]
+        vecs[row, q] = acc / bankL[s, q, 0 if diag else q]
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _lsolve_col(L, n, diag, X, c):  # pragma: no cover - compiled
+    """``X[:n, c] = L^-1 X[:n, c]``."""
+    for q in range(n):
+        acc = X[q, c]
+        if not diag:
+            for s in range(q):
+                acc -= L[q, s] * X[s, c]
+        X[q, c] = acc / L[q, 0 if diag else q]
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _ltsolve(bankL, s, n, diag, vecs, row):  # pragma: no cover - compiled
+    """``x[:n] = L^-T x[:n]`` (back substitution), ``L = bankL[s]``, ``x = vecs[row]``."""
+    for q in range(n - 1, -1, -1):
+        acc = vecs[row, q]
+        if not diag:
+            for t in range(q + 1, n):
+                acc -= bankL[s, t, q] * vecs[row, t]
+        vecs[row, q] = acc / bankL[s, q, 0 if diag else q]
+
+
 @njit(cache=True, nogil=True)
-def _level(A, b, r0, r1, gam, Wu, diag, up, lo, hi, u, free, pinned, maxit,
-           F, L, Yc, Vc, sc, Ya, Va, sa, e, g, h, y, tmp, lam, tabu, scale):  # pragma: no cover - compiled
+def _factor(A, r0, r1, Wu, diag, F, nf, L, Yc, Vc, sc, Ya, Va, sa):  # pragma: no cover - compiled
+    """Factorise the free set ``F[:nf]`` of the level with rows ``A[r0:r1]`` (equalities ``A[:r0]``).
+
+    ``L L' = Wu[F, F]``; ``Yc`` (with ``Vc``, ``sc``) the SVD of the equality rows in the ``L``
+    metric, ``L^-1 A[:r0, F]'``; ``Ya`` (with ``Va``, ``sa``) that of this level's rows projected
+    onto their null space.  A pure function of the level and ``F``: cached per free set.
+    """
+    nl = r1 - r0
+    nc = r0
+    if diag:
+        for q in range(nf):
+            L[q, 0] = np.sqrt(Wu[F[q], F[q]])  # a diagonal L is stored as a column
+    else:
+        for q in range(nf):
+            for s in range(q + 1):
+                acc = Wu[F[q], F[s]]
+                for t in range(s):
+                    acc -= L[q, t] * L[s, t]
+                if q == s:
+                    L[q, q] = np.sqrt(max(acc, 1e-300))
+                else:
+                    L[q, s] = acc / L[s, s]
+    for c in range(nc):
+        for q in range(nf):
+            Yc[q, c] = A[c, F[q]]
+        _lsolve_col(L, nf, diag, Yc, c)
+    if nc > 0:
+        _jacobi(Yc, nf, nc, Vc, sc, 0.0)
+    ref = 0.0
+    for i in range(nl):
+        for q in range(nf):
+            Ya[q, i] = A[r0 + i, F[q]]
+        _lsolve_col(L, nf, diag, Ya, i)
+        for q in range(nf):
+            ref = max(ref, abs(Ya[q, i]))
+        for _twice in range(2):  # Gram-Schmidt twice: rows nearly in the span lose digits
+            for c in range(nc):
+                if sc[c] > 0.0:
+                    acc = 0.0
+                    for q in range(nf):
+                        acc += Yc[q, c] * Ya[q, i]
+                    for q in range(nf):
+                        Ya[q, i] -= acc * Yc[q, c]
+    if nl > 0:
+        _jacobi(Ya, nf, nl, Va, sa, ref)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _factors(mats, ivecs, bankL, bank, r0, r1, lev, diag, nf, m):  # pragma: no cover - compiled
+    """The cache slot holding the factorisation of the current free set (``_factor``'s
+    ``L = bankL[s]``, ``Yc, Ya, Vc, Va = bank[s, 0:4]``, ``sc, sa = bank[s, 4, 0:2]``):
+    looked up, else computed (and kept while the cache has room; past that, computed into
+    the scratch slot 0).  Cached and recomputed factors are bitwise equal, so the cache
+    never changes an answer, only its cost.  The hash table (rows ``_TABLE:`` of ``ivecs``)
+    is open addressing as in :func:`alloc._kernels._probe`.
+    """
+    words = ivecs[_HEAD, _WORDS]
+    for w in range(words):
+        ivecs[_KEY, w] = 0
+    for j in range(m):
+        if ivecs[_FREE, j]:
+            ivecs[_KEY, j // _FREE_BITS] |= np.int64(1) << np.int64(j % _FREE_BITS)
+    ivecs[_KEY, words - 1] = lev + 1
+    h = np.int64(0)
+    for w in range(words):
+        h = (h ^ ivecs[_KEY, w]) * np.int64(-7046029254386353131)  # Fibonacci hashing
+    mask = ivecs.shape[0] - _TABLE - 1
+    pos = (h >> np.int64(29)) & mask
+    while ivecs[_TABLE + pos, 0] >= 0:
+        same = True
+        for w in range(words):
+            if ivecs[_TABLE + pos, 1 + w] != ivecs[_KEY, w]:
+                same = False
+                break
+        if same:
+            return ivecs[_TABLE + pos, 0]
+        pos = (pos + 1) & mask
+    s = ivecs[_MISC, 0]
+    if s < bankL.shape[0]:
+        ivecs[_MISC, 0] = s + 1
+        for w in range(words):
+            ivecs[_TABLE + pos, 1 + w] = ivecs[_KEY, w]
+        ivecs[_TABLE + pos, 0] = s
+    else:
+        s = 0  # the cache is full: slot 0 is the scratch (never a table entry)
+    E = bank[s]
+    sv = E[4]
+    _factor(mats[_A], r0, r1, mats[_WU], diag, ivecs[_FIDX], nf, bankL[s], E[0], E[2], sv[0], E[1], E[3], sv[1])
+    return s
+
+
+@njit(cache=True, nogil=True)
+def _level(mats, vecs, ivecs, bankL, bank, r0, r1, lev, gam, diag, iup, ilo, ihi, maxit, m,
+           refine):  # pragma: no cover - compiled
     """Solve one level in place on ``u`` (feasible on entry) and ``free`` (working set).
 
     Rows ``A[r0:r1]`` are this level's least-squares rows, rows ``A[:r0]`` its equality
@@ -120,416 +282,417 @@ def _level(A, b, r0, r1, gam, Wu, diag, up, lo, hi, u, free, pinned, maxit,
     nonzero, unique multiplier); on return this level adds its own.  Without pinning, the
     stage-2 multipliers at a stage-1 vertex are not unique and a minimum-norm estimate
     frees effectors that cannot move.  An effector freed and then blocked by a zero step
-    (a degenerate multiplier) is not freed again until the iterate moves.  The remaining
-    arguments are work arrays (allocated once per call by :func:`lexico_ls`).  Returns
-    the iteration count, or -1 when the cap was hit.
+    (a degenerate multiplier) is not freed again until the iterate moves.  Everything is
+    addressed by row in the stacked arrays of :func:`pack` (``up``, ``lo``, ``hi`` are the
+    rows ``iup``, ``ilo``, ``ihi`` of ``vecs``): no views, no allocation.  With ``refine``
+    (a warm start: the iterate came from another demand) a full step is followed by one
+    more step on the same working set before the multipliers are tested (iterative
+    refinement: the answer is then as exact as from the cold start).  Returns the
+    iteration count, or -1 when the cap was hit.
     """
-    m = u.shape[0]
     nl = r1 - r0
     nc = r0
-    tabu[:] = False
+    for j in range(m):
+        ivecs[_TABU, j] = 0
     last = -1
+    refined = False
     gam2 = gam * gam
     for it in range(maxit):
         # --- residual e = b - A u of this level's rows.  A pure least-squares level whose
         # residual is zero to round-off is at its global minimum (the objective is >= 0):
-        # done, with zero multipliers (the common attainable case from the Eq 1.23 start).
+        # done, with zero multipliers (the common attainable case).
         zero = nl > 0 and gam2 == 0.0
         for i in range(nl):
-            acc = b[r0 + i]
-            mag = abs(b[r0 + i])
+            acc = vecs[_BV, r0 + i]
+            mag = abs(vecs[_BV, r0 + i])
             for j in range(m):
-                t = A[r0 + i, j] * u[j]
+                t = mats[_A, r0 + i, j] * vecs[_U, j]
                 acc -= t
                 mag += abs(t)
-            e[i] = acc
+            vecs[_E, i] = acc
             if abs(acc) > MU_EPS * mag:
                 zero = False
         if zero:
             return it + 1
         nf = 0
         for j in range(m):
-            if free[j]:
-                F[nf] = j
+            if ivecs[_FREE, j]:
+                ivecs[_FIDX, nf] = j
                 nf += 1
-        # --- L L' = Wu[F, F] (Cholesky; diagonal fast path)
-        if diag:
-            for q in range(nf):
-                L[q, q] = np.sqrt(Wu[F[q], F[q]])
-        else:
-            for q in range(nf):
-                for s in range(q + 1):
-                    acc = Wu[F[q], F[s]]
-                    for t in range(s):
-                        acc -= L[q, t] * L[s, t]
-                    if q == s:
-                        L[q, q] = np.sqrt(max(acc, 1e-300))
-                    else:
-                        L[q, s] = acc / L[s, s]
+        slot = _factors(mats, ivecs, bankL, bank, r0, r1, lev, diag, nf, m)
         # --- the preference gradient Wu (u - up)
         for j in range(m):
-            tmp[j] = u[j] - up[j]
+            vecs[_TMP, j] = vecs[_U, j] - vecs[iup, j]
         for q in range(nf):
-            j = F[q]
+            j = ivecs[_FIDX, q]
             acc = 0.0
             if diag:
-                acc = Wu[j, j] * tmp[j]
+                acc = mats[_WU, j, j] * vecs[_TMP, j]
             else:
                 for s in range(m):
-                    acc += Wu[j, s] * tmp[s]
-            h[q] = acc
-        _lsolve(L, nf, diag, h)  # h = L^-1 (Wu (u - up))_F
-        # --- equality rows in the L metric: Yc = L^-1 A[:r0, F]'  (nf x nc), then its SVD
-        for c in range(nc):
-            for q in range(nf):
-                Yc[q, c] = A[c, F[q]]
-            _lsolve_col(L, nf, diag, Yc, c)
-        if nc > 0:
-            _jacobi(Yc, nf, nc, Vc, sc, 0.0)
-        # --- this level's rows, projected onto the null space of the equalities
-        ref = 0.0
-        for i in range(nl):
-            for q in range(nf):
-                Ya[q, i] = A[r0 + i, F[q]]
-            _lsolve_col(L, nf, diag, Ya, i)
-            for q in range(nf):
-                ref = max(ref, abs(Ya[q, i]))
-            for _twice in range(2):  # Gram-Schmidt twice: rows nearly in the span lose digits
-                for c in range(nc):
-                    if sc[c] > 0.0:
-                        acc = 0.0
-                        for q in range(nf):
-                            acc += Yc[q, c] * Ya[q, i]
-                        for q in range(nf):
-                            Ya[q, i] -= acc * Yc[q, c]
-        if nl > 0:
-            _jacobi(Ya, nf, nl, Va, sa, ref)
+                    acc += mats[_WU, j, s] * vecs[_TMP, s]
+            vecs[_H, q] = acc
+        _lsolve(bankL, slot, nf, diag, vecs, _H)  # h = L^-1 (Wu (u - up))_F
         # --- step y = -P h + Ua z   (P: projector onto null(Ct) and null(At)),
         #     z_i = (s_i (Va' e)_i - gam^2 (Ua' h)_i) / (s_i^2 + gam^2)
         for q in range(nf):
-            y[q] = -h[q]
+            vecs[_Y, q] = -vecs[_H, q]
         for c in range(nc):
-            if sc[c] > 0.0:
+            if bank[slot, 4, 0, c] > 0.0:
                 acc = 0.0
                 for q in range(nf):
-                    acc += Yc[q, c] * h[q]
+                    acc += bank[slot, 0, q, c] * vecs[_H, q]
                 for q in range(nf):
-                    y[q] += acc * Yc[q, c]
+                    vecs[_Y, q] += acc * bank[slot, 0, q, c]
         for i in range(nl):
-            if sa[i] > 0.0:
+            if bank[slot, 4, 1, i] > 0.0:
                 uh = 0.0
                 for q in range(nf):
-                    uh += Ya[q, i] * h[q]
+                    uh += bank[slot, 1, q, i] * vecs[_H, q]
                 ve = 0.0
                 for r in range(nl):
-                    ve += Va[r, i] * e[r]
-                z = (sa[i] * ve - gam2 * uh) / (sa[i] * sa[i] + gam2)
+                    ve += bank[slot, 3, r, i] * vecs[_E, r]
+                z = (bank[slot, 4, 1, i] * ve - gam2 * uh) / (bank[slot, 4, 1, i] * bank[slot, 4, 1, i] + gam2)
                 for q in range(nf):
-                    y[q] += (uh + z) * Ya[q, i]
+                    vecs[_Y, q] += (uh + z) * bank[slot, 1, q, i]
         for c in range(nc):  # y in null(Ct) to round-off: the held moments do not drift
-            if sc[c] > 0.0:
+            if bank[slot, 4, 0, c] > 0.0:
                 acc = 0.0
                 for q in range(nf):
-                    acc += Yc[q, c] * y[q]
+                    acc += bank[slot, 0, q, c] * vecs[_Y, q]
                 for q in range(nf):
-                    y[q] -= acc * Yc[q, c]
-        _ltsolve(L, nf, diag, y)  # p_F = L^-T y
+                    vecs[_Y, q] -= acc * bank[slot, 0, q, c]
+        _ltsolve(bankL, slot, nf, diag, vecs, _Y)  # p_F = L^-T y
         # --- ratio test
         alpha = 1.0
         block = -1
         for q in range(nf):
-            j = F[q]
-            d = y[q]
+            j = ivecs[_FIDX, q]
+            d = vecs[_Y, q]
             if d > 0.0:
-                room = hi[j] - u[j]
+                room = vecs[ihi, j] - vecs[_U, j]
                 if room < alpha * d:
                     alpha = max(room, 0.0) / d
                     block = q
             elif d < 0.0:
-                room = lo[j] - u[j]
+                room = vecs[ilo, j] - vecs[_U, j]
                 if room > alpha * d:
                     alpha = min(room, 0.0) / d
                     block = q
         for q in range(nf):
-            u[F[q]] += alpha * y[q]
+            vecs[_U, ivecs[_FIDX, q]] += alpha * vecs[_Y, q]
         if block >= 0:
-            j = F[block]
-            u[j] = hi[j] if y[block] > 0.0 else lo[j]
-            free[j] = False
+            j = ivecs[_FIDX, block]
+            vecs[_U, j] = vecs[ihi, j] if vecs[_Y, block] > 0.0 else vecs[ilo, j]
+            ivecs[_FREE, j] = 0
             if alpha > 0.0:
-                tabu[:] = False
+                for t in range(m):
+                    ivecs[_TABU, t] = 0
             elif j == last:
-                tabu[j] = True
+                ivecs[_TABU, j] = 1
+            refined = False
             continue
-        # --- full step: multipliers of the bounds held, mu = g + A[:r0]' lam
+        if refine and not refined:
+            refined = True
+            continue
+        # --- full step: multipliers of the bounds held, mu = g + mats[_A, :r0]' lam
         for j in range(m):
-            tmp[j] = u[j] - up[j]
+            vecs[_TMP, j] = vecs[_U, j] - vecs[iup, j]
         for j in range(m):
             acc = 0.0
             if gam2 > 0.0:
                 if diag:
-                    acc = gam2 * Wu[j, j] * tmp[j]
+                    acc = gam2 * mats[_WU, j, j] * vecs[_TMP, j]
                 else:
                     for s in range(m):
-                        acc += Wu[j, s] * tmp[s]
+                        acc += mats[_WU, j, s] * vecs[_TMP, s]
                     acc *= gam2
-            g[j] = acc
-        scale[:] = 0.0  # round-off bound of each g_j (and of A' lam below)
+            vecs[_G, j] = acc
+        for j in range(m):
+            vecs[_SCALE, j] = 0.0  # round-off bound of each g_j (and of A' lam below)
         for i in range(nl):
-            acc = -b[r0 + i]
-            mag = abs(b[r0 + i])
+            acc = -vecs[_BV, r0 + i]
+            mag = abs(vecs[_BV, r0 + i])
             for j in range(m):
-                t = A[r0 + i, j] * u[j]
+                t = mats[_A, r0 + i, j] * vecs[_U, j]
                 acc += t
                 mag += abs(t)
             for j in range(m):
-                g[j] += A[r0 + i, j] * acc
-                scale[j] += abs(A[r0 + i, j]) * mag
+                vecs[_G, j] += mats[_A, r0 + i, j] * acc
+                vecs[_SCALE, j] += abs(mats[_A, r0 + i, j]) * mag
         if gam2 > 0.0:
             for j in range(m):
                 if diag:
-                    acc = abs(Wu[j, j]) * (abs(u[j]) + abs(up[j]))
+                    acc = abs(mats[_WU, j, j]) * (abs(vecs[_U, j]) + abs(vecs[iup, j]))
                 else:
                     acc = 0.0
                     for s in range(m):
-                        acc += abs(Wu[j, s]) * (abs(u[s]) + abs(up[s]))
-                scale[j] += gam2 * acc
+                        acc += abs(mats[_WU, j, s]) * (abs(vecs[_U, s]) + abs(vecs[iup, s]))
+                vecs[_SCALE, j] += gam2 * acc
         if nc > 0:
             # lam = -Vc diag(1/sc) Uc' L^-1 g_F
             for q in range(nf):
-                h[q] = g[F[q]]
-            _lsolve(L, nf, diag, h)
+                vecs[_H, q] = vecs[_G, ivecs[_FIDX, q]]
+            _lsolve(bankL, slot, nf, diag, vecs, _H)
             for c in range(nc):
-                lam[c] = 0.0
+                vecs[_LAM, c] = 0.0
             for c in range(nc):
-                if sc[c] > 0.0:
+                if bank[slot, 4, 0, c] > 0.0:
                     acc = 0.0
                     for q in range(nf):
-                        acc += Yc[q, c] * h[q]
-                    acc /= sc[c]
+                        acc += bank[slot, 0, q, c] * vecs[_H, q]
+                    acc /= bank[slot, 4, 0, c]
                     for r in range(nc):
-                        lam[r] -= Vc[r, c] * acc
+                        vecs[_LAM, r] -= bank[slot, 2, r, c] * acc
             for c in range(nc):
                 for j in range(m):
-                    t = A[c, j] * lam[c]
-                    g[j] += t
-                    scale[j] += abs(t)
+                    t = mats[_A, c, j] * vecs[_LAM, c]
+                    vecs[_G, j] += t
+                    vecs[_SCALE, j] += abs(t)
         unique = True
         for c in range(nc):
-            if sc[c] == 0.0:
+            if bank[slot, 4, 0, c] == 0.0:
                 unique = False
         worst = -1
         wv = 0.0
         for j in range(m):
-            if free[j] or lo[j] == hi[j] or pinned[j] or tabu[j]:
+            if ivecs[_FREE, j] or vecs[ilo, j] == vecs[ihi, j] or ivecs[_PINNED, j] or ivecs[_TABU, j]:
                 continue
-            viol = -g[j] if u[j] <= lo[j] else g[j]
-            tol = MU_EPS * scale[j]
+            viol = -vecs[_G, j] if vecs[_U, j] <= vecs[ilo, j] else vecs[_G, j]
+            tol = MU_EPS * vecs[_SCALE, j]
             if viol > tol and viol - tol > wv:
                 wv = viol - tol
                 worst = j
         if worst < 0:
             if unique and nl > 0:
                 for j in range(m):
-                    if not free[j] and lo[j] < hi[j]:
-                        mu = -g[j] if u[j] <= lo[j] else g[j]
-                        if mu < -100.0 * MU_EPS * scale[j]:
-                            pinned[j] = True
+                    if not ivecs[_FREE, j] and vecs[ilo, j] < vecs[ihi, j]:
+                        mu = -vecs[_G, j] if vecs[_U, j] <= vecs[ilo, j] else vecs[_G, j]
+                        if mu < -100.0 * MU_EPS * vecs[_SCALE, j]:
+                            ivecs[_PINNED, j] = 1
             return it + 1
-        free[worst] = True
+        ivecs[_FREE, worst] = 1
         last = worst
     return -1
 
 
-@njit(cache=True, nogil=True)
-def _lsolve(L, n, diag, x):  # pragma: no cover - compiled
-    """``x[:n] = L^-1 x[:n]`` (forward substitution)."""
-    for q in range(n):
-        acc = x[q]
-        if not diag:
-            for s in range(q):
-                acc -= L[q, s] * x[s]
-        x[q] = acc / L[q, q]
 
 
-@njit(cache=True, nogil=True)
-def _lsolve_col(L, n, diag, X, c):  # pragma: no cover - compiled
-    """``X[:n, c] = L^-1 X[:n, c]``."""
-    for q in range(n):
-        acc = X[q, c]
-        if not diag:
-            for s in range(q):
-                acc -= L[q, s] * X[s, c]
-        X[q, c] = acc / L[q, q]
+def pack(A, T, perm, starts, gammas, final, Wu, diag, up, B, P0, umin, umax, rate_min, rate_max, maxit,
+         vmax, rtol, Kv=None, Ku=None):
+    """The solver's data and state: the argument tuple of :func:`lexico_call` before ``v``.
 
-
-@njit(cache=True, nogil=True)
-def _ltsolve(L, n, diag, x):  # pragma: no cover - compiled
-    """``x[:n] = L^-T x[:n]`` (back substitution)."""
-    for q in range(n - 1, -1, -1):
-        acc = x[q]
-        if not diag:
-            for s in range(q + 1, n):
-                acc -= L[s, q] * x[s]
-        x[q] = acc / L[q, q]
-
-
-@njit(cache=True, nogil=True)
-def lexico_ls(A, T, perm, starts, gammas, final, Wu, diag, up, B0, P0, v, lo, hi, maxit):  # pragma: no cover - compiled
-    """All levels for one demand: ``b = T v[perm]``; returns ``(u, iterations, ok)``.
-
-    ``A`` (n x m) stacks the levels' rows (level ``l`` is ``A[starts[l]:starts[l+1]]``,
-    weight ``gammas[l]``); ``final`` adds the preference level ``min (u-up)'Wu(u-up)``
-    holding all rows of ``A`` (stage 2 of ``qp``).  The start is the pseudo-inverse
-    answer ``up + P0 (v - B0 up)`` clipped into ``[lo, hi]``, the effectors clipped held
-    at their bound (a deterministic start: the answer depends on the data alone).
+    ``up`` is the preference point, or with ``Kv`` (m x k) and ``Ku`` (m x m) its constant
+    part: the call's preference point is ``up + Kv v (+ Ku u_prev with rate limits)``
+    (``dynamic``).  ``vmax`` bounds the valid input domain, ``rtol`` is the ``exact``
+    tolerance.  The cache holds up to ``CACHE_ENTRIES`` free sets within ``CACHE_FLOATS``.
     """
     n, m = A.shape
-    b = np.empty(n)
-    for i in range(n):
-        acc = 0.0
-        for r in range(n):
-            acc += T[i, r] * v[perm[r]]
-        b[i] = acc
-    u = np.empty(m)
-    free = np.empty(m, dtype=np.bool_)
-    pinned = np.zeros(m, dtype=np.bool_)
-    # start: the Eq 1.23 pseudo-inverse answer u0 = up + P0 (v - B0 up), clipped
-    k0 = B0.shape[0]
-    r = np.empty(k0)
-    for i in range(k0):
+    k = B.shape[0]
+    nlev = len(starts) - 1
+    nw = max(n, 1)
+    words = m // _FREE_BITS + 2  # the free set's bits, then the level
+    R = C = max(n, m, k)
+    mats = np.zeros((7, R, C))
+    for i, M in ((_A, A), (_T, T), (_WU, Wu), (_B, B), (_P0, P0)) + (((_KV, Kv), (_KU, Ku)) if Kv is not None else ()):
+        M = np.asarray(M, dtype=float)
+        mats[i, :M.shape[0], :M.shape[1]] = M
+    vecs = np.zeros((22, max(m, n, k, nlev, 2)))
+    for i, x in ((_UP, up), (_UMIN, umin), (_UMAX, umax), (_RMIN, rate_min), (_RMAX, rate_max), (_GAM, gammas),
+                 (_CONST, [vmax, rtol])):
+        x = np.asarray(x, dtype=float)
+        vecs[i, :len(x)] = x
+    ivecs = np.zeros((_TABLE, max(m, n, nlev + 1, words + 1, 10)), dtype=np.int64)
+    ivecs[_HEAD, :10] = [n, m, k, nlev, int(final), int(diag), int(maxit), words, int(Kv is not None), 1]
+    ivecs[_PERM, :n] = perm
+    ivecs[_STARTS, :nlev + 1] = starts
+    ivecs[_MISC, 0] = 1  # the next free cache slot (slot 0 is scratch)
+    R2 = max(m, nw, 2)
+    mL = 1 if diag else m  # a diagonal L is stored as its column of pivots
+    cap = int(max(4, min(CACHE_ENTRIES, CACHE_FLOATS // (m * mL + 5 * R2 * nw) - 1)))
+    bankL = np.empty((cap + 1, m, mL))  # untouched pages cost nothing until a free set is cached
+    bank = np.empty((cap + 1, 5, R2, nw))
+    size = 1 << int(2 * (cap + 1) - 1).bit_length()  # a power of two, at most half full
+    table = np.zeros((size, ivecs.shape[1]), dtype=np.int64)
+    table[:, 0] = -1
+    return mats, vecs, np.vstack([ivecs, table]), bankL, bank
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _start(mats, vecs, ivecs, v, ilo, ihi, iup, warm, m, k):  # pragma: no cover - compiled
+    """The first iterate and working set.  Warm: the previous call's working set (held
+    effectors at their new bound, free ones at their previous value clipped); cold: the
+    Eq 1.23 pseudo-inverse answer ``up + P0 (v - B up)`` clipped, the clipped effectors held."""
+    if warm:
+        for j in range(m):
+            lo, hi = vecs[ilo, j], vecs[ihi, j]
+            if lo == hi or ivecs[_WSTATE, j] < 0:
+                vecs[_U, j] = lo
+                ivecs[_FREE, j] = 0
+            elif ivecs[_WSTATE, j] > 0:
+                vecs[_U, j] = hi
+                ivecs[_FREE, j] = 0
+            else:
+                vecs[_U, j] = min(max(vecs[_UWARM, j], lo), hi)
+                ivecs[_FREE, j] = 1
+        return
+    for i in range(k):
         acc = v[i]
         for j in range(m):
-            acc -= B0[i, j] * up[j]
-        r[i] = acc
+            acc -= mats[_B, i, j] * vecs[iup, j]
+        vecs[_R, i] = acc
     for j in range(m):
-        x = up[j]
-        for i in range(k0):
-            x += P0[j, i] * r[i]
-        x = min(max(x, lo[j]), hi[j])
-        u[j] = x
-        free[j] = lo[j] < x < hi[j]
-    nw = max(n, 1)
-    F = np.empty(m, dtype=np.int64)
-    tabu = np.zeros(m, dtype=np.bool_)
-    work = np.zeros(m * m + 2 * m * nw + 2 * nw * nw + 4 * nw + 5 * m)
-    o = 0
-    L = work[o:o + m * m].reshape((m, m))
-    o += m * m
-    Yc = work[o:o + m * nw].reshape((m, nw))
-    o += m * nw
-    Ya = work[o:o + m * nw].reshape((m, nw))
-    o += m * nw
-    Vc = work[o:o + nw * nw].reshape((nw, nw))
-    o += nw * nw
-    Va = work[o:o + nw * nw].reshape((nw, nw))
-    o += nw * nw
-    sc = work[o:o + nw]
-    o += nw
-    sa = work[o:o + nw]
-    o += nw
-    e = work[o:o + nw]
-    o += nw
-    lam = work[o:o + nw]
-    o += nw
-    g = work[o:o + m]
-    o += m
-    h = work[o:o + m]
-    o += m
-    y = work[o:o + m]
-    o += m
-    tmp = work[o:o + m]
-    o += m
-    scale = work[o:o + m]
-    total = 0
-    for l in range(starts.shape[0] - 1):
-        it = _level(A, b, starts[l], starts[l + 1], gammas[l], Wu, diag, up, lo, hi, u, free, pinned, maxit,
-                    F, L, Yc, Vc, sc, Ya, Va, sa, e, g, h, y, tmp, lam, tabu, scale)
-        if it < 0:
-            return u, total + maxit, False
-        total += it
-    if final:
-        it = _level(A, b, n, n, 1.0, Wu, diag, up, lo, hi, u, free, pinned, maxit,
-                    F, L, Yc, Vc, sc, Ya, Va, sa, e, g, h, y, tmp, lam, tabu, scale)
-        if it < 0:
-            return u, total + maxit, False
-        total += it
-    return u, total, True
+        x = vecs[iup, j]
+        for i in range(k):
+            x += mats[_P0, j, i] * vecs[_R, i]
+        lo, hi = vecs[ilo, j], vecs[ihi, j]
+        x = min(max(x, lo), hi)
+        vecs[_U, j] = x
+        ivecs[_FREE, j] = 1 if lo < x < hi else 0
 
 
 @njit(cache=True, nogil=True)
-def lexico_ls_batch(A, T, perm, starts, gammas, final, Wu, diag, up, B0, P0, V, lo, hi, maxit):  # pragma: no cover - compiled
-    """:func:`lexico_ls` over the rows of ``V``; ``ok[i]`` False where a level hit its cap."""
-    N = V.shape[0]
-    m = A.shape[1]
-    U = np.empty((N, m))
-    ok = np.empty(N, dtype=np.bool_)
-    for i in range(N):
-        u, _it, good = lexico_ls(A, T, perm, starts, gammas, final, Wu, diag, up, B0, P0, V[i], lo, hi, maxit)
-        U[i] = u
-        ok[i] = good
-    return U, ok
+def _run(mats, vecs, ivecs, bankL, bank, v, ilo, ihi, iup):  # pragma: no cover - compiled
+    """All levels for one demand, into ``vecs[_U]``; returns ``(iterations, ok)``.
 
-
-# --- packed entry points: one compiled call with few arguments --------------------------
-#
-# numba unboxes every array argument on each call (~0.1 us each) and every np.empty in a
-# call is an allocation; the hot path therefore passes the solver's data packed in one
-# float and one int array and carves its work arrays out of one allocation.
-
-#: int header: n, m, k0, levels, final, diag, maxit, then perm (n), then starts (levels + 1)
-_HDR = 7
-
-
-def pack(A, T, perm, starts, gammas, final, Wu, diag, up, B0, P0, maxit):
-    """The solver data as ``(fdata, idata)`` for :func:`lexico_packed`."""
-    n, m = A.shape
-    k0 = B0.shape[0]
-    idata = np.concatenate([[n, m, k0, len(starts) - 1, int(final), int(diag), int(maxit)],
-                            np.asarray(perm), np.asarray(starts)]).astype(np.int64)
-    fdata = np.concatenate([np.ravel(A), np.ravel(T), np.ravel(Wu), np.ravel(up), np.ravel(B0),
-                            np.ravel(P0), np.asarray(gammas, dtype=float)]).astype(float)
-    return np.ascontiguousarray(fdata), np.ascontiguousarray(idata)
-
-
-@njit(cache=True, nogil=True)
-def lexico_packed(fdata, idata, up, v, lo, hi):  # pragma: no cover - compiled
-    """:func:`lexico_ls` on packed data; ``up`` is the preference point of this call."""
-    n = idata[0]
-    m = idata[1]
-    k0 = idata[2]
-    nlev = idata[3]
-    final = idata[4] != 0
-    diag = idata[5] != 0
-    maxit = idata[6]
-    perm = idata[_HDR:_HDR + n]
-    starts = idata[_HDR + n:_HDR + n + nlev + 1]
-    o = 0
-    A = fdata[o:o + n * m].reshape((n, m))
-    o += n * m
-    T = fdata[o:o + n * n].reshape((n, n))
-    o += n * n
-    Wu = fdata[o:o + m * m].reshape((m, m))
-    o += m * m
-    o += m  # the build-time up (the caller passes the call's up)
-    B0 = fdata[o:o + k0 * m].reshape((k0, m))
-    o += k0 * m
-    P0 = fdata[o:o + m * k0].reshape((m, k0))
-    o += m * k0
-    gammas = fdata[o:o + nlev]
-    return lexico_ls(A, T, perm, starts, gammas, final, Wu, diag, up, B0, P0, v, lo, hi, maxit)
-
-
-@njit(cache=True, nogil=True)
-def lexico_packed_batch(fdata, idata, up, V, lo, hi):  # pragma: no cover - compiled
-    """:func:`lexico_packed` over the rows of ``V``; ``ok[i]`` False where a level hit its cap."""
-    N = V.shape[0]
-    m = idata[1]
-    U = np.empty((N, m))
-    ok = np.empty(N, dtype=np.bool_)
-    for i in range(N):
-        u, _it, good = lexico_packed(fdata, idata, up, V[i], lo, hi)
+    ``b = T v[perm]``; level ``l`` is rows ``A[starts[l]:starts[l+1]]`` with weight
+    ``gammas[l]``; ``final`` adds the preference level holding every row (stage 2 of ``qp``).
+    Warm-started when the previous call succeeded; a warm start that hits the cap is
+    retried cold.  On success the working set is kept for the next call.  The bounds and
+    the preference point are the rows ``ilo``, ``ihi``, ``iup`` of ``vecs``.
+    """
+    n, m, k, nlev = ivecs[_HEAD, _N], ivecs[_HEAD, _M], ivecs[_HEAD, _K], ivecs[_HEAD, _NLEV]
+    maxit = ivecs[_HEAD, _MAXIT]
+    diag = ivecs[_HEAD, _DIAG] != 0
+    for i in range(n):
+        acc = 0.0
+        for q in range(n):
+            acc += mats[_T, i, q] * v[ivecs[_PERM, q]]
+        vecs[_BV, i] = acc
+    # warm only for a demand close to the previous one (the way a flight controller calls):
+    # from an unrelated working set a cold start takes fewer pivots
+    dv = 0.0
+    scale = 0.0
+    for i in range(k):
+        dv = max(dv, abs(v[i] - vecs[_VLAST, i]))
+        scale = max(scale, abs(v[i]), abs(vecs[_VLAST, i]))
+        vecs[_VLAST, i] = v[i]
+    warm = ivecs[_MISC, 1] != 0 and ivecs[_HEAD, _WARM] != 0 and dv <= WARM_STEP * scale
+    ivecs[_MISC, 1] = 0
+    while True:
+        _start(mats, vecs, ivecs, v, ilo, ihi, iup, warm, m, k)
         for j in range(m):
-            U[i, j] = u[j]
+            ivecs[_PINNED, j] = 0
+        total = 0
+        ok = True
+        for l in range(nlev + (1 if ivecs[_HEAD, _FINAL] else 0)):
+            if l < nlev:
+                r0, r1, gam = ivecs[_STARTS, l], ivecs[_STARTS, l + 1], vecs[_GAM, l]
+            else:
+                r0, r1, gam = n, n, 1.0
+            it = _level(mats, vecs, ivecs, bankL, bank, r0, r1, l, gam, diag, iup, ilo, ihi, maxit, m, warm)
+            if it < 0:
+                total += maxit
+                ok = False
+                break
+            total += it
+        if ok or not warm:
+            break
+        warm = False  # the warm start hit the cap: retry cold (what a fresh allocator does)
+    if ok:
+        for j in range(m):
+            vecs[_UWARM, j] = vecs[_U, j]
+            ivecs[_WSTATE, j] = 0 if ivecs[_FREE, j] else (-1 if vecs[_U, j] <= vecs[ilo, j] else 1)
+        ivecs[_MISC, 1] = 1
+    return total, ok
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _target(mats, vecs, ivecs, v, u_prev, rate):  # pragma: no cover - compiled
+    """The row of ``vecs`` holding the call's preference point: ``up``, or (``dynamic``)
+    ``up + Kv v (+ Ku u_prev)`` written into ``vecs[_UPC]``; -1 when that is not finite."""
+    if ivecs[_HEAD, _DYN] == 0:
+        return _UP
+    m, k = ivecs[_HEAD, _M], ivecs[_HEAD, _K]
+    good = True
+    for j in range(m):
+        acc = vecs[_UP, j]
+        for i in range(k):
+            acc += mats[_KV, j, i] * v[i]
+        if rate:
+            for s in range(m):
+                acc += mats[_KU, j, s] * u_prev[s]
+        vecs[_UPC, j] = acc
+        if not np.isfinite(acc):
+            good = False
+    return _UPC if good else -1
+
+
+@njit(cache=True)
+def lexico_call(mats, vecs, ivecs, bankL, bank, v, u_prev, dt):  # pragma: no cover - compiled
+    """One allocation in one compiled call, for the allocator's fast path.
+
+    Checks the demand (and ``u_prev`` when ``dt > 0``) against the valid domain, forms the
+    rate-limited bounds (Eq 1.28) when ``dt > 0``, solves, clips, and classifies like
+    :func:`alloc._kernels.finish`.  Returns ``(out, code, iterations)``: the
+    :func:`alloc._kernels.packed_out` array and the code, 0 exact, 1 unattainable,
+    2 non-finite, 3 ``v`` outside the domain, 4 ``u_prev`` outside the domain, 5 the cap.
+    """
+    m, k = ivecs[_HEAD, _M], ivecs[_HEAD, _K]
+    vmax, rtol = vecs[_CONST, 0], vecs[_CONST, 1]
+    out = packed_out(m, k)
+    if not copy_demand(v, out, m, vmax):
+        return out, 3, 0
+    rate = dt > 0.0
+    ilo, ihi = _UMIN, _UMAX
+    if rate:
+        for j in range(m):
+            if not abs(u_prev[j]) <= vmax:
+                return out, 4, 0
+        ilo, ihi = _LO, _HI
+        rate_window_into(vecs[_UMIN, :m], vecs[_UMAX], vecs[_RMIN], vecs[_RMAX], u_prev, dt, vecs[_LO], vecs[_HI])
+    iup = _target(mats, vecs, ivecs, v, u_prev, rate)
+    if iup < 0:
+        return out, 2, 0
+    it, ok = _run(mats, vecs, ivecs, bankL, bank, v, ilo, ihi, iup)
+    if not ok:
+        return out, 5, it
+    for j in range(m):
+        out[j] = vecs[_U, j]
+    code = finish(mats[_B, :k, :m], out[:m], vecs[ilo], vecs[ihi], v, out[m:m + k], rtol)
+    close_out(out, m, k)
+    return out, code, it
+
+
+@njit(cache=True)
+def lexico_solve(mats, vecs, ivecs, bankL, bank, v, lo, hi, u_prev, rate):  # pragma: no cover - compiled
+    """The method's ``solve``: ``(u, iterations, ok)`` within ``[lo, hi]`` (the caller's
+    bounds, copied into the state); ``u_prev`` enters only the ``dynamic`` preference
+    point, when ``rate``; ``iterations`` is -1 when that point is not finite."""
+    m = ivecs[_HEAD, _M]
+    for j in range(m):
+        vecs[_LO, j] = lo[j]
+        vecs[_HI, j] = hi[j]
+    iup = _target(mats, vecs, ivecs, v, u_prev, rate)
+    if iup < 0:
+        return vecs[_UPC, :m].copy(), -1, False
+    it, ok = _run(mats, vecs, ivecs, bankL, bank, v, _LO, _HI, iup)
+    return vecs[_U, :m].copy(), it, ok
+
+
+@njit(cache=True)
+def lexico_batch(mats, vecs, ivecs, bankL, bank, V):  # pragma: no cover - compiled
+    """:func:`lexico_solve` over the rows of ``V`` within the position limits, in order (a
+    compiled loop: row ``i`` is what the ``i``-th single call would return); ``ok[i]`` False
+    where a level hit its cap."""
+    N = V.shape[0]
+    m = ivecs[_HEAD, _M]
+    U = np.empty((N, m))
+    ok = np.empty(N, dtype=np.bool_)
+    for i in range(N):
+        iup = _target(mats, vecs, ivecs, V[i], V[i], False)
+        good = iup >= 0 and _run(mats, vecs, ivecs, bankL, bank, V[i], _UMIN, _UMAX, iup)[1]
+        for j in range(m):
+            U[i, j] = vecs[_U, j]
         ok[i] = good
     return U, ok

@@ -99,12 +99,10 @@ def finish_batch(B, U, lo, hi, V, Vach, rtol):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def rate_window(umin, umax, rate_min, rate_max, u_prev, dt):  # pragma: no cover - compiled
-    """Eq 1.28 bounds; where the rate window misses the position box, the nearest limit."""
-    m = umin.shape[0]
-    lo = np.empty(m)
-    hi = np.empty(m)
-    for j in range(m):
+def rate_window_into(umin, umax, rate_min, rate_max, u_prev, dt, lo, hi):  # pragma: no cover - compiled
+    """Eq 1.28 bounds into ``lo``, ``hi``; where the rate window misses the position box,
+    the nearest limit."""
+    for j in range(umin.shape[0]):
         a = max(umin[j], u_prev[j] + rate_min[j] * dt)
         b = min(umax[j], u_prev[j] + rate_max[j] * dt)
         if a > b:
@@ -112,6 +110,14 @@ def rate_window(umin, umax, rate_min, rate_max, u_prev, dt):  # pragma: no cover
             b = a
         lo[j] = a
         hi[j] = b
+
+
+@njit(cache=True, nogil=True)
+def rate_window(umin, umax, rate_min, rate_max, u_prev, dt):  # pragma: no cover - compiled
+    """Eq 1.28 bounds ``(lo, hi)`` (:func:`rate_window_into` on new arrays)."""
+    lo = np.empty(umin.shape[0])
+    hi = np.empty(umin.shape[0])
+    rate_window_into(umin, umax, rate_min, rate_max, u_prev, dt, lo, hi)
     return lo, hi
 
 
@@ -254,6 +260,32 @@ def scaled_increment(P, B, b, v, lo, hi):  # pragma: no cover - compiled
     for j in range(m):
         u[j] = base[j] + s * du[j]
     return u
+
+
+@njit(cache=True)
+def fused_scaled(P, B, base, lo, hi, rtol, vmax_domain, v, u_prev, dt):  # pragma: no cover - compiled
+    """``pinv_scale`` without rate limits as one call (the allocator's packed fast path;
+    ``u_prev`` and ``dt`` unused): :func:`scaled_increment` from the clipped bias ``base``,
+    then :func:`finish`, into a :func:`packed_out` array.  Returns ``(out, code, 0)``
+    (code 3: ``v`` outside the valid domain)."""
+    k, m = B.shape
+    out = packed_out(m, k)
+    if not copy_demand(v, out, m, vmax_domain):
+        return out, 3, 0
+    r = out[m + 2 * k:]  # scratch until close_out writes v - B u there
+    _residual(B, base, v, r)
+    du = out[:m]
+    for j in range(m):
+        s = 0.0
+        for i in range(k):
+            s += P[j, i] * r[i]
+        du[j] = s
+    s = _scale_to_box(base, du, lo, hi, np.arange(m), m)
+    for j in range(m):
+        du[j] = base[j] + s * du[j]
+    code = finish(B, du, lo, hi, v, out[m:m + k], rtol)
+    close_out(out, m, k)
+    return out, code, 0
 
 
 @njit(cache=True, nogil=True)
@@ -442,40 +474,57 @@ def cascade(B, up, v, lo, hi, keys, slots, bank, u, free, it0):  # pragma: no co
 
 
 @njit(cache=True, nogil=True)
+def packed_out(m, k):  # pragma: no cover - compiled
+    """The one array a fast-path call returns, ``m + 3 k`` long: ``u`` (m), ``B u`` (k), a
+    copy of ``v`` (k), ``v - B u`` (k) (the allocator wraps read-only views of it into the
+    Result: one allocation per call)."""
+    return np.empty(m + 3 * k)
+
+
+@njit(cache=True, nogil=True)
+def copy_demand(v, out, m, vmax_domain):  # pragma: no cover - compiled
+    """Copy ``v`` into ``out``; False when ``v`` is outside the valid domain (non-finite
+    or ``|v| > vmax_domain``)."""
+    k = v.shape[0]
+    for i in range(k):
+        if not abs(v[i]) <= vmax_domain:  # also NaN
+            return False
+        out[m + k + i] = v[i]
+    return True
+
+
+@njit(cache=True, nogil=True)
+def close_out(out, m, k):  # pragma: no cover - compiled
+    """Write ``v - B u`` into a packed output."""
+    for i in range(k):
+        out[m + 2 * k + i] = out[m + k + i] - out[m + i]
+
+
+@njit(cache=True, nogil=True)
 def fused_affine(W, v, rtol, vmax_domain):  # pragma: no cover - compiled
     """One call for ``u = clip(c + P v)``, ``B u`` and the status, without rate limits.
 
     ``W`` packs everything constant, one row per effector: ``[c | P (k) | B' (k) | umin | umax]``
     (numba charges per argument, so one packed array is measurably cheaper than five).
-    Returns ``out`` of length ``m + 2 k + 1``: ``u``, ``B u``, a code (0 exact,
-    1 unattainable, 2 non-finite ``u`` or ``B u``, 3 ``v`` outside the valid domain:
-    non-finite or ``|v| > vmax_domain``) and a copy of ``v`` (one allocation for the result).
+    Returns ``(out, code, 0)``: the :func:`packed_out` array, the code (0 exact,
+    1 unattainable, 2 non-finite ``u`` or ``B u``, 3 ``v`` outside the valid domain) and
+    the iteration count.
     """
     m = W.shape[0]
     k = v.shape[0]
-    out = np.empty(m + 2 * k + 1)
+    out = packed_out(m, k)
+    if not copy_demand(v, out, m, vmax_domain):
+        return out, 3, 0
     vmax = 1.0
     for i in range(k):
-        a = abs(v[i])
-        if not a <= vmax_domain:  # also NaN
-            out[m + k] = 3.0
-            return out
-        vmax = max(vmax, a)
-        out[m + k + 1 + i] = v[i]  # the result's own copy of the demand
+        vmax = max(vmax, abs(v[i]))
     for j in range(m):
         s = W[j, 0]
         for i in range(k):
             s += W[j, 1 + i] * v[i]
         if not np.isfinite(s):
-            out[m + k] = 2.0
-            return out
-        lo = W[j, 1 + 2 * k]
-        hi = W[j, 2 + 2 * k]
-        if s < lo:
-            s = lo
-        if s > hi:
-            s = hi
-        out[j] = s
+            return out, 2, 0
+        out[j] = clip_scalar(s, W[j, 1 + 2 * k], W[j, 2 + 2 * k])
     err = 0.0
     for i in range(k):
         s = 0.0
@@ -485,11 +534,8 @@ def fused_affine(W, v, rtol, vmax_domain):  # pragma: no cover - compiled
         e = abs(s - v[i])
         if not e <= err:  # NaN-safe
             err = e
-    if not np.isfinite(err):
-        out[m + k] = 2.0
-    else:
-        out[m + k] = 0.0 if err <= rtol * vmax else 1.0
-    return out
+    close_out(out, m, k)
+    return out, (2 if not np.isfinite(err) else (0 if err <= rtol * vmax else 1)), 0
 
 
 @njit(cache=True, nogil=True)

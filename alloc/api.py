@@ -17,6 +17,10 @@ from .result import EXACT_RTOL, BatchResult, Result, Status
 __all__ = ["Allocator", "make_allocator", "allocate", "allocate_batch"]
 
 _EXACT, _UNATT, _FALLBACK = Status.EXACT, Status.UNATTAINABLE, Status.FALLBACK
+_F64 = np.dtype(np.float64)
+_clock = time.perf_counter
+_new_result = tuple.__new__  # Result is a tuple: built in one C call on the fast paths
+_STATUS = (Status.EXACT, Status.UNATTAINABLE)  # by the kernels' code
 
 
 def _frozen(a: np.ndarray) -> np.ndarray:
@@ -41,8 +45,8 @@ class Allocator:
     :class:`~alloc.methods.pseudo_inverse.SafeCommand` with status ``fallback`` and the reason.
     """
 
-    __slots__ = ("problem", "method", "impl", "build_error", "_safe", "_B", "_lo", "_hi", "_kshape",
-                 "_W", "_m", "_mk")
+    __slots__ = ("problem", "method", "impl", "build_error", "_safe", "_B", "_lo", "_hi", "_kshape", "_mshape",
+                 "_W", "_packed", "_packed_rate", "_zm", "_su", "_sv", "_sa", "_sr")
 
     def __init__(self, problem: Problem, method: str, **options: Any) -> None:
         self.problem = problem
@@ -62,29 +66,49 @@ class Allocator:
         self._safe = SafeCommand(problem)
         self._B = problem.B
         self._lo, self._hi = problem.umin, problem.umax
-        self._kshape = (problem.k,)
-        self._m, self._mk = problem.m, problem.m + problem.k
+        m, k = problem.m, problem.k
+        self._kshape, self._mshape = (k,), (m,)
+        # the fast paths' packed output (alloc._kernels.packed_out): u, B u, v, v - B u
+        self._su, self._sa, self._sv, self._sr = (slice(0, m), slice(m, m + k), slice(m + k, m + 2 * k),
+                                                  slice(m + 2 * k, m + 3 * k))
+        self._zm = np.zeros(m)  # the u_prev argument of a call without rate limits (unused)
         self._W = None
-        fused = None if self.impl is None else self.impl.fused
+        impl = self.impl
+        fused = None if impl is None else impl.fused
         if fused is not None:  # closed-form u = clip(c + P v): one packed compiled call
             c, P = fused
             W = np.column_stack([c, P, problem.B.T, problem.umin, problem.umax])
             if np.isfinite(W).all():
                 self._W = np.ascontiguousarray(W, dtype=float)
+        self._packed = None if impl is None else impl.packed
+        self._packed_rate = None if impl is None else impl.packed_rate
 
     def __repr__(self) -> str:
         return f"Allocator(method={self.method!r}, {self.problem!r})"
 
     def __call__(self, v: ArrayLike, *, u_prev: ArrayLike | None = None, dt: float | None = None) -> Result:
-        if type(v) is np.ndarray and v.shape == self._kshape and v.dtype == np.float64:
-            if self._W is not None and u_prev is None and dt is None:
-                t0 = time.perf_counter()
-                out = fused_affine(self._W, v, EXACT_RTOL, MAX_MAGNITUDE)
-                code = out[self._mk]
-                if code < 2.0:
-                    out.setflags(write=False)  # u, B u and the copy of v are read-only views of it
-                    return Result(out[:self._m], out[self._mk + 1:], out[self._m:self._mk],
-                                  _EXACT if code == 0.0 else _UNATT, self.method, 0, time.perf_counter() - t0, "")
+        if type(v) is np.ndarray and v.shape == self._kshape and v.dtype == _F64:
+            # fast paths: one compiled call checks v (and u_prev), allocates, computes B u, the
+            # residual and the status code into one new array; the Result holds read-only views
+            res = None
+            if u_prev is None and dt is None:
+                if self._W is not None:
+                    t0 = _clock()
+                    res = fused_affine(self._W, v, EXACT_RTOL, MAX_MAGNITUDE)
+                elif self._packed is not None:
+                    kernel, state = self._packed
+                    t0 = _clock()
+                    res = kernel(*state, v, self._zm, 0.0)
+            elif (self._packed_rate is not None and type(dt) is float and 0.0 < dt <= MAX_MAGNITUDE
+                  and type(u_prev) is np.ndarray and u_prev.shape == self._mshape and u_prev.dtype == _F64):
+                kernel, state = self._packed_rate
+                t0 = _clock()
+                res = kernel(*state, v, u_prev, dt)
+            if res is not None and res[1] < 2:
+                out = res[0]
+                out.setflags(write=False)
+                return _new_result(Result, (out[self._su], out[self._sv], out[self._sa], _STATUS[res[1]], self.method,
+                                            res[2], _clock() - t0, "", out[self._sr]))
             v = v.copy()  # the result owns its demand: the caller may reuse the array
             if not in_domain(v, MAX_MAGNITUDE):
                 self.problem.check_demand(v)  # raises DemandError naming v
@@ -107,7 +131,7 @@ class Allocator:
             try:
                 u_m, iterations = self.impl.solve(v, lo, hi, up)
                 u = np.array(u_m, dtype=float)  # own copy: clipped in place below
-                if u.shape != (self._m,):
+                if u.shape != self._mshape:
                     raise SolverError(f"{self.method} returned a command of shape {u.shape}")
                 iterations = int(iterations)
                 v_ach = np.empty(problem.k)

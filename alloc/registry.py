@@ -87,6 +87,11 @@ class Method(ABC):
     #: ``(c, P)`` when the method is ``u = clip(c + P v)`` without rate limits: the
     #: allocator then runs it as one compiled call (pseudo-inverse family, ganging).
     fused: tuple[FloatArray, FloatArray] | None = None
+    #: ``(kernel, state)`` when a call is one compiled call ``kernel(*state, v, u_prev, dt) -> out``
+    #: (the allocator's fast path, see :func:`alloc._active_set.lexico_call`; ``dt = 0`` without
+    #: rate limits); ``packed_rate`` the same for rate-limited calls.
+    packed: tuple[Any, tuple[Any, ...]] | None = None
+    packed_rate: tuple[Any, tuple[Any, ...]] | None = None
 
     def __init__(self, problem: Problem) -> None:
         self.problem = problem

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from enum import Enum
+from operator import itemgetter
 from typing import Any
 
 import numpy as np
@@ -42,9 +43,16 @@ def exact_tolerance(v: NDArray[np.float64]) -> float:
     return EXACT_RTOL * max(1.0, float(np.abs(v).max()) if v.size else 1.0)
 
 
-@dataclass(frozen=True, slots=True)
-class Result:
-    """One allocation.
+def _field(i: int, doc: str) -> property:
+    return property(itemgetter(i), doc=doc)
+
+
+class Result(tuple):
+    """One allocation: an immutable record (a tuple of its fields, ``__slots__ = ()``).
+
+    Built once per call on the hot path, so it is a tuple (built in one C call) rather than
+    a frozen dataclass (one ``object.__setattr__`` per field, about a microsecond); its
+    arrays are read-only and its own (never views of the caller's arrays).
 
     Attributes
     ----------
@@ -62,26 +70,42 @@ class Result:
         Seconds spent in the method (excluding validation).
     message : str
         Why a fallback happened, or empty.
+    unallocated : ndarray (k,)
+        The part of the demand left unallocated, ``v - B u`` (for hedging/anti-windup);
+        computed from ``v`` and ``v_achieved`` when not given.
     """
 
-    u: NDArray[np.float64]
-    v: NDArray[np.float64]
-    v_achieved: NDArray[np.float64]
-    status: Status
-    method: str
-    iterations: int = 0
-    solve_time: float = 0.0
-    message: str = ""
+    __slots__ = ()
+    _fields = ("u", "v", "v_achieved", "status", "method", "iterations", "solve_time", "message", "unallocated")
 
-    @property
-    def unallocated(self) -> NDArray[np.float64]:
-        """The part of the demand left unallocated, ``v - B u`` (for hedging/anti-windup)."""
-        return self.v - self.v_achieved
+    def __new__(cls, u: NDArray[np.float64], v: NDArray[np.float64], v_achieved: NDArray[np.float64],
+                status: Status, method: str, iterations: int = 0, solve_time: float = 0.0, message: str = "",
+                unallocated: NDArray[np.float64] | None = None) -> Result:
+        if unallocated is None:
+            unallocated = np.subtract(v, v_achieved)
+            unallocated.setflags(write=False)
+        return tuple.__new__(cls, (u, v, v_achieved, status, method, iterations, solve_time, message, unallocated))
+
+    def __getnewargs__(self) -> tuple[Any, ...]:  # pickle and copy
+        return tuple(self)
+
+    def __repr__(self) -> str:
+        return "Result(" + ", ".join(f"{f}={x!r}" for f, x in zip(self._fields, self)) + ")"
+
+    u = _field(0, "Effector command (m,), finite and within the (rate-limited) bounds.")
+    v = _field(1, "The demand (k,).")
+    v_achieved = _field(2, "``B u`` (k,).")
+    status = _field(3, "The outcome, a :class:`Status`.")
+    method = _field(4, "The registry name of the method.")
+    iterations = _field(5, "Solver iterations or cascade steps (0 for closed-form methods).")
+    solve_time = _field(6, "Seconds spent in the method (excluding validation).")
+    message = _field(7, "Why a fallback happened, or empty.")
+    unallocated = _field(8, "``v - B u`` (k,): the part of the demand left unallocated.")
 
     @property
     def moment_error(self) -> float:
         """Euclidean norm of ``v - B u``."""
-        return float(np.linalg.norm(self.v - self.v_achieved))
+        return float(np.linalg.norm(self.unallocated))
 
     @property
     def fallback(self) -> bool:
@@ -92,17 +116,14 @@ class Result:
         return float(max(0.0, (lo - self.u).max(), (self.u - hi).max()))
 
     def to_dict(self) -> dict[str, Any]:
-        return {
-            "u": self.u.tolist(),
-            "v": self.v.tolist(),
-            "v_achieved": self.v_achieved.tolist(),
-            "unallocated": self.unallocated.tolist(),
-            "status": self.status.value,
-            "method": self.method,
-            "iterations": int(self.iterations),
-            "solve_time": float(self.solve_time),
-            "message": self.message,
-        }
+        return {**_arrays_dict(self, with_v=True), "status": self.status.value, "method": self.method,
+                "iterations": int(self.iterations), "solve_time": float(self.solve_time), "message": self.message}
+
+
+def _arrays_dict(r: Result | BatchResult, with_v: bool) -> dict[str, Any]:
+    """The arrays of a single or a batch result in their JSON form."""
+    v = {"v": r.v.tolist()} if with_v else {}
+    return {"u": r.u.tolist(), **v, "v_achieved": r.v_achieved.tolist(), "unallocated": r.unallocated.tolist()}
 
 
 @dataclass(frozen=True, slots=True)
@@ -128,12 +149,5 @@ class BatchResult:
         return {s.value: int((self.status == s.value).sum()) for s in Status}
 
     def to_dict(self) -> dict[str, Any]:
-        return {
-            "u": self.u.tolist(),
-            "v_achieved": self.v_achieved.tolist(),
-            "unallocated": self.unallocated.tolist(),
-            "status": self.status.tolist(),
-            "method": self.method,
-            "counts": self.counts(),
-            "solve_time": float(self.solve_time),
-        }
+        return {**_arrays_dict(self, with_v=False), "status": self.status.tolist(), "method": self.method,
+                "counts": self.counts(), "solve_time": float(self.solve_time)}

@@ -202,9 +202,9 @@ def test_finish_kernel_classifies_nan_as_non_finite():
     Bbig = np.array([[1e308, 1e308]])
     assert finish(Bbig, np.array([1e10, 1e10]), np.full(2, -1e11), np.full(2, 1e11), np.array([1.0]), v_ach, 1e-6) == 2
     W = np.array([[0.0, 1.0, 1e308, -1.0, 1.0], [0.0, 1.0, 1e308, -1.0, 1.0]])
-    m, k = 2, 1  # out = [u (m) | B u (k) | code | v (k)]
-    assert fused_affine(W, np.array([1.0]), 1e-6, MAX_MAGNITUDE)[m + k] == 2.0
-    assert fused_affine(W, np.array([np.nan]), 1e-6, MAX_MAGNITUDE)[m + k] == 3.0
+    # fused_affine returns (out, code, iterations)
+    assert fused_affine(W, np.array([1.0]), 1e-6, MAX_MAGNITUDE)[1] == 2
+    assert fused_affine(W, np.array([np.nan]), 1e-6, MAX_MAGNITUDE)[1] == 3
 
 
 # --------------------------------------------------------------------------- priorities as ranks

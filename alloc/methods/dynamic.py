@@ -28,7 +28,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._linalg import sqrt_factor
-from ..exceptions import OptionError, SolverError
+from ..exceptions import OptionError
 from ..problem import Problem
 from ..options import weight
 from ..registry import FloatArray, Method, register
@@ -80,8 +80,14 @@ class DynamicAllocation(Method):
         Wd_inv = np.linalg.inv(Wd)
         self._M1 = Wd_inv @ Q1
         self._M2 = Wd_inv @ Q2
-        self._static = LexicoLS(p, [np.arange(p.k)], [0.0], final=True, Wu=Q1)  # no u_prev
-        self._dynamic = LexicoLS(p, [np.arange(p.k)], [0.0], final=True, Wu=Wd)
+        # the target, linear in v and u_prev, is formed in the compiled call:
+        # u_s = c0 + P v, c = M1 u_s + M2 u_prev
+        c0 = p.up - self.P @ (p.B @ p.up)
+        self._static = LexicoLS(p, [np.arange(p.k)], [0.0], final=True, Wu=Q1,  # no u_prev
+                                target=(c0, self.P, np.zeros((m, m))))
+        self._dynamic = LexicoLS(p, [np.arange(p.k)], [0.0], final=True, Wu=Wd,
+                                 target=(self._M1 @ c0, self._M1 @ self.P, self._M2))
+        self.packed, self.packed_rate = self._static.packed, self._dynamic.packed
 
     def static_command(self, v: FloatArray) -> FloatArray:
         """``u_s``: the static distribution of Eq 1.23 (not clipped)."""
@@ -96,8 +102,6 @@ class DynamicAllocation(Method):
         return self._M1 @ us + self._M2 @ u_prev
 
     def solve(self, v, lo, hi, u_prev):
-        c = np.ascontiguousarray(self.target(v, u_prev))
-        if not np.all(np.isfinite(c)):
-            raise SolverError("dynamic: non-finite target (u_prev or the static distribution)")
-        model = self._static if u_prev is None else self._dynamic
-        return model.solve(v, lo, hi, up=c)
+        if u_prev is None:
+            return self._static.solve(v, lo, hi)
+        return self._dynamic.solve(v, lo, hi, u_prev)  # a non-finite target: SolverError (fallback)

@@ -25,12 +25,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._kernels import affine, affine_clip_batch, scaled_increment, scaled_increment_batch
+from .._kernels import affine, affine_clip_batch, fused_scaled, scaled_increment, scaled_increment_batch
 from .._linalg import RCOND, check_rcond, max_scale, weighted_pinv
 from ..exceptions import OptionError, SolverError
 from ..options import flag, real
-from ..problem import Problem
+from ..problem import MAX_MAGNITUDE, Problem
 from ..registry import FloatArray, Method, register
+from ..result import EXACT_RTOL
 
 _OPTIONS = {
     "rcond": real(RCOND, "relative singular-value cut-off of the inverse", low=0.0, high=1.0, high_open=True),
@@ -101,6 +102,13 @@ class PinvScale(_PinvBase):
 
     def _base(self, lo: FloatArray, hi: FloatArray, u_prev: FloatArray | None) -> FloatArray:
         return np.minimum(np.maximum(self._bias(u_prev), lo), hi)
+
+    def __init__(self, problem: Problem, **options) -> None:
+        super().__init__(problem, **options)
+        # without rate limits (bias up): one compiled call through the allocator's fast path
+        base = np.ascontiguousarray(self._base(problem.umin, problem.umax, None), dtype=float)
+        self.packed = (fused_scaled, (self._P, self._B, base, np.array(problem.umin), np.array(problem.umax),
+                                      EXACT_RTOL, MAX_MAGNITUDE))
 
     def affine_map(self):
         # unscaled where admissible: u = base + P (v - B base), base = up clipped to the limits

@@ -28,13 +28,13 @@ from typing import Any
 
 import numpy as np
 
-from .._active_set import lexico_packed, lexico_packed_batch, pack
+from .._active_set import _HEAD, _MAXIT, lexico_batch, lexico_call, lexico_solve, pack
 from .._linalg import check_real_option
 from ..exceptions import OptionError, SolverError
 from ..options import choice, levels, real
-from ..problem import Problem
+from ..problem import MAX_MAGNITUDE, Problem
 from ..registry import FloatArray, Method, register
-from ..result import exact_tolerance
+from ..result import EXACT_RTOL, exact_tolerance
 from ..solvers import backends, make_backend
 from ._common import KEEP_RTOL, check_backend, row_basis
 from .cascade import check_priorities
@@ -156,15 +156,19 @@ def _upper_sqrt(W: FloatArray) -> FloatArray:
 
 
 class LexicoLS:
-    """Data of the compiled lexicographic least-squares solver (:mod:`alloc._active_set`).
+    """Data and state of the compiled lexicographic least-squares solver (:mod:`alloc._active_set`).
 
     Level ``l`` is ``min ||S_l (B_l u - v_l)||^2 + gammas[l]^2 (u - up)' Wu (u - up)`` with
     ``S_l' S_l = Wv[rows_l, rows_l]``, the earlier levels' moments held; ``final`` adds
-    ``min (u - up)' Wu (u - up)`` with every moment held (stage 2, Eq 1.21).
+    ``min (u - up)' Wu (u - up)`` with every moment held (stage 2, Eq 1.21).  With
+    ``target = (d, Kv, Ku)`` the preference point of a call is ``d + Kv v`` (``+ Ku u_prev``
+    with rate limits) instead of the problem's ``up`` (``dynamic``).  The packed arrays
+    carry the warm-start working set and the factorisation cache from call to call.
     """
 
     def __init__(self, problem: Problem, groups: Sequence[np.ndarray], gammas: Sequence[float],
-                 final: bool, Wu: FloatArray | None = None) -> None:
+                 final: bool, Wu: FloatArray | None = None,
+                 target: tuple[FloatArray, FloatArray, FloatArray] | None = None) -> None:
         p = problem
         perm = np.concatenate([np.asarray(g, dtype=np.int64) for g in groups])
         T = np.zeros((p.k, p.k))
@@ -174,39 +178,39 @@ class LexicoLS:
             n = len(rows)
             T[a:a + n, a:a + n] = _upper_sqrt(p.Wv[np.ix_(rows, rows)])
             starts.append(a + n)
-        self.perm = perm
-        self.T = np.ascontiguousarray(T)
-        self.A = np.ascontiguousarray(T @ p.B[perm])  # rows S_l B_l, level by level
-        self.starts = np.array(starts, dtype=np.int64)
-        self.gammas = np.array(gammas, dtype=float)
-        self.final = bool(final)
-        Wu = p.Wu if Wu is None else Wu
-        self.Wu = np.ascontiguousarray(Wu, dtype=float)
-        self.diag = _is_diagonal(self.Wu)
-        self.up = np.ascontiguousarray(p.up, dtype=float)
-        self.B = np.ascontiguousarray(p.B)
-        # start of every call: the Eq 1.23 weighted pseudo-inverse in the same Wu metric
-        self.P0 = np.ascontiguousarray(distribution_matrix(p if Wu is p.Wu else p.replace(Wu=Wu)))
-        self._fdata, self._idata = pack(self.A, self.T, self.perm, self.starts, self.gammas, self.final,
-                                        self.Wu, self.diag, self.up, self.B, self.P0, 50 + 10 * (p.m + p.k))
+        A = T @ p.B[perm]  # rows S_l B_l, level by level
+        Wu = np.asarray(p.Wu if Wu is None else Wu, dtype=float)
+        # start of a cold call: the Eq 1.23 weighted pseudo-inverse in the same Wu metric
+        P0 = distribution_matrix(p if Wu is p.Wu else p.replace(Wu=Wu))
+        up, Kv, Ku = (p.up, None, None) if target is None else target
+        self._state = pack(A, T, perm, starts, np.asarray(gammas, dtype=float), final, Wu, _is_diagonal(Wu),
+                           up, p.B, P0, p.umin, p.umax, p.rate_min, p.rate_max, 50 + 10 * (p.m + p.k),
+                           MAX_MAGNITUDE, EXACT_RTOL, Kv, Ku)
+        #: ``(kernel, state)``: the allocator's one-call fast path, ``kernel(*state, v, u_prev, dt)``
+        self.packed = (lexico_call, self._state)
 
     @property
     def maxit(self) -> int:
         """Iteration cap per level."""
-        return int(self._idata[6])
+        return int(self._state[2][_HEAD, _MAXIT])
 
     @maxit.setter
     def maxit(self, value: int) -> None:
-        self._idata[6] = int(value)
+        self._state[2][_HEAD, _MAXIT] = int(value)
 
-    def solve(self, v: FloatArray, lo: FloatArray, hi: FloatArray, up: FloatArray | None = None) -> tuple[FloatArray, int]:
-        u, it, ok = lexico_packed(self._fdata, self._idata, self.up if up is None else up, v, lo, hi)
+    def solve(self, v: FloatArray, lo: FloatArray, hi: FloatArray,
+              u_prev: FloatArray | None = None) -> tuple[FloatArray, int]:
+        rate = u_prev is not None
+        u, it, ok = lexico_solve(*self._state, v, lo, hi, u_prev if rate else v, rate)
         if not ok:
+            if it < 0:
+                raise SolverError("active set: non-finite preference point (u_prev or the static distribution)")
             raise SolverError(f"active set: iteration cap ({self.maxit} per level) reached")
         return u, it
 
     def solve_batch(self, V: FloatArray, lo: FloatArray, hi: FloatArray) -> FloatArray:
-        U, ok = lexico_packed_batch(self._fdata, self._idata, self.up, np.ascontiguousarray(V), lo, hi)
+        """Rows of ``V`` within the position limits (``lo``, ``hi`` are those), one compiled loop."""
+        U, ok = lexico_batch(*self._state, np.ascontiguousarray(V))
         U[~ok] = np.nan  # the allocator re-runs those rows one by one (fallback per row)
         return U
 
@@ -250,7 +254,7 @@ class TwoStageQP(_ActiveSetOrBackend):
             self._impl = _SolverTwoStageQP(problem, backend=self.backend, priorities=priorities)
             return
         self._impl = LexicoLS(problem, self.groups, [0.0] * len(self.groups), final=True)
-
+        self.packed = self.packed_rate = self._impl.packed
 
 
 @register("wls", supports_batch=True)
@@ -274,4 +278,5 @@ class WeightedLeastSquares(_ActiveSetOrBackend):
             self._impl = _SolverWLS(problem, backend=self.backend, gamma=g)
             return
         self._impl = LexicoLS(problem, [np.arange(problem.k)], [g], final=False)
+        self.packed = self.packed_rate = self._impl.packed
 
