@@ -43,6 +43,18 @@ def in_domain(x, bound):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
+def owned_demand(v, bound):  # pragma: no cover - compiled
+    """A copy of ``v`` and whether every ``|v[i]| <= bound`` (False for NaN and inf)."""
+    out = np.empty(v.shape[0])
+    ok = True
+    for i in range(v.shape[0]):
+        out[i] = v[i]
+        if not abs(v[i]) <= bound:
+            ok = False
+    return out, ok
+
+
+@njit(cache=True, nogil=True)
 def affine(c, P, v):  # pragma: no cover - compiled
     """``c + P v`` for a small dense ``P``."""
     m, k = P.shape
@@ -85,6 +97,22 @@ def finish(B, u, lo, hi, v, v_ach, rtol):  # pragma: no cover - compiled
     if not (np.isfinite(err) and np.isfinite(vmax)):
         return 2
     return 0 if err <= rtol * vmax else 1
+
+
+@njit(cache=True, nogil=True)
+def finish_owned(B, u_m, lo, hi, v, rtol):  # pragma: no cover - compiled
+    """:func:`finish` into one new buffer ``[u | B u | v | v - B u]`` (the result's own arrays,
+    ``u_m`` and ``v`` left untouched), and the status code."""
+    k, m = B.shape
+    out = np.empty(m + 3 * k)
+    u = out[:m]
+    for j in range(m):
+        u[j] = u_m[j]
+    code = finish(B, u, lo, hi, v, out[m:m + k], rtol)
+    for i in range(k):
+        out[m + k + i] = v[i]
+        out[m + 2 * k + i] = v[i] - out[m + i]
+    return out, code
 
 
 @njit(cache=True, nogil=True)

@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._kernels import finish, finish_batch, fused_affine, in_domain
+from ._kernels import finish, finish_batch, finish_owned, fused_affine, in_domain, owned_demand
 from .exceptions import AllocError, DemandError, SolverError
 from .problem import MAX_MAGNITUDE, Problem, as_float_array, check_magnitude
 from .registry import FloatArray, Method, build
@@ -109,8 +109,8 @@ class Allocator:
                 out.setflags(write=False)
                 return _new_result(Result, (out[self._su], out[self._sv], out[self._sa], _STATUS[res[1]], self.method,
                                             res[2], _clock() - t0, "", out[self._sr]))
-            v = v.copy()  # the result owns its demand: the caller may reuse the array
-            if not in_domain(v, MAX_MAGNITUDE):
+            v, ok = owned_demand(v, MAX_MAGNITUDE)  # the result owns its demand: the caller may reuse the array
+            if not ok:
                 self.problem.check_demand(v)  # raises DemandError naming v
         else:
             v = self.problem.check_demand(v)
@@ -130,6 +130,15 @@ class Allocator:
         if self.impl is not None:
             try:
                 u_m, iterations = self.impl.solve(v, lo, hi, up)
+                if type(u_m) is np.ndarray and u_m.dtype == _F64 and u_m.shape == self._mshape:
+                    # one compiled call: the result's arrays in one new buffer, as on the fast paths
+                    out, code = finish_owned(self._B, u_m, lo, hi, v, EXACT_RTOL)
+                    if code == 2:
+                        raise SolverError(f"{self.method} produced non-finite commands")
+                    out.setflags(write=False)
+                    return _new_result(Result, (out[self._su], out[self._sv], out[self._sa], _STATUS[code],
+                                                self.method, int(iterations), time.perf_counter() - t0, message,
+                                                out[self._sr]))
                 u = np.array(u_m, dtype=float)  # own copy: clipped in place below
                 if u.shape != self._mshape:
                     raise SolverError(f"{self.method} returned a command of shape {u.shape}")
