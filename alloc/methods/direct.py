@@ -45,21 +45,21 @@ def facet_call_us(m: int, k: int) -> float:
 
 
 def lp_call_us(m: int, k: int) -> float:
-    """Modelled median us per call of the LP backend (``benchmarks/bench_da_cost.py``)."""
-    return 31.1 + 4.23 * m - 6.56 * k
+    """Modelled median us per call of the LP backend (``benchmarks/bench_da_cost.py``; refitted
+    2026-11-30 on a quiet machine after the LP became a fresh equilibrated DAQP solve per call)."""
+    return 47.4 + 2.94 * m
 
 
 def facet_is_cheaper(m: int, k: int) -> bool:
     """The measured per-call cost model of ``backend="auto"``.
 
     Linear fits to ``benchmarks/bench_da_cost.py`` (median us per call, k = 1..6,
-    m = 8..64): facet search ``-1.7 + 0.078 C(m, k-1)``, LP ``31 + 4.2 m - 6.6 k``.  On
-    every measured cell the model picks the cheaper backend (k = 6, m = 16: LP).  Never the
-    facet search beyond :data:`FACET_LIMIT` subsets.  Re-measured after the LPs became cold
-    solves (2026-11-30, shared machine, grid k = 1..6, m = 4..64): the LP costs 55-100 us at
-    small m now, yet the backend chosen is within 1.15x of the cheaper one on every cell
-    (k = 6, m = 12: a near tie, 74 vs 65 us); the issue-11 goal is 1.5x.  A refit linear in
-    k mispredicts k = 1 (the LP is slower there), so the fit above is kept.
+    m = 4..64): facet search ``-1.7 + 0.078 C(m, k-1)``, LP ``47.4 + 2.94 m`` (the LP's
+    cost hardly depends on k).  Never the facet search beyond :data:`FACET_LIMIT` subsets.
+    Refitted on a quiet machine (2026-11-30) when each LP call became a fresh, equilibrated
+    DAQP solve: the old LP fit (``31 + 4.2 m - 6.6 k``) chose the LP at k = 6, m = 12 at
+    1.5-2.5x the facet search's cost; with the refit the chosen backend is within 1.03x of
+    the cheaper one on every measured cell (issue-11 goal: 1.5x).
     """
     return math.comb(m, max(k - 1, 0)) <= FACET_LIMIT and facet_call_us(m, k) <= lp_call_us(m, k)
 
