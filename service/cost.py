@@ -21,6 +21,7 @@ allocators are measured with :func:`estimate_bytes` and the cache is bounded in 
 from __future__ import annotations
 
 import sys
+import types
 from collections.abc import Mapping
 from typing import Any
 
@@ -49,6 +50,10 @@ def is_costly(seconds: float) -> bool:
     return seconds > CHEAP_BUILD_SECONDS
 
 
+_SHARED = (type, bool, int, float, str, bytes, types.FunctionType, types.BuiltinFunctionType, types.MethodType,
+           types.ModuleType)
+
+
 def estimate_bytes(obj: object, _limit: int = 100_000) -> int:
     """Bytes held by ``obj``: numpy buffers plus Python objects, walked once (bounded walk).
 
@@ -62,7 +67,9 @@ def estimate_bytes(obj: object, _limit: int = 100_000) -> int:
     while stack and steps < _limit:
         steps += 1
         o = stack.pop()
-        if id(o) in seen or o is None or isinstance(o, (type, bool, int, float, str, bytes)):
+        if id(o) in seen or o is None or isinstance(o, _SHARED) or (o is not obj and hasattr(o, "py_func")):
+            # code, not data: functions, modules and numba dispatchers (the compiled kernels an
+            # allocator holds are shared by every allocator; walking one counted its overloads)
             if isinstance(o, (str, bytes)) and id(o) not in seen:
                 seen.add(id(o))
                 total += sys.getsizeof(o)
