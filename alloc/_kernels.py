@@ -10,7 +10,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["all_finite", "in_domain", "affine", "finish", "fused_affine", "rate_window", "facet_polish"]
+__all__ = ["all_finite", "owned_demand", "affine", "finish", "finish_owned", "fused_affine", "rate_window",
+           "facet_polish"]
 
 FINISH_EXACT, FINISH_UNATTAINABLE, FINISH_NONFINITE = 0, 1, 2
 
@@ -31,15 +32,6 @@ def clip_scalar(y, lo, hi):  # pragma: no cover - compiled
     if y > hi:
         y = hi
     return y
-
-
-@njit(cache=True, nogil=True)
-def in_domain(x, bound):  # pragma: no cover - compiled
-    """True when every ``|x[i]| <= bound`` (False for NaN and inf)."""
-    for i in range(x.shape[0]):
-        if not abs(x[i]) <= bound:
-            return False
-    return True
 
 
 @njit(cache=True, nogil=True)

@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._kernels import finish, finish_batch, finish_owned, fused_affine, in_domain, owned_demand
+from ._kernels import finish_batch, finish_owned, fused_affine, owned_demand
 from .exceptions import AllocError, DemandError, SolverError
 from .problem import MAX_MAGNITUDE, Problem, as_float_array, check_magnitude
 from .registry import FloatArray, Method, build
@@ -126,36 +126,28 @@ class Allocator:
             up = problem.check_u_prev(u_prev)
         t0 = time.perf_counter()
         message = self.build_error
-        u: FloatArray | None = None
         if self.impl is not None:
             try:
                 u_m, iterations = self.impl.solve(v, lo, hi, up)
-                if type(u_m) is np.ndarray and u_m.dtype == _F64 and u_m.shape == self._mshape:
-                    # one compiled call: the result's arrays in one new buffer, as on the fast paths
-                    out, code = finish_owned(self._B, u_m, lo, hi, v, EXACT_RTOL)
-                    if code == 2:
-                        raise SolverError(f"{self.method} produced non-finite commands")
-                    out.setflags(write=False)
-                    return _new_result(Result, (out[self._su], out[self._sv], out[self._sa], _STATUS[code],
-                                                self.method, int(iterations), time.perf_counter() - t0, message,
-                                                out[self._sr]))
-                u = np.array(u_m, dtype=float)  # own copy: clipped in place below
-                if u.shape != self._mshape:
-                    raise SolverError(f"{self.method} returned a command of shape {u.shape}")
-                iterations = int(iterations)
-                v_ach = np.empty(problem.k)
-                code = finish(self._B, u, lo, hi, v, v_ach, EXACT_RTOL)
+                if not (type(u_m) is np.ndarray and u_m.dtype == _F64):
+                    u_m = np.asarray(u_m, dtype=float)
+                if u_m.shape != self._mshape:
+                    raise SolverError(f"{self.method} returned a command of shape {u_m.shape}")
+                # one compiled call: the result's arrays in one new buffer, as on the fast paths
+                out, code = finish_owned(self._B, u_m, lo, hi, v, EXACT_RTOL)
                 if code == 2:
                     raise SolverError(f"{self.method} produced non-finite commands")
-                status = _EXACT if code == 0 else _UNATT
+                out.setflags(write=False)
+                return _new_result(Result, (out[self._su], out[self._sv], out[self._sa], _STATUS[code],
+                                            self.method, int(iterations), time.perf_counter() - t0, message,
+                                            out[self._sr]))
             except Exception as exc:  # noqa: BLE001 - any backend failure becomes the safe answer
-                u, message = None, _reason(exc)
-        if u is None:
-            u, iterations, status = self._safe(v, lo, hi), 0, _FALLBACK
+                message = _reason(exc)
+        u, iterations, status = self._safe(v, lo, hi), 0, _FALLBACK
+        v_ach = self._B @ u
+        if not np.isfinite(v_ach).all():  # unreachable inside the valid domain; never report NaN
+            u = np.minimum(np.maximum(problem.up, lo), hi)
             v_ach = self._B @ u
-            if not np.isfinite(v_ach).all():  # unreachable inside the valid domain; never report NaN
-                u = np.minimum(np.maximum(problem.up, lo), hi)
-                v_ach = self._B @ u
         return Result(_frozen(u), _frozen(v), _frozen(v_ach), status, self.method, iterations,
                       time.perf_counter() - t0, message)
 
