@@ -85,8 +85,9 @@ def test_full_sweep_axes() -> None:
     ids = [s["id"] for s in specs]
     assert len(ids) == len(set(ids))
     methods = 1 + len(alloc.methods())
-    per_cell = (2 * methods - 1) * 10 * 4 * 2  # modes (static blind only) x seeds x pilots x frame rates
+    per_cell = (2 * methods - 1) * 10 * 3 * 2  # modes (static blind only) x seeds x pilots x frame rates
     assert len(specs) == per_cell * ((1 + 10) + (2 + 10))  # ICE: seed + catalogue; HARV: 2 + catalogue
+    assert {s["sim"].get("pilot", "standin") for s in specs} == {"crossover", "standin"}
     assert {s["sim"].get(FRAME_PERIOD) for s in specs} == {None, 0.01}
     assert not any(s["method"] == STATIC and s["told"] for s in specs)
 

@@ -138,11 +138,18 @@ def full(scheduler: str | None = _SCHEDULER, out: Path | None = _OUT, workers: i
          seeds: int = typer.Option(10, "--seeds", min=2, help="noise seeds per cell"),
          frame_rates: str = typer.Option("seed,100", "--frame-rates",
                                          help="flight-control frame rates: 'seed' (the seed's 0.5 ms) and/or Hz"),
+         seed_durations: bool = typer.Option(False, "--seed-durations",
+                                             help="the seed's run lengths (ICE 40 s, HARV 50 s; about twice the "
+                                                  "time) instead of their first halves"),
          dry_run: bool = typer.Option(False, "--dry-run", help="print the run count and exit")) -> None:
     """ICE and HARV lat-dir: every method x failure x blind/told x frame rate x pilot x seed (long; --dry-run).
 
-    Failures: the scenario's own and the catalogue's (5 kinds, single and double)."""
-    specs = full_sweep(seeds=seeds, frame_rates=_frame_rates(frame_rates))
+    Failures: the scenario's own and the catalogue's (5 kinds, single and double).  Runs: ICE
+    20 s with the failure at 10 s, HARV lat-dir 25 s with the failure at 12.5 s."""
+    from .sweep import SCENARIO_TIMES
+
+    specs = full_sweep(seeds=seeds, frame_rates=_frame_rates(frame_rates),
+                       times=SCENARIO_TIMES if seed_durations else None)
     if dry_run:
         closed = sum(s["kind"] == "closed" for s in specs)
         typer.echo(f"full sweep: {len(specs)} runs ({closed} closed loop, {len(specs) - closed} open loop)")

@@ -32,6 +32,7 @@ from .failures import catalogue_names, is_catalogue
 __all__ = [
     "Spec", "STATIC", "FRAME_PERIOD", "PILOT_SETTINGS", "open_spec", "closed_spec", "closed_grid",
     "setting_tag", "quick_sweep", "full_sweep", "tiny_sweep", "smoke_sweep", "check_simulator_support", "SCENARIO_TIMES",
+    "FULL_TIMES", "FULL_PILOTS",
 ]
 
 Spec = dict[str, Any]
@@ -53,8 +54,17 @@ PILOT_SETTINGS: tuple[dict[str, Any], ...] = (
     {"pilot": "crossover"},
 )
 
-#: duration and failure time (s) of each scenario's closed-loop runs (the seed's)
+#: duration and failure time (s) of each scenario's runs in the seed (ICE Fig 4-110: 40 s;
+#: HARV lat-dir: 50 s)
 SCENARIO_TIMES = {"ice": (40.0, 20.0), "harv_latdir": (50.0, 25.0)}
+#: duration and failure time (s) of the full sweep's closed-loop runs: the first half of the
+#: seed's runs (the failure moved to mid-run), so that the 40,020-run grid fits one working
+#: session on 2 cores (about 0.5 s per run); ``--seed-durations`` runs the seed's lengths
+FULL_TIMES = {"ice": (20.0, 10.0), "harv_latdir": (25.0, 12.5)}
+#: pilot settings of the full sweep: the principled pilot (McRuer crossover model) and two
+#: stand-in pilots (gain 1, in which the seed's Fig 4-110 reproduces; gain 2, the simulator's
+#: default and the aggressive one).  ``PILOT_SETTINGS`` adds a slower, more delayed stand-in.
+FULL_PILOTS: tuple[dict[str, Any], ...] = (PILOT_SETTINGS[3], PILOT_SETTINGS[0], PILOT_SETTINGS[1])
 #: failures the scenario itself defines that the full sweep runs (besides the catalogue)
 SCENARIO_FAILURES = {"ice": ("seed",), "harv_latdir": ("failure1", "failure2")}
 
@@ -146,17 +156,19 @@ def quick_sweep() -> list[Spec]:
 
 
 def full_sweep(*, seeds: int = 10, frame_rates: Sequence[float | None] = (None, 100.0),
-               pilots: Sequence[dict[str, Any]] = PILOT_SETTINGS) -> list[Spec]:
-    """The complete sweep: every method and ``static``; ICE (40 s, failure at 20 s) and HARV
-    lat-dir (50 s, failure at 25 s; its ``failure2`` is at t = 0 as in the seed) with the
-    scenario's own failures and every catalogue failure (5 kinds, single and double);
-    blind and told; frame rates (``None`` = the seed's rate) x pilot settings; ``seeds``
-    noise seeds.  Open loop on 10 random problems with 20,000 coverage samples."""
+               pilots: Sequence[dict[str, Any]] = FULL_PILOTS,
+               times: dict[str, tuple[float, float]] | None = None) -> list[Spec]:
+    """The complete sweep: every method and ``static``; ICE and HARV lat-dir (``times``:
+    duration and failure time per scenario, default :data:`FULL_TIMES`; HARV's ``failure2``
+    is at t = 0 as in the seed) with the scenario's own failures and every catalogue failure
+    (5 kinds, single and double); blind and told; frame rates (``None`` = the seed's rate) x
+    pilot settings; ``seeds`` noise seeds.  Open loop on 10 random problems with 20,000
+    coverage samples."""
     frame_axis = [{} if f is None else {FRAME_PERIOD: 1.0 / float(f)} for f in frame_rates]
     settings = settings_product(pilots, frame_axis)
     seed_list = list(range(1, seeds + 1))
     specs: list[Spec] = []
-    for scenario, (duration, t_fail) in SCENARIO_TIMES.items():
+    for scenario, (duration, t_fail) in (times or FULL_TIMES).items():
         failures = [*SCENARIO_FAILURES[scenario], *catalogue_names()]
         specs += closed_grid(scenario, failures, all_methods(), seed_list, settings=settings, duration=duration,
                              failure_time=t_fail, history_failures=[SCENARIO_FAILURES[scenario][0], "jam1"])
