@@ -22,6 +22,14 @@ _clock = time.perf_counter
 _new_result = tuple.__new__  # Result is a tuple: built in one C call on the fast paths
 _STATUS = (Status.EXACT, Status.UNATTAINABLE)  # by the kernels' code
 
+try:  # the call path in C (alloc/_fastcall.c, built at install); without it the same path in Python
+    from ._fastcall import FastCall as _CallBase
+
+    FAST_CALL = True
+except ImportError:  # pragma: no cover - a build without a C compiler
+    _CallBase = object  # type: ignore[assignment,misc]
+    FAST_CALL = False
+
 
 def _frozen(a: np.ndarray) -> np.ndarray:
     a.setflags(write=False)
@@ -33,7 +41,7 @@ def _reason(exc: BaseException) -> str:
     return str(exc) if isinstance(exc, SolverError) else f"{type(exc).__name__}: {exc}"
 
 
-class Allocator:
+class Allocator(_CallBase):  # type: ignore[misc,valid-type]
     """A method built once for a problem; call it with demands.
 
     ``allocator(v, u_prev=None, dt=None) -> Result``.  With ``u_prev`` and ``dt`` the
@@ -43,6 +51,10 @@ class Allocator:
     naming the field (``OptionError``, a TypeError, for options), and anything else a method's
     backend raises -- at build or at call -- becomes the safe answer of
     :class:`~alloc.methods.pseudo_inverse.SafeCommand` with status ``fallback`` and the reason.
+
+    The call is :meth:`_call_py`; where ``alloc._fastcall`` is built (``FAST_CALL``), its fast
+    paths run in C (the same compiled kernel with the same arguments, so the same bits) and
+    every other case goes to :meth:`_call_py`.
     """
 
     __slots__ = ("problem", "method", "impl", "build_error", "_safe", "_B", "_lo", "_hi", "_kshape", "_mshape",
@@ -82,11 +94,35 @@ class Allocator:
                 self._W = np.ascontiguousarray(W, dtype=float)
         self._packed = None if impl is None else impl.packed
         self._packed_rate = None if impl is None else impl.packed_rate
+        self._wire()
+
+    def _wire(self) -> None:
+        """Hand the C call path (``alloc._fastcall``) the kernels of :meth:`_call_py`'s fast paths."""
+        if not FAST_CALL:
+            return
+        if self._W is not None:
+            kernel, pre, post = fused_affine, (self._W,), (EXACT_RTOL, MAX_MAGNITUDE)
+        elif self._packed is not None:
+            kernel, pre, post = self._packed[0], tuple(self._packed[1]), (self._zm, 0.0)
+        else:
+            kernel, pre, post = None, (), ()
+        rkernel, rpre = (None, ()) if self._packed_rate is None else (self._packed_rate[0], tuple(self._packed_rate[1]))
+        self._fast_setup(kernel, pre, post, rkernel, rpre, self.method, _STATUS, Result, self.problem.k,
+                         self.problem.m, MAX_MAGNITUDE)
+
+    def __getstate__(self) -> dict[str, Any]:
+        return {name: getattr(self, name) for name in Allocator.__slots__ if hasattr(self, name)}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        for name, value in state.items():
+            setattr(self, name, value)
+        self._wire()
 
     def __repr__(self) -> str:
         return f"Allocator(method={self.method!r}, {self.problem!r})"
 
-    def __call__(self, v: ArrayLike, *, u_prev: ArrayLike | None = None, dt: float | None = None) -> Result:
+    def _call_py(self, v: ArrayLike, *, u_prev: ArrayLike | None = None, dt: float | None = None) -> Result:
+        """``allocator(v, u_prev=None, dt=None)``: the call (in Python; see the class docstring)."""
         if type(v) is np.ndarray and v.shape == self._kshape and v.dtype == _F64:
             # fast paths: one compiled call checks v (and u_prev), allocates, computes B u, the
             # residual and the status code into one new array; the Result holds read-only views
@@ -115,6 +151,9 @@ class Allocator:
         else:
             v = self.problem.check_demand(v)
         return self._solve(v, u_prev, dt)
+
+    if not FAST_CALL:  # pragma: no cover
+        __call__ = _call_py
 
     def _solve(self, v: FloatArray, u_prev: ArrayLike | None, dt: float | None) -> Result:
         """Allocate a validated demand (owned copy) through the method, or the safe answer."""

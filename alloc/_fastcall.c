@@ -1,0 +1,314 @@
+/* alloc._fastcall: the allocator's call path in C.
+ *
+ * ``FastCall`` is the base type of ``alloc.Allocator``.  Its ``tp_call`` does, without a
+ * Python frame, what ``Allocator._call_py`` does on its fast paths: check the demand (and
+ * ``u_prev``, ``dt``) by type, shape and dtype; call the method's one compiled kernel (a numba
+ * dispatcher: the same kernel, the same arguments, so the same bits); mark its packed output
+ * read-only and return the ``Result`` tuple of views into it.  Every other case -- another
+ * argument form, an input the kernel does not vouch for (status code 2), no compiled kernel --
+ * goes to ``self._call_py(*args, **kwargs)``, the Python implementation, which re-checks
+ * and answers (or raises the named error).  Measured in benchmarks/bench_alloc.py.
+ *
+ * Packed output of a kernel (alloc._kernels.packed_out): u (m), B u (k), v (k), v - B u (k).
+ * The kernel returns (out, code, iterations); code 0 = exact, 1 = unattainable.
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#define NPY_NO_DEPRECATED_API NPY_1_7_API_VERSION
+#include <numpy/arrayobject.h>
+#include <time.h>
+
+#define MAXARGS 40
+
+typedef struct {
+    PyObject_HEAD
+    PyObject *kernel;  /* plain path: kernel(*pre, v, *post); NULL = none */
+    PyObject *pre;
+    PyObject *post;
+    PyObject *rkernel; /* rate path: rkernel(*rpre, v, u_prev, dt); NULL = none */
+    PyObject *rpre;
+    PyObject *method;  /* Result.method */
+    PyObject *status;  /* (Status.EXACT, Status.UNATTAINABLE) */
+    PyObject *rtype;   /* the Result type (a tuple subclass) */
+    Py_ssize_t k, m;
+    double maxmag;
+} FastCall;
+
+static PyObject *str_u_prev, *str_dt, *str_call_py, *str_empty;
+
+static double now(void) {
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts); /* time.perf_counter's clock on Linux */
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+static int is_vector(PyObject *a, Py_ssize_t n) {
+    if (!PyArray_CheckExact(a))
+        return 0;
+    PyArrayObject *x = (PyArrayObject *)a;
+    return PyArray_NDIM(x) == 1 && PyArray_DIM(x, 0) == n && PyArray_TYPE(x) == NPY_DOUBLE &&
+           PyArray_ISNOTSWAPPED(x);
+}
+
+static PyObject *view(PyArrayObject *out, Py_ssize_t offset, Py_ssize_t len) {
+    npy_intp dims[1] = {len};
+    PyArray_Descr *d = PyArray_DESCR(out);
+    Py_INCREF(d);
+    /* flags 0 with given data: a read-only view, as out[a:b] of a read-only out */
+    PyObject *a = PyArray_NewFromDescr(&PyArray_Type, d, 1, dims, NULL,
+                                       (char *)PyArray_DATA(out) + offset * (Py_ssize_t)sizeof(double), 0, NULL);
+    if (a == NULL)
+        return NULL;
+    Py_INCREF(out);
+    if (PyArray_SetBaseObject((PyArrayObject *)a, (PyObject *)out) < 0) {
+        Py_DECREF(a);
+        return NULL;
+    }
+    return a;
+}
+
+static PyObject *slow(PyObject *self, PyObject *args, PyObject *kw) {
+    PyObject *f = PyObject_GetAttr(self, str_call_py);
+    if (f == NULL)
+        return NULL;
+    PyObject *r = PyObject_Call(f, args, kw);
+    Py_DECREF(f);
+    return r;
+}
+
+/* The Result of a kernel's answer, or NULL with no error set when the answer is not a fast one. */
+static PyObject *finish(FastCall *self, PyObject *res, double t0) {
+    double t = now() - t0;
+    if (!PyTuple_CheckExact(res) || PyTuple_GET_SIZE(res) != 3)
+        return NULL;
+    PyObject *o = PyTuple_GET_ITEM(res, 0), *c = PyTuple_GET_ITEM(res, 1), *it = PyTuple_GET_ITEM(res, 2);
+    if (!PyLong_CheckExact(c))
+        return NULL;
+    long code = PyLong_AsLong(c);
+    if (code == -1 && PyErr_Occurred()) {
+        PyErr_Clear();
+        return NULL;
+    }
+    Py_ssize_t m = self->m, k = self->k;
+    if (code < 0 || code > 1 || !is_vector(o, m + 3 * k) || !PyArray_IS_C_CONTIGUOUS((PyArrayObject *)o))
+        return NULL;
+    PyArrayObject *out = (PyArrayObject *)o;
+    PyArray_CLEARFLAGS(out, NPY_ARRAY_WRITEABLE);
+    PyObject *items[9] = {NULL};
+    items[0] = view(out, 0, m);         /* u */
+    items[1] = view(out, m + k, k);     /* v */
+    items[2] = view(out, m, k);         /* B u */
+    items[3] = PyTuple_GET_ITEM(self->status, code);
+    Py_INCREF(items[3]);
+    items[4] = self->method;
+    Py_INCREF(items[4]);
+    items[5] = it;
+    Py_INCREF(it);
+    items[6] = PyFloat_FromDouble(t);
+    items[7] = str_empty;
+    Py_INCREF(str_empty);
+    items[8] = view(out, m + 2 * k, k); /* v - B u */
+    PyTypeObject *rt = (PyTypeObject *)self->rtype;
+    PyObject *r = NULL;
+    if (items[0] && items[1] && items[2] && items[6] && items[8])
+        r = rt->tp_alloc(rt, 9);
+    if (r == NULL) {
+        for (int i = 0; i < 9; i++)
+            Py_XDECREF(items[i]);
+        if (!PyErr_Occurred())
+            PyErr_NoMemory();
+        return NULL;
+    }
+    for (int i = 0; i < 9; i++)
+        PyTuple_SET_ITEM(r, i, items[i]);
+    return r;
+}
+
+static PyObject *fc_call(PyObject *op, PyObject *args, PyObject *kw) {
+    FastCall *self = (FastCall *)op;
+    PyObject *up = NULL, *dt = NULL;
+    if (PyTuple_GET_SIZE(args) != 1)
+        return slow(op, args, kw);
+    PyObject *v = PyTuple_GET_ITEM(args, 0);
+    if (kw != NULL && PyDict_GET_SIZE(kw) > 0) {
+        Py_ssize_t found = 0;
+        up = PyDict_GetItemWithError(kw, str_u_prev);
+        if (up != NULL)
+            found++;
+        else if (PyErr_Occurred())
+            return NULL;
+        dt = PyDict_GetItemWithError(kw, str_dt);
+        if (dt != NULL)
+            found++;
+        else if (PyErr_Occurred())
+            return NULL;
+        if (found != PyDict_GET_SIZE(kw))
+            return slow(op, args, kw);
+        if (up == Py_None)
+            up = NULL;
+        if (dt == Py_None)
+            dt = NULL;
+    }
+    if (!is_vector(v, self->k))
+        return slow(op, args, kw);
+    PyObject *argv[MAXARGS];
+    Py_ssize_t n = 0;
+    PyObject *kern;
+    if (up == NULL && dt == NULL) {
+        if (self->kernel == NULL)
+            return slow(op, args, kw);
+        kern = self->kernel;
+        for (Py_ssize_t i = 0; i < PyTuple_GET_SIZE(self->pre); i++)
+            argv[n++] = PyTuple_GET_ITEM(self->pre, i);
+        argv[n++] = v;
+        for (Py_ssize_t i = 0; i < PyTuple_GET_SIZE(self->post); i++)
+            argv[n++] = PyTuple_GET_ITEM(self->post, i);
+    } else {
+        if (self->rkernel == NULL || up == NULL || dt == NULL || !PyFloat_CheckExact(dt) || !is_vector(up, self->m))
+            return slow(op, args, kw);
+        double d = PyFloat_AS_DOUBLE(dt);
+        if (!(d > 0.0 && d <= self->maxmag))
+            return slow(op, args, kw);
+        kern = self->rkernel;
+        for (Py_ssize_t i = 0; i < PyTuple_GET_SIZE(self->rpre); i++)
+            argv[n++] = PyTuple_GET_ITEM(self->rpre, i);
+        argv[n++] = v;
+        argv[n++] = up;
+        argv[n++] = dt;
+    }
+    double t0 = now();
+    PyObject *res = PyObject_Vectorcall(kern, argv, n, NULL);
+    if (res == NULL)
+        return NULL; /* the kernel raised: as on the Python path */
+    PyObject *r = finish(self, res, t0);
+    Py_DECREF(res);
+    if (r != NULL || PyErr_Occurred())
+        return r;
+    return slow(op, args, kw); /* not a fast answer: the Python path decides */
+}
+
+static int check_tuple(PyObject *t, const char *name) {
+    if (!PyTuple_Check(t)) {
+        PyErr_Format(PyExc_TypeError, "_fast_setup: %s must be a tuple", name);
+        return -1;
+    }
+    return 0;
+}
+
+static PyObject *fc_setup(PyObject *op, PyObject *args) {
+    FastCall *self = (FastCall *)op;
+    PyObject *kernel, *pre, *post, *rkernel, *rpre, *method, *status, *rtype;
+    Py_ssize_t k, m;
+    double maxmag;
+    if (!PyArg_ParseTuple(args, "OOOOOOOOnnd:_fast_setup", &kernel, &pre, &post, &rkernel, &rpre, &method, &status,
+                          &rtype, &k, &m, &maxmag))
+        return NULL;
+    if (check_tuple(pre, "pre") || check_tuple(post, "post") || check_tuple(rpre, "rpre") ||
+        check_tuple(status, "status"))
+        return NULL;
+    if (PyTuple_GET_SIZE(status) != 2 || !PyType_Check(rtype) ||
+        !PyType_IsSubtype((PyTypeObject *)rtype, &PyTuple_Type) || k < 1 || m < 1) {
+        PyErr_SetString(PyExc_ValueError, "_fast_setup: bad status, result type or sizes");
+        return NULL;
+    }
+    if (PyTuple_GET_SIZE(pre) + 1 + PyTuple_GET_SIZE(post) > MAXARGS || PyTuple_GET_SIZE(rpre) + 3 > MAXARGS) {
+        PyErr_SetString(PyExc_ValueError, "_fast_setup: too many kernel arguments");
+        return NULL;
+    }
+#define SET(field, value)                      \
+    do {                                       \
+        PyObject *tmp_ = self->field;          \
+        self->field = (value);                 \
+        Py_XINCREF(self->field);               \
+        Py_XDECREF(tmp_);                      \
+    } while (0)
+    SET(kernel, kernel == Py_None ? NULL : kernel);
+    SET(pre, pre);
+    SET(post, post);
+    SET(rkernel, rkernel == Py_None ? NULL : rkernel);
+    SET(rpre, rpre);
+    SET(method, method);
+    SET(status, status);
+    SET(rtype, rtype);
+#undef SET
+    self->k = k;
+    self->m = m;
+    self->maxmag = maxmag;
+    Py_RETURN_NONE;
+}
+
+static int fc_traverse(PyObject *op, visitproc visit, void *arg) {
+    FastCall *self = (FastCall *)op;
+    Py_VISIT(self->kernel);
+    Py_VISIT(self->pre);
+    Py_VISIT(self->post);
+    Py_VISIT(self->rkernel);
+    Py_VISIT(self->rpre);
+    Py_VISIT(self->method);
+    Py_VISIT(self->status);
+    Py_VISIT(self->rtype);
+    return 0;
+}
+
+static int fc_clear(PyObject *op) {
+    FastCall *self = (FastCall *)op;
+    Py_CLEAR(self->kernel);
+    Py_CLEAR(self->pre);
+    Py_CLEAR(self->post);
+    Py_CLEAR(self->rkernel);
+    Py_CLEAR(self->rpre);
+    Py_CLEAR(self->method);
+    Py_CLEAR(self->status);
+    Py_CLEAR(self->rtype);
+    return 0;
+}
+
+static void fc_dealloc(PyObject *op) {
+    PyObject_GC_UnTrack(op);
+    fc_clear(op);
+    Py_TYPE(op)->tp_free(op);
+}
+
+static PyMethodDef fc_methods[] = {
+    {"_fast_setup", fc_setup, METH_VARARGS,
+     "_fast_setup(kernel, pre, post, rate_kernel, rate_pre, method, status, result_type, k, m, max_magnitude): "
+     "the compiled kernels the C call path calls (None: that path goes to _call_py)."},
+    {NULL, NULL, 0, NULL}};
+
+static PyTypeObject FastCallType = {
+    PyVarObject_HEAD_INIT(NULL, 0).tp_name = "alloc._fastcall.FastCall",
+    .tp_basicsize = sizeof(FastCall),
+    .tp_flags = Py_TPFLAGS_DEFAULT | Py_TPFLAGS_BASETYPE | Py_TPFLAGS_HAVE_GC,
+    .tp_doc = "Base of alloc.Allocator: its call path in C (see alloc/_fastcall.c).",
+    .tp_call = fc_call,
+    .tp_traverse = fc_traverse,
+    .tp_clear = fc_clear,
+    .tp_dealloc = fc_dealloc,
+    .tp_methods = fc_methods,
+    .tp_new = PyType_GenericNew,
+};
+
+static struct PyModuleDef moduledef = {PyModuleDef_HEAD_INIT, "alloc._fastcall",
+                                       "The allocator's call path in C (see alloc/api.py).", -1, NULL};
+
+PyMODINIT_FUNC PyInit__fastcall(void) {
+    import_array();
+    if (PyType_Ready(&FastCallType) < 0)
+        return NULL;
+    str_u_prev = PyUnicode_InternFromString("u_prev");
+    str_dt = PyUnicode_InternFromString("dt");
+    str_call_py = PyUnicode_InternFromString("_call_py");
+    str_empty = PyUnicode_InternFromString("");
+    if (!str_u_prev || !str_dt || !str_call_py || !str_empty)
+        return NULL;
+    PyObject *mod = PyModule_Create(&moduledef);
+    if (mod == NULL)
+        return NULL;
+    Py_INCREF(&FastCallType);
+    if (PyModule_AddObject(mod, "FastCall", (PyObject *)&FastCallType) < 0) {
+        Py_DECREF(&FastCallType);
+        Py_DECREF(mod);
+        return NULL;
+    }
+    return mod;
+}

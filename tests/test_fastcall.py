@@ -1,0 +1,148 @@
+"""The allocator's call path in C (alloc/_fastcall.c) against its Python twin (``Allocator._call_py``).
+
+The C path must be invisible except in time: for every method and every argument form --
+valid, odd or invalid -- ``allocator(...)`` returns what ``allocator._call_py(...)`` returns,
+bit for bit, or raises the same error.  Generated: random problems (seeded), every method,
+demands inside and outside the attainable set, with and without rate limits, and a catalogue
+of argument forms the fast path must hand back to Python.
+"""
+
+from __future__ import annotations
+
+import gc
+import pickle
+import sys
+
+import numpy as np
+import pytest
+
+import alloc
+from alloc.api import FAST_CALL
+from alloc.testing import KINDS, random_problem
+
+pytestmark = pytest.mark.skipif(not FAST_CALL, reason="alloc._fastcall is not built (no C compiler at install)")
+
+FLAGS = ("C_CONTIGUOUS", "F_CONTIGUOUS", "OWNDATA", "WRITEABLE", "ALIGNED")
+
+
+def same_result(a: alloc.Result, b: alloc.Result) -> None:
+    assert type(a) is type(b) is alloc.Result
+    for name, x, y in zip(a._fields, a, b):
+        if name == "solve_time":
+            assert isinstance(x, float) and isinstance(y, float) and x >= 0 and y >= 0
+        elif isinstance(x, np.ndarray):
+            assert type(y) is np.ndarray and x.dtype == y.dtype and x.shape == y.shape, name
+            assert np.array_equal(x, y, equal_nan=True), name
+            assert [x.flags[f] for f in FLAGS] == [y.flags[f] for f in FLAGS], name
+        else:
+            assert type(x) is type(y) and x == y, name
+
+
+def outcome(call, *args, **kwargs):
+    try:
+        return call(*args, **kwargs), None
+    except Exception as exc:  # noqa: BLE001 - compared below
+        return None, (type(exc), str(exc))
+
+
+def check_same(f: alloc.Allocator, *args, **kwargs) -> None:
+    a, ea = outcome(f, *args, **kwargs)
+    b, eb = outcome(f._call_py, *args, **kwargs)
+    assert ea == eb
+    if a is not None:
+        same_result(a, b)
+
+
+@pytest.mark.parametrize("method", alloc.methods())
+def test_c_path_equals_python_path_on_generated_problems(method: str) -> None:
+    rng = np.random.default_rng(20261130)
+    built = 0
+    for trial in range(2 * len(KINDS)):
+        p = random_problem(rng, int(rng.integers(1, 5)), int(rng.integers(4, 10)), KINDS[trial % len(KINDS)],
+                           weights=trial < len(KINDS))
+        try:
+            f = alloc.make_allocator(p, method)
+        except alloc.AllocError:  # e.g. the L1 methods refuse non-diagonal weights
+            continue
+        built += 1
+        for _ in range(25):
+            u = rng.uniform(p.umin, p.umax)
+            v = p.B @ u * rng.choice([0.3, 1.0, 2.5, 50.0])
+            u_prev = rng.uniform(p.umin, p.umax)
+            check_same(f, v)
+            check_same(f, v, u_prev=u_prev, dt=float(rng.choice([1e-3, 0.02, 1.0])))
+    assert built >= len(KINDS)
+
+
+def test_argument_forms_the_c_path_hands_back() -> None:
+    p = random_problem(np.random.default_rng(5), 3, 8)
+    for method in ("pinv", "qp", "wls", "lp", "pinv_scale", "da"):
+        f = alloc.make_allocator(p, method)
+        v = p.B @ (0.5 * (p.umin + p.umax) + 0.05)
+        up = 0.5 * (p.umin + p.umax)
+        big_endian = v.astype(">f8")
+        strided = np.repeat(v, 2)[::2]
+        forms = [
+            ((v,), {}), ((v,), {"u_prev": None, "dt": None}), ((list(v),), {}), ((tuple(v),), {}),
+            ((v.astype(np.float32),), {}), ((v.astype(int),), {}), ((big_endian,), {}), ((strided,), {}),
+            ((v[:2],), {}), ((v.reshape(1, 3),), {}), ((np.r_[v, 1.0],), {}), ((np.full(3, np.nan),), {}),
+            ((np.full(3, np.inf),), {}), ((np.full(3, 1e60),), {}), (("abc",), {}), ((None,), {}), ((), {}),
+            ((v, v), {}), ((v,), {"w": 1}), ((v,), {"u_prev": up}), ((v,), {"dt": 0.01}),
+            ((v,), {"u_prev": up, "dt": 1}), ((v,), {"u_prev": up, "dt": -0.01}), ((v,), {"u_prev": up, "dt": 0.0}),
+            ((v,), {"u_prev": up, "dt": np.float64(0.01)}), ((v,), {"u_prev": up, "dt": float("nan")}),
+            ((v,), {"u_prev": up, "dt": 1e60}), ((v,), {"u_prev": list(up), "dt": 0.01}),
+            ((v,), {"u_prev": up[:3], "dt": 0.01}), ((v,), {"u_prev": up.astype(">f8"), "dt": 0.01}),
+            ((v,), {"u_prev": np.full(8, np.nan), "dt": 0.01}), ((v,), {"u_prev": up, "dt": 0.01, "x": 1}),
+        ]
+        for args, kwargs in forms:
+            check_same(f, *args, **kwargs)
+
+
+def test_results_are_read_only_and_own_their_buffer() -> None:
+    p = random_problem(np.random.default_rng(7), 3, 8)
+    f = alloc.make_allocator(p, "qp")
+    v = p.B @ p.umax * 3.0
+    r = f(v)
+    v[:] = 0.0  # the caller reuses its array: the result keeps the demand it was given
+    assert not np.array_equal(r.v, v)
+    for a in (r.u, r.v, r.v_achieved, r.unallocated):
+        assert not a.flags.writeable
+        with pytest.raises(ValueError):
+            a[0] = 1.0
+    assert r.u.base is r.v.base is r.v_achieved.base is r.unallocated.base
+
+
+def test_no_reference_leaks() -> None:
+    p = random_problem(np.random.default_rng(9), 3, 8)
+    rng = np.random.default_rng(1)
+    V = rng.normal(size=(200, 3))
+    up = 0.5 * (p.umin + p.umax)
+    for method in ("pinv", "qp"):
+        f = alloc.make_allocator(p, method)
+        watched = (alloc.Result, alloc.Status.EXACT, alloc.Status.UNATTAINABLE, f.method, up, "")
+
+        def run() -> None:
+            for v in V:
+                f(v)
+                f(v, u_prev=up, dt=0.01)
+                outcome(f, v[:2])
+
+        run()
+        gc.collect()
+        before = [sys.getrefcount(x) for x in watched]
+        for _ in range(5):
+            run()
+        gc.collect()
+        assert [sys.getrefcount(x) for x in watched] == before
+
+
+def test_pickle_round_trip_keeps_the_c_path() -> None:
+    import service.builds  # noqa: F401 - registers Problem's pickling, as the service does
+
+    p = random_problem(np.random.default_rng(11), 3, 8)
+    v = p.B @ p.umax * 0.4
+    for method in ("pinv", "wls", "da"):
+        f = alloc.make_allocator(p, method)
+        g = pickle.loads(pickle.dumps(f))
+        same_result(g(v), f(v))
+        same_result(g(v), g._call_py(v))
