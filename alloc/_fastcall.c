@@ -2,8 +2,9 @@
  *
  * ``FastCall`` is the base type of ``alloc.Allocator``.  Its ``tp_call`` does, without a
  * Python frame, what ``Allocator._call_py`` does on its fast paths: check the demand (and
- * ``u_prev``, ``dt``) by type, shape and dtype; call the method's one compiled kernel (a numba
- * dispatcher: the same kernel, the same arguments, so the same bits); mark its packed output
+ * ``u_prev``, ``dt``) by type, shape, dtype and layout; call the method's one compiled kernel
+ * (numba's entry for exactly those argument types, alloc.api._entry_point: the same compiled
+ * code with the same arguments, so the same bits); mark its packed output
  * read-only and return the ``Result`` tuple of views into it.  Every other case -- another
  * argument form, an input the kernel does not vouch for (status code 2), no compiled kernel --
  * goes to ``self._call_py(*args, **kwargs)``, the Python implementation, which re-checks
@@ -46,8 +47,9 @@ static int is_vector(PyObject *a, Py_ssize_t n) {
     if (!PyArray_CheckExact(a))
         return 0;
     PyArrayObject *x = (PyArrayObject *)a;
+    /* the kernels are called through their entry for C-contiguous, aligned float64 vectors */
     return PyArray_NDIM(x) == 1 && PyArray_DIM(x, 0) == n && PyArray_TYPE(x) == NPY_DOUBLE &&
-           PyArray_ISNOTSWAPPED(x);
+           PyArray_ISNOTSWAPPED(x) && PyArray_IS_C_CONTIGUOUS(x) && PyArray_ISALIGNED(x);
 }
 
 static PyObject *view(PyArrayObject *out, Py_ssize_t offset, Py_ssize_t len) {

@@ -36,6 +36,26 @@ def _frozen(a: np.ndarray) -> np.ndarray:
     return a
 
 
+def _entry_point(kernel: Any, args: tuple[Any, ...]) -> Any:
+    """The compiled entry of numba dispatcher ``kernel`` for exactly the types of ``args``.
+
+    Calling it skips the dispatcher's type resolution (0.2-0.6 us a call); the C call path
+    uses it only for arguments of exactly these types (1-D float64 arrays, C-contiguous,
+    aligned, native byte order; a Python float).  Anything else -- or a kernel that is not a
+    dispatcher -- keeps the dispatcher itself."""
+    try:
+        from numba import typeof
+
+        sig = tuple(typeof(a) for a in args)
+        overload = kernel.overloads.get(sig)
+        if overload is None:
+            kernel.compile(sig)  # what the first call would do (from numba's cache when it has it)
+            overload = kernel.overloads[sig]
+        return overload.entry_point
+    except Exception:  # noqa: BLE001 - not a numba dispatcher, or a type numba cannot name
+        return kernel
+
+
 def _reason(exc: BaseException) -> str:
     """A fallback's message: the backend's own words, or the exception's type and text."""
     return str(exc) if isinstance(exc, SolverError) else f"{type(exc).__name__}: {exc}"
@@ -100,15 +120,19 @@ class Allocator(_CallBase):  # type: ignore[misc,valid-type]
         """Hand the C call path (``alloc._fastcall``) the kernels of :meth:`_call_py`'s fast paths."""
         if not FAST_CALL:
             return
+        k, m = self.problem.k, self.problem.m
         if self._W is not None:
             kernel, pre, post = fused_affine, (self._W,), (EXACT_RTOL, MAX_MAGNITUDE)
         elif self._packed is not None:
             kernel, pre, post = self._packed[0], tuple(self._packed[1]), (self._zm, 0.0)
         else:
             kernel, pre, post = None, (), ()
+        if kernel is not None:
+            kernel = _entry_point(kernel, (*pre, np.zeros(k), *post))
         rkernel, rpre = (None, ()) if self._packed_rate is None else (self._packed_rate[0], tuple(self._packed_rate[1]))
-        self._fast_setup(kernel, pre, post, rkernel, rpre, self.method, _STATUS, Result, self.problem.k,
-                         self.problem.m, MAX_MAGNITUDE)
+        if rkernel is not None:
+            rkernel = _entry_point(rkernel, (*rpre, np.zeros(k), np.zeros(m), 1.0))
+        self._fast_setup(kernel, pre, post, rkernel, rpre, self.method, _STATUS, Result, k, m, MAX_MAGNITUDE)
 
     def __getstate__(self) -> dict[str, Any]:
         return {name: getattr(self, name) for name in Allocator.__slots__ if hasattr(self, name)}
