@@ -50,6 +50,8 @@ __all__ = ["pack", "lexico_call", "lexico_solve", "lexico_batch", "SIGMA_RTOL", 
 
 #: Singular values below this fraction of the largest are round-off (dropped).
 SIGMA_RTOL = 1e-12
+#: Unit round-off of the Jacobi SVD's orthogonality test (see :func:`_jacobi`).
+JACOBI_EPS = float(np.finfo(float).eps)
 #: Multiplier tolerance in units of the round-off bound of the multiplier's computation.
 MU_EPS = 1e3 * np.finfo(float).eps
 
@@ -102,6 +104,21 @@ def _jacobi(X, n, p, V, sig, ref):  # pragma: no cover - compiled
         for j in range(p):
             V[i, j] = 0.0
         V[i, i] = 1.0
+    # a pair is orthogonal when |c| <= tol sqrt(a b): the computed c of an n-row dot product
+    # carries a relative error up to about n eps, so a smaller tol cannot be met on
+    # (near-)dependent columns and the sweeps ran to their cap (40 sweeps, 4-14 us a
+    # factorisation at ICE size, the slow tail of first-seen free sets; LAPACK's xGESVJ uses
+    # sqrt(n) eps for the same reason)
+    tol = max(1e-15, n * JACOBI_EPS)
+    # a column below 1e-15 of ||X||_F is round-off (dropped below, SIGMA_RTOL = 1e-12): it
+    # is not rotated.  With more columns than rows (p > n) one column must become such noise,
+    # and no rotation can make it orthogonal to the others, which already span the rows: the
+    # sweeps ran to their cap on every such matrix (2 x 3 at the second stage of ICE qp).
+    small = 0.0
+    for j in range(p):
+        for r in range(n):
+            small += X[r, j] * X[r, j]
+    small *= 1e-30
     for _sweep in range(40):
         rotated = False
         for i in range(p - 1):
@@ -115,7 +132,7 @@ def _jacobi(X, n, p, V, sig, ref):  # pragma: no cover - compiled
                     a += xi * xi
                     b += xj * xj
                     c += xi * xj
-                if c == 0.0 or abs(c) <= 1e-15 * np.sqrt(a * b):
+                if c == 0.0 or a <= small or b <= small or abs(c) <= tol * np.sqrt(a * b):
                     continue
                 rotated = True
                 zeta = (b - a) / (2.0 * c)
