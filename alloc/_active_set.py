@@ -41,12 +41,15 @@ mutate that state hold the GIL (no ``nogil``): an allocator shared by threads st
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 from numba import njit
 
 from ._kernels import _FREE_BITS, close_out, copy_demand, finish, packed_out, rate_window_into
 
-__all__ = ["pack", "lexico_call", "lexico_solve", "lexico_batch", "SIGMA_RTOL", "MU_EPS"]
+__all__ = ["pack", "lexico_call", "lexico_solve", "lexico_batch", "lexico_batch_threads", "batch_threads", "SIGMA_RTOL",
+           "MU_EPS"]
 
 #: Singular values below this fraction of the largest are round-off (dropped).
 SIGMA_RTOL = 1e-12
@@ -706,11 +709,8 @@ def lexico_solve(mats, vecs, ivecs, bankL, bank, v, lo, hi, u_prev, rate):  # pr
     return vecs[_U, :m].copy(), it, ok
 
 
-@njit(cache=True)
-def lexico_batch(mats, vecs, ivecs, bankL, bank, V):  # pragma: no cover - compiled
-    """:func:`lexico_solve` over the rows of ``V`` within the position limits, in order (a
-    compiled loop: row ``i`` is what the ``i``-th single call would return); ``ok[i]`` False
-    where a level hit its cap."""
+@njit(cache=True, nogil=True, inline="always")
+def _batch_rows(mats, vecs, ivecs, bankL, bank, V):  # pragma: no cover - compiled
     N = V.shape[0]
     m = ivecs[_HEAD, _M]
     U = np.empty((N, m))
@@ -722,3 +722,52 @@ def lexico_batch(mats, vecs, ivecs, bankL, bank, V):  # pragma: no cover - compi
             U[i, j] = vecs[_U, j]
         ok[i] = good
     return U, ok
+
+
+@njit(cache=True)
+def lexico_batch(mats, vecs, ivecs, bankL, bank, V):  # pragma: no cover - compiled
+    """:func:`lexico_solve` over the rows of ``V`` within the position limits, in order (a
+    compiled loop: row ``i`` is what the ``i``-th single call would return); ``ok[i]`` False
+    where a level hit its cap."""
+    return _batch_rows(mats, vecs, ivecs, bankL, bank, V)
+
+
+@njit(cache=True, nogil=True)
+def _batch_rows_nogil(mats, vecs, ivecs, bankL, bank, V):  # pragma: no cover - compiled
+    """:func:`lexico_batch` without the GIL, for a thread's private copy of the state."""
+    return _batch_rows(mats, vecs, ivecs, bankL, bank, V)
+
+
+#: rows per thread below which :func:`lexico_batch_threads` stays on one thread
+BATCH_ROWS_PER_THREAD = 1000
+#: most threads a batch uses (None: one per core)
+BATCH_THREADS: int | None = None
+_POOL: list = []
+
+
+def batch_threads(n_rows: int) -> int:
+    """Threads for a batch of ``n_rows``: one per core (``BATCH_THREADS``), at least
+    ``BATCH_ROWS_PER_THREAD`` rows each."""
+    cap = BATCH_THREADS if BATCH_THREADS is not None else (os.cpu_count() or 1)
+    return max(1, min(cap, n_rows // BATCH_ROWS_PER_THREAD))
+
+
+def lexico_batch_threads(state: tuple, V: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`lexico_batch` split over :func:`batch_threads` threads, each on a private copy
+    of the solver's state (work arrays and factorisation cache: the allocator's own is never
+    touched off the GIL).  Rows are pure functions of the data (the cache changes the cost,
+    not the answer), so the result is the single-thread one bit for bit."""
+    threads = batch_threads(len(V))
+    if threads == 1:
+        return lexico_batch(*state, V)
+    if not _POOL:
+        from concurrent.futures import ThreadPoolExecutor
+
+        _POOL.append(ThreadPoolExecutor(max_workers=max(threads, os.cpu_count() or 1), thread_name_prefix="alloc-batch"))
+    cuts = np.linspace(0, len(V), threads + 1).astype(np.int64)
+
+    def part(i: int) -> tuple[np.ndarray, np.ndarray]:
+        return _batch_rows_nogil(*(a.copy() for a in state), V[cuts[i]:cuts[i + 1]])
+
+    parts = list(_POOL[0].map(part, range(threads)))
+    return np.concatenate([u for u, _ in parts]), np.concatenate([ok for _, ok in parts])

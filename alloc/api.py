@@ -241,7 +241,7 @@ class Allocator(_CallBase):  # type: ignore[misc,valid-type]
                 status = np.where(codes == 0, _EXACT.value, _UNATT.value)
                 return BatchResult(_frozen(U), Varr, _frozen(Vach), _frozen(status), self.method,
                                    time.perf_counter() - t0)
-        results = [self._solve(np.array(v), None, None) for v in Varr]
+        results = [self(v) for v in Varr]  # the single call itself (its fast path where it has one)
         m = problem.m
         U = np.array([r.u for r in results]).reshape(len(results), m)
         Vach = np.array([r.v_achieved for r in results]).reshape(len(results), problem.k)

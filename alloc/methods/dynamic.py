@@ -57,7 +57,7 @@ def _weight(value: object, m: int, field: str) -> FloatArray:
     return arr
 
 
-@register("dynamic")
+@register("dynamic", supports_batch=True)
 class DynamicAllocation(Method):
     equation = "Eqs 1.20-1.21 with Härkegård (2002) dynamic cost"
     summary = "stage 1 min moment error, stage 2 min ||W1(u-u_s)||^2 + ||W2(u-u_prev)||^2 at that moment"
@@ -105,3 +105,7 @@ class DynamicAllocation(Method):
         if u_prev is None:
             return self._static.solve(v, lo, hi)
         return self._dynamic.solve(v, lo, hi, u_prev)  # a non-finite target: SolverError (fallback)
+
+    def solve_batch(self, V: FloatArray, lo: FloatArray, hi: FloatArray) -> FloatArray:
+        """Rows without ``u_prev`` (a batch has no history): the static stage's compiled batch."""
+        return self._static.solve_batch(V, lo, hi)

@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from .._active_set import _HEAD, _MAXIT, lexico_batch, lexico_call, lexico_solve, pack
+from .._active_set import _HEAD, _MAXIT, lexico_batch_threads, lexico_call, lexico_solve, pack
 from .._linalg import check_real_option
 from ..exceptions import OptionError, SolverError
 from ..options import choice, levels, real
@@ -209,8 +209,9 @@ class LexicoLS:
         return u, it
 
     def solve_batch(self, V: FloatArray, lo: FloatArray, hi: FloatArray) -> FloatArray:
-        """Rows of ``V`` within the position limits (``lo``, ``hi`` are those), one compiled loop."""
-        U, ok = lexico_batch(*self._state, np.ascontiguousarray(V))
+        """Rows of ``V`` within the position limits (``lo``, ``hi`` are those): a compiled loop,
+        on every core for large batches (:func:`alloc._active_set.lexico_batch_threads`)."""
+        U, ok = lexico_batch_threads(self._state, np.ascontiguousarray(V))
         U[~ok] = np.nan  # the allocator re-runs those rows one by one (fallback per row)
         return U
 
