@@ -35,7 +35,7 @@ def _histories(out: Path) -> dict[str, dict[str, np.ndarray]]:
     return {p.name: dict(np.load(p)) for p in sorted((out / "histories").glob("*.npz"))}
 
 
-@pytest.mark.slow  # about 25 s: cluster start-up 6 s, three runs, graceful teardown 4 s, the local reference 5 s
+# 10-25 s (cluster start-up, three runs, graceful teardown, the local reference): part of the default run
 def test_dask_cluster_by_address_gives_byte_identical_csvs(tmp_path: Path) -> None:
     """``dask scheduler`` and two ``dask worker`` processes on loopback (torn down however the test ends)."""
     pytest.importorskip("distributed")
