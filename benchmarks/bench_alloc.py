@@ -10,7 +10,7 @@ precomputed m x k numpy matrix-vector product).  Reference lines: DAQP's own Pyt
 loop of single calls, a scaling table over m = 8..64 for k = 3 and 6, and the goals of
 issue 11 marked met or not.  Usage::
 
-    python -m benchmarks.bench_alloc [--calls 3000] [--json out.json] [--quick]
+    python -m benchmarks.bench_alloc [--calls 3000] [--json out.json] [--markdown tables.md] [--quick]
 
 The machine these numbers come from is shared and noisy: compare ratios within one run.
 """
@@ -206,6 +206,7 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--scaling-calls", type=int, default=300, help="calls per cell of the scaling table")
     ap.add_argument("--quick", action="store_true", help="fewer calls (a smoke run)")
     ap.add_argument("--json", help="write the tables as JSON here")
+    ap.add_argument("--markdown", help="write the README's tables (Markdown) here")
     args = ap.parse_args(argv)
     if args.quick:
         args.calls, args.batch, args.scaling_calls = 300, 2000, 50
@@ -268,7 +269,39 @@ def main(argv: list[str] | None = None) -> dict:
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(out, fh, indent=2)
+    if args.markdown:
+        with open(args.markdown, "w") as fh:
+            fh.write(markdown(out))
     return out
+
+
+def markdown(out: dict) -> str:
+    """The README's tables from one run's results (``main``'s return value or ``--json``)."""
+    cases = list(out["latency"])
+    by_method: dict[str, dict[str, dict]] = {}
+    for case in cases:
+        for r in out["latency"][case]:
+            by_method.setdefault(r["method"], {})[case] = r
+    lines = ["| method | " + " | ".join(f"{c}: median µs (× floor), p99, again p99" if i == 0 else c
+                                       for i, c in enumerate(cases)) + " |", "|---" * (len(cases) + 1) + "|"]
+    for method, row in by_method.items():
+        cells = [f"{r['median_us']:.1f} ({r['ratio']:.1f}×), {r['p99_us']:.0f}, {r['p99_again_us']:.0f}"
+                 if (r := row.get(c)) else "-" for c in cases]
+        lines.append(f"| `{method}` | " + " | ".join(cells) + " |")
+    lines += ["", f"`allocate_batch` against a Python loop of single calls (ICE, N = {out['batch'][0]['n']:,}, "
+              "half unattainable; medians of 5):", "", "| method | threads | batch s | loop s | speed-up |",
+              "|---|---|---|---|---|"]
+    lines += [f"| `{b['method']}` | {b['threads']} | {b['batch_s']:.3f} | {b['loop_s']:.3f} | {b['speedup']:.1f}× |"
+              for b in out["batch"]]
+    lines += ["", "Scaling: median µs per call on random general problems (no rate limits):", "",
+              "| k | m | floor µs | qp | wls | lp | da |", "|---|---|---|---|---|---|---|"]
+    lines += [f"| {r['k']} | {r['m']} | {r['floor_us']:.2f} | {r['qp']:.1f} | {r['wls']:.1f} | {r['lp']:.1f} | "
+              f"{r['da']:.1f} |" for r in out["scaling"]]
+    lines += ["", "| goal (issue 11) | measured | met? |", "|---|---|---|"]
+    for g in out["goals"]:
+        shown = f"{1.0 / g['value']:.1f}×" if "batch" in g["goal"] else f"{g['value']:.2f}"
+        lines.append(f"| {g['goal']} | {shown} | {'met' if g['met'] else '**not met**'} |")
+    return "\n".join(lines) + "\n"
 
 
 if __name__ == "__main__":
