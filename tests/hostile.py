@@ -49,9 +49,6 @@ DEMAND_FIELDS = ("v", "u_prev", "dt", "V")
 #: batch row vs single call, relative to the moments' scale: vectorised arithmetic differs
 #: from the compiled single call only in rounding order
 BATCH_RTOL = 1e-9
-#: methods whose solver carries state (warm starts) from call to call: batch and singles
-#: are compared on fresh allocators given the same demands in the same order
-STATEFUL = ("qp", "wls", "lp", "da")
 
 
 # ----------------------------------------------------------------------------- generator
@@ -377,14 +374,10 @@ def check(c: dict[str, Any]) -> dict[str, Any]:
         if not kw:
             singles.append(r)
     if singles:
-        # Batch equals single: two fresh allocators (warm-started solvers carry state from
-        # call to call) given the same demands in the same order, one row by row.
+        # Batch equals single, on the same long-lived allocator after its single calls (so
+        # this also checks that answers do not depend on call history).
         V = np.array([r.v for r in singles])
         try:
-            if c["method"] in STATEFUL or getattr(f.impl, "_lp", None) is not None:  # da* on the LP
-                f_single = alloc.make_allocator(p, c["method"], **c["options"])
-                singles = [f_single(v) for v in V]
-                f = alloc.make_allocator(p, c["method"], **c["options"])
             br = f.batch(V)
         except Exception as exc:  # noqa: BLE001 - valid demands: batch must not raise
             fail.append(f"escaped at batch: {type(exc).__name__}: {exc}")
