@@ -215,3 +215,55 @@ def test_quick_sweep_shape() -> None:
 
     assert {s["method"] for s in closed} == {STATIC, *alloc.methods()}
     assert any(s["history"] for s in closed)
+
+
+def test_settings_pooled_and_verdicts_per_setting(tmp_path: Path) -> None:
+    """Two simulator settings in which different methods win: the pooled section scores each run
+    against ``static`` in its own setting, pairs told/blind within a setting and seed, and its
+    verdict table names each setting's winner."""
+    from benchmarks.compare.report import (
+        ALL_SETTINGS, cell_summaries, closed_scores, load_rows, pooled_rows, told_blind, verdicts_by_setting,
+    )
+
+    winners = {"pilot_gain=1": "qp", "pilot_gain=2": "pinv"}
+    rng = np.random.default_rng(3)
+    specs, closed = [], []
+    for sim, tag in (({"pilot_gain": 1.0}, "pilot_gain=1"), ({"pilot_gain": 2.0}, "pilot_gain=2")):
+        static_rms = 1.0 if tag == "pilot_gain=1" else 3.0  # scores are relative to static in the same setting
+        for s in SEEDS:
+            for m in (STATIC, "qp", "pinv"):
+                for told in ((False,) if m == STATIC else (True, False)):
+                    spec = closed_spec("ice", "jam1", m, told=told, seed=s, duration=2.0, failure_time=1.0, sim=sim)
+                    factor = 1.0 if m == STATIC else (0.5 if m == winners[tag] else 0.9)
+                    factor *= (0.8 if told else 1.0) * (1 + 0.01 * rng.standard_normal())
+                    row = _closed_row(spec, static_rms * factor)
+                    row["setting"] = tag
+                    specs.append(spec)
+                    closed.append(row)
+    _write(tmp_path / "closed_ice.csv", closed)
+    rows = closed_scores(load_rows(tmp_path, specs)["closed_ice"])
+    pooled = pooled_rows(rows)
+    assert {r["setting"] for r in pooled} == {ALL_SETTINGS}
+    assert len({(r["seed"]) for r in pooled}) == 2 * len(SEEDS)
+    assert [r["score"] for r in pooled] == [r["score"] for r in rows]
+    verdicts = verdicts_by_setting(cell_summaries(rows), ["jam1"])
+    assert verdicts == [{"failure": "jam1", "pilot_gain=1": "qp told", "pilot_gain=2": "pinv told"}]
+    ratios = told_blind(pooled)
+    assert {r["pairs"] for r in ratios} == {2 * len(SEEDS)}
+    assert all(r["verdict"] == "helps" and abs(r["ratio"] - 0.8) < 0.02 for r in ratios)
+    cells = {(c["method"], c["mode"]): c for c in cell_summaries(pooled)}
+    assert cells[("qp", "told")]["runs"] == 2 * len(SEEDS)
+    assert 0.4 < cells[("qp", "told")]["score"] < 0.72  # 0.4 in one setting, 0.72 in the other: the median between
+
+    import json
+    (tmp_path / "run.json").write_text(json.dumps({"sweep": "t", "command": "t", "date": "t", "cores": 2,
+                                                   "load_avg_1min": 0, "platform": "t", "python": "t", "numpy": "t",
+                                                   "engine": "t", "runs": len(specs), "ran": len(specs), "skipped": 0,
+                                                   "wall_s": 1, "latency_pass_s": None}))
+    text = make_report(tmp_path, specs).read_text()
+    assert "ICE, all 2 simulator settings pooled" in text
+    table = parse_markdown_table(text.split("all 2 simulator settings pooled")[1], "failure")
+    assert table[0] == {"failure": "jam1", "pilot_gain=1": "qp told", "pilot_gain=2": "pinv told"}
+    saved = list(csv.DictReader((tmp_path / "heatmap_ice_all_settings.csv").open()))
+    qp_told = next(r for r in saved if (r["method"], r["mode"]) == ("qp", "told"))
+    assert math.isclose(float(qp_told["score"]), cells[("qp", "told")]["score"])

@@ -49,7 +49,7 @@ from .sweep import STATIC, Spec
 from .timing import TIMINGS_CSV
 
 __all__ = ["make_report", "load_rows", "closed_scores", "cell_summaries", "told_blind", "coverage_agreement",
-           "parse_markdown_table"]
+           "parse_markdown_table", "pooled_rows", "verdicts_by_setting", "ALL_SETTINGS"]
 
 Row = dict[str, Any]
 DPI = 80
@@ -514,6 +514,78 @@ def _closed_section(out: Path, scenario: str, setting: str, rows: list[Row], cel
     return "\n".join(lines), figures
 
 
+# ----------------------------------------------------------------------------- across settings
+#: the ``setting`` of rows pooled over every simulator setting of a scenario
+ALL_SETTINGS = "all settings"
+
+
+def pooled_rows(rows: Sequence[Row]) -> list[Row]:
+    """Copies of scored closed-loop rows with the simulator settings pooled (``setting`` =
+    :data:`ALL_SETTINGS`); ``seed`` renumbered per (setting, seed), so told/blind pairs stay
+    within one setting and one noise seed.  Scores are those of :func:`closed_scores`, each
+    relative to ``static`` in its own setting."""
+    ids: dict[tuple[str, int], int] = {}
+    out = []
+    for r in rows:
+        c = dict(r)
+        c["setting"] = ALL_SETTINGS
+        c["seed"] = ids.setdefault((r["setting"], int(r["seed"])), len(ids) + 1)
+        out.append(c)
+    return out
+
+
+def verdicts_by_setting(cells: Sequence[Row], failures: Sequence[str]) -> list[Row]:
+    """Rank-1 methods (ties included, ``static`` left out) per failure and simulator setting."""
+    settings = sorted({c["setting"] for c in cells})
+    out = []
+    for f in failures:
+        row: Row = {"failure": f}
+        for st in settings:
+            top = sorted(f"{c['method']} {c['mode']}" for c in cells
+                         if c["failure"] == f and c["setting"] == st and c["rank"] == 1 and c["method"] != STATIC)
+            row[st] = ", ".join(top) or "static only"
+        out.append(row)
+    return out
+
+
+def _across_section(out: Path, scenario: str, rows: list[Row], cells_by_setting: list[Row]) -> tuple[str, list[Row],
+                                                                                                    list[Row]]:
+    """The scenario's runs pooled over its simulator settings: heat map, ranking, told/blind,
+    and which method ranks first in each setting (does the verdict depend on the pilot or the
+    frame rate?)."""
+    settings = sorted({r["setting"] for r in rows})
+    pooled = pooled_rows(rows)
+    cells = cell_summaries(pooled)
+    ratios = told_blind(pooled)
+    failures = _failure_order(sorted({r["failure"] for r in rows}))
+    tag = _slug(f"{scenario}_all_settings")
+    title = f"{TITLES.get(scenario, scenario)}, all {len(settings)} simulator settings pooled"
+    lines = [f"### {title}", "",
+             f"{len(rows)} runs; settings {', '.join(f'`{st}`' for st in settings)}; each run scored against `static` "
+             "in its own setting and noise seed, then pooled: a cell's median and interval are over every setting and "
+             "seed (how a method does across pilots and frame rates, not in one of them).", ""]
+    png = _plot_heatmap(cells, failures, out, f"heatmap_{tag}", title)
+    lines += [f"![heat map: median score per method and failure, settings pooled]({png})", "",
+              f"Median score [95 % bootstrap CI] (the heat map's numbers; `{png[:-4]}.csv`):", "",
+              _heatmap_table(cells, failures), ""]
+    verdicts = verdicts_by_setting(cells_by_setting, failures)
+    _write_csv(out / f"verdicts_{tag}.csv", verdicts)
+    lines += ["Rank 1 per failure in each simulator setting (ties: overlapping 95 % intervals; "
+              f"`verdicts_{tag}.csv`).  Where the entries differ across a row, the verdict depends on the pilot "
+              "or the frame rate:", "",
+              _table(["failure", *settings], [[v["failure"], *[v[st] for st in settings]] for v in verdicts]), ""]
+    if ratios:
+        png = _plot_forest(ratios, failures, out, f"forest_{tag}", title)
+        helps = sum(r["verdict"] == "helps" for r in ratios)
+        hurts = sum(r["verdict"] == "hurts" for r in ratios)
+        lines += ["#### Told vs blind, settings pooled", "",
+                  f"Telling the allocator helps in {helps} of {len(ratios)} method x failure cells, hurts in {hurts}. "
+                  f"Ratio [95 % CI], pairs within a setting and noise seed (`{png[:-4]}.csv`):", "",
+                  _ratio_table(ratios, failures), "", f"![told/blind forest plot, settings pooled]({png})", ""]
+    _write_csv(out / f"closed_{scenario}_pooled_cells.csv", cells)
+    return "\n".join(lines), cells, ratios
+
+
 # ----------------------------------------------------------------------------- open loop
 _OPEN_METRICS: list[tuple[str, str, bool, Callable[[float], str]]] = [
     # column, title, higher is better, format
@@ -670,6 +742,8 @@ def make_report(out: Path | str, specs: Sequence[Spec], meta: dict[str, Any] | N
     all_cells: list[Row] = []
     all_ratios: list[Row] = []
     all_agree: list[Row] = []
+    pooled_cells: list[Row] = []
+    pooled_ratios: list[Row] = []
     for name in sorted(t for t in tables if t.startswith("closed_")):
         rows = closed_scores(tables[name])
         if not rows:
@@ -682,6 +756,13 @@ def make_report(out: Path | str, specs: Sequence[Spec], meta: dict[str, Any] | N
         all_agree += agree
         _write_csv(out / f"{name}_cells.csv", cells)
         _write_csv(out / f"{name}_told_blind.csv", ratios)
+        for (scenario,), grp in _groups(rows, ("scenario",)).items():
+            if len({r["setting"] for r in grp}) > 1:
+                section, pcells, pratios = _across_section(out, scenario, grp,
+                                                           [c for c in cells if c["scenario"] == scenario])
+                body.append(section)
+                pooled_cells += pcells
+                pooled_ratios += pratios
         for (scenario, setting), grp in _groups(rows, ("scenario", "setting")).items():
             key = (scenario, setting)
             section, _ = _closed_section(
@@ -690,7 +771,8 @@ def make_report(out: Path | str, specs: Sequence[Spec], meta: dict[str, Any] | N
                 [r for r in ratios if (r["scenario"], r["setting"]) == key],
                 [a for a in agree if (a["scenario"], a["setting"]) == key])
             body.append(section)
-    parts = ["## Headline", "", *_headline(all_cells, all_ratios, all_agree), ""]
+    parts = ["## Headline", "", *_headline(pooled_cells, pooled_ratios, []), *_headline(all_cells, all_ratios, all_agree),
+             ""]
     if body:
         doc = __doc__ or ""
         parts += ["## Closed loop", "", "Definitions:", "",
