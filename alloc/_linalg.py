@@ -23,14 +23,15 @@ def check_real_option(value: object, method: str, field: str, lo: float, hi: flo
     """A real-valued option in ``[lo, hi]`` (ends open if asked); OptionError naming it otherwise."""
     lb, rb = "(" if open_lo else "[", ")" if open_hi else "]"
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise OptionError(f"{method}: {field} must be a real number in {lb}{lo:g}, {hi:g}{rb}, got {value!r}")
+        raise OptionError(f"{method}: {field} must be a real number in {lb}{lo:g}, {hi:g}{rb}, got {value!r}",
+                          field=field)
     try:
         x = float(value)
     except OverflowError:
         x = math.inf
     ok = (lo < x if open_lo else lo <= x) and (x < hi if open_hi else x <= hi)
     if not ok:
-        raise OptionError(f"{method}: {field} must be in {lb}{lo:g}, {hi:g}{rb}, got {value!r}")
+        raise OptionError(f"{method}: {field} must be in {lb}{lo:g}, {hi:g}{rb}, got {value!r}", field=field)
     return x
 
 

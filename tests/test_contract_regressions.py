@@ -356,3 +356,16 @@ def test_backend_failure_at_build_is_a_fallback_with_reason(method, monkeypatch)
     r = f([0.5, 0.25])
     assert r.status.value == "fallback" and "refused" in r.message
     assert_honest(p, r)
+
+
+@pytest.mark.parametrize("options", [{"gamma": 1e300}, {"gamma": 1e51}, {"backend": "daqp", "gamma": 1e9}])
+def test_wls_gamma_outside_the_domain_is_refused_naming_it(options):
+    """Found by the adversarial run (seed 20001645): ``wls`` accepted ``gamma = 1e300``, whose
+    square is inf, and every call was a fallback "wls produced non-finite commands"."""
+    p = alloc.Problem(B2, [-1] * 3, [1] * 3)
+    with pytest.raises(alloc.AllocError) as info:
+        alloc.make_allocator(p, "wls", **options)
+    assert info.value.field == "gamma" and isinstance(info.value, TypeError)
+    r = alloc.make_allocator(p, "wls", gamma=1e50)([0.5, 0.25])  # the domain's edge: an answer, not a fallback
+    assert r.status.value in ("exact", "unattainable")
+    assert_honest(p, r)

@@ -22,7 +22,6 @@ a band) or any qpsolvers name keep the previous formulation as cross-checks.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from typing import Any
 
@@ -263,17 +262,14 @@ class WeightedLeastSquares(_ActiveSetOrBackend):
     equation = "Eqs 1.20-1.21 (single-stage weighted form)"
     summary = "min (Bu-v)'Wv(Bu-v) + gamma^2 (u-up)'Wu(u-up) over the limits"
     options = {"backend": _AS_BACKEND,
-               "gamma": real(1e-4, "weight of the preference term", low=0.0, low_open=True)}
+               "gamma": real(1e-4, "weight of the preference term (at most 1e6 on the qpsolvers/DAQP backends)",
+                             low=0.0, low_open=True, high=MAX_MAGNITUDE)}
 
     def __init__(self, problem: Problem, *, backend: str = ACTIVE_SET, gamma: float = 1e-4) -> None:
         super().__init__(problem)
         self.backend = _backend_choice(backend, "wls")
-        try:
-            g = float(gamma)
-        except (TypeError, ValueError, OverflowError):
-            g = math.nan
-        if not (math.isfinite(g) and g > 0):
-            raise OptionError(f"gamma: must be positive and finite, got {gamma!r}")
+        # the valid domain's bound on numbers: gamma = 1e300 squared is inf (every call a fallback)
+        g = check_real_option(gamma, "wls", "gamma", 0.0, MAX_MAGNITUDE, open_lo=True)
         self.gamma = g
         if self.backend != ACTIVE_SET:
             self._impl = _SolverWLS(problem, backend=self.backend, gamma=g)
