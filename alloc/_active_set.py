@@ -41,15 +41,13 @@ mutate that state hold the GIL (no ``nogil``): an allocator shared by threads st
 
 from __future__ import annotations
 
-import os
-
 import numpy as np
 from numba import njit
 
+from ._threads import split_rows, threads_for
 from ._kernels import _FREE_BITS, close_out, copy_demand, finish, packed_out, rate_window_into
 
-__all__ = ["pack", "lexico_call", "lexico_solve", "lexico_batch", "lexico_batch_threads", "batch_threads", "SIGMA_RTOL",
-           "MU_EPS"]
+__all__ = ["pack", "lexico_call", "lexico_solve", "lexico_batch", "lexico_batch_threads", "SIGMA_RTOL", "MU_EPS"]
 
 #: Singular values below this fraction of the largest are round-off (dropped).
 SIGMA_RTOL = 1e-12
@@ -738,36 +736,13 @@ def _batch_rows_nogil(mats, vecs, ivecs, bankL, bank, V):  # pragma: no cover - 
     return _batch_rows(mats, vecs, ivecs, bankL, bank, V)
 
 
-#: rows per thread below which :func:`lexico_batch_threads` stays on one thread
-BATCH_ROWS_PER_THREAD = 1000
-#: most threads a batch uses (None: one per core)
-BATCH_THREADS: int | None = None
-_POOL: list = []
-
-
-def batch_threads(n_rows: int) -> int:
-    """Threads for a batch of ``n_rows``: one per core (``BATCH_THREADS``), at least
-    ``BATCH_ROWS_PER_THREAD`` rows each."""
-    cap = BATCH_THREADS if BATCH_THREADS is not None else (os.cpu_count() or 1)
-    return max(1, min(cap, n_rows // BATCH_ROWS_PER_THREAD))
-
-
 def lexico_batch_threads(state: tuple, V: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`lexico_batch` split over :func:`batch_threads` threads, each on a private copy
-    of the solver's state (work arrays and factorisation cache: the allocator's own is never
-    touched off the GIL).  Rows are pure functions of the data (the cache changes the cost,
-    not the answer), so the result is the single-thread one bit for bit."""
-    threads = batch_threads(len(V))
+    """:func:`lexico_batch` split over :func:`alloc._threads.threads_for` threads, each on a
+    private copy of the solver's state (work arrays and factorisation cache: the allocator's
+    own is never touched off the GIL).  Rows are pure functions of the data (the cache changes
+    the cost, not the answer), so the result is the single-thread one bit for bit."""
+    threads = threads_for(len(V))
     if threads == 1:
         return lexico_batch(*state, V)
-    if not _POOL:
-        from concurrent.futures import ThreadPoolExecutor
-
-        _POOL.append(ThreadPoolExecutor(max_workers=max(threads, os.cpu_count() or 1), thread_name_prefix="alloc-batch"))
-    cuts = np.linspace(0, len(V), threads + 1).astype(np.int64)
-
-    def part(i: int) -> tuple[np.ndarray, np.ndarray]:
-        return _batch_rows_nogil(*(a.copy() for a in state), V[cuts[i]:cuts[i + 1]])
-
-    parts = list(_POOL[0].map(part, range(threads)))
+    parts = split_rows(lambda a, b: _batch_rows_nogil(*(x.copy() for x in state), V[a:b]), len(V), threads)
     return np.concatenate([u for u, _ in parts]), np.concatenate([ok for _, ok in parts])

@@ -9,6 +9,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ._kernels import finish_batch, finish_owned, fused_affine, owned_demand
+from ._threads import split_rows, threads_for
 from .exceptions import AllocError, DemandError, SolverError
 from .problem import MAX_MAGNITUDE, Problem, as_float_array, check_magnitude
 from .registry import FloatArray, Method, build
@@ -236,7 +237,10 @@ class Allocator(_CallBase):  # type: ignore[misc,valid-type]
         if U is not None and U.shape == (len(Varr), problem.m):
             U = np.array(U, dtype=float)  # own, contiguous: clipped in place by the kernel
             Vach = np.empty((len(Varr), problem.k))
-            codes = finish_batch(self._B, U, self._lo, self._hi, Varr, Vach, EXACT_RTOL)
+            B, lo, hi = self._B, self._lo, self._hi
+            codes = np.concatenate(split_rows(  # row by row, so any split gives the same bits
+                lambda a, b: finish_batch(B, U[a:b], lo, hi, Varr[a:b], Vach[a:b], EXACT_RTOL),
+                len(Varr), threads_for(len(Varr))))
             if not (codes == 2).any():  # the single call's kernel: same B u, same status
                 status = np.where(codes == 0, _EXACT.value, _UNATT.value)
                 return BatchResult(_frozen(U), Varr, _frozen(Vach), _frozen(status), self.method,

@@ -153,12 +153,12 @@ def batch_rows(p: alloc.Problem, n: int, repeats: int = 5) -> list[dict]:
     """``allocate_batch`` against a Python loop of single calls, each on its own fresh allocator
     warmed on the same 10 rows (so neither inherits the other's factorisation cache); medians
     of ``repeats`` interleaved runs."""
-    from alloc._active_set import BATCH_ROWS_PER_THREAD, batch_threads
+    from alloc._threads import ROWS_PER_THREAD, threads_for
 
     V = random_sequence(p, n, seed=3)
     # the warm-up batch: the same 10 rows, repeated so that it takes the threaded path too
     # (loading that kernel is a one-time cost, as every compiled kernel's first call)
-    warm = np.tile(V[:10], (2 * BATCH_ROWS_PER_THREAD // 10 + 1, 1))
+    warm = np.tile(V[:10], (2 * ROWS_PER_THREAD // 10 + 1, 1))
     out = []
     for name in ("qp", "wls", "dynamic", "pinv", "da"):
         tb, tl = [], []
@@ -174,7 +174,7 @@ def batch_rows(p: alloc.Problem, n: int, repeats: int = 5) -> list[dict]:
             for v in V:
                 fl(v)
             tl.append(time.perf_counter() - t0)
-        threads = batch_threads(n) if name in ("qp", "wls", "dynamic") else 1
+        threads = threads_for(n) if name in ("qp", "wls", "dynamic") else 1
         b, loop = float(np.median(tb)), float(np.median(tl))
         out.append(dict(method=name, n=n, batch_s=b, loop_s=loop, speedup=loop / b, threads=threads))
     return out

@@ -148,11 +148,11 @@ def test_pickle_round_trip_keeps_the_c_path() -> None:
         same_result(g(v), g._call_py(v))
 
 
-@pytest.mark.parametrize("method", ["qp", "wls", "dynamic"])
+@pytest.mark.parametrize("method", ["qp", "wls", "dynamic", "pinv", "da"])
 def test_threaded_batch_equals_single_calls(method: str, monkeypatch: pytest.MonkeyPatch) -> None:
     """``allocate_batch`` on several threads (each on a private copy of the solver state) returns
     the single calls' answers bit for bit, whatever the split."""
-    from alloc import _active_set
+    from alloc import _threads
 
     rng = np.random.default_rng(31)
     p = random_problem(rng, 3, 9, "coplanar")
@@ -161,9 +161,9 @@ def test_threaded_batch_equals_single_calls(method: str, monkeypatch: pytest.Mon
     single = alloc.make_allocator(p, method)
     expected = [single(v) for v in V]
     for threads in (1, 2, 3, 7):
-        monkeypatch.setattr(_active_set, "BATCH_ROWS_PER_THREAD", 10)
-        monkeypatch.setattr(_active_set, "BATCH_THREADS", threads)
-        assert _active_set.batch_threads(len(V)) == threads
+        monkeypatch.setattr(_threads, "ROWS_PER_THREAD", 10)
+        monkeypatch.setattr(_threads, "MAX_THREADS", threads)
+        assert _threads.threads_for(len(V)) == threads
         res = alloc.make_allocator(p, method).batch(V)
         assert np.array_equal(res.u, np.array([r.u for r in expected]))
         assert np.array_equal(res.v_achieved, np.array([r.v_achieved for r in expected]))
