@@ -263,7 +263,7 @@ def main(argv: list[str] | None = None) -> dict:
     ]
     print("\n## goals (issue 11)\n| goal | measured | met |\n|---|---|---|")
     for name, val, lim in goals:
-        shown = f"{1.0 / val:.1f}x" if "batch" in name else f"{val:.2f}"
+        shown = f"{1.0 / val:.2f}x" if "batch" in name else f"{val:.2f}"
         print(f"| {name} | {shown} | {'met' if val <= lim else 'NOT met'} |")
         out["goals"].append(dict(goal=name, value=val, limit=lim, met=bool(val <= lim)))
     if args.json:
@@ -299,7 +299,7 @@ def markdown(out: dict) -> str:
               f"{r['da']:.1f} |" for r in out["scaling"]]
     lines += ["", "| goal (issue 11) | measured | met? |", "|---|---|---|"]
     for g in out["goals"]:
-        shown = f"{1.0 / g['value']:.1f}×" if "batch" in g["goal"] else f"{g['value']:.2f}"
+        shown = f"{1.0 / g['value']:.2f}×" if "batch" in g["goal"] else f"{g['value']:.2f}"
         lines.append(f"| {g['goal']} | {shown} | {'met' if g['met'] else '**not met**'} |")
     return "\n".join(lines) + "\n"
 
