@@ -82,6 +82,9 @@ def test_argument_forms_the_c_path_hands_back() -> None:
         up = 0.5 * (p.umin + p.umax)
         big_endian = v.astype(">f8")
         strided = np.repeat(v, 2)[::2]
+        read_only, up_read_only = v.copy(), up.copy()
+        read_only.setflags(write=False)
+        up_read_only.setflags(write=False)
         forms = [
             ((v,), {}), ((v,), {"u_prev": None, "dt": None}), ((list(v),), {}), ((tuple(v),), {}),
             ((v.astype(np.float32),), {}), ((v.astype(int),), {}), ((big_endian,), {}), ((strided,), {}),
@@ -93,6 +96,8 @@ def test_argument_forms_the_c_path_hands_back() -> None:
             ((v,), {"u_prev": up, "dt": 1e60}), ((v,), {"u_prev": list(up), "dt": 0.01}),
             ((v,), {"u_prev": up[:3], "dt": 0.01}), ((v,), {"u_prev": up.astype(">f8"), "dt": 0.01}),
             ((v,), {"u_prev": np.full(8, np.nan), "dt": 0.01}), ((v,), {"u_prev": up, "dt": 0.01, "x": 1}),
+            ((read_only,), {}), ((read_only,), {"u_prev": up_read_only, "dt": 0.01}),
+            ((f(v).v,), {}),  # a result's own (read-only) demand, given back
         ]
         for args, kwargs in forms:
             check_same(f, *args, **kwargs)
