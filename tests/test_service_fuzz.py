@@ -11,6 +11,7 @@ import tempfile
 
 import itertools
 
+import pytest
 import schemathesis
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -31,6 +32,15 @@ _vehicle = app.state.store.create(VehicleCreate(**harv_latdir().to_dict(), name=
 app.state.store.record_event(
     _vehicle.id, TypeAdapter(EventIn).validate_python({"effector": "rudder", "kind": "jam", "position": 3.0}))
 _alternate = itertools.cycle([True, False])
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _close_store():
+    """The lifespan's shutdown, which in-process requests without ``with TestClient`` never reach:
+    without it, a build process still warming its kernels (niced, on a loaded machine: minutes)
+    kept pytest from exiting until it finished."""
+    yield
+    app.state.store.close()
 
 schema = schemathesis.openapi.from_asgi("/openapi.json", app)
 schema.config.generation.update(modes=[GenerationMode.POSITIVE, GenerationMode.NEGATIVE],
