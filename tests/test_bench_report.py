@@ -117,6 +117,12 @@ def test_rank_with_ties() -> None:
     ranks = rank_with_ties({"a": (0.5, 0.45, 0.55), "b": (0.52, 0.5, 0.6), "c": (2.0, 1.8, 2.2),
                             "d": (math.inf, math.inf, math.inf), "e": (math.nan, math.nan, math.nan)})
     assert ranks == {"a": 1, "b": 1, "c": 3, "d": 4, "e": 5}
+    # diverged in most runs (median inf) but some survived (interval reaching down to the best):
+    # ranked after every finite median, never tied for first (found in the ICE sweep: pinv_scale
+    # told, jam1, stand-in pilot at gain 2, was listed at rank 1 with median inf)
+    ranks = rank_with_ties({"a": (0.5, 0.45, 0.55), "b": (0.52, 0.5, 0.6), "f": (math.inf, 0.4, math.inf),
+                            "d": (math.inf, math.inf, math.inf)})
+    assert ranks == {"a": 1, "b": 1, "f": 3, "d": 3}  # both inf: they overlap, so they share
 
 
 def test_spearman() -> None:

@@ -79,16 +79,20 @@ def paired_ratio(told: Sequence[float], blind: Sequence[float], *, n_boot: int =
 def rank_with_ties(intervals: Mapping[str, Interval]) -> dict[str, int]:
     """Rank 1 = best (lowest).  A method's rank is 1 + the number of methods whose interval lies
     entirely below its own (upper bound < its lower bound): methods whose intervals overlap share
-    a rank unless a third method separates them.  ``nan`` estimates rank last."""
+    a rank unless a third method separates them.  An infinite estimate (a median run that
+    diverged) ranks after every finite one, whatever its interval: a method that diverges in
+    most runs never ties for first because some of its runs survived.  ``nan`` estimates rank
+    last."""
     names = list(intervals)
+    finite = [n for n in names if math.isfinite(intervals[n][0])]
     ranks = {}
     for n in names:
         est, lo, _ = intervals[n]
         if math.isnan(est):
             ranks[n] = len(names)
             continue
-        ranks[n] = 1 + sum(1 for o in names if o != n and not math.isnan(intervals[o][0])
-                           and intervals[o][2] < lo)
+        below = sum(1 for o in names if o != n and not math.isnan(intervals[o][0]) and intervals[o][2] < lo)
+        ranks[n] = 1 + (below if math.isfinite(est) else max(below, len(finite)))
     return ranks
 
 
