@@ -254,6 +254,9 @@ def test_settings_pooled_and_verdicts_per_setting(tmp_path: Path) -> None:
     assert [r["score"] for r in pooled] == [r["score"] for r in rows]
     verdicts = verdicts_by_setting(cell_summaries(rows), ["jam1"])
     assert verdicts == [{"failure": "jam1", "pilot_gain=1": "qp told", "pilot_gain=2": "pinv told"}]
+    from benchmarks.compare.report import verdict_stability
+    assert verdict_stability(cell_summaries(rows), ["jam1"]) == [
+        {"failure": "jam1", "settings": 2, "always": "-", "sometimes": "pinv told (1); qp told (1)"}]
     ratios = told_blind(pooled)
     assert {r["pairs"] for r in ratios} == {2 * len(SEEDS)}
     assert all(r["verdict"] == "helps" and abs(r["ratio"] - 0.8) < 0.02 for r in ratios)
@@ -268,8 +271,20 @@ def test_settings_pooled_and_verdicts_per_setting(tmp_path: Path) -> None:
                                                    "wall_s": 1, "latency_pass_s": None}))
     text = make_report(tmp_path, specs).read_text()
     assert "ICE, all 2 simulator settings pooled" in text
-    table = parse_markdown_table(text.split("all 2 simulator settings pooled")[1], "failure")
+    section = text.split("all 2 simulator settings pooled")[1]
+    stable = parse_markdown_table(section, "failure")
+    assert stable[0] == {"failure": "jam1", "rank 1 in every setting": "-",
+                         "rank 1 in some settings": "pinv told (1); qp told (1)"}
+    table = parse_markdown_table(section.split("<summary>")[1], "failure")
     assert table[0] == {"failure": "jam1", "pilot_gain=1": "qp told", "pilot_gain=2": "pinv told"}
     saved = list(csv.DictReader((tmp_path / "heatmap_ice_all_settings.csv").open()))
     qp_told = next(r for r in saved if (r["method"], r["mode"]) == ("qp", "told"))
     assert math.isclose(float(qp_told["score"]), cells[("qp", "told")]["score"])
+
+
+def test_da_family_written_once_when_all_four_agree() -> None:
+    from benchmarks.compare.report import _short
+
+    four = [f"{m} told" for m in ("da", "da_bisect", "da_facet", "da_table")]
+    assert _short([*four, "qp told"]) == "da* told, qp told"
+    assert _short([*four[:3], "qp told"]) == "da told, da_bisect told, da_facet told, qp told"  # not all four

@@ -49,7 +49,7 @@ from .sweep import STATIC, Spec
 from .timing import TIMINGS_CSV
 
 __all__ = ["make_report", "load_rows", "closed_scores", "cell_summaries", "told_blind", "coverage_agreement",
-           "parse_markdown_table", "pooled_rows", "verdicts_by_setting", "ALL_SETTINGS"]
+           "parse_markdown_table", "pooled_rows", "verdicts_by_setting", "verdict_stability", "ALL_SETTINGS"]
 
 Row = dict[str, Any]
 DPI = 80
@@ -548,6 +548,38 @@ def verdicts_by_setting(cells: Sequence[Row], failures: Sequence[str]) -> list[R
     return out
 
 
+#: the direct-allocation family: one allocation by four backends (identical closed-loop rows in
+#: the sweeps); shown as ``da*`` when all four share a verdict
+DA_FAMILY = ("da", "da_bisect", "da_facet", "da_table")
+
+
+def _short(entries: Sequence[str]) -> str:
+    """``method mode`` entries, with the four ``da*`` backends of one mode written once as ``da*``."""
+    items = sorted(set(entries))
+    for mode in ("blind", "told"):
+        family = [f"{m} {mode}" for m in DA_FAMILY]
+        if all(f in items for f in family):
+            items = [i for i in items if i not in family] + [f"da* {mode}"]
+    return ", ".join(sorted(items))
+
+
+def verdict_stability(cells: Sequence[Row], failures: Sequence[str]) -> list[Row]:
+    """Per failure: the entries (method and allocator mode, ``static`` left out) at rank 1 in
+    every simulator setting, and those at rank 1 in only some, with the count of settings."""
+    settings = sorted({c["setting"] for c in cells})
+    out = []
+    for f in failures:
+        count: dict[str, int] = defaultdict(int)
+        for c in cells:
+            if c["failure"] == f and c["rank"] == 1 and c["method"] != STATIC:
+                count[f"{c['method']} {c['mode']}"] += 1
+        always = [e for e, n in count.items() if n == len(settings)]
+        some = sorted(((e, n) for e, n in count.items() if n < len(settings)), key=lambda en: (-en[1], en[0]))
+        out.append({"failure": f, "settings": len(settings), "always": _short(always) or "-",
+                    "sometimes": "; ".join(f"{e} ({n})" for e, n in some) or "-"})
+    return out
+
+
 def _across_section(out: Path, scenario: str, rows: list[Row], cells_by_setting: list[Row]) -> tuple[str, list[Row],
                                                                                                     list[Row]]:
     """The scenario's runs pooled over its simulator settings: heat map, ranking, told/blind,
@@ -570,10 +602,16 @@ def _across_section(out: Path, scenario: str, rows: list[Row], cells_by_setting:
               _heatmap_table(cells, failures), ""]
     verdicts = verdicts_by_setting(cells_by_setting, failures)
     _write_csv(out / f"verdicts_{tag}.csv", verdicts)
-    lines += ["Rank 1 per failure in each simulator setting (ties: overlapping 95 % intervals; "
-              f"`verdicts_{tag}.csv`).  Where the entries differ across a row, the verdict depends on the pilot "
-              "or the frame rate:", "",
-              _table(["failure", *settings], [[v["failure"], *[v[st] for st in settings]] for v in verdicts]), ""]
+    stability = verdict_stability(cells_by_setting, failures)
+    _write_csv(out / f"verdict_stability_{tag}.csv", stability)
+    lines += [f"Does the verdict depend on the pilot or the frame rate?  Rank 1 (ties: overlapping 95 % intervals) "
+              f"in every one of the {len(settings)} settings, and in only some (number of settings; "
+              f"`verdict_stability_{tag}.csv`; `da*`: the four direct-allocation backends, which agree):", "",
+              _table(["failure", "rank 1 in every setting", "rank 1 in some settings"],
+                     [[v["failure"], v["always"], v["sometimes"]] for v in stability]), "",
+              "<details><summary>Rank 1 per failure in each setting</summary>", "",
+              _table(["failure", *settings], [[v["failure"], *[v[st] for st in settings]] for v in verdicts]), "",
+              "</details>", ""]
     if ratios:
         png = _plot_forest(ratios, failures, out, f"forest_{tag}", title)
         helps = sum(r["verdict"] == "helps" for r in ratios)
