@@ -66,6 +66,14 @@ MU_EPS = 1e3 * np.finfo(float).eps
 # and work rows), ``ivecs`` (header, index data, working sets, then from row ``_TABLE`` the
 # cache's hash table: column 0 the slot, then the key words) and the factorisation cache
 # ``bankL``, ``bank`` (slot 0 is scratch).
+#
+# The solver's inner functions (``_jacobi``, ``_factor``, ``_level``, ``_run``) allocate
+# nothing, so they are compiled without numba's reference counting (``_nrt=False``): with
+# it, every call of ``_level`` and every cache lookup took and dropped an atomic reference
+# on each array argument, a quarter of the solver's time in a perf profile (NRT_incref /
+# NRT_decref).  Without it: 15-25 % less per allocation on ICE and the hexacopter, answers
+# bit for bit the same (benchmarks/bench_alloc.py; tests/test_fastcall.py).  The caller
+# (``lexico_call``, ``lexico_batch``) owns the arrays for the whole call.
 
 #: int header fields (``ivecs[0]``)
 _N, _M, _K, _NLEV, _FINAL, _DIAG, _MAXIT, _WORDS, _DYN, _WARM = range(10)
@@ -91,7 +99,7 @@ WARM_STEP = 0.05
 WARM_START = False
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, _nrt=False)
 def _jacobi(X, n, p, V, sig, ref):  # pragma: no cover - compiled
     """One-sided (Hestenes) Jacobi SVD of ``X[:n, :p]`` in place.
 
@@ -205,7 +213,7 @@ def _ltsolve(bankL, s, n, diag, vecs, row):  # pragma: no cover - compiled
         vecs[row, q] = acc / bankL[s, q, 0 if diag else q]
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, _nrt=False)
 def _factor(A, r0, r1, Wu, diag, F, nf, L, Yc, Vc, sc, Ya, Va, sa):  # pragma: no cover - compiled
     """Factorise the free set ``F[:nf]`` of the level with rows ``A[r0:r1]`` (equalities ``A[:r0]``).
 
@@ -297,7 +305,7 @@ def _factors(mats, ivecs, bankL, bank, r0, r1, lev, diag, nf, m):  # pragma: no 
     return s
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, _nrt=False)
 def _level(mats, vecs, ivecs, bankL, bank, r0, r1, lev, gam, diag, iup, ilo, ihi, maxit, m,
            refine):  # pragma: no cover - compiled
     """Solve one level in place on ``u`` (feasible on entry) and ``free`` (working set).
@@ -583,7 +591,7 @@ def _start(mats, vecs, ivecs, v, ilo, ihi, iup, warm, m, k):  # pragma: no cover
         ivecs[_FREE, j] = 1 if lo < x < hi else 0
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, _nrt=False)
 def _run(mats, vecs, ivecs, bankL, bank, v, ilo, ihi, iup):  # pragma: no cover - compiled
     """All levels for one demand, into ``vecs[_U]``; returns ``(iterations, ok)``.
 
