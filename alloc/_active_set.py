@@ -326,6 +326,14 @@ def _level(mats, vecs, ivecs, bankL, bank, r0, r1, lev, gam, diag, iup, ilo, ihi
     """
     nl = r1 - r0
     nc = r0
+    # The final level of a one-level problem (stage 2 of ``qp`` and ``dynamic``) holds the
+    # rows of level 0 as its equalities: its factorisation of a free set is level 0's (the
+    # same matrix ``L^-1 A[:n, F]'``, the same Jacobi SVD), so it is looked up under level 0
+    # and read from level 0's places in the slot (``Ya, Va, sa``).  Stage 2 starts on the
+    # free set stage 1 ended on: that factorisation is always cached by then.
+    share = nl == 0 and lev == 1 and ivecs[_HEAD, _NLEV] == 1 and ivecs[_STARTS, 0] == 0
+    klev, kr0, kr1 = (0, 0, r0) if share else (lev, r0, r1)
+    ic, icv, ics = (1, 3, 1) if share else (0, 2, 0)
     for j in range(m):
         ivecs[_TABU, j] = 0
     last = -1
@@ -353,7 +361,7 @@ def _level(mats, vecs, ivecs, bankL, bank, r0, r1, lev, gam, diag, iup, ilo, ihi
             if ivecs[_FREE, j]:
                 ivecs[_FIDX, nf] = j
                 nf += 1
-        slot = _factors(mats, ivecs, bankL, bank, r0, r1, lev, diag, nf, m)
+        slot = _factors(mats, ivecs, bankL, bank, kr0, kr1, klev, diag, nf, m)
         # --- the preference gradient Wu (u - up)
         for j in range(m):
             vecs[_TMP, j] = vecs[_U, j] - vecs[iup, j]
@@ -372,12 +380,12 @@ def _level(mats, vecs, ivecs, bankL, bank, r0, r1, lev, gam, diag, iup, ilo, ihi
         for q in range(nf):
             vecs[_Y, q] = -vecs[_H, q]
         for c in range(nc):
-            if bank[slot, 4, 0, c] > 0.0:
+            if bank[slot, 4, ics, c] > 0.0:
                 acc = 0.0
                 for q in range(nf):
-                    acc += bank[slot, 0, q, c] * vecs[_H, q]
+                    acc += bank[slot, ic, q, c] * vecs[_H, q]
                 for q in range(nf):
-                    vecs[_Y, q] += acc * bank[slot, 0, q, c]
+                    vecs[_Y, q] += acc * bank[slot, ic, q, c]
         for i in range(nl):
             if bank[slot, 4, 1, i] > 0.0:
                 uh = 0.0
@@ -390,12 +398,12 @@ def _level(mats, vecs, ivecs, bankL, bank, r0, r1, lev, gam, diag, iup, ilo, ihi
                 for q in range(nf):
                     vecs[_Y, q] += (uh + z) * bank[slot, 1, q, i]
         for c in range(nc):  # y in null(Ct) to round-off: the held moments do not drift
-            if bank[slot, 4, 0, c] > 0.0:
+            if bank[slot, 4, ics, c] > 0.0:
                 acc = 0.0
                 for q in range(nf):
-                    acc += bank[slot, 0, q, c] * vecs[_Y, q]
+                    acc += bank[slot, ic, q, c] * vecs[_Y, q]
                 for q in range(nf):
-                    vecs[_Y, q] -= acc * bank[slot, 0, q, c]
+                    vecs[_Y, q] -= acc * bank[slot, ic, q, c]
         _ltsolve(bankL, slot, nf, diag, vecs, _Y)  # p_F = L^-T y
         # --- ratio test
         alpha = 1.0
@@ -471,13 +479,13 @@ def _level(mats, vecs, ivecs, bankL, bank, r0, r1, lev, gam, diag, iup, ilo, ihi
             for c in range(nc):
                 vecs[_LAM, c] = 0.0
             for c in range(nc):
-                if bank[slot, 4, 0, c] > 0.0:
+                if bank[slot, 4, ics, c] > 0.0:
                     acc = 0.0
                     for q in range(nf):
-                        acc += bank[slot, 0, q, c] * vecs[_H, q]
-                    acc /= bank[slot, 4, 0, c]
+                        acc += bank[slot, ic, q, c] * vecs[_H, q]
+                    acc /= bank[slot, 4, ics, c]
                     for r in range(nc):
-                        vecs[_LAM, r] -= bank[slot, 2, r, c] * acc
+                        vecs[_LAM, r] -= bank[slot, icv, r, c] * acc
             for c in range(nc):
                 for j in range(m):
                     t = mats[_A, c, j] * vecs[_LAM, c]
@@ -485,7 +493,7 @@ def _level(mats, vecs, ivecs, bankL, bank, r0, r1, lev, gam, diag, iup, ilo, ihi
                     vecs[_SCALE, j] += abs(t)
         unique = True
         for c in range(nc):
-            if bank[slot, 4, 0, c] == 0.0:
+            if bank[slot, 4, ics, c] == 0.0:
                 unique = False
         worst = -1
         wv = 0.0
