@@ -686,30 +686,38 @@ def lexico_call(mats, vecs, ivecs, bankL, bank, v, u_prev, dt):  # pragma: no co
     :func:`alloc._kernels.packed_out` array and the code, 0 exact, 1 unattainable,
     2 non-finite, 3 ``v`` outside the domain, 4 ``u_prev`` outside the domain, 5 the cap.
     """
+    out = packed_out(ivecs[_HEAD, _M], ivecs[_HEAD, _K])
+    code, it = _call_into(mats, vecs, ivecs, bankL, bank, v, u_prev, dt, out)
+    return out, code, it
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def _call_into(mats, vecs, ivecs, bankL, bank, v, u_prev, dt, out):  # pragma: no cover - compiled
+    """:func:`lexico_call`'s work into its ``out``: ``(code, iterations)``.  No reference
+    counting (the caller owns every array), so the views below cost nothing."""
     m, k = ivecs[_HEAD, _M], ivecs[_HEAD, _K]
     vmax, rtol = vecs[_CONST, 0], vecs[_CONST, 1]
-    out = packed_out(m, k)
     if not copy_demand(v, out, m, vmax):
-        return out, 3, 0
+        return 3, 0
     rate = dt > 0.0
     ilo, ihi = _UMIN, _UMAX
     if rate:
         for j in range(m):
             if not abs(u_prev[j]) <= vmax:
-                return out, 4, 0
+                return 4, 0
         ilo, ihi = _LO, _HI
         rate_window_into(vecs[_UMIN, :m], vecs[_UMAX], vecs[_RMIN], vecs[_RMAX], u_prev, dt, vecs[_LO], vecs[_HI])
     iup = _target(mats, vecs, ivecs, v, u_prev, rate)
     if iup < 0:
-        return out, 2, 0
+        return 2, 0
     it, ok = _run(mats, vecs, ivecs, bankL, bank, v, ilo, ihi, iup)
     if not ok:
-        return out, 5, it
+        return 5, it
     for j in range(m):
         out[j] = vecs[_U, j]
     code = finish(mats[_B, :k, :m], out[:m], vecs[ilo], vecs[ihi], v, out[m:m + k], rtol)
     close_out(out, m, k)
-    return out, code, it
+    return code, it
 
 
 @njit(cache=True)
@@ -728,18 +736,25 @@ def lexico_solve(mats, vecs, ivecs, bankL, bank, v, lo, hi, u_prev, rate):  # pr
     return vecs[_U, :m].copy(), it, ok
 
 
-@njit(cache=True, nogil=True, inline="always")
-def _batch_rows(mats, vecs, ivecs, bankL, bank, V):  # pragma: no cover - compiled
-    N = V.shape[0]
+@njit(cache=True, nogil=True, _nrt=False)
+def _rows_into(mats, vecs, ivecs, bankL, bank, V, U, ok):  # pragma: no cover - compiled
+    """The batch's rows into ``U``, ``ok`` (allocated by the caller: no reference counting
+    here, so a row's views of ``V`` cost nothing)."""
     m = ivecs[_HEAD, _M]
-    U = np.empty((N, m))
-    ok = np.empty(N, dtype=np.bool_)
-    for i in range(N):
+    for i in range(V.shape[0]):
         iup = _target(mats, vecs, ivecs, V[i], V[i], False)
         good = iup >= 0 and _run(mats, vecs, ivecs, bankL, bank, V[i], _UMIN, _UMAX, iup)[1]
         for j in range(m):
             U[i, j] = vecs[_U, j]
         ok[i] = good
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _batch_rows(mats, vecs, ivecs, bankL, bank, V):  # pragma: no cover - compiled
+    N = V.shape[0]
+    U = np.empty((N, ivecs[_HEAD, _M]))
+    ok = np.empty(N, dtype=np.bool_)
+    _rows_into(mats, vecs, ivecs, bankL, bank, V, U, ok)
     return U, ok
 
 

@@ -16,7 +16,7 @@ __all__ = ["all_finite", "owned_demand", "affine", "finish", "finish_owned", "fu
 FINISH_EXACT, FINISH_UNATTAINABLE, FINISH_NONFINITE = 0, 1, 2
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, _nrt=False)
 def all_finite(x):  # pragma: no cover - compiled
     for i in range(x.shape[0]):
         if not np.isfinite(x[i]):
@@ -59,7 +59,7 @@ def affine(c, P, v):  # pragma: no cover - compiled
     return out
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, _nrt=False)
 def finish(B, u, lo, hi, v, v_ach, rtol):  # pragma: no cover - compiled
     """Clip ``u`` onto ``[lo, hi]`` in place, write ``B u`` into ``v_ach``, and classify.
 
@@ -118,7 +118,7 @@ def finish_batch(B, U, lo, hi, V, Vach, rtol):  # pragma: no cover - compiled
     return codes
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, _nrt=False)
 def rate_window_into(umin, umax, rate_min, rate_max, u_prev, dt, lo, hi):  # pragma: no cover - compiled
     """Eq 1.28 bounds into ``lo``, ``hi``; where the rate window misses the position box,
     the nearest limit."""
@@ -229,7 +229,7 @@ def clip(x, lo, hi):  # pragma: no cover - compiled
     return out
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, _nrt=False)
 def _residual(B, u, v, r):  # pragma: no cover - compiled
     """``r = v - B u``."""
     k, m = B.shape
@@ -240,7 +240,7 @@ def _residual(B, u, v, r):  # pragma: no cover - compiled
         r[i] = v[i] - s
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, _nrt=False)
 def _scale_to_box(base, du, lo, hi, idx, n):  # pragma: no cover - compiled
     """Largest ``s`` in [0, 1] with ``lo <= base + s du <= hi`` over ``j = idx[:n]``;
     ``du`` is indexed by position ``q``, the bounds by ``idx[q]`` (``max_scale``)."""
@@ -389,7 +389,7 @@ def scaled_increment_batch(P, B, b, V, lo, hi):  # pragma: no cover - compiled
 _FREE_BITS = 63
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, _nrt=False)
 def _free_key(free, key):  # pragma: no cover - compiled
     for w in range(key.shape[0]):
         key[w] = 0
@@ -398,7 +398,7 @@ def _free_key(free, key):  # pragma: no cover - compiled
             key[j // _FREE_BITS] |= np.int64(1) << np.int64(j % _FREE_BITS)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, _nrt=False)
 def _probe(keys, slots, key):  # pragma: no cover - compiled
     """Table position of ``key``, or of the empty place where it belongs."""
     h = np.int64(0)
@@ -501,7 +501,7 @@ def packed_out(m, k):  # pragma: no cover - compiled
     return np.empty(m + 3 * k)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, _nrt=False)
 def copy_demand(v, out, m, vmax_domain):  # pragma: no cover - compiled
     """Copy ``v`` into ``out``; False when ``v`` is outside the valid domain (non-finite
     or ``|v| > vmax_domain``)."""
@@ -513,7 +513,7 @@ def copy_demand(v, out, m, vmax_domain):  # pragma: no cover - compiled
     return True
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, _nrt=False)
 def close_out(out, m, k):  # pragma: no cover - compiled
     """Write ``v - B u`` into a packed output."""
     for i in range(k):

@@ -60,7 +60,7 @@ def tie_break_weights(m: int) -> np.ndarray:
     return 1.0 + np.mod((np.arange(m) + 1.0) * golden, 1.0)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, _nrt=False)
 def _eliminate(T, r, q):  # pragma: no cover - compiled
     """Gauss-Jordan step: scale row ``r`` to ``T[r, q] = 1`` and clear column ``q`` elsewhere."""
     k, n = T.shape
@@ -75,7 +75,7 @@ def _eliminate(T, r, q):  # pragma: no cover - compiled
                     T[i, j] -= f * T[r, j]
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, _nrt=False)
 def _refactor(F, basis, status, x, b, cost, T, d, W):  # pragma: no cover - compiled
     """Tableau ``T = M^-1 F``, basic values and reduced costs from the basis (Gauss-Jordan
     on ``W = [M | F | b - N x_N]``, partial pivoting); False when ``M`` is numerically singular."""
@@ -114,7 +114,7 @@ def _refactor(F, basis, status, x, b, cost, T, d, W):  # pragma: no cover - comp
     return True
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, _nrt=False)
 def _reduced_costs(T, basis, cost, d):  # pragma: no cover - compiled
     k, N = T.shape
     for j in range(N):
@@ -137,7 +137,7 @@ def _step_to_bound(a, xj, lbj, ubj):  # pragma: no cover - compiled
     return np.inf
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, _nrt=False)
 def _iterate(T, basis, status, x, lb, ub, d, frozen, budget):  # pragma: no cover - compiled
     """Primal simplex pivots (at most ``budget``); ``(done, pivots)``: done when optimal."""
     k, N = T.shape
