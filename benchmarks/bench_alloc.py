@@ -138,6 +138,32 @@ def latency_rows(p: alloc.Problem, V: np.ndarray, methods: list[tuple[str, dict]
     return rows
 
 
+def tail_rows(p: alloc.Problem, V: np.ndarray, names: tuple[str, ...] = ("qp", "wls", "dynamic"),
+              runs: int = 5, warm: int = 50) -> list[dict]:
+    """The first-pass tail without the machine's: ``runs`` fresh allocators time the same
+    demands (each run takes the same iterations and factorises the same new free sets), and
+    each call's minimum over the runs is its own cost; a single run's p99 adds whatever the
+    shared machine did at that moment (timeit's rule: the minimum of repeats is the code).
+    Both are reported: the median over runs of one run's p99/median, and p99/median of the
+    per-call minima."""
+    rows = []
+    for name in names:
+        T = []
+        for _ in range(runs):
+            f = alloc.make_allocator(p, name)
+            for v in V[:warm]:
+                f(v)
+            T.append(timed(f, V))
+        T = np.array(T)
+        per_run = [float(np.percentile(t, 99) / np.median(t)) for t in T]
+        best = T.min(axis=0)
+        rows.append(dict(method=name, runs=runs, median_us=float(np.median(best)),
+                         p99_us=float(np.percentile(best, 99)),
+                         ratio_min=float(np.percentile(best, 99) / np.median(best)),
+                         ratio_runs=float(np.median(per_run))))
+    return rows
+
+
 def print_rows(title: str, rows: list[dict]) -> None:
     print(f"\n## {title}")
     print(f"| {'method':<34} | {'median us':>9} | {'p99 us':>8} | {'floor us':>8} | {'x floor':>7} | {'p99/med':>7} "
@@ -224,6 +250,13 @@ def main(argv: list[str] | None = None) -> dict:
             out["latency"][f"{pname}, {sname}"] = rows
             print_rows(f"{pname}, {sname}", rows)
 
+    print("\n## first-pass tail, ICE random: 5 fresh allocators on the same demands")
+    trows = tail_rows(ice(), random_sequence(ice(), args.calls))
+    out["tail"] = trows
+    print("| method | per-call min: median us | p99 us | p99/median | one run's p99/median (median of 5) |\n|---|---|---|---|---|")
+    for r in trows:
+        print(f"| {r['method']} | {r['median_us']:.2f} | {r['p99_us']:.1f} | {r['ratio_min']:.2f} | {r['ratio_runs']:.2f} |")
+
     print(f"\n## allocate_batch vs a Python loop of single calls (ICE, N = {args.batch}, medians of 5)")
     brows = batch_rows(ice(), args.batch)
     out["batch"] = brows
@@ -241,15 +274,20 @@ def main(argv: list[str] | None = None) -> dict:
     ice_r = {r["method"]: r for r in out["latency"]["ICE 3x11, random"]}
     ice_s = {r["method"]: r for r in out["latency"]["ICE 3x11, sines 2 kHz"]}
     bat = {r["method"]: r for r in brows}
+    tail = {r["method"]: r for r in trows}
     s64 = [r for r in srows if r["k"] == 3 and r["m"] == 64]
     goals = [
         ("pinv <= 2x floor (ICE random)", ice_r["pinv"]["ratio"], 2.0),
         ("pinv_scale <= 3x floor", ice_r["pinv_scale"]["ratio"], 3.0),
         ("qp <= 6x floor", ice_r["qp"]["ratio"], 6.0),
         ("wls <= 5x floor", ice_r["wls"]["ratio"], 5.0),
-        ("qp p99 <= 3x median (first pass: new free sets factorised)", ice_r["qp"]["p99_us"] / ice_r["qp"]["median_us"],
+        ("qp p99 <= 3x median (first pass: new free sets factorised; one run)", ice_r["qp"]["p99_us"] / ice_r["qp"]["median_us"],
          3.0),
-        ("wls p99 <= 3x median (first pass)", ice_r["wls"]["p99_us"] / ice_r["wls"]["median_us"], 3.0),
+        ("wls p99 <= 3x median (first pass; one run)", ice_r["wls"]["p99_us"] / ice_r["wls"]["median_us"], 3.0),
+        ("qp p99 <= 3x median (first pass, per-call min of 5 runs)", tail["qp"]["ratio_min"], 3.0),
+        ("wls p99 <= 3x median (first pass, per-call min of 5 runs)", tail["wls"]["ratio_min"], 3.0),
+        ("qp p99 <= 3x median (first pass, median of 5 single runs)", tail["qp"]["ratio_runs"], 3.0),
+        ("wls p99 <= 3x median (first pass, median of 5 single runs)", tail["wls"]["ratio_runs"], 3.0),
         ("qp p99 <= 3x median (same demands again)", ice_r["qp"]["p99_again_us"] / ice_r["qp"]["median_us"], 3.0),
         ("wls p99 <= 3x median (same demands again)", ice_r["wls"]["p99_again_us"] / ice_r["wls"]["median_us"], 3.0),
         ("qp p99 <= 3x median (sines)", ice_s["qp"]["p99_us"] / ice_s["qp"]["median_us"], 3.0),
@@ -288,6 +326,13 @@ def markdown(out: dict) -> str:
         cells = [f"{r['median_us']:.1f} ({r['ratio']:.1f}×), {r['p99_us']:.0f}, {r['p99_again_us']:.0f}"
                  if (r := row.get(c)) else "-" for c in cases]
         lines.append(f"| `{method}` | " + " | ".join(cells) + " |")
+    if out.get("tail"):
+        lines += ["", "First-pass tail on ICE random demands: 5 fresh allocators time the same demands; each "
+                  "call's minimum over the runs is the code's own cost (one run's p99 adds the machine's):", "",
+                  "| method | per-call min: median µs | p99 µs | p99/median | one run's p99/median (median of 5) |",
+                  "|---|---|---|---|---|"]
+        lines += [f"| `{r['method']}` | {r['median_us']:.2f} | {r['p99_us']:.1f} | {r['ratio_min']:.2f} | "
+                  f"{r['ratio_runs']:.2f} |" for r in out["tail"]]
     lines += ["", f"`allocate_batch` against a Python loop of single calls (ICE, N = {out['batch'][0]['n']:,}, "
               "half unattainable; medians of 5):", "", "| method | threads | batch s | loop s | speed-up |",
               "|---|---|---|---|---|"]
