@@ -71,7 +71,7 @@ MU_EPS = 1e3 * np.finfo(float).eps
 # nothing, so they are compiled without numba's reference counting (``_nrt=False``): with
 # it, every call of ``_level`` and every cache lookup took and dropped an atomic reference
 # on each array argument, a quarter of the solver's time in a perf profile (NRT_incref /
-# NRT_decref).  Without it: 15-25 % less per allocation on ICE and the hexacopter, answers
+# NRT_decref).  Without it: 11-22 % less per allocation on ICE and the hexacopter, answers
 # bit for bit the same (benchmarks/bench_alloc.py; tests/test_fastcall.py).  The caller
 # (``lexico_call``, ``lexico_batch``) owns the arrays for the whole call.
 
