@@ -123,19 +123,21 @@ def latency_rows(p: alloc.Problem, V: np.ndarray, methods: list[tuple[str, dict]
         ts = timed(f, V)
         again = timed(f, V)  # the same demands again: every free set's factorisation cached
         fb = sum(f(v).status is alloc.Status.FALLBACK for v in V[:500])
-        rows.append(dict(method=label, median_us=float(np.median(ts)), p99_us=float(np.percentile(ts, 99)),
-                         p99_again_us=float(np.percentile(again, 99)),
-                         floor_us=fl, ratio=float(np.median(ts)) / fl, fallbacks_per_500=int(fb)))
+        rows.append(_latency_row(label, ts, again, fl, int(fb)))
     for label, keep in (("daqp.Model wls (reference), cold", False), ("daqp.Model wls (reference), warm", True)):
         call = daqp_reference(p, keep_active_set=keep)
         for v in V[:warm]:
             call(v)
         fl = floor_of(p, V)
-        ts = timed(call, V)
-        again = timed(call, V)
-        rows.append(dict(method=label, median_us=float(np.median(ts)), p99_us=float(np.percentile(ts, 99)),
-                         p99_again_us=float(np.percentile(again, 99)), floor_us=fl, ratio=float(np.median(ts)) / fl, fallbacks_per_500=0))
+        rows.append(_latency_row(label, timed(call, V), timed(call, V), fl, 0))
     return rows
+
+
+def _latency_row(label: str, ts: np.ndarray, again: np.ndarray, floor_us: float, fallbacks: int) -> dict:
+    """One latency table row: median and p99 of a first pass ``ts``, p99 of a second pass ``again``."""
+    return dict(method=label, median_us=float(np.median(ts)), p99_us=float(np.percentile(ts, 99)),
+                p99_again_us=float(np.percentile(again, 99)), floor_us=floor_us,
+                ratio=float(np.median(ts)) / floor_us, fallbacks_per_500=fallbacks)
 
 
 def tail_rows(p: alloc.Problem, V: np.ndarray, names: tuple[str, ...] = ("qp", "wls", "dynamic"),
