@@ -44,10 +44,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ._threads import split_rows, threads_for
+from ._threads import run_chunks, threads_for
 from ._kernels import _FREE_BITS, close_out, copy_demand, finish, packed_out, rate_window_into
 
-__all__ = ["pack", "lexico_call", "lexico_solve", "lexico_batch", "lexico_batch_threads", "SIGMA_RTOL", "MU_EPS"]
+__all__ = ["pack", "lexico_call", "lexico_solve", "lexico_batch_finished", "SIGMA_RTOL", "MU_EPS"]
 
 #: Singular values below this fraction of the largest are round-off (dropped).
 SIGMA_RTOL = 1e-12
@@ -73,7 +73,7 @@ MU_EPS = 1e3 * np.finfo(float).eps
 # on each array argument, a quarter of the solver's time in a perf profile (NRT_incref /
 # NRT_decref).  Without it: 11-22 % less per allocation on ICE and the hexacopter, answers
 # bit for bit the same (benchmarks/bench_alloc.py; tests/test_fastcall.py).  The caller
-# (``lexico_call``, ``lexico_batch``) owns the arrays for the whole call.
+# (``lexico_call``, ``lexico_batch_finished``) owns the arrays for the whole call.
 
 #: int header fields (``ivecs[0]``)
 _N, _M, _K, _NLEV, _FINAL, _DIAG, _MAXIT, _WORDS, _DYN, _WARM = range(10)
@@ -737,48 +737,62 @@ def lexico_solve(mats, vecs, ivecs, bankL, bank, v, lo, hi, u_prev, rate):  # pr
 
 
 @njit(cache=True, nogil=True, _nrt=False)
-def _rows_into(mats, vecs, ivecs, bankL, bank, V, U, ok):  # pragma: no cover - compiled
-    """The batch's rows into ``U``, ``ok`` (allocated by the caller: no reference counting
-    here, so a row's views of ``V`` cost nothing)."""
-    m = ivecs[_HEAD, _M]
-    for i in range(V.shape[0]):
+def _finished_into(mats, vecs, ivecs, bankL, bank, V, U, Vach, codes, a, b):  # pragma: no cover - compiled
+    """Rows ``a:b`` of the batch, each what :func:`_call_into` does for it without rate
+    limits: solve, then :func:`alloc._kernels.finish` (clip, ``B u``, the code) into ``U``,
+    ``Vach``, ``codes``; code 5 where a level hit its cap, 2 where the preference point is
+    not finite (the caller redoes such rows one by one)."""
+    m, k = ivecs[_HEAD, _M], ivecs[_HEAD, _K]
+    rtol = vecs[_CONST, 1]
+    for i in range(a, b):
         iup = _target(mats, vecs, ivecs, V[i], V[i], False)
-        good = iup >= 0 and _run(mats, vecs, ivecs, bankL, bank, V[i], _UMIN, _UMAX, iup)[1]
+        if iup < 0:
+            codes[i] = 2
+            continue
+        if not _run(mats, vecs, ivecs, bankL, bank, V[i], _UMIN, _UMAX, iup)[1]:
+            codes[i] = 5
+            continue
         for j in range(m):
             U[i, j] = vecs[_U, j]
-        ok[i] = good
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _batch_rows(mats, vecs, ivecs, bankL, bank, V):  # pragma: no cover - compiled
-    N = V.shape[0]
-    U = np.empty((N, ivecs[_HEAD, _M]))
-    ok = np.empty(N, dtype=np.bool_)
-    _rows_into(mats, vecs, ivecs, bankL, bank, V, U, ok)
-    return U, ok
+        codes[i] = finish(mats[_B, :k, :m], U[i], vecs[_UMIN], vecs[_UMAX], V[i], Vach[i], rtol)
 
 
 @njit(cache=True)
-def lexico_batch(mats, vecs, ivecs, bankL, bank, V):  # pragma: no cover - compiled
-    """:func:`lexico_solve` over the rows of ``V`` within the position limits, in order (a
-    compiled loop: row ``i`` is what the ``i``-th single call would return); ``ok[i]`` False
-    where a level hit its cap."""
-    return _batch_rows(mats, vecs, ivecs, bankL, bank, V)
+def _finished_gil(mats, vecs, ivecs, bankL, bank, V, U, Vach, codes, a, b):  # pragma: no cover - compiled
+    """:func:`_finished_into` holding the GIL: on the allocator's own state."""
+    _finished_into(mats, vecs, ivecs, bankL, bank, V, U, Vach, codes, a, b)
 
 
 @njit(cache=True, nogil=True)
-def _batch_rows_nogil(mats, vecs, ivecs, bankL, bank, V):  # pragma: no cover - compiled
-    """:func:`lexico_batch` without the GIL, for a thread's private copy of the state."""
-    return _batch_rows(mats, vecs, ivecs, bankL, bank, V)
+def _finished_nogil(mats, vecs, ivecs, bankL, bank, V, U, Vach, codes, a, b):  # pragma: no cover - compiled
+    """:func:`_finished_into` without the GIL: on a thread's private copy of the state."""
+    _finished_into(mats, vecs, ivecs, bankL, bank, V, U, Vach, codes, a, b)
 
 
-def lexico_batch_threads(state: tuple, V: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`lexico_batch` split over :func:`alloc._threads.threads_for` threads, each on a
-    private copy of the solver's state (work arrays and factorisation cache: the allocator's
-    own is never touched off the GIL).  Rows are pure functions of the data (the cache changes
-    the cost, not the answer), so the result is the single-thread one bit for bit."""
-    threads = threads_for(len(V))
+def lexico_batch_finished(state: tuple, V: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(U, B U, codes)`` of the rows of ``V`` within the position limits: the solve and the
+    single call's :func:`alloc._kernels.finish` in one compiled pass per chunk of rows.
+
+    Large batches run on :func:`alloc._threads.threads_for` threads that pull chunks of rows
+    from a shared counter (:func:`alloc._threads.run_chunks`: a thread slowed by other load
+    takes fewer), each on a private copy of the solver's state; the allocator's own state is
+    used, under the GIL, only by a one-thread batch.  Rows are pure functions of the data (the
+    factorisation cache changes the cost, never the answer), so every split gives the same
+    bits as the single calls."""
+    V = np.ascontiguousarray(V, dtype=float)
+    n = len(V)
+    m, k = int(state[2][_HEAD, _M]), int(state[2][_HEAD, _K])
+    U = np.empty((n, m))
+    Vach = np.empty((n, k))
+    codes = np.empty(n, dtype=np.int64)
+    threads = threads_for(n)
     if threads == 1:
-        return lexico_batch(*state, V)
-    parts = split_rows(lambda a, b: _batch_rows_nogil(*(x.copy() for x in state), V[a:b]), len(V), threads)
-    return np.concatenate([u for u, _ in parts]), np.concatenate([ok for _, ok in parts])
+        _finished_gil(*state, V, U, Vach, codes, 0, n)
+        return U, Vach, codes
+
+    def worker():
+        own = tuple(x.copy() for x in state)
+        return lambda a, b: _finished_nogil(*own, V, U, Vach, codes, a, b)
+
+    run_chunks(worker, n, threads)
+    return U, Vach, codes

@@ -229,6 +229,19 @@ class Allocator(_CallBase):  # type: ignore[misc,valid-type]
         Varr.setflags(write=False)
         t0 = time.perf_counter()
         U = None
+        fused = None
+        if self.impl is not None:
+            try:  # solve and classify in one compiled pass, where the method has one
+                fused = self.impl.batch_finished(Varr)
+            except Exception:  # noqa: BLE001 - the per-row path below handles every failure
+                fused = None
+        if fused is not None:
+            U, Vach, codes = fused
+            status = np.where(codes == 0, _EXACT.value, _UNATT.value).astype("<U12")
+            for i in np.flatnonzero(codes > 1):  # a level's cap, a non-finite answer: the single call
+                r = self(Varr[i])
+                U[i], Vach[i], status[i] = r.u, r.v_achieved, r.status.value
+            return BatchResult(_frozen(U), Varr, _frozen(Vach), _frozen(status), self.method, time.perf_counter() - t0)
         if self.impl is not None:
             try:
                 U = self.impl.solve_batch(Varr, self._lo, self._hi)

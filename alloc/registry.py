@@ -106,6 +106,13 @@ class Method(ABC):
         """Vectorised allocation of the rows of ``V`` (N, k); ``None`` if not vectorised."""
         return None
 
+    def batch_finished(self, V: FloatArray) -> tuple[FloatArray, FloatArray, np.ndarray] | None:
+        """``(U, B U, codes)`` for the rows of ``V`` within the position limits, each row
+        exactly what the allocator's single call returns (its :func:`alloc._kernels.finish`
+        codes: 0 exact, 1 unattainable, anything else a row to redo one by one), solved and
+        classified in one compiled pass; ``None`` where the method has no such pass."""
+        return None
+
     def affine_map(self) -> tuple[FloatArray, FloatArray] | None:
         """``(c, P)`` when, without rate limits, the method returns ``u = c + P v`` wherever
         that is admissible (and something else, never ``B u = v``, where it is not); ``None``

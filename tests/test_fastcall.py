@@ -165,11 +165,61 @@ def test_threaded_batch_equals_single_calls(method: str, monkeypatch: pytest.Mon
     V = (V * rng.choice([0.5, 1.0, 3.0], size=240)).T.copy()
     single = alloc.make_allocator(p, method)
     expected = [single(v) for v in V]
-    for threads in (1, 2, 3, 7):
+    for threads, chunk in ((1, 256), (2, 256), (2, 7), (3, 1), (7, 13)):
         monkeypatch.setattr(_threads, "ROWS_PER_THREAD", 10)
         monkeypatch.setattr(_threads, "MAX_THREADS", threads)
+        monkeypatch.setattr(_threads, "CHUNK_ROWS", chunk)  # threads pull chunks in any order
         assert _threads.threads_for(len(V)) == threads
         res = alloc.make_allocator(p, method).batch(V)
         assert np.array_equal(res.u, np.array([r.u for r in expected]))
         assert np.array_equal(res.v_achieved, np.array([r.v_achieved for r in expected]))
         assert list(res.status) == [r.status.value for r in expected]
+
+
+@pytest.mark.parametrize("method", ["qp", "wls", "dynamic"])
+def test_batch_rows_at_the_iteration_cap_are_the_single_calls(method: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Rows the compiled batch cannot finish (a level's iteration cap) are redone by the single
+    call: the batch still equals the single calls row by row, fallbacks included."""
+    from alloc import _threads
+
+    rng = np.random.default_rng(32)
+    p = random_problem(rng, 3, 10, "general")
+    V = (p.B @ rng.uniform(p.umin, p.umax, size=(300, p.m)).T * 2.5).T.copy()  # many pivots each
+    monkeypatch.setattr(_threads, "ROWS_PER_THREAD", 50)
+    single, batch = alloc.make_allocator(p, method), alloc.make_allocator(p, method)
+    for f in (single, batch):
+        impl = f.impl._static if method == "dynamic" else f.impl._impl
+        impl.maxit = 2
+    expected = [single(v) for v in V]
+    assert 0 < sum(r.status is alloc.Status.FALLBACK for r in expected) < len(V)
+    res = batch.batch(V)
+    assert np.array_equal(res.u, np.array([r.u for r in expected]))
+    assert np.array_equal(res.v_achieved, np.array([r.v_achieved for r in expected]))
+    assert list(res.status) == [r.status.value for r in expected]
+
+
+@pytest.mark.parametrize("threads,chunk", [(1, 5), (2, 1), (2, 64), (3, 7), (5, 1000)])
+def test_run_chunks_covers_every_row_once_and_raises(threads: int, chunk: int) -> None:
+    from alloc._threads import run_chunks
+
+    n = 531
+    seen = np.zeros(n, dtype=np.int64)
+    contexts = []
+
+    def worker():
+        contexts.append(object())
+        def work(a: int, b: int) -> None:
+            seen[a:b] += 1
+        return work
+
+    run_chunks(worker, n, threads, chunk)
+    assert (seen == 1).all() and len(contexts) == threads
+
+    def failing():
+        def work(a: int, b: int) -> None:
+            if a <= 300 < b:
+                raise RuntimeError("row 300")
+        return work
+
+    with pytest.raises(RuntimeError, match="row 300"):
+        run_chunks(failing, n, threads, chunk)

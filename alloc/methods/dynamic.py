@@ -109,3 +109,7 @@ class DynamicAllocation(Method):
     def solve_batch(self, V: FloatArray, lo: FloatArray, hi: FloatArray) -> FloatArray:
         """Rows without ``u_prev`` (a batch has no history): the static stage's compiled batch."""
         return self._static.solve_batch(V, lo, hi)
+
+    def batch_finished(self, V: FloatArray) -> tuple[FloatArray, FloatArray, np.ndarray]:
+        """The static stage's compiled solve-and-classify pass (rows without ``u_prev``)."""
+        return self._static.batch_finished(V)

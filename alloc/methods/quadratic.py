@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from .._active_set import _HEAD, _MAXIT, lexico_batch_threads, lexico_call, lexico_solve, pack
+from .._active_set import _HEAD, _MAXIT, lexico_batch_finished, lexico_call, lexico_solve, pack
 from .._linalg import check_real_option
 from ..exceptions import OptionError, SolverError
 from ..options import choice, levels, real
@@ -208,11 +208,16 @@ class LexicoLS:
         return u, it
 
     def solve_batch(self, V: FloatArray, lo: FloatArray, hi: FloatArray) -> FloatArray:
-        """Rows of ``V`` within the position limits (``lo``, ``hi`` are those): a compiled loop,
-        on every core for large batches (:func:`alloc._active_set.lexico_batch_threads`)."""
-        U, ok = lexico_batch_threads(self._state, np.ascontiguousarray(V))
-        U[~ok] = np.nan  # the allocator re-runs those rows one by one (fallback per row)
+        """Rows of ``V`` within the position limits (``lo``, ``hi`` are those), clipped: the
+        compiled pass of :meth:`batch_finished`; NaN rows where it could not finish (the
+        allocator redoes those one by one)."""
+        U, _, codes = lexico_batch_finished(self._state, V)
+        U[codes > 1] = np.nan
         return U
+
+    def batch_finished(self, V: FloatArray) -> tuple[FloatArray, FloatArray, np.ndarray]:
+        """Solve and classify in one compiled pass (:func:`alloc._active_set.lexico_batch_finished`)."""
+        return lexico_batch_finished(self._state, V)
 
 
 def _backend_choice(backend: object, method: str) -> str:
@@ -238,6 +243,9 @@ class _ActiveSetOrBackend(Method):
 
     def solve_batch(self, V, lo, hi):
         return self._impl.solve_batch(V, lo, hi) if self.backend == ACTIVE_SET else None
+
+    def batch_finished(self, V):
+        return self._impl.batch_finished(V) if self.backend == ACTIVE_SET else None
 
 
 @register("qp", supports_priorities=True, supports_batch=True)
