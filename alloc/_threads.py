@@ -57,11 +57,13 @@ def _pool(threads: int) -> ThreadPoolExecutor:
 def run_chunks(make_worker: Callable[[], Callable[[int, int], None]], n_rows: int, threads: int,
                chunk: int | None = None) -> None:
     """Run ``range(n_rows)`` in chunks of ``chunk`` rows (default :data:`CHUNK_ROWS`) on
-    ``threads`` threads, the caller's included.  Each thread calls ``make_worker()`` once (its
-    private context, e.g. a copy of a solver's state) and then the returned ``work(a, b)`` on
-    the chunks it pulls, in any order: ``work`` must write rows ``a:b`` of a shared output and
-    give the same rows whichever thread runs them.  An exception in any thread is raised here
-    after every thread has stopped."""
+    ``threads`` threads, the caller's included.  A thread that gets a chunk calls
+    ``make_worker()`` once (its private context, e.g. a copy of a solver's state; a pool thread
+    that starts after the rows are gone makes none) and then the returned ``work(a, b)`` on the
+    chunks it pulls, in any order: ``work`` must write rows ``a:b`` of a shared output and give
+    the same rows whichever thread runs them.  The caller works too, so a pool busy with another
+    batch delays nothing.  An exception in any thread is raised here after every thread has
+    stopped."""
     if threads <= 1 or n_rows <= 0:
         make_worker()(0, n_rows)
         return
@@ -70,13 +72,15 @@ def run_chunks(make_worker: Callable[[], Callable[[int, int], None]], n_rows: in
     nxt = [0]
 
     def loop() -> None:
-        work = make_worker()
+        work = None
         while True:
             with lock:
                 a = nxt[0]
                 nxt[0] = a + size
             if a >= n_rows:
                 return
+            if work is None:
+                work = make_worker()
             work(a, min(n_rows, a + size))
 
     futures = [_pool(threads).submit(loop) for _ in range(threads - 1)]
