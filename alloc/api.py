@@ -218,8 +218,11 @@ class Allocator(_CallBase):  # type: ignore[misc,valid-type]
     def batch(self, V: ArrayLike) -> BatchResult:
         """Allocate each row of ``V`` (N, k) without rate limits; vectorised where the method allows.
 
-        Row ``i`` equals ``self(V[i])`` (status included); where the vectorised path cannot
-        vouch for that (non-finite output, an exception) the rows are allocated one by one.
+        Row ``i`` equals ``self(V[i])`` (status included).  Methods with a compiled
+        solve-and-classify pass (:meth:`Method.batch_finished`: ``qp``, ``wls``, ``dynamic``)
+        redo by the single call only the rows that pass could not finish (an iteration cap);
+        elsewhere, where the vectorised path cannot vouch for that (non-finite output, an
+        exception), the rows are allocated one by one.
         """
         problem = self.problem
         Varr = as_float_array("V", V, DemandError)
