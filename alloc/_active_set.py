@@ -76,9 +76,11 @@ MU_EPS = 1e3 * np.finfo(float).eps
 # (``lexico_call``, ``lexico_batch_finished``) owns the arrays for the whole call.
 
 #: int header fields (``ivecs[0]``)
-_N, _M, _K, _NLEV, _FINAL, _DIAG, _MAXIT, _WORDS, _DYN, _WARM = range(10)
+_N, _M, _K, _NLEV, _FINAL, _DIAG, _MAXIT, _WORDS, _DYN, _WARM, _NCW, _NLW = range(12)
 #: ``mats`` rows
 _A, _T, _WU, _B, _P0, _KV, _KU = range(7)
+#: ``ivecs[_MISC]`` columns: the next free cache slot, the warm-start flag, factorisations computed
+_NEXT_SLOT, _WARM_OK, _FACTORED = range(3)
 #: ``vecs`` rows
 (_UP, _UMIN, _UMAX, _RMIN, _RMAX, _GAM, _UWARM, _U, _LO, _HI, _UPC, _BV, _R, _E, _LAM,
  _G, _H, _Y, _TMP, _SCALE, _CONST, _VLAST) = range(22)
@@ -87,8 +89,12 @@ _HEAD, _PERM, _STARTS, _WSTATE, _FREE, _PINNED, _TABU, _FIDX, _KEY, _MISC, _TABL
 #: cache budget per allocator, floats (2 MiB), and entry cap (free sets beyond are computed, not
 #: kept); sized so an allocator stays small enough for the service to cache (a 32 MiB budget made
 #: every inline qp request rebuild a 14 MiB allocator: 4 ms a build, 300 req/s overloaded it)
+#: A slot holds only the blocks its levels use (:func:`_slot`): 69 floats on ICE, 140 on the 6 x 12
+#: hexacopter (372 when every slot had five square blocks).  A long-lived ICE allocator meets
+#: about 700 free sets, the hexacopter about 2,000 in 10,000 random demands and 2,950 in 100,000:
+#: it keeps 1,871 (it kept 703, and recomputed almost every second call's factorisation).
 CACHE_FLOATS = 1 << 18
-CACHE_ENTRIES = 1 << 10
+CACHE_ENTRIES = 1 << 11
 #: warm-start when ``max|v - v_previous| <= WARM_STEP * max(|v|, |v_previous|)``
 WARM_STEP = 0.05
 #: Warm starts are off: every call starts cold, so an answer is a function of the call's data
@@ -264,9 +270,8 @@ def _factor(A, r0, r1, Wu, diag, F, nf, L, Yc, Vc, sc, Ya, Va, sa):  # pragma: n
 @njit(cache=True, nogil=True, inline="always")
 def _factors(mats, ivecs, bankL, bank, r0, r1, lev, diag, nf, m):  # pragma: no cover - compiled
     """The cache slot holding the factorisation of the current free set (``_factor``'s
-    ``L = bankL[s]``, ``Yc, Ya, Vc, Va = bank[s, 0:4]``, ``sc, sa = bank[s, 4, 0:2]``):
-    looked up, else computed (and kept while the cache has room; past that, computed into
-    the scratch slot 0).  Cached and recomputed factors are bitwise equal, so the cache
+    ``L = bankL[s]``, the rest :func:`_slot` of ``bank[s]``): looked up, else computed (and
+    kept while the cache has room; past that, computed into the scratch slot 0).  Cached and recomputed factors are bitwise equal, so the cache
     never changes an answer, only its cost.  The hash table (rows ``_TABLE:`` of ``ivecs``)
     is open addressing as in :func:`alloc._kernels._probe`.
     """
@@ -291,18 +296,33 @@ def _factors(mats, ivecs, bankL, bank, r0, r1, lev, diag, nf, m):  # pragma: no 
         if same:
             return ivecs[_TABLE + pos, 0]
         pos = (pos + 1) & mask
-    s = ivecs[_MISC, 0]
+    s = ivecs[_MISC, _NEXT_SLOT]
     if s < bankL.shape[0]:
-        ivecs[_MISC, 0] = s + 1
+        ivecs[_MISC, _NEXT_SLOT] = s + 1
         for w in range(words):
             ivecs[_TABLE + pos, 1 + w] = ivecs[_KEY, w]
         ivecs[_TABLE + pos, 0] = s
     else:
         s = 0  # the cache is full: slot 0 is the scratch (never a table entry)
-    E = bank[s]
-    sv = E[4]
-    _factor(mats[_A], r0, r1, mats[_WU], diag, ivecs[_FIDX], nf, bankL[s], E[0], E[2], sv[0], E[1], E[3], sv[1])
+    ivecs[_MISC, _FACTORED] += 1  # counted for benchmarks/bench_alloc.py
+    Yc, Vc, sc, Ya, Va, sa = _slot(bank, s, m, ivecs[_HEAD, _NCW], ivecs[_HEAD, _NLW])
+    _factor(mats[_A], r0, r1, mats[_WU], diag, ivecs[_FIDX], nf, bankL[s], Yc, Vc, sc, Ya, Va, sa)
     return s
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _slot(bank, s, m, ncw, nlw):  # pragma: no cover - compiled
+    """Views of cache slot ``s``, packed end to end in ``bank[s]``: ``Yc`` (m x ncw), ``Vc``
+    (ncw x ncw), ``sc`` (ncw), ``Ya`` (m x nlw), ``Va`` (nlw x nlw), ``sa`` (nlw); ``ncw`` and
+    ``nlw`` are the most equality rows and level rows a level factorises (:func:`pack`)."""
+    E = bank[s]
+    a = m * ncw
+    b = a + ncw * ncw
+    c = b + ncw
+    d = c + m * nlw
+    e = d + nlw * nlw
+    return (E[:a].reshape((m, ncw)), E[a:b].reshape((ncw, ncw)), E[b:c],
+            E[c:d].reshape((m, nlw)), E[d:e].reshape((nlw, nlw)), E[e:e + nlw])
 
 
 @njit(cache=True, nogil=True, _nrt=False)
@@ -318,7 +338,8 @@ def _level(mats, vecs, ivecs, bankL, bank, r0, r1, lev, gam, diag, iup, ilo, ihi
     frees effectors that cannot move.  An effector freed and then blocked by a zero step
     (a degenerate multiplier) is not freed again until the iterate moves.  Everything is
     addressed by row in the stacked arrays of :func:`pack` (``up``, ``lo``, ``hi`` are the
-    rows ``iup``, ``ilo``, ``ihi`` of ``vecs``): no views, no allocation.  With ``refine``
+    rows ``iup``, ``ilo``, ``ihi`` of ``vecs``; the cache slot's factors are views, which cost
+    nothing without reference counting): no allocation.  With ``refine``
     (a warm start: the iterate came from another demand) a full step is followed by one
     more step on the same working set before the multipliers are tested (iterative
     refinement: the answer is then as exact as from the cold start).  Returns the
@@ -326,16 +347,35 @@ def _level(mats, vecs, ivecs, bankL, bank, r0, r1, lev, gam, diag, iup, ilo, ihi
     """
     nl = r1 - r0
     nc = r0
+    # rows of the stacked state as views (free without reference counting); the arithmetic is
+    # the same, in the same order, as indexing the stacks
+    A, Wu = mats[_A], mats[_WU]
+    u, e, bv, tmp, h, y, g, scale, lam = (vecs[_U], vecs[_E], vecs[_BV], vecs[_TMP], vecs[_H], vecs[_Y], vecs[_G],
+                                          vecs[_SCALE], vecs[_LAM])
+    up, lo, hi = vecs[iup], vecs[ilo], vecs[ihi]
+    free, fidx, tabu, pinned = ivecs[_FREE], ivecs[_FIDX], ivecs[_TABU], ivecs[_PINNED]
+    # the factors in a slot ``E = bank[slot]`` (the layout of :func:`_slot`), indexed flat:
+    # ``Yc`` row q, column c at ``oYc + q * wc + c``, ``Vc`` likewise from ``oVc``, ``sc`` from
+    # ``osc``; ``Ya, Va, sa`` from ``oYa, oVa, osa`` with width ``nlw`` (2-d views made per
+    # iteration cost more than they save: 14 % on an ICE batch row)
+    ncw, nlw = ivecs[_HEAD, _NCW], ivecs[_HEAD, _NLW]
+    oVc = m * ncw
+    osc = oVc + ncw * ncw
+    oYa = osc + ncw
+    oVa = oYa + m * nlw
+    osa = oVa + nlw * nlw
+    oYc, wc = 0, ncw
     # The final level of a one-level problem (stage 2 of ``qp`` and ``dynamic``) holds the
     # rows of level 0 as its equalities: its factorisation of a free set is level 0's (the
     # same matrix ``L^-1 A[:n, F]'``, the same Jacobi SVD), so it is looked up under level 0
-    # and read from level 0's places in the slot (``Ya, Va, sa``).  Stage 2 starts on the
+    # and its ``Ya, Va, sa`` are read as this level's ``Yc, Vc, sc``.  Stage 2 starts on the
     # free set stage 1 ended on: that factorisation is always cached by then.
     share = nl == 0 and lev == 1 and ivecs[_HEAD, _NLEV] == 1 and ivecs[_STARTS, 0] == 0
     klev, kr0, kr1 = (0, 0, r0) if share else (lev, r0, r1)
-    ic, icv, ics = (1, 3, 1) if share else (0, 2, 0)
+    if share:  # the equalities' factors are level 0's own
+        oYc, oVc, osc, wc = oYa, oVa, osa, nlw
     for j in range(m):
-        ivecs[_TABU, j] = 0
+        tabu[j] = 0
     last = -1
     refined = False
     gam2 = gam * gam
@@ -345,175 +385,176 @@ def _level(mats, vecs, ivecs, bankL, bank, r0, r1, lev, gam, diag, iup, ilo, ihi
         # done, with zero multipliers (the common attainable case).
         zero = nl > 0 and gam2 == 0.0
         for i in range(nl):
-            acc = vecs[_BV, r0 + i]
-            mag = abs(vecs[_BV, r0 + i])
+            acc = bv[r0 + i]
+            mag = abs(bv[r0 + i])
             for j in range(m):
-                t = mats[_A, r0 + i, j] * vecs[_U, j]
+                t = A[r0 + i, j] * u[j]
                 acc -= t
                 mag += abs(t)
-            vecs[_E, i] = acc
+            e[i] = acc
             if abs(acc) > MU_EPS * mag:
                 zero = False
         if zero:
             return it + 1
         nf = 0
         for j in range(m):
-            if ivecs[_FREE, j]:
-                ivecs[_FIDX, nf] = j
+            if free[j]:
+                fidx[nf] = j
                 nf += 1
         slot = _factors(mats, ivecs, bankL, bank, kr0, kr1, klev, diag, nf, m)
+        E = bank[slot]
         # --- the preference gradient Wu (u - up)
         for j in range(m):
-            vecs[_TMP, j] = vecs[_U, j] - vecs[iup, j]
+            tmp[j] = u[j] - up[j]
         for q in range(nf):
-            j = ivecs[_FIDX, q]
+            j = fidx[q]
             acc = 0.0
             if diag:
-                acc = mats[_WU, j, j] * vecs[_TMP, j]
+                acc = Wu[j, j] * tmp[j]
             else:
                 for s in range(m):
-                    acc += mats[_WU, j, s] * vecs[_TMP, s]
-            vecs[_H, q] = acc
+                    acc += Wu[j, s] * tmp[s]
+            h[q] = acc
         _lsolve(bankL, slot, nf, diag, vecs, _H)  # h = L^-1 (Wu (u - up))_F
         # --- step y = -P h + Ua z   (P: projector onto null(Ct) and null(At)),
         #     z_i = (s_i (Va' e)_i - gam^2 (Ua' h)_i) / (s_i^2 + gam^2)
         for q in range(nf):
-            vecs[_Y, q] = -vecs[_H, q]
+            y[q] = -h[q]
         for c in range(nc):
-            if bank[slot, 4, ics, c] > 0.0:
+            if E[osc + c] > 0.0:
                 acc = 0.0
                 for q in range(nf):
-                    acc += bank[slot, ic, q, c] * vecs[_H, q]
+                    acc += E[oYc + q * wc + c] * h[q]
                 for q in range(nf):
-                    vecs[_Y, q] += acc * bank[slot, ic, q, c]
+                    y[q] += acc * E[oYc + q * wc + c]
         for i in range(nl):
-            if bank[slot, 4, 1, i] > 0.0:
+            if E[osa + i] > 0.0:
                 uh = 0.0
                 for q in range(nf):
-                    uh += bank[slot, 1, q, i] * vecs[_H, q]
+                    uh += E[oYa + q * nlw + i] * h[q]
                 ve = 0.0
                 for r in range(nl):
-                    ve += bank[slot, 3, r, i] * vecs[_E, r]
-                z = (bank[slot, 4, 1, i] * ve - gam2 * uh) / (bank[slot, 4, 1, i] * bank[slot, 4, 1, i] + gam2)
+                    ve += E[oVa + r * nlw + i] * e[r]
+                z = (E[osa + i] * ve - gam2 * uh) / (E[osa + i] * E[osa + i] + gam2)
                 for q in range(nf):
-                    vecs[_Y, q] += (uh + z) * bank[slot, 1, q, i]
+                    y[q] += (uh + z) * E[oYa + q * nlw + i]
         for c in range(nc):  # y in null(Ct) to round-off: the held moments do not drift
-            if bank[slot, 4, ics, c] > 0.0:
+            if E[osc + c] > 0.0:
                 acc = 0.0
                 for q in range(nf):
-                    acc += bank[slot, ic, q, c] * vecs[_Y, q]
+                    acc += E[oYc + q * wc + c] * y[q]
                 for q in range(nf):
-                    vecs[_Y, q] -= acc * bank[slot, ic, q, c]
+                    y[q] -= acc * E[oYc + q * wc + c]
         _ltsolve(bankL, slot, nf, diag, vecs, _Y)  # p_F = L^-T y
         # --- ratio test
         alpha = 1.0
         block = -1
         for q in range(nf):
-            j = ivecs[_FIDX, q]
-            d = vecs[_Y, q]
+            j = fidx[q]
+            d = y[q]
             if d > 0.0:
-                room = vecs[ihi, j] - vecs[_U, j]
+                room = hi[j] - u[j]
                 if room < alpha * d:
                     alpha = max(room, 0.0) / d
                     block = q
             elif d < 0.0:
-                room = vecs[ilo, j] - vecs[_U, j]
+                room = lo[j] - u[j]
                 if room > alpha * d:
                     alpha = min(room, 0.0) / d
                     block = q
         for q in range(nf):
-            vecs[_U, ivecs[_FIDX, q]] += alpha * vecs[_Y, q]
+            u[fidx[q]] += alpha * y[q]
         if block >= 0:
-            j = ivecs[_FIDX, block]
-            vecs[_U, j] = vecs[ihi, j] if vecs[_Y, block] > 0.0 else vecs[ilo, j]
-            ivecs[_FREE, j] = 0
+            j = fidx[block]
+            u[j] = hi[j] if y[block] > 0.0 else lo[j]
+            free[j] = 0
             if alpha > 0.0:
                 for t in range(m):
-                    ivecs[_TABU, t] = 0
+                    tabu[t] = 0
             elif j == last:
-                ivecs[_TABU, j] = 1
+                tabu[j] = 1
             refined = False
             continue
         if refine and not refined:
             refined = True
             continue
-        # --- full step: multipliers of the bounds held, mu = g + mats[_A, :r0]' lam
+        # --- full step: multipliers of the bounds held, mu = g + A[:r0]' lam
         for j in range(m):
-            vecs[_TMP, j] = vecs[_U, j] - vecs[iup, j]
+            tmp[j] = u[j] - up[j]
         for j in range(m):
             acc = 0.0
             if gam2 > 0.0:
                 if diag:
-                    acc = gam2 * mats[_WU, j, j] * vecs[_TMP, j]
+                    acc = gam2 * Wu[j, j] * tmp[j]
                 else:
                     for s in range(m):
-                        acc += mats[_WU, j, s] * vecs[_TMP, s]
+                        acc += Wu[j, s] * tmp[s]
                     acc *= gam2
-            vecs[_G, j] = acc
+            g[j] = acc
         for j in range(m):
-            vecs[_SCALE, j] = 0.0  # round-off bound of each g_j (and of A' lam below)
+            scale[j] = 0.0  # round-off bound of each g_j (and of A' lam below)
         for i in range(nl):
-            acc = -vecs[_BV, r0 + i]
-            mag = abs(vecs[_BV, r0 + i])
+            acc = -bv[r0 + i]
+            mag = abs(bv[r0 + i])
             for j in range(m):
-                t = mats[_A, r0 + i, j] * vecs[_U, j]
+                t = A[r0 + i, j] * u[j]
                 acc += t
                 mag += abs(t)
             for j in range(m):
-                vecs[_G, j] += mats[_A, r0 + i, j] * acc
-                vecs[_SCALE, j] += abs(mats[_A, r0 + i, j]) * mag
+                g[j] += A[r0 + i, j] * acc
+                scale[j] += abs(A[r0 + i, j]) * mag
         if gam2 > 0.0:
             for j in range(m):
                 if diag:
-                    acc = abs(mats[_WU, j, j]) * (abs(vecs[_U, j]) + abs(vecs[iup, j]))
+                    acc = abs(Wu[j, j]) * (abs(u[j]) + abs(up[j]))
                 else:
                     acc = 0.0
                     for s in range(m):
-                        acc += abs(mats[_WU, j, s]) * (abs(vecs[_U, s]) + abs(vecs[iup, s]))
-                vecs[_SCALE, j] += gam2 * acc
+                        acc += abs(Wu[j, s]) * (abs(u[s]) + abs(up[s]))
+                scale[j] += gam2 * acc
         if nc > 0:
             # lam = -Vc diag(1/sc) Uc' L^-1 g_F
             for q in range(nf):
-                vecs[_H, q] = vecs[_G, ivecs[_FIDX, q]]
+                h[q] = g[fidx[q]]
             _lsolve(bankL, slot, nf, diag, vecs, _H)
             for c in range(nc):
-                vecs[_LAM, c] = 0.0
+                lam[c] = 0.0
             for c in range(nc):
-                if bank[slot, 4, ics, c] > 0.0:
+                if E[osc + c] > 0.0:
                     acc = 0.0
                     for q in range(nf):
-                        acc += bank[slot, ic, q, c] * vecs[_H, q]
-                    acc /= bank[slot, 4, ics, c]
+                        acc += E[oYc + q * wc + c] * h[q]
+                    acc /= E[osc + c]
                     for r in range(nc):
-                        vecs[_LAM, r] -= bank[slot, icv, r, c] * acc
+                        lam[r] -= E[oVc + r * wc + c] * acc
             for c in range(nc):
                 for j in range(m):
-                    t = mats[_A, c, j] * vecs[_LAM, c]
-                    vecs[_G, j] += t
-                    vecs[_SCALE, j] += abs(t)
+                    t = A[c, j] * lam[c]
+                    g[j] += t
+                    scale[j] += abs(t)
         unique = True
         for c in range(nc):
-            if bank[slot, 4, ics, c] == 0.0:
+            if E[osc + c] == 0.0:
                 unique = False
         worst = -1
         wv = 0.0
         for j in range(m):
-            if ivecs[_FREE, j] or vecs[ilo, j] == vecs[ihi, j] or ivecs[_PINNED, j] or ivecs[_TABU, j]:
+            if free[j] or lo[j] == hi[j] or pinned[j] or tabu[j]:
                 continue
-            viol = -vecs[_G, j] if vecs[_U, j] <= vecs[ilo, j] else vecs[_G, j]
-            tol = MU_EPS * vecs[_SCALE, j]
+            viol = -g[j] if u[j] <= lo[j] else g[j]
+            tol = MU_EPS * scale[j]
             if viol > tol and viol - tol > wv:
                 wv = viol - tol
                 worst = j
         if worst < 0:
             if unique and nl > 0:
                 for j in range(m):
-                    if not ivecs[_FREE, j] and vecs[ilo, j] < vecs[ihi, j]:
-                        mu = -vecs[_G, j] if vecs[_U, j] <= vecs[ilo, j] else vecs[_G, j]
-                        if mu < -100.0 * MU_EPS * vecs[_SCALE, j]:
-                            ivecs[_PINNED, j] = 1
+                    if not free[j] and lo[j] < hi[j]:
+                        mu = -g[j] if u[j] <= lo[j] else g[j]
+                        if mu < -100.0 * MU_EPS * scale[j]:
+                            pinned[j] = 1
             return it + 1
-        ivecs[_FREE, worst] = 1
+        free[worst] = 1
         last = worst
     return -1
 
@@ -532,7 +573,6 @@ def pack(A, T, perm, starts, gammas, final, Wu, diag, up, B, P0, umin, umax, rat
     n, m = A.shape
     k = B.shape[0]
     nlev = len(starts) - 1
-    nw = max(n, 1)
     words = m // _FREE_BITS + 2  # the free set's bits, then the level
     R = C = max(n, m, k)
     mats = np.zeros((7, R, C))
@@ -544,21 +584,29 @@ def pack(A, T, perm, starts, gammas, final, Wu, diag, up, B, P0, umin, umax, rat
                  (_CONST, [vmax, rtol])):
         x = np.asarray(x, dtype=float)
         vecs[i, :len(x)] = x
-    ivecs = np.zeros((_TABLE, max(m, n, nlev + 1, words + 1, 10)), dtype=np.int64)
-    ivecs[_HEAD, :10] = [n, m, k, nlev, int(final), int(diag), int(maxit), words, int(Kv is not None),
-                         int(WARM_START)]
+    # the widest equality block and level block any level factorises on its own (the final
+    # level of a one-level problem reads level 0's: see _level); a slot holds exactly these
+    share = nlev == 1 and int(starts[0]) == 0
+    own = [(int(starts[lv]), int(starts[lv + 1]) - int(starts[lv])) for lv in range(nlev)]
+    if final and not share:
+        own.append((n, 0))
+    ncw = max(1, max(nc for nc, _ in own))
+    nlw = max(1, max(nl for _, nl in own))
+    ivecs = np.zeros((_TABLE, max(m, n, nlev + 1, words + 1, 12)), dtype=np.int64)
+    ivecs[_HEAD, :12] = [n, m, k, nlev, int(final), int(diag), int(maxit), words, int(Kv is not None),
+                         int(WARM_START), ncw, nlw]
     ivecs[_PERM, :n] = perm
     ivecs[_STARTS, :nlev + 1] = starts
-    ivecs[_MISC, 0] = 1  # the next free cache slot (slot 0 is scratch)
-    R2 = max(m, nw, 2)
+    ivecs[_MISC, _NEXT_SLOT] = 1  # the next free cache slot (slot 0 is scratch)
     mL = 1 if diag else m  # a diagonal L is stored as its column of pivots
-    cap = int(max(4, min(CACHE_ENTRIES, CACHE_FLOATS // (m * mL + 5 * R2 * nw) - 1)))
+    slot = m * ncw + ncw * ncw + ncw + m * nlw + nlw * nlw + nlw  # see _slot
+    cap = int(max(4, min(CACHE_ENTRIES, CACHE_FLOATS // (m * mL + slot) - 1)))
     # written once here so that every page is resident: a first-seen free set's factorisation
     # then never takes a page fault on the call path (measured: 15-18 % off the first-pass p99
     # of random ICE demands; real-time code pre-faults its memory for the same reason)
     bankL = np.empty((cap + 1, m, mL))
     bankL.fill(0.0)
-    bank = np.empty((cap + 1, 5, R2, nw))
+    bank = np.empty((cap + 1, slot))
     bank.fill(0.0)
     size = 1 << int(2 * (cap + 1) - 1).bit_length()  # a power of two, at most half full
     table = np.zeros((size, ivecs.shape[1]), dtype=np.int64)
@@ -625,8 +673,8 @@ def _run(mats, vecs, ivecs, bankL, bank, v, ilo, ihi, iup):  # pragma: no cover 
         dv = max(dv, abs(v[i] - vecs[_VLAST, i]))
         scale = max(scale, abs(v[i]), abs(vecs[_VLAST, i]))
         vecs[_VLAST, i] = v[i]
-    warm = ivecs[_MISC, 1] != 0 and ivecs[_HEAD, _WARM] != 0 and dv <= WARM_STEP * scale
-    ivecs[_MISC, 1] = 0
+    warm = ivecs[_MISC, _WARM_OK] != 0 and ivecs[_HEAD, _WARM] != 0 and dv <= WARM_STEP * scale
+    ivecs[_MISC, _WARM_OK] = 0
     while True:
         _start(mats, vecs, ivecs, v, ilo, ihi, iup, warm, m, k)
         for j in range(m):
@@ -651,7 +699,7 @@ def _run(mats, vecs, ivecs, bankL, bank, v, ilo, ihi, iup):  # pragma: no cover 
         for j in range(m):
             vecs[_UWARM, j] = vecs[_U, j]
             ivecs[_WSTATE, j] = 0 if ivecs[_FREE, j] else (-1 if vecs[_U, j] <= vecs[ilo, j] else 1)
-        ivecs[_MISC, 1] = 1
+        ivecs[_MISC, _WARM_OK] = 1
     return total, ok
 
 
