@@ -271,8 +271,8 @@ def _factor(A, r0, r1, Wu, diag, F, nf, L, Yc, Vc, sc, Ya, Va, sa):  # pragma: n
 def _factors(mats, ivecs, bankL, bank, r0, r1, lev, diag, nf, m):  # pragma: no cover - compiled
     """The cache slot holding the factorisation of the current free set (``_factor``'s
     ``L = bankL[s]``, the rest :func:`_slot` of ``bank[s]``): looked up, else computed (and
-    kept while the cache has room; past that, computed into the scratch slot 0).  Cached and recomputed factors are bitwise equal, so the cache
-    never changes an answer, only its cost.  The hash table (rows ``_TABLE:`` of ``ivecs``)
+    kept while the cache has room; past that, computed into the scratch slot 0).  Cached and
+    recomputed factors are bitwise equal, so the cache never changes an answer, only its cost.  The hash table (rows ``_TABLE:`` of ``ivecs``)
     is open addressing as in :func:`alloc._kernels._probe`.
     """
     words = ivecs[_HEAD, _WORDS]
@@ -311,18 +311,27 @@ def _factors(mats, ivecs, bankL, bank, r0, r1, lev, diag, nf, m):  # pragma: no 
 
 
 @njit(cache=True, nogil=True, inline="always")
+def _slot_offsets(m, ncw, nlw):  # pragma: no cover - compiled
+    """Where a cache slot's blocks start, packed end to end: ``Yc`` (m x ncw) at 0, then
+    ``Vc`` (ncw x ncw), ``sc`` (ncw), ``Ya`` (m x nlw), ``Va`` (nlw x nlw), ``sa`` (nlw), each
+    row-major; ``ncw`` and ``nlw`` are the most equality rows and level rows a level
+    factorises on its own (:func:`pack`).  Returns the starts of ``Vc, sc, Ya, Va, sa`` and
+    the slot's length."""
+    oVc = m * ncw
+    osc = oVc + ncw * ncw
+    oYa = osc + ncw
+    oVa = oYa + m * nlw
+    osa = oVa + nlw * nlw
+    return oVc, osc, oYa, oVa, osa, osa + nlw
+
+
+@njit(cache=True, nogil=True, inline="always")
 def _slot(bank, s, m, ncw, nlw):  # pragma: no cover - compiled
-    """Views of cache slot ``s``, packed end to end in ``bank[s]``: ``Yc`` (m x ncw), ``Vc``
-    (ncw x ncw), ``sc`` (ncw), ``Ya`` (m x nlw), ``Va`` (nlw x nlw), ``sa`` (nlw); ``ncw`` and
-    ``nlw`` are the most equality rows and level rows a level factorises (:func:`pack`)."""
+    """The blocks of cache slot ``s`` (:func:`_slot_offsets`) as views, for :func:`_factor`."""
     E = bank[s]
-    a = m * ncw
-    b = a + ncw * ncw
-    c = b + ncw
-    d = c + m * nlw
-    e = d + nlw * nlw
-    return (E[:a].reshape((m, ncw)), E[a:b].reshape((ncw, ncw)), E[b:c],
-            E[c:d].reshape((m, nlw)), E[d:e].reshape((nlw, nlw)), E[e:e + nlw])
+    oVc, osc, oYa, oVa, osa, end = _slot_offsets(m, ncw, nlw)
+    return (E[:oVc].reshape((m, ncw)), E[oVc:osc].reshape((ncw, ncw)), E[osc:oYa],
+            E[oYa:oVa].reshape((m, nlw)), E[oVa:osa].reshape((nlw, nlw)), E[osa:end])
 
 
 @njit(cache=True, nogil=True, _nrt=False)
@@ -338,8 +347,7 @@ def _level(mats, vecs, ivecs, bankL, bank, r0, r1, lev, gam, diag, iup, ilo, ihi
     frees effectors that cannot move.  An effector freed and then blocked by a zero step
     (a degenerate multiplier) is not freed again until the iterate moves.  Everything is
     addressed by row in the stacked arrays of :func:`pack` (``up``, ``lo``, ``hi`` are the
-    rows ``iup``, ``ilo``, ``ihi`` of ``vecs``; the cache slot's factors are views, which cost
-    nothing without reference counting): no allocation.  With ``refine``
+    rows ``iup``, ``ilo``, ``ihi`` of ``vecs``; the cache slot is indexed flat): no allocation.  With ``refine``
     (a warm start: the iterate came from another demand) a full step is followed by one
     more step on the same working set before the multipliers are tested (iterative
     refinement: the answer is then as exact as from the cold start).  Returns the
@@ -354,16 +362,12 @@ def _level(mats, vecs, ivecs, bankL, bank, r0, r1, lev, gam, diag, iup, ilo, ihi
                                           vecs[_SCALE], vecs[_LAM])
     up, lo, hi = vecs[iup], vecs[ilo], vecs[ihi]
     free, fidx, tabu, pinned = ivecs[_FREE], ivecs[_FIDX], ivecs[_TABU], ivecs[_PINNED]
-    # the factors in a slot ``E = bank[slot]`` (the layout of :func:`_slot`), indexed flat:
-    # ``Yc`` row q, column c at ``oYc + q * wc + c``, ``Vc`` likewise from ``oVc``, ``sc`` from
+    # the factors in a slot ``E = bank[slot]`` (:func:`_slot_offsets`), indexed flat: ``Yc``
+    # row q, column c at ``oYc + q * wc + c``, ``Vc`` likewise from ``oVc``, ``sc`` from
     # ``osc``; ``Ya, Va, sa`` from ``oYa, oVa, osa`` with width ``nlw`` (2-d views made per
     # iteration cost more than they save: 14 % on an ICE batch row)
     ncw, nlw = ivecs[_HEAD, _NCW], ivecs[_HEAD, _NLW]
-    oVc = m * ncw
-    osc = oVc + ncw * ncw
-    oYa = osc + ncw
-    oVa = oYa + m * nlw
-    osa = oVa + nlw * nlw
+    oVc, osc, oYa, oVa, osa, _end = _slot_offsets(m, ncw, nlw)
     oYc, wc = 0, ncw
     # The final level of a one-level problem (stage 2 of ``qp`` and ``dynamic``) holds the
     # rows of level 0 as its equalities: its factorisation of a free set is level 0's (the
@@ -599,7 +603,7 @@ def pack(A, T, perm, starts, gammas, final, Wu, diag, up, B, P0, umin, umax, rat
     ivecs[_STARTS, :nlev + 1] = starts
     ivecs[_MISC, _NEXT_SLOT] = 1  # the next free cache slot (slot 0 is scratch)
     mL = 1 if diag else m  # a diagonal L is stored as its column of pivots
-    slot = m * ncw + ncw * ncw + ncw + m * nlw + nlw * nlw + nlw  # see _slot
+    slot = _slot_offsets(m, ncw, nlw)[5]
     cap = int(max(4, min(CACHE_ENTRIES, CACHE_FLOATS // (m * mL + slot) - 1)))
     # written once here so that every page is resident: a first-seen free set's factorisation
     # then never takes a page fault on the call path (measured: 15-18 % off the first-pass p99
