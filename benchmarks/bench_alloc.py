@@ -150,14 +150,15 @@ def tail_rows(p: alloc.Problem, V: np.ndarray, names: tuple[str, ...] = ("qp", "
     run's p99/median, and p99/median of the per-call minima.  What the slowest 1 % of calls do
     is counted on one more allocator warmed the same way (untimed): their median active-set
     iterations and free sets factorised (cache misses: first seen, or not kept once the cache
-    is full), against the median call's.  Warm-up: the first ``warm`` demands of ``V`` (a first pass: the cache has met
-    almost none of ``V``'s free sets), or with ``prior`` every demand of ``prior`` (other
-    demands from the same distribution: a long-lived allocator meeting new demands)."""
+    is full), against the median call's.  Warm-up: the first ``warm`` demands of ``V`` (a first
+    pass: the cache has met almost none of ``V``'s free sets), or with ``prior`` every demand
+    of ``prior`` (other demands from the same distribution: a long-lived allocator meeting new
+    demands)."""
     from alloc._active_set import _FACTORED, _MISC
 
     warmup = V[:warm] if prior is None else prior
 
-    def fresh():
+    def fresh(name: str) -> alloc.Allocator:
         f = alloc.make_allocator(p, name)
         for v in warmup:
             f(v)
@@ -165,16 +166,16 @@ def tail_rows(p: alloc.Problem, V: np.ndarray, names: tuple[str, ...] = ("qp", "
 
     rows = []
     for name in names:
-        T = np.array([timed(fresh(), V) for _ in range(runs)])
+        T = np.array([timed(fresh(name), V) for _ in range(runs)])
         per_run = [float(np.percentile(t, 99) / np.median(t)) for t in T]
         best = T.min(axis=0)
-        f = fresh()
+        f = fresh(name)
         ivecs = f._packed[1][2]  # the solver's int state; ivecs[_MISC, _FACTORED] counts factorisations
-        its, new = np.empty(len(V)), np.empty(len(V))
+        its, factored = np.empty(len(V)), np.empty(len(V))
         for i, v in enumerate(V):
             before = int(ivecs[_MISC, _FACTORED])
             its[i] = f(v).iterations
-            new[i] = int(ivecs[_MISC, _FACTORED]) - before
+            factored[i] = int(ivecs[_MISC, _FACTORED]) - before
         slow = best >= np.percentile(best, 99)
         rows.append(dict(method=name, runs=runs, prior=0 if prior is None else len(prior),
                          median_us=float(np.median(best)),
@@ -182,7 +183,8 @@ def tail_rows(p: alloc.Problem, V: np.ndarray, names: tuple[str, ...] = ("qp", "
                          ratio_min=float(np.percentile(best, 99) / np.median(best)),
                          ratio_runs=float(np.median(per_run)),
                          iterations_median=float(np.median(its)), iterations_slowest=float(np.median(its[slow])),
-                         new_sets_median=float(np.median(new)), new_sets_slowest=float(np.median(new[slow])), new_sets_total=int(new.sum())))
+                         factored_median=float(np.median(factored)), factored_slowest=float(np.median(factored[slow])),
+                         factored_total=int(factored.sum())))
     return rows
 
 
@@ -192,8 +194,8 @@ def print_tail(rows: list[dict]) -> None:
           "|---|---|---|---|---|---|---|")
     for r in rows:
         print(f"| {r['method']} | {r['median_us']:.2f} | {r['p99_us']:.1f} | {r['ratio_min']:.2f} | {r['ratio_runs']:.2f} "
-              f"| {r['iterations_median']:.0f}, {r['iterations_slowest']:.0f} | {r['new_sets_median']:.0f}, "
-              f"{r['new_sets_slowest']:.0f}, {r['new_sets_total']} |")
+              f"| {r['iterations_median']:.0f}, {r['iterations_slowest']:.0f} | {r['factored_median']:.0f}, "
+              f"{r['factored_slowest']:.0f}, {r['factored_total']} |")
 
 
 def print_rows(title: str, rows: list[dict]) -> None:
@@ -390,8 +392,8 @@ def markdown(out: dict) -> str:
     def tail_lines(rows):
         return [f"| `{r['method']}` | {r['median_us']:.2f} | {r['p99_us']:.1f} | {r['ratio_min']:.2f} | "
                 f"{r['ratio_runs']:.2f} | {r.get('iterations_median', nan):.0f}, {r.get('iterations_slowest', nan):.0f} | "
-                f"{r.get('new_sets_median', nan):.0f}, {r.get('new_sets_slowest', nan):.0f}, "
-                f"{r.get('new_sets_total', '-')} |" for r in rows]
+                f"{r.get('factored_median', nan):.0f}, {r.get('factored_slowest', nan):.0f}, "
+                f"{r.get('factored_total', '-')} |" for r in rows]
 
     if out.get("tail"):
         lines += ["", f"First-pass tail on ICE random demands: {out['tail'][0].get('runs', 5)} fresh allocators time the "

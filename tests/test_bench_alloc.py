@@ -73,7 +73,7 @@ def test_tail_rows_prior_and_markdown():
     first = tail_rows(p, V, names=("wls",), runs=2)
     lived = tail_rows(p, V, names=("wls",), runs=2, prior=random_sequence(p, 3000, seed=1))
     assert first[0]["prior"] == 0 and lived[0]["prior"] == 3000
-    assert lived[0]["new_sets_total"] < first[0]["new_sets_total"]
+    assert lived[0]["factored_total"] < first[0]["factored_total"]
     for r in first + lived:
         assert np.isfinite([r["median_us"], r["p99_us"], r["ratio_min"], r["ratio_runs"]]).all()
     out = {"latency": {}, "tail": first, "tail_long_lived": lived,
