@@ -48,6 +48,6 @@ for command in ("methods", "allocate", "ams", "sim", "serve", "bench"):
 for command, extra in (("serve", "service"), ("sim", "sim")):
     run = subprocess.run([exe, command, "--port", "1"] if command == "serve" else [exe, command, "ice"],
                          capture_output=True, text=True, env={**os.environ, "COLUMNS": "200"})
-    assert run.returncode == 2 and f"alloc[{extra}]" in run.stderr, (command, run.returncode, run.stderr)
+    assert run.returncode == 2 and f"alloc-toolkit[{extra}]" in run.stderr, (command, run.returncode, run.stderr)
 print("core install: `alloc serve` and `alloc sim` name their extras")
 sys.exit(0)

@@ -54,6 +54,9 @@ __all__ = [
     "methods", "method_info", "register",
     "AllocError", "ProblemError", "DemandError", "OptionError", "UnknownMethodError", "SolverError",
 ]
+#: the name this project is published under (``pip install alloc-toolkit``); ``alloc`` on the
+#: public index is an unrelated project.  The import name and the command stay ``alloc``.
+DISTRIBUTION = "alloc-toolkit"
 #: the one definition of the version (pyproject.toml reads it: ``[tool.setuptools.dynamic]``)
 __version__ = "0.1.0"
 

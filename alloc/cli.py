@@ -24,6 +24,7 @@ import typer
 from typer.core import TyperCommand, TyperGroup
 
 import alloc
+from alloc import DISTRIBUTION
 
 #: entry-point group through which other packages add sub-commands to ``alloc``
 COMMAND_GROUP = "alloc.commands"
@@ -134,7 +135,7 @@ class PluginGroup(TyperGroup):
         name = args[0] if args else None
         ep = command_entry_points().get(name) if name not in self.commands else None
         if ep is not None:
-            hint = f"install the extra: pip install 'alloc[{','.join(ep.extras) or name}]'"
+            hint = f"install the extra: pip install '{DISTRIBUTION}[{','.join(ep.extras) or name}]'"
             missing = missing_requirements(ep)
             if missing:
                 ctx.fail(f"`alloc {name}` needs {', '.join(missing)}, not installed; {hint}")
