@@ -81,8 +81,14 @@ def _affine_map(impl: Any, problem: Problem) -> tuple[FloatArray, FloatArray] | 
     if affine is None:
         return None
     c, P = affine
-    if np.abs(problem.B @ P - np.eye(problem.k)).max() > 1e-9:
-        return None  # B P != I: exact only on a lower-dimensional set -> estimate instead
+    # B (c + P v) = v for every v needs B P = I and B c = 0 (an offset that B does not cancel,
+    # e.g. a preferred position added without its moment, is exact nowhere); otherwise the
+    # exact set is lower-dimensional or empty -> estimate by sampling instead
+    B = problem.B
+    if np.abs(B @ P - np.eye(problem.k)).max() > 1e-9:
+        return None
+    if np.abs(B @ c).max() > 1e-9 * max(1.0, float((np.abs(B) @ np.abs(c)).max())):
+        return None
     return c, P
 
 

@@ -14,13 +14,15 @@ from .pseudo_inverse import distribution_matrix
 
 @register("ganging", affine=True, supports_batch=True)
 class Ganging(Method):
-    """``u = up + G v`` clipped to the limits.
+    """``u = up + G (v - B up)`` clipped to the limits.
 
     ``G`` (m x k) is the user's static distribution matrix, e.g. the seed's Eq 4.19
     for the F-18/HARV lateral-directional model.  Without ``G`` the design-time
     pseudo-inverse of Eq 1.23 is frozen as the gang (as the seed does for ICE, Eq 4.24).
-    The bias ``up`` is added so that ``G`` acts on increments about the preferred
-    position (``up = 0`` for surfaces whose limits contain zero).
+    ``G`` acts on the demand's increment about what the preferred position already
+    produces, ``B up``: with ``B G = I`` the command meets ``B u = v`` wherever it is
+    admissible, for any ``up`` (hover thrust, mid-range surfaces).  The map is affine,
+    ``u = c + G v`` with ``c = up - G B up``.
     """
 
     equation = "section 1.3.4.1"
@@ -37,11 +39,12 @@ class Ganging(Method):
                 raise ProblemError(f"G: expected shape ({problem.m}, {problem.k}), got {G_arr.shape}")
             check_magnitude("G", G_arr)  # the valid input domain, as for B
         self.G = G_arr
-        self._up, self._G = np.array(problem.up), np.ascontiguousarray(G_arr)
-        self.fused = (self._up, self._G)
+        self._G = np.ascontiguousarray(G_arr)
+        self._c = problem.up - self._G @ (problem.B @ problem.up)
+        self.fused = (self._c, self._G)
 
     def solve(self, v, lo, hi, u_prev):
-        return affine(self.problem.up, self.G, v), 0  # clipped by the allocator
+        return affine(self._c, self._G, v), 0  # clipped by the allocator
 
     def solve_batch(self, V, lo, hi):
-        return affine_clip_batch(self._up, self._G, np.ascontiguousarray(V), lo, hi)
+        return affine_clip_batch(self._c, self._G, np.ascontiguousarray(V), lo, hi)
