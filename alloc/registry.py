@@ -20,13 +20,16 @@ from .exceptions import UnknownMethodError
 from .options import Option, validate
 from .problem import Problem
 
-__all__ = ["Method", "register", "get_method", "methods", "method_info"]
+__all__ = ["Method", "register", "get_method", "methods", "method_info", "DEFAULT_METHOD"]
 
 FloatArray = NDArray[np.float64]
 
 _REGISTRY: dict[str, type[Method]] = {}
 #: seconds: the declared build cost of a method that enumerates nothing (:meth:`Method.build_cost`)
 CHEAP_BUILD_SECONDS = 1e-3
+#: the method used wherever none is named (library, command line, HTTP): ``qp`` meets every
+#: attainable demand exactly (seed Eqs 1.20-1.21), which the pseudo-inverse family (Eq 1.23) does not
+DEFAULT_METHOD = "qp"
 
 
 class Method(ABC):
