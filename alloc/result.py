@@ -12,7 +12,9 @@ from numpy.typing import NDArray
 
 __all__ = ["Status", "Result", "BatchResult", "EXACT_RTOL"]
 
-#: Relative tolerance of the ``exact`` status: ``max|B u - v| <= EXACT_RTOL * max(1, max|v|)``.
+#: Relative tolerance of the ``exact`` status: the residual in exact arithmetic is certified
+#: within it, ``max_i (|fl(B u - v)_i| + gamma_{m+1} (|B| |u| + |v|)_i) <= EXACT_RTOL * max(1, max|v|)``
+#: (the computed residual plus its rounding bound, :func:`alloc._kernels.rounding_gamma`).
 EXACT_RTOL = 1e-6
 
 
@@ -20,7 +22,8 @@ class Status(str, Enum):
     """Outcome of one allocation (a closed set).
 
     ``exact``
-        ``B u = v`` within ``EXACT_RTOL``.
+        ``B u = v`` within ``EXACT_RTOL``, certified: the computed residual plus its
+        rounding bound is within the tolerance (:data:`EXACT_RTOL`).
     ``unattainable``
         ``v`` lies outside what the method reaches with admissible ``u``; ``u`` is the
         method's best admissible answer and ``v - B u`` is reported as ``unallocated``.
