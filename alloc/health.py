@@ -30,7 +30,6 @@ they are never "told" to an allocator.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from enum import Enum
@@ -39,6 +38,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .exceptions import ProblemError
+from .problem import as_real, short_repr
 
 if TYPE_CHECKING:
     from .problem import Problem
@@ -93,15 +93,12 @@ class FailureEvent:
         for name in need:
             if getattr(self, name) is None:
                 raise ProblemError(f"{name}: required for a {self.kind.value!r} failure")
+        if isinstance(self.effector, (bool, np.bool_)) or not isinstance(self.effector, (int, np.integer, str)):
+            raise ProblemError(f"effector: expected an index or a name, got {short_repr(self.effector)}")
         for name in ("position", "fraction", "lo", "hi", "rate_min", "rate_max"):
             value = getattr(self, name)
-            if value is None:
-                continue
-            if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
-                raise ProblemError(f"{name}: expected a number, got {value!r}")
-            if not math.isfinite(float(value)):
-                raise ProblemError(f"{name}: must be finite, got {value!r}")
-            object.__setattr__(self, name, float(value))
+            if value is not None:
+                object.__setattr__(self, name, as_real(name, value))
 
 
 @dataclass(frozen=True, slots=True)
@@ -113,6 +110,34 @@ class EffectorHealth:
     effectiveness: float = 1.0
     limits: tuple[float, float] | None = None
     rate_limits: tuple[float, float] | None = None
+
+    def __post_init__(self) -> None:
+        """Each field checked and normalised (floats, tuples); ProblemError naming it otherwise.
+
+        Only what needs no problem is checked here (types, ``effectiveness`` in [0, 1],
+        ordered limits, ``rate_min <= 0 <= rate_max``); positions against the nominal limits
+        are :func:`apply_health`'s to check.
+        """
+        setter = object.__setattr__
+        if self.jam_position is not None:
+            setter(self, "jam_position", as_real("jam_position", self.jam_position))
+        if not isinstance(self.floating, (bool, np.bool_)):
+            raise ProblemError(f"floating: expected true or false, got {short_repr(self.floating)}")
+        setter(self, "floating", bool(self.floating))
+        eff = as_real("effectiveness", self.effectiveness)
+        if not 0.0 <= eff <= 1.0:
+            raise ProblemError(f"effectiveness: {eff:g} must be in [0, 1]")
+        setter(self, "effectiveness", eff)
+        if self.limits is not None:
+            lo, hi = _pair("limits", self.limits)
+            if lo > hi:
+                raise ProblemError(f"limits: [{lo:g}, {hi:g}] is not an ordered interval")
+            setter(self, "limits", (lo, hi))
+        if self.rate_limits is not None:
+            rmin, rmax = _pair("rate_limits", self.rate_limits)
+            if rmin > 0.0 or rmax < 0.0:
+                raise ProblemError(f"rate_limits: [{rmin:g}, {rmax:g}] must satisfy rate_min <= 0 <= rate_max")
+            setter(self, "rate_limits", (rmin, rmax))
 
     @property
     def status(self) -> str:
@@ -135,15 +160,23 @@ class EffectorHealth:
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> EffectorHealth:
-        """Inverse of :meth:`to_dict`."""
-        lim, rl = data.get("limits"), data.get("rate_limits")
-        jam = data.get("jam_position")
-        return cls(
-            jam_position=None if jam is None else float(jam), floating=bool(data.get("floating", False)),
-            effectiveness=float(data.get("effectiveness", 1.0)),
-            limits=None if lim is None else (float(lim[0]), float(lim[1])),
-            rate_limits=None if rl is None else (float(rl[0]), float(rl[1])),
-        )
+        """Inverse of :meth:`to_dict`; strict (see :data:`EFFECTOR_HEALTH_SCHEMA`): unknown
+        keys, text for numbers and anything but ``true``/``false`` for ``floating`` raise
+        ProblemError naming the field."""
+        if not isinstance(data, Mapping):
+            raise ProblemError(f"health: an effector's health must be an object, got {short_repr(data)}")
+        unknown = sorted(set(data) - set(EFFECTOR_HEALTH_SCHEMA["properties"]), key=str)
+        if unknown:
+            known = ", ".join(EFFECTOR_HEALTH_SCHEMA["properties"])
+            raise ProblemError(f"health: unknown field(s) {unknown}; accepted: {known}")
+        return cls(**data)
+
+
+def _pair(name: str, value: Any) -> tuple[float, float]:
+    """``[a, b]`` as two floats (each a real number in the domain), or ProblemError naming ``name``."""
+    if isinstance(value, (str, bytes, Mapping)) or not hasattr(value, "__len__") or len(value) != 2:
+        raise ProblemError(f"{name}: expected a pair [lo, hi], got {short_repr(value)}")
+    return as_real(name, value[0]), as_real(name, value[1])
 
 
 HEALTHY = EffectorHealth()
@@ -177,6 +210,9 @@ def apply_event(nominal: Problem, health: Mapping[str, EffectorHealth], event: F
         unknown effector, or a value outside the nominal limits (jam position, reduced
         limits, rate limits) or an effectiveness outside [0, 1]; the message names the field.
     """
+    if not isinstance(event, FailureEvent):
+        raise ProblemError(f"event: expected an alloc.health.FailureEvent, got {type(event).__name__}")
+    health = _checked_health(health)
     i = nominal.index(event.effector)
     name = nominal.names[i]
     lo0, hi0 = float(nominal.umin[i]), float(nominal.umax[i])
@@ -224,14 +260,28 @@ def apply_event(nominal: Problem, health: Mapping[str, EffectorHealth], event: F
     return name, out
 
 
+def _checked_health(health: Any) -> Mapping[Any, EffectorHealth]:
+    """``health`` if it maps effectors to :class:`EffectorHealth`; ProblemError naming it otherwise."""
+    if not isinstance(health, Mapping):
+        raise ProblemError(f"health: expected a mapping of effector to EffectorHealth, got {type(health).__name__}")
+    for key, h in health.items():
+        if not isinstance(h, EffectorHealth):
+            raise ProblemError(f"health: the health of {short_repr(key)} must be an alloc.health.EffectorHealth, "
+                               f"got {type(h).__name__}")
+    return health
+
+
 def apply_health(nominal: Problem, health: Mapping[int | str, EffectorHealth]) -> Problem:
     """The problem of a vehicle at ``health`` (``nominal`` itself when all are healthy).
 
     Keys are effector names or indices.  See the module docstring for each kind's meaning.
+    Reduced position and rate limits act within the nominal ones (their intersection: a
+    failure never widens a limit); reduced limits that do not meet the nominal ones, or a
+    jam outside them, raise ProblemError.
     """
     p = nominal
     rate_min, rate_max = nominal.rate_min.copy(), nominal.rate_max.copy()
-    for key, h in health.items():
+    for key, h in _checked_health(health).items():
         i = nominal.index(key)
         if h.effectiveness != 1.0 or h.floating:
             p = p.with_effectiveness(i, 0.0 if h.floating else h.effectiveness)
@@ -240,9 +290,15 @@ def apply_health(nominal: Problem, health: Mapping[int | str, EffectorHealth]) -
         elif h.jam_position is not None:
             p = p.with_jam(i, h.jam_position)
         elif h.limits is not None:
-            p = p.with_limits(i, *h.limits)
-        if h.rate_limits is not None:
-            rate_min[i], rate_max[i] = h.rate_limits
+            lo0, hi0 = float(nominal.umin[i]), float(nominal.umax[i])
+            lo, hi = max(h.limits[0], lo0), min(h.limits[1], hi0)
+            if lo > hi:
+                raise ProblemError(f"limits: reduced limits [{h.limits[0]:g}, {h.limits[1]:g}] of "
+                                   f"{nominal.names[i]!r} do not meet its nominal limits [{lo0:g}, {hi0:g}]")
+            p = p.with_limits(i, lo, hi)
+        if h.rate_limits is not None:  # rate_min <= 0 <= rate_max on both sides: never empty
+            rate_min[i] = max(h.rate_limits[0], nominal.rate_min[i])
+            rate_max[i] = min(h.rate_limits[1], nominal.rate_max[i])
     if not (np.array_equal(rate_min, p.rate_min) and np.array_equal(rate_max, p.rate_max)):
         p = p.replace(rate_min=rate_min, rate_max=rate_max)
     return p
@@ -254,5 +310,17 @@ def health_to_dict(health: Mapping[str, EffectorHealth]) -> dict[str, Any]:
 
 
 def health_from_dict(data: Mapping[str, Any] | None) -> Health:
-    """Inverse of :func:`health_to_dict`."""
-    return {name: EffectorHealth.from_dict(h) for name, h in (data or {}).items()}
+    """Inverse of :func:`health_to_dict`; ProblemError naming the field for anything else."""
+    if data is None:
+        return {}
+    if not isinstance(data, Mapping):
+        raise ProblemError(f"health: expected an object of effector name to health, got {type(data).__name__}")
+    out = {}
+    for name, h in data.items():
+        if not isinstance(name, str):
+            raise ProblemError(f"health: effector names must be strings, got {short_repr(name)}")
+        try:
+            out[name] = EffectorHealth.from_dict(h)
+        except ProblemError as exc:
+            raise ProblemError(f"{exc} (effector {name!r})", field=exc.field) from None
+    return out

@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from .exceptions import OptionError
+from .problem import MAX_MAGNITUDE, as_float_array, short_repr
 
 __all__ = ["Option", "real", "integer", "flag", "choice", "matrix", "weight", "levels", "groups", "validate"]
 
@@ -84,9 +85,17 @@ def real(default: float | None, doc: str, *, low: float = -math.inf, high: float
     constraint = f"{lo_b}{low:g}, {high:g}{hi_b}" if bounded else "finite"
 
     def check(value: Any) -> float:
-        if not _is_real(value) or not math.isfinite(float(value)):
+        if not _is_real(value):
             raise ValueError("must be a finite number")
-        x = float(value)
+        try:
+            x = float(value)
+        except OverflowError:  # a big Python integer
+            x = math.inf if value > 0 else -math.inf
+        if not math.isfinite(x):
+            raise ValueError("must be a finite number" + ("" if isinstance(value, float) else
+                                                          f" with |x| <= {MAX_MAGNITUDE:g}"))
+        if abs(x) > MAX_MAGNITUDE:
+            raise ValueError(f"must be a finite number with |x| <= {MAX_MAGNITUDE:g}")
         if x < low or x > high or (low_open and x == low) or (high_open and x == high):
             raise ValueError(f"must be in {constraint}")
         return x
@@ -137,42 +146,43 @@ def choice(default: str, doc: str, choices: Sequence[str] | Callable[[], Sequenc
     return Option("str", default, doc, check, constraint)
 
 
+def _numeric(value: Any) -> np.ndarray:
+    """``value`` as a float array within the valid domain, or ``ValueError`` with the reason
+    (complex, boolean or text elements, big integers, non-finite or huge values)."""
+    try:
+        arr = as_float_array("value", value, ValueError)
+    except ValueError as exc:
+        raise ValueError(str(exc).removeprefix("value: ")) from None
+    if not (np.abs(arr) <= MAX_MAGNITUDE).all():
+        raise ValueError(f"must have finite entries with |x| <= {MAX_MAGNITUDE:g}")
+    return arr
+
+
 def matrix(doc: str) -> Option:
-    """A finite numeric 2-D array (default ``None``); its shape is the method's to check."""
+    """A finite numeric 2-D array in the valid domain (default ``None``); its shape is the
+    method's to check."""
 
     def check(value: Any) -> Any:
         if value is None:
             return None
-        try:
-            arr = np.asarray(value, dtype=float)
-        except (TypeError, ValueError):
-            raise ValueError("must be a numeric matrix") from None
+        arr = _numeric(value)
         if arr.ndim != 2:
             raise ValueError(f"must be a matrix (2-D), got {arr.ndim}-D")
-        if not np.isfinite(arr).all():
-            raise ValueError("must have finite entries")
         return value
 
-    return Option("matrix", None, doc, check, "finite 2-D array")
+    return Option("matrix", None, doc, check, f"finite 2-D array, |x| <= {MAX_MAGNITUDE:g}")
 
 
 def weight(doc: str) -> Option:
     """A finite weight given as a scalar, a vector (a diagonal) or a matrix (default ``None``);
-    its size is the method's to check."""
+    its size and range are the method's to check."""
 
     def check(value: Any) -> Any:
         if value is None:
             return None
-        if isinstance(value, (bool, str)):
-            raise ValueError("must be a number, vector or matrix")
-        try:
-            arr = np.asarray(value, dtype=float)
-        except (TypeError, ValueError, OverflowError):
-            raise ValueError("must be a number, vector or matrix") from None
+        arr = _numeric(value)
         if arr.ndim > 2:
             raise ValueError(f"must be a scalar, vector or matrix, got {arr.ndim}-D")
-        if not np.isfinite(arr).all():
-            raise ValueError("must have finite entries")
         return value
 
     return Option("weight", None, doc, check, "finite scalar, vector or matrix")
@@ -239,5 +249,5 @@ def validate(method: str, spec: dict[str, Option], given: dict[str, Any]) -> dic
         try:
             out[name] = spec[name].check(value)
         except ValueError as exc:
-            raise OptionError(f"{name}: {exc}, got {value!r}", field=name) from None
+            raise OptionError(f"{name}: {exc}, got {short_repr(value)}", field=name) from None
     return out

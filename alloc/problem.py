@@ -10,7 +10,9 @@ preference cost is ``(u - up)' Wu (u - up)`` and the moment-error cost is
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
+from numbers import Real
 from typing import Any
 
 import numpy as np
@@ -39,17 +41,62 @@ MAX_AXES = 32
 MAX_EFFECTORS = 512
 
 
-def as_float_array(name: str, value: Any, error: type[Exception] = ProblemError, *,
-                 none_as: float | None = None) -> FloatArray:
-    """``value`` as a new float array, or ``error`` naming ``name`` (ragged, text, big ints).
+#: Array kinds refused as numbers, by numpy dtype kind: a complex value would lose its
+#: imaginary part, a boolean or a text would be read as a number it is not.
+_NOT_REAL = {"c": "complex", "b": "boolean", "U": "text", "S": "text", "M": "datetime", "m": "timedelta",
+             "V": "structured"}
 
-    With ``none_as`` a ``None`` element (JSON ``null``) stands for that value.
+
+def _not_real(value: Any) -> str | None:
+    """What the first element of ``value`` that is not a real number is, or ``None``.
+
+    Walks nested lists and tuples (and object arrays) without recursion; a numeric array
+    inside is judged by its dtype.  Python ``bool`` is refused although it is an ``int``:
+    ``True`` as an effectiveness or a limit is a caller's mistake, never a number.
+    """
+    stack = [value]
+    while stack:
+        x = stack.pop()
+        if isinstance(x, (list, tuple)):
+            stack.extend(x)
+        elif isinstance(x, np.ndarray):
+            if x.dtype.kind == "O":
+                stack.extend(x.ravel().tolist())
+            elif x.dtype.kind in _NOT_REAL:
+                return _NOT_REAL[x.dtype.kind]
+        elif isinstance(x, (bool, np.bool_)):
+            return "boolean"
+        elif isinstance(x, Real):
+            continue
+        elif isinstance(x, (complex, np.complexfloating)):
+            return "complex"
+        elif isinstance(x, (str, bytes)):
+            return "text"
+        else:
+            return "null" if x is None else type(x).__name__
+    return None
+
+
+def as_float_array(name: str, value: Any, error: type[Exception] = ProblemError, *,
+                   none_as: float | None = None) -> FloatArray:
+    """``value`` as a new float array, or ``error`` naming ``name``.
+
+    Refused, each with its reason: ragged or deeply nested sequences; elements that are not
+    real numbers (complex -- whose imaginary part a cast would drop --, boolean, text,
+    ``None``); Python integers too large for a float.  With ``none_as`` a ``None`` element
+    (JSON ``null``) stands for that value.
     """
     if none_as is not None and not isinstance(value, np.ndarray) and value is not None:
         try:
             value = [none_as if x is None else x for x in value]
         except TypeError:
-            pass  # not iterable: np.array below reports it
+            pass  # not iterable: the checks below report it
+    if isinstance(value, np.ndarray) and value.dtype.kind in "fiu":
+        kind = None  # the common case: one dtype test, no walk
+    else:
+        kind = _not_real(value)
+    if kind is not None:
+        raise error(f"{name}: {kind} values are not accepted (real numbers required)")
     try:
         arr = np.array(value, dtype=float)
     except OverflowError as exc:
@@ -57,6 +104,34 @@ def as_float_array(name: str, value: Any, error: type[Exception] = ProblemError,
     except (TypeError, ValueError) as exc:
         raise error(f"{name}: not a numeric array of consistent shape ({exc})") from exc
     return arr
+
+
+def as_real(name: str, value: Any, error: type[Exception] = ProblemError) -> float:
+    """``value`` as a finite float within the valid domain, or ``error`` naming ``name``.
+
+    A real number (``int``, ``float``, a numpy real scalar, a ``Fraction``); not a bool, a
+    complex, a text or ``None``; ``|x| <= MAX_MAGNITUDE`` (a big Python integer is refused
+    by its size, not by an overflow).
+    """
+    if isinstance(value, np.ndarray) and value.ndim == 0 and value.dtype.kind in "fiu":
+        value = value.item()  # a 0-d array from numpy arithmetic is its number
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, Real):
+        kind = _not_real(value) if not isinstance(value, (bool, np.bool_)) else "boolean"
+        raise error(f"{name}: expected a real number, got {kind or type(value).__name__} {short_repr(value)}")
+    try:
+        x = float(value)
+    except OverflowError as exc:
+        raise error(f"{name}: {short_repr(value)} is too large (|x| <= {MAX_MAGNITUDE:g} required)") from exc
+    if not abs(x) <= MAX_MAGNITUDE:
+        what = "must be finite" if not math.isfinite(x) else f"|x| must be <= {MAX_MAGNITUDE:g}"
+        raise error(f"{name}: {what}, got {short_repr(value)}")
+    return x
+
+
+def short_repr(value: Any, limit: int = 60) -> str:
+    """``repr(value)`` cut to ``limit`` characters (a 400-digit integer in a message is noise)."""
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 def check_magnitude(name: str, arr: FloatArray, error: type[Exception] = ProblemError, *,
@@ -113,10 +188,16 @@ def _as_weight(name: str, value: ArrayLike | None, n: int) -> FloatArray:
         np.linalg.cholesky(arr)
     except np.linalg.LinAlgError as exc:
         raise ProblemError(f"{name}: weight matrix is not positive definite") from exc
-    lam = float(np.linalg.eigvalsh((arr + arr.T) / 2.0).min())
-    if lam < MIN_WEIGHT:
-        raise ProblemError(f"{name}: weight matrix's smallest eigenvalue {lam:g} is below {MIN_WEIGHT:g} "
+    # Entries within MAX_MAGNITUDE still allow an eigenvalue up to n times larger (all
+    # entries 1e50 at n = 512: 5e52), so both ends of the spectrum are bounded; the
+    # condition number is then at most MAX_MAGNITUDE / MIN_WEIGHT.
+    lam = np.linalg.eigvalsh((arr + arr.T) / 2.0)
+    if lam[0] < MIN_WEIGHT:
+        raise ProblemError(f"{name}: weight matrix's smallest eigenvalue {lam[0]:g} is below {MIN_WEIGHT:g} "
                            "(not positive definite within the valid domain)")
+    if lam[-1] > MAX_MAGNITUDE:
+        raise ProblemError(f"{name}: weight matrix's largest eigenvalue {lam[-1]:g} is above {MAX_MAGNITUDE:g} "
+                           "(outside the valid domain)")
     return arr
 
 
@@ -241,6 +322,16 @@ class Problem:
     def __setattr__(self, name: str, value: Any) -> None:
         raise AttributeError(f"Problem is immutable; use Problem.replace(...) to change {name!r}")
 
+    def __reduce__(self) -> tuple[Any, tuple[Any, ...]]:
+        """Pickle, ``copy`` and ``deepcopy`` rebuild through the constructor.
+
+        So an unpickled problem is validated like any other input (a pickle comes from
+        outside), its arrays are read-only again, and its values are bit for bit the
+        original's (the constructor copies floats without arithmetic).
+        """
+        return _problem_from_fields, (self.B, self.umin, self.umax, self.up, self.Wu, self.Wv,
+                                      self.rate_min, self.rate_max, self.names, self.axes)
+
     def __repr__(self) -> str:
         return f"Problem(k={self.k}, m={self.m}, rate_limits={self.has_rate_limits})"
 
@@ -289,10 +380,10 @@ class Problem:
     def with_jam(self, effector: int | str, position: float) -> Problem:
         """Effector held at ``position`` (``umin = umax = position``): a jam or hard-over."""
         i = self.index(effector)
-        pos = float(position)
-        if not (np.isfinite(pos) and self.umin[i] <= pos <= self.umax[i]):
+        pos = as_real("position", position)
+        if not self.umin[i] <= pos <= self.umax[i]:
             raise ProblemError(
-                f"position: jam position {position!r} of effector {self.names[i]!r} outside its "
+                f"position: jam position {pos:g} of effector {self.names[i]!r} outside its "
                 f"limits [{self.umin[i]:g}, {self.umax[i]:g}]"
             )
         lo, hi = self.umin.copy(), self.umax.copy()
@@ -302,19 +393,26 @@ class Problem:
     def with_effectiveness(self, effector: int | str, fraction: float) -> Problem:
         """Scale an effector's column of ``B`` by ``fraction`` in [0, 1] (loss of effectiveness)."""
         i = self.index(effector)
-        f = float(fraction)
-        if not (np.isfinite(f) and 0.0 <= f <= 1.0):
-            raise ProblemError(f"fraction: effectiveness {fraction!r} must be in [0, 1]")
+        f = as_real("fraction", fraction)
+        if not 0.0 <= f <= 1.0:
+            raise ProblemError(f"fraction: effectiveness {f:g} must be in [0, 1]")
         B = self.B.copy()
         B[:, i] *= f
         return self.replace(B=B)
 
     def with_limits(self, effector: int | str, lo: float, hi: float) -> Problem:
-        """Reduced position limits ``[lo, hi]`` for one effector (must lie within the old ones)."""
+        """Reduced position limits ``[lo, hi]`` for one effector, within its current limits.
+
+        Widening is refused: a failure never gives an effector more travel (use
+        :meth:`replace` to change the nominal limits).
+        """
         i = self.index(effector)
-        lo_f, hi_f = float(lo), float(hi)
-        if not (np.isfinite(lo_f) and np.isfinite(hi_f) and lo_f <= hi_f):
-            raise ProblemError(f"limits: [{lo!r}, {hi!r}] is not an ordered finite interval")
+        lo_f, hi_f = as_real("lo", lo), as_real("hi", hi)
+        if lo_f > hi_f:
+            raise ProblemError(f"limits: [{lo_f:g}, {hi_f:g}] is not an ordered interval")
+        if lo_f < self.umin[i] or hi_f > self.umax[i]:
+            raise ProblemError(f"limits: [{lo_f:g}, {hi_f:g}] of effector {self.names[i]!r} must lie within its "
+                               f"limits [{self.umin[i]:g}, {self.umax[i]:g}]")
         umin, umax = self.umin.copy(), self.umax.copy()
         umin[i], umax[i] = lo_f, hi_f
         return self.replace(umin=umin, umax=umax)
@@ -362,15 +460,8 @@ class Problem:
     @staticmethod
     def check_dt(dt: Any) -> float:
         """Validate a time step: a real number in ``(0, MAX_MAGNITUDE]``."""
-        if isinstance(dt, (bool, np.bool_)):
-            raise DemandError(f"dt: expected a number, got {dt!r}")
-        try:
-            dt_f = float(dt)
-        except OverflowError as exc:
-            raise DemandError(f"dt: too large for a float (must be <= {MAX_MAGNITUDE:g})") from exc
-        except (TypeError, ValueError) as exc:
-            raise DemandError(f"dt: not a number ({dt!r})") from exc
-        if not (0.0 < dt_f <= MAX_MAGNITUDE):
+        dt_f = as_real("dt", dt, DemandError)
+        if not dt_f > 0.0:
             raise DemandError(f"dt: time step must be positive, finite and <= {MAX_MAGNITUDE:g}, got {dt!r}")
         return dt_f
 
@@ -393,3 +484,9 @@ class Problem:
             "rate_min": fin(self.rate_min), "rate_max": fin(self.rate_max),
             "names": list(self.names), "axes": list(self.axes),
         }
+
+
+def _problem_from_fields(B: Any, umin: Any, umax: Any, up: Any, Wu: Any, Wv: Any, rate_min: Any, rate_max: Any,
+                         names: Any, axes: Any) -> Problem:
+    """:meth:`Problem.__reduce__`'s rebuild (module level, so pickle can name it)."""
+    return Problem(B, umin, umax, up=up, Wu=Wu, Wv=Wv, rate_min=rate_min, rate_max=rate_max, names=names, axes=axes)

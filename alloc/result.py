@@ -89,8 +89,9 @@ class Result(tuple):
             unallocated.setflags(write=False)
         return tuple.__new__(cls, (u, v, v_achieved, status, method, iterations, solve_time, message, unallocated))
 
-    def __getnewargs__(self) -> tuple[Any, ...]:  # pickle and copy
-        return tuple(self)
+    def __reduce__(self) -> tuple[Any, tuple[Any, ...]]:
+        """Pickle, ``copy`` and ``deepcopy``: the same fields, the arrays read-only again."""
+        return _result_from_fields, tuple(self)
 
     def __repr__(self) -> str:
         return "Result(" + ", ".join(f"{f}={x!r}" for f, x in zip(self._fields, self)) + ")"
@@ -123,6 +124,20 @@ class Result(tuple):
                 "iterations": int(self.iterations), "solve_time": float(self.solve_time), "message": self.message}
 
 
+def _read_only(a: Any) -> Any:
+    """``a`` itself with its write flag cleared (an array unpickled or deep-copied is writeable)."""
+    if isinstance(a, np.ndarray) and a.flags.writeable:
+        a.setflags(write=False)
+    return a
+
+
+def _result_from_fields(u: Any, v: Any, v_achieved: Any, status: Any, method: str, iterations: int,
+                        solve_time: float, message: str, unallocated: Any) -> Result:
+    """:meth:`Result.__reduce__`'s rebuild (module level, so pickle can name it)."""
+    return tuple.__new__(Result, (_read_only(u), _read_only(v), _read_only(v_achieved), Status(status), method,
+                                  iterations, solve_time, message, _read_only(unallocated)))
+
+
 def _arrays_dict(r: Result | BatchResult, with_v: bool) -> dict[str, Any]:
     """The arrays of a single or a batch result in their JSON form."""
     v = {"v": r.v.tolist()} if with_v else {}
@@ -142,10 +157,14 @@ class BatchResult:
 
     @property
     def unallocated(self) -> NDArray[np.float64]:
-        return self.v - self.v_achieved
+        return _read_only(self.v - self.v_achieved)
 
     def __len__(self) -> int:
         return int(self.u.shape[0])
+
+    def __reduce__(self) -> tuple[Any, tuple[Any, ...]]:
+        """Pickle, ``copy`` and ``deepcopy``: the same fields, the arrays read-only again."""
+        return _batch_from_fields, (self.u, self.v, self.v_achieved, self.status, self.method, self.solve_time)
 
     def counts(self) -> dict[str, int]:
         """How many results have each status."""
@@ -154,3 +173,8 @@ class BatchResult:
     def to_dict(self) -> dict[str, Any]:
         return {**_arrays_dict(self, with_v=False), "status": self.status.tolist(), "method": self.method,
                 "counts": self.counts(), "solve_time": float(self.solve_time)}
+
+
+def _batch_from_fields(u: Any, v: Any, v_achieved: Any, status: Any, method: str, solve_time: float) -> BatchResult:
+    """:meth:`BatchResult.__reduce__`'s rebuild (module level, so pickle can name it)."""
+    return BatchResult(_read_only(u), _read_only(v), _read_only(v_achieved), _read_only(status), method, solve_time)

@@ -31,7 +31,6 @@ the build process and only the result comes back.
 from __future__ import annotations
 
 import asyncio
-import copyreg
 import logging
 import os
 import pickle
@@ -61,20 +60,6 @@ _log = logging.getLogger("service")
 BUILD_NICE = 10
 #: largest allocator (estimate_bytes) sent back from a build process (~25 ms to unpickle)
 TRANSFER_BYTES = 4 * 1024 * 1024
-
-
-def _problem_from_fields(*fields: Any) -> alloc.Problem:
-    B, umin, umax, up, Wu, Wv, rate_min, rate_max, names, axes = fields
-    return alloc.Problem(B, umin, umax, up=up, Wu=Wu, Wv=Wv, rate_min=rate_min, rate_max=rate_max,
-                         names=names, axes=axes)
-
-
-def _reduce_problem(p: alloc.Problem) -> tuple[Callable[..., alloc.Problem], tuple[Any, ...]]:
-    return _problem_from_fields, (p.B, p.umin, p.umax, p.up, p.Wu, p.Wv, p.rate_min, p.rate_max, p.names, p.axes)
-
-
-# Problem is immutable (its __setattr__ refuses), so pickle rebuilds it through its constructor
-copyreg.pickle(alloc.Problem, _reduce_problem)
 
 
 def _reject(field_name: str, reason: str) -> InvalidRequest:

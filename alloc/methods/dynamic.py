@@ -25,36 +25,53 @@ constrained quadratic programming", AIAA GNC; after seed Eqs 1.20-1.21).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .._linalg import sqrt_factor
-from ..exceptions import OptionError
-from ..problem import Problem
+from ..exceptions import OptionError, ProblemError
+from ..problem import MAX_MAGNITUDE, MIN_WEIGHT, Problem, as_float_array, check_magnitude
 from ..options import weight
 from ..registry import FloatArray, Method, register
 from .pseudo_inverse import distribution_matrix
 from .quadratic import LexicoLS
 
 
+#: Range of the singular values of ``W1`` and ``W2``: their squares ``W'W`` and the sum
+#: ``Wd = W1'W1 + W2'W2`` (the stages' preference weights) then have eigenvalues within the
+#: valid domain ``[MIN_WEIGHT, MAX_MAGNITUDE]`` with a factor 10 to spare for round-off.
+W_MIN = math.sqrt(10.0 * MIN_WEIGHT)
+W_MAX = math.sqrt(MAX_MAGNITUDE / 20.0)
+
+
 def _weight(value: object, m: int, field: str) -> FloatArray:
-    """``W`` (m x m) from None (identity), a positive scalar, a vector (diagonal) or a matrix."""
+    """``W`` (m x m) from None (identity), a positive scalar, a vector (diagonal) or a matrix.
+
+    Every singular value must lie in ``[W_MIN, W_MAX]``; OptionError naming ``field`` otherwise.
+    """
     if value is None:
         return np.eye(m)
-    try:
-        arr = np.array(value, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise OptionError(f"{field}: not a number, vector or matrix ({exc})") from None
+    arr = as_float_array(field, value, OptionError)
+    check_magnitude(field, arr, OptionError)
     if arr.ndim == 0:
         arr = np.full(m, float(arr))
     if arr.ndim == 1:
-        if arr.shape != (m,) or not np.all(np.isfinite(arr)) or np.any(arr <= 0):
-            raise OptionError(f"{field}: expected {m} positive finite weights, got {arr.tolist()}")
-        return np.diag(arr)
-    if arr.shape != (m, m) or not np.all(np.isfinite(arr)):
-        raise OptionError(f"{field}: expected a finite {m} x {m} matrix, got shape {arr.shape}")
-    if np.linalg.matrix_rank(arr) < m:
-        raise OptionError(f"{field}: matrix must be nonsingular")
-    return arr
+        if arr.shape != (m,):
+            raise OptionError(f"{field}: expected {m} weights, got {arr.shape[0]}")
+        if (arr <= 0).any():
+            i = int(np.argmax(arr <= 0))
+            raise OptionError(f"{field}: weight {field}[{i}] = {arr[i]:g} is not positive")
+        sv, out = arr, np.diag(arr)
+    elif arr.shape == (m, m):
+        sv, out = np.linalg.svd(arr, compute_uv=False), arr
+    else:
+        raise OptionError(f"{field}: expected a scalar, {m} weights or a {m} x {m} matrix, got shape {arr.shape}")
+    lo, hi = float(sv.min()), float(sv.max())
+    if lo < W_MIN or hi > W_MAX:
+        raise OptionError(f"{field}: singular values must lie in [{W_MIN:.3g}, {W_MAX:.3g}] (so that {field}'{field} "
+                          f"is a weight of the valid domain), got [{lo:.3g}, {hi:.3g}]")
+    return out
 
 
 @register("dynamic", supports_batch=True)
@@ -83,10 +100,16 @@ class DynamicAllocation(Method):
         # the target, linear in v and u_prev, is formed in the compiled call:
         # u_s = c0 + P v, c = M1 u_s + M2 u_prev
         c0 = p.up - self.P @ (p.B @ p.up)
-        self._static = LexicoLS(p, [np.arange(p.k)], [0.0], final=True, Wu=Q1,  # no u_prev
-                                target=(c0, self.P, np.zeros((m, m))))
-        self._dynamic = LexicoLS(p, [np.arange(p.k)], [0.0], final=True, Wu=Wd,
-                                 target=(self._M1 @ c0, self._M1 @ self.P, self._M2))
+        try:  # the stages check Q1 and Wd as a problem's Wu: name the options the caller gave
+            self._static = LexicoLS(p, [np.arange(p.k)], [0.0], final=True, Wu=Q1,  # no u_prev
+                                    target=(c0, self.P, np.zeros((m, m))))
+            self._dynamic = LexicoLS(p, [np.arange(p.k)], [0.0], final=True, Wu=Wd,
+                                     target=(self._M1 @ c0, self._M1 @ self.P, self._M2))
+        except ProblemError as exc:
+            if exc.field != "Wu":
+                raise
+            raise OptionError(f"W1/W2: {str(exc).removeprefix('Wu: ')} (the stage weight formed from W1 and W2)",
+                              field="W1") from exc
         self.packed, self.packed_rate = self._static.packed, self._dynamic.packed
 
     def static_command(self, v: FloatArray) -> FloatArray:
