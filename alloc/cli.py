@@ -6,6 +6,12 @@ The library's own commands (``methods``, ``vehicles``, ``allocate``, ``ams``) li
 ``serve``) register themselves as entry points of the group ``alloc.commands`` (declared in
 ``pyproject.toml``, the way pytest and Dask discover plugins): the core never imports them,
 and loads one only when it runs.  ``alloc --help`` imports no plugin and no compiled kernel.
+
+Errors: every invalid input, whichever command meets it, ends the same way -- one line on
+stderr, ``<command>: error: <field>: <reason>``, and exit status 2 (:data:`EXIT_USAGE`).
+:class:`OneLineErrors` does that in one place, for typer's usage errors and for every
+:class:`~alloc.AllocError` a command lets through.  The input helpers (:func:`finite`,
+:func:`strict_json`, :func:`output_file`) are shared with the plugins' commands.
 """
 
 from __future__ import annotations
@@ -14,24 +20,224 @@ import ast
 import importlib.machinery
 import importlib.util
 import json
+import math
+import os
 import re
+import statistics
+import sys
+import time
+from collections.abc import Callable
 from functools import cache
 from importlib.metadata import EntryPoint, PackageNotFoundError, entry_points, version
 from pathlib import Path
-from typing import Optional
+from typing import Any, NoReturn, Optional
 
 import typer
 from typer.core import TyperCommand, TyperGroup
 
+try:  # typer >= 0.2x carries its own copy of click and raises that copy's exceptions
+    from typer._click.exceptions import ClickException, UsageError
+except ImportError:  # pragma: no cover - older typer on the click package
+    from click.exceptions import ClickException, UsageError
+
 import alloc
 from alloc import DISTRIBUTION
+from alloc.exceptions import AllocError
 
 #: entry-point group through which other packages add sub-commands to ``alloc``
 COMMAND_GROUP = "alloc.commands"
 #: the library's own sub-applications, loaded like the plugins (on use)
 _BUILTIN = (EntryPoint("ams", "alloc.ams.cli:app", COMMAND_GROUP),)
+#: exit status of every invalid input (click's usage-error status)
+EXIT_USAGE = 2
+#: largest JSON input file read (a 32 x 512 problem is about 0.4 MB of JSON)
+MAX_JSON_BYTES = 64 * 1024 * 1024
 
 
+# ------------------------------------------------------------------ one-line errors
+class InputError(ClickException):
+    """An invalid input met inside a command: printed as one line, exit status 2."""
+
+    exit_code = EXIT_USAGE
+
+    def __init__(self, message: str, where: str) -> None:
+        super().__init__(message)
+        self.where = where
+
+
+def _one_line(text: str) -> str:
+    return " ".join(text.split())
+
+
+def _report(exc: ClickException, prog: str) -> NoReturn:
+    """Print ``exc`` as ``<command>: error: <message>`` on one stderr line and exit."""
+    ctx = getattr(exc, "ctx", None)
+    where = getattr(exc, "where", None) or (ctx.command_path if ctx is not None else prog)
+    message = _one_line(exc.format_message())
+    if isinstance(exc, UsageError):
+        message += f" (see '{where} --help')"
+    typer.echo(f"{where}: error: {message}", err=True)
+    sys.exit(exc.exit_code)
+
+
+class OneLineErrors(TyperGroup):
+    """A command group whose invalid inputs end in one stderr line and exit status 2.
+
+    The top-level group's :meth:`main` runs the whole command line and formats every
+    click exception (typer's ``BadParameter``, ``UsageError``) as one line,
+    instead of typer's usage block and framed panel; :meth:`invoke` turns an
+    :class:`~alloc.AllocError` raised by a sub-command into such an error, naming the command.
+    Sub-applications (``alloc ams``, ``alloc bench``) use the class too, so that they behave
+    the same when run on their own (``python -m benchmarks.compare``).
+    """
+
+    def invoke(self, ctx: typer.Context) -> Any:
+        try:
+            return super().invoke(ctx)
+        except AllocError as exc:
+            where = " ".join(filter(None, [ctx.command_path, ctx.invoked_subcommand]))
+            raise InputError(str(exc), where) from exc
+
+    def main(self, args: Any = None, prog_name: str | None = None, complete_var: str | None = None,
+             standalone_mode: bool = True, **extra: Any) -> Any:
+        if not standalone_mode:
+            return super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+        try:
+            code = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+        except ClickException as exc:
+            if type(exc).__name__ == "NoArgsIsHelpError":  # the help itself (typer's own test)
+                if not _rich_help(exc.ctx):  # rich has printed it already
+                    typer.echo(exc.format_message())
+                sys.exit(exc.exit_code)
+            _report(exc, prog_name or "alloc")
+        except typer.Abort:
+            typer.echo("Aborted!", err=True)
+            sys.exit(1)
+        sys.exit(code if isinstance(code, int) else 0)
+
+
+def _rich_help(ctx: typer.Context) -> bool:
+    """Whether typer printed the help itself (rich installed and enabled)."""
+    from typer.core import HAS_RICH
+
+    return bool(HAS_RICH) and getattr(ctx.command, "rich_markup_mode", None) is not None
+
+
+# ------------------------------------------------------------------ input helpers
+def finite(low: float | None = None, high: float | None = None, *, low_open: bool = False,
+           high_open: bool = False, unit: str = "") -> Callable[[str], float]:
+    """A typer ``parser`` for a finite real number in ``[low, high]`` (open ends on request).
+
+    Click's own ``FloatRange`` lets ``nan`` and ``inf`` through; this one does not.  It raises
+    ``BadParameter`` (a ``ValueError`` would reach the user as "Value error, ...").
+    """
+    def parse(text: str) -> float:
+        if isinstance(text, float):  # a default, already parsed
+            return text
+        try:
+            value = float(text)
+        except (TypeError, ValueError):
+            raise typer.BadParameter(f"expected a number, got {text!r}") from None
+        if not math.isfinite(value):
+            raise typer.BadParameter(f"must be a finite number, got {text!r}")
+        below = low is not None and (value <= low if low_open else value < low)
+        above = high is not None and (value >= high if high_open else value > high)
+        if below or above:
+            lo = "" if low is None else f"{'>' if low_open else '>='} {low:g}"
+            hi = "" if high is None else f"{'<' if high_open else '<='} {high:g}"
+            raise typer.BadParameter(f"must be {' and '.join(filter(None, [lo, hi]))}{unit}, got {text}")
+        return value
+
+    return parse
+
+
+def _no_duplicate_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in out:
+            raise ValueError(f"duplicate key {key!r}")
+        out[key] = value
+    return out
+
+
+def _json_int(text: str) -> int:
+    value = int(text)
+    try:
+        float(value)
+    except OverflowError:
+        raise ValueError(f"integer with {len(text.lstrip('-'))} digits is beyond float64") from None
+    return value
+
+
+def _json_float(text: str) -> float:
+    value = float(text)
+    if not math.isfinite(value):
+        raise ValueError(f"number {text} is beyond float64")
+    return value
+
+
+def _json_constant(name: str) -> NoReturn:
+    raise ValueError(f"{name} is not a JSON number (JSON has no NaN or infinity)")
+
+
+def strict_json(text: str) -> Any:
+    """Parse standard JSON: no ``NaN``/``Infinity``, no numbers beyond float64, no duplicate keys.
+
+    Raises ``ValueError`` (a ``json.JSONDecodeError`` with its position where the syntax is
+    wrong) naming the reason; nesting deeper than the parser can follow is one too.
+    """
+    try:
+        return json.loads(text, object_pairs_hook=_no_duplicate_keys, parse_int=_json_int,
+                          parse_float=_json_float, parse_constant=_json_constant)
+    except RecursionError:
+        raise ValueError("nested too deeply") from None
+
+
+def read_json_file(path: Path, param_hint: str) -> Any:
+    """The JSON value in ``path`` (UTF-8, at most :data:`MAX_JSON_BYTES`), or a ``BadParameter``."""
+    def bad(reason: str) -> NoReturn:
+        raise typer.BadParameter(f"{path}: {reason}", param_hint=param_hint)
+
+    try:
+        with open(path, "rb") as fh:
+            raw = fh.read(MAX_JSON_BYTES + 1)
+    except OSError as exc:
+        bad(f"cannot read: {exc.strerror or exc}")
+    if len(raw) > MAX_JSON_BYTES:
+        bad(f"larger than {MAX_JSON_BYTES // 2**20} MiB")
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        bad(f"not UTF-8 text (byte {exc.start})")
+    try:
+        return strict_json(text)
+    except ValueError as exc:
+        bad(f"not valid JSON: {exc}")
+
+
+def output_file(path: Path | None, force: bool, param_hint: str, *, taken: dict[Path, str] | None = None) -> None:
+    """Refuse an output path before any work is done: an existing file (unless ``force``), a
+    directory, a folder that does not exist or cannot be written, or a path given twice."""
+    if path is None:
+        return
+    if path.is_dir():
+        raise typer.BadParameter(f"{path} is a directory; give a file name", param_hint=param_hint)
+    if path.exists() and not force:
+        raise typer.BadParameter(f"{path} exists; choose another name or pass --force to overwrite it",
+                                 param_hint=param_hint)
+    parent = path.parent if str(path.parent) else Path(".")
+    if not parent.is_dir():
+        raise typer.BadParameter(f"folder {parent} does not exist", param_hint=param_hint)
+    if not os.access(parent, os.W_OK):
+        raise typer.BadParameter(f"folder {parent} is not writable", param_hint=param_hint)
+    if taken is not None:
+        key = path.resolve()
+        if key in taken:
+            raise typer.BadParameter(f"{path} is also the {taken[key]} output", param_hint=param_hint)
+        taken[key] = param_hint
+
+
+# ------------------------------------------------------------------ plugins
 @cache
 def command_entry_points() -> dict[str, EntryPoint]:
     """Sub-commands by name: the library's own lazily loaded ones and the installed plugins."""
@@ -114,7 +320,7 @@ def missing_requirements(ep: EntryPoint) -> list[str]:
     return sorted(set(missing))
 
 
-class PluginGroup(TyperGroup):
+class PluginGroup(OneLineErrors):
     """The top-level group: own commands plus entry-point commands, loaded when they run.
 
     Help listings get a light stand-in (name and one-line summary); resolving a command
@@ -163,7 +369,8 @@ app = typer.Typer(
         "  alloc sim ice --method qp --failure seed --allocator-knows-failure --plot ice.png\n\n"
         "  alloc ams plot --problem ice-mid --method pinv --out ams.png\n\n"
         "  alloc bench quick\n\n"
-        "  alloc serve --port 8000"
+        "  alloc serve --port 8000\n\n"
+        "An invalid input ends in one line on stderr naming the field, and exit status 2."
     ),
     no_args_is_help=True,
     add_completion=False,
@@ -176,6 +383,26 @@ def _root(show_version: bool = typer.Option(False, "--version", callback=_versio
     """The options every sub-command shares (the help text is the app's)."""
 
 
+def default_method() -> str:
+    """The library's one default method, :data:`alloc.registry.DEFAULT_METHOD`.
+
+    Read on use: the registry loads the compiled kernels, which ``alloc --help`` must not.
+    """
+    from .registry import DEFAULT_METHOD
+
+    return DEFAULT_METHOD
+
+
+class DefaultMethodCommand(TyperCommand):
+    """A command whose ``--method`` help shows the library's default, read when the help is drawn."""
+
+    def format_help(self, ctx: typer.Context, formatter: Any) -> None:
+        for param in self.params:
+            if param.name == "method":
+                param.show_default = default_method()
+        super().format_help(ctx, formatter)
+
+
 def _vehicle(name: str) -> alloc.Problem:
     from . import vehicles
 
@@ -185,40 +412,64 @@ def _vehicle(name: str) -> alloc.Problem:
         raise typer.BadParameter(str(exc), param_hint="--vehicle") from None
 
 
-def _problem_from_file(path: Path) -> alloc.Problem:
-    try:
-        data = json.loads(path.read_text())
-    except (OSError, json.JSONDecodeError) as exc:
-        raise typer.BadParameter(f"cannot read a JSON problem from {path}: {exc}", param_hint="--problem") from None
+#: fields of :class:`alloc.Problem` a problem file may hold (``null`` rate: unlimited)
+PROBLEM_FIELDS = ("B", "umin", "umax", "up", "Wu", "Wv", "rate_min", "rate_max", "names", "axes")
+#: fields of one call a problem file may also hold, as in the body of ``POST /v1/allocate``
+CALL_FIELDS = ("v", "method", "options", "u_prev", "dt")
+
+
+def _problem_from_file(path: Path) -> tuple[alloc.Problem, dict[str, Any]]:
+    """The problem in a JSON file, and the call fields it holds (the HTTP request's fields)."""
+    data = read_json_file(path, "--problem")
+
+    def bad(reason: str) -> NoReturn:
+        raise typer.BadParameter(f"{path}: {reason}", param_hint="--problem")
+
     if not isinstance(data, dict):
-        raise typer.BadParameter("the problem file must hold a JSON object", param_hint="--problem")
-    known = {"B", "umin", "umax", "up", "Wu", "Wv", "rate_min", "rate_max", "names", "axes"}
-    unknown = set(data) - known - {"v", "method"}
+        bad(f"must hold a JSON object with fields {', '.join(PROBLEM_FIELDS)}, got {type(data).__name__}")
+    unknown = sorted(set(data) - set(PROBLEM_FIELDS) - set(CALL_FIELDS))
     if unknown:
-        raise typer.BadParameter(f"unknown field(s) {sorted(unknown)}; known: {sorted(known)}", param_hint="--problem")
+        bad(f"unknown field(s) {unknown}; known: {list(PROBLEM_FIELDS + CALL_FIELDS)}")
+    missing = [f for f in ("B", "umin", "umax") if f not in data]
+    if missing:
+        bad(f"missing field(s) {missing}")
+    fields = {k: data[k] for k in PROBLEM_FIELDS if k in data}
+    for name, unlimited in (("rate_min", -math.inf), ("rate_max", math.inf)):
+        if isinstance(fields.get(name), list):
+            fields[name] = [unlimited if r is None else r for r in fields[name]]
     try:
-        return alloc.Problem(data["B"], data["umin"], data["umax"], **{k: data[k] for k in known - {"B", "umin", "umax"} if k in data})
-    except KeyError as exc:
-        raise typer.BadParameter(f"missing field {exc.args[0]!r}", param_hint="--problem") from None
+        problem = alloc.Problem(**fields)
+    except (AllocError, ValueError, TypeError, OverflowError) as exc:
+        bad(str(exc))
+    return problem, {k: data[k] for k in CALL_FIELDS if k in data}
 
 
 def _floats(text: str, what: str) -> list[float]:
     try:
-        return [float(x) for x in text.replace(";", ",").split(",") if x.strip()]
+        values = [_json_float(x) for x in text.replace(";", ",").split(",") if x.strip()]
     except ValueError:
-        raise typer.BadParameter(f"expected comma-separated numbers, got {text!r}", param_hint=what) from None
+        raise typer.BadParameter(f"expected comma-separated finite numbers, got {text!r}", param_hint=what) from None
+    if not values:
+        raise typer.BadParameter("expected comma-separated numbers, got none", param_hint=what)
+    return values
 
 
-def _options(pairs: list[str]) -> dict:
-    out = {}
+def _options(pairs: list[str]) -> dict[str, Any]:
+    """``key=value`` pairs; a value is read as JSON (numbers, lists, true) or else kept as text."""
+    out: dict[str, Any] = {}
     for pair in pairs:
         key, sep, value = pair.partition("=")
-        if not sep:
+        key = key.strip()
+        if not sep or not key:
             raise typer.BadParameter(f"expected key=value, got {pair!r}", param_hint="--option")
+        if key in out:
+            raise typer.BadParameter(f"option {key!r} given twice", param_hint="--option")
         try:
-            out[key] = json.loads(value)
+            out[key] = strict_json(value)
         except json.JSONDecodeError:
-            out[key] = value
+            out[key] = value  # a word: a backend name, a choice
+        except ValueError as exc:
+            raise typer.BadParameter(f"{key}: {exc}", param_hint="--option") from None
     return out
 
 
@@ -254,35 +505,92 @@ def vehicles_command(as_json: bool = typer.Option(False, "--json", help="print J
         typer.echo(f"{r['name']:<11} {r['k']} x {r['m']:<3} {r['title']}, {r['source']}{alias}")
 
 
-@app.command("allocate")
+#: wall-clock budget of the repeated calls that time one solve (at least one call is made)
+TIMING_BUDGET_S = 1.0
+
+
+def _merge(flag: Any, from_file: dict[str, Any], field: str, hint: str) -> Any:
+    if flag is not None and field in from_file:
+        raise typer.BadParameter(f"given both in the problem file ({field!r}) and as {hint}; give one",
+                                 param_hint=hint)
+    return flag if flag is not None else from_file.get(field)
+
+
+def _fmt_seconds(s: float) -> str:
+    return f"{s * 1e6:.0f} us" if s < 1e-3 else f"{s * 1e3:.1f} ms" if s < 1.0 else f"{s:.2f} s"
+
+
+@app.command("allocate", cls=DefaultMethodCommand)
 def allocate_command(
-    v: str = typer.Option(..., "--v", help="demand, comma-separated (one value per axis)"),
-    method: str = typer.Option("qp", "--method", "-m", help="allocation method (see `alloc methods`)"),
+    v: Optional[str] = typer.Option(None, "--v", help="demand, comma-separated, one value per axis in the "
+                                    "problem's units (ice: rad/s^2 for p, q, r); or the file's 'v'"),
+    method: Optional[str] = typer.Option(None, "--method", "-m",
+                                         help="allocation method (see `alloc methods`); or the file's 'method'"),
     vehicle: Optional[str] = typer.Option(None, "--vehicle", help="a named problem (see `alloc vehicles`), e.g. ice"),
-    problem: Optional[Path] = typer.Option(None, "--problem", help="JSON file with B, umin, umax and optional fields"),
-    option: list[str] = typer.Option([], "--option", "-o", help="method option key=value (value parsed as JSON)"),
-    u_prev: Optional[str] = typer.Option(None, "--u-prev", help="previous command, comma-separated (rate limits)"),
-    dt: Optional[float] = typer.Option(None, "--dt", help="time step in seconds (rate limits, with --u-prev)"),
+    problem: Optional[Path] = typer.Option(
+        None, "--problem", help="JSON file (UTF-8): B, umin, umax and optionally up, Wu, Wv, rate_min, rate_max "
+        "(null: unlimited), names, axes -- the fields of alloc.Problem -- and optionally v, method, options, "
+        "u_prev, dt, as in the body of POST /v1/allocate"),
+    option: list[str] = typer.Option([], "--option", "-o", help="method option key=value (value parsed as JSON, "
+                                     "else text; see `alloc methods`); repeatable"),
+    u_prev: Optional[str] = typer.Option(None, "--u-prev", help="previous command, comma-separated, one value per "
+                                         "effector (rate limits, with --dt)"),
+    dt: Optional[float] = typer.Option(None, "--dt", parser=finite(0.0, low_open=True, unit=" s"),
+                                       help="time step in seconds, > 0 (rate limits, with --u-prev)"),
+    repeat: int = typer.Option(100, "--repeat", min=1, max=1_000_000,
+                               help=f"calls timed for the solve time (stopping early after {TIMING_BUDGET_S:g} s)"),
     as_json: bool = typer.Option(False, "--json", help="print the result as JSON"),
 ) -> None:
-    """Allocate one demand and print the effector commands."""
+    """Allocate one demand and print the effector commands, the status and honest timings.
+
+    Times, in seconds in the JSON: build_time (make_allocator: the method's precomputation,
+    and loading its compiled kernels the first time in a process); first_call_time (the
+    first allocation, which may still load kernels); solve_time (the median over --repeat
+    further calls of the same demand on the built allocator: what a control loop pays).
+    Errors: exit status 2 and one line on stderr.
+    """
     if (vehicle is None) == (problem is None):
         raise typer.BadParameter("give exactly one of --vehicle or --problem", param_hint="--vehicle/--problem")
-    p = _vehicle(vehicle) if vehicle is not None else _problem_from_file(problem)
-    try:
-        result = alloc.allocate(p, _floats(v, "--v"), method,
-                                u_prev=None if u_prev is None else _floats(u_prev, "--u-prev"), dt=dt,
-                                **_options(option))
-    except alloc.AllocError as exc:
-        typer.echo(f"error: {exc}", err=True)
-        raise typer.Exit(2) from None
+    if vehicle is not None:
+        p, from_file = _vehicle(vehicle), {}
+    else:
+        p, from_file = _problem_from_file(problem)
+    demand = _merge(None if v is None else _floats(v, "--v"), from_file, "v", "--v")
+    if demand is None:
+        raise typer.BadParameter("give the demand with --v (or as 'v' in the problem file)", param_hint="--v")
+    previous = _merge(None if u_prev is None else _floats(u_prev, "--u-prev"), from_file, "u_prev", "--u-prev")
+    step = _merge(dt, from_file, "dt", "--dt")
+    name = _merge(method, from_file, "method", "--method") or default_method()
+    options = _options(option)
+    file_options = from_file.get("options", {})
+    if not isinstance(file_options, dict):
+        raise typer.BadParameter(f"{problem}: options: must be a JSON object", param_hint="--problem")
+    twice = sorted(set(options) & set(file_options))
+    if twice:
+        raise typer.BadParameter(f"option(s) {twice} given both in the problem file and as --option",
+                                 param_hint="--option")
+    options.update(file_options)
+
+    t0 = time.perf_counter()
+    allocator = alloc.make_allocator(p, name, **options)
+    build_time = time.perf_counter() - t0
+    result = allocator(demand, u_prev=previous, dt=step)
+    first_call_time = result.solve_time
+    times: list[float] = []
+    budget_end = time.perf_counter() + TIMING_BUDGET_S
+    while len(times) < repeat and (not times or time.perf_counter() < budget_end):
+        times.append(allocator(demand, u_prev=previous, dt=step).solve_time)
+    solve_time = statistics.median(times)
     if as_json:
-        typer.echo(json.dumps({**result.to_dict(), "names": list(p.names), "axes": list(p.axes)}, indent=2))
+        typer.echo(json.dumps({**result.to_dict(), "solve_time": solve_time, "first_call_time": first_call_time,
+                               "build_time": build_time, "timed_calls": len(times),
+                               "names": list(p.names), "axes": list(p.axes)}, indent=2))
         return
-    typer.echo(f"method {result.method}: {result.status.value} ({result.iterations} iterations, "
-               f"{result.solve_time * 1e6:.0f} us)")
-    for name, u in zip(p.names, result.u):
-        typer.echo(f"  {name:<12} {u: .6g}")
+    typer.echo(f"method {result.method}: {result.status.value} ({result.iterations} iterations)")
+    typer.echo(f"  time: solve {_fmt_seconds(solve_time)} (median of {len(times)} calls), first call "
+               f"{_fmt_seconds(first_call_time)}, build {_fmt_seconds(build_time)}")
+    for label, u in zip(p.names, result.u):
+        typer.echo(f"  {label:<12} {u: .6g}")
     for axis, want, got in zip(p.axes, result.v, result.v_achieved):
         typer.echo(f"  {axis:<12} demand {want: .6g}  achieved {got: .6g}")
 

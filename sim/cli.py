@@ -1,9 +1,10 @@
 """``alloc sim SCENARIO``: run a closed-loop scenario, print its summary, write JSON, CSV and PNG.
 
-Registered by the lead in ``alloc/cli.py`` with ``app.command("sim")(sim_command)``.
+Registered as the entry point ``sim`` of the group ``alloc.commands`` (``pyproject.toml``).
 
 Exit codes: 0 the run stayed bounded; 1 the run diverged (see :mod:`sim.result`);
-2 bad arguments (typer's usage error).
+2 invalid arguments (one line on stderr, checked before the run where they can be).
+Outputs are written only where asked, and never over an existing file unless ``--force``.
 """
 
 from __future__ import annotations
@@ -15,31 +16,52 @@ from typing import Any, Optional
 
 import typer
 
+from alloc.cli import finite, output_file
 from sim.scenarios import get_scenario, scenarios
 
-__all__ = ["sim_command", "EXIT_DIVERGED"]
+__all__ = ["sim_command", "EXIT_DIVERGED", "NO_FAILURE"]
 
 #: Runs longer than this many simulated seconds show a progress bar.
 PROGRESS_AFTER = 2.0
 #: Exit code of a diverged run.
 EXIT_DIVERGED = 1
+#: Exit code of invalid arguments (typer's usage error).
+EXIT_USAGE = 2
+#: ``--failure`` value of a nominal run, for scenarios that inject a failure by default.
+NO_FAILURE = "none"
+#: Longest run (simulated seconds): 90 times the seed's longest; the 2 kHz loop records 200 rows/s.
+MAX_DURATION = 3600.0
+#: Longest pilot time delay (s), far beyond the seed's 0.2-0.3 s.
+MAX_PILOT_DELAY = 10.0
 
 
 def sim_command(
     scenario: str = typer.Argument(..., help=f"scenario name: {', '.join(scenarios())}"),
-    method: Optional[str] = typer.Option(None, "--method", help="allocation method (alloc methods) or 'static'"),
-    failure: Optional[str] = typer.Option(None, "--failure", help="failure name (see the scenario's failures)"),
-    failure_time: Optional[float] = typer.Option(None, "--failure-time", help="failure time (s); default: the seed's"),
-    duration: Optional[float] = typer.Option(None, "--duration", help="simulated seconds"),
-    seed: int = typer.Option(0, "--seed", help="noise seed"),
+    method: Optional[str] = typer.Option(
+        None, "--method", help="allocation method (see `alloc methods`) or 'static'; default: the scenario's "
+        "(the seed's choice: pinv for ice, ganging for the HARV)"),
+    failure: Optional[str] = typer.Option(
+        None, "--failure", help="failure name (see the scenario's failures); default: the scenario's own "
+        f"(harv_latdir_failure2: failure2), else none; '{NO_FAILURE}' for a nominal run"),
+    failure_time: Optional[float] = typer.Option(
+        None, "--failure-time", parser=finite(0.0, unit=" s"),
+        help="failure time in seconds, >= 0 and before the end of the run; default: the seed's"),
+    duration: Optional[float] = typer.Option(
+        None, "--duration", parser=finite(0.0, MAX_DURATION, low_open=True, unit=" s"),
+        help=f"simulated seconds, 0 < duration <= {MAX_DURATION:g}; default: the scenario's (ice 40 s)"),
+    seed: int = typer.Option(0, "--seed", min=0, max=2**32 - 1, help="noise seed (0 to 2^32 - 1)"),
     noise: Optional[bool] = typer.Option(None, "--noise/--no-noise", help="sensor noise (default: on, seed gains)"),
     controller: Optional[str] = typer.Option(None, "--controller", help="'smc' (default) or 'loopshape'"),
     pilot: Optional[str] = typer.Option(None, "--pilot", help="pilot model: 'standin' (default) or 'crossover'"),
-    pilot_gain: Optional[float] = typer.Option(None, "--pilot-gain", help="override the pilot model's gain"),
-    pilot_delay: Optional[float] = typer.Option(None, "--pilot-delay", help="override the pilot's time delay (s)"),
+    pilot_gain: Optional[float] = typer.Option(None, "--pilot-gain", parser=finite(0.0),
+                                               help="override the pilot model's gain (>= 0)"),
+    pilot_delay: Optional[float] = typer.Option(
+        None, "--pilot-delay", parser=finite(0.0, MAX_PILOT_DELAY, unit=" s"),
+        help=f"override the pilot's time delay in seconds (0 to {MAX_PILOT_DELAY:g})"),
     frame_rate: Optional[float] = typer.Option(
-        None, "--frame-rate", help="flight-control frame rate (Hz); default: the 2 kHz integration rate"
-    ),
+        None, "--frame-rate", parser=finite(0.0, low_open=True, unit=" Hz"),
+        help="flight-control frame rate in Hz (its period a multiple of the 0.5 ms step); default: 2000, "
+             "the integration rate"),
     rate_aware: Optional[bool] = typer.Option(
         None, "--rate-aware/--rate-blind", help="allocator gets u_prev and dt = frame period (seed Eq 1.28; default on)"
     ),
@@ -61,22 +83,42 @@ def sim_command(
         False, "--told/--blind", "--allocator-knows-failure",
         help="tell the allocator the failed effectors' new limits (default: blind)",
     ),
-    json_path: Optional[Path] = typer.Option(None, "--json", help="write the JSON summary here"),
-    csv_path: Optional[Path] = typer.Option(None, "--csv", help="write the time histories here (CSV)"),
+    json_path: Optional[Path] = typer.Option(None, "--json", help="write the JSON summary to this new file"),
+    csv_path: Optional[Path] = typer.Option(None, "--csv", help="write the time histories to this new file (CSV)"),
     parquet_path: Optional[Path] = typer.Option(
-        None, "--parquet", help="write the time histories here (Parquet, full precision; needs pyarrow)"
+        None, "--parquet", help="write the time histories to this new file (Parquet, full precision; needs pyarrow)"
     ),
-    plot_path: Optional[Path] = typer.Option(None, "--plot", help="write a PNG plot here"),
+    plot_path: Optional[Path] = typer.Option(None, "--plot", help="write a PNG plot to this new file"),
+    force: bool = typer.Option(False, "--force", help="overwrite output files that exist"),
 ) -> None:
-    """Run SCENARIO in closed loop and print its JSON summary (exit 1 if it diverged)."""
+    """Run SCENARIO in closed loop and print its JSON summary (exit 1 if it diverged).
+
+    Units: seconds, degrees for effector positions, the seed's units for the outputs.
+    Nothing is written unless asked (--json, --csv, --parquet, --plot), and an existing
+    file is refused unless --force.
+    """
     try:
         run = get_scenario(scenario)
     except KeyError as exc:
         raise typer.BadParameter(str(exc.args[0]), param_hint="SCENARIO") from None
-    if failure is not None and failure not in run.failures:
-        raise typer.BadParameter(f"unknown failure {failure!r}; known: {sorted(run.failures)}", param_hint="--failure")
-    if frame_rate is not None and frame_rate <= 0:
-        raise typer.BadParameter(f"must be positive, got {frame_rate!r}", param_hint="--frame-rate")
+    if failure is None:
+        failure = run.default_failure
+    elif failure == NO_FAILURE:
+        failure = None
+    elif failure not in run.failures:
+        known = sorted(run.failures) + [NO_FAILURE]
+        raise typer.BadParameter(f"unknown failure {failure!r} for {scenario}; known: {known}", param_hint="--failure")
+    simulated = run.default_duration if duration is None else duration
+    if failure_time is not None:
+        if failure is None:
+            raise typer.BadParameter(f"{scenario} injects no failure in this run; name one with --failure",
+                                     param_hint="--failure-time")
+        if failure_time >= simulated:
+            raise typer.BadParameter(f"{failure_time:g} s is not before the end of the run ({simulated:g} s): "
+                                     "the failure would never happen", param_hint="--failure-time")
+    taken: dict[Path, str] = {}
+    for path, hint in ((json_path, "--json"), (csv_path, "--csv"), (parquet_path, "--parquet"), (plot_path, "--plot")):
+        output_file(path, force, hint, taken=taken)
     kwargs: dict[str, Any] = dict(failure=failure, duration=duration, seed=seed, allocator_knows_failure=told)
     optional = dict(
         method=method, failure_time=failure_time, noise=noise, controller=controller, pilot=pilot,
@@ -85,13 +127,18 @@ def sim_command(
         boundary_layer=boundary_layer, rate_window=rate_window, anti_windup=anti_windup,
     )
     kwargs.update({k: v for k, v in optional.items() if v is not None})
-    simulated = run.default_duration if duration is None else duration
     try:
         result = run(progress=simulated > PROGRESS_AFTER, **kwargs)
     except TypeError as exc:
         raise typer.BadParameter(f"scenario {scenario!r} does not take this option: {exc}") from None
     except (ValueError, KeyError) as exc:
-        raise typer.BadParameter(str(exc)) from None
+        raise typer.BadParameter(str(exc.args[0] if isinstance(exc, KeyError) and exc.args else exc)) from None
+    if failure is not None and not result.diverged and (result.failure_time is None
+                                                         or result.failure_time >= result.duration):
+        at = "" if result.failure_time is None else f" at t = {result.failure_time:g} s"
+        raise typer.BadParameter(f"the run ended at t = {result.duration:g} s, before the failure{at}: nothing was "
+                                 "injected; pass a longer --duration or an earlier --failure-time",
+                                 param_hint="--duration")
     summary = result.summary()
     typer.echo(json.dumps(summary, indent=2))
     if json_path is not None:
@@ -117,6 +164,8 @@ def command_line(scenario: str, **options: Any) -> str:
              "preferred": "--preferred",
              "boundary_layer": "--boundary-layer", "rate_window": "--rate-window", "anti_windup": "--anti-windup"}
     words = ["alloc", "sim", scenario]
+    if "failure" in options and options["failure"] is None and get_scenario(scenario).default_failure is not None:
+        options = {**options, "failure": NO_FAILURE}  # nominal, where the scenario's default injects one
     for key, value in options.items():
         if value is None:
             continue

@@ -8,12 +8,18 @@ from pathlib import Path
 import typer
 
 from .. import vehicles
+from ..cli import OneLineErrors, output_file
 from ..exceptions import ProblemError
 from ..problem import Problem
+from ..registry import DEFAULT_METHOD
 from ..registry import methods as registered_methods
 
-app = typer.Typer(help="Attainable moment set: geometry summary, 3-D pictures, method coverage.",
+app = typer.Typer(cls=OneLineErrors, help="Attainable moment set: geometry summary, 3-D pictures, method coverage.",
                   no_args_is_help=True)
+
+#: largest Monte Carlo sample of one command (memory: about 8 (k + m) bytes per demand, twice)
+MAX_SAMPLES = 1_000_000
+_SEED = typer.Option(0, min=0, max=2**63 - 1, help="seed of the Monte Carlo sampler (>= 0)")
 
 def get_problem(name: str) -> Problem:
     try:
@@ -33,7 +39,7 @@ _PROBLEM_HELP = "a named problem: " + " | ".join(vehicles.names())
 @app.command()
 def summary(problem: str = typer.Option("ice", help=_PROBLEM_HELP),
             as_json: bool = typer.Option(False, "--json", help="print JSON")) -> None:
-    """Volume, facets, vertices of the AMS."""
+    """Volume, facets, vertices of the AMS (volume in the product of the axes' units)."""
     from .geometry import AttainableSet
 
     s = AttainableSet(get_problem(problem)).summary()
@@ -46,14 +52,18 @@ def summary(problem: str = typer.Option("ice", help=_PROBLEM_HELP),
 
 @app.command()
 def plot(problem: str = typer.Option("ice", help=_PROBLEM_HELP),
-         method: str = typer.Option("pinv", help="method whose reached region is drawn inside"),
-         out: Path = typer.Option(..., "--out",
-                               help="PNG file to write (required: a run never overwrites a tracked picture)"),
-         samples: int = typer.Option(4000, help="Monte Carlo demands for non-affine methods"),
-         seed: int = typer.Option(0)) -> None:
-    """3-D picture of the AMS (2-D for k = 2) with the method's reached region inside."""
+         method: str = typer.Option(DEFAULT_METHOD, help="method whose reached region is drawn inside "
+                                    "(see `alloc methods`)"),
+         out: Path = typer.Option(..., "--out", help="PNG file to write (required; an existing file is refused "
+                                  "unless --force, so a run never overwrites a tracked picture)"),
+         force: bool = typer.Option(False, "--force", help="overwrite --out if it exists"),
+         samples: int = typer.Option(4000, min=1, max=MAX_SAMPLES,
+                                     help="Monte Carlo demands for non-affine methods"),
+         seed: int = _SEED) -> None:
+    """3-D picture of the AMS (2-D for k = 2) with the method's reached region inside (PNG)."""
     from .plot import plot_ams
 
+    output_file(out, force, "--out")
     plot_ams(get_problem(problem), method, out, samples=samples, seed=seed, name=vehicles.lookup(problem).title,
              **default_options(problem, method))
     typer.echo(f"wrote {out}")
@@ -62,10 +72,12 @@ def plot(problem: str = typer.Option("ice", help=_PROBLEM_HELP),
 @app.command("coverage")
 def coverage_cmd(problem: str = typer.Option("ice", help=_PROBLEM_HELP),
                  method: list[str] = typer.Option(None, help="methods (default: all registered)"),
-                 samples: int = typer.Option(20_000, help="Monte Carlo sample size"),
-                 seed: int = typer.Option(0),
+                 samples: int = typer.Option(20_000, min=1, max=MAX_SAMPLES,
+                                             help="Monte Carlo sample size (affine methods: exact polytope, "
+                                                  "no sample)"),
+                 seed: int = _SEED,
                  as_json: bool = typer.Option(False, "--json", help="print JSON")) -> None:
-    """Fraction of the AMS volume each method reaches exactly (Bordignon-Durham)."""
+    """Fraction of the AMS volume each method reaches exactly (Bordignon-Durham), in per cent."""
     from .coverage import coverage
 
     p = get_problem(problem)

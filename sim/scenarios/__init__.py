@@ -9,7 +9,8 @@ A scenario is a callable with the signature::
 
 registered with :func:`register_scenario`, which also attaches the metadata
 attributes ``name``, ``description``, ``failures`` (failure name ->
-description), ``default_duration`` and ``default_method``.
+description), ``default_duration``, ``default_method`` and ``default_failure`` (the
+failure a run injects when the caller names none; ``None`` for most scenarios).
 
 Two runners fly every scenario:
 
@@ -58,6 +59,7 @@ class Scenario(Protocol):
     failures: dict[str, str]
     default_duration: float
     default_method: str | None
+    default_failure: str | None
 
     def __call__(self, **kwargs: Any) -> SimResult: ...
 
@@ -72,6 +74,7 @@ def register_scenario(
     failures: dict[str, str] | None = None,
     default_duration: float | None = None,
     default_method: str | None = None,
+    default_failure: str | None = None,
 ) -> Callable[[Callable[..., SimResult]], Scenario]:
     """Register ``run`` under ``name`` and attach its metadata.
 
@@ -98,6 +101,9 @@ def register_scenario(
             default_duration or getattr(run, "default_duration", 10.0)
         )
         run.default_method = default_method or getattr(run, "default_method", None)  # type: ignore[attr-defined]
+        run.default_failure = default_failure or getattr(run, "default_failure", None)  # type: ignore[attr-defined]
+        if run.default_failure is not None and run.default_failure not in run.failures:  # type: ignore[attr-defined]
+            raise ValueError(f"scenario {name!r}: default failure {run.default_failure!r} is not one of its failures")
         _REGISTRY[name] = run  # type: ignore[assignment]
         return run  # type: ignore[return-value]
 

@@ -212,8 +212,12 @@ def run(**options: Any) -> SimResult:
     failures={"failure2": FAILURES["failure2"]},
     default_duration=40.0,
     default_method="ganging",
+    default_failure="failure2",
 )
 def run_failure2(*, failure: str | None = "failure2", duration: float | None = None, **options: Any) -> SimResult:
-    """HARV lat-dir with Failure #2 and the filtered-step input (``failure=None``: nominal, same input)."""
+    """HARV lat-dir with Failure #2 and the filtered-step input (``failure=None``: nominal, same input).
+
+    ``failure`` defaults to ``"failure2"``, declared as the scenario's ``default_failure`` so
+    that callers who name no failure (``alloc sim harv_latdir_failure2``) get it too."""
     return run_mimo(SCENARIO, failure=failure, duration=40.0 if duration is None else duration,
                     phi_command="filtered_steps", **options)
