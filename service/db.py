@@ -22,13 +22,13 @@ from contextlib import contextmanager
 from collections.abc import Iterator
 
 from sqlalchemy import (
-    JSON, DateTime, ForeignKey, Integer, String, TypeDecorator, UniqueConstraint, create_engine, event, inspect,
+    JSON, DateTime, ForeignKey, Integer, String, Text, TypeDecorator, UniqueConstraint, create_engine, event, inspect,
     text,
 )
 from sqlalchemy.engine import Engine, make_url
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, sessionmaker
 
-__all__ = ["Base", "VehicleRow", "EventRow", "make_engine", "make_sessionmaker", "migrate", "utcnow"]
+__all__ = ["Base", "VehicleRow", "EventRow", "IdempotencyRow", "make_engine", "make_sessionmaker", "migrate", "utcnow"]
 
 MIGRATIONS = Path(__file__).resolve().parent / "migrations"
 
@@ -79,6 +79,22 @@ class EventRow(Base):
     params: Mapped[dict[str, Any]]
     note: Mapped[str | None] = mapped_column(String(500))
     recorded_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+
+class IdempotencyRow(Base):
+    """The answer to a write sent with an ``Idempotency-Key``: a retry with the same key gets
+    it again (written in the same transaction as the write it answers)."""
+
+    __tablename__ = "idempotency_keys"
+
+    #: the write's method and path (``POST /v1/vehicles/<id>/events``): a key is per endpoint
+    scope: Mapped[str] = mapped_column(String(200), primary_key=True)
+    key: Mapped[str] = mapped_column(String(255), primary_key=True)
+    #: SHA-256 of the scope and the validated body: the same key with another body is a 409
+    fingerprint: Mapped[str] = mapped_column(String(64))
+    status: Mapped[int] = mapped_column(Integer)
+    body: Mapped[str] = mapped_column(Text)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow, index=True)
 
 
 def _sqlite_pragmas(dbapi_connection: Any, connection_record: Any) -> None:

@@ -6,17 +6,25 @@ that costs more than the allocation itself.
 
 from __future__ import annotations
 
+import hashlib
 import hmac
 from typing import Annotated
 
-from fastapi import Depends, Request, Security
+from fastapi import Depends, Header, Request, Security
 from fastapi.security import APIKeyHeader
+from pydantic import BaseModel
 
 from .config import Settings
 from .errors import Unauthorized
-from .store import VehicleStore
+from .store import Idempotency, VehicleStore
 
-__all__ = ["StoreDep", "SettingsDep", "require_api_key"]
+__all__ = ["StoreDep", "SettingsDep", "IdempotencyKey", "require_api_key", "idempotency"]
+
+#: the ``Idempotency-Key`` request header of the write endpoints (printable ASCII, no spaces)
+IdempotencyKey = Annotated[str | None, Header(
+    alias="Idempotency-Key", min_length=1, max_length=255, pattern=r"^[\x21-\x7e]+$",
+    description="a retry with the same key and body gets the first answer (the write happens once); "
+                "the same key with another body gets 409. Kept ALLOC_IDEMPOTENCY_TTL_S (24 h)")]
 
 _api_key_header = APIKeyHeader(name="X-API-Key", auto_error=False,
                                description="required on write endpoints when ALLOC_API_KEY is set")
@@ -44,3 +52,12 @@ async def require_api_key(settings: SettingsDep, key: Annotated[str | None, Secu
                            [{"loc": ["header", "X-API-Key"], "pointer": None, "reason": "missing"}])
     if not hmac.compare_digest(key.encode(), expected.encode()):
         raise Unauthorized("wrong API key", [{"loc": ["header", "X-API-Key"], "pointer": None, "reason": "wrong key"}])
+
+
+def idempotency(request: Request, key: str | None, body: BaseModel) -> Idempotency | None:
+    """The write's key, scoped to its method and path, with the fingerprint of its validated body."""
+    if key is None:
+        return None
+    scope = f"{request.method} {request.url.path.rstrip('/')}"
+    digest = hashlib.sha256(f"{scope}\n".encode() + body.model_dump_json().encode()).hexdigest()
+    return Idempotency(scope, key, digest)

@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 from fastapi import FastAPI
+from pydantic import ValidationError
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 import alloc
@@ -213,7 +214,7 @@ UVICORN_DEFAULTS: dict[str, Any] = {
 
 def serve(host: str = "127.0.0.1", port: int = 8000, data_dir: str | Path | None = None,
           database_url: str | None = None, api_key: str | None = None, workers: int = 1,
-          **uvicorn_options: Any) -> None:
+          api_key_file: str | Path | None = None, **uvicorn_options: Any) -> None:
     """Run the service with uvicorn: ``workers`` processes on one port and one database.
 
     Any number of workers (and of replicas on the same database) is safe: every request
@@ -228,7 +229,13 @@ def serve(host: str = "127.0.0.1", port: int = 8000, data_dir: str | Path | None
         os.environ["ALLOC_DATABASE_URL"] = database_url
     if api_key is not None:
         os.environ["ALLOC_API_KEY"] = api_key
-    settings = Settings()  # validated here once: an empty key stops the start, before any worker
+    if api_key_file is not None:
+        os.environ["ALLOC_API_KEY_FILE"] = str(Path(api_key_file).resolve())
+    try:  # validated here once: a refused setting stops the start, before any worker
+        settings = Settings()
+    except ValidationError as exc:  # say which setting and why, without a traceback (nor the value)
+        reasons = "; ".join(str(err["msg"]).removeprefix("Value error, ") for err in exc.errors())
+        raise SystemExit(f"alloc service: refusing to start: {reasons}") from None
     make_engine(settings.resolved_database_url).dispose()  # migrate once, before the workers start
     options = {**UVICORN_DEFAULTS, **uvicorn_options}
     uvicorn.run("service.main:create_app", factory=True, host=host, port=port, workers=workers,
@@ -244,11 +251,13 @@ def _main() -> None:
     parser.add_argument("--workers", type=int, default=1, help="worker processes (one database, one truth)")
     parser.add_argument("--data-dir", default=None)
     parser.add_argument("--database-url", default=None)
+    parser.add_argument("--api-key-file", default=None,
+                        help="file holding the write key (or ALLOC_API_KEY); never the key itself on argv")
     parser.add_argument("--log-level", default="info")
     parser.add_argument("--access-log", action="store_true", help="log every request")
     args = parser.parse_args()
-    serve(args.host, args.port, args.data_dir, args.database_url, workers=args.workers, log_level=args.log_level,
-          access_log=args.access_log)
+    serve(args.host, args.port, args.data_dir, args.database_url, workers=args.workers,
+          api_key_file=args.api_key_file, log_level=args.log_level, access_log=args.access_log)
 
 
 if __name__ == "__main__":

@@ -12,9 +12,17 @@ returning and the coroutine resuming (``resume``); with the gate, p50 of both 0.
 So a *priority* request (a write: create or delete a vehicle, record an event; carrying
 the right API key, or any write when no key is configured) closes a gate for the time it
 is in flight; every other request waits at the gate before it reads its body or costs
-anything (at most :data:`MAX_WAIT_S`, a safety net).  When no write is in flight the
-others enter :data:`TURNS` per loop iteration, so the loop reads its sockets (and a
-write's headers) between every few of them.  The gate is closed as soon as the request's headers are parsed
+anything.  When no write is in flight the others enter :data:`TURNS` per loop iteration,
+so the loop reads its sockets (and a write's headers) between every few of them.
+
+What is bounded, and by how much: the gate stays closed for at most :data:`MAX_WAIT_S` at
+a time (writes overlapping for longer no longer hold the others back).  A request's whole
+wait is that plus its place in the line that formed behind the gate: ``TURNS`` of the
+waiting requests enter per loop iteration, each costing about 0.6 ms, so with ``Q``
+requests ahead of it a request waits up to ``MAX_WAIT_S + Q x 0.6 ms``; at most
+``ALLOC_MAX_CONNECTIONS`` (512) requests can be in line, so up to about 0.8 s
+(measured 0.65-0.92 s under the flood of ``benchmarks/bench_service.py``).  Writes do
+not queue here at all.  The gate is closed as soon as the request's headers are parsed
 (:class:`service.server.GuardedHttpToolsProtocol`), before the loop runs any request task
 queued ahead of it; without that protocol (an in-process test client) the middleware closes
 it when the request reaches the application.
@@ -38,7 +46,8 @@ __all__ = ["PriorityGate", "PriorityMiddleware", "MAX_WAIT_S", "SCOPE_KEY", "GAT
 #: two reads of the sockets the loop runs at most this many of them (a flood request costs
 #: ~0.6 ms), so a write's bytes are read, and the gate closed, within about a millisecond
 TURNS = 2
-#: the longest a request waits for writes in flight (a bound, not a schedule: writes take ms)
+#: the longest the gate stays closed at a time (a bound, not a schedule: writes take ms); a
+#: request's whole wait adds its place in the line behind the gate (module docstring)
 MAX_WAIT_S = 0.5
 #: scope key set by the protocol: ``True`` when the gate was closed for this request
 SCOPE_KEY = "alloc.priority"

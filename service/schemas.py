@@ -410,4 +410,5 @@ PROBLEM_RESPONSES: dict[int | str, dict[str, Any]] = {
 }
 #: additionally, on routes with a vehicle id / on write routes
 NOT_FOUND = {404: _problem("unknown vehicle")}
-UNAUTHORIZED = {401: _problem("missing or wrong X-API-Key (when ALLOC_API_KEY is set)")}
+UNAUTHORIZED = {401: _problem("missing or wrong X-API-Key (when ALLOC_API_KEY is set)"),
+                409: _problem("Idempotency-Key reused with a different body, or too many concurrent writes")}

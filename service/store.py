@@ -36,6 +36,8 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
+import os
+import signal
 import sqlite3
 import threading
 import uuid
@@ -43,11 +45,12 @@ from collections import OrderedDict
 from collections.abc import Callable, Hashable
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
-from datetime import datetime
+from datetime import datetime, timedelta
 from typing import Any
 
 import numpy as np
 from sqlalchemy import delete, func, select, text, update
+from sqlalchemy.exc import IntegrityError
 from sqlalchemy.engine import Engine
 from sqlalchemy.orm import Session, sessionmaker
 
@@ -56,12 +59,12 @@ import alloc
 from . import timing
 from .builds import TRANSFER_BYTES, Builder, Built, Call, build, build_allocator, check_build_cost
 from .cost import is_costly
-from .db import EventRow, VehicleRow, utcnow
+from .db import EventRow, IdempotencyRow, VehicleRow, utcnow
 from .errors import Conflict, NotFound, ServiceError
 from .health import Health, apply_event, dump_health, load_health, to_problem
 from .schemas import EventIn, VehicleCreate
 
-__all__ = ["VehicleState", "AllocatorCache", "Builder", "VehicleStore", "VersionProbe", "build_allocator",
+__all__ = ["VehicleState", "Idempotency", "Answer", "AllocatorCache", "Builder", "VehicleStore", "VersionProbe", "build_allocator",
            "check_build_cost", "options_key", "PREBUILD_LIMIT", "INLINE_ENTRY_BYTES"]  # the build API re-exported
 
 _log = logging.getLogger("service")
@@ -221,11 +224,68 @@ def _state(row: VehicleRow, nominal: alloc.Problem | None = None) -> VehicleStat
                         to_problem(nominal, health))
 
 
+@dataclass(frozen=True, slots=True)
+class Idempotency:
+    """A write's ``Idempotency-Key`` (per ``scope``: its method and path) and the fingerprint
+    of its body (SHA-256 over the scope and the validated body)."""
+
+    scope: str
+    key: str
+    fingerprint: str
+
+
+@dataclass(frozen=True, slots=True)
+class Answer:
+    """A write's answer as sent: its status and JSON body; ``state`` is the new vehicle state
+    when the write happened now (``None``: the answer was replayed for a retried key)."""
+
+    status: int
+    body: bytes
+    state: VehicleState | None
+
+    @property
+    def replayed(self) -> bool:
+        return self.state is None
+
+
+def _replay(session: Session, once: Idempotency | None) -> Answer | None:
+    """The stored answer to ``once``'s key, or ``None`` (409 when the key came with another body)."""
+    if once is None:
+        return None
+    row = session.get(IdempotencyRow, (once.scope, once.key))
+    if row is None:
+        return None
+    if row.fingerprint != once.fingerprint:
+        raise Conflict(f"Idempotency-Key {once.key!r} was used for a different request to {once.scope}; "
+                       f"a retry must repeat the request unchanged, a new request needs a new key",
+                       [{"loc": ["header", "Idempotency-Key"], "pointer": None,
+                         "reason": "key reused with a different body"}])
+    return Answer(row.status, row.body.encode(), None)
+
+
+def _remember_answer(session: Session, once: Idempotency | None, status: int, body: bytes, ttl_s: float) -> None:
+    """Store the answer in the write's own transaction (and drop keys older than ``ttl_s``)."""
+    if once is None:
+        return
+    now = utcnow()
+    session.execute(delete(IdempotencyRow).where(IdempotencyRow.created_at < now - timedelta(seconds=ttl_s)))
+    session.add(IdempotencyRow(scope=once.scope, key=once.key, fingerprint=once.fingerprint, status=status,
+                               body=body.decode(), created_at=now))
+
+
+def _failpoint(name: str) -> None:
+    """Fault injection for the crash tests: ``ALLOC_FAILPOINT=<name>`` kills this process
+    (SIGKILL, no clean-up) when it reaches ``name``.  Unset in production: one dict lookup."""
+    if os.environ.get("ALLOC_FAILPOINT") == name:
+        os.kill(os.getpid(), signal.SIGKILL)
+
+
 class VehicleStore:
     """Vehicles in the database; their states and allocators cached per version in this process."""
 
     def __init__(self, engine: Engine, sessions: sessionmaker[Session], *, cache_size: int, cache_bytes: int,
-                 inline_cache_bytes: int, build_budget: float, build_workers: int, build_queue: int) -> None:
+                 inline_cache_bytes: int, build_budget: float, build_workers: int, build_queue: int,
+                 idempotency_ttl_s: float = 86400.0) -> None:
         self._sessions = sessions
         self._probe = VersionProbe(engine)
         self._states: OrderedDict[str, VehicleState] = OrderedDict()
@@ -233,6 +293,7 @@ class VehicleStore:
         self.allocators = AllocatorCache(cache_size, cache_bytes, inline_cache_bytes)
         self.builder = Builder(build_workers, build_queue)
         self.build_budget = build_budget
+        self.idempotency_ttl_s = idempotency_ttl_s
         # Writes (events, deletes) get threads of their own: they never queue behind the
         # shared thread pool of the sync routes or behind builds.
         self._writers: ThreadPoolExecutor | None = None
@@ -287,12 +348,36 @@ class VehicleStore:
 
     # ----------------------------------------------------------- vehicles
     def create(self, body: VehicleCreate) -> VehicleState:
+        answer = self.create_once(body, None, lambda state: b"")
+        assert answer.state is not None
+        return answer.state
+
+    def create_once(self, body: VehicleCreate, once: Idempotency | None,
+                    render: Callable[[VehicleState], bytes]) -> Answer:
+        """Create a vehicle; with ``once``, at most once per key (a retry gets the first answer).
+
+        ``render(state)`` is the answer's body, stored with the key in the same transaction.
+        """
         nominal = body.to_problem()
-        row = VehicleRow(id=str(uuid.uuid4()), name=body.name, problem=nominal.to_dict(), health={},
-                         health_version=0, created_at=utcnow())
-        with self._sessions.begin() as session:
-            session.add(row)
-        return self._remember(_state(row, nominal))
+        for _ in range(_MAX_RETRIES):
+            row = VehicleRow(id=str(uuid.uuid4()), name=body.name, problem=nominal.to_dict(), health={},
+                             health_version=0, created_at=utcnow())
+            state = _state(row, nominal)
+            try:
+                with self._sessions.begin() as session:
+                    if (replayed := _replay(session, once)) is not None:
+                        return replayed
+                    session.add(row)
+                    answer = Answer(201, render(state), state)
+                    _remember_answer(session, once, answer.status, answer.body, self.idempotency_ttl_s)
+            except IntegrityError:
+                if once is None:
+                    raise
+                continue  # the same key committed concurrently: replay its answer
+            _failpoint("after-commit")
+            self._remember(state)
+            return answer
+        raise Conflict("too many concurrent writes with this Idempotency-Key; retry")
 
     def get(self, vehicle_id: str) -> VehicleState:
         """The vehicle at its committed health (the version read from the database now)."""
@@ -338,8 +423,25 @@ class VehicleStore:
         Nothing else happens before the caller can answer: allocators are rebuilt by
         :meth:`prebuild`, after the response.
         """
+        written: list[tuple[EventRow, VehicleState, int]] = []
+
+        def keep(ev: EventRow, new: VehicleState, old_version: int) -> bytes:
+            written.append((ev, new, old_version))
+            return b""
+        self.record_event_once(vehicle_id, event, None, keep)
+        return written[-1]
+
+    def record_event_once(self, vehicle_id: str, event: EventIn, once: Idempotency | None,
+                          render: Callable[[EventRow, VehicleState, int], bytes]) -> Answer:
+        """:meth:`record_event`, at most once per ``once`` key (a retry gets the first answer).
+
+        ``render(event, new state, old version)`` is the answer's body, stored with the key in
+        the same transaction as the event: committed together or not at all.
+        """
         for _ in range(_MAX_RETRIES):
             with self._sessions() as session:
+                if (replayed := _replay(session, once)) is not None:
+                    return replayed
                 row = session.get(VehicleRow, vehicle_id, with_for_update=True)
                 if row is None:
                     self._forget(vehicle_id)
@@ -361,11 +463,20 @@ class VehicleStore:
                 ev = EventRow(vehicle_id=vehicle_id, seq=version, effector=name, kind=event.kind,
                               params=params, note=event.note, recorded_at=utcnow())
                 session.add(ev)
-                session.commit()
-            new = VehicleState(old.id, old.name, old.created_at, old.nominal, health, version,
-                               to_problem(old.nominal, health))
+                new = VehicleState(old.id, old.name, old.created_at, old.nominal, health, version,
+                                   to_problem(old.nominal, health))
+                answer = Answer(201, render(ev, new, old.version), new)
+                _remember_answer(session, once, answer.status, answer.body, self.idempotency_ttl_s)
+                try:
+                    session.commit()
+                except IntegrityError:
+                    if once is None:
+                        raise
+                    session.rollback()
+                    continue  # the same key committed concurrently: its answer is replayed next round
+            _failpoint("after-commit")
             self._remember(new)
-            return ev, new, old.version
+            return answer
         raise Conflict(f"vehicle {vehicle_id!r}: too many concurrent events; retry")
 
     def prebuild(self, new: VehicleState) -> int:

@@ -148,6 +148,49 @@ def test_empty_api_key_refuses_to_start(tmp_path):
         ServiceProcess(tmp_path / "data", api_key="").start(timeout=120.0)
 
 
+def test_padded_api_key_refuses_to_start_with_a_clear_message(tmp_path):
+    with pytest.raises(RuntimeError, match="surrounding whitespace") as info:
+        ServiceProcess(tmp_path / "data", api_key=" k ").start(timeout=120.0)
+    assert " k " not in str(info.value).split("surrounding whitespace")[1]  # the key is not echoed
+    assert "Traceback" not in str(info.value)
+
+
+@pytest.mark.parametrize(("content", "accepted"), [("s3cret\n", "s3cret"), ("s3cret", "s3cret"),
+                                                   ("s3cret\r\n", "s3cret"), (" s3cret\n", None),
+                                                   ("s3cret\n\n", None), ("\n", None), ("", None)])
+def test_api_key_file(tmp_path, content, accepted):
+    from pydantic import ValidationError
+
+    from service.config import Settings
+    path = tmp_path / "key"
+    path.write_text(content, newline="")
+    if accepted is None:
+        with pytest.raises(ValidationError, match="empty|whitespace"):
+            Settings(api_key_file=path)
+    else:
+        assert Settings(api_key_file=path).api_key == accepted
+    with pytest.raises(ValidationError, match="one way"):
+        Settings(api_key_file=path, api_key="other")
+
+
+def test_no_key_on_the_command_line(tmp_path):
+    """``--api-key`` is gone (argv is world-readable in /proc/<pid>/cmdline); the file form works."""
+    import inspect
+
+    from service import cli
+    assert "api_key" not in inspect.signature(cli.serve_command).parameters
+    (tmp_path / "key").write_text("from-file\n")
+    proc = ServiceProcess(tmp_path / "data", env={"ALLOC_API_KEY_FILE": str(tmp_path / "key")}).start(timeout=120.0)
+    try:
+        cmdline = open(f"/proc/{proc.proc.pid}/cmdline", "rb").read()
+        assert b"from-file" not in cmdline
+        with httpx.Client(base_url=proc.url, timeout=30.0) as c:
+            assert c.post("/v1/vehicles", json=ice().to_dict()).status_code == 401
+            assert c.post("/v1/vehicles", json=ice().to_dict(), headers={"X-API-Key": "from-file"}).status_code == 201
+    finally:
+        proc.stop()
+
+
 def test_build_cost_refused_before_it_starts(server):
     rng = np.random.default_rng(1)
     B = rng.normal(size=(3, 64)).tolist()

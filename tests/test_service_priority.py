@@ -136,3 +136,27 @@ def test_gate_lets_in_at_most_turns_per_loop_iteration():
         return passed
     passed = asyncio.run(scenario())
     assert max(passed.count(i) for i in set(passed)) <= TURNS and len(passed) == 10
+
+
+def test_whole_wait_is_the_gate_bound_plus_the_line_ahead():
+    """The documented bound (service.priority): with the gate held by a write that never ends and
+    Q requests in line, each costing c seconds once in, the last waits at most MAX_WAIT_S + Q c
+    (plus scheduling slack); the first ones wait about MAX_WAIT_S."""
+    gate, q, cost = PriorityGate(None), 200, 0.0005
+
+    async def scenario() -> list[float]:
+        gate.enter()  # never left
+        t0 = time.monotonic()
+        waits: list[float] = []
+
+        async def other() -> None:
+            await gate.wait()
+            waits.append(time.monotonic() - t0)
+            end = time.perf_counter() + cost  # the request's own work, holding the loop
+            while time.perf_counter() < end:
+                pass
+        await asyncio.gather(*(other() for _ in range(q)))
+        return waits
+    waits = asyncio.run(scenario())
+    # slack for a shared machine: the line costs q c of CPU, which a loaded machine stretches
+    assert MAX_WAIT_S * 0.9 <= min(waits) and max(waits) <= MAX_WAIT_S + 2 * q * cost + 0.3, (min(waits), max(waits))

@@ -8,11 +8,13 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, BackgroundTasks, Depends, Path, Query, Response, status
+import json
+
+from fastapi import APIRouter, BackgroundTasks, Depends, Path, Query, Request, Response, status
 
 from .. import ams
 from ..db import EventRow
-from ..deps import StoreDep, require_api_key
+from ..deps import IdempotencyKey, StoreDep, idempotency, require_api_key
 from ..responses import allocation_response, batch_response
 from ..health import health_out
 from ..schemas import (
@@ -22,7 +24,7 @@ from ..schemas import (
     VehicleOut, VehicleSummary,
 )
 from ..builds import Call
-from ..store import VehicleState
+from ..store import Answer, VehicleState
 
 router = APIRouter(prefix="/v1/vehicles", tags=["vehicles"], responses={**PROBLEM_RESPONSES, **NOT_FOUND})
 VehicleId = Annotated[str, Path(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_-]+$",
@@ -47,10 +49,19 @@ def _event_out(e: EventRow) -> EventOut:
 
 @router.post("", response_model=VehicleOut, status_code=status.HTTP_201_CREATED, dependencies=WriteAccess,
              responses=UNAUTHORIZED, summary="Create a vehicle (its nominal effector suite)")
-def create_vehicle(body: VehicleCreate, store: StoreDep, response: Response) -> VehicleOut:
-    state = store.create(body)
-    response.headers["Location"] = f"/v1/vehicles/{state.id}"
-    return _vehicle_out(state)
+def create_vehicle(body: VehicleCreate, store: StoreDep, request: Request,
+                   idempotency_key: IdempotencyKey = None) -> Response:
+    answer = store.create_once(body, idempotency(request, idempotency_key, body),
+                               lambda state: _vehicle_out(state).model_dump_json().encode())
+    location = f"/v1/vehicles/{json.loads(answer.body)['id']}"
+    return _answer(answer, Location=location)
+
+
+def _answer(answer: Answer, **headers: str) -> Response:
+    """A write's answer, as first sent; a replay for a retried key says so."""
+    if answer.replayed:
+        headers["Idempotent-Replayed"] = "true"
+    return Response(answer.body, status_code=answer.status, media_type="application/json", headers=headers)
 
 
 @router.get("", response_model=VehicleList, summary="List vehicles")
@@ -76,14 +87,20 @@ async def delete_vehicle(vehicle_id: VehicleId, store: StoreDep) -> Response:
 
 @router.post("/{vehicle_id}/events", response_model=EventRecorded, status_code=status.HTTP_201_CREATED,
              dependencies=WriteAccess, responses=UNAUTHORIZED, summary="Record a failure or repair of one effector")
-async def record_event(vehicle_id: VehicleId, body: EventIn, store: StoreDep,
-                       tasks: BackgroundTasks) -> EventRecorded:
+async def record_event(vehicle_id: VehicleId, body: EventIn, store: StoreDep, request: Request,
+                       tasks: BackgroundTasks, idempotency_key: IdempotencyKey = None) -> Response:
     # Committed (fsync'd) on the writer threads and visible to every process before the
     # response; the allocators that were in use are rebuilt after it (bounded, this
     # vehicle only, on the build pool).
-    event, state, _ = await store.write(store.record_event, vehicle_id, body)
-    tasks.add_task(store.prebuild, state)
-    return EventRecorded(event=_event_out(event), health=_health_out(state))
+    answer = await store.write(store.record_event_once, vehicle_id, body,
+                               idempotency(request, idempotency_key, body), _render_event)
+    if answer.state is not None:
+        tasks.add_task(store.prebuild, answer.state)
+    return _answer(answer)
+
+
+def _render_event(event: EventRow, state: VehicleState, old_version: int) -> bytes:
+    return EventRecorded(event=_event_out(event), health=_health_out(state)).model_dump_json().encode()
 
 
 @router.get("/{vehicle_id}/events", response_model=EventList, summary="Event history, oldest first")
