@@ -143,6 +143,7 @@ def _run_all(blocks: list[Block], tmp_path: Path) -> None:
         after = _git_status()
     if before is not None:
         new = set(after.splitlines()) - set(before.splitlines())
+        # exact in a clone of its own (CI); in a checkout that others edit meanwhile, check who wrote these
         assert not new, f"README commands changed the checkout: {sorted(new)}"
 
 
