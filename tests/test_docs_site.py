@@ -141,3 +141,19 @@ def test_methods_table_latency_is_the_committed_run():
     assert sorted(r[0].strip("`") for r in rows) == sorted(k for k in ice if " " not in k)
     for name, _, _, median in rows:
         assert abs(float(median) - ice[name.strip("`")]) <= 0.051, name
+
+
+def test_simulator_speed_table_is_the_committed_run():
+    text = (DOCS / "performance.md").read_text()
+    lines = (ROOT / "benchmarks/reference/bench_sim.txt").read_text().splitlines()[2:]
+    rows = [line.split() for line in lines if line.strip()]
+    assert len(rows) == 8
+    for hz, method, simulated, wall, real_time, median, p90, ratio in rows:
+        assert f"| {hz} | {method} | {simulated} | {wall} | {real_time} | {median} / {p90} | {ratio} |" in text
+
+
+def test_ice_allocation_table_is_generated_from_the_committed_csv():
+    from benchmarks.ice_table import readme_table
+
+    table = readme_table(ROOT / "benchmarks/reference/ice_table.csv").strip()
+    assert table in (DOCS / "simulator.md").read_text()
