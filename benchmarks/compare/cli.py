@@ -16,23 +16,29 @@ import platform
 import shlex
 import sys
 from pathlib import Path
+from typing import NoReturn
 
 import typer
 
+from alloc.cli import OneLineErrors, finite, read_json_file
+
 from .sweep import Spec, check_simulator_support, full_sweep, quick_sweep, smoke_sweep
 
-app = typer.Typer(help="Allocator comparison: open loop and closed loop, on all local cores or a Dask cluster.",
-                  no_args_is_help=True)
+app = typer.Typer(cls=OneLineErrors, no_args_is_help=True,
+                  help="Allocator comparison: open loop and closed loop, on all local cores or a Dask cluster.")
+
+#: most local worker processes one sweep starts (each holds a simulator, about 0.3 GB)
+MAX_WORKERS = 256
 
 _SCHEDULER = typer.Option(None, "--scheduler", metavar="ADDRESS",
                           help="Dask scheduler address (tcp://host:8786); default: local process pool")
 _OUT = typer.Option(None, "--out", help="folder for the CSVs, report.md and figures "
                     "(default: a new ./bench-<sweep>-<timestamp>)")
-_WORKERS = typer.Option(None, "--workers", min=1, help="local worker processes (default: all cores)")
+_WORKERS = typer.Option(None, "--workers", min=1, max=MAX_WORKERS, help="local worker processes (default: all cores)")
 _RESUME = typer.Option(False, "--resume", help="continue a sweep in --out, skipping the runs already written")
 _TIMING = typer.Option(True, "--timing/--no-timing",
                        help="after the sweep, measure per-call latency in this process alone (report's latency)")
-_TIMING_CALLS = typer.Option(2000, "--timing-calls", min=10, help="timed calls per method and problem")
+_TIMING_CALLS = typer.Option(2000, "--timing-calls", min=10, max=1_000_000, help="timed calls per method and problem")
 
 
 def _command() -> str:
@@ -118,6 +124,9 @@ def smoke(scheduler: str | None = _SCHEDULER, out: Path | None = _OUT, workers: 
     _run("smoke", smoke_sweep(), scheduler, out, workers, resume, timing, timing_calls)
 
 
+_RATE = finite(0.0, low_open=True, unit=" Hz")
+
+
 def _frame_rates(text: str) -> list[float | None]:
     out: list[float | None] = []
     for part in text.split(","):
@@ -126,16 +135,19 @@ def _frame_rates(text: str) -> list[float | None]:
             out.append(None)
             continue
         try:
-            out.append(float(part))
-        except ValueError:
-            raise typer.BadParameter(f"expected 'seed' or a rate in Hz, got {part!r}", param_hint="--frame-rates") from None
+            out.append(_RATE(part))
+        except typer.BadParameter as exc:
+            raise typer.BadParameter(f"expected 'seed' or a rate in Hz: {exc.message}",
+                                     param_hint="--frame-rates") from None
+    if len(set(out)) != len(out):
+        raise typer.BadParameter(f"a frame rate is given twice in {text!r}", param_hint="--frame-rates")
     return out
 
 
 @app.command()
 def full(scheduler: str | None = _SCHEDULER, out: Path | None = _OUT, workers: int | None = _WORKERS,
          resume: bool = _RESUME, timing: bool = _TIMING, timing_calls: int = _TIMING_CALLS,
-         seeds: int = typer.Option(10, "--seeds", min=2, help="noise seeds per cell"),
+         seeds: int = typer.Option(10, "--seeds", min=2, max=1000, help="noise seeds per cell"),
          frame_rates: str = typer.Option("seed,100", "--frame-rates",
                                          help="flight-control frame rates: 'seed' (the seed's 0.5 ms) and/or Hz"),
          seed_durations: bool = typer.Option(False, "--seed-durations",
@@ -157,24 +169,71 @@ def full(scheduler: str | None = _SCHEDULER, out: Path | None = _OUT, workers: i
     _run("full", specs, scheduler, out, workers, resume, timing, timing_calls)
 
 
+def _sweep_folder(out: Path) -> list[Spec]:
+    """The specs of the sweep in ``out``, once the folder is checked to hold what a report reads."""
+    from .runner import table_of
+
+    def bad(reason: str) -> NoReturn:
+        raise typer.BadParameter(f"{out}: {reason}", param_hint="DIR")
+
+    if not out.is_dir():
+        bad("no such folder" if not out.exists() else "not a folder")
+    for name in ("specs.json", "run.json"):
+        if not (out / name).is_file():
+            bad(f"holds no {name}; not a sweep folder (one written by `alloc bench quick|full|smoke`)")
+    specs = read_json_file(out / "specs.json", "DIR")
+    if (not isinstance(specs, list) or not specs
+            or not all(isinstance(s, dict) and isinstance(s.get("id"), str) and s.get("kind") in ("open", "closed")
+                       and (s["kind"] == "open" or isinstance(s.get("scenario"), str)) for s in specs)):
+        bad("specs.json is not a list of sweep specs (id, kind 'open' or 'closed', scenario)")
+    if not isinstance(read_json_file(out / "run.json", "DIR"), dict):
+        bad("run.json is not a JSON object")
+    missing = sorted({f"{table_of(s)}.csv" for s in specs} - {p.name for p in out.iterdir()})
+    if missing:
+        bad(f"missing result table(s) {missing}: the sweep has not written them (resume it with --resume)")
+    return specs
+
+
 @app.command()
-def report(out: Path = typer.Argument(..., help="folder of a sweep (holds specs.json and the CSVs)")) -> None:
-    """Re-render report.md and the figures of a sweep folder from its CSVs (no run)."""
+def report(out: Path = typer.Argument(..., metavar="DIR", help="folder of a sweep (holds specs.json, run.json "
+                                      "and the CSVs)"),
+           force: bool = typer.Option(False, "--force", help="overwrite the folder's existing report.md and "
+                                      "figures")) -> None:
+    """Re-render report.md and the figures of a sweep folder from its CSVs (no run).
+
+    The folder's report.md, figures and their CSVs are rewritten, so a folder that already
+    holds a report.md needs --force.
+    """
     from .report import make_report
 
-    specs = json.loads((out / "specs.json").read_text())
-    typer.echo(f"report: {make_report(out, specs)}")
+    specs = _sweep_folder(out)
+    if (out / "report.md").exists() and not force:
+        raise typer.BadParameter(f"{out}: holds a report.md; pass --force to re-render over it", param_hint="DIR")
+    try:
+        path = make_report(out, specs)
+    except (KeyError, ValueError, TypeError) as exc:  # rows that are not the sweep's own
+        raise typer.BadParameter(f"{out}: its tables cannot be read as this sweep's results: {exc!r}",
+                                 param_hint="DIR") from None
+    typer.echo(f"report: {path}")
 
 
 @app.command()
-def scaling(workers: str = typer.Option("1,2,4", help="worker counts"),
-            runs: int = typer.Option(24, min=2, help="closed-loop runs per measurement"),
+def scaling(workers: str = typer.Option("1,2,4", help="worker counts, comma-separated"),
+            runs: int = typer.Option(24, min=2, max=10_000, help="closed-loop runs (ICE, 8 s each) per measurement"),
             engine: list[str] = typer.Option(["dask", "local"], help="dask (loopback cluster) and/or local"),
             as_json: bool = typer.Option(False, "--json")) -> None:
     """Throughput with 1, 2, 4 worker processes on a loopback Dask cluster and the local pool."""
     from .throughput import measure_scaling
 
-    counts = [int(x) for x in workers.split(",")]
+    try:
+        counts = [int(x) for x in workers.split(",")]
+    except ValueError:
+        raise typer.BadParameter(f"expected comma-separated worker counts, got {workers!r}", param_hint="--workers") from None
+    if not all(1 <= n <= MAX_WORKERS for n in counts):
+        raise typer.BadParameter(f"worker counts must be 1 to {MAX_WORKERS}, got {workers!r}", param_hint="--workers")
+    unknown = sorted(set(engine) - {"dask", "local"})
+    if unknown:
+        raise typer.BadParameter(f"unknown engine(s) {unknown}; expected 'dask' and/or 'local'", param_hint="--engine")
     rows = measure_scaling(counts, runs, engine)
     if as_json:
         typer.echo(json.dumps(rows, indent=2))
