@@ -1,0 +1,457 @@
+"""Where numba keeps the distribution's compiled kernels, for any user, and the cache shipped with it.
+
+numba's own choice (``cache=True``) is the package's ``__pycache__`` if this process can write
+there, else ``~/.cache/numba``, else it raises ``RuntimeError: cannot cache function ...: no
+locator available`` at import -- what a user met whose site-packages was installed by root and
+who had no writable home.  :class:`KernelCacheLocator` takes that choice for the files of this
+distribution (``alloc``, ``sim``, ``service``, ``benchmarks``) and never fails:
+
+1. the package's ``__pycache__``, if writable (an editable clone; root on a system install);
+2. else ``$XDG_CACHE_HOME/alloc-toolkit`` (``~/.cache/alloc-toolkit``);
+3. else ``<tempdir>/alloc-toolkit-<uid>``, else ``/dev/shm/alloc-toolkit-<uid>`` (private:
+   created 0700, used only if owned by this user and writable by nobody else -- the cache
+   holds machine code that this process would load);
+4. else the package's ``__pycache__`` read-only: kernels found there load, the others are
+   compiled in memory for this process only (nothing is written, nothing raises).
+
+The package's ``__pycache__`` is also the *shipped* cache: ``pip install`` builds the wheel
+with every kernel compiled (setup.py's build step runs :func:`warm` in the build tree), and
+``make install`` warms the editable clone.  numba keys an entry by the source file's content
+hash, the function's bytecode, the Python and numba versions and the CPU (name and features).
+On a user's first use of a kernel from a fallback directory (2-3), the shipped entries for this
+CPU are copied there, so that directory holds the kernels compiled for it as well.  On another
+CPU, or with another numba version, the shipped entries do not apply: each kernel is compiled
+on first use into the location above, with one line on stderr per method::
+
+    alloc: compiling kernels for qp (not in the kernel cache for this CPU; first use on this machine) ...
+
+``NUMBA_CACHE_DIR`` (numba's own setting) still wins: the kernels are then cached only there.
+``python -m alloc._jit_cache`` warms the cache (``warm``) or says where the kernels load from
+(``where``).
+
+This module imports numba; ``alloc/__init__.py`` loads it only once numba itself is imported
+(``import alloc`` stays cheap), before any kernel is decorated.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import inspect
+import os
+import pickle
+import re
+import shutil
+import stat
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import numba
+from numba.core import config, event
+from numba.core.caching import CacheImpl, CompileResultCacheImpl, FunctionCache, _CacheLocator
+
+__all__ = ["KernelCacheLocator", "install", "kernel_files", "warm", "where"]
+
+#: the distribution's packages whose numba kernels this module places
+PACKAGES = ("alloc", "sim", "service", "benchmarks")
+#: the directory that holds those packages (site-packages, or the root of a clone)
+_ROOT = Path(__file__).resolve().parent.parent
+_APP = "alloc-toolkit"
+_PYCACHE = "__pycache__"
+
+
+def _ours(py_file: str) -> bool:
+    """Whether ``py_file`` is a source file of one of this distribution's packages."""
+    try:
+        rel = Path(py_file).resolve().relative_to(_ROOT)
+    except (ValueError, OSError):
+        return False
+    return len(rel.parts) > 1 and rel.parts[0] in PACKAGES
+
+
+@functools.lru_cache(maxsize=None)
+def _content_hash(path: str, mtime: float, size: int) -> bytes:
+    # numba >= 0.61's own stamp (a content hash, unlike the mtime and size of earlier
+    # versions, which an install changes): the same value, so caches made by either agree
+    with open(path, "rb") as f:
+        return hashlib.sha256(f.read()).digest()
+
+
+_usable_lock = threading.Lock()
+_usable_memo: dict[str, bool] = {}
+
+
+def _writable_dir(path: str, private_root: str | None = None) -> bool:
+    """Whether ``path`` exists (made if need be) and this process can write files in it.
+
+    ``private_root``: a directory in a place other users can write (a temp dir): made 0700,
+    and refused unless owned by this user and writable by nobody else.  Memoised: one probe
+    per directory and process.
+    """
+    with _usable_lock:
+        known = _usable_memo.get(path)
+        if known is not None:
+            return known
+        try:
+            if private_root is not None:
+                os.makedirs(private_root, mode=0o700, exist_ok=True)
+                st = os.lstat(private_root)
+                if (not stat.S_ISDIR(st.st_mode) or st.st_uid != os.getuid()
+                        or st.st_mode & (stat.S_IWGRP | stat.S_IWOTH)):
+                    raise PermissionError(f"{private_root} is not private to this user")
+            os.makedirs(path, exist_ok=True)
+            tempfile.TemporaryFile(dir=path).close()
+            ok = True
+        except (OSError, ValueError):
+            ok = False
+        _usable_memo[path] = ok
+        return ok
+
+
+def _fallback_dirs(subpath: str) -> list[tuple[str, str | None]]:
+    """(directory, private root or None) for a kernel file's cache, in order of preference."""
+    out: list[tuple[str, str | None]] = []
+    home_cache = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    if os.path.isabs(home_cache):
+        root = os.path.join(home_cache, _APP)
+        out.append((os.path.join(root, subpath), root))
+    uid = os.getuid() if hasattr(os, "getuid") else 0
+    try:
+        bases = [tempfile.gettempdir()]
+    except OSError:  # no usable temporary directory at all
+        bases = []
+    for base in [*bases, "/dev/shm"]:
+        root = os.path.join(base, f"{_APP}-{uid}")
+        out.append((os.path.join(root, subpath), root))
+    return out
+
+
+class KernelCacheLocator(_CacheLocator):
+    """numba's cache locator for this distribution's kernels (see the module's docstring).
+
+    ``writable`` is False only in the last resort (nothing writable anywhere): the entries
+    in the shipped cache load, nothing is saved.
+    """
+
+    def __init__(self, py_func: Any, py_file: str, cache_path: str, writable: bool) -> None:
+        self._py_file = py_file
+        self._lineno = py_func.__code__.co_firstlineno
+        self._cache_path = cache_path
+        self.writable = writable
+        #: the cache that ``pip install`` ships, beside the source file
+        self.shipped_path = os.path.join(os.path.dirname(py_file), _PYCACHE)
+
+    def ensure_cache_path(self) -> None:
+        if self.writable:
+            super().ensure_cache_path()
+
+    def get_cache_path(self) -> str:
+        return self._cache_path
+
+    def get_source_stamp(self) -> bytes:
+        st = os.stat(self._py_file)
+        return _content_hash(self._py_file, st.st_mtime, st.st_size)
+
+    def get_disambiguator(self) -> str:
+        return str(self._lineno)
+
+    @classmethod
+    def from_function(cls, py_func: Any, py_file: str) -> KernelCacheLocator | None:
+        if config.CACHE_DIR or not _ours(py_file):
+            return None  # NUMBA_CACHE_DIR, or not our file: numba's own locators decide
+        in_tree = os.path.join(os.path.dirname(py_file), _PYCACHE)
+        if _writable_dir(in_tree):
+            return cls(py_func, py_file, in_tree, True)
+        subpath = cls.get_suitable_cache_subpath(py_file)
+        for path, private_root in _fallback_dirs(subpath):
+            if _writable_dir(path, private_root):
+                return cls(py_func, py_file, path, True)
+        return cls(py_func, py_file, in_tree, False)
+
+    def seed_from_shipped(self, filename_base: str) -> None:
+        """Copy the shipped entries of one kernel into this (fallback) cache directory.
+
+        Only when this directory has no fresh index for the kernel and the shipped one is
+        fresh and holds entries for this CPU; each file written whole (a temporary name, then
+        renamed), so a concurrent reader sees the old file or the new one.
+        """
+        if not self.writable or self._cache_path == self.shipped_path:
+            return
+        index = filename_base + ".nbi"
+        target = os.path.join(self._cache_path, index)
+        stamp = self.get_source_stamp()
+        if _read_index(target, stamp) is not None:
+            return
+        overloads = _read_index(os.path.join(self.shipped_path, index), stamp)
+        if not overloads:
+            return
+        magic = _host_magic()
+        names = {name for key, name in overloads.items() if key[1] == magic}
+        if not names:
+            return  # compiled for another CPU: nothing here to reuse
+        try:
+            for name in sorted(names) + [index]:
+                _copy_whole(os.path.join(self.shipped_path, name), os.path.join(self._cache_path, name))
+        except OSError:
+            pass  # a partial copy is harmless: a missing data file is a miss, then a compile
+
+
+def _read_index(path: str, stamp: bytes) -> dict[Any, str] | None:
+    """A numba cache index's entries ({key: data file name}), or None if absent or stale."""
+    try:
+        with open(path, "rb") as f:
+            version = pickle.load(f)
+            if version != numba.__version__:
+                return None
+            saved_stamp, overloads = pickle.loads(f.read())
+    except (OSError, EOFError, pickle.UnpicklingError, ValueError, TypeError, AttributeError):
+        return None
+    return overloads if saved_stamp == stamp else None
+
+
+def _copy_whole(src: str, dst: str) -> None:
+    tmp = f"{dst}.tmp.{os.getpid()}.{threading.get_ident()}"
+    try:
+        shutil.copyfile(src, tmp)
+        os.replace(tmp, dst)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+
+
+@functools.lru_cache(maxsize=1)
+def _host_magic() -> tuple[Any, ...]:
+    """What numba's cache keys say about this machine: target triple, CPU name, features."""
+    from numba.core.registry import cpu_target
+
+    return tuple(cpu_target.target_context.codegen().magic_tuple())
+
+
+class KernelCacheImpl(CompileResultCacheImpl):
+    """numba's cache of compile results, placed by :class:`KernelCacheLocator` for our files.
+
+    For every other function numba's own locators decide, as before.
+    """
+
+    _locator_classes = [KernelCacheLocator, *CacheImpl._locator_classes]
+
+    def __init__(self, py_func: Any) -> None:
+        super().__init__(py_func)
+        if isinstance(self._locator, KernelCacheLocator):
+            self._locator.seed_from_shipped(self.filename_base)
+
+    def check_cachable(self, cres: Any) -> bool:
+        if isinstance(self._locator, KernelCacheLocator) and not self._locator.writable:
+            return False  # nowhere to write: the kernel lives in memory for this process
+        return super().check_cachable(cres)
+
+
+class CompileNotice(event.Listener):
+    """One line on stderr when one of our kernels is compiled rather than loaded: per method
+    (or once, outside a method), at the start of the outermost compile."""
+
+    def __init__(self, stream: Any = None) -> None:
+        self._stream = stream
+        self._depth = 0
+        self._told: set[str] = set()
+        self.compiles = 0  #: outermost compiles of our kernels in this process
+
+    def on_start(self, ev: event.Event) -> None:
+        # numba holds its global compiler lock across a compile: the nesting is one thread's
+        self._depth += 1
+        if self._depth > 1:
+            return
+        dispatcher = ev.data.get("dispatcher") if isinstance(ev.data, dict) else None
+        py_func = getattr(dispatcher, "py_func", None)
+        try:
+            source = inspect.getfile(py_func) if py_func is not None else ""
+        except TypeError:
+            return
+        if not _ours(source):
+            return
+        self.compiles += 1
+        method = _calling_method()
+        if method in self._told:
+            return
+        self._told.add(method)
+        cache = getattr(getattr(dispatcher, "_cache", None), "cache_path", None)
+        where = f"; saved in {cache}" if cache else "; kept in memory for this process"
+        locator = getattr(getattr(getattr(dispatcher, "_cache", None), "_impl", None), "locator", None)
+        if isinstance(locator, KernelCacheLocator) and not locator.writable:
+            where = "; no writable cache directory: kept in memory for this process"
+        what = f"kernels for {method}" if method else "kernels"
+        print(f"alloc: compiling {what} (not in the kernel cache for this CPU; first use on this machine, "
+              f"up to a minute{where}) ...", file=self._stream or sys.__stderr__ or sys.stderr, flush=True)
+
+    def on_end(self, ev: event.Event) -> None:
+        self._depth -= 1
+
+
+def _calling_method() -> str:
+    """The registered method whose allocator is being built or called, if any (for the notice)."""
+    api = os.path.join(str(_ROOT), "alloc", "api.py")
+    frame = sys._getframe(2)
+    while frame is not None:
+        if frame.f_code.co_filename == api:
+            local = frame.f_locals
+            name = local.get("method")
+            if not isinstance(name, str):
+                name = getattr(local.get("self"), "method", None)
+            if isinstance(name, str):
+                return name
+        frame = frame.f_back
+    return ""
+
+
+_installed = False
+notice = CompileNotice()
+
+
+def install() -> None:
+    """Place our kernels' caches with :class:`KernelCacheLocator` and report compiles.
+
+    Idempotent.  Must run before a kernel is decorated (``alloc/__init__.py`` sees to it).
+    """
+    global _installed
+    if _installed:
+        return
+    FunctionCache._impl_class = KernelCacheImpl
+    event.register("numba:compile", notice)
+    _installed = True
+
+
+# ----------------------------------------------------------------------------- warming
+
+
+def _warm_cases() -> list[tuple[Any, dict[str, dict[str, Any]]]]:
+    """(problem, {method: options}) pairs whose calls reach every kernel signature in use."""
+    import numpy as np
+
+    import alloc
+    from alloc import vehicles
+
+    small = alloc.Problem(np.array([[1.0, -1.0, 0.5, 0.2], [0.3, 0.4, -1.0, 0.8], [0.2, 0.1, 0.3, -1.0]]),
+                          [-1.0] * 4, [1.0] * 4, rate_min=[-5.0] * 4, rate_max=[5.0] * 4)
+    cases = []
+    for problem, groups in ((small, [[0, 1], [2, 3]]), (vehicles.problem("ice"), vehicles.daisy_groups("ice"))):
+        options: dict[str, dict[str, Any]] = {}
+        for name in alloc.methods():
+            spec = alloc.method_info(name)["options"]
+            opts: dict[str, Any] = {}
+            if "groups" in spec:
+                opts["groups"] = groups
+            if "resolution" in spec:
+                opts["resolution"] = 8
+            options[name] = opts
+            if "priorities" in spec:
+                options[f"{name}:priorities"] = {**opts, "priorities": list(range(problem.k, 0, -1))}
+            if "incremental" in spec:
+                options[f"{name}:incremental"] = {**opts, "incremental": True}
+        cases.append((problem, options))
+    return cases
+
+
+def warm(methods: list[str] | None = None, stream: Any = None) -> dict[str, float]:
+    """Compile (or load) every kernel the registered methods use; CPU seconds per method.
+
+    Each method (and its variants: ``priorities``, ``incremental``) is built on a small
+    problem and on ICE and called the ways a user calls it: a demand; a demand with ``u_prev``
+    and ``dt``; the same with strided (non-contiguous) vectors; a batch, C- and
+    Fortran-ordered.
+    """
+    import numpy as np
+
+    import alloc
+
+    spent: dict[str, float] = {}
+    for problem, options in _warm_cases():
+        rng = np.random.default_rng(0)
+        k, m = problem.k, problem.m
+        scale = np.abs(problem.B).sum(axis=1) * np.maximum(np.abs(problem.umin), np.abs(problem.umax)).max() / 3
+        V = rng.uniform(-1.0, 1.0, (5, k)) * scale
+        u_prev = 0.5 * (problem.umin + problem.umax)
+        strided_v = np.repeat(V[0], 2)[::2]
+        strided_u = np.repeat(u_prev, 2)[::2]
+        for variant, opts in options.items():
+            name = variant.split(":")[0]
+            if methods is not None and name not in methods:
+                continue
+            t0 = time.process_time()
+            try:
+                allocator = alloc.make_allocator(problem, name, **opts)
+            except alloc.AllocError:
+                continue  # options this problem cannot give
+            allocator(V[0])
+            allocator(V[1], u_prev=u_prev, dt=0.01)
+            allocator(strided_v)
+            allocator(strided_v, u_prev=strided_u, dt=0.01)
+            allocator.batch(V)
+            allocator.batch(np.asfortranarray(V))
+            spent[name] = spent.get(name, 0.0) + time.process_time() - t0
+    if stream is not None:
+        for name, seconds in spent.items():
+            print(f"{name:12s} {seconds:7.2f} s", file=stream)
+    return spent
+
+
+def kernel_files() -> list[Path]:
+    """Source files of our packages that hold numba kernels (they import numba's ``njit``)."""
+    out = []
+    for package in PACKAGES:
+        for path in sorted((_ROOT / package).rglob("*.py")):
+            try:
+                text = path.read_text(encoding="utf-8")
+            except OSError:
+                continue
+            if re.search(r"^@njit", text, re.MULTILINE):
+                out.append(path)
+    return out
+
+
+def where() -> list[tuple[str, str, bool]]:
+    """For each kernel file: (file, the cache directory its kernels use, writable)."""
+
+    def probe() -> None:
+        """probe"""
+
+    out = []
+    for path in kernel_files():
+        locator = KernelCacheLocator.from_function(probe, str(path))
+        if locator is None:
+            out.append((str(path), f"NUMBA_CACHE_DIR={config.CACHE_DIR}", True))
+        else:
+            out.append((str(path), locator.get_cache_path(), locator.writable))
+    return out
+
+
+def _main(argv: list[str]) -> int:
+    import argparse
+
+    parser = argparse.ArgumentParser(prog="python -m alloc._jit_cache", description=__doc__.split("\n")[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    w = sub.add_parser("warm", help="compile every kernel into the cache (what the build does)")
+    w.add_argument("methods", nargs="*", help="only these methods (default: all registered)")
+    w.add_argument("--quiet", action="store_true")
+    sub.add_parser("where", help="where each kernel file's cache is")
+    args = parser.parse_args(argv)
+    if args.command == "warm":
+        t0, c0 = time.perf_counter(), time.process_time()
+        spent = warm(args.methods or None, stream=None if args.quiet else sys.stdout)
+        if not args.quiet:
+            print(f"warmed {len(spent)} methods in {time.perf_counter() - t0:.1f} s "
+                  f"({time.process_time() - c0:.1f} s CPU; {notice.compiles} kernels compiled)")
+        return 0
+    for file, cache, writable in where():
+        print(f"{file}: {cache}{'' if writable else ' (read-only: loads only)'}")
+    return 0
+
+
+if __name__ == "__main__":
+    # run as a script this file is a second module object; the installed one is alloc._jit_cache
+    from alloc._jit_cache import _main as _installed_main
+
+    sys.exit(_installed_main(sys.argv[1:]))
