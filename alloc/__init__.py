@@ -47,6 +47,7 @@ _LAZY: dict[str, str] = {
     "Problem": "problem",
     "method_info": "registry", "register": "registry",
     "EXACT_RTOL": "result", "BatchResult": "result", "Result": "result", "Status": "result",
+    "load_vehicle": "vehicle_file", "Vehicle": "vehicle_file",
 }
 
 __all__ = [
