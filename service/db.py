@@ -13,6 +13,7 @@ survives a SIGKILL of the service.  The same code runs on PostgreSQL given
 
 from __future__ import annotations
 
+import logging
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -26,11 +27,14 @@ from sqlalchemy import (
     text,
 )
 from sqlalchemy.engine import Engine, make_url
+from sqlalchemy.pool import NullPool
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, sessionmaker
 
-__all__ = ["Base", "VehicleRow", "EventRow", "IdempotencyRow", "make_engine", "make_sessionmaker", "migrate", "utcnow"]
+__all__ = ["Base", "VehicleRow", "EventRow", "IdempotencyRow", "make_engine", "make_sessionmaker", "migrate", "schema_revision",
+           "SchemaError", "utcnow"]
 
 MIGRATIONS = Path(__file__).resolve().parent / "migrations"
+_log = logging.getLogger("service")
 
 
 def utcnow() -> datetime:
@@ -146,20 +150,114 @@ def _migration_lock(engine: Engine) -> Iterator[None]:
         yield
 
 
+class SchemaError(RuntimeError):
+    """The database's schema is neither a known revision nor repairable: start-up stops."""
+
+
+def _migration_engine(engine: Engine) -> Engine:
+    """The engine migrations run on.  SQLite: a connection of its own whose transaction
+    really covers DDL.  Python's sqlite3 module commits before ``CREATE``/``DROP``/``ALTER``
+    on its own (it opens transactions for DML only), so an upgrade that failed half-way
+    used to keep its first tables and an empty ``alembic_version``; with the driver's
+    transaction handling off and ``BEGIN`` sent explicitly (SQLAlchemy's pysqlite recipe),
+    an upgrade is all or nothing.  Foreign keys stay off here, as SQLite's table-rebuilding
+    ``ALTER`` (Alembic's batch mode) needs.  Other databases: the engine itself."""
+    if engine.dialect.name != "sqlite":
+        return engine
+    migrating = create_engine(engine.url, poolclass=NullPool)
+
+    @event.listens_for(migrating, "connect")
+    def _connect(dbapi_connection: Any, connection_record: Any) -> None:
+        dbapi_connection.isolation_level = None  # the driver opens no transaction; we do
+        cursor = dbapi_connection.cursor()
+        cursor.execute("PRAGMA journal_mode=WAL")
+        cursor.execute("PRAGMA synchronous=FULL")
+        cursor.execute("PRAGMA busy_timeout=5000")
+        cursor.close()
+
+    @event.listens_for(migrating, "begin")
+    def _begin(conn: Any) -> None:
+        conn.exec_driver_sql("BEGIN IMMEDIATE")  # the write lock up front: one migrator at a time
+    return migrating
+
+
+def schema_revision(conn: Any) -> str | None:
+    """The revision the tables match, read from the tables themselves (``None``: no schema).
+
+    Each revision leaves a mark: 0001 the ``vehicles`` and ``events`` tables, 0002 the
+    unique ``(vehicle_id, seq)`` constraint, 0003 the ``idempotency_keys`` table.  A new
+    revision adds its mark here.
+    """
+    inspector = inspect(conn)
+    tables = set(inspector.get_table_names())
+    if "vehicles" not in tables:
+        if tables - {"alembic_version"}:
+            raise SchemaError(f"the database has tables {sorted(tables)} but no 'vehicles': not this "
+                              f"service's database, or damaged; restore it from a backup")
+        return None
+    if "events" not in tables:
+        raise SchemaError("the database has 'vehicles' but no 'events' table: damaged; restore it from a backup")
+    if "idempotency_keys" in tables:
+        return "0003"
+    uniques = {u["name"] for u in inspector.get_unique_constraints("events")}
+    return "0002" if "uq_events_vehicle_seq" in uniques else "0001"
+
+
+def _repair(conn: Any, cfg: Any) -> None:
+    """A database left half-upgraded by an older release (its SQLite DDL committed statement
+    by statement): Alembic's leftover batch tables dropped, and a missing or empty
+    ``alembic_version`` stamped with the revision the tables match, saying so in the log."""
+    from alembic import command
+
+    tables = set(inspect(conn).get_table_names())
+    for leftover in sorted(t for t in tables if t.startswith("_alembic_tmp_")):
+        _log.warning("database repair: dropping %s, left by an interrupted upgrade", leftover)
+        conn.exec_driver_sql(f'DROP TABLE "{leftover}"')
+    if _stamped(conn) is not None:
+        return
+    found = schema_revision(conn)
+    if found is not None:
+        if "alembic_version" in tables:
+            _log.warning("database repair: alembic_version is empty but the tables are revision %s "
+                         "(an upgrade interrupted by an older release); stamping %s and upgrading", found, found)
+        command.stamp(cfg, found)
+
+
 def migrate(engine: Engine) -> None:
-    """Upgrade the schema to the latest Alembic revision (a database made by an older
-    ``create_all`` release, tables present but no version, is stamped as revision 0001)."""
+    """Upgrade the schema to the latest Alembic revision, all or nothing (one transaction,
+    on SQLite too: :func:`_migration_engine`).  A database made by an older ``create_all``
+    release (tables present, no version) is stamped with the revision its tables match, as
+    is one that an older release left half-upgraded (:func:`_repair`)."""
     from alembic import command
     from alembic.config import Config
 
     cfg = Config()
     cfg.set_main_option("script_location", str(MIGRATIONS))
-    with _migration_lock(engine), engine.begin() as conn:
-        cfg.attributes["connection"] = conn
-        tables = set(inspect(conn).get_table_names())
-        if "vehicles" in tables and "alembic_version" not in tables:
-            command.stamp(cfg, "0001")
-        command.upgrade(cfg, "head")
+    migrating = _migration_engine(engine)
+    try:
+        with _migration_lock(engine):
+            try:
+                with migrating.begin() as conn:
+                    cfg.attributes["connection"] = conn
+                    _repair(conn, cfg)
+                    command.upgrade(cfg, "head")
+            except SchemaError:
+                raise
+            except Exception as exc:
+                with migrating.connect() as conn:
+                    at = _stamped(conn)
+                raise SchemaError(f"the database upgrade failed and was rolled back: the database is unchanged "
+                                  f"(at revision {at or 'none'}); {type(exc).__name__}: {exc}") from exc
+    finally:
+        if migrating is not engine:
+            migrating.dispose()
+
+
+def _stamped(conn: Any) -> str | None:
+    """The revision ``alembic_version`` records (``None``: no table or no row)."""
+    if "alembic_version" not in inspect(conn).get_table_names():
+        return None
+    return conn.exec_driver_sql("SELECT version_num FROM alembic_version").scalar()
 
 
 def make_sessionmaker(engine: Engine) -> sessionmaker:
