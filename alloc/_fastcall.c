@@ -12,12 +12,20 @@
  *
  * Packed output of a kernel (alloc._kernels.packed_out): u (m), B u (k), v (k), v - B u (k).
  * The kernel returns (out, code, iterations); code 0 = exact, 1 = unattainable.
+ *
+ * Thread safety: each FastCall owns one re-entrant lock (a PyThread lock plus owner and
+ * depth, both read and written only with the GIL held).  The C path holds it around a kernel
+ * call whose path was set up as stateful (``lock_plain``/``lock_rate``: the kernel mutates a
+ * cache or warm start); ``_acquire()``/``_release()`` give the Python path the same lock, so
+ * the C and Python paths of one allocator exclude each other.  Uncontended it is a
+ * sem_trywait/sem_post pair (tens of nanoseconds); contended, the waiter releases the GIL.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
 #define NPY_NO_DEPRECATED_API NPY_1_7_API_VERSION
 #include <numpy/arrayobject.h>
 #include <time.h>
+#include <pythread.h>
 
 #define MAXARGS 40
 
@@ -33,7 +41,34 @@ typedef struct {
     PyObject *rtype;   /* the Result type (a tuple subclass) */
     Py_ssize_t k, m;
     double maxmag;
+    int lock_plain, lock_rate; /* hold the lock around the plain / rate kernel */
+    PyThread_type_lock lock;   /* NULL only if allocation failed (tp_new then fails) */
+    unsigned long owner;       /* thread holding the lock (valid while depth > 0) */
+    long depth;                /* re-entry count of the owner */
 } FastCall;
+
+/* Take the allocator's lock (re-entrant).  Called with the GIL held. */
+static void lock_take(FastCall *self) {
+    unsigned long me = PyThread_get_thread_ident();
+    if (self->depth > 0 && self->owner == me) {
+        self->depth++;
+        return;
+    }
+    if (!PyThread_acquire_lock(self->lock, NOWAIT_LOCK)) {
+        Py_BEGIN_ALLOW_THREADS
+        PyThread_acquire_lock(self->lock, WAIT_LOCK);
+        Py_END_ALLOW_THREADS
+    }
+    self->owner = me;
+    self->depth = 1;
+}
+
+static void lock_drop(FastCall *self) {
+    if (--self->depth == 0) {
+        self->owner = 0;
+        PyThread_release_lock(self->lock);
+    }
+}
 
 static PyObject *str_u_prev, *str_dt, *str_call_py, *str_empty;
 
@@ -178,8 +213,13 @@ static PyObject *fc_call(PyObject *op, PyObject *args, PyObject *kw) {
         argv[n++] = up;
         argv[n++] = dt;
     }
+    int locked = (up == NULL) ? self->lock_plain : self->lock_rate;
+    if (locked)
+        lock_take(self);
     double t0 = now();
     PyObject *res = PyObject_Vectorcall(kern, argv, n, NULL);
+    if (locked)
+        lock_drop(self);
     if (res == NULL)
         return NULL; /* the kernel raised: as on the Python path */
     PyObject *r = finish(self, res, t0);
@@ -202,8 +242,9 @@ static PyObject *fc_setup(PyObject *op, PyObject *args) {
     PyObject *kernel, *pre, *post, *rkernel, *rpre, *method, *status, *rtype;
     Py_ssize_t k, m;
     double maxmag;
-    if (!PyArg_ParseTuple(args, "OOOOOOOOnnd:_fast_setup", &kernel, &pre, &post, &rkernel, &rpre, &method, &status,
-                          &rtype, &k, &m, &maxmag))
+    int lock_plain = 1, lock_rate = 1;
+    if (!PyArg_ParseTuple(args, "OOOOOOOOnnd|pp:_fast_setup", &kernel, &pre, &post, &rkernel, &rpre, &method,
+                          &status, &rtype, &k, &m, &maxmag, &lock_plain, &lock_rate))
         return NULL;
     if (check_tuple(pre, "pre") || check_tuple(post, "post") || check_tuple(rpre, "rpre") ||
         check_tuple(status, "status"))
@@ -236,7 +277,38 @@ static PyObject *fc_setup(PyObject *op, PyObject *args) {
     self->k = k;
     self->m = m;
     self->maxmag = maxmag;
+    self->lock_plain = lock_plain;
+    self->lock_rate = lock_rate;
     Py_RETURN_NONE;
+}
+
+static PyObject *fc_acquire(PyObject *op, PyObject *Py_UNUSED(ignored)) {
+    lock_take((FastCall *)op);
+    Py_RETURN_NONE;
+}
+
+static PyObject *fc_release(PyObject *op, PyObject *Py_UNUSED(ignored)) {
+    FastCall *self = (FastCall *)op;
+    if (self->depth <= 0 || self->owner != PyThread_get_thread_ident()) {
+        PyErr_SetString(PyExc_RuntimeError, "_release: the allocator's lock is not held by this thread");
+        return NULL;
+    }
+    lock_drop(self);
+    Py_RETURN_NONE;
+}
+
+static PyObject *fc_new(PyTypeObject *type, PyObject *args, PyObject *kw) {
+    PyObject *op = PyType_GenericNew(type, args, kw);
+    if (op == NULL)
+        return NULL;
+    FastCall *self = (FastCall *)op;
+    self->lock_plain = self->lock_rate = 1;
+    self->lock = PyThread_allocate_lock();
+    if (self->lock == NULL) {
+        Py_DECREF(op);
+        return PyErr_NoMemory();
+    }
+    return op;
 }
 
 static int fc_traverse(PyObject *op, visitproc visit, void *arg) {
@@ -268,13 +340,21 @@ static int fc_clear(PyObject *op) {
 static void fc_dealloc(PyObject *op) {
     PyObject_GC_UnTrack(op);
     fc_clear(op);
+    FastCall *self = (FastCall *)op;
+    if (self->lock != NULL) {
+        PyThread_free_lock(self->lock);
+        self->lock = NULL;
+    }
     Py_TYPE(op)->tp_free(op);
 }
 
 static PyMethodDef fc_methods[] = {
     {"_fast_setup", fc_setup, METH_VARARGS,
      "_fast_setup(kernel, pre, post, rate_kernel, rate_pre, method, status, result_type, k, m, max_magnitude): "
-     "the compiled kernels the C call path calls (None: that path goes to _call_py)."},
+     "the compiled kernels the C call path calls (None: that path goes to _call_py).  Optional "
+     "lock_plain, lock_rate (default True): hold the allocator's lock around that kernel."},
+    {"_acquire", fc_acquire, METH_NOARGS, "Take the allocator's lock (re-entrant; blocks without the GIL)."},
+    {"_release", fc_release, METH_NOARGS, "Release the allocator's lock (RuntimeError if this thread does not hold it)."},
     {NULL, NULL, 0, NULL}};
 
 static PyTypeObject FastCallType = {
@@ -287,7 +367,7 @@ static PyTypeObject FastCallType = {
     .tp_clear = fc_clear,
     .tp_dealloc = fc_dealloc,
     .tp_methods = fc_methods,
-    .tp_new = PyType_GenericNew,
+    .tp_new = fc_new,
 };
 
 static struct PyModuleDef moduledef = {PyModuleDef_HEAD_INIT, "alloc._fastcall",

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import threading
 import time
 from typing import Any
 
@@ -10,7 +11,7 @@ from numpy.typing import ArrayLike
 
 from ._kernels import finish_batch, finish_owned, fused_affine, owned_demand
 from ._threads import split_rows, threads_for
-from .exceptions import AllocError, DemandError, SolverError
+from .exceptions import AllocError, DemandError, MethodTypeError, ProblemTypeError, SolverError
 from .problem import MAX_MAGNITUDE, Problem, as_float_array, check_magnitude
 from .registry import FloatArray, Method, build
 from .result import EXACT_RTOL, BatchResult, Result, Status
@@ -23,13 +24,70 @@ _clock = time.perf_counter
 _new_result = tuple.__new__  # Result is a tuple: built in one C call on the fast paths
 _STATUS = (Status.EXACT, Status.UNATTAINABLE)  # by the kernels' code
 
+class _PyCallBase:
+    """The allocator's lock where ``alloc._fastcall`` is not built: a re-entrant lock made with
+    the object (also by ``__new__`` alone, as unpickling and copying do)."""
+
+    __slots__ = ("_rlock",)
+
+    def __new__(cls, *args: Any, **kwargs: Any) -> Any:
+        self = super().__new__(cls)
+        self._rlock = threading.RLock()
+        return self
+
+    def _acquire(self) -> None:
+        self._rlock.acquire()
+
+    def _release(self) -> None:
+        self._rlock.release()
+
+
 try:  # the call path in C (alloc/_fastcall.c, built at install); without it the same path in Python
     from ._fastcall import FastCall as _CallBase
 
     FAST_CALL = True
 except ImportError:  # pragma: no cover - a build without a C compiler
-    _CallBase = object  # type: ignore[assignment,misc]
+    _CallBase = _PyCallBase  # type: ignore[assignment,misc]
     FAST_CALL = False
+
+#: dtype kinds converted to float64 at the boundary (others go to the problem's checks)
+_REAL_KINDS = frozenset("fiu")
+
+
+def _compiled_layout(a: Any) -> Any:
+    """``a`` in the layout the kernels are compiled for, when it is a real numeric array.
+
+    numba compiles one machine-code version per argument type, and an array's type includes
+    its dtype, layout (C-contiguous or not) and writeability: a strided, reversed,
+    transposed, unaligned, byte-swapped, read-only, float32 or integer array met for the
+    first time would compile a new kernel inside the call (seconds).  A copy into a new
+    C-contiguous, aligned, native float64 array costs well under a microsecond and gives the
+    same values, so the same bits.  Anything else (lists, complex, objects) is returned
+    unchanged for the problem's checks to convert or refuse."""
+    if type(a) is np.ndarray and a.dtype.kind in _REAL_KINDS:
+        f = a.flags
+        if not (a.dtype == _F64 and f.c_contiguous and f.aligned and f.writeable):
+            return np.array(a, dtype=np.float64, order="C")
+    return a
+
+
+def _describe(value: Any) -> str:
+    """What was passed, for an error message: its type, and its shape or a short repr."""
+    if isinstance(value, np.ndarray):
+        return f"numpy.ndarray of shape {value.shape}"
+    text = repr(value)
+    return f"{type(value).__name__} {text[:60] + '...' if len(text) > 60 else text}"
+
+
+def _check_arguments(problem: Any, method: Any) -> None:
+    """Raise the named TypeError for a first argument that is not a Problem or a method that
+    is not a name."""
+    if not isinstance(problem, Problem):
+        hint = {dict: "; build one with alloc.Problem(**d)",
+                str: "; a named vehicle is alloc.vehicles.problem(name)"}.get(type(problem), "")
+        raise ProblemTypeError(f"problem: expected an alloc.Problem, got {_describe(problem)}{hint}")
+    if not isinstance(method, str):
+        raise MethodTypeError(f"method: expected a method name (str), got {_describe(method)}")
 
 
 def _frozen(a: np.ndarray) -> np.ndarray:
@@ -76,12 +134,27 @@ class Allocator(_CallBase):  # type: ignore[misc,valid-type]
     The call is :meth:`_call_py`; where ``alloc._fastcall`` is built (``FAST_CALL``), its fast
     paths run in C (the same compiled kernel with the same arguments, so the same bits) and
     every other case goes to :meth:`_call_py`.
+
+    Thread safety: an allocator is safe to call from several threads at once, and each
+    answer is what the same call on this allocator alone would return.  Every call and every
+    :meth:`batch` holds the allocator's own re-entrant lock while it touches the method's
+    mutable state (factorisation caches, warm starts, backend models, none of which are
+    re-entrant) -- on the C path and on the Python path alike.  The one path that takes no
+    lock is the fused affine kernel ``u = clip(c + P v)`` without rate limits, which only
+    reads its matrix.  Batches that run on internal threads (:mod:`alloc._threads`) hold the
+    lock in the calling thread and give each worker thread private solver state.  Different
+    allocators share no mutable state and do not wait for each other.
+
+    Inputs are normalised at the boundary: a demand, ``u_prev`` or batch ``V`` that is not a
+    C-contiguous, aligned, native-order, writeable float64 array is copied into one, so no
+    call ever compiles a kernel for a new argument layout.
     """
 
     __slots__ = ("problem", "method", "impl", "build_error", "_safe", "_B", "_lo", "_hi", "_kshape", "_mshape",
                  "_W", "_packed", "_packed_rate", "_zm", "_su", "_sv", "_sa", "_sr")
 
     def __init__(self, problem: Problem, method: str, **options: Any) -> None:
+        _check_arguments(problem, method)
         self.problem = problem
         self.method = method
         #: why the method could not be built (every call is then a fallback), or ""
@@ -133,7 +206,9 @@ class Allocator(_CallBase):  # type: ignore[misc,valid-type]
         rkernel, rpre = (None, ()) if self._packed_rate is None else (self._packed_rate[0], tuple(self._packed_rate[1]))
         if rkernel is not None:
             rkernel = _entry_point(rkernel, (*rpre, np.zeros(k), np.zeros(m), 1.0))
-        self._fast_setup(kernel, pre, post, rkernel, rpre, self.method, _STATUS, Result, k, m, MAX_MAGNITUDE)
+        # only the fused affine kernel is stateless (it reads W); every other kernel is locked
+        self._fast_setup(kernel, pre, post, rkernel, rpre, self.method, _STATUS, Result, k, m, MAX_MAGNITUDE,
+                         self._W is None, True)
 
     def __getstate__(self) -> dict[str, Any]:
         return {name: getattr(self, name) for name in Allocator.__slots__ if hasattr(self, name)}
@@ -148,6 +223,9 @@ class Allocator(_CallBase):  # type: ignore[misc,valid-type]
 
     def _call_py(self, v: ArrayLike, *, u_prev: ArrayLike | None = None, dt: float | None = None) -> Result:
         """``allocator(v, u_prev=None, dt=None)``: the call (in Python; see the class docstring)."""
+        v = _compiled_layout(v)
+        if u_prev is not None:
+            u_prev = _compiled_layout(u_prev)
         if type(v) is np.ndarray and v.shape == self._kshape and v.dtype == _F64:
             # fast paths: one compiled call checks v (and u_prev), allocates, computes B u, the
             # residual and the status code into one new array; the Result holds read-only views
@@ -158,13 +236,21 @@ class Allocator(_CallBase):  # type: ignore[misc,valid-type]
                     res = fused_affine(self._W, v, EXACT_RTOL, MAX_MAGNITUDE)
                 elif self._packed is not None:
                     kernel, state = self._packed
-                    t0 = _clock()
-                    res = kernel(*state, v, self._zm, 0.0)
+                    self._acquire()
+                    try:
+                        t0 = _clock()
+                        res = kernel(*state, v, self._zm, 0.0)
+                    finally:
+                        self._release()
             elif (self._packed_rate is not None and type(dt) is float and 0.0 < dt <= MAX_MAGNITUDE
                   and type(u_prev) is np.ndarray and u_prev.shape == self._mshape and u_prev.dtype == _F64):
                 kernel, state = self._packed_rate
-                t0 = _clock()
-                res = kernel(*state, v, u_prev, dt)
+                self._acquire()
+                try:
+                    t0 = _clock()
+                    res = kernel(*state, v, u_prev, dt)
+                finally:
+                    self._release()
             if res is not None and res[1] < 2:
                 out = res[0]
                 out.setflags(write=False)
@@ -174,14 +260,19 @@ class Allocator(_CallBase):  # type: ignore[misc,valid-type]
             if not ok:
                 self.problem.check_demand(v)  # raises DemandError naming v
         else:
-            v = self.problem.check_demand(v)
-        return self._solve(v, u_prev, dt)
+            v = _compiled_layout(self.problem.check_demand(v))
+        self._acquire()
+        try:
+            return self._solve(v, u_prev, dt)
+        finally:
+            self._release()
 
     if not FAST_CALL:  # pragma: no cover
         __call__ = _call_py
 
     def _solve(self, v: FloatArray, u_prev: ArrayLike | None, dt: float | None) -> Result:
-        """Allocate a validated demand (owned copy) through the method, or the safe answer."""
+        """Allocate a validated demand (owned copy) through the method, or the safe answer
+        (the caller holds the allocator's lock)."""
         problem = self.problem
         if u_prev is None and dt is None:
             lo, hi, up = self._lo, self._hi, None
@@ -229,7 +320,18 @@ class Allocator(_CallBase):  # type: ignore[misc,valid-type]
         if Varr.ndim != 2 or Varr.shape[1] != problem.k:
             raise DemandError(f"V: expected shape (N, {problem.k}), got {Varr.shape}")
         check_magnitude("V", Varr, DemandError)
+        if not Varr.flags.c_contiguous:  # a Fortran-ordered or transposed V (the copy above kept its order)
+            Varr = np.ascontiguousarray(Varr)
         Varr.setflags(write=False)
+        self._acquire()
+        try:
+            return self._batch(Varr)
+        finally:
+            self._release()
+
+    def _batch(self, Varr: FloatArray) -> BatchResult:
+        """:meth:`batch` of a validated, read-only, C-contiguous ``V`` (the caller holds the lock)."""
+        problem = self.problem
         t0 = time.perf_counter()
         U = None
         fused = None
@@ -270,7 +372,12 @@ class Allocator(_CallBase):  # type: ignore[misc,valid-type]
 
 
 def make_allocator(problem: Problem, method: str = "pinv", **options: Any) -> Allocator:
-    """Build ``method`` for ``problem`` once; the returned callable allocates fast.
+    """Build ``method`` for ``problem`` once; the returned callable allocates fast (and may be
+    shared by threads: see :class:`Allocator`).
+
+    Anything but a :class:`~alloc.problem.Problem` as ``problem`` raises
+    :class:`~alloc.exceptions.ProblemTypeError`, a ``method`` that is not a str
+    :class:`~alloc.exceptions.MethodTypeError` (both TypeErrors naming the field).
 
     Parameters
     ----------

@@ -10,9 +10,11 @@ from __future__ import annotations
 __all__ = [
     "AllocError",
     "ProblemError",
+    "ProblemTypeError",
     "DemandError",
     "OptionError",
     "UnknownMethodError",
+    "MethodTypeError",
     "SolverError",
 ]
 
@@ -40,6 +42,10 @@ class ProblemError(AllocError, ValueError):
     """An allocation problem is malformed (shape, finiteness, limits, weights)."""
 
 
+class ProblemTypeError(ProblemError, TypeError):
+    """Something other than an :class:`alloc.Problem` was passed as the problem (field ``problem``)."""
+
+
 class DemandError(AllocError, ValueError):
     """A demand ``v``, previous command ``u_prev`` or time step ``dt`` is invalid."""
 
@@ -50,6 +56,10 @@ class OptionError(AllocError, TypeError):
 
 class UnknownMethodError(AllocError, ValueError):
     """The requested allocation method is not registered."""
+
+
+class MethodTypeError(UnknownMethodError, TypeError):
+    """The method was not given as a name (a str; field ``method``)."""
 
 
 class SolverError(AllocError, RuntimeError):

@@ -11,7 +11,10 @@ equalities.  A backend is set up once and each call passes only the data that ch
 of ``A`` and the cost to unit largest entry) and the answer is mapped back, so
 magnitudes from 1e-30 to 1e48 in the allocation data reach the solver as O(1) numbers.
 Every backend's answer is a function of the call's data alone (no warm state carried
-from call to call).  Measured costs are in ``benchmarks/bench_alloc.py`` and the README.
+from call to call), and every backend is bounded by iteration counts, never by wall-clock
+time, so an answer does not depend on the machine's load (:data:`ITERATION_LIMITS`).  A
+backend object is not re-entrant: the allocator that owns it serialises its calls
+(:class:`alloc.api.Allocator`).  Measured costs are in ``benchmarks/bench_alloc.py`` and the README.
 
 Backends
 --------
@@ -19,8 +22,7 @@ Backends
     DAQP's dual active-set solver, a ``daqp.Model`` set up per solve (LPs and singular
     Hessians use its proximal-point iterations); LPs chain to HiGHS on DAQP's failure.
 ``highs``
-    HiGHS (highspy), one model kept while ``A`` is fixed, its solver state cleared
-    before each solve; LPs only.
+    HiGHS (highspy), a new model per solve (the constraint matrix converted once); LPs only.
 any name in ``qpsolvers.available_solvers`` (``osqp``, ``clarabel``, ``proxqp``, ...)
     Through qpsolvers, which rebuilds the solver each call: slow, for cross-checks.
 """
@@ -256,7 +258,7 @@ class _Daqp:
         self._sense[self._n:][bl == bu] = self._EQ
         self._f = np.array(f, dtype=float)
         self._ub = np.array(ub, dtype=float)
-        self._settings = {"iter_limit": 2000}
+        self._settings = {"iter_limit": ITERATION_LIMITS["daqp"]}
         if singular:
             self._settings["eps_prox"] = 1e-6
         self._setup()
@@ -317,14 +319,15 @@ class _Chain:
 
 
 class _Highs:
-    """HiGHS LP: one kept model while ``A`` is fixed, its solver state cleared before each
-    solve (``clearSolver``: no basis, no factorisation carried from call to call), so each
-    answer is a function of this call's costs and bounds alone.
+    """HiGHS LP, a new model per solve, so each answer is a function of this call's costs,
+    bounds and matrix alone.
 
-    When ``A`` changes (direct allocation's ray) the model is passed anew: changing
-    coefficients one by one keeps the earlier sparsity pattern (explicit zeros), and where
-    the LP optimum is not unique (a ray through an AMS edge) the simplex then lands on
-    another vertex than a fresh model would.
+    A kept model, even with its solver state cleared (``clearSolver``) before each solve,
+    answered differently after earlier calls where the LP optimum is not unique (B near
+    1e-100, a zero row, duplicated columns: u differing by up to 0.95 between the same
+    demand's fresh and history-laden calls, both ``exact``); changing coefficients one by one
+    also keeps the earlier sparsity pattern.  A fresh model costs a model hand-over per solve
+    (``benchmarks/bench_alloc.py``); the matrix is converted to CSC only when it changes.
     """
 
     def __init__(self, f, A, bl, bu, lb, ub) -> None:
@@ -333,23 +336,23 @@ class _Highs:
         self._hs = highspy
         self._f = np.array(f, dtype=float)
         self._A = np.array(A, dtype=float)
+        self._csc = _to_csc(self._A)
         self._bl, self._bu = np.array(bl, dtype=float), np.array(bu, dtype=float)
         self._lb, self._ub = np.array(lb, dtype=float), np.array(ub, dtype=float)
-        self._h = self._model()
-        self._cols = np.arange(self._f.size, dtype=np.int32)
-        self._rows = np.arange(self._A.shape[0], dtype=np.int32)
 
     def _model(self):
         hs = self._hs
         h = hs.Highs()
         h.setOptionValue("output_flag", False)
+        h.setOptionValue("simplex_iteration_limit", ITERATION_LIMITS["highs"])
+        h.setOptionValue("ipm_iteration_limit", ITERATION_LIMITS["highs"])
         lp = hs.HighsLp()
         n, mA = int(self._f.size), int(self._A.shape[0])
         lp.num_col_, lp.num_row_ = n, mA
         lp.col_cost_, lp.col_lower_, lp.col_upper_ = self._f, self._lb, self._ub
         lp.row_lower_, lp.row_upper_ = self._bl, self._bu
         lp.a_matrix_.format_ = hs.MatrixFormat.kColwise
-        lp.a_matrix_.start_, lp.a_matrix_.index_, lp.a_matrix_.value_ = _to_csc(self._A)
+        lp.a_matrix_.start_, lp.a_matrix_.index_, lp.a_matrix_.value_ = self._csc
         lp.a_matrix_.num_col_, lp.a_matrix_.num_row_ = n, mA
         h.passModel(lp)
         return h
@@ -359,17 +362,8 @@ class _Highs:
             if value is not None:
                 setattr(self, name, np.array(value, dtype=float))
         if A is not None:
-            h = self._h = self._model()
-        else:
-            h = self._h
-            n, mA = self._cols.size, self._rows.size
-            if f is not None:
-                h.changeColsCost(n, self._cols, self._f)
-            if lb is not None or ub is not None:
-                h.changeColsBounds(n, self._cols, self._lb, self._ub)
-            if (bl is not None or bu is not None) and mA:
-                h.changeRowsBounds(mA, self._rows, self._bl, self._bu)
-            h.clearSolver()
+            self._csc = _to_csc(self._A)
+        h = self._model()
         h.run()
         status = h.getModelStatus()
         if status != self._hs.HighsModelStatus.kOptimal:
@@ -425,18 +419,33 @@ class _Qpsolvers:
         return np.asarray(x, dtype=float), 0
 
 
-#: Wall-clock bound (s) per solve handed to the iterative qpsolvers backends (a qp call with
-#: priorities solves up to k + 1 stages, so at most 0.7 s a call): on badly scaled problems
-#: (B ~ 1e47) OSQP and SCS otherwise iterate for seconds to minutes (adversarial suite); a
-#: time-out is a SolverError, so the allocator answers with its fallback.
-QP_TIME_LIMIT_S = 0.1
+#: Iteration bounds per solve, the only bound on a backend's work (no wall-clock limit: the
+#: same call must give the same answer on an idle and on a busy machine).  Measured on the
+#: random and degenerate suites at the size caps (tests/test_backend_determinism.py):
+#:
+#: - ``daqp``: an active-set solver needs about one iteration per constraint that enters or
+#:   leaves the working set (tens on m <= 64); 2,000 is far above any converging solve.
+#: - ``highs``: simplex pivots on the allocation LPs are O(rows + columns) (tens to a few
+#:   hundred); 10,000 stops only a cycling or stalled solve.
+#: - ``osqp``: ADMM; on the equilibrated data the median solve takes 75 iterations at the
+#:   tightened tolerances, and solves not converged by 20,000 (about 80 ms at 4 us an
+#:   iteration) are the ill-posed ones (infeasible or inaccurate), which more iterations do
+#:   not rescue.
+#: - ``scs``: first-order like OSQP, the same bound.
+#: - ``clarabel``: an interior-point method converges in 10-50 iterations; 200 (its default)
+#:   stops only a stalled solve.
+#:
+#: Reaching a bound is a SolverError, so the allocator answers with its fallback.
+ITERATION_LIMITS = {"daqp": 2000, "highs": 10_000, "osqp": 20_000, "scs": 20_000, "clarabel": 200}
 
 # Stock tolerances of first-order/interior-point solvers do not resolve the small
-# regularisation terms of allocation QPs (SOLVER-NOTES); tighten them, and bound their time.
+# regularisation terms of allocation QPs (SOLVER-NOTES); tighten them, and bound their
+# iterations (never their time: the solvers' default time limits are off, see ITERATION_LIMITS).
 _TIGHT = {
-    "osqp": {"eps_abs": 1e-9, "eps_rel": 1e-9, "polish": True, "max_iter": 200000, "time_limit": QP_TIME_LIMIT_S},
-    "clarabel": {"tol_gap_abs": 1e-10, "tol_gap_rel": 1e-10, "tol_feas": 1e-10, "time_limit": QP_TIME_LIMIT_S},
-    "scs": {"time_limit_secs": QP_TIME_LIMIT_S},
+    "osqp": {"eps_abs": 1e-9, "eps_rel": 1e-9, "polish": True, "max_iter": ITERATION_LIMITS["osqp"]},
+    "clarabel": {"tol_gap_abs": 1e-10, "tol_gap_rel": 1e-10, "tol_feas": 1e-10,
+                 "max_iter": ITERATION_LIMITS["clarabel"]},
+    "scs": {"max_iters": ITERATION_LIMITS["scs"]},
 }
 
 
