@@ -1,0 +1,301 @@
+"""PX4 control-allocation parameters -> vehicle.
+
+Reads the parameters PX4's ``control_allocator`` module uses (PX4-Autopilot
+``src/modules/control_allocator/module.yaml``; defaults in brackets):
+
+* ``CA_AIRFRAME`` [0]: 0 multirotor, 1 fixed-wing, 2 standard VTOL (others refused).
+* ``CA_ROTOR_COUNT`` [0] and per rotor ``CA_ROTORn_PX/PY/PZ`` [0] (m, body axes x forward,
+  y right, z down), ``CA_ROTORn_AX/AY/AZ`` [0, 0, -1] (thrust axis), ``CA_ROTORn_CT`` [6.5]
+  (thrust at full command), ``CA_ROTORn_KM`` [0.05] (moment per thrust, > 0 counter-clockwise);
+  ``CA_R_REV`` (bit n: rotor n reversible, command in [-1, 1] instead of [0, 1]);
+  ``CA_Rn_SLEW`` [0] (seconds for the full range: rate limit ``range / slew``; 0 = none).
+* ``CA_SV_CS_COUNT`` [0] and per surface ``CA_SV_CSn_TYPE`` [1], ``CA_SV_CSn_TRQ_R/P/Y`` [0]
+  (roll/pitch/yaw torque per unit command), ``CA_SV_CSn_TRIM`` [0] (the preferred position);
+  ``CA_SVn_SLEW`` [0] (servo ``n``'s full range -1..1 in seconds).  Commands are in [-1, 1].
+
+Effectiveness, by PX4's own code (PX4/PX4-Autopilot ``src/modules/control_allocator/
+ActuatorEffectiveness/``):
+
+* rotors: ``ActuatorEffectivenessRotors::computeEffectivenessMatrix``
+  (``ActuatorEffectivenessRotors.cpp``, commit 25ab311a8229): thrust ``ct * a``, moment
+  ``ct * (p x a) - ct * km * a`` for the normalised axis ``a`` (:func:`alloc.vehicle_file.rotor_wrench`).
+  Fixed-wing: the axis is fixed forward ``(1, 0, 0)`` and propeller torque disabled (``km = 0``;
+  ``ActuatorEffectivenessFixedWing.cpp``: ``AxisConfiguration::FixedForward``,
+  ``enablePropellerTorque(false)``).  Standard VTOL: ``km = 0`` for a rotor whose axis is not
+  upwards (``|ax|, |ay| < 0.1``, ``az < -0.5``; ``ActuatorEffectivenessStandardVTOL.cpp``:
+  ``enablePropellerTorqueNonUpwards(false)``), i.e. the pusher.
+* surfaces: ``ActuatorEffectivenessControlSurfaces``: the column is ``(TRQ_R, TRQ_P, TRQ_Y)`` in
+  the moment rows, no force; flaps (types 9, 10) and airbrakes (11) get a zero column.
+
+The axes are PX4's six: ``roll, pitch, yaw`` (moments) and ``fx, fy, fz`` (forces); with
+``axes="auto"`` (default) the axes no effector acts on are left out (a multirotor keeps
+roll, pitch, yaw, fz).  PX4 allocates a standard VTOL's rotors and surfaces in two matrices
+(matrix 0: rotors, matrix 1: surfaces); here they are the columns of one ``B``.
+
+Normalisation (``normalize``):
+
+* ``"none"`` (default): ``B`` in physical units -- moment and force per unit command (N m
+  and N when ``CT`` is in newtons).  The surfaces' ``TRQ_*`` are PX4's normalised torques
+  (PX4 allocates them against normalised setpoints), so on a fixed-wing or VTOL the moment
+  rows mix the rotors' N m with the surfaces' normalised units.
+* ``"px4"``: PX4's ``ControlAllocationPseudoInverse::updateControlAllocationMatrixScale`` and
+  ``normalizeControlAllocationMatrix`` (``ControlAllocationPseudoInverse.cpp``, commit
+  089afb091546), expressed on ``B``.  PX4 computes the mix ``M = pinv(B)`` (m x 6) of each
+  matrix and divides its columns by scales ``s``:
+  roll and pitch share ``s = max over those two of sqrt(|M_col|^2 / (n / 2))``, ``n`` the
+  entries of that column above 1e-3 in magnitude -- only for matrices with "normalize RPY"
+  (multirotor: matrix 0; fixed-wing: none; standard VTOL: matrix 0), otherwise 1; yaw
+  ``s = max_i M_i,yaw`` (signed maximum) under the same condition; the three forces share
+  ``s = mean over effectors with a non-zero force row of |M_i,force|`` (the norm of the
+  3-vector), 1 if none.  A scale at or below FLT_EPSILON leaves its columns unscaled.
+  Since the allocation is ``u = M diag(1/s) c``, the setpoint ``c`` PX4 allocates is
+  ``diag(s) B u``: the normalised effectiveness is ``diag(s) B`` (rows scaled), computed
+  per matrix (each matrix's columns with its own ``s``).  Not reproduced: PX4 then zeroes
+  the entries of the normalised *mix* below 1e-3 (a property of its mixer, not of ``B``),
+  and it works in float32.  The scales are computed once for the healthy vehicle (PX4
+  recomputes them on a parameter change, not on a failure); a failed rotor is then a
+  :mod:`alloc.health` event on the imported vehicle.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..exceptions import ProblemError
+from ..vehicle_file import FORMAT, WRENCH_COMPONENTS, Vehicle, rotor_wrench, vehicle_from_dict
+
+__all__ = ["read_params", "vehicle_from_params", "px4_scales", "AIRFRAMES", "SURFACE_TYPES", "DEFAULTS"]
+
+#: CA_AIRFRAME values this importer reads
+AIRFRAMES = {0: "multirotor", 1: "fixed-wing", 2: "standard VTOL"}
+#: CA_SV_CSn_TYPE (ActuatorEffectivenessControlSurfaces.hpp ``Type``; 15 from the SIH airframes)
+SURFACE_TYPES = {1: "left_aileron", 2: "right_aileron", 3: "elevator", 4: "rudder", 5: "left_elevon",
+                 6: "right_elevon", 7: "left_v_tail", 8: "right_v_tail", 9: "left_flap", 10: "right_flap",
+                 11: "airbrake", 12: "custom", 15: "single_channel_aileron"}
+_NO_TORQUE_TYPES = (9, 10, 11)  # torque.setZero() in ActuatorEffectivenessControlSurfaces::updateParams
+#: module.yaml defaults of the per-rotor and per-surface parameters
+DEFAULTS = {"PX": 0.0, "PY": 0.0, "PZ": 0.0, "AX": 0.0, "AY": 0.0, "AZ": -1.0, "CT": 6.5, "KM": 0.05,
+            "TYPE": 1, "TRQ_R": 0.0, "TRQ_P": 0.0, "TRQ_Y": 0.0, "TRIM": 0.0}
+_MAX_ROTORS = 12
+_MAX_SURFACES = 8
+_FLT_EPSILON = float(np.finfo(np.float32).eps)
+#: MAVLink MAV_PARAM_TYPE codes QGroundControl writes: 1-8 integers, 9 float32, 10 float64
+_INT_TYPES = range(1, 9)
+
+
+def read_params(source: str | Path) -> dict[str, float | int]:
+    """Parameters from a QGroundControl ``.params`` file (or its text), or airframe lines.
+
+    QGroundControl lines are tab-separated ``vehicle_id component_id NAME value type``
+    (``1\\t1\\tCA_ROTOR0_PX\\t0.15\\t9``; type 9 = float32, 1-8 integers, 10 float64);
+    ``#`` starts a comment.  PX4 airframe lines ``param set-default NAME value`` (and
+    ``param set``) are read too, so an airframe file's parameters can be pasted.
+
+    Raises
+    ------
+    ProblemError
+        naming the line (``params: line 7: ...``).
+    """
+    if isinstance(source, Path) or (isinstance(source, str) and "\n" not in source and source.endswith(".params")):
+        try:
+            text = Path(source).read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
+            raise ProblemError(f"path: cannot read {str(source)!r} ({exc})", field="path") from exc
+    elif isinstance(source, str):
+        text = source
+    else:
+        raise ProblemError(f"params: expected a path or the file's text, got {type(source).__name__}", field="params")
+    out: dict[str, float | int] = {}
+    for n, raw in enumerate(text.splitlines(), start=1):
+        line = raw.split("#", 1)[0].strip()
+        if not line:
+            continue
+        words = line.split()
+        if words[0] == "param" and len(words) >= 4 and words[1] in ("set", "set-default"):
+            name, value, kind = words[2], words[3], None
+        elif len(words) == 5:
+            name, value, kind = words[2], words[3], words[4]
+        else:
+            raise ProblemError(f"params: line {n}: expected 'vehicle component NAME value type' (tab-separated) or "
+                               f"'param set-default NAME value', got {raw.strip()[:60]!r}", field="params")
+        try:
+            code = None if kind is None else int(kind)
+            if code is not None and code in _INT_TYPES:
+                number: float | int = int(value)
+            elif code is None and _looks_int(value):
+                number = int(value)
+            else:
+                number = float(value)
+        except ValueError:
+            raise ProblemError(f"params: line {n}: {name}: {value!r} is not a number of type {kind}",
+                               field="params") from None
+        if isinstance(number, float) and not math.isfinite(number):
+            raise ProblemError(f"params: line {n}: {name}: must be finite, got {value!r}", field="params")
+        out[name] = number
+    return out
+
+
+def _looks_int(text: str) -> bool:
+    return text.lstrip("+-").isdigit()
+
+
+def _get(params: Mapping[str, Any], name: str, default: float) -> float:
+    value = params.get(name, default)
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(float(value)):
+        raise ProblemError(f"{name}: expected a finite number, got {value!r}", field=name)
+    return float(value)
+
+
+def _count(params: Mapping[str, Any], name: str, high: int) -> int:
+    x = _get(params, name, 0)
+    if not x.is_integer() or not 0 <= x <= high:
+        raise ProblemError(f"{name}: expected an integer 0..{high}, got {params.get(name)!r}", field=name)
+    return int(x)
+
+
+def vehicle_from_params(params: Mapping[str, Any], *, name: str = "px4", normalize: str = "none",
+                        axes: str = "auto") -> Vehicle:
+    """The vehicle PX4 would allocate for with these parameters (see the module docstring).
+
+    Parameters
+    ----------
+    params : mapping
+        Parameter name -> value (:func:`read_params`); absent parameters take PX4's defaults.
+    normalize : {"none", "px4"}
+        ``"none"``: physical effectiveness; ``"px4"``: PX4's normalised effectiveness.
+    axes : {"auto", "all"}
+        ``"auto"`` leaves out the axes no effector acts on; ``"all"`` keeps PX4's six.
+    """
+    if normalize not in ("none", "px4"):
+        raise ProblemError(f"normalize: expected 'none' or 'px4', got {normalize!r}", field="normalize")
+    if axes not in ("auto", "all"):
+        raise ProblemError(f"axes: expected 'auto' or 'all', got {axes!r}", field="axes")
+    airframe = _get(params, "CA_AIRFRAME", 0)
+    if airframe not in AIRFRAMES:
+        known = ", ".join(f"{k} ({v})" for k, v in AIRFRAMES.items())
+        raise ProblemError(f"CA_AIRFRAME: {params.get('CA_AIRFRAME')!r} is not supported; supported: {known}",
+                           field="CA_AIRFRAME")
+    airframe = int(airframe)
+    n_rotors = _count(params, "CA_ROTOR_COUNT", _MAX_ROTORS)
+    n_surfaces = _count(params, "CA_SV_CS_COUNT", _MAX_SURFACES) if airframe != 0 else 0
+    reversible = int(_get(params, "CA_R_REV", 0))
+
+    columns: list[np.ndarray] = []  # 6-vectors, PX4's axis order
+    matrix: list[int] = []  # which PX4 matrix each effector is in
+    effectors: list[dict[str, Any]] = []
+    for i in range(n_rotors):
+        def p(suffix: str) -> float:
+            return _get(params, f"CA_ROTOR{i}_{suffix}", DEFAULTS[suffix])
+
+        position = [p("PX"), p("PY"), p("PZ")]
+        axis = [1.0, 0.0, 0.0] if airframe == 1 else [p("AX"), p("AY"), p("AZ")]
+        ct, km = p("CT"), p("KM")
+        if airframe == 1 or (airframe == 2 and not _upwards(axis)):
+            km = 0.0
+        lo = -1.0 if reversible >> i & 1 else 0.0
+        e: dict[str, Any] = {"name": f"motor{i + 1}", "kind": "rotor", "unit": "1", "min": lo, "max": 1.0}
+        slew = _get(params, f"CA_R{i}_SLEW", 0.0)
+        if slew < 0:
+            raise ProblemError(f"CA_R{i}_SLEW: must be >= 0, got {slew:g}", field=f"CA_R{i}_SLEW")
+        if slew > 0:
+            e["rate_max"] = (1.0 - lo) / slew
+        columns.append(rotor_wrench(position, axis, ct, km))
+        if normalize == "none" and ct >= _FLT_EPSILON and math.hypot(*axis) > _FLT_EPSILON and ct > 0:
+            e["rotor"] = {"position": position, "axis": axis, "ct": ct, "km": km}
+        matrix.append(0)
+        effectors.append(e)
+    names = {e["name"] for e in effectors}
+    for i in range(n_surfaces):
+        kind = int(_get(params, f"CA_SV_CS{i}_TYPE", DEFAULTS["TYPE"]))
+        torque = [_get(params, f"CA_SV_CS{i}_TRQ_{a}", 0.0) for a in "RPY"]
+        if kind in _NO_TORQUE_TYPES:
+            torque = [0.0, 0.0, 0.0]
+        base = SURFACE_TYPES.get(kind, f"surface_type{kind}")
+        label = base if base not in names else f"{base}_{i}"
+        names.add(label)
+        e = {"name": label, "kind": "surface", "unit": "1", "min": -1.0, "max": 1.0}
+        trim = _get(params, f"CA_SV_CS{i}_TRIM", 0.0)
+        if not -1.0 <= trim <= 1.0:
+            raise ProblemError(f"CA_SV_CS{i}_TRIM: must be in [-1, 1], got {trim:g}", field=f"CA_SV_CS{i}_TRIM")
+        if trim != 0.0:
+            e["preferred"] = trim
+        slew = _get(params, f"CA_SV{i}_SLEW", 0.0)
+        if slew < 0:
+            raise ProblemError(f"CA_SV{i}_SLEW: must be >= 0, got {slew:g}", field=f"CA_SV{i}_SLEW")
+        if slew > 0:
+            e["rate_max"] = 2.0 / slew
+        columns.append(np.array([*torque, 0.0, 0.0, 0.0]))
+        matrix.append(0 if airframe == 1 else 1)
+        effectors.append(e)
+    if not effectors:
+        raise ProblemError("CA_ROTOR_COUNT: the parameters define no rotor and no control surface",
+                           field="CA_ROTOR_COUNT")
+
+    B6 = np.array(columns, dtype=float).T  # (6, m)
+    if normalize == "px4":
+        rpy = {0: (True,), 1: (False,), 2: (True, False)}[airframe]
+        for mat in sorted(set(matrix)):
+            cols = [j for j, mj in enumerate(matrix) if mj == mat]
+            B6[:, cols] = px4_scales(B6[:, cols], normalize_rpy=rpy[mat])[:, None] * B6[:, cols]
+    keep = list(range(6)) if axes == "all" else [r for r in range(6) if np.any(B6[r] != 0.0)]
+    if not keep:
+        raise ProblemError("CA_ROTOR_COUNT: no effector acts on any axis (all columns zero)", field="CA_ROTOR_COUNT")
+    moment_unit, force_unit = ("1", "1") if normalize == "px4" else ("N m", "N")
+    doc_axes = [{"name": WRENCH_COMPONENTS[r], "unit": moment_unit if r < 3 else force_unit} for r in keep]
+    for j, e in enumerate(effectors):
+        if "rotor" not in e:
+            e["effectiveness"] = [float(B6[r, j]) for r in keep]
+    doc = {
+        "format": FORMAT, "name": name,
+        "description": f"PX4 {AIRFRAMES[airframe]}: {n_rotors} rotor(s), {n_surfaces} control surface(s)",
+        "source": (f"PX4 parameters (CA_AIRFRAME {airframe}); effectiveness by ActuatorEffectivenessRotors::"
+                   f"computeEffectivenessMatrix and ActuatorEffectivenessControlSurfaces; normalize={normalize}"),
+        "axes": doc_axes, "effectors": effectors,
+    }
+    return vehicle_from_dict(doc)
+
+
+def _upwards(axis: list[float]) -> bool:
+    """PX4's test in computeEffectivenessMatrix (on the normalised axis)."""
+    a = np.asarray(axis, dtype=float)
+    n = float(np.linalg.norm(a))
+    if not n > _FLT_EPSILON:
+        return True  # a zero axis gives a zero column anyway
+    a = a / n
+    return abs(a[0]) < 0.1 and abs(a[1]) < 0.1 and a[2] < -0.5
+
+
+def px4_scales(B6: np.ndarray, *, normalize_rpy: bool) -> np.ndarray:
+    """PX4's six axis scales ``s`` for one effectiveness matrix ``B6`` (6 x m); see the module docstring.
+
+    ``ControlAllocationPseudoInverse::updateControlAllocationMatrixScale`` on ``M = pinv(B6)``,
+    with the FLT_EPSILON guards of ``normalizeControlAllocationMatrix`` folded in (an unused
+    scale is 1).  The normalised effectiveness is ``s[:, None] * B6``.
+    """
+    B6 = np.asarray(B6, dtype=float)
+    m = B6.shape[1]
+    M = np.linalg.pinv(B6)  # (m, 6)
+    s = np.ones(6)
+    if normalize_rpy:
+        def rp_scale(col: np.ndarray) -> float:
+            n = int((np.abs(col) > 1e-3).sum())
+            return math.sqrt(float(col @ col) / (n / 2.0)) if n > 0 else 1.0
+
+        s_rp = max(rp_scale(M[:, 0]), rp_scale(M[:, 1]))
+        s_yaw = float(M[:, 2].max()) if m else 1.0
+        if s_rp > _FLT_EPSILON:
+            s[0] = s[1] = s_rp
+        if s_yaw > _FLT_EPSILON:
+            s[2] = s_yaw
+    norms = np.linalg.norm(M[:, 3:6], axis=1)
+    nonzero = norms > _FLT_EPSILON
+    if nonzero.any():
+        s_force = float(norms.sum() / nonzero.sum())
+        if s_force > _FLT_EPSILON:
+            s[3:6] = s_force
+    return s
