@@ -76,7 +76,7 @@ _CITED = re.compile(r"`((?:alloc|sim|service|benchmarks|tests|docs|\.ci)/[A-Za-z
                     r"Makefile|pyproject\.toml|mkdocs\.yml|CHANGELOG\.md|setup\.py)(?:::[A-Za-z0-9_]+)?`")
 
 
-@pytest.mark.parametrize("page", ["README.md", *sorted(f"docs/{p.name}" for p in DOCS.glob("*.md"))])
+@pytest.mark.parametrize("page", ["README.md", "service/README.md", *sorted(f"docs/{p.name}" for p in DOCS.glob("*.md"))])
 def test_cited_files_exist(page):
     text = (ROOT / page).read_text()
     missing = [path for path in _CITED.findall(text) if not (ROOT / path.rstrip("/")).exists()]
