@@ -560,7 +560,8 @@ def allocate_command(
         raise typer.BadParameter("give the demand with --v (or as 'v' in the problem file)", param_hint="--v")
     previous = _merge(None if u_prev is None else _floats(u_prev, "--u-prev"), from_file, "u_prev", "--u-prev")
     step = _merge(dt, from_file, "dt", "--dt")
-    name = _merge(method, from_file, "method", "--method") or default_method()
+    name = _merge(method, from_file, "method", "--method")
+    name = default_method() if name is None else name
     options = _options(option)
     file_options = from_file.get("options", {})
     if not isinstance(file_options, dict):
