@@ -99,9 +99,8 @@ sys.modules[__name__].__class__ = _Package
 
 
 def _place_kernel_caches() -> None:
-    from . import _jit_cache
-
-    _jit_cache.install()
+    # importing the module installs its locator (at its end: numba may be imported by it)
+    importlib.import_module("alloc._jit_cache")
 
 
 class _AfterNumbaImport:

@@ -29,8 +29,9 @@ on first use into the location above, with one line on stderr per method::
 ``python -m alloc._jit_cache`` warms the cache (``warm``) or says where the kernels load from
 (``where``).
 
-This module imports numba; ``alloc/__init__.py`` loads it only once numba itself is imported
-(``import alloc`` stays cheap), before any kernel is decorated.
+This module imports numba, and importing it installs the locator; ``alloc/__init__.py`` imports
+it as soon as numba itself is imported (``import alloc`` stays cheap), before any kernel is
+decorated.
 """
 
 from __future__ import annotations
@@ -322,6 +323,9 @@ def install() -> None:
     FunctionCache._impl_class = KernelCacheImpl
     event.register("numba:compile", notice)
     _installed = True
+
+
+install()  # importing this module is what installs it (alloc/__init__.py does, when numba loads)
 
 
 # ----------------------------------------------------------------------------- warming

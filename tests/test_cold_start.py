@@ -1,0 +1,223 @@
+"""Compiled kernels for any user (issue 22): where numba's cache goes, and the shipped cache.
+
+The fast tests drive :mod:`alloc._jit_cache` in this process on a one-kernel package written to
+a temporary directory (numba compiles it in well under a second).  The slow one installs the
+project into a fresh venv and runs ``.ci/check-core-install`` (an unprivileged user with no home
+imports and allocates from the root-owned install, no kernel compiled, within 5 s of CPU).
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import io
+import os
+import re
+import shutil
+import stat
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+from alloc import _jit_cache
+
+ROOT = Path(__file__).resolve().parents[1]
+TINY = textwrap.dedent('''
+    from numba import njit
+
+
+    @njit(cache=True)
+    def twice(x):
+        return 2.0 * x
+''')
+
+
+@pytest.fixture
+def fake_root(tmp_path, monkeypatch):
+    """A directory standing for site-packages, holding ``alloc/tiny.py`` (one cached kernel)."""
+    pkg = tmp_path / "site" / "alloc"
+    pkg.mkdir(parents=True)
+    (pkg / "tiny.py").write_text(TINY)
+    monkeypatch.setattr(_jit_cache, "_ROOT", (tmp_path / "site").resolve())
+    monkeypatch.setattr(_jit_cache, "_usable_memo", {})
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
+    return pkg
+
+
+def _import_tiny(pkg: Path, tag: str):
+    """A new module object (so a new numba dispatcher, a new cache look-up) from ``tiny.py``."""
+    spec = importlib.util.spec_from_file_location(f"_cold_start_tiny_{tag}", pkg / "tiny.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _package_dir_read_only(monkeypatch, pkg: Path) -> None:
+    """What a user other than the installer sees: the package's __pycache__ is not writable."""
+    real = _jit_cache._writable_dir
+    shipped = str(pkg / "__pycache__")
+    monkeypatch.setattr(_jit_cache, "_writable_dir",
+                        lambda path, private_root=None: path != shipped and real(path, private_root))
+
+
+def _listen():
+    from numba.core import event
+
+    notice = _jit_cache.CompileNotice(stream=io.StringIO())
+    event.register("numba:compile", notice)
+    return notice
+
+
+def _unlisten(notice) -> None:
+    from numba.core import event
+
+    event.unregister("numba:compile", notice)
+
+
+def test_import_alloc_does_not_import_numba_but_numba_gets_the_locator():
+    code = ("import sys, alloc\nprint('numba' in sys.modules)\nimport numba\n"
+            "from numba.core.caching import FunctionCache\nprint(FunctionCache._impl_class.__name__)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
+    assert out.stdout.split() == ["False", "KernelCacheImpl"]
+    # numba imported first: alloc installs it on import
+    code = "import numba, alloc\nfrom numba.core.caching import FunctionCache\nprint(FunctionCache._impl_class.__name__)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
+    assert out.stdout.split() == ["KernelCacheImpl"]
+
+
+def test_package_kernels_use_the_package_pycache_where_writable():
+    def probe():
+        pass
+
+    locator = _jit_cache.KernelCacheLocator.from_function(probe, str(ROOT / "alloc" / "_kernels.py"))
+    assert locator.writable and locator.get_cache_path() == str(ROOT / "alloc" / "__pycache__")
+    # another project's file: numba's own locators decide
+    assert _jit_cache.KernelCacheLocator.from_function(probe, str(ROOT / "tests" / "hostile.py")) is None
+    assert _jit_cache.KernelCacheLocator.from_function(probe, "/usr/lib/python3/x.py") is None
+
+
+def test_fallback_order_home_then_temp_then_shm_then_read_only(fake_root, tmp_path, monkeypatch):
+    def probe():
+        pass
+
+    py_file = str(fake_root / "tiny.py")
+    _package_dir_read_only(monkeypatch, fake_root)
+    subpath = _jit_cache.KernelCacheLocator.get_suitable_cache_subpath(py_file)
+    uid = os.getuid()
+
+    def where() -> tuple[str, bool]:
+        _jit_cache._usable_memo.clear()
+        locator = _jit_cache.KernelCacheLocator.from_function(probe, py_file)
+        return locator.get_cache_path(), locator.writable
+
+    assert where() == (str(tmp_path / "xdg" / "alloc-toolkit" / subpath), True)
+    (tmp_path / "blocked").write_text("a file, not a directory")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "blocked"))
+    monkeypatch.setattr(_jit_cache.tempfile, "tempdir", str(tmp_path / "tmp"))
+    assert where() == (str(tmp_path / "tmp" / f"alloc-toolkit-{uid}" / subpath), True)
+    monkeypatch.setattr(_jit_cache.tempfile, "tempdir", str(tmp_path / "blocked"))
+    shm = f"/dev/shm/alloc-toolkit-{uid}"
+    if os.access("/dev/shm", os.W_OK) and not os.path.exists(shm):
+        assert where() == (os.path.join(shm, subpath), True)
+        shutil.rmtree(shm)
+    monkeypatch.setattr(_jit_cache, "_fallback_dirs", lambda subpath: [])
+    assert where() == (str(fake_root / "__pycache__"), False)
+
+
+def test_shared_temp_root_is_refused_unless_private(tmp_path):
+    root = tmp_path / "alloc-toolkit-x"
+    root.mkdir(mode=0o700)
+    memo = _jit_cache._usable_memo
+    assert _jit_cache._writable_dir(str(root / "a"), str(root))
+    os.chmod(root, 0o777)  # another user could have planted machine code here
+    assert not _jit_cache._writable_dir(str(root / "b"), str(root))
+    if os.getuid() == 0:
+        os.chmod(root, 0o700)
+        os.chown(root, 65534, -1)
+        assert not _jit_cache._writable_dir(str(root / "c"), str(root))
+    for key in [k for k in memo if k.startswith(str(tmp_path))]:
+        del memo[key]
+
+
+def test_source_stamp_is_the_content_not_the_mtime(fake_root):
+    def probe():
+        pass
+
+    locator = _jit_cache.KernelCacheLocator.from_function(probe, str(fake_root / "tiny.py"))
+    stamp = locator.get_source_stamp()
+    os.utime(fake_root / "tiny.py", (1, 1))  # what an install does to the mtime
+    assert locator.get_source_stamp() == stamp
+    (fake_root / "tiny.py").write_text(TINY + "\n# changed\n")
+    assert locator.get_source_stamp() != stamp
+
+
+def test_nothing_writable_compiles_in_memory_with_a_notice(fake_root, monkeypatch):
+    _package_dir_read_only(monkeypatch, fake_root)
+    monkeypatch.setattr(_jit_cache, "_fallback_dirs", lambda subpath: [])
+    notice = _listen()
+    try:
+        module = _import_tiny(fake_root, "memory")
+        assert module.twice(1.5) == 3.0
+    finally:
+        _unlisten(notice)
+    assert notice.compiles == 1
+    text = notice._stream.getvalue()
+    assert text.count("\n") == 1 and text.startswith("alloc: compiling kernels (")
+    assert "no writable cache directory: kept in memory" in text
+    assert not (fake_root / "__pycache__").exists() or not list((fake_root / "__pycache__").glob("*.nb*"))
+
+
+def test_another_user_loads_the_shipped_cache_without_compiling(fake_root, tmp_path, monkeypatch):
+    notice = _listen()
+    try:
+        assert _import_tiny(fake_root, "installer").twice(2.0) == 4.0  # the build: compiled, saved in the package
+        assert notice.compiles == 1 and list((fake_root / "__pycache__").glob("tiny.twice-*.nbi"))
+        _package_dir_read_only(monkeypatch, fake_root)
+        _jit_cache._usable_memo.clear()
+        module = _import_tiny(fake_root, "user")
+        assert module.twice(3.0) == 6.0
+    finally:
+        _unlisten(notice)
+    assert notice.compiles == 1, notice._stream.getvalue()  # the user's call loaded it
+    assert sum(module.twice.stats.cache_hits.values()) == 1
+    seeded = module.twice.stats.cache_path
+    assert seeded.startswith(str(tmp_path / "xdg" / "alloc-toolkit")), seeded
+    assert {p.name for p in Path(seeded).iterdir()} == {p.name for p in (fake_root / "__pycache__").glob("tiny.*.nb*")}
+
+
+def test_another_cpu_compiles_into_the_fallback_with_a_notice(fake_root, tmp_path, monkeypatch):
+    _import_tiny(fake_root, "build").twice(1.0)
+    notice = _listen()
+    try:
+        _package_dir_read_only(monkeypatch, fake_root)
+        _jit_cache._usable_memo.clear()
+        # the shipped entries were written on another CPU: their key's CPU name is not this one's
+        monkeypatch.setattr(_jit_cache, "_host_magic", lambda: ("x86_64-unknown-linux-gnu", "another-cpu", ""))
+        module = _import_tiny(fake_root, "other_cpu")
+        fallback = Path(module.twice.stats.cache_path)
+        assert fallback.is_relative_to(tmp_path / "xdg") and not list(fallback.glob("*.nb*"))  # nothing copied
+        assert module.twice(2.0) == 4.0
+    finally:
+        _unlisten(notice)
+    assert notice.compiles == 1
+    assert "saved in " + str(fallback) in notice._stream.getvalue()
+    assert list(fallback.glob("tiny.twice-*.nbi")) and list(fallback.glob("tiny.twice-*.nbc"))
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(3600)
+def test_fresh_root_install_serves_an_unprivileged_user_without_compiling():
+    """``.ci/check-core-install``: ``pip install .`` as root into a fresh venv, then as ``nobody``
+    with HOME=/nonexistent the first pinv and qp allocations within 5 s of CPU, nothing compiled;
+    then every method on ICE as root, nothing compiled."""
+    if os.getuid() != 0 or shutil.which("setpriv") is None:
+        pytest.skip("needs root and setpriv to act as another user")
+    out = subprocess.run([str(ROOT / ".ci" / "check-core-install")], capture_output=True, text=True, cwd=ROOT)
+    assert out.returncode == 0, out.stdout[-3000:] + out.stderr[-3000:]
+    firsts = re.findall(r"first (\w+) allocation ([\d.]+) s CPU .*no kernel compiled", out.stdout)
+    assert sorted(m for m, _ in firsts) == ["pinv", "qp"], out.stdout
+    assert all(float(cpu) < 5.0 for _, cpu in firsts), firsts
+    assert "every kernel loaded from the wheel's cache" in out.stdout
