@@ -98,6 +98,11 @@ def make_backend(
                           np.asarray(bl, dtype=float), np.asarray(bu, dtype=float))
 
 
+def _highs_from(d: dict) -> _Highs:
+    """The HiGHS LP of ``_Chain``'s data (a module-level function: a backend pickles)."""
+    return _Highs(d["f"], d["A"], d["bl"], d["bu"], d["lb"], d["ub"])
+
+
 def _make_raw(name, H, f, A, bl, bu, lb, ub, singular):
     lp = H is None
     if name == "daqp":
@@ -106,8 +111,7 @@ def _make_raw(name, H, f, A, bl, bu, lb, ub, singular):
             # DAQP's proximal-point LP reports false infeasibility or cycling on a few
             # degenerate allocation LPs (~0.3 % of the random suites); HiGHS' simplex
             # re-solves exactly those calls.
-            return _Chain(primary, lambda d: _Highs(d["f"], d["A"], d["bl"], d["bu"], d["lb"], d["ub"]),
-                          dict(f=f, A=A, bl=bl, bu=bu, lb=lb, ub=ub))
+            return _Chain(primary, _highs_from, dict(f=f, A=A, bl=bl, bu=bu, lb=lb, ub=ub))
         return primary
     if name == "highs":
         return _Highs(f, A, bl, bu, lb, ub)
@@ -245,9 +249,8 @@ class _Daqp:
     _EQ = 5  # DAQP sense flag of an equality constraint
 
     def __init__(self, H, f, A, bl, bu, lb, ub, *, singular: bool) -> None:
-        import daqp
+        import daqp  # noqa: F401 - fails here, at build, when DAQP is absent
 
-        self._daqp = daqp
         self._n = int(f.size)
         # daqp.Model needs a matrix: an LP is a QP with H = 0 solved by proximal-point iterations.
         self._H = np.zeros((f.size, f.size)) if H is None else np.array(H, dtype=float, order="C")
@@ -264,7 +267,9 @@ class _Daqp:
         self._setup()
 
     def _setup(self):
-        model = self._daqp.Model()
+        import daqp  # a module is not kept on the object: a backend pickles (alloc.Allocator)
+
+        model = daqp.Model()
         flag, _ = model.setup(self._H, self._f, self._A, self._bupper, self._blower, self._sense.copy())
         if flag < 0:
             raise SolverError(f"daqp setup failed with exit flag {flag}")
@@ -331,9 +336,8 @@ class _Highs:
     """
 
     def __init__(self, f, A, bl, bu, lb, ub) -> None:
-        import highspy
+        import highspy  # noqa: F401 - fails here, at build, when HiGHS is absent
 
-        self._hs = highspy
         self._f = np.array(f, dtype=float)
         self._A = np.array(A, dtype=float)
         self._csc = _to_csc(self._A)
@@ -341,7 +345,8 @@ class _Highs:
         self._lb, self._ub = np.array(lb, dtype=float), np.array(ub, dtype=float)
 
     def _model(self):
-        hs = self._hs
+        import highspy as hs  # a module is not kept on the object: a backend pickles (alloc.Allocator)
+
         h = hs.Highs()
         h.setOptionValue("output_flag", False)
         h.setOptionValue("simplex_iteration_limit", ITERATION_LIMITS["highs"])
@@ -363,10 +368,12 @@ class _Highs:
                 setattr(self, name, np.array(value, dtype=float))
         if A is not None:
             self._csc = _to_csc(self._A)
+        import highspy
+
         h = self._model()
         h.run()
         status = h.getModelStatus()
-        if status != self._hs.HighsModelStatus.kOptimal:
+        if status != highspy.HighsModelStatus.kOptimal:
             raise SolverError(f"highs returned model status {h.modelStatusToString(status)}")
         x = np.array(h.getSolution().col_value, dtype=float)
         if not np.all(np.isfinite(x)):

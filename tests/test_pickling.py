@@ -28,7 +28,7 @@ ROUND_TRIPS = {
 OLD_PROTOCOLS = {"pickle-0": lambda x: pickle.loads(pickle.dumps(x, protocol=0))}
 #: backends whose native models cannot be pickled (they hold the solver module and a C
 #: model; alloc/solvers.py would need __getstate__/__setstate__ that rebuild them)
-UNPICKLABLE_BACKENDS = {"daqp", "highs"}
+UNPICKLABLE_BACKENDS: set[str] = set()
 
 
 def _problem(Wu: object) -> alloc.Problem:
