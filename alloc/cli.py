@@ -543,11 +543,15 @@ def allocate_command(
 ) -> None:
     """Allocate one demand and print the effector commands, the status and honest timings.
 
-    Times, in seconds in the JSON: build_time (make_allocator: the method's precomputation,
-    and loading its compiled kernels the first time in a process); first_call_time (the
-    first allocation, which may still load kernels); solve_time (the median over --repeat
-    further calls of the same demand on the built allocator: what a control loop pays).
-    Errors: exit status 2 and one line on stderr.
+    Times (seconds in the JSON), each measured on its own:
+
+    build_time: make_allocator, the method's precomputation (and loading its compiled kernels, once per process);
+
+    first_call_time: the first allocation, which may still load kernels;
+
+    solve_time: the median of --repeat further calls of the same demand (what a control loop pays per call).
+
+    Invalid input: exit 2 and one line on stderr.
     """
     if (vehicle is None) == (problem is None):
         raise typer.BadParameter("give exactly one of --vehicle or --problem", param_hint="--vehicle/--problem")

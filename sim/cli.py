@@ -35,13 +35,27 @@ MAX_DURATION = 3600.0
 MAX_PILOT_DELAY = 10.0
 
 
+def list_scenarios(value: bool) -> None:
+    """``--list``: every scenario with its defaults and failures, then exit."""
+    if not value:
+        return
+    for name in scenarios():
+        run = get_scenario(name)
+        typer.echo(f"{name}: {run.description}")
+        typer.echo(f"  default duration {run.default_duration:g} s, method {run.default_method or '(no allocator)'}, "
+                   f"failure {run.default_failure or NO_FAILURE}")
+        for failure, text in run.failures.items():
+            typer.echo(f"  --failure {failure}: {text}")
+    raise typer.Exit()
+
+
 def sim_command(
-    scenario: str = typer.Argument(..., help=f"scenario name: {', '.join(scenarios())}"),
+    scenario: str = typer.Argument(..., help=f"scenario name: {', '.join(scenarios())} (see --list)"),
     method: Optional[str] = typer.Option(
         None, "--method", help="allocation method (see `alloc methods`) or 'static'; default: the scenario's "
         "(the seed's choice: pinv for ice, ganging for the HARV)"),
     failure: Optional[str] = typer.Option(
-        None, "--failure", help="failure name (see the scenario's failures); default: the scenario's own "
+        None, "--failure", help="failure name (see --list); default: the scenario's own "
         f"(harv_latdir_failure2: failure2), else none; '{NO_FAILURE}' for a nominal run"),
     failure_time: Optional[float] = typer.Option(
         None, "--failure-time", parser=finite(0.0, unit=" s"),
@@ -51,7 +65,8 @@ def sim_command(
         help=f"simulated seconds, 0 < duration <= {MAX_DURATION:g}; default: the scenario's (ice 40 s)"),
     seed: int = typer.Option(0, "--seed", min=0, max=2**32 - 1, help="noise seed (0 to 2^32 - 1)"),
     noise: Optional[bool] = typer.Option(None, "--noise/--no-noise", help="sensor noise (default: on, seed gains)"),
-    controller: Optional[str] = typer.Option(None, "--controller", help="'smc' (default) or 'loopshape'"),
+    controller: Optional[str] = typer.Option(None, "--controller", help="'smc' (default); 'loopshape' (ice, HARV) "
+                                             "or 'lqr' (pendulum)"),
     pilot: Optional[str] = typer.Option(None, "--pilot", help="pilot model: 'standin' (default) or 'crossover'"),
     pilot_gain: Optional[float] = typer.Option(None, "--pilot-gain", parser=finite(0.0),
                                                help="override the pilot model's gain (>= 0)"),
@@ -90,12 +105,16 @@ def sim_command(
     ),
     plot_path: Optional[Path] = typer.Option(None, "--plot", help="write a PNG plot to this new file"),
     force: bool = typer.Option(False, "--force", help="overwrite output files that exist"),
+    list_: bool = typer.Option(False, "--list", callback=list_scenarios, is_eager=True, expose_value=False,
+                               help="list the scenarios, their defaults and failures, and exit"),
 ) -> None:
     """Run SCENARIO in closed loop and print its JSON summary (exit 1 if it diverged).
 
-    Units: seconds, degrees for effector positions, the seed's units for the outputs.
-    Nothing is written unless asked (--json, --csv, --parquet, --plot), and an existing
-    file is refused unless --force.
+    Units: seconds; effector positions in degrees; outputs in the seed's units.
+
+    Nothing is written unless asked (--json, --csv, --parquet, --plot); an existing file is refused unless --force.
+
+    Invalid arguments: exit 2 and one line on stderr.
     """
     try:
         run = get_scenario(scenario)

@@ -76,3 +76,61 @@ def test_command_line_round_trips_the_options():
                         rate_aware=True, noise=False, pilot="crossover")
     assert line == ("alloc sim ice --method qp --failure seed --told --frame-rate 100 --rate-aware --no-noise "
                     "--pilot crossover")
+
+
+def _histories(path) -> dict[str, np.ndarray]:
+    lines = path.read_text().splitlines()
+    header = lines[0].split(",")[:-1]  # the last column is the allocator status
+    table = np.array([[float(x) for x in line.split(",")[:-1]] for line in lines[1:]])
+    return {name: table[:, j] for j, name in enumerate(header)}
+
+
+def test_harv_latdir_failure2_injects_its_failure_by_default(tmp_path):
+    # issue 22: `alloc sim harv_latdir_failure2` (the README's Fig 4-81 command) ran nominal, because
+    # the command passed failure=None over the scenario's own default
+    failed_csv, nominal_csv = tmp_path / "failed.csv", tmp_path / "nominal.csv"
+    failed = runner.invoke(app, ["harv_latdir_failure2", "--duration", "6", "--no-noise", "--csv", str(failed_csv)])
+    assert failed.exit_code == 0, failed.output
+    nominal = runner.invoke(app, ["harv_latdir_failure2", "--duration", "6", "--no-noise", "--failure", "none",
+                                  "--csv", str(nominal_csv)])
+    assert nominal.exit_code == 0, nominal.output
+    assert json.loads(failed.stdout)["failure"] == "failure2" and json.loads(failed.stdout)["failure_time"] == 0.0
+    assert json.loads(nominal.stdout)["failure"] is None
+    hist, ref = _histories(failed_csv), _histories(nominal_csv)
+    # Failure #2 (seed 4.6): yaw thrust vector limited to +-3 deg at 10 % effectiveness; the
+    # filtered bank-angle steps drive it to that limit and the rudder (30 deg limit) takes over
+    assert np.abs(hist["pos_yaw_tv"]).max() == pytest.approx(3.0, abs=1e-9)
+    assert np.abs(hist["pos_rudder"]).max() > 20.0
+    assert np.abs(ref["pos_yaw_tv"]).max() < 2.5 and np.abs(ref["pos_rudder"]).max() < 5.0
+
+
+def test_outputs_never_overwrite_an_existing_file_unless_forced(tmp_path):
+    # issue 22: the README's `alloc sim ice ... --json docs/... --plot docs/...` overwrote two tracked files
+    js, png = tmp_path / "tracked.json", tmp_path / "tracked.png"
+    js.write_text("tracked"), png.write_bytes(b"tracked")
+    args = ["ice", "--method", "qp", "--duration", "0.05", "--no-noise", "--json", str(js), "--plot", str(png)]
+    refused = runner.invoke(app, args)
+    assert refused.exit_code == 2 and "--force" in refused.stderr
+    assert js.read_text() == "tracked" and png.read_bytes() == b"tracked"
+    forced = runner.invoke(app, [*args, "--force"])
+    assert forced.exit_code == 0, forced.output
+    assert json.loads(js.read_text())["scenario"] == "ice" and png.stat().st_size > 10_000
+    twice = runner.invoke(app, ["ice", "--duration", "0.05", "--json", str(tmp_path / "a"), "--csv", str(tmp_path / "a")])
+    assert twice.exit_code == 2 and not (tmp_path / "a").exists()
+
+
+def test_a_failure_the_run_never_reaches_is_refused():
+    res = runner.invoke(app, ["ice", "--failure", "seed", "--duration", "0.05", "--no-noise"])
+    assert res.exit_code == 2 and "nothing was injected" in res.stderr  # the seed's failure is at 20 s
+
+
+def test_command_line_of_a_nominal_failure2_run_says_so():
+    assert command_line("harv_latdir_failure2", failure=None) == "alloc sim harv_latdir_failure2 --failure none"
+    assert command_line("ice", failure=None) == "alloc sim ice"
+
+
+def test_list_names_every_scenario_and_failure():
+    res = runner.invoke(app, ["--list"])
+    assert res.exit_code == 0, res.output
+    assert "harv_latdir_failure2:" in res.stdout and "failure failure2" in res.stdout
+    assert "--failure seed:" in res.stdout

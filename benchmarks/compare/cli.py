@@ -156,8 +156,10 @@ def full(scheduler: str | None = _SCHEDULER, out: Path | None = _OUT, workers: i
          dry_run: bool = typer.Option(False, "--dry-run", help="print the run count and exit")) -> None:
     """ICE and HARV lat-dir: every method x failure x blind/told x frame rate x pilot x seed (long; --dry-run).
 
-    Failures: the scenario's own and the catalogue's (5 kinds, single and double).  Runs: ICE
-    20 s with the failure at 10 s, HARV lat-dir 25 s with the failure at 12.5 s."""
+    Failures: the scenario's own and the catalogue's (5 kinds, single and double).
+
+    Runs: ICE 20 s with the failure at 10 s, HARV lat-dir 25 s with the failure at 12.5 s (--seed-durations: 40 s, 50 s).
+    """
     from .sweep import SCENARIO_TIMES
 
     specs = full_sweep(seeds=seeds, frame_rates=_frame_rates(frame_rates),
@@ -201,8 +203,7 @@ def report(out: Path = typer.Argument(..., metavar="DIR", help="folder of a swee
                                       "figures")) -> None:
     """Re-render report.md and the figures of a sweep folder from its CSVs (no run).
 
-    The folder's report.md, figures and their CSVs are rewritten, so a folder that already
-    holds a report.md needs --force.
+    The folder's report.md, figures and their CSVs are rewritten: a folder that holds a report.md needs --force.
     """
     from .report import make_report
 
@@ -221,7 +222,7 @@ def report(out: Path = typer.Argument(..., metavar="DIR", help="folder of a swee
 def scaling(workers: str = typer.Option("1,2,4", help="worker counts, comma-separated"),
             runs: int = typer.Option(24, min=2, max=10_000, help="closed-loop runs (ICE, 8 s each) per measurement"),
             engine: list[str] = typer.Option(["dask", "local"], help="dask (loopback cluster) and/or local"),
-            as_json: bool = typer.Option(False, "--json")) -> None:
+            as_json: bool = typer.Option(False, "--json", help="print JSON rows instead of the table")) -> None:
     """Throughput with 1, 2, 4 worker processes on a loopback Dask cluster and the local pool."""
     from .throughput import measure_scaling
 
