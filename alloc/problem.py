@@ -374,7 +374,7 @@ class Problem:
         else:
             raise ProblemError(f"effector: {effector!r} is not an integer index or a name")
         if not 0 <= i < self.m:
-            raise ProblemError(f"effector: index {i} out of range 0..{self.m - 1}")
+            raise ProblemError(f"effector: index {short_repr(i)} out of range 0..{self.m - 1}")
         return i
 
     def with_jam(self, effector: int | str, position: float) -> Problem:
@@ -486,7 +486,26 @@ class Problem:
         }
 
 
+_ARRAY_FIELDS = ("B", "umin", "umax", "up", "Wu", "Wv", "rate_min", "rate_max")
+
+
 def _problem_from_fields(B: Any, umin: Any, umax: Any, up: Any, Wu: Any, Wv: Any, rate_min: Any, rate_max: Any,
                          names: Any, axes: Any) -> Problem:
-    """:meth:`Problem.__reduce__`'s rebuild (module level, so pickle can name it)."""
-    return Problem(B, umin, umax, up=up, Wu=Wu, Wv=Wv, rate_min=rate_min, rate_max=rate_max, names=names, axes=axes)
+    """:meth:`Problem.__reduce__`'s rebuild (module level, so pickle can name it).
+
+    Validated by the constructor; then the problem keeps the very arrays it was handed
+    where they equal the validated ones (float64, same shape and values), made read-only.
+    Other objects of the same pickle or deep copy (an allocator's bounds) refer to those
+    arrays, and methods recognise the problem's own limits by identity (``lo is
+    problem.umin``): a copy of the constructor's would take the general path and could
+    round differently.
+    """
+    given = (B, umin, umax, up, Wu, Wv, rate_min, rate_max)
+    p = Problem(B, umin, umax, up=up, Wu=Wu, Wv=Wv, rate_min=rate_min, rate_max=rate_max, names=names, axes=axes)
+    for name, arr in zip(_ARRAY_FIELDS, given):
+        own = getattr(p, name)
+        if (type(arr) is np.ndarray and arr.dtype == own.dtype and arr.shape == own.shape
+                and arr.tobytes() == own.tobytes()):
+            arr.setflags(write=False)
+            object.__setattr__(p, name, arr)
+    return p
