@@ -73,7 +73,7 @@ from .problem import MAX_AXES, MAX_EFFECTORS, MAX_MAGNITUDE, Problem, short_repr
 __all__ = [
     "FORMAT", "SCHEMA_PATH", "DATA_DIR", "EFFECTOR_KINDS", "WRENCH_COMPONENTS",
     "Dynamics", "Rotor", "Effector", "Axis", "LinearModel", "Vehicle",
-    "load_vehicle", "vehicle_from_dict", "vehicle_names", "rotor_wrench", "to_toml",
+    "load_vehicle", "vehicle_from_dict", "vehicle_from_problem", "vehicle_names", "rotor_wrench", "to_toml",
 ]
 
 #: the format this module reads and writes (a later, incompatible format gets a new number)
@@ -675,6 +675,46 @@ def vehicle_from_dict(doc: Any) -> Vehicle:
     except ProblemError as exc:  # the per-field checks above should leave nothing; say where if they do
         raise _fail(exc.field or "vehicle", str(exc)) from exc
     return vehicle
+
+
+def vehicle_from_problem(problem: Problem, name: str, *, methods: Mapping[str, Mapping[str, Any]] | None = None,
+                         description: str = "", source: str = "") -> Vehicle:
+    """The vehicle of an allocation problem (``vehicle_from_problem(p, n).problem()`` equals ``p``).
+
+    A vehicle file carries diagonal weights only: a problem whose ``Wu`` or ``Wv`` has
+    off-diagonal entries raises ProblemError naming it.
+    """
+    if not isinstance(problem, Problem):
+        raise ProblemError(f"problem: expected an alloc.Problem, got {type(problem).__name__}", field="problem")
+    for label, W in (("Wu", problem.Wu), ("Wv", problem.Wv)):
+        if not np.array_equal(W, np.diag(np.diag(W))):
+            raise ProblemError(f"{label}: a vehicle file carries diagonal weights only", field=label)
+    weighted_u = not np.array_equal(problem.Wu, np.eye(problem.m))
+    weighted_v = not np.array_equal(problem.Wv, np.eye(problem.k))
+    default_up = np.minimum(np.maximum(0.0, problem.umin), problem.umax)
+    effectors = []
+    for j, label in enumerate(problem.names):
+        e: dict[str, Any] = {"name": label, "min": float(problem.umin[j]), "max": float(problem.umax[j])}
+        rmin, rmax = float(problem.rate_min[j]), float(problem.rate_max[j])
+        if math.isfinite(rmax):
+            e["rate_max"] = rmax
+        if math.isfinite(rmin) and rmin != -rmax:
+            e["rate_min"] = rmin
+        elif math.isinf(rmin) and math.isfinite(rmax):
+            raise ProblemError(f"rate_min: effector {label!r} has rate_max {rmax:g} and no rate_min; a vehicle file "
+                               "reads a missing rate_min as -rate_max", field="rate_min")
+        if problem.up[j] != default_up[j]:
+            e["preferred"] = float(problem.up[j])
+        if weighted_u:
+            e["weight"] = float(problem.Wu[j, j])
+        effectors.append(e)
+    axes = [{"name": a, **({"weight": float(problem.Wv[i, i])} if weighted_v else {})}
+            for i, a in enumerate(problem.axes)]
+    doc: dict[str, Any] = {"format": FORMAT, "name": name, "description": description, "source": source,
+                           "axes": axes, "effectors": effectors, "effectiveness": {"B": problem.B.tolist()}}
+    if methods:
+        doc["methods"] = {k: dict(v) for k, v in methods.items()}
+    return vehicle_from_dict(doc)
 
 
 def _effectiveness(t: Mapping[str, Any], axes: tuple[Axis, ...], effectors: tuple[Effector, ...]) -> tuple[Matrix, bool]:

@@ -141,3 +141,10 @@ def test_seeded_random_failures_never_widen_and_never_crash():
         for axis in r.ranges:
             assert axis.nominal_low - 1e-7 <= axis.low <= 0.0 <= axis.high <= axis.nominal_high + 1e-7, trial
         json.dumps(r.to_dict(), allow_nan=False)
+
+
+def test_vehicle_trim_is_the_default_reference():
+    v = vehicle_from_params({**read_params(HEXA_X), "MPC_THR_HOVER": 0.5})
+    r = report(v, LOST)
+    assert r.reference == (0.0, 0.0, 0.0, -3 * CT) and r.name == "px4"
+    assert (r.range("yaw").low, r.range("yaw").high) == pytest.approx((0.0, 0.975), abs=1e-7)

@@ -285,3 +285,12 @@ def test_seeded_random_multirotors_match_the_formula_and_load_back():
         assert alloc.vehicle_file.vehicle_from_dict(v.to_dict()) == v
         vn = vehicle_from_params(params, normalize="px4", axes="all")
         assert np.isfinite(vn.problem().B).all()
+
+
+def test_hover_thrust_sets_the_fz_trim():
+    v = vehicle_from_params({**read_params(HEXA_X), "MPC_THR_HOVER": 0.5})
+    assert v.trim.tolist() == [0.0, 0.0, 0.0, -0.5 * 6 * CT]  # six rotors at half command
+    vn = vehicle_from_params({**read_params(HEXA_X), "MPC_THR_HOVER": 0.5}, normalize="px4")
+    assert vn.trim[-1] == pytest.approx(-0.5)  # normalised: each rotor -1/6
+    with pytest.raises(ProblemError, match="^MPC_THR_HOVER: must be in"):
+        vehicle_from_params({**read_params(HEXA_X), "MPC_THR_HOVER": 1.5})

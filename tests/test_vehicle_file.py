@@ -277,3 +277,26 @@ def test_seeded_malformed_documents_raise_problem_error_naming_a_path():
         assert vehicle_from_dict(v.to_dict()) == v  # what loads, writes and reads back
         assert validator.is_valid(v.to_dict()), trial
     assert outcomes["rejected"] > 300 and outcomes["accepted"] > 0, outcomes
+
+
+@pytest.mark.parametrize("name", vehicles.names())
+def test_vehicle_from_problem_round_trips_bit_for_bit(name):
+    from alloc.vehicle_file import vehicle_from_problem
+
+    p = vehicles.problem(name)
+    v = vehicle_from_problem(p, name, methods={"daisy": {"groups": vehicles.daisy_groups(name)}})
+    assert_same_problem(v.problem(), p)
+    assert_same_problem(load_vehicle(v.to_dict()).problem(), p)
+
+
+def test_vehicle_from_problem_refuses_what_the_format_cannot_carry():
+    from alloc.vehicle_file import vehicle_from_problem
+
+    p = alloc.Problem([[1.0, 2.0]], [-1, -1], [1, 1], Wu=[[2.0, 0.5], [0.5, 2.0]])
+    with pytest.raises(ProblemError, match="^Wu: a vehicle file carries diagonal weights only"):
+        vehicle_from_problem(p, "x")
+    q = alloc.Problem([[1.0, 2.0]], [-1, -1], [1, 1], rate_max=[1.0, 2.0])
+    with pytest.raises(ProblemError, match="^rate_min: "):
+        vehicle_from_problem(q, "x")
+    r = alloc.Problem([[1.0, 2.0]], [-1, -1], [1, 1], rate_min=[-3.0, -1.0], rate_max=[1.0, 2.0], Wv=[4.0])
+    assert_same_problem(vehicle_from_problem(r, "x").problem(), r)

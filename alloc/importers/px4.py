@@ -12,6 +12,8 @@ Reads the parameters PX4's ``control_allocator`` module uses (PX4-Autopilot
 * ``CA_SV_CS_COUNT`` [0] and per surface ``CA_SV_CSn_TYPE`` [1], ``CA_SV_CSn_TRQ_R/P/Y`` [0]
   (roll/pitch/yaw torque per unit command), ``CA_SV_CSn_TRIM`` [0] (the preferred position);
   ``CA_SVn_SLEW`` [0] (servo ``n``'s full range -1..1 in seconds).  Commands are in [-1, 1].
+* ``MPC_THR_HOVER`` (when present): the ``fz`` axis's trim is the force with every rotor at
+  that command (the operating point :mod:`alloc.controllability` measures around).
 
 Effectiveness, by PX4's own code (PX4/PX4-Autopilot ``src/modules/control_allocator/
 ActuatorEffectiveness/``):
@@ -247,6 +249,12 @@ def vehicle_from_params(params: Mapping[str, Any], *, name: str = "px4", normali
         raise ProblemError("CA_ROTOR_COUNT: no effector acts on any axis (all columns zero)", field="CA_ROTOR_COUNT")
     moment_unit, force_unit = ("1", "1") if normalize == "px4" else ("N m", "N")
     doc_axes = [{"name": WRENCH_COMPONENTS[r], "unit": moment_unit if r < 3 else force_unit} for r in keep]
+    if "MPC_THR_HOVER" in params and 5 in keep:
+        hover = _get(params, "MPC_THR_HOVER", 0.5)
+        if not 0.0 <= hover <= 1.0:
+            raise ProblemError(f"MPC_THR_HOVER: must be in [0, 1], got {hover:g}", field="MPC_THR_HOVER")
+        # every rotor at the hover command: the thrust the controllability report measures around
+        doc_axes[keep.index(5)]["trim"] = float(hover * B6[5, :n_rotors].sum())
     for j, e in enumerate(effectors):
         if "rotor" not in e:
             e["effectiveness"] = [float(B6[r, j]) for r in keep]
