@@ -61,7 +61,7 @@ import math
 import re
 import tomllib
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -666,14 +666,15 @@ def vehicle_from_dict(doc: Any) -> Vehicle:
     _unique([e.name for e in effectors], "effectors")
     m = len(effectors)
     B, given = _effectiveness(t, axes, effectors)
-    methods = _methods(t["methods"], effectors) if "methods" in t else {}
     model = LinearModel.from_dict(t["model"], "model", m) if "model" in t else None
     vehicle = Vehicle(name=name, axes=axes, effectors=effectors, B=B, B_given=given, description=description,
-                      source=source, methods=methods, model=model)
+                      source=source, model=model)
     try:
-        vehicle.problem()
+        problem = vehicle.problem()
     except ProblemError as exc:  # the per-field checks above should leave nothing; say where if they do
         raise _fail(exc.field or "vehicle", str(exc)) from exc
+    if "methods" in t:
+        vehicle = replace(vehicle, methods=_methods(t["methods"], problem))
     return vehicle
 
 
@@ -751,14 +752,18 @@ def _effectiveness(t: Mapping[str, Any], axes: tuple[Axis, ...], effectors: tupl
     return tuple(tuple(float(x) for x in row) for row in B), False
 
 
-def _methods(value: Any, effectors: tuple[Effector, ...]) -> dict[str, dict[str, Any]]:
-    """``[methods.<name>]`` tables: each a registered method, each option declared and admissible."""
+def _methods(value: Any, problem: Problem) -> dict[str, dict[str, Any]]:
+    """``[methods.<name>]`` tables: each a registered method, each option declared and admissible.
+
+    Options that depend on the problem are checked against it: effector groups name
+    effectors, a priority list has one level per axis, and a method given a group or
+    matrix option (``daisy``, ``ganging``: closed-form builds) is built once.
+    """
     from . import registry
     from .exceptions import UnknownMethodError
     from .options import validate
 
     table = _table(value, "methods")
-    names = [e.name for e in effectors]
     out: dict[str, dict[str, Any]] = {}
     for method, options in table.items():
         path = f"methods.{method}"
@@ -772,9 +777,18 @@ def _methods(value: Any, effectors: tuple[Effector, ...]) -> dict[str, dict[str,
         except AllocError as exc:
             where = f"{path}.{exc.field}" if exc.field in opts else path
             raise _fail(where, str(exc)) from None
-        for opt, spec in cls.options.items():
-            if spec.type == "groups" and opt in opts:
-                _check_groups(opts[opt], f"{path}.{opt}", names)
+        kinds = {opt: cls.options[opt].type for opt in opts}
+        for opt, kind in kinds.items():
+            if kind == "groups" and opts[opt] is not None:
+                _check_groups(opts[opt], f"{path}.{opt}", list(problem.names))
+            elif kind == "real list" and opts[opt] is not None and len(opts[opt]) != problem.k:
+                raise _fail(f"{path}.{opt}", f"expected {problem.k} entries (one per axis), got {len(opts[opt])}")
+        if any(kind in ("groups", "matrix") for kind in kinds.values()):
+            try:
+                registry.build(problem, method, opts)
+            except AllocError as exc:
+                where = f"{path}.{exc.field}" if exc.field in opts else path
+                raise _fail(where, str(exc)) from None
         try:
             out[method] = json.loads(json.dumps(opts, allow_nan=False))
         except ValueError:

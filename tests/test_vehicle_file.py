@@ -300,3 +300,16 @@ def test_vehicle_from_problem_refuses_what_the_format_cannot_carry():
         vehicle_from_problem(q, "x")
     r = alloc.Problem([[1.0, 2.0]], [-1, -1], [1, 1], rate_min=[-3.0, -1.0], rate_max=[1.0, 2.0], Wv=[4.0])
     assert_same_problem(vehicle_from_problem(r, "x").problem(), r)
+
+
+def test_method_defaults_are_checked_against_the_problem():
+    doc = hexa_doc()
+    doc["methods"] = {"ganging": {"G": np.zeros((6, 4)).tolist()}, "cgi": {"priorities": [2, 2, 1, 3]}}
+    v = vehicle_from_dict(doc)
+    assert v.method_options("cgi") == {"priorities": [2, 2, 1, 3]} and v.method_options("qp") == {}
+    doc["methods"] = {"ganging": {"G": np.zeros((4, 6)).tolist()}}
+    with pytest.raises(ProblemError, match=r"^methods\.ganging\.G: "):
+        vehicle_from_dict(doc)
+    doc["methods"] = {"cgi": {"priorities": [1, 2]}}
+    with pytest.raises(ProblemError, match=r"^methods\.cgi\.priorities: expected 4 entries"):
+        vehicle_from_dict(doc)
