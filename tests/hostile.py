@@ -5,22 +5,34 @@ huge limits, all or some jammed, zero and duplicated columns, near-singular and
 rank-deficient B, ill-conditioned and near-singular weights, k > m, zero rate limits), a
 registry method with odd option values and types, and a few calls (demands from zero to the
 domain's edge, ``u_prev`` outside the limits, tiny and huge ``dt``), sometimes with values
-outside the valid input domain (NaN, 1e300, Python big integers, ragged arrays).
+outside the valid input domain (NaN, 1e300, Python big integers, ragged arrays).  Drawn
+from a second stream (so the classes above give the same cases as before), about one case
+in ten also carries each of issue 22's classes: a non-real value (a Python big integer, a
+complex number or array, a boolean or boolean array, a number as text, a numpy complex
+scalar) in one field of the problem, one numeric option or one call argument (``v``,
+``u_prev``, ``dt``, a batch's ``V``), which must be refused naming exactly that field;
+health-API abuse (failure events with hostile effectors, kinds and parameters, health
+records with limits wider than the nominal ones and text for booleans, their JSON form);
+and a pickle, copy or deep-copy round trip of the problem, the allocator and its results.
 
 ``check(case)`` builds and calls it and returns the contract violations (empty when it
 holds): only ``AllocError``/``TypeError`` may escape, with the field named; every ``u``
 finite and within the call's bounds; ``v_achieved = B u`` finite; status ``exact`` iff
 ``B u = v`` within tolerance; the result owns read-only arrays; ``allocate_batch`` equals
-the single calls; no call takes longer than ``CALL_LIMIT`` seconds.
+the single calls; no call takes longer than ``CALL_LIMIT`` seconds.  With issue 22's
+classes: a non-real value is never accepted; the health API raises only ``AllocError``
+naming a health field, a failed problem never leaves the nominal limits, rate limits or
+effectiveness, and health round-trips through JSON; a round-tripped allocator answers every
+call and the batch bit for bit as the original, and round-tripped results are read-only.
 
 ``run(seeds, workers)`` runs cases in watchdog subprocesses (a hang that holds the GIL
 cannot be interrupted from a thread): a case that does not answer within its budget is a
 hang, the worker is killed and restarted.  ``shrink(case)`` reduces a failing case to a
 minimal one (fewer calls, effectors, axes, options; simpler numbers) that still fails.
 
-Command line (the large run recorded in the README)::
+Command line (the large run recorded in the docs; seeds ``S .. S + N - 1``)::
 
-    python tests/hostile.py --cases 100000 --workers 2 [--seed 0]
+    python tests/hostile.py --cases 100000 --workers 2 [--seed 0] [--json report.json]
 """
 
 from __future__ import annotations
@@ -268,7 +280,165 @@ def case(seed: int) -> dict[str, Any]:
             call["u_prev"] = (rng.uniform(lo, hi) + rng.choice([0.0, 0.0, 3.0]) * span).tolist()
             call["dt"] = float(rng.choice([0.01, 1e-300, 1e-9, 1.0, 1e40, 0.0, -1.0]))
         calls.append(call)
-    return {"seed": seed, "method": method, "fields": fields, "options": options, "calls": calls}
+    c = {"seed": seed, "method": method, "fields": fields, "options": options, "calls": calls}
+    _boundary_classes(np.random.default_rng([seed, 22]), c, B, lo, hi)
+    return c
+
+
+# ------------------------------------------------------------------ issue 22's classes
+#: what a non-real value is, by kind, as case data (``$array``/``$scalar`` are decoded by
+#: :func:`decode` into numpy objects when the case runs, so a case stays comparable data)
+NON_REAL = ("big int", "complex", "complex array", "bool", "bool array", "text", "numpy complex")
+#: share of cases carrying each class
+P_NON_REAL, P_HEALTH, P_ROUND_TRIP = 0.10, 0.10, 0.10
+HEALTH_FIELDS = ("effector", "kind", "position", "fraction", "lo", "hi", "rate_min", "rate_max", "limits",
+                 "rate_limits", "jam_position", "floating", "effectiveness", "health", "event")
+
+
+def _non_real(rng: np.random.Generator, kind: str, like: Any) -> Any:
+    """``like`` (a number or a nested list) made non-real in the way ``kind`` says."""
+    def first(x: Any, value: Any) -> Any:  # replace the first scalar of a nested list
+        if isinstance(x, list):
+            return [first(x[0], value)] + x[1:] if x else [value]
+        return value
+
+    def num(x: Any) -> float:
+        while isinstance(x, list):
+            x = x[0] if x else 0.0
+        return 0.0 if x is None else float(x)
+
+    base = like if like is not None else 0.0
+    if kind == "big int":
+        return first(base, int(rng.choice([1, -1])) * 10 ** int(rng.choice([309, 400, 4000])))
+    if kind == "complex":
+        return first(base, complex(num(base), float(rng.choice([0.0, 1e-300, 1.0]))))
+    if kind == "bool":
+        return first(base, bool(rng.random() < 0.5))
+    if kind == "text":
+        return first(base, str(num(base)))
+    if kind == "numpy complex":
+        return {"$scalar": "complex128", "value": num(base)}
+    dtype = "complex128" if kind == "complex array" else "bool"
+    return {"$array": dtype, "data": base if isinstance(base, list) else [base]}
+
+
+def decode(x: Any) -> Any:
+    """A case value with its ``$array``/``$scalar`` markers turned into numpy objects."""
+    if isinstance(x, dict) and "$array" in x:
+        return np.array(x["data"], dtype=x["$array"])
+    if isinstance(x, dict) and "$scalar" in x:
+        return np.dtype(x["$scalar"]).type(x["value"])
+    if isinstance(x, dict):
+        return {key: decode(val) for key, val in x.items()}
+    if isinstance(x, list):
+        return [decode(v) for v in x]
+    return x
+
+
+def _boundary_classes(rng: np.random.Generator, c: dict[str, Any], B: np.ndarray, lo: np.ndarray,
+                      hi: np.ndarray) -> None:
+    """Add issue 22's classes to case ``c``: a non-real value in one field (which must be
+    refused naming that field), health-API abuse, a pickle/copy round trip."""
+    import alloc.registry
+
+    k, m = B.shape
+    if rng.random() < P_NON_REAL:
+        kind = str(rng.choice(NON_REAL))
+        spec = alloc.registry.get_method(c["method"]).options
+        numeric = [n for n, o in spec.items() if o.type in ("float", "int", "matrix", "weight")]
+        where = str(rng.choice(["problem", "option", "call"] if numeric else ["problem", "call"]))
+        clean = {"B": B.tolist(), "umin": lo.tolist(), "umax": hi.tolist()}  # within the domain by construction
+        if where == "problem":
+            field = str(rng.choice(["B", "umin", "umax", "up", "Wu", "Wv", "rate_min", "rate_max"]))
+            base = {"up": np.clip(0.0, lo, hi).tolist(), "Wu": [1.0] * m, "Wv": [1.0] * k,
+                    "rate_min": [-1.0] * m, "rate_max": [1.0] * m, **clean}[field]
+            if kind == "numpy complex":
+                kind = "complex array"
+            c["fields"] = {**clean, field: _non_real(rng, kind, base)}
+            if field in ("rate_min", "rate_max"):
+                other = "rate_max" if field == "rate_min" else "rate_min"
+                c["fields"][other] = [1.0 if other == "rate_max" else -1.0] * m
+            c["hostile"] = {"where": "problem", "field": field, "kind": kind}
+        elif where == "option":
+            name = str(rng.choice(numeric))
+            typ = spec[name].type
+            base: Any = {"float": 0.5, "int": 4, "matrix": np.zeros((m, k)).tolist(), "weight": 1.0}[typ]
+            if kind in ("complex array", "bool array") and typ in ("float", "int"):
+                kind = "numpy complex"
+            c["fields"], c["options"] = clean, {name: _non_real(rng, kind, base)}
+            c["hostile"] = {"where": "option", "field": name, "kind": kind}
+        else:
+            field = str(rng.choice(["v", "u_prev", "dt", "V"]))
+            v0 = B @ rng.uniform(lo, hi)
+            v0 = (v0 if np.abs(v0).max() <= 1e49 else np.zeros(k)).tolist()  # the other fields stay valid
+            call: dict[str, Any] = {"v": v0}
+            if field in ("u_prev", "dt"):
+                call["u_prev"], call["dt"] = np.clip(0.0, lo, hi).tolist(), 0.01
+            if field == "V":
+                c["batch_V"] = _non_real(rng, kind, [v0, v0])
+            else:
+                if field == "dt" and kind in ("complex array", "bool array"):
+                    kind = "numpy complex"
+                call[field] = _non_real(rng, kind, call[field])
+                call["hostile"] = field
+                c["calls"] = c["calls"] + [call]
+            c["fields"] = clean
+            c["hostile"] = {"where": "call", "field": field, "kind": kind}
+    if rng.random() < P_HEALTH:
+        c["health"] = _health_abuse(rng, lo, hi, m)
+    if rng.random() < P_ROUND_TRIP:
+        c["round_trip"] = str(rng.choice(["pickle", "copy", "deepcopy"]))
+
+
+def case_classes(c: dict[str, Any]) -> list[str]:
+    """Issue 22's classes case ``c`` carries (for the report's counts)."""
+    out = [f"non-real {c['hostile']['where']}"] if "hostile" in c else []
+    return out + [name for key, name in (("health", "health API"), ("round_trip", "round trip")) if key in c]
+
+
+def _health_value(rng: np.random.Generator, good: float) -> Any:
+    """A health parameter: usually ``good``, otherwise a hostile number or type."""
+    if rng.random() < 0.75:
+        return good
+    return [10**400, -(10**400), 1j, "abc", math.nan, math.inf, True, None, [good], 1e300][int(rng.integers(10))]
+
+
+def _health_abuse(rng: np.random.Generator, lo: np.ndarray, hi: np.ndarray, m: int) -> dict[str, Any]:
+    """Failure events (some hostile), direct health records (wider limits, strings for
+    booleans) and a JSON health document for :func:`alloc.health.health_from_dict`."""
+    kinds = ["jam", "hardover", "float", "effectiveness", "limits", "rate_limits", "repair"]
+    events = []
+    for _ in range(int(rng.integers(1, 5))):
+        j = int(rng.integers(m))
+        kind = str(rng.choice(kinds + ["melted"])) if rng.random() < 0.95 else "melted"
+        effector: Any = j if rng.random() < 0.8 else [f"u{j}", 10**400, True, [j], m + 3, -1][int(rng.integers(6))]
+        a, b = sorted(rng.uniform(lo[j], hi[j], 2).tolist())
+        span = max(float(hi[j] - lo[j]), 1.0)
+        if rng.random() < 0.2:  # outside the nominal limits: refused by apply_event
+            a, b = a - 2 * span, b + 2 * span
+        ev: dict[str, Any] = {"effector": effector, "kind": kind}
+        if kind in ("jam", "hardover"):
+            ev["position"] = _health_value(rng, float(rng.uniform(lo[j], hi[j])))
+        elif kind == "effectiveness":
+            ev["fraction"] = _health_value(rng, float(rng.choice([0.0, 0.3, 1.0, 1.5])))
+        elif kind == "limits":
+            ev["lo"], ev["hi"] = _health_value(rng, a), _health_value(rng, b)
+        elif kind == "rate_limits":
+            ev["rate_min"], ev["rate_max"] = _health_value(rng, -float(rng.uniform(0, 2))), _health_value(rng, 1.0)
+        events.append(ev)
+    j = int(rng.integers(m))
+    span = max(float(hi[j] - lo[j]), 1.0)
+    record = {"effectiveness": _health_value(rng, float(rng.uniform(0, 1))),
+              "limits": [float(lo[j] - span * rng.choice([0, 0.5, 3])), float(hi[j] + span * rng.choice([0, 0.5, 3]))],
+              "rate_limits": [-float(rng.uniform(0, 3)), float(rng.uniform(0, 3))],
+              "floating": [False, False, "false", "true", 0, 1, None][int(rng.integers(7))]}
+    if rng.random() < 0.3:
+        record["jam_position"] = _health_value(rng, float(rng.uniform(lo[j], hi[j])))
+    if rng.random() < 0.1:
+        record["colour"] = "red"
+    if record["floating"] is None:
+        del record["floating"]
+    return {"events": events, "record_effector": j, "record": record}
 
 
 # ----------------------------------------------------------------------------- contract
@@ -317,25 +487,41 @@ def check(c: dict[str, Any]) -> dict[str, Any]:
 
     out: dict[str, Any] = {"fail": [], "status": Counter(), "refused": ""}
     fail = out["fail"]
+    hostile = c.get("hostile")
+
+    def refused_right(stage: str, exc: BaseException, fields: tuple[str, ...]) -> None:
+        """A refusal at ``stage``: it must name the case's non-real field when it has one there."""
+        if hostile is not None and hostile["where"] == stage:
+            fields = (hostile["field"],)
+        if not _names_field(exc, fields):
+            fail.append(f"{stage} error names no field: {type(exc).__name__}: {exc}")
+
     try:
-        p = alloc.Problem(**c["fields"])
+        p = alloc.Problem(**decode(c["fields"]))
     except (AllocError, TypeError) as exc:
-        if not _names_field(exc, PROBLEM_FIELDS + ("umin/umax",)):
-            fail.append(f"problem error names no field: {type(exc).__name__}: {exc}")
+        refused_right("problem", exc, PROBLEM_FIELDS + ("umin/umax",))
         out["refused"] = "problem"
         return out
     except Exception as exc:  # noqa: BLE001 - the contract under test
         fail.append(f"escaped at Problem: {type(exc).__name__}: {exc}")
         return out
+    if hostile is not None and hostile["where"] == "problem":
+        fail.append(f"accepted a {hostile['kind']} value in {hostile['field']}")
+        return out
     d = p.to_dict()
     if alloc.Problem(**d).to_dict() != d:
         fail.append("to_dict -> Problem(**d) does not round-trip")
+    if "round_trip" in c:
+        fail.extend(_problem_round_trip(p, c["round_trip"]))
+    if "health" in c:
+        p = _apply_health(p, c["health"], fail)
+        if p is None:
+            return out
     t0 = time.perf_counter()
     try:
-        f = alloc.make_allocator(p, c["method"], **c["options"])
+        f = alloc.make_allocator(p, c["method"], **decode(c["options"]))
     except (AllocError, TypeError) as exc:
-        if not _names_field(exc, tuple(c["options"]) + PROBLEM_FIELDS):
-            fail.append(f"build error names no field: {type(exc).__name__}: {exc}")
+        refused_right("option", exc, tuple(c["options"]) + PROBLEM_FIELDS)
         out["refused"] = "options"
         return out
     except Exception as exc:  # noqa: BLE001
@@ -343,15 +529,25 @@ def check(c: dict[str, Any]) -> dict[str, Any]:
         return out
     if time.perf_counter() - t0 > BUILD_LIMIT:
         fail.append(f"slow build: {time.perf_counter() - t0:.2f} s")
+    if hostile is not None and hostile["where"] == "option":
+        fail.append(f"accepted a {hostile['kind']} value in option {hostile['field']}")
+        return out
+    twin = None
+    if "round_trip" in c:
+        twin = _allocator_round_trip(f, c["round_trip"], fail)
     singles = []
     for call in c["calls"]:
-        kw = {x: call[x] for x in ("u_prev", "dt") if x in call}
-        v_in = np.array(call["v"], dtype=float) if _plain(call["v"]) else call["v"]
+        kw = {x: decode(call[x]) for x in ("u_prev", "dt") if x in call}
+        if "hostile" in call:
+            v_in = decode(call["v"])
+        else:
+            v_in = np.array(call["v"], dtype=float) if _plain(call["v"]) else call["v"]
         t0 = time.perf_counter()
         try:
             r = f(v_in, **kw)
         except (AllocError, TypeError) as exc:
-            if not _names_field(exc, DEMAND_FIELDS + ("u_prev/dt",)):
+            fields = (call["hostile"],) if "hostile" in call else DEMAND_FIELDS + ("u_prev/dt",)
+            if not _names_field(exc, fields):
                 fail.append(f"call error names no field: {type(exc).__name__}: {exc}")
             continue
         except Exception as exc:  # noqa: BLE001
@@ -360,6 +556,11 @@ def check(c: dict[str, Any]) -> dict[str, Any]:
         dt = time.perf_counter() - t0
         if dt > CALL_LIMIT:
             fail.append(f"slow call: {dt:.2f} s")
+        if "hostile" in call:
+            fail.append(f"accepted a non-real value in {call['hostile']}: {str(call[call['hostile']])[:80]}")
+            continue
+        if twin is not None:
+            fail.extend(_twin_agrees(twin, r, v_in, kw, c["round_trip"]))
         v = np.asarray(r.v)
         lo, hi = p.effective_bounds(kw.get("u_prev"), kw.get("dt")) if kw else (p.umin, p.umax)
         snapshot = (r.u.copy(), r.v.copy())
@@ -373,6 +574,16 @@ def check(c: dict[str, Any]) -> dict[str, Any]:
             out.setdefault("messages", []).append(r.message[:120])
         if not kw:
             singles.append(r)
+    if "batch_V" in c:
+        try:
+            f.batch(decode(c["batch_V"]))
+        except (AllocError, TypeError) as exc:
+            if not _names_field(exc, ("V",)):
+                fail.append(f"batch error names no field: {type(exc).__name__}: {exc}")
+        except Exception as exc:  # noqa: BLE001
+            fail.append(f"escaped at batch: {type(exc).__name__}: {exc}")
+        else:
+            fail.append(f"accepted a non-real value in V: {str(c['batch_V'])[:80]}")
     if singles:
         # Batch equals single, on the same long-lived allocator after its single calls (so
         # this also checks that answers do not depend on call history).
@@ -383,7 +594,108 @@ def check(c: dict[str, Any]) -> dict[str, Any]:
             fail.append(f"escaped at batch: {type(exc).__name__}: {exc}")
         else:
             fail.extend(_batch_equals_single(p.B, br, singles))
+            if twin is not None:
+                tb = twin.batch(V)
+                if not (tb.u.tobytes() == br.u.tobytes() and list(tb.status) == list(br.status)):
+                    fail.append(f"round trip ({c['round_trip']}): batch differs from the original's")
     return out
+
+
+def _trip(how: str) -> Any:
+    import copy
+    import pickle
+
+    return {"pickle": lambda x: pickle.loads(pickle.dumps(x)), "copy": copy.copy, "deepcopy": copy.deepcopy}[how]
+
+
+def _problem_round_trip(p: Any, how: str) -> list[str]:
+    q = _trip(how)(p)
+    arrays = ("B", "umin", "umax", "up", "Wu", "Wv", "rate_min", "rate_max")
+    bad = [f"round trip ({how}): Problem.{a} differs" for a in arrays
+           if getattr(p, a).tobytes() != getattr(q, a).tobytes()]
+    bad += [f"round trip ({how}): Problem.{a} writeable" for a in arrays if getattr(q, a).flags.writeable]
+    if (q.names, q.axes) != (p.names, p.axes):
+        bad.append(f"round trip ({how}): Problem names differ")
+    return bad
+
+
+def _allocator_round_trip(f: Any, how: str, fail: list[str]) -> Any:
+    """``f`` after ``how`` (``None`` when that fails: a failure of the case)."""
+    try:
+        return _trip(how)(f)
+    except Exception as exc:  # noqa: BLE001 - every allocator pickles (protocol >= 2)
+        fail.append(f"round trip ({how}) of the allocator failed: {type(exc).__name__}: {exc}\n"
+                    f"{traceback.format_exc(limit=-3)}")
+        return None
+
+
+def _twin_agrees(twin: Any, r: Any, v_in: Any, kw: dict[str, Any], how: str) -> list[str]:
+    """The round-tripped allocator answers ``v_in`` bit for bit as the original did; the
+    result itself round-trips with read-only arrays."""
+    try:
+        t = twin(v_in, **kw)
+    except Exception as exc:  # noqa: BLE001
+        return [f"round trip ({how}): the copy raised {type(exc).__name__}: {exc}"]
+    bad = []
+    if not (t.u.tobytes() == r.u.tobytes() and t.v_achieved.tobytes() == r.v_achieved.tobytes()
+            and t.status is r.status):
+        bad.append(f"round trip ({how}): answer differs from the original's ({r.status.value} -> {t.status.value})")
+    rr = _trip(how)(r)
+    if any(a.flags.writeable for a in (rr.u, rr.v, rr.v_achieved, rr.unallocated)):
+        bad.append(f"round trip ({how}): result array writeable")
+    if rr.u.tobytes() != r.u.tobytes() or rr.status is not r.status:
+        bad.append(f"round trip ({how}): result differs")
+    return bad
+
+
+def _apply_health(p: Any, h: dict[str, Any], fail: list[str]) -> Any:
+    """Apply case ``h``'s events and records to ``p``; the failed problem, or ``None``.
+
+    Every refusal is a ProblemError naming a health field; the failed problem keeps within
+    the nominal one (limits, rate limits, effectiveness <= 1) and its health round-trips
+    through JSON."""
+    from alloc.exceptions import AllocError
+    from alloc.health import EffectorHealth, FailureEvent, apply_event, health_from_dict, health_to_dict
+
+    def refused(stage: str, exc: BaseException) -> None:
+        if stage == "record" and type(exc) is TypeError and "unexpected keyword argument" in str(exc):
+            return  # a constructor given an unknown field: Python's own TypeError names it
+        if not isinstance(exc, AllocError):
+            fail.append(f"health {stage} escaped: {type(exc).__name__}: {exc}")
+        elif not _names_field(exc, HEALTH_FIELDS):
+            fail.append(f"health {stage} error names no field: {exc}")
+
+    health: dict[str, Any] = {}
+    for ev in h["events"]:
+        try:
+            _, health = apply_event(p, health, FailureEvent(**ev))
+        except Exception as exc:  # noqa: BLE001 - the contract under test
+            refused("event", exc)
+    name = p.names[h["record_effector"]]
+    for stage, make in (("record", lambda: EffectorHealth(**h["record"])),
+                        ("from_dict", lambda: health_from_dict({name: h["record"]})[name])):
+        try:
+            rec = make()
+        except Exception as exc:  # noqa: BLE001
+            refused(stage, exc)
+            continue
+        if not isinstance(h["record"].get("floating", False), bool):
+            fail.append(f"health {stage} accepted floating = {h['record'].get('floating')!r}")
+        health = {**health, name: rec}
+    try:
+        if health_from_dict(health_to_dict(health)) != health:
+            fail.append("health does not round-trip through health_to_dict/health_from_dict")
+        q = p.with_health(health)
+    except Exception as exc:  # noqa: BLE001
+        refused("with_health", exc)
+        return None
+    tol = 0.0
+    if ((q.umin < p.umin - tol).any() or (q.umax > p.umax + tol).any() or (q.rate_min < p.rate_min).any()
+            or (q.rate_max > p.rate_max).any() or (np.abs(q.B) > np.abs(p.B)).any()):
+        fail.append("with_health widened a limit or raised an effectiveness")
+    if (q.up < q.umin).any() or (q.up > q.umax).any():
+        fail.append("with_health left up outside the limits")
+    return q
 
 
 def _plain(v: Any) -> bool:
@@ -566,7 +878,7 @@ def run(seeds: range, workers: int = 1, shrink_failures: bool = True, log: Any =
     """Run the cases ``seeds``; totals, per-method status counts and (shrunk) failures."""
     import alloc
 
-    report: dict[str, Any] = {"cases": 0, "refused": Counter(), "fail": [], "by_method": {},
+    report: dict[str, Any] = {"cases": 0, "refused": Counter(), "classes": Counter(), "fail": [], "by_method": {},
                               "fallback_reasons": {}}
     for name in alloc.methods():
         report["by_method"][name] = Counter()
@@ -587,7 +899,8 @@ def run(seeds: range, workers: int = 1, shrink_failures: bool = True, log: Any =
 def _run_part(seeds: list[int], shrink_failures: bool, log: Any = None) -> dict[str, Any]:
     import alloc
 
-    rep: dict[str, Any] = {"cases": 0, "refused": Counter(), "fail": [], "by_method": {}, "fallback_reasons": {}}
+    rep: dict[str, Any] = {"cases": 0, "refused": Counter(), "classes": Counter(), "fail": [], "by_method": {},
+                           "fallback_reasons": {}}
     for name in alloc.methods():
         rep["by_method"][name] = Counter()
         rep["fallback_reasons"][name] = Counter()
@@ -599,6 +912,7 @@ def _merge(report: dict[str, Any], part: dict[str, Any]) -> None:
     report["cases"] += part["cases"]
     report["stopped_at_deadline"] = report.get("stopped_at_deadline", False) or part.get("stopped_at_deadline", False)
     report["refused"].update(part["refused"])
+    report["classes"].update(part["classes"])
     report["fail"].extend(part["fail"])
     for name, cnt in part["by_method"].items():
         report["by_method"][name].update(cnt)
@@ -618,6 +932,7 @@ def _run_chunk(seeds: list[int], report: dict[str, Any], shrink_failures: bool, 
             report["cases"] += 1
             if res["refused"]:
                 report["refused"][res["refused"]] += 1
+            report["classes"].update(case_classes(c))
             report["by_method"][c["method"]].update(res["status"])
             for msg in res.get("messages", []):
                 report["fallback_reasons"][c["method"]][re.sub(r"[-+]?\d[\d.e+-]*", "#", msg)[:80]] += 1
@@ -647,9 +962,12 @@ def main() -> None:  # pragma: no cover - command line
     rep = run(range(a.seed, a.seed + a.cases), a.workers, log=sys.stderr)
     rep["seconds"] = round(time.time() - t0, 1)
     calls = {m: dict(c) for m, c in rep["by_method"].items()}
-    print(json.dumps({"cases": rep["cases"], "seconds": rep["seconds"],
+    rate = rep["cases"] / rep["seconds"] if rep["seconds"] else 0.0
+    print(json.dumps({"cases": rep["cases"], "seeds": [a.seed, a.seed + a.cases - 1], "seconds": rep["seconds"],
+                      "cases_per_second": round(rate, 1),
                       "stopped_at_deadline": rep.get("stopped_at_deadline", False), "refused": dict(rep["refused"]),
-                      "failures": len(rep["fail"]), "calls_by_method": calls}, indent=1))
+                      "classes": dict(rep["classes"]), "failures": len(rep["fail"]), "calls_by_method": calls},
+                     indent=1))
     for f in rep["fail"][:20]:
         print(json.dumps(f, default=str)[:2000])
     for m, cnt in rep["fallback_reasons"].items():
@@ -657,7 +975,7 @@ def main() -> None:  # pragma: no cover - command line
             print(f"fallback {m}: {n} x {msg}")
     if a.json:
         with open(a.json, "w") as fh:
-            json.dump({**rep, "refused": dict(rep["refused"]),
+            json.dump({**rep, "refused": dict(rep["refused"]), "classes": dict(rep["classes"]),
                        "by_method": calls, "fallback_reasons": {m: dict(c) for m, c in rep["fallback_reasons"].items()}},
                       fh, indent=1, default=str)
 

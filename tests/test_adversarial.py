@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import os
+from collections import Counter
 
 import pytest
 
@@ -69,6 +70,65 @@ def test_contract_check_catches_a_planted_violation(monkeypatch):
 
     monkeypatch.setattr(alloc.Allocator, "__call__", lying)
     assert any("dishonest exact" in s for s in hostile.check(c)["fail"])
+
+
+def test_issue_22_classes_are_drawn_without_changing_the_earlier_classes():
+    counts = Counter(k for s in range(3000) for k in hostile.case_classes(hostile.case(s)))
+    for name in ("non-real problem", "non-real option", "non-real call", "health API", "round trip"):
+        assert counts[name] >= 50, (name, counts)
+    assert 250 <= counts["health API"] <= 350 and 250 <= counts["round trip"] <= 350  # 10 % each
+    kinds = Counter(hostile.case(s)["hostile"]["kind"] for s in range(3000) if "hostile" in hostile.case(s))
+    assert set(kinds) == set(hostile.NON_REAL), kinds
+    # a case without those classes is the earlier generator's case, draw for draw
+    plain = next(s for s in range(100) if not hostile.case_classes(hostile.case(s)))
+    assert set(hostile.case(plain)) == {"seed", "method", "fields", "options", "calls"}
+
+
+_COMPLEX_B = {"seed": -1, "method": "pinv", "options": {}, "calls": [{"v": [0.5]}],
+              "fields": {"B": {"$array": "complex128", "data": [[1.0, 1.0]]}, "umin": [-1.0, -1.0], "umax": [1.0, 1.0]},
+              "hostile": {"where": "problem", "field": "B", "kind": "complex array"}}
+
+
+def test_contract_check_catches_an_accepted_complex_value(monkeypatch):
+    import warnings
+
+    import alloc.problem
+
+    assert hostile.check(_COMPLEX_B)["fail"] == [] and hostile.check(_COMPLEX_B)["refused"] == "problem"
+    monkeypatch.setattr(alloc.problem, "_not_real", lambda value: None)  # the old boundary
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # numpy's ComplexWarning as it drops the imaginary part
+        assert hostile.check(_COMPLEX_B)["fail"] == ["accepted a complex array value in B"]
+    call = {**_COMPLEX_B, "fields": {**_COMPLEX_B["fields"], "B": [[1.0, 1.0]]},
+            "calls": [{"v": {"$array": "complex128", "data": [0.5]}, "hostile": "v"}],
+            "hostile": {"where": "call", "field": "v"}}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert any(f.startswith("accepted a non-real value in v") for f in hostile.check(call)["fail"])
+
+
+def test_contract_check_catches_health_abuse_accepted(monkeypatch):
+    import alloc.health
+
+    c = {"seed": -1, "method": "pinv", "options": {}, "calls": [{"v": [0.5]}],
+         "fields": {"B": [[1.0, 1.0]], "umin": [-1.0, -1.0], "umax": [1.0, 1.0]},
+         "health": {"events": [], "record_effector": 0,
+                    "record": {"floating": "false", "limits": [-5.0, 5.0], "effectiveness": 0.5}}}
+    assert hostile.check(c)["fail"] == []
+    monkeypatch.setattr(alloc.health.EffectorHealth, "__post_init__", lambda self: None)  # no checks
+    fails = hostile.check(c)["fail"]
+    assert "health record accepted floating = 'false'" in fails
+    assert "health from_dict accepted floating = 'false'" in fails
+
+
+def test_contract_check_catches_a_writeable_result_after_a_round_trip(monkeypatch):
+    from alloc.result import Result
+
+    c = {"seed": -1, "method": "qp", "options": {}, "calls": [{"v": [0.5]}, {"v": [3.0]}], "round_trip": "pickle",
+         "fields": {"B": [[1.0, 1.0]], "umin": [-1.0, -1.0], "umax": [1.0, 1.0]}}
+    assert hostile.check(c)["fail"] == []
+    monkeypatch.setattr(Result, "__reduce__", lambda self: (tuple.__new__, (Result, tuple(self))))
+    assert hostile.check(c)["fail"] == ["round trip (pickle): result array writeable"] * 2
 
 
 def test_shrinker_reduces_a_failing_case(monkeypatch):
