@@ -13,7 +13,10 @@ $(STAMP): pyproject.toml
 	$(BIN)/pip install --quiet -e '.[dev]'
 	touch $(STAMP)
 
+# an editable install builds no wheel, so nothing compiled the numba kernels: do it once here
+# (about 2-3 min of CPU; afterwards it only loads them, a few seconds)
 install: $(STAMP)
+	$(BIN)/python -m alloc._jit_cache warm --quiet
 
 test: $(STAMP)
 	$(BIN)/pytest -q

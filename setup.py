@@ -34,8 +34,10 @@ class BuildWithKernels(build):
         if os.environ.get("ALLOC_BUILD_KERNELS", "1") == "0":
             return
         build_lib = os.path.abspath(self.build_lib)
-        # the built tree only: not the source tree, not an installed copy of the package
-        env = {**os.environ, "PYTHONPATH": build_lib, "PYTHONNOUSERSITE": "1"}
+        # the built tree first (not the source tree, not an installed copy of the package), then
+        # what this process sees: pip's isolated build environment holds numba and scipy
+        path = [build_lib, *(p for p in sys.path if p and os.path.abspath(p) != os.path.abspath("."))]
+        env = {**os.environ, "PYTHONPATH": os.pathsep.join(path), "PYTHONNOUSERSITE": "1"}
         env.pop("NUMBA_CACHE_DIR", None)
         command = [sys.executable, "-m", "alloc._jit_cache", "warm"]
         print(f"compiling the numba kernels into {build_lib} (about a minute per method family)", flush=True)

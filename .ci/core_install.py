@@ -1,8 +1,13 @@
 """Run inside a clean venv holding only ``pip install .``: the core works alone.
 
 Asserts that the optional packages are absent, allocates with every registered method on
-the seed's ICE problem, and checks that the commands of the packages built on the library
-point at their extra instead of failing obscurely.
+the seed's ICE problem without compiling a kernel (the wheel carries them: setup.py), and
+checks that the commands of the packages built on the library point at their extra instead of
+failing obscurely.
+
+``core_install.py --cold`` (run first, by a user who can write neither the installed package
+nor a home): each default method's first allocation in a fresh interpreter imports, builds and
+allocates without compiling, within ``COLD_CPU_S`` of CPU for the whole process.
 """
 
 from __future__ import annotations
@@ -14,6 +19,66 @@ import subprocess
 import sys
 
 import numpy as np
+
+#: the goal for the default methods' first allocation after a fresh install (issue 22)
+COLD_CPU_S = 5.0
+COLD_METHODS = ("pinv", "qp")
+#: one fresh interpreter: import, build, first call; CPU and wall seconds of each step
+FIRST_ALLOCATION = """
+import json, sys, time
+c0, w0 = time.process_time(), time.perf_counter()
+import numpy as np
+import alloc
+from alloc import vehicles
+p = vehicles.problem("ice")
+c1, w1 = time.process_time(), time.perf_counter()
+allocator = alloc.make_allocator(p, sys.argv[1])
+c2, w2 = time.process_time(), time.perf_counter()
+r = allocator(np.array([2.0, 30.0, 0.5]))
+c3, w3 = time.process_time(), time.perf_counter()
+from alloc import _jit_cache
+print(json.dumps({"status": r.status.value, "compiles": _jit_cache.notice.compiles,
+                  "import_cpu": c1 - c0, "make_cpu": c2 - c1, "call_cpu": c3 - c2,
+                  "import_wall": w1 - w0, "make_wall": w2 - w1, "call_wall": w3 - w2,
+                  "cache": [c for _, c, _ in _jit_cache.where()][0]}))
+"""
+
+
+def first_allocation(method: str) -> dict:
+    """``FIRST_ALLOCATION`` in a fresh interpreter; adds the whole process's CPU seconds."""
+    import json
+    import resource
+
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    out = subprocess.run([sys.executable, "-c", FIRST_ALLOCATION, method], capture_output=True, text=True)
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    assert out.returncode == 0, (method, out.stderr[-3000:])
+    row = json.loads(out.stdout.strip().splitlines()[-1])
+    row["process_cpu"] = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    row["stderr"] = out.stderr
+    return row
+
+
+def cold_check() -> None:
+    import alloc
+
+    pkg_cache = os.path.join(os.path.dirname(alloc.__file__), "__pycache__")
+    assert not os.access(pkg_cache, os.W_OK), f"this check needs a read-only install: {pkg_cache} is writable"
+    assert not os.access(os.path.expanduser("~"), os.W_OK), "this check needs a user without a writable home"
+    for method in COLD_METHODS:
+        row = first_allocation(method)
+        assert "compiling" not in row["stderr"] and row["compiles"] == 0, (method, row)
+        assert row["status"] in ("exact", "unattainable"), (method, row)  # not a fallback
+        assert row["process_cpu"] < COLD_CPU_S, (method, row)
+        assert not row["cache"].startswith(os.path.dirname(alloc.__file__)), row  # a fallback, not the package
+        print(f"core install, uid {os.getuid()}, read-only package, no home: first {method} allocation "
+              f"{row['process_cpu']:.2f} s CPU (import {row['import_cpu']:.2f}, make_allocator "
+              f"{row['make_cpu']:.2f}, call {row['call_cpu']:.3f}), no kernel compiled; cache {row['cache']}")
+
+
+if "--cold" in sys.argv:
+    cold_check()
+    sys.exit(0)
 
 ABSENT = ("fastapi", "dask", "distributed", "cvxpy", "matplotlib", "qpsolvers", "sqlalchemy", "uvicorn", "tqdm")
 present = [name for name in ABSENT if importlib.util.find_spec(name) is not None]
@@ -38,7 +103,11 @@ for method in alloc.methods():
     assert meets == (r.status.value == "exact"), (method, r.status, p.B @ r.u)
     if method in ("qp", "lp", "da", "da_facet", "cgi"):  # optimal or boundary methods reach it
         assert meets, (method, p.B @ r.u)
-print(f"core install: {len(alloc.methods())} methods allocate on ICE without optional packages")
+from alloc import _jit_cache  # noqa: E402
+
+assert _jit_cache.notice.compiles == 0, f"{_jit_cache.notice.compiles} kernels compiled: the wheel lacks them"
+print(f"core install: {len(alloc.methods())} methods allocate on ICE without optional packages, "
+      "every kernel loaded from the wheel's cache")
 
 exe = shutil.which("alloc")
 assert exe is not None, "the alloc command is not installed"
