@@ -1,4 +1,4 @@
-"""Write the seed's aircraft as vehicle files (alloc/data/vehicles/*.toml), once.
+"""Write the seed's aircraft (and two examples) as vehicle files (alloc/data/vehicles/*.toml), once.
 
     .venv/bin/python tests/make_seed_vehicles.py
 
@@ -6,8 +6,9 @@ Each catalogue entry of :mod:`alloc.vehicles` becomes a file whose ``Problem`` e
 ``alloc.vehicles.problem(name)`` bit for bit (floats written with ``repr``), with the
 entry's daisy groups as ``[methods.daisy]``, the actuator dynamics of the simulator's seed
 tables (``sim/scenarios/ice.py`` Table 4-5, ``sim/scenarios/harv_latdir.py`` Table 4-3) and
-the linear models of those scenarios.  tests/test_vehicle_file.py checks that the committed
-files are what this script writes.
+the linear models of those scenarios.  Two examples that are not the seed's aircraft:
+``tailless`` (3 x 8: ICE's eight surfaces) and ``hexa-x`` (rotor geometry, hover model).
+tests/test_vehicle_file.py checks that the committed files are what this script writes.
 """
 
 from __future__ import annotations
@@ -104,10 +105,81 @@ def document(name: str) -> dict[str, Any]:
     }
 
 
+# --------------------------------------------------------------------------- examples not in the seed
+#: the tailless example: ICE's eight aerodynamic surfaces, without the pitch flap and thrust vectoring
+TAILLESS_EFFECTORS = ("elevon_l", "elevon_r", "amt_l", "amt_r", "ssd_l", "ssd_r", "lef_l", "lef_r")
+_G = 9.81
+# the hexacopter example: PX4 6001_hexa_x geometry (m), CT 6.5 N, KM 0.05 m; our mass and inertia
+_HEXA_ROTORS = ((0.0, 0.5, -0.05), (0.0, -0.5, 0.05), (0.43, -0.25, -0.05), (-0.43, 0.25, 0.05),
+                (0.43, 0.25, 0.05), (-0.43, -0.25, -0.05))
+_HEXA_MASS, _HEXA_INERTIA = 2.0, (0.08, 0.08, 0.15)
+
+
+def tailless_document() -> dict[str, Any]:
+    """A 3 x 8 tailless aircraft: the ICE airframe flown on its eight surfaces only (seed section 4.7 data)."""
+    from sim.scenarios import ice as scenario
+
+    ice = document("ice")
+    cols = [vehicles.ICE_EFFECTORS.index(n) for n in TAILLESS_EFFECTORS]
+    B = np.asarray(ice["effectiveness"]["B"])[:, cols]
+    model = _ice_model()
+    model["B"] = _floats(np.asarray(scenario.B)[:, cols])
+    model["D"] = _floats(np.asarray(scenario.D)[:, cols])
+    return {
+        "format": FORMAT, "name": "tailless",
+        "description": "Tailless example, 3 axes x 8 surfaces: the ICE airframe without pitch flap and thrust vectoring",
+        "source": "seed section 4.7 (ICE B, A, C, D) and Table 4-5 (limits, rates, actuator poles), columns "
+                  + ", ".join(TAILLESS_EFFECTORS),
+        "axes": ice["axes"], "effectors": [e for e in ice["effectors"] if e["name"] in TAILLESS_EFFECTORS],
+        "effectiveness": {"B": _floats(B)},
+        "methods": {"daisy": {"groups": [["elevon_l", "elevon_r", "lef_l", "lef_r"], ["amt_l", "amt_r", "ssd_l", "ssd_r"]]}},
+        "model": model,
+    }
+
+
+def hexa_document() -> dict[str, Any]:
+    """A hexacopter example: rotor geometry, a hover model, yaw as the axis that gives way first."""
+    from alloc.vehicle_file import rotor_wrench
+
+    ct = 6.5
+    W = np.array([rotor_wrench((x, y, 0.0), (0.0, 0.0, -1.0), ct, km) for x, y, km in _HEXA_ROTORS]).T
+    B_axes = W[[0, 1, 2, 5]]  # roll, pitch, yaw, fz
+    Ixx, Iyy, Izz = _HEXA_INERTIA
+    # hover, small angles, no aerodynamic damping: phi' = p, theta' = q, psi' = r, p' = L / Ixx, ..., w' = Z / m
+    A = np.zeros((7, 7))
+    A[0, 3] = A[1, 4] = A[2, 5] = 1.0
+    Bm = np.zeros((7, 6))
+    Bm[3:6] = B_axes[:3] / np.array([[Ixx], [Iyy], [Izz]])
+    Bm[6] = B_axes[3] / _HEXA_MASS
+    states = ["phi", "theta", "psi", "p", "q", "r", "w"]
+    return {
+        "format": FORMAT, "name": "hexa-x",
+        "description": "Hexacopter example (6 rotors, X): PX4 6001_hexa_x geometry, 2 kg, hover linear model",
+        "source": "rotor positions and KM from PX4 ROMFS airframe 6001_hexa_x, CT 6.5 N (PX4 default); mass 2 kg "
+                  "and inertia diag(0.08, 0.08, 0.15) kg m^2 are this example's; motor lag 1/30 s, slew 0.1 s",
+        "axes": [{"name": "roll", "unit": "N m"}, {"name": "pitch", "unit": "N m"}, {"name": "yaw", "unit": "N m"},
+                 {"name": "thrust", "unit": "N", "wrench": "fz", "trim": -_HEXA_MASS * _G,
+                  "description": "body z force (down positive): hover at -m g"}],
+        "effectors": [{"name": f"motor{i + 1}", "kind": "rotor", "unit": "1", "min": 0.0, "max": 1.0,
+                       "rate_max": 10.0, "dynamics": {"bandwidth": 30.0},
+                       "rotor": {"position": [x, y, 0.0], "axis": [0.0, 0.0, -1.0], "ct": ct, "km": km}}
+                      for i, (x, y, km) in enumerate(_HEXA_ROTORS)],
+        "methods": {"cgi": {"priorities": [2, 2, 1, 3]}, "qp": {"priorities": [2, 2, 1, 3]},
+                    "lp": {"priorities": [2, 2, 1, 3]}},
+        "model": {"states": states, "outputs": states, "A": _floats(A), "B": _floats(Bm), "C": _floats(np.eye(7)),
+                  "D": _floats(np.zeros((7, 6))), "controlled": ["p", "q", "r", "w"]},
+    }
+
+
+#: the bundled examples that are not the seed's: file name -> document
+EXAMPLES = {"tailless": tailless_document, "hexa-x": hexa_document}
+
+
 def main() -> None:
     DATA_DIR.mkdir(parents=True, exist_ok=True)
-    for name in vehicles.names():
-        path = vehicle_from_dict(document(name)).save(DATA_DIR / f"{name}.toml")
+    docs = {name: (lambda n=name: document(n)) for name in vehicles.names()} | EXAMPLES
+    for name, make in docs.items():
+        path = vehicle_from_dict(make()).save(DATA_DIR / f"{name}.toml")
         print(path.relative_to(ROOT))
 
 

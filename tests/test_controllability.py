@@ -148,3 +148,12 @@ def test_vehicle_trim_is_the_default_reference():
     r = report(v, LOST)
     assert r.reference == (0.0, 0.0, 0.0, -3 * CT) and r.name == "px4"
     assert (r.range("yaw").low, r.range("yaw").high) == pytest.approx((0.0, 0.975), abs=1e-7)
+
+
+def test_bundled_hexa_example_after_a_rotor_loss():
+    # as above with sum u = S = 19.62 / 6.5: C = u2 + u5 = (S - 3 u1) / 2 and A = u3 + u4 = 2 u1 + C, yaw sum = 3 u1;
+    # A <= 2 caps u1 at 4 - S = 0.9815: yaw in [0, 3 * 0.325 * (4 - S)]
+    r = report(alloc.load_vehicle("hexa-x"), LOST)
+    assert r.rank == 4 and r.reference == (0.0, 0.0, 0.0, -19.62)
+    S = 19.62 / CT
+    assert (r.range("yaw").low, r.range("yaw").high) == pytest.approx((0.0, 3 * KM_CT * (4 - S)), abs=1e-7)

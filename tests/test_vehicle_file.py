@@ -54,16 +54,43 @@ def test_seed_vehicle_file_is_the_catalogue_problem_bit_for_bit(name):
     assert v.method_options("daisy") == {"groups": vehicles.daisy_groups(name)}
 
 
+EXAMPLES = ("hexa-x", "tailless")
+
+
 def test_every_catalogue_entry_has_a_file_and_back():
-    assert vehicle_names() == sorted(vehicles.names())
+    assert vehicle_names() == sorted([*vehicles.names(), *EXAMPLES])
 
 
-@pytest.mark.parametrize("name", vehicles.names())
+@pytest.mark.parametrize("name", [*vehicles.names(), *EXAMPLES])
 def test_committed_seed_files_are_what_the_script_writes(name):
     make = pytest.importorskip("make_seed_vehicles")
-    assert vehicle_from_dict(make.document(name)) == load_vehicle(name)
-    text = (DATA_DIR / f"{name}.toml").read_text()
-    assert to_toml(vehicle_from_dict(make.document(name)).to_dict()) == text
+    doc = make.EXAMPLES[name]() if name in EXAMPLES else make.document(name)
+    assert vehicle_from_dict(doc) == load_vehicle(name)
+    assert to_toml(vehicle_from_dict(doc).to_dict()) == (DATA_DIR / f"{name}.toml").read_text()
+
+
+def test_tailless_example_is_ice_on_its_eight_surfaces():
+    ice, v = vehicles.problem("ice"), load_vehicle("tailless")
+    cols = [ice.names.index(n) for n in v.effector_names]
+    assert v.effector_names == ("elevon_l", "elevon_r", "amt_l", "amt_r", "ssd_l", "ssd_r", "lef_l", "lef_r")
+    expected = alloc.Problem(ice.B[:, cols], ice.umin[cols], ice.umax[cols], rate_min=ice.rate_min[cols],
+                             rate_max=ice.rate_max[cols], names=v.effector_names, axes=ice.axes)
+    assert_same_problem(v.problem(), expected)
+    A, B, C, D = v.model.arrays()
+    full = load_vehicle("ice").model.arrays()
+    assert np.array_equal(A, full[0]) and np.array_equal(B, full[1][:, cols]) and np.array_equal(D, full[3][:, cols])
+
+
+def test_hexa_example_hover_model_and_priorities():
+    v = load_vehicle("hexa-x")
+    p = v.problem()
+    A, B, C, D = v.model.arrays()
+    # p' = roll / Ixx, w' = thrust / m (hover, small angles)
+    np.testing.assert_array_equal(B[3], p.B[0] / 0.08)
+    np.testing.assert_array_equal(B[6], p.B[3] / 2.0)
+    assert v.trim.tolist() == [0.0, 0.0, 0.0, -19.62]
+    assert v.method_options("qp") == {"priorities": [2, 2, 1, 3]}  # yaw gives way first, thrust last
+    assert v.effectors[0].dynamics.transfer_function() == ((30.0,), (1.0, 30.0))
 
 
 def test_seed_ice_model_is_the_simulator_model():
@@ -76,7 +103,7 @@ def test_seed_ice_model_is_the_simulator_model():
 
 
 # --------------------------------------------------------------------------- round trips
-@pytest.mark.parametrize("name", [*vehicles.names(), "hexa"])
+@pytest.mark.parametrize("name", [*vehicles.names(), *EXAMPLES, "hexa"])
 def test_round_trips_toml_json_dict(name, tmp_path):
     v = vehicle_from_dict(hexa_doc()) if name == "hexa" else load_vehicle(name)
     assert vehicle_from_dict(v.to_dict()) == v
@@ -209,7 +236,7 @@ def test_missing_effectiveness_is_named():
 
 
 def test_load_vehicle_file_errors(tmp_path):
-    with pytest.raises(ProblemError, match="^path: no file 'no-such-plane'.*bundled: harv, ice"):
+    with pytest.raises(ProblemError, match="^path: no file 'no-such-plane'.*bundled: harv, hexa-x, ice"):
         load_vehicle("no-such-plane")
     (tmp_path / "bad.toml").write_text("format = \n")
     with pytest.raises(ProblemError, match="^path: bad.toml is not valid TOML"):
