@@ -79,3 +79,40 @@ def test_ams_plot_needs_an_explicit_out(tmp_path: Path) -> None:
     ok = runner.invoke(app, ["ams", "plot", "--problem", "harv", "--samples", "50", "--out", str(png)])
     assert ok.exit_code == 0, ok.output
     assert png.stat().st_size > 1000
+
+
+
+def _one_line(res, *tokens: str) -> None:
+    lines = [line for line in res.stderr.splitlines() if line.strip()]
+    assert res.exit_code == 2 and len(lines) == 1 and "Traceback" not in res.stderr, res.stderr
+    assert all(t in lines[0] for t in tokens), lines
+
+
+def test_report_checks_its_folder_and_rerenders_only_when_forced(clone: Path) -> None:
+    out = clone / "fresh"
+    if not (out / "report.md").exists():  # run alone: the sweep of the test above
+        assert _bench(clone, "smoke", "--no-timing", "--workers", "1", "--out", "fresh").returncode == 0
+    runner = CliRunner()
+
+    def report(*args: str):
+        return runner.invoke(app, ["bench", "report", *args], prog_name="alloc")
+
+    # issue 22: a missing or wrong DIR gave a 35-line traceback
+    _one_line(report(str(clone / "nope")), "DIR", "no such folder")
+    _one_line(report(str(clone)), "DIR", "specs.json")
+    _one_line(report(str(clone / "README.md")), "DIR", "not a folder")
+    broken = clone / "broken"
+    broken.mkdir()
+    for name in ("specs.json", "run.json"):
+        shutil.copy2(out / name, broken / name)
+    _one_line(report(str(broken)), "DIR", "closed_ice.csv")
+    (broken / "specs.json").write_text('{"not": "a list"}')
+    _one_line(report(str(broken)), "DIR", "specs.json")
+    shutil.rmtree(broken)
+    before = (out / "report.md").read_text()
+    _one_line(report(str(out)), "--force")  # it would rewrite report.md
+    assert (out / "report.md").read_text() == before
+    forced = report(str(out), "--force")
+    assert forced.exit_code == 0, forced.output
+    assert f"report: {out / 'report.md'}" in forced.stdout
+    assert (out / "report.md").read_text().split("## Headline")[1] == before.split("## Headline")[1]
