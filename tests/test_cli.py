@@ -5,6 +5,10 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
+import typer
+import typer.core
+import typer.main
 from typer.testing import CliRunner
 
 import alloc
@@ -52,3 +56,70 @@ def test_allocate_problem_file_and_options(tmp_path):
     # axis 0 first: at most 2 of its 3 (u0 = u1 = 1); then axis 1 met exactly with u2 = -1
     np.testing.assert_allclose(data["unallocated"], [1.0, 0.0], atol=1e-8)
     np.testing.assert_allclose(data["u"], [1.0, 1.0, -1.0], atol=1e-8)
+
+
+def test_allocate_reports_build_first_call_and_solve_times_separately():
+    # issue 22: solve_time was the first call's 138-355 ms (kernel loading) for a microsecond solve
+    out = runner.invoke(app, ["allocate", "--vehicle", "ice", "--v", "2,30,0.5", "--json", "--repeat", "50"])
+    assert out.exit_code == 0, out.output
+    data = json.loads(out.stdout)
+    assert data["timed_calls"] == 50
+    assert 0.0 < data["solve_time"] < 5e-3  # the warm median: microseconds, 5 ms even on a loaded machine
+    assert data["build_time"] > 0.0 and data["first_call_time"] > 0.0
+    text = runner.invoke(app, ["allocate", "--vehicle", "ice", "--v", "2,30,0.5", "--repeat", "5"]).stdout
+    assert "solve " in text and "(median of 5 calls), first call " in text and ", build " in text
+
+
+def test_the_cli_default_method_is_the_registry_constant():
+    from alloc.ams.cli import app as ams_app
+    from alloc.registry import DEFAULT_METHOD
+
+    out = runner.invoke(app, ["allocate", "--vehicle", "ice", "--v", "2,30,0.5", "--json", "--repeat", "1"])
+    assert json.loads(out.stdout)["method"] == DEFAULT_METHOD
+    assert f"[default: ({DEFAULT_METHOD})]" in runner.invoke(app, ["allocate", "--help"]).stdout
+    plot = next(c for c in typer.main.get_command(ams_app).commands.values() if c.name == "plot")
+    assert next(p for p in plot.params if p.name == "method").default == DEFAULT_METHOD
+
+
+@pytest.mark.xfail(strict=True, reason="the library's and the HTTP schema's default (pinv) await their owners' "
+                                       "switch to alloc.registry.DEFAULT_METHOD (issue 22)")
+def test_one_default_method_everywhere():
+    import inspect
+
+    from alloc.registry import DEFAULT_METHOD
+    from service.schemas import AllocateRequest, BatchAllocateRequest
+
+    for fn in (alloc.make_allocator, alloc.allocate, alloc.allocate_batch):
+        assert inspect.signature(fn).parameters["method"].default == DEFAULT_METHOD, fn.__name__
+    for schema in (AllocateRequest, BatchAllocateRequest):
+        assert schema.model_fields["method"].default == DEFAULT_METHOD, schema.__name__
+
+
+def _commands() -> list[tuple[str, typer.core.TyperCommand]]:
+    from alloc.cli import _load_command, command_entry_points
+
+    root = typer.main.get_command(app)
+    ctx = typer.Context(root, info_name="alloc")
+    found = []
+
+    def walk(cmd, path: str) -> None:
+        found.append((path, cmd))
+        for name in getattr(cmd, "list_commands", lambda ctx: [])(ctx):
+            entry = command_entry_points().get(name) if path == "alloc" else None
+            walk(_load_command(entry) if entry is not None else cmd.get_command(ctx, name), f"{path} {name}")
+
+    walk(root, "alloc")
+    return found
+
+
+def test_every_command_and_option_explains_itself():
+    commands = _commands()
+    assert {p for p, _ in commands} >= {"alloc allocate", "alloc ams plot", "alloc ams coverage", "alloc sim",
+                                         "alloc bench quick", "alloc bench full", "alloc bench report",
+                                         "alloc bench scaling", "alloc serve"}
+    for path, cmd in commands:
+        assert (cmd.help or "").strip(), path
+        undocumented = [p.name for p in cmd.params if p.name != "help" and not (getattr(p, "help", "") or "").strip()]
+        assert undocumented == [], (path, undocumented)
+        res = runner.invoke(app, [*path.split()[1:], "--help"], prog_name="alloc")
+        assert res.exit_code == 0 and "Usage: alloc" in res.stdout, (path, res.output)
