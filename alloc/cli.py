@@ -522,8 +522,8 @@ def _fmt_seconds(s: float) -> str:
 
 @app.command("allocate", cls=DefaultMethodCommand)
 def allocate_command(
-    v: Optional[str] = typer.Option(None, "--v", help="demand, comma-separated, one value per axis in the "
-                                    "problem's units (ice: rad/s^2 for p, q, r); or the file's 'v'"),
+    v: Optional[str] = typer.Option(None, "--v", help="demand, comma-separated, one value per axis (the "
+                                    "problem's axes and units: `alloc vehicles --json`); or the file's 'v'"),
     method: Optional[str] = typer.Option(None, "--method", "-m",
                                          help="allocation method (see `alloc methods`); or the file's 'method'"),
     vehicle: Optional[str] = typer.Option(None, "--vehicle", help="a named problem (see `alloc vehicles`), e.g. ice"),
