@@ -416,4 +416,3 @@ def test_real_processes(tmp_path: Path) -> None:
     _assert_process_one_line(_run([*_alloc_command(), "serve", "--port", "99999999"], tmp_path), "--port")
     _assert_process_one_line(_run([sys.executable, "-m", "benchmarks.compare", "report", str(tmp_path / "x")],
                                   tmp_path), "DIR")
-    _assert_process_one_line(_run([*_alloc_command(), "ams", "coverage", "--method", "nope"], tmp_path), "nope")
