@@ -20,13 +20,43 @@ from .exceptions import UnknownMethodError
 from .options import Option, validate
 from .problem import Problem
 
-__all__ = ["Method", "register", "get_method", "methods", "method_info", "DEFAULT_METHOD"]
+__all__ = ["Method", "register", "get_method", "methods", "method_info", "DEFAULT_METHOD", "BUILD_LIMIT_SECONDS",
+           "BUILD_LIMIT_BYTES", "CALL_LIMIT_SECONDS"]
 
 FloatArray = NDArray[np.float64]
 
 _REGISTRY: dict[str, type[Method]] = {}
 #: seconds: the declared build cost of a method that enumerates nothing (:meth:`Method.build_cost`)
+#: at the sizes the service builds on its threads (up to about 6 x 64)
 CHEAP_BUILD_SECONDS = 1e-3
+
+# The bounds the declared costs keep.  Costs are CPU seconds on the project's machine (2 cores
+# shared with other work; measured under load, so a quiet machine is faster), conservative.
+#: No build starts whose declared :meth:`Method.build_cost` exceeds this: the facet searches
+#: then use the LP formulation, ``da_table`` refuses the table (OptionError naming ``resolution``).
+BUILD_LIMIT_SECONDS = 20.0
+#: No build starts whose declared :meth:`Method.build_memory` exceeds this (1 GiB; the same
+#: redirect to the LP).
+BUILD_LIMIT_BYTES = 1 << 30
+#: No allocator is built whose declared :meth:`Method.call_cost` exceeds this (``cgi`` refuses
+#: ``priorities`` levels at sizes where its level-by-level cascade would: OptionError naming
+#: ``priorities``).  The slowest call measured at the size caps: 1.2 s (``qp`` with 32
+#: priority levels at 32 x 512, under load).
+CALL_LIMIT_SECONDS = 3.0
+# Default per-call models of the methods that declare none, fitted to the worst call of each
+# cell of seeded random problems up to the size caps (``benchmarks/bench_cost_bounds.py``):
+# an affine method (pinv, pinv_clip, ganging) is one O(k m) pass, 20 us + 0.1 us k m; any other
+# (pinv_scale, the compiled active set of qp/wls/dynamic, the simplex, the LP backends) at most
+# 0.3 ms + 0.2 us k m (k + m) + 0.03 us k^3 m (priority levels and active-set iterations grow
+# with k).  Declared / worst measured under load: 32 x 512 2.3 s / 1.2 s (qp, 32 levels);
+# 32 x 64 102 / 67 ms (qp, 32 levels); 6 x 512 322 / 146 ms (da); 16 x 128 75 / 18 ms;
+# 6 x 64 6.3 / 4.4 ms (dynamic).
+_AFFINE_CALL_S, _AFFINE_CALL_KM_S = 2e-5, 1e-7
+_CALL_BASE_S, _CALL_KMKM_S, _CALL_K3M_S = 3e-4, 2e-7, 3e-8
+# Default build model: an SVD or QP/LP set-up is O(k m (k + m)): CHEAP_BUILD_SECONDS up to
+# k m = 384 (6 x 64, where the service builds on its threads), beyond it 0.3 us k m (k + m)
+# (2.7 s at 32 x 512, where builds of 0.3-2.9 s were measured under load).
+_CHEAP_BUILD_ENTRIES, _BUILD_KMKM_S = 6 * 64, 3e-7
 #: the method used wherever none is named (library, command line, HTTP): ``qp`` meets every
 #: attainable demand exactly (seed Eqs 1.20-1.21), which the pseudo-inverse family (Eq 1.23) does not
 DEFAULT_METHOD = "qp"
@@ -82,10 +112,38 @@ class Method(ABC):
         project's 2-core machine, conservative).  Read by the service before it builds;
         ``options`` may be unvalidated (an unreadable value counts as its default).
 
-        Default: :data:`CHEAP_BUILD_SECONDS` -- a closed form, an SVD or a QP/LP set-up
-        within the size caps (6 x 64) builds in milliseconds.
+        Default: a closed form, an SVD or a QP/LP set-up, ``O(k m (k + m))``:
+        :data:`CHEAP_BUILD_SECONDS` up to ``k m = 384`` (6 x 64), ``3e-7 k m (k + m)`` s beyond
+        (2.7 s at the size caps, 32 x 512, where builds of 0.3-2.9 s were measured under load).
         """
-        return CHEAP_BUILD_SECONDS
+        k, m = problem.k, problem.m
+        if k * m <= _CHEAP_BUILD_ENTRIES:
+            return CHEAP_BUILD_SECONDS
+        return max(CHEAP_BUILD_SECONDS, _BUILD_KMKM_S * k * m * (k + m))
+
+    @classmethod
+    def build_memory(cls, problem: Problem, **options: Any) -> int:
+        """Declared bytes the build allocates (its tables), conservative; ``options`` as for
+        :meth:`build_cost`.  Default: a few dense ``k x m`` and ``m x m`` factors."""
+        k, m = problem.k, problem.m
+        return 8 * (8 * k * m + 2 * m * m + 4 * k * k)
+
+    @classmethod
+    def call_cost(cls, problem: Problem, **options: Any) -> float:
+        """Declared worst-case CPU seconds of one call of ``cls(problem, **options)`` (nominal
+        or rate-limited), conservative, on the project's machine; finite and positive.  The
+        service prices a batch per row with it.  ``options`` as for :meth:`build_cost`.
+
+        Default, fitted to the worst calls measured (``benchmarks/bench_cost_bounds.py``) of
+        every method that declares none: ``20 us + 0.1 us k m`` for an :attr:`affine` method,
+        else ``0.3 ms + 0.2 us k m (k + m) + 0.03 us k^3 m`` (the compiled active set, the
+        simplex, the LP backends; 2.3 s at the size caps, where 0.8-1.2 s was the worst
+        measured under load).
+        """
+        k, m = problem.k, problem.m
+        if cls.affine:
+            return _AFFINE_CALL_S + _AFFINE_CALL_KM_S * k * m
+        return _CALL_BASE_S + _CALL_KMKM_S * k * m * (k + m) + _CALL_K3M_S * k ** 3 * m
 
     #: ``(c, P)`` when the method is ``u = clip(c + P v)`` without rate limits: the
     #: allocator then runs it as one compiled call (pseudo-inverse family, ganging).

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import alloc
-from alloc.methods.facet_search import FACET_LIMIT, FACET_SECONDS
+from alloc.methods.facet_search import FACET_LIMIT, FACET_SECONDS, facet_build_seconds
 from alloc.registry import CHEAP_BUILD_SECONDS, get_method
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -42,19 +42,31 @@ def test_closed_form_and_optimisation_methods_are_cheap():
 def test_facet_methods_price_their_enumeration():
     p = _problem(6, 20)
     p_jam = alloc.Problem(p.B, [-1.0] * 20, [-1.0] + [1.0] * 19)  # one jammed: C(19, 5)
-    for method in ("da_facet", "da_bisect", "da_table"):  # no table above k = 3
+    for method in ("da_facet", "da_bisect", "da_table"):  # no table nor edge table above k = 3
         assert get_method(method).build_cost(p) == pytest.approx(FACET_SECONDS * math.comb(20, 5), rel=1e-12)
         assert get_method(method).build_cost(p_jam) == pytest.approx(FACET_SECONDS * math.comb(19, 5), rel=1e-12)
     assert get_method("da").build_cost(p, backend="facet") == pytest.approx(FACET_SECONDS * math.comb(20, 5))
+
+
+def test_facet_build_grows_with_the_tables_rows():
+    """Every tile holds rows of m numbers: beyond k m = 480 the per-subset cost grows with k m
+    (measured 68 us per subset at k = 3, m = 64; 184 us at m = 283)."""
+    assert facet_build_seconds(1000, 480) == pytest.approx(1000 * FACET_SECONDS, rel=1e-12)
+    assert facet_build_seconds(1000, 960) == pytest.approx(2000 * FACET_SECONDS, rel=1e-12)
+    p = _problem(3, 200)
+    assert get_method("da_facet").build_cost(p) == pytest.approx(FACET_SECONDS * 19_900 * 600 / 480, rel=1e-12)
+    # da_bisect's k = 3 edge table: 200 us per subset more, growing alike
+    assert get_method("da_bisect").build_cost(p) == pytest.approx(
+        get_method("da_facet").build_cost(p) + 200e-6 * 600 / 480 * 19_900, rel=1e-12)
 
 
 def test_da_table_adds_its_direction_table_at_k3():
     p = _problem(3, 64)
     facets = FACET_SECONDS * math.comb(64, 2)
     table = get_method("da_table")
-    # resolution^2 x (270 + 0.75 x subsets) us: 7.3 s measured at m = 64, resolution 64
-    assert table.build_cost(p) == pytest.approx(facets + 64**2 * (270e-6 + 0.75e-6 * 2016), rel=1e-12)
-    assert table.build_cost(p, resolution=8) == pytest.approx(facets + 64 * (270e-6 + 0.75e-6 * 2016), rel=1e-12)
+    # resolution^2 x (300 + 2 x subsets) us: 9.1 s measured at m = 64, resolution 64 under load
+    assert table.build_cost(p) == pytest.approx(facets + 64**2 * (300e-6 + 2e-6 * 2016), rel=1e-12)
+    assert table.build_cost(p, resolution=8) == pytest.approx(facets + 64 * (300e-6 + 2e-6 * 2016), rel=1e-12)
     # an unreadable value counts as its default (the library refuses it at build)
     assert table.build_cost(p, resolution="x") == pytest.approx(facets, rel=1e-12)
 

@@ -73,15 +73,32 @@ def test_compiled_matches_numpy(method):
     assert seen == CASES
 
 
-def test_cgi_full_cache_falls_back_to_numpy():
-    """Past the cache limit the Python cascade answers; the answers do not change."""
+def test_cgi_full_cache_is_emptied_and_answers_do_not_depend_on_it():
+    """Past the cache limit the cache is emptied and refilled: every answer is bit for bit a
+    fresh allocator's (the compiled cascade's), whatever the cache held before."""
     rng = np.random.default_rng(3)
     p = random_problem(rng, 3, 12)
     impl = alloc.make_allocator(p, "cgi").impl
-    impl._CACHE_LIMIT = 2
+    impl._cache_slots = 2
+    refills = 0
     for v in random_demands(rng, p, 200, attainable_fraction=0.2):
-        assert_same(impl.solve(v, p.umin, p.umax, None), impl._solve_reference(v, p.umin, p.umax, None))
-    assert impl._banked == 2
+        before = impl._banked
+        u, it = impl.solve(v, p.umin, p.umax, None)
+        refills += impl._banked < before
+        fresh = alloc.make_allocator(p, "cgi").impl
+        assert np.array_equal(u, fresh.solve(v, p.umin, p.umax, None)[0])
+        assert_same((u, it), impl._solve_reference(v, p.umin, p.umax, None))
+        assert impl._banked <= 2
+    assert refills > 10
+
+
+def test_cgi_cache_is_bounded_in_bytes():
+    """At the size caps the cache holds 512 free sets (64 MiB), not 4,096 (512 MiB)."""
+    from alloc.methods.cascade import CGI_CACHE_BYTES
+    rng = np.random.default_rng(4)
+    assert alloc.make_allocator(random_problem(rng, 3, 11), "cgi").impl._cache_slots == 4096
+    big = alloc.make_allocator(random_problem(rng, 32, 512, weights=False, rates=False), "cgi").impl
+    assert big._cache_slots == 512 and big._cache_slots * 8 * 32 * 512 == CGI_CACHE_BYTES
 
 
 def test_cgi_cache_grows_past_its_first_bank():

@@ -11,11 +11,27 @@ import numpy as np
 
 from .._kernels import _FREE_BITS, cascade, daisy_chain, free_set_insert, free_set_pinv
 from .._linalg import ABS_FLOOR, RCOND, check_rcond, max_scale, priority_groups, sqrt_factor, weighted_pinv
-from ..exceptions import ProblemError
+from ..exceptions import OptionError, ProblemError
 from ..options import groups as groups_option
 from ..options import levels, real
 from ..problem import Problem
-from ..registry import FloatArray, Method, register
+from ..registry import CALL_LIMIT_SECONDS, FloatArray, Method, register
+
+#: Bytes the compiled cascade's cache of free-set pseudo-inverses may hold (64 MiB: all 4,096
+#: slots up to k m = 2,048, 512 slots at the size caps, 32 x 512)
+CGI_CACHE_BYTES = 64 << 20
+# Declared per-call cost (``Method.call_cost``), CPU seconds, measured under load on the
+# project's machine (``benchmarks/bench_cost_bounds.py``).  One level: a compiled cascade step
+# is O(k m), a free set met for the first time adds a compiled k x m SVD; worst call 1 ms +
+# 1.5e-7 k m^2 (declared 1.26 s at 32 x 512, where 0.57 s was the worst measured; 4.7 ms at
+# 6 x 64, 0.44 ms measured).  By level: each step removes an effector or ends its level (at most
+# m_free + L steps) and is one Python prioritised pseudo-inverse over n free effectors,
+# 1.5 ms + 3.2e-8 (k + 8) n^2 s (measured 0.3 ms at 32 x 64, 325 ms at 32 x 512 with two BLAS
+# threads under load); summed over n = m_free .. 1 plus one full step per level.
+_CGI_BASE_S, _CGI_KMM_S = 1e-3, 1.5e-7
+_LEVEL_STEP_S, _LEVEL_STEP_N2_S = 1.5e-3, 3.2e-8
+# Daisy chaining and the closed forms: a fixed number of O(k m) passes
+_DAISY_BASE_S, _DAISY_KM_S = 2e-4, 1e-7
 
 
 def priority_ranks(priorities: Any, k: int) -> list[int] | None:
@@ -76,13 +92,42 @@ class CascadedGeneralizedInverse(Method):
     }
     _CACHE_LIMIT = 4096
 
+    @classmethod
+    def call_cost(cls, problem: Problem, **options: Any) -> float:
+        """Declared worst-case CPU seconds of one call (model and measurements above).
+
+        With ``priorities`` of L > 1 levels: ``1 ms + sum`` over the at most ``m_free + L``
+        steps of ``1.5 ms + 3.2e-8 (k + 8) n^2`` (n the free effectors of the step); else
+        ``1 ms + 1.5e-7 k m^2``.  An unreadable ``priorities`` counts as one level.
+        """
+        k, m = problem.k, problem.m
+        try:
+            ranks = priority_ranks(options.get("priorities"), k)
+        except ProblemError:
+            ranks = None
+        levels = len(set(ranks)) if ranks else 1
+        if levels <= 1:
+            return _CGI_BASE_S + _CGI_KMM_S * k * m * m
+        n = int((problem.umax > problem.umin).sum())
+        squares = levels * n * n + n * (n + 1) * (2 * n + 1) / 6  # one full step per level, then n .. 1
+        return _CGI_BASE_S + _LEVEL_STEP_S * (n + levels) + _LEVEL_STEP_N2_S * (k + 8) * squares
+
     def __init__(self, problem: Problem, *, rcond: float = RCOND, priorities: Sequence[int] | None = None) -> None:
         super().__init__(problem)
         self.rcond = check_rcond(rcond, "cgi")
         self.groups = check_priorities(priorities, problem.k)
+        if self.groups is not None and len(self.groups) > 1:
+            seconds = self.call_cost(problem, priorities=priorities)
+            if seconds > CALL_LIMIT_SECONDS:
+                raise OptionError(
+                    f"priorities: cgi by {len(self.groups)} levels over {problem.k} x {problem.m} declares "
+                    f"{seconds:.3g} s per call, beyond the call bound of {CALL_LIMIT_SECONDS:g} s (fewer levels, "
+                    f"fewer effectors, or 'qp' with priorities)", field="priorities")
         self._cache: dict[bytes, FloatArray] = {}
-        # the compiled cascade's cache: free set -> slot of ``_bank`` (see _kernels.cascade)
+        # the compiled cascade's cache: free set -> slot of ``_bank`` (see _kernels.cascade),
+        # bounded in bytes; when full it is emptied and refilled (answers never depend on it)
         m, k = problem.m, problem.k
+        self._cache_slots = int(min(self._CACHE_LIMIT, max(16, CGI_CACHE_BYTES // (8 * max(m * k, 1)))))
         self._keys = np.zeros((2 * self._CACHE_LIMIT, -(-max(m, 1) // _FREE_BITS)), dtype=np.int64)
         self._slots = np.full(2 * self._CACHE_LIMIT, -1, dtype=np.int64)
         self._bank = np.zeros((16, m, k))
@@ -101,14 +146,17 @@ class CascadedGeneralizedInverse(Method):
         if P is None:
             p = self.problem
             P = weighted_pinv(p.B[:, free], p.Wu[np.ix_(free, free)], p.Wv, groups=self.groups, rcond=self.rcond)
-            if len(self._cache) < self._CACHE_LIMIT:
+            if len(self._cache) < self._cache_slots:
                 self._cache[key] = P
         return P
 
-    def _bank_pinv(self, free: np.ndarray) -> bool:
-        """Add the pseudo-inverse of ``free`` to the compiled cascade's cache (False if full)."""
-        if self._banked >= self._CACHE_LIMIT:
-            return False
+    def _bank_pinv(self, free: np.ndarray) -> None:
+        """Add the pseudo-inverse of ``free`` to the compiled cascade's cache; a full cache
+        is emptied first (its entries are a function of the free set alone, so a call answers
+        the same whatever the cache held before)."""
+        if self._banked >= self._cache_slots:
+            self._slots.fill(-1)
+            self._banked = 0
         if self._banked == self._bank.shape[0]:
             self._bank = np.concatenate([self._bank, np.zeros_like(self._bank)])
         if self._diagonal_Wu:
@@ -118,7 +166,6 @@ class CascadedGeneralizedInverse(Method):
         self._bank[self._banked, :P.shape[0]] = P
         free_set_insert(self._keys, self._slots, free, self._banked)
         self._banked += 1
-        return True
 
     def solve(self, v, lo, hi, u_prev):
         if self.groups is not None and len(self.groups) > 1:
@@ -131,8 +178,7 @@ class CascadedGeneralizedInverse(Method):
             it, missing = cascade(p.B, p.up, v, lo, hi, self._keys, self._slots, self._bank, u, free, it)
             if not missing:
                 return u, it
-            if not self._bank_pinv(free):  # cache full: the uncached Python cascade
-                return self._solve_reference(v, lo, hi, u_prev)
+            self._bank_pinv(free)
 
     def _solve_reference(self, v, lo, hi, u_prev):
         """The cascade in numpy (what :func:`alloc._kernels.cascade` computes, compiled)."""
@@ -213,6 +259,12 @@ class DaisyChain(Method):
         "groups": groups_option("list of lists of effector indices (or names), in priority order"),
         "rcond": real(RCOND, "relative singular-value cut-off", low=0.0, high=1.0, high_open=True),
     }
+
+    @classmethod
+    def call_cost(cls, problem: Problem, **options: Any) -> float:
+        """One compiled O(k m) pass over the groups: ``0.2 ms + 0.1 us k m`` (worst measured
+        0.57 ms at 32 x 512 under load)."""
+        return _DAISY_BASE_S + _DAISY_KM_S * problem.k * problem.m
 
     def __init__(self, problem: Problem, *, groups=None, rcond: float = RCOND) -> None:
         super().__init__(problem)

@@ -48,46 +48,66 @@ from ..ams import AttainableSet
 from ..exceptions import OptionError
 from ..options import integer
 from ..problem import Problem
-from ..registry import FloatArray, Method, register
+from ..registry import BUILD_LIMIT_BYTES, BUILD_LIMIT_SECONDS, FloatArray, Method, register
 from . import _facet_kernels as _kernels
 
-__all__ = ["FacetSearch", "EdgeBisect", "SphericalTable", "FACET_LIMIT", "FACET_BUILD_LIMIT", "FACET_SECONDS",
-           "facet_build_seconds"]
+__all__ = ["FacetSearch", "EdgeBisect", "SphericalTable", "FACET_LIMIT", "FACET_SECONDS", "FACET_BYTES",
+           "facet_build_seconds", "facet_build_bytes"]
 
 _EQ = "Eqs 1.15-1.17"
 #: The facet limit: ``da``'s ``backend="auto"`` uses the facet search only up to this many
 #: facet generator subsets C(m, k-1) (k = 6, m = 64 has 7.6 million), and the service's
 #: default build budget is the declared build cost of an enumeration this large (3.0 s).
 FACET_LIMIT = 20_000
-#: Largest C(m, k-1) the facet-search methods enumerate at all (asked for explicitly); beyond
-#: it they use the LP formulation (build time and memory grow with the number of facets).
-FACET_BUILD_LIMIT = 100_000
 _TOL = 1e-10  # Eq 1.17 slack, relative (rays through an edge satisfy two tiles up to round-off)
 
-# Declared build cost (``Method.build_cost``), measured on the project's machine (2 shared
-# cores, 2026-11-30), seconds per build:
+# Declared build cost and memory (``Method.build_cost``, ``Method.build_memory``), CPU seconds
+# and RSS growth measured on the project's machine (2 shared cores at load 8-11, 2026-12-01;
+# ``benchmarks/bench_cost_bounds.py``), per facet generator subset S = C(m_free, k-1):
 #
-#   method               problem                 build    per facet subset C(m_free, k-1)
-#   da_facet             k=6, m=20 (15,504)      0.72 s   46 us
-#   da_bisect            k=6, m=20 (15,504)      1.13 s   73 us
-#   da_bisect            k=3, m=64 (2,016)       0.29 s   142 us
-#   da_table res 64      k=6, m=20 (15,504)      0.95 s   62 us (no table above k = 3)
-#   da_table res 64      k=3, m=20 (190)         1.72 s   table term dominates
-#   da_table res 64      k=3, m=64 (2,016)       7.34 s   table term dominates
-#   da_table res 128/32  k=3, m=20               3.46/0.45 s
+#   method      problem              S        build     per subset   RSS growth
+#   da_facet    k=3, m=64            2,016    0.14 s    68 us        18 MiB
+#   da_facet    k=3, m=141           9,870    0.81 s    82 us        199 MiB
+#   da_facet    k=3, m=200           19,900   2.38 s    120 us       513 MiB
+#   da_facet    k=3, m=283           39,903   7.35 s    184 us       1,295 MiB
+#   da_facet    k=6, m=20            15,504   0.72 s    46 us        60-71 MiB
+#   da_bisect   k=3, m=64 / 141 / 200         0.40 / 2.04 / 5.10 s (about 200 us per subset)
+#   da_table    k=3, m=64 / 100, resolution 64  9.1 / 22.0 s (the direction table dominates)
 #
-# The model over-predicts every measurement above, by up to 2x: 150 us per subset; the
-# k = 3 table of da_table adds resolution^2 x (270 + 0.75 x subsets) us (two ray casts per
-# cell against every tile).  Memory: about 4.5 KiB per subset (k = 6, m = 20: 60-71 MiB RSS).
-#: seconds per facet generator subset enumerated at build (measured <= 142 us)
+# Every table holds a row of m (or (k-1) x m) numbers per tile, so time and memory grow
+# with S x k m.  The model: FACET_SECONDS per subset up to k m = 480, growing in proportion
+# beyond; da_bisect adds 200 us per subset at k = 3 (its edge table, a Python loop per
+# facet), growing the same way; da_table adds resolution^2 x (300 + 2 S) us (ray casts of the
+# cell centres and corners against every tile); FACET_BYTES per subset and k m entry.  It
+# over-predicts every measurement above, by 1.1-3.3x (time) and 1.3-2x (memory), and predicts
+# the worst builds reported in issue 22 within 1.0-1.3x (k = 3, m = 447: da_facet 41.8 s
+# declared / 41 s measured, da_bisect 97 / 77 s, da_table 860 / 781 s, 8.0 GiB / 5 GB;
+# m = 69, resolution 128: 82 / 81 s).  Builds predicted beyond
+# :data:`~alloc.registry.BUILD_LIMIT_SECONDS` or :data:`~alloc.registry.BUILD_LIMIT_BYTES`
+# are never started: the facet searches use the LP formulation instead (k = 3: m > 223 by
+# memory; k = 4: m > 71; k = 6: m > 28), ``da_table`` refuses a larger table naming ``resolution``.
+#: seconds per facet generator subset enumerated at build, up to k m = 480 entries
 FACET_SECONDS = 150e-6
-_TABLE_CELL_SECONDS, _TABLE_CELL_SUBSET_SECONDS = 270e-6, 0.75e-6
+_FACET_REFERENCE_ENTRIES = 480
+#: bytes per facet generator subset and entry of B (k m) that the facet tables hold
+FACET_BYTES = 64
+_BISECT_SUBSET_SECONDS = 200e-6
+_TABLE_CELL_SECONDS, _TABLE_CELL_SUBSET_SECONDS = 300e-6, 2.0e-6
+# Declared call cost (``Method.call_cost``): a nominal call scans every tile (about two per
+# subset) with a k x k product, a rate-limited call recomputes every facet's gap, O(m) each;
+# measured worst calls (under load): see ``benchmarks/bench_cost_bounds.py``.
+_CALL_BASE_S, _CALL_SUBSET_K2_S, _CALL_SUBSET_M_S = 1e-3, 0.05e-6, 0.02e-6
 
 
-def facet_build_seconds(subsets: int) -> float:
-    """Declared build time (s) of a facet enumeration over ``subsets`` generator subsets."""
-    return FACET_SECONDS * subsets
-_TOL = 1e-10  # Eq 1.17 slack, relative (rays through an edge satisfy two tiles up to round-off)
+def facet_build_seconds(subsets: int, entries: int = 0) -> float:
+    """Declared build time (s) of a facet enumeration over ``subsets`` generator subsets of a
+    ``B`` with ``entries = k m`` entries (0: the per-subset cost at small sizes)."""
+    return FACET_SECONDS * subsets * max(1.0, entries / _FACET_REFERENCE_ENTRIES)
+
+
+def facet_build_bytes(subsets: int, entries: int) -> int:
+    """Declared memory (bytes) of the facet tables over ``subsets`` subsets of ``entries = k m``."""
+    return FACET_BYTES * subsets * entries
 
 
 def _int_option(value: object, field: str, lo: int, hi: int, method: str = "da_bisect") -> int:
@@ -106,22 +126,62 @@ class FacetSearch(Method):
     options = {}
 
     @classmethod
+    def enumeration_cost(cls, problem: Problem, options: dict[str, Any] | None = None) -> tuple[float, int]:
+        """Declared ``(seconds, bytes)`` of the facet enumeration and its search tables
+        (:func:`facet_build_seconds`, :func:`facet_build_bytes`; subclasses add their own tables)."""
+        subsets, entries = cls.facet_subsets(problem, options or {}), problem.k * problem.m
+        return facet_build_seconds(subsets, entries), facet_build_bytes(subsets, entries)
+
+    @classmethod
     def build_cost(cls, problem: Problem, **options: Any) -> float:
-        """Enumerating the facets: :data:`FACET_SECONDS` per subset C(m_free, k-1)."""
-        return facet_build_seconds(cls.facet_subsets(problem, options))
+        """The facet enumeration (:meth:`enumeration_cost`).  Above the build bounds the
+        method builds the LP instead (milliseconds); the declared cost stays the
+        enumeration's, so that a budget refuses what the method's name promises."""
+        return cls.enumeration_cost(problem, options)[0]
+
+    @classmethod
+    def build_memory(cls, problem: Problem, **options: Any) -> int:
+        """The facet tables (:meth:`enumeration_cost`); the LP's within the build bounds' redirect."""
+        if cls.redirected(problem, options):
+            return super().build_memory(problem, **options)
+        return cls.enumeration_cost(problem, options)[1]
+
+    @classmethod
+    def redirected(cls, problem: Problem, options: dict[str, Any] | None = None) -> str:
+        """Why the build uses the LP formulation instead of enumerating ("" if it does not):
+        the enumeration's declared time or memory beyond the build bounds."""
+        seconds, nbytes = cls.enumeration_cost(problem, options)
+        if seconds > BUILD_LIMIT_SECONDS:
+            return (f"the facet enumeration's declared build time {seconds:.3g} s exceeds the build bound of "
+                    f"{BUILD_LIMIT_SECONDS:g} s")
+        if nbytes > BUILD_LIMIT_BYTES:
+            return (f"the facet tables' declared memory {nbytes / 2**20:,.0f} MiB exceeds the build bound of "
+                    f"{BUILD_LIMIT_BYTES / 2**20:,.0f} MiB")
+        return ""
+
+    @classmethod
+    def call_cost(cls, problem: Problem, **options: Any) -> float:
+        """A nominal call scans every tile (``O(S k^2)``), a rate-limited call recomputes every
+        facet's gap (``O(S m)``): ``1 ms + S (0.05 k^2 + 0.02 m) us``; the LP's cost
+        (:meth:`Method.call_cost`) when the build is redirected."""
+        if cls.redirected(problem, options):
+            return super().call_cost(problem, **options)
+        subsets = cls.facet_subsets(problem, options)
+        return _CALL_BASE_S + subsets * (_CALL_SUBSET_K2_S * problem.k ** 2 + _CALL_SUBSET_M_S * problem.m)
 
     def __init__(self, problem: Problem) -> None:
         super().__init__(problem)
         t0 = time.perf_counter()
         self.fallbacks = 0
         #: the LP formulation of Eqs 1.15-1.17 (``da``'s LP backend) when the facet search
-        #: cannot be built: a set too large to enumerate, or degenerate geometry (nearly
-        #: rank-deficient or coplanar beyond tolerance) that the exact search cannot tile
+        #: cannot be built: a set too large to enumerate within the build bounds, or
+        #: degenerate geometry (nearly rank-deficient or coplanar beyond tolerance) that the
+        #: exact search cannot tile
         self._lp: Method | None = None
         self.lp_reason = ""
-        n_sets = math.comb(problem.m, max(problem.k - 1, 0))
-        if n_sets > FACET_BUILD_LIMIT:
-            self._use_lp(f"C(m, k-1) = {n_sets} facet generator sets exceed {FACET_BUILD_LIMIT}")
+        too_large = self.redirected(problem)
+        if too_large:
+            self._use_lp(too_large)
         else:
             try:
                 self.ams = AttainableSet(problem)
@@ -316,6 +376,17 @@ class EdgeBisect(FacetSearch):
     options = {"angles": integer(16, "rotation angles tried per round (1 = plain bisection)", low=1, high=1024),
                "max_rounds": integer(40, "rounds before falling back to the sequential search", low=1, high=1000)}
 
+    @classmethod
+    def enumeration_cost(cls, problem: Problem, options: dict[str, Any] | None = None) -> tuple[float, int]:
+        """The facet enumeration plus, at k = 3, the edge table: 200 us per subset (growing
+        beyond k m = 480 as the enumeration's) and the (C, C) class-pair tables (C <= m classes)."""
+        seconds, nbytes = super().enumeration_cost(problem, options)
+        if problem.k == 3:
+            grow = max(1.0, 3 * problem.m / _FACET_REFERENCE_ENTRIES)
+            seconds += _BISECT_SUBSET_SECONDS * grow * cls.facet_subsets(problem, options or {})
+            nbytes += 48 * problem.m ** 2
+        return seconds, nbytes
+
     def __init__(self, problem: Problem, *, angles: int = 16, max_rounds: int = 40) -> None:
         angles = _int_option(angles, "angles", 1, 1024)
         max_rounds = _int_option(max_rounds, "max_rounds", 1, 1000)
@@ -488,20 +559,52 @@ class SphericalTable(FacetSearch):
     _CANDIDATES = 5
 
     @classmethod
+    def table_seconds(cls, problem: Problem, resolution: int) -> float:
+        """Declared build time (s) of the k = 3 (resolution x 2 resolution) direction table:
+        ``resolution^2 x (300 + 2 S) us`` (0 where no table is built)."""
+        if problem.k != 3:
+            return 0.0
+        subsets = cls.facet_subsets(problem, {})
+        return float(resolution) ** 2 * (_TABLE_CELL_SECONDS + _TABLE_CELL_SUBSET_SECONDS * subsets)
+
+    @classmethod
     def build_cost(cls, problem: Problem, **options: Any) -> float:
         """The facet enumeration plus, at k = 3, the (resolution x 2 resolution) direction table."""
         seconds = super().build_cost(problem, **options)
         res = options.get("resolution", cls.options["resolution"].default)
-        if problem.k == 3 and isinstance(res, int) and not isinstance(res, bool) and res > 0:
-            subsets = cls.facet_subsets(problem, options)
-            seconds += float(res) ** 2 * (_TABLE_CELL_SECONDS + _TABLE_CELL_SUBSET_SECONDS * subsets)
+        if isinstance(res, (int, np.integer)) and not isinstance(res, (bool, np.bool_)) and res > 0:
+            seconds += cls.table_seconds(problem, int(res))
         return seconds
+
+    @classmethod
+    def build_memory(cls, problem: Problem, **options: Any) -> int:
+        """The facet tables plus the direction table's 10 resolution^2 candidate indices."""
+        res = options.get("resolution", cls.options["resolution"].default)
+        extra = 0
+        if problem.k == 3 and isinstance(res, (int, np.integer)) and not isinstance(res, (bool, np.bool_)) and res > 0:
+            extra = 8 * 10 * int(res) ** 2
+        return super().build_memory(problem, **options) + extra
 
     def __init__(self, problem: Problem, *, resolution: int = 64) -> None:
         resolution = _int_option(resolution, "resolution", 2, 256, "da_table")
         self.resolution = resolution
+        if not self.redirected(problem):
+            self._check_table_bound(problem, resolution)
         super().__init__(problem)
         self.hits = 0
+
+    @classmethod
+    def _check_table_bound(cls, problem: Problem, resolution: int) -> None:
+        """OptionError naming ``resolution`` when the build's declared time exceeds the bound."""
+        facets = cls.enumeration_cost(problem)[0]
+        seconds = facets + cls.table_seconds(problem, resolution)
+        if seconds <= BUILD_LIMIT_SECONDS:
+            return
+        per_cell = cls.table_seconds(problem, 1)
+        fits = int(math.isqrt(int(max(BUILD_LIMIT_SECONDS - facets, 0.0) / per_cell)))
+        hint = f"resolution <= {fits} fits" if fits >= 2 else "no table fits; use 'da_facet'"
+        raise OptionError(f"resolution: da_table's declared build time {seconds:.3g} s at resolution {resolution} "
+                          f"exceeds the build bound of {BUILD_LIMIT_SECONDS:g} s ({hint})", field="resolution")
 
     def _prepare(self) -> None:
         super()._prepare()
