@@ -73,15 +73,16 @@ def test_contract_check_catches_a_planted_violation(monkeypatch):
 
 
 def test_issue_22_classes_are_drawn_without_changing_the_earlier_classes():
-    counts = Counter(k for s in range(3000) for k in hostile.case_classes(hostile.case(s)))
+    cases = [hostile.case(s) for s in range(2000)]
+    counts = Counter(k for c in cases for k in hostile.case_classes(c))
     for name in ("non-real problem", "non-real option", "non-real call", "health API", "round trip"):
-        assert counts[name] >= 50, (name, counts)
-    assert 250 <= counts["health API"] <= 350 and 250 <= counts["round trip"] <= 350  # 10 % each
-    kinds = Counter(hostile.case(s)["hostile"]["kind"] for s in range(3000) if "hostile" in hostile.case(s))
+        assert counts[name] >= 40, (name, counts)
+    assert 150 <= counts["health API"] <= 250 and 150 <= counts["round trip"] <= 250  # 10 % each
+    kinds = Counter(c["hostile"]["kind"] for c in cases if "hostile" in c)
     assert set(kinds) == set(hostile.NON_REAL), kinds
     # a case without those classes is the earlier generator's case, draw for draw
-    plain = next(s for s in range(100) if not hostile.case_classes(hostile.case(s)))
-    assert set(hostile.case(plain)) == {"seed", "method", "fields", "options", "calls"}
+    plain = next(c for c in cases if not hostile.case_classes(c))
+    assert set(plain) == {"seed", "method", "fields", "options", "calls"}
 
 
 _COMPLEX_B = {"seed": -1, "method": "pinv", "options": {}, "calls": [{"v": [0.5]}],
