@@ -351,10 +351,14 @@ class Problem:
         if unknown:
             raise TypeError(f"Problem.replace: unknown field(s) {sorted(unknown)}")
         if ("umin" in changes or "umax" in changes) and "up" not in changes:
-            lo = np.asarray(changes.get("umin", self.umin), dtype=float)
-            hi = np.asarray(changes.get("umax", self.umax), dtype=float)
-            if lo.shape == self.up.shape and hi.shape == self.up.shape:
-                fields["up"] = np.minimum(np.maximum(self.up, lo), hi)
+            try:
+                lo = as_float_array("umin", changes.get("umin", self.umin))
+                hi = as_float_array("umax", changes.get("umax", self.umax))
+            except ProblemError:
+                pass  # the constructor below reports the bad limits, naming them
+            else:
+                if lo.shape == self.up.shape and hi.shape == self.up.shape:
+                    fields["up"] = np.minimum(np.maximum(self.up, lo), hi)
         fields.update(changes)
         return Problem(**fields)
 

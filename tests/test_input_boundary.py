@@ -70,6 +70,17 @@ def test_problem_refuses_non_real_arrays(field, dtype):
     assert info.value.field == field
 
 
+@pytest.mark.parametrize("bad", list(BAD), ids=list(BAD))
+@pytest.mark.parametrize("field", ["umin", "umax", "B", "Wu"])
+def test_replace_refuses_each_non_real_element_naming_the_field(field, bad):
+    """``replace`` re-clips ``up`` into new limits before validating: that step must not
+    raise a raw TypeError/OverflowError/ValueError of its own."""
+    p = alloc.Problem(B, LO, HI)
+    with pytest.raises(alloc.ProblemError) as info:
+        p.replace(**{field: _problem_with(field, BAD[bad])[field]})
+    assert info.value.field == field
+
+
 @pytest.mark.parametrize("dtype", [np.float16, np.float32, np.int8, ">f8", object])
 def test_real_arrays_of_any_dtype_are_accepted(dtype):
     p = alloc.Problem(np.array(B).astype(dtype), np.array(LO).astype(dtype), np.array(HI).astype(dtype))
