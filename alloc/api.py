@@ -223,44 +223,48 @@ class Allocator(_CallBase):  # type: ignore[misc,valid-type]
 
     def _call_py(self, v: ArrayLike, *, u_prev: ArrayLike | None = None, dt: float | None = None) -> Result:
         """``allocator(v, u_prev=None, dt=None)``: the call (in Python; see the class docstring)."""
+        # Every input form is brought to the one the kernels are compiled for, so that every
+        # form of the same values takes the same path (and the same compiled code).
         v = _compiled_layout(v)
-        if u_prev is not None:
+        if not (type(v) is np.ndarray and v.shape == self._kshape and v.dtype == _F64):
+            v = self.problem.check_demand(v)  # DemandError naming v, or a new float64 array (k,)
+        if u_prev is not None and dt is not None:
             u_prev = _compiled_layout(u_prev)
-        if type(v) is np.ndarray and v.shape == self._kshape and v.dtype == _F64:
-            # fast paths: one compiled call checks v (and u_prev), allocates, computes B u, the
-            # residual and the status code into one new array; the Result holds read-only views
-            res = None
-            if u_prev is None and dt is None:
-                if self._W is not None:
-                    t0 = _clock()
-                    res = fused_affine(self._W, v, EXACT_RTOL, MAX_MAGNITUDE)
-                elif self._packed is not None:
-                    kernel, state = self._packed
-                    self._acquire()
-                    try:
-                        t0 = _clock()
-                        res = kernel(*state, v, self._zm, 0.0)
-                    finally:
-                        self._release()
-            elif (self._packed_rate is not None and type(dt) is float and 0.0 < dt <= MAX_MAGNITUDE
-                  and type(u_prev) is np.ndarray and u_prev.shape == self._mshape and u_prev.dtype == _F64):
-                kernel, state = self._packed_rate
+            if not (type(u_prev) is np.ndarray and u_prev.shape == self._mshape and u_prev.dtype == _F64):
+                u_prev = self.problem.check_u_prev(u_prev)
+            if type(dt) is not float:
+                dt = self.problem.check_dt(dt)
+        # fast paths: one compiled call checks v (and u_prev), allocates, computes B u, the
+        # residual and the status code into one new array; the Result holds read-only views
+        res = None
+        if u_prev is None and dt is None:
+            if self._W is not None:
+                t0 = _clock()
+                res = fused_affine(self._W, v, EXACT_RTOL, MAX_MAGNITUDE)
+            elif self._packed is not None:
+                kernel, state = self._packed
                 self._acquire()
                 try:
                     t0 = _clock()
-                    res = kernel(*state, v, u_prev, dt)
+                    res = kernel(*state, v, self._zm, 0.0)
                 finally:
                     self._release()
-            if res is not None and res[1] < 2:
-                out = res[0]
-                out.setflags(write=False)
-                return _new_result(Result, (out[self._su], out[self._sv], out[self._sa], _STATUS[res[1]], self.method,
-                                            res[2], _clock() - t0, "", out[self._sr]))
-            v, ok = owned_demand(v, MAX_MAGNITUDE)  # the result owns its demand: the caller may reuse the array
-            if not ok:
-                self.problem.check_demand(v)  # raises DemandError naming v
-        else:
-            v = _compiled_layout(self.problem.check_demand(v))
+        elif self._packed_rate is not None and type(dt) is float and 0.0 < dt <= MAX_MAGNITUDE and u_prev is not None:
+            kernel, state = self._packed_rate
+            self._acquire()
+            try:
+                t0 = _clock()
+                res = kernel(*state, v, u_prev, dt)
+            finally:
+                self._release()
+        if res is not None and res[1] < 2:
+            out = res[0]
+            out.setflags(write=False)
+            return _new_result(Result, (out[self._su], out[self._sv], out[self._sa], _STATUS[res[1]], self.method,
+                                        res[2], _clock() - t0, "", out[self._sr]))
+        v, ok = owned_demand(v, MAX_MAGNITUDE)  # the result owns its demand: the caller may reuse the array
+        if not ok:
+            self.problem.check_demand(v)  # raises DemandError naming v
         self._acquire()
         try:
             return self._solve(v, u_prev, dt)
