@@ -61,6 +61,9 @@ class FailureKind(str, Enum):
     REPAIR = "repair"
 
 
+_KINDS = frozenset(k.value for k in FailureKind)
+
+
 @dataclass(frozen=True, slots=True)
 class FailureEvent:
     """One failure (or repair) of one effector.
@@ -81,11 +84,10 @@ class FailureEvent:
     rate_max: float | None = None
 
     def __post_init__(self) -> None:
-        try:
-            object.__setattr__(self, "kind", FailureKind(self.kind))
-        except ValueError as exc:
+        if not (isinstance(self.kind, str) and self.kind in _KINDS):  # no repr of an arbitrary object
             kinds = ", ".join(k.value for k in FailureKind)
-            raise ProblemError(f"kind: unknown failure kind {self.kind!r}; expected one of {kinds}") from exc
+            raise ProblemError(f"kind: unknown failure kind {short_repr(self.kind)}; expected one of {kinds}")
+        object.__setattr__(self, "kind", FailureKind(self.kind))
         need = {
             FailureKind.JAM: ("position",), FailureKind.EFFECTIVENESS: ("fraction",),
             FailureKind.LIMITS: ("lo", "hi"), FailureKind.RATE_LIMITS: ("rate_min", "rate_max"),

@@ -11,6 +11,7 @@ preference cost is ``(u - up)' Wu (u - up)`` and the moment-error cost is
 from __future__ import annotations
 
 import math
+import reprlib
 from collections.abc import Sequence
 from numbers import Real
 from typing import Any
@@ -128,9 +129,18 @@ def as_real(name: str, value: Any, error: type[Exception] = ProblemError) -> flo
     return x
 
 
+_REPR = reprlib.Repr()
+_REPR.maxlevel, _REPR.maxlist, _REPR.maxtuple, _REPR.maxdict = 3, 6, 6, 4
+_REPR.maxlong, _REPR.maxstring, _REPR.maxother = 24, 40, 40
+
+
 def short_repr(value: Any, limit: int = 60) -> str:
-    """``repr(value)`` cut to ``limit`` characters (a 400-digit integer in a message is noise)."""
-    text = repr(value)
+    """``repr(value)`` for a message: nesting, long sequences and long integers elided (a
+    400-digit integer is noise; a list nested 100,000 deep would exhaust the recursion limit)."""
+    try:
+        text = _REPR.repr(value)
+    except Exception:  # noqa: BLE001 - an object whose __repr__ fails still gets a message
+        text = f"<{type(value).__name__}>"
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
@@ -312,7 +322,14 @@ class Problem:
             return tuple(f"{prefix}{i}" for i in range(n))
         if isinstance(labels, str):
             raise ProblemError(f"{field}: expected a sequence of {n} strings, got a string")
-        out = tuple(str(s) for s in labels)
+        try:
+            out = tuple(labels)
+        except TypeError:
+            raise ProblemError(f"{field}: expected a sequence of {n} strings, got {short_repr(labels)}") from None
+        for s in out:
+            if not isinstance(s, str):  # 1 and "1" would be one name in JSON, two here
+                raise ProblemError(f"{field}: names must be strings, got {type(s).__name__} {short_repr(s)}")
+        out = tuple(str(s) for s in out)  # a numpy str_ as a plain str
         if len(out) != n:
             raise ProblemError(f"{field}: expected {n} names, got {len(out)}")
         if len(set(out)) != n:
@@ -368,15 +385,15 @@ class Problem:
             try:
                 return self.names.index(effector)
             except ValueError:
-                raise ProblemError(f"effector: unknown name {effector!r}; known: {list(self.names)}") from None
+                raise ProblemError(f"effector: unknown name {short_repr(effector)}; known: {short_repr(list(self.names), 200)}") from None
         if isinstance(effector, (bool, np.bool_)):
-            raise ProblemError(f"effector: expected an index or a name, got {effector!r}")
+            raise ProblemError(f"effector: expected an index or a name, got {short_repr(effector)}")
         if isinstance(effector, (int, np.integer)):
             i = int(effector)
         elif isinstance(effector, (float, np.floating)) and float(effector).is_integer():
             i = int(effector)  # 2.0 from JSON; 1.7 is an error, never truncated
         else:
-            raise ProblemError(f"effector: {effector!r} is not an integer index or a name")
+            raise ProblemError(f"effector: {short_repr(effector)} is not an integer index or a name")
         if not 0 <= i < self.m:
             raise ProblemError(f"effector: index {short_repr(i)} out of range 0..{self.m - 1}")
         return i
@@ -466,7 +483,7 @@ class Problem:
         """Validate a time step: a real number in ``(0, MAX_MAGNITUDE]``."""
         dt_f = as_real("dt", dt, DemandError)
         if not dt_f > 0.0:
-            raise DemandError(f"dt: time step must be positive, finite and <= {MAX_MAGNITUDE:g}, got {dt!r}")
+            raise DemandError(f"dt: time step must be positive, finite and <= {MAX_MAGNITUDE:g}, got {dt_f!r}")
         return dt_f
 
     def check_u_prev(self, u_prev: ArrayLike) -> FloatArray:

@@ -303,3 +303,46 @@ def test_health_round_trips_through_its_json_form_exactly(nominal):
     assert health_from_dict(health_to_dict(h)) == h
     assert health_from_dict(None) == {} and health_from_dict({}) == {}
     assert health_from_dict({"a": {"floating": False, "effectiveness": 1}}) == {"a": EffectorHealth()}
+
+
+# ------------------------------------------------------------------------- structure
+def _deep(depth: int = 100_000) -> list:
+    x: list = [0.1]
+    for _ in range(depth):
+        x = [x]
+    return x
+
+
+def test_deeply_nested_values_are_refused_naming_the_field(problem):
+    """A message quoting the value must not exhaust the recursion limit (a RecursionError at
+    build became a silent fallback allocator)."""
+    import alloc.health as health
+
+    deep = _deep()
+    f = alloc.make_allocator(problem, "pinv")
+    cases = {
+        "v": lambda: f(deep), "dt": lambda: f(np.ones(2), u_prev=np.zeros(3), dt=deep),
+        "u_prev": lambda: f(np.ones(2), u_prev=deep, dt=0.1), "V": lambda: f.batch(deep),
+        "B": lambda: alloc.Problem(deep, [-1], [1]), "position": lambda: problem.with_jam(0, deep),
+        "gamma": lambda: alloc.make_allocator(problem, "wls", gamma=deep),
+        "G": lambda: alloc.make_allocator(problem, "ganging", G=deep),
+        "W1": lambda: alloc.make_allocator(problem, "dynamic", W1=deep),
+        "priorities": lambda: alloc.make_allocator(problem, "qp", priorities=deep),
+        "kind": lambda: health.FailureEvent(0, deep), "effector": lambda: health.FailureEvent(deep, "float"),
+        "limits": lambda: health.health_from_dict({"u0": {"limits": deep}}),
+        "names": lambda: alloc.Problem(B, LO, HI, names=[deep, "b", "c"]),
+    }
+    for field, call in cases.items():
+        with pytest.raises(alloc.AllocError) as info:
+            call()
+        assert info.value.field == field, (field, str(info.value))
+        assert len(str(info.value)) < 400
+
+
+@pytest.mark.parametrize("labels", [[1, 2, 3], [None, "b", "c"], ["a", b"b", "c"], 5])
+def test_names_must_be_strings(labels):
+    """``1`` and ``"1"`` are one name in JSON and two in Python: names are strings only."""
+    with pytest.raises(alloc.ProblemError, match="^names: ") as info:
+        alloc.Problem(B, LO, HI, names=labels)
+    assert info.value.field == "names"
+    assert alloc.Problem(B, LO, HI, names=np.array(["a", "b", "c"])).names == ("a", "b", "c")
