@@ -45,13 +45,14 @@ BUILD_LIMIT_BYTES = 1 << 30
 CALL_LIMIT_SECONDS = 3.0
 # Default per-call models of the methods that declare none, fitted to the worst call of each
 # cell of seeded random problems up to the size caps (``benchmarks/bench_cost_bounds.py``):
-# an affine method (pinv, pinv_clip, ganging) is one O(k m) pass, 20 us + 0.1 us k m; any other
+# an affine method (pinv, pinv_clip, ganging) is one O(k m) pass after the allocator's own checks
+# (20-30 us a call at 3 x 8 under load, worst 160 us), 0.1 ms + 0.1 us k m; any other
 # (pinv_scale, the compiled active set of qp/wls/dynamic, the simplex, the LP backends) at most
 # 0.3 ms + 0.2 us k m (k + m) + 0.03 us k^3 m (priority levels and active-set iterations grow
 # with k).  Declared / worst measured under load: 32 x 512 2.3 s / 1.2 s (qp, 32 levels);
 # 32 x 64 102 / 67 ms (qp, 32 levels); 6 x 512 322 / 146 ms (da); 16 x 128 75 / 18 ms;
 # 6 x 64 6.3 / 4.4 ms (dynamic).
-_AFFINE_CALL_S, _AFFINE_CALL_KM_S = 2e-5, 1e-7
+_AFFINE_CALL_S, _AFFINE_CALL_KM_S = 1e-4, 1e-7
 _CALL_BASE_S, _CALL_KMKM_S, _CALL_K3M_S = 3e-4, 2e-7, 3e-8
 # Default build model: an SVD or QP/LP set-up is O(k m (k + m)): CHEAP_BUILD_SECONDS up to
 # k m = 384 (6 x 64, where the service builds on its threads), beyond it 0.3 us k m (k + m)
@@ -135,7 +136,7 @@ class Method(ABC):
         service prices a batch per row with it.  ``options`` as for :meth:`build_cost`.
 
         Default, fitted to the worst calls measured (``benchmarks/bench_cost_bounds.py``) of
-        every method that declares none: ``20 us + 0.1 us k m`` for an :attr:`affine` method,
+        every method that declares none: ``0.1 ms + 0.1 us k m`` for an :attr:`affine` method,
         else ``0.3 ms + 0.2 us k m (k + m) + 0.03 us k^3 m`` (the compiled active set, the
         simplex, the LP backends; 2.3 s at the size caps, where 0.8-1.2 s was the worst
         measured under load).

@@ -10,7 +10,7 @@ build and call of an allocator that is built finishes within its declaration.
 Times are CPU seconds (``time.process_time``: load-independent, BLAS threads included);
 the declarations were measured on the shared machine under load, so the factors below
 (``BUILD_FACTOR``, ``CALL_FACTOR``) only absorb noise.  Memory is the growth of the peak RSS
-of a fresh subprocess.  The default run samples every method at small and medium sizes and
+of a fresh subprocess (the slow builds) or the peak of ``tracemalloc``'s traced allocations.  The default run samples every method at small and medium sizes and
 checks every refusal and redirect at and near the caps (about 30 s); ``-m slow`` builds and
 calls at the largest sizes the bounds admit.
 """
@@ -22,6 +22,7 @@ import math
 import subprocess
 import sys
 import time
+import tracemalloc
 
 import numpy as np
 import pytest
@@ -36,9 +37,10 @@ from alloc.testing import random_demands, random_problem
 #: measured CPU time <= FACTOR x declared + SLACK (seconds): the slack covers a build's or a
 #: call's fixed Python overhead on a loaded machine (a page fault, a cold cache)
 BUILD_FACTOR, BUILD_SLACK = 1.5, 0.05
-CALL_FACTOR, CALL_SLACK = 1.0, 2e-4
-#: peak RSS growth <= MEMORY_FACTOR x declared + 64 MiB (interpreter and numpy temporaries)
-MEMORY_FACTOR, MEMORY_SLACK = 1.0, 64 << 20
+CALL_FACTOR, CALL_SLACK = 1.0, 2e-5
+PAUSE_SLACK = 0.01
+#: peak RSS growth <= MEMORY_FACTOR x declared + 32 MiB (allocator overhead, numpy temporaries)
+MEMORY_FACTOR, MEMORY_SLACK = 1.0, 32 << 20
 FACET = ("da_facet", "da_bisect", "da_table")
 
 
@@ -77,7 +79,9 @@ def _declared_build(problem, name, options, f) -> float:
 
 def _call_times(f, problem, V) -> np.ndarray:
     u = problem.up.copy()
-    f(V[0]), f(V[0], u_prev=u, dt=0.01)  # compiled kernels loaded before the clock starts
+    # compiled kernels loaded before the clock starts, for every input form the loop passes
+    # (a result's u is read-only: another signature)
+    f(V[0]), f(V[0], u_prev=np.asarray(f(V[0], u_prev=u, dt=0.01).u), dt=0.01)
     times = []
     for i, v in enumerate(V):
         t0 = time.process_time()
@@ -122,8 +126,8 @@ def test_declarations_are_finite_positive_floats_up_to_the_caps():
 def test_closed_forms_declare_microseconds_and_the_rest_their_worst_calls():
     p = alloc.Problem(np.ones((3, 11)), [-1.0] * 11, [1.0] * 11)  # ICE's size
     for name in ("pinv", "pinv_clip", "ganging"):
-        assert get_method(name).call_cost(p) == pytest.approx(20e-6 + 0.1e-6 * 33)
-    assert get_method("daisy").call_cost(p) == pytest.approx(200e-6 + 0.1e-6 * 33)
+        assert get_method(name).call_cost(p) == pytest.approx(100e-6 + 0.1e-6 * 33)
+    assert get_method("daisy").call_cost(p) == pytest.approx(400e-6 + 0.1e-6 * 33)
     assert get_method("qp").call_cost(p) == pytest.approx(3e-4 + 2e-7 * 33 * 14 + 3e-8 * 27 * 11)
     big = alloc.Problem(np.ones((MAX_AXES, MAX_EFFECTORS)), [-1.0] * MAX_EFFECTORS, [1.0] * MAX_EFFECTORS)
     for name in alloc.methods():
@@ -219,7 +223,7 @@ def test_da_table_names_the_largest_resolution_that_fits():
 
 
 # ----------------------------------------------------------------------------- measured against declared
-SAMPLE_SIZES = [(1, 3), (3, 8), (3, 20), (6, 20), (8, 40)]
+SAMPLE_SIZES = [(1, 3), (3, 8), (3, 20), (6, 14), (8, 40)]
 
 
 @pytest.mark.parametrize(("k", "m"), SAMPLE_SIZES)
@@ -257,13 +261,20 @@ print(json.dumps({{"cpu": t1 - t0, "rss": (r1 - r0) * 1024, "lp": getattr(f.impl
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
-def test_a_facet_build_stays_within_its_declared_memory():
-    rng = np.random.default_rng(5)
-    p = _problem(rng, 3, 100)
-    got = _rss_growth("da_facet", 3, 100, {})
-    assert not got["lp"]
-    assert got["rss"] <= MEMORY_FACTOR * get_method("da_facet").build_memory(p) + MEMORY_SLACK, got
-    assert got["cpu"] <= BUILD_FACTOR * get_method("da_facet").build_cost(p) + BUILD_SLACK, got
+@pytest.mark.parametrize(("name", "m", "options"), [("da_facet", 100, {}), ("da_bisect", 64, {}),
+                                                     ("da_table", 20, {"resolution": 64})])
+def test_a_facet_build_stays_within_its_declared_memory(name, m, options):
+    """Peak of the build's traced allocations (numpy's included) against ``build_memory``."""
+    p = _problem(np.random.default_rng(5), 3, m, rates=False)
+    tracemalloc.start()
+    try:
+        f = alloc.make_allocator(p, name, **options)  # (tracing slows it: time is checked elsewhere)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert f.impl._lp is None
+    assert peak <= MEMORY_FACTOR * get_method(name).build_memory(p, **options) + MEMORY_SLACK, peak
+    assert peak >= 0.2 * get_method(name).build_memory(p, **options)  # the declaration is not vacuous
 
 
 @pytest.mark.slow
@@ -307,4 +318,7 @@ def test_calls_at_the_caps_finish_within_their_declarations(k, m):
             assert seconds <= BUILD_FACTOR * _declared_build(p, name, options, f) + BUILD_SLACK, (name, seconds)
         times = _call_times(f, p, V)
         call = get_method(name).call_cost(p, **options)
-        assert times.max() <= 1.5 * call + CALL_SLACK, (name, times.max(), call)
+        assert np.quantile(times, 0.9) <= 1.5 * call + CALL_SLACK, (name, times, call)
+        # one-off pauses (garbage collection, page faults of a first large allocation) of up to
+        # 6 ms were seen in single calls of microsecond methods at these sizes
+        assert times.max() <= 1.5 * call + PAUSE_SLACK, (name, times, call)

@@ -110,3 +110,19 @@ def test_cgi_cache_grows_past_its_first_bank():
     for v in random_demands(rng, p, 400, attainable_fraction=0.0):
         assert_same(impl.solve(v, p.umin, p.umax, None), impl._solve_reference(v, p.umin, p.umax, None))
     assert impl._banked > first
+
+
+def test_cgi_by_level_cache_keeps_answers_bit_for_bit():
+    """The by-level pseudo-inverses are cached per (level, free set): a long-lived allocator
+    answers every demand exactly as a fresh one, also when its cache is emptied mid-way."""
+    rng = np.random.default_rng(6)
+    p = random_problem(rng, 4, 10)
+    pr = [2, 1, 1, 0]
+    f = alloc.make_allocator(p, "cgi", priorities=pr)
+    V = random_demands(rng, p, 120, attainable_fraction=0.3)
+    for i, v in enumerate(V):
+        if i == 60:
+            f.impl._level_cache.clear()
+            f.impl._level_bytes = 0
+        assert np.array_equal(f(v).u, alloc.make_allocator(p, "cgi", priorities=pr)(v).u)
+    assert 0 < len(f.impl._level_cache) and f.impl._level_bytes == sum(P.nbytes for P in f.impl._level_cache.values())

@@ -93,6 +93,7 @@ _FACET_REFERENCE_ENTRIES = 480
 FACET_BYTES = 64
 _BISECT_SUBSET_SECONDS = 200e-6
 _TABLE_CELL_SECONDS, _TABLE_CELL_SUBSET_SECONDS = 300e-6, 2.0e-6
+_TABLE_TEMPORARY_BYTES = 96 << 20
 # Declared call cost (``Method.call_cost``): a nominal call scans every tile (about two per
 # subset) with a k x k product, a rate-limited call recomputes every facet's gap, O(m) each;
 # measured worst calls (under load): see ``benchmarks/bench_cost_bounds.py``.
@@ -578,11 +579,12 @@ class SphericalTable(FacetSearch):
 
     @classmethod
     def build_memory(cls, problem: Problem, **options: Any) -> int:
-        """The facet tables plus the direction table's 10 resolution^2 candidate indices."""
+        """The facet tables plus the direction table's 10 resolution^2 candidate indices and
+        the ray casts' temporaries (chunks of 2 million tile tests: 41 MiB measured at m = 20)."""
         res = options.get("resolution", cls.options["resolution"].default)
         extra = 0
         if problem.k == 3 and isinstance(res, (int, np.integer)) and not isinstance(res, (bool, np.bool_)) and res > 0:
-            extra = 8 * 10 * int(res) ** 2
+            extra = 8 * 10 * int(res) ** 2 + _TABLE_TEMPORARY_BYTES
         return super().build_memory(problem, **options) + extra
 
     def __init__(self, problem: Problem, *, resolution: int = 64) -> None:
