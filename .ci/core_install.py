@@ -23,44 +23,11 @@ import numpy as np
 #: the goal for the default methods' first allocation after a fresh install (issue 22)
 COLD_CPU_S = 5.0
 COLD_METHODS = ("pinv", "qp")
-#: one fresh interpreter: import, build, first call; CPU and wall seconds of each step
-FIRST_ALLOCATION = """
-import json, sys, time
-c0, w0 = time.process_time(), time.perf_counter()
-import numpy as np
-import alloc
-from alloc import vehicles
-p = vehicles.problem("ice")
-c1, w1 = time.process_time(), time.perf_counter()
-allocator = alloc.make_allocator(p, sys.argv[1])
-c2, w2 = time.process_time(), time.perf_counter()
-r = allocator(np.array([2.0, 30.0, 0.5]))
-c3, w3 = time.process_time(), time.perf_counter()
-from alloc import _jit_cache
-print(json.dumps({"status": r.status.value, "compiles": _jit_cache.notice.compiles,
-                  "import_cpu": c1 - c0, "make_cpu": c2 - c1, "call_cpu": c3 - c2,
-                  "import_wall": w1 - w0, "make_wall": w2 - w1, "call_wall": w3 - w2,
-                  "cache": [c for _, c, _ in _jit_cache.where()][0]}))
-"""
-
-
-def first_allocation(method: str) -> dict:
-    """``FIRST_ALLOCATION`` in a fresh interpreter; adds the whole process's CPU seconds."""
-    import json
-    import resource
-
-    before = resource.getrusage(resource.RUSAGE_CHILDREN)
-    out = subprocess.run([sys.executable, "-c", FIRST_ALLOCATION, method], capture_output=True, text=True)
-    after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    assert out.returncode == 0, (method, out.stderr[-3000:])
-    row = json.loads(out.stdout.strip().splitlines()[-1])
-    row["process_cpu"] = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
-    row["stderr"] = out.stderr
-    return row
 
 
 def cold_check() -> None:
     import alloc
+    from benchmarks.bench_startup import first_allocation  # the benchmark's own probe, installed with alloc
 
     pkg_cache = os.path.join(os.path.dirname(alloc.__file__), "__pycache__")
     assert not os.access(pkg_cache, os.W_OK), f"this check needs a read-only install: {pkg_cache} is writable"

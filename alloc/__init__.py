@@ -100,7 +100,13 @@ sys.modules[__name__].__class__ = _Package
 
 def _place_kernel_caches() -> None:
     # importing the module installs its locator (at its end: numba may be imported by it)
-    importlib.import_module("alloc._jit_cache")
+    try:
+        importlib.import_module("alloc._jit_cache")
+    except Exception as exc:  # noqa: BLE001 - numba's private cache API changed: never break `import numba`
+        import warnings
+
+        warnings.warn(f"alloc: the kernel cache locator is not installed ({type(exc).__name__}: {exc}); "
+                      "numba's own cache locations apply", RuntimeWarning, stacklevel=2)
 
 
 class _AfterNumbaImport:

@@ -257,10 +257,10 @@ def fresh_report(args: argparse.Namespace) -> None:
             python = args.venv / "bin" / "python"
         versions = subprocess.run([str(python), "-c", "import sys, numba, alloc; print(sys.version.split()[0], "
                                    "numba.__version__, alloc.__file__)"], capture_output=True, text=True,
-                                  check=True).stdout.split()
+                                  check=True, cwd="/").stdout.split()
         print(f"fresh venv {python} (Python {versions[0]}, numba {versions[1]}, alloc from {versions[2]}){built}")
         listed = subprocess.run([str(python), "-c", "import alloc; print(' '.join(alloc.methods()))"],
-                                capture_output=True, text=True, check=True).stdout.split()
+                                capture_output=True, text=True, check=True, cwd="/").stdout.split()
         others = [m for m in listed if m not in DEFAULT_METHODS]
         nobody = _other_user()
         owner = pwd.getpwnam("nobody").pw_uid if nobody else None
