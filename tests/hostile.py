@@ -9,11 +9,12 @@ outside the valid input domain (NaN, 1e300, Python big integers, ragged arrays).
 from a second stream (so the classes above give the same cases as before), about one case
 in ten also carries each of issue 22's classes: a non-real value (a Python big integer, a
 complex number or array, a boolean or boolean array, a number as text, a numpy complex
-scalar) in one field of the problem, one numeric option or one call argument (``v``,
-``u_prev``, ``dt``, a batch's ``V``), which must be refused naming exactly that field;
-health-API abuse (failure events with hostile effectors, kinds and parameters, health
-records with limits wider than the nominal ones and text for booleans, their JSON form);
-and a pickle, copy or deep-copy round trip of the problem, the allocator and its results.
+scalar, a list nested up to 100,000 deep) in one field of the problem, one numeric option
+or one call argument (``v``, ``u_prev``, ``dt``, a batch's ``V``), which must be refused
+naming exactly that field; health-API abuse (failure events with hostile effectors, kinds
+and parameters, health records with limits wider than the nominal ones and text for
+booleans, their JSON form); and a pickle, copy or deep-copy round trip of the problem, the
+allocator and its results.
 
 ``check(case)`` builds and calls it and returns the contract violations (empty when it
 holds): only ``AllocError``/``TypeError`` may escape, with the field named; every ``u``
@@ -288,7 +289,7 @@ def case(seed: int) -> dict[str, Any]:
 # ------------------------------------------------------------------ issue 22's classes
 #: what a non-real value is, by kind, as case data (``$array``/``$scalar`` are decoded by
 #: :func:`decode` into numpy objects when the case runs, so a case stays comparable data)
-NON_REAL = ("big int", "complex", "complex array", "bool", "bool array", "text", "numpy complex")
+NON_REAL = ("big int", "complex", "complex array", "bool", "bool array", "text", "numpy complex", "deeply nested")
 #: share of cases carrying each class
 P_NON_REAL, P_HEALTH, P_ROUND_TRIP = 0.10, 0.10, 0.10
 HEALTH_FIELDS = ("effector", "kind", "position", "fraction", "lo", "hi", "rate_min", "rate_max", "limits",
@@ -318,6 +319,8 @@ def _non_real(rng: np.random.Generator, kind: str, like: Any) -> Any:
         return first(base, str(num(base)))
     if kind == "numpy complex":
         return {"$scalar": "complex128", "value": num(base)}
+    if kind == "deeply nested":  # built when the case runs (pickle and repr recurse on it)
+        return {"$deep": int(rng.choice([100, 10_000, 100_000])), "value": num(base)}
     dtype = "complex128" if kind == "complex array" else "bool"
     return {"$array": dtype, "data": base if isinstance(base, list) else [base]}
 
@@ -328,6 +331,11 @@ def decode(x: Any) -> Any:
         return np.array(x["data"], dtype=x["$array"])
     if isinstance(x, dict) and "$scalar" in x:
         return np.dtype(x["$scalar"]).type(x["value"])
+    if isinstance(x, dict) and "$deep" in x:
+        nested: Any = [x["value"]]
+        for _ in range(x["$deep"]):
+            nested = [nested]
+        return nested
     if isinstance(x, dict):
         return {key: decode(val) for key, val in x.items()}
     if isinstance(x, list):
