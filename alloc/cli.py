@@ -367,7 +367,7 @@ app = typer.Typer(
         "  alloc methods\n\n"
         "  alloc allocate --vehicle ice --v 2,30,0.5 --method qp --json\n\n"
         "  alloc sim ice --method qp --failure seed --allocator-knows-failure --plot ice.png\n\n"
-        "  alloc ams plot --problem ice-mid --method pinv --out ams.png\n\n"
+        "  alloc ams plot --vehicle ice-mid --method pinv --out ams.png\n\n"
         "  alloc bench quick\n\n"
         "  alloc serve --port 8000\n\n"
         "An invalid input ends in one line on stderr naming the field, and exit status 2."
@@ -403,13 +403,24 @@ class DefaultMethodCommand(TyperCommand):
         super().format_help(ctx, formatter)
 
 
-def _vehicle(name: str) -> alloc.Problem:
+#: help of every ``--vehicle`` option (alloc allocate, alloc ams, alloc sim, alloc bench)
+VEHICLE_HELP = ("a catalogue vehicle (see `alloc vehicles`; ALLOC_VEHICLE_PATH adds folders of files) or a "
+                "vehicle file (.toml, .json, PX4 .params)")
+
+
+def load_vehicle_option(source: str, param_hint: str = "--vehicle") -> Any:
+    """The :class:`~alloc.vehicle_file.Vehicle` a ``--vehicle NAME|FILE`` names, or a one-line usage error.
+
+    A malformed file's error names the file and the field path (``--vehicle x.toml:
+    effectors[3].rate_max: must be > 0``).
+    """
     from . import vehicles
 
     try:
-        return vehicles.problem(name)
+        return vehicles.get_vehicle(source)
     except alloc.ProblemError as exc:
-        raise typer.BadParameter(str(exc), param_hint="--vehicle") from None
+        where = "" if exc.field == "vehicle" or str(exc).startswith("path:") else f"{source}: "
+        raise typer.BadParameter(f"{where}{exc}", param_hint=param_hint) from None
 
 
 #: fields of :class:`alloc.Problem` a problem file may hold (``null`` rate: unlimited)
@@ -488,21 +499,31 @@ def methods_command(as_json: bool = typer.Option(False, "--json", help="print JS
 
 @app.command("vehicles")
 def vehicles_command(as_json: bool = typer.Option(False, "--json", help="print JSON")) -> None:
-    """List the named problems (the seed's aircraft) that --vehicle and --problem accept."""
+    """List the catalogue's vehicles (bundled, ALLOC_VEHICLE_PATH, entry points) that --vehicle accepts."""
     from . import vehicles
 
     rows = []
-    for entry in vehicles.CATALOGUE.values():
-        p = entry.problem()
-        rows.append({"name": entry.name, "title": entry.title, "source": entry.source, "k": p.k, "m": p.m,
-                     "axes": list(p.axes), "effectors": list(p.names), "aliases": list(entry.aliases),
-                     "daisy_groups": [list(g) for g in entry.daisy_groups]})
+    for entry in vehicles.catalogue().values():
+        row: dict[str, Any] = {"name": entry.name, "origin": entry.origin, "aliases": list(entry.aliases)}
+        try:
+            v = entry.vehicle()
+        except alloc.AllocError as exc:  # one broken user file must not hide the others
+            rows.append({**row, "error": str(exc)})
+            continue
+        rows.append({**row, "title": v.description or v.name, "source": v.source or entry.origin, "k": v.k,
+                     "m": v.m, "axes": list(v.axis_names), "effectors": list(v.effector_names),
+                     "daisy_groups": [list(g) for g in entry.daisy_groups], "methods": v.method_table(),
+                     "model": v.model is not None})
     if as_json:
         typer.echo(json.dumps(rows, indent=2))
         return
     for r in rows:
+        if "error" in r:
+            typer.echo(f"{r['name']:<11} unreadable ({r['origin']}): {_one_line(r['error'])}")
+            continue
         alias = f" (also {', '.join(r['aliases'])})" if r["aliases"] else ""
-        typer.echo(f"{r['name']:<11} {r['k']} x {r['m']:<3} {r['title']}, {r['source']}{alias}")
+        defaults = f"; defaults for {', '.join(r['methods'])}" if r["methods"] else ""
+        typer.echo(f"{r['name']:<11} {r['k']} x {r['m']:<3} {r['title']}, {r['source']}{alias}{defaults}")
 
 
 #: wall-clock budget of the repeated calls that time one solve (at least one call is made)
@@ -526,7 +547,8 @@ def allocate_command(
                                     "problem's axes and units: `alloc vehicles --json`); or the file's 'v'"),
     method: Optional[str] = typer.Option(None, "--method", "-m",
                                          help="allocation method (see `alloc methods`); or the file's 'method'"),
-    vehicle: Optional[str] = typer.Option(None, "--vehicle", help="a named problem (see `alloc vehicles`), e.g. ice"),
+    vehicle: Optional[str] = typer.Option(None, "--vehicle", metavar="NAME|FILE",
+                                          help=VEHICLE_HELP + "; its [methods.<method>] defaults apply under --option"),
     problem: Optional[Path] = typer.Option(
         None, "--problem", help="JSON file (UTF-8): B, umin, umax and optionally up, Wu, Wv, rate_min, rate_max "
         "(null: unlimited), names, axes -- the fields of alloc.Problem -- and optionally v, method, options, "
@@ -555,8 +577,10 @@ def allocate_command(
     """
     if (vehicle is None) == (problem is None):
         raise typer.BadParameter("give exactly one of --vehicle or --problem", param_hint="--vehicle/--problem")
+    vehicle_file = None
     if vehicle is not None:
-        p, from_file = _vehicle(vehicle), {}
+        vehicle_file = load_vehicle_option(vehicle)
+        p, from_file = vehicle_file.problem(), {}
     else:
         p, from_file = _problem_from_file(problem)
     demand = _merge(None if v is None else _floats(v, "--v"), from_file, "v", "--v")
@@ -575,6 +599,10 @@ def allocate_command(
         raise typer.BadParameter(f"option(s) {twice} given both in the problem file and as --option",
                                  param_hint="--option")
     options.update(file_options)
+    if vehicle_file is not None:
+        from .vehicles import method_options
+
+        options = method_options(vehicle_file, name, options)
 
     t0 = time.perf_counter()
     allocator = alloc.make_allocator(p, name, **options)

@@ -1,19 +1,40 @@
-"""The one catalogue of named allocation problems: the seed's aircraft.
+"""The one catalogue of named vehicles, and the seed's aircraft transcribed.
 
-Effectiveness, limits and rate limits of the seed's aircraft, and :data:`CATALOGUE`, the
-names every command line and benchmark uses for them (``alloc allocate --vehicle NAME``,
-``alloc ams summary --problem NAME``, the comparison sweep):
+The catalogue (:func:`catalogue`, :func:`names`, :func:`lookup`, :func:`get_vehicle`) is
+built from vehicle files (:mod:`alloc.vehicle_file`), so every command line and benchmark
+reads a vehicle the same way (``alloc allocate|ams|sim|bench ... --vehicle NAME|FILE``).
+Its entries come from, in this order:
 
-========== ============================================================ ======
-name       problem                                                      k x m
-========== ============================================================ ======
-ice        ICE, axes (alpha, p, beta), seed section 4.7                 3 x 11
-ice-design ICE design problem of seed Eq 4.24 (SSD out of pitch, Wu)    3 x 11
-ice-mid    ICE with AMT/SSD preferring mid-range (30 deg)               3 x 11
-harv       F-18/HARV lateral-directional, seed Eq 4.16 (``harv_latdir``) 3 x 5
-========== ============================================================ ======
+1. the bundled files ``alloc/data/vehicles/*.toml``:
 
-Each entry also carries its daisy-chain groups (seed Eq 1.25).
+   ========== ============================================================ ======
+   name       vehicle                                                      k x m
+   ========== ============================================================ ======
+   ice        ICE, axes (alpha, p, beta), seed section 4.7                 3 x 11
+   ice-design ICE design problem of seed Eq 4.24 (SSD out of pitch, Wu)    3 x 11
+   ice-mid    ICE with AMT/SSD preferring mid-range (30 deg)               3 x 11
+   harv       F-18/HARV lateral-directional, seed Eq 4.16 (``harv_latdir``) 3 x 5
+   hexa-x     hexacopter example, PX4 6001_hexa_x geometry                 4 x 6
+   tailless   tailless example, ICE's eight surfaces                       3 x 8
+   ========== ============================================================ ======
+
+2. the vehicle files (``.toml``, ``.json``, PX4 ``.params``) in the folders named by the
+   environment variable ``ALLOC_VEHICLE_PATH`` (:data:`VEHICLE_PATH_ENV`, folders separated
+   by ``os.pathsep``), each named by its file name without the extension;
+3. the entry points of the group ``alloc.vehicles`` (:data:`ENTRY_POINT_GROUP`) of installed
+   packages: the entry's name is the vehicle's, its object a path to a vehicle file or a
+   callable returning a vehicle document (a dict) or a :class:`~alloc.vehicle_file.Vehicle`.
+
+A name defined twice (a user file named like a bundled vehicle, say) is refused when it
+is looked up, naming both definitions: a user's file never silently replaces the seed's.
+Files are read when an entry is first used, not when the names are listed.
+
+Per-vehicle method defaults (daisy groups, priorities, a gang matrix) live in the
+vehicle's ``[methods.<name>]`` tables; :func:`method_options` merges them under the
+caller's options, the one rule every tool applies.
+
+The seed's aircraft are also transcribed here in Python (:func:`ice`, :func:`harv_latdir`,
+:data:`SEED`): tests/test_vehicles.py checks the bundled files against them bit for bit.
 
 Transcribed from the seed (OCR'd: decimal points restored where the scan lost them, e.g.
 ``-0009123567`` -> ``-0.009123567``) and checked by reproducing the seed's printed
@@ -24,19 +45,27 @@ derivatives per degree of deflection.
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass
+import os
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from functools import cache, lru_cache, partial
+from importlib.metadata import EntryPoint, entry_points
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from .exceptions import ProblemError
+from .exceptions import OptionError, ProblemError
 from .problem import Problem
+from .vehicle_file import DATA_DIR, Vehicle, load_vehicle, vehicle_from_dict
 
 __all__ = [
     "ICE_B_FULL", "ICE_EFFECTORS", "ICE_STATES", "ICE_BK_SEED", "ice", "ice_mid",
     "HARV_LATDIR_B", "HARV_LATDIR_EFFECTORS", "HARV_LATDIR_BK_SEED", "harv_latdir",
     "ICE_DAISY_GROUPS", "HARV_LATDIR_DAISY_GROUPS", "ice_daisy_groups",
-    "NamedProblem", "CATALOGUE", "names", "lookup", "problem", "daisy_groups",
+    "SEED", "VEHICLE_PATH_ENV", "ENTRY_POINT_GROUP", "VEHICLE_SUFFIXES",
+    "NamedProblem", "CATALOGUE", "catalogue", "names", "lookup", "problem", "daisy_groups",
+    "get_vehicle", "method_options",
 ]
 
 # seed section 4.7, B' (11 effectors x 8 states), flight condition M = 0.3, h = 15,000 ft.
@@ -154,52 +183,238 @@ def harv_latdir() -> Problem:
 HARV_LATDIR_DAISY_GROUPS = (("diff_tail", "aileron", "rudder"), ("roll_tv", "yaw_tv"))
 
 
+# --------------------------------------------------------------------------- the seed, transcribed
+#: the seed's aircraft as transcribed above, by catalogue name: the bundled files must
+#: yield these problems and daisy groups bit for bit (tests/test_vehicles.py)
+SEED: dict[str, tuple[Callable[[], Problem], tuple[tuple[str, ...], ...]]] = {
+    "ice": (ice, ICE_DAISY_GROUPS),
+    "ice-design": (lambda: ice(design=True), ICE_DAISY_GROUPS),
+    "ice-mid": (ice_mid, ICE_DAISY_GROUPS),
+    "harv": (harv_latdir, HARV_LATDIR_DAISY_GROUPS),
+}
+#: other names of the bundled vehicles (the simulator's scenario is ``harv_latdir``)
+_ALIASES = {"harv": ("harv_latdir", "harv-latdir")}
+
+
 # --------------------------------------------------------------------------- catalogue
+#: environment variable naming folders of vehicle files added to the catalogue (``os.pathsep``-separated)
+VEHICLE_PATH_ENV = "ALLOC_VEHICLE_PATH"
+#: entry-point group through which installed packages add vehicles (name -> path or callable)
+ENTRY_POINT_GROUP = "alloc.vehicles"
+#: the file extensions a vehicle file may have (:func:`alloc.vehicle_file.load_vehicle`)
+VEHICLE_SUFFIXES = (".toml", ".json", ".params")
+
+
 @dataclass(frozen=True)
 class NamedProblem:
-    """An entry of the catalogue: a named problem, where it comes from, its daisy groups."""
+    """An entry of the catalogue: a named vehicle and where it is defined (read on first use)."""
 
     name: str
-    title: str
-    source: str
-    make: Callable[[], Problem]
-    daisy_groups: tuple[tuple[str, ...], ...]
+    origin: str
+    load: Callable[[], Vehicle] = field(repr=False, compare=False)
     aliases: tuple[str, ...] = ()
 
+    def vehicle(self) -> Vehicle:
+        """The vehicle (read once per file version)."""
+        return self.load()
+
     def problem(self) -> Problem:
-        return self.make()
+        return self.vehicle().problem()
+
+    @property
+    def title(self) -> str:
+        return self.vehicle().description or self.name
+
+    @property
+    def source(self) -> str:
+        return self.vehicle().source or self.origin
+
+    @property
+    def daisy_groups(self) -> tuple[tuple[Any, ...], ...]:
+        """The vehicle's ``[methods.daisy] groups`` (``()`` when it declares none)."""
+        return tuple(tuple(g) for g in self.vehicle().method_options("daisy").get("groups") or ())
 
 
-#: name -> entry; the one place named problems are defined
-CATALOGUE: dict[str, NamedProblem] = {entry.name: entry for entry in (
-    NamedProblem("ice", "ICE", "seed section 4.7, Table 4-5", ice, ICE_DAISY_GROUPS),
-    NamedProblem("ice-design", "ICE design problem", "seed Eq 4.24", lambda: ice(design=True), ICE_DAISY_GROUPS),
-    NamedProblem("ice-mid", "ICE (AMT/SSD prefer 30 deg)", "seed section 4.7, up at mid-range", ice_mid,
-                 ICE_DAISY_GROUPS),
-    NamedProblem("harv", "F-18/HARV lat-dir", "seed Eq 4.16, Table 4-3", harv_latdir, HARV_LATDIR_DAISY_GROUPS,
-                 aliases=("harv_latdir", "harv-latdir")),
-)}
-_BY_NAME = {**{a: e for e in CATALOGUE.values() for a in e.aliases}, **CATALOGUE}
+@lru_cache(maxsize=256)
+def _read_file(path: str, mtime_ns: int, size: int) -> Vehicle:
+    return load_vehicle(path)
+
+
+def _file_loader(path: Path) -> Callable[[], Vehicle]:
+    def load() -> Vehicle:
+        try:
+            stat = path.stat()
+        except OSError as exc:
+            raise ProblemError(f"path: cannot read {str(path)!r} ({exc.strerror})", field="path") from exc
+        return _read_file(str(path), stat.st_mtime_ns, stat.st_size)
+
+    return load
+
+
+@cache
+def _load_entry_point(ep: EntryPoint) -> Vehicle:
+    where = f"entry point {ep.name!r} ({ep.value}) of {ENTRY_POINT_GROUP}"
+    try:
+        obj = ep.load()
+    except Exception as exc:  # a broken plugin must name itself, whatever it raised
+        raise ProblemError(f"vehicle: {where} cannot be loaded: {exc!r}", field="vehicle") from exc
+    if isinstance(obj, (str, os.PathLike)):
+        return load_vehicle(Path(obj))
+    if not callable(obj):
+        raise ProblemError(f"vehicle: {where} is a {type(obj).__name__}; expected a path or a callable",
+                           field="vehicle")
+    doc = obj()
+    if isinstance(doc, Vehicle):
+        return doc
+    if isinstance(doc, Mapping):
+        return vehicle_from_dict(doc)
+    raise ProblemError(f"vehicle: {where} returned a {type(doc).__name__}; expected a vehicle document (dict)",
+                       field="vehicle")
+
+
+@cache
+def _entry_points() -> tuple[EntryPoint, ...]:
+    """The installed ``alloc.vehicles`` entry points (read once: installing a package restarts a tool)."""
+    return tuple(sorted(entry_points(group=ENTRY_POINT_GROUP), key=lambda e: e.name))
+
+
+def _folder_files(folder: Path) -> list[Path]:
+    try:
+        return sorted(p for p in folder.iterdir() if p.suffix.lower() in VEHICLE_SUFFIXES and p.is_file())
+    except OSError:  # a folder on the path that does not exist (yet) adds nothing, like PATH
+        return []
+
+
+def _definitions() -> list[NamedProblem]:
+    """Every definition, in catalogue order (bundled, ALLOC_VEHICLE_PATH, entry points), duplicates kept."""
+    bundled = {p.stem: p for p in DATA_DIR.glob("*.toml")}
+    order = [n for n in SEED if n in bundled] + sorted(set(bundled) - set(SEED))
+    out = [NamedProblem(n, f"bundled {bundled[n].name}", _file_loader(bundled[n]), _ALIASES.get(n, ()))
+           for n in order]
+    for folder in filter(None, os.environ.get(VEHICLE_PATH_ENV, "").split(os.pathsep)):
+        out += [NamedProblem(p.stem, str(p), _file_loader(p)) for p in _folder_files(Path(folder))]
+    out += [NamedProblem(ep.name, f"entry point {ep.value}", partial(_load_entry_point, ep))
+            for ep in _entry_points()]
+    return out
+
+
+def _index() -> tuple[dict[str, NamedProblem], dict[str, NamedProblem], dict[str, list[str]]]:
+    """``(entries, by name or alias, clashes)``: a name defined twice is a clash, kept out of both."""
+    entries: dict[str, NamedProblem] = {}
+    by_name: dict[str, NamedProblem] = {}
+    origins: dict[str, list[str]] = {}
+    for entry in _definitions():
+        for key in (entry.name, *entry.aliases):
+            origins.setdefault(key, []).append(entry.origin)
+            by_name.setdefault(key, entry)
+        entries.setdefault(entry.name, entry)
+    clashes = {k: v for k, v in origins.items() if len(v) > 1}
+    return entries, {k: e for k, e in by_name.items() if k not in clashes}, clashes
+
+
+def catalogue() -> dict[str, NamedProblem]:
+    """name -> entry, read now (the environment variable and the installed entry points as they are)."""
+    return _index()[0]
+
+
+def __getattr__(name: str) -> Any:
+    if name == "CATALOGUE":  # the catalogue as it is now (ALLOC_VEHICLE_PATH may change)
+        return catalogue()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def names() -> list[str]:
-    """The catalogue's names (aliases aside), in catalogue order."""
-    return list(CATALOGUE)
+    """The catalogue's names (aliases aside), in catalogue order; no file is read."""
+    return list(catalogue())
 
 
 def lookup(name: str) -> NamedProblem:
     """The entry named ``name`` (or one of its aliases); unknown names list the known ones."""
-    entry = _BY_NAME.get(name) if isinstance(name, str) else None
+    entries, by_name, clashes = _index()
+    if isinstance(name, str) and name in clashes:
+        raise ProblemError(f"vehicle: {name!r} is defined {len(clashes[name])} times ({'; '.join(clashes[name])}); "
+                           "rename all but one", field="vehicle")
+    entry = by_name.get(name) if isinstance(name, str) else None
     if entry is None:
-        raise ProblemError(f"vehicle: unknown {name!r}; known: {', '.join(CATALOGUE)}", field="vehicle")
+        raise ProblemError(f"vehicle: unknown {name!r}; known: {', '.join(entries)}", field="vehicle")
     return entry
 
 
 def problem(name: str) -> Problem:
-    """The allocation problem named ``name`` (see :data:`CATALOGUE`)."""
+    """The allocation problem of the vehicle named ``name`` (see :func:`catalogue`)."""
     return lookup(name).problem()
 
 
 def daisy_groups(name: str) -> list[list[str]]:
-    """Daisy-chain groups (effector names, priority order) of the problem named ``name``."""
-    return [list(g) for g in lookup(name).daisy_groups]
+    """Daisy-chain groups (effector names, priority order) of the vehicle named ``name``.
+
+    Raises OptionError naming ``groups`` for a vehicle that declares none.
+    """
+    groups = lookup(name).daisy_groups
+    if not groups:
+        raise OptionError(f"groups: vehicle {name!r} declares no daisy groups ([methods.daisy] groups)",
+                          field="groups")
+    return [list(g) for g in groups]
+
+
+def get_vehicle(source: str | os.PathLike[str] | Vehicle) -> Vehicle:
+    """The vehicle a ``--vehicle NAME|FILE`` names: a catalogue name (or alias), else a vehicle file.
+
+    A catalogue name wins over a file of that name in the current folder; a path is what
+    has a vehicle file's extension (:data:`VEHICLE_SUFFIXES`), a folder separator, or is a file.
+
+    Raises
+    ------
+    ProblemError
+        field ``vehicle`` for a name that is neither (listing the known names), the file's
+        field path (``effectors[3].rate_max``) for a malformed file.
+    """
+    if isinstance(source, Vehicle):
+        return source
+    if isinstance(source, str):
+        entries, by_name, clashes = _index()
+        if source in by_name or source in clashes:
+            return lookup(source).vehicle()
+    if not isinstance(source, (str, os.PathLike)):
+        raise ProblemError(f"vehicle: expected a name or a path, got {type(source).__name__}", field="vehicle")
+    path = Path(source)
+    if path.suffix.lower() in VEHICLE_SUFFIXES or os.sep in str(source) or path.is_file():
+        return load_vehicle(path)
+    raise ProblemError(f"vehicle: unknown {str(source)!r}; known: {', '.join(entries)}; or a vehicle file "
+                       f"({', '.join(VEHICLE_SUFFIXES)})", field="vehicle")
+
+
+def _needs_from_vehicle(method: str) -> list[str]:
+    """Options without which ``method`` silently becomes another method on a vehicle.
+
+    Declared by the option's type: an effector-groups option left at its default ``None``
+    makes ``daisy`` one group, i.e. ``pinv_scale``; no other default changes what a method is.
+    """
+    from .registry import get_method
+
+    spec = get_method(method).options
+    return [name for name, opt in spec.items() if opt.type == "groups" and opt.default is None]
+
+
+def method_options(vehicle: str | os.PathLike[str] | Vehicle, method: str,
+                   options: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """The options every tool gives ``method`` on ``vehicle``: ``{**vehicle defaults, **options}``.
+
+    The vehicle's defaults are its ``[methods.<method>]`` table; the caller's ``options``
+    override them one by one.
+
+    Raises
+    ------
+    OptionError
+        naming the option (``groups``) when neither the vehicle nor ``options`` give one the
+        method cannot do without (:func:`_needs_from_vehicle`); UnknownMethodError for an
+        unregistered method.
+    """
+    v = get_vehicle(vehicle)
+    merged = {**v.method_options(method), **(options or {})}
+    for name in _needs_from_vehicle(method):
+        if merged.get(name) is None:
+            raise OptionError(
+                f"{name}: method {method!r} needs effector {name} and vehicle {v.name!r} declares none; give "
+                f"--option {name}='[[...], ...]' or add [methods.{method}] {name} = [...] to its file", field=name)
+    return merged

@@ -59,8 +59,12 @@ def test_harv_ganging_is_eq_4_19():
 
 
 # ------------------------------------------------------------------ the catalogue
+SEED_NAMES = ["ice", "ice-design", "ice-mid", "harv"]
+EXAMPLES = ["hexa-x", "tailless"]
+
+
 def test_every_command_names_the_same_problems_the_same_way():
-    """alloc allocate --vehicle, alloc ams --problem and the sweep use one catalogue."""
+    """alloc allocate --vehicle, alloc ams --vehicle and the sweep use one catalogue."""
     import json
 
     from typer.testing import CliRunner
@@ -71,16 +75,31 @@ def test_every_command_names_the_same_problems_the_same_way():
 
     runner = CliRunner()
     listed = json.loads(runner.invoke(app, ["vehicles", "--json"]).output)
-    assert [row["name"] for row in listed] == vehicles.names() == ["ice", "ice-design", "ice-mid", "harv"]
+    assert [row["name"] for row in listed] == vehicles.names() == SEED_NAMES + EXAMPLES
     for name in vehicles.names() + ["harv_latdir"]:
         p = vehicles.problem(name)
         out = runner.invoke(app, ["allocate", "--vehicle", name, "--v", ",".join(["0.1"] * p.k), "--json"])
         assert out.exit_code == 0, out.output
         assert json.loads(out.output)["names"] == list(p.names)
-        out = runner.invoke(ams_app, ["summary", "--problem", name, "--json"])
+        out = runner.invoke(ams_app, ["summary", "--vehicle", name, "--json"])
         assert out.exit_code == 0, out.output
     bad = runner.invoke(app, ["allocate", "--vehicle", "f22", "--v", "0"], env={"COLUMNS": "200"})
-    assert bad.exit_code == 2 and "unknown 'f22'; known: ice, ice-design, ice-mid, harv" in bad.output
+    assert bad.exit_code == 2
+    assert "unknown 'f22'; known: ice, ice-design, ice-mid, harv, hexa-x, tailless" in bad.output
+
+
+@pytest.mark.parametrize("name", SEED_NAMES)
+def test_bundled_files_are_the_seed_transcription_bit_for_bit(name):
+    """The catalogue reads the bundled files; they carry the seed's problems and groups exactly."""
+    from alloc import vehicles
+
+    make, groups = vehicles.SEED[name]
+    p, q = vehicles.problem(name), make()
+    for f in ("B", "umin", "umax", "up", "Wu", "Wv", "rate_min", "rate_max"):
+        a, b = getattr(p, f), getattr(q, f)
+        assert a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes(), f
+    assert p.names == q.names and p.axes == q.axes
+    assert vehicles.daisy_groups(name) == [list(g) for g in groups]
 
 
 def test_catalogue_entries_and_aliases():
@@ -90,11 +109,16 @@ def test_catalogue_entries_and_aliases():
     np.testing.assert_array_equal(vehicles.problem("ice-design").B, vehicles.ice(design=True).B)
     mid = vehicles.problem("ice-mid")
     np.testing.assert_array_equal(mid.up[mid.umin >= 0], 30.0)  # AMT/SSD 0..60 deg prefer mid-range
-    for name in vehicles.names():
+    for name in SEED_NAMES + ["tailless"]:
         p = vehicles.problem(name)
         groups = vehicles.daisy_groups(name)
         assert sorted(e for g in groups for e in g) == sorted(p.names)  # each effector in one group
         assert alloc.allocate(p, p.B @ p.up, "daisy", groups=groups).status.value == "exact"
+    with pytest.raises(alloc.OptionError, match="groups: vehicle 'hexa-x' declares no daisy groups") as info:
+        vehicles.daisy_groups("hexa-x")
+    assert info.value.field == "groups"
     with pytest.raises(alloc.ProblemError, match="vehicle: unknown 'x'") as info:
         vehicles.problem("x")
     assert info.value.field == "vehicle"
+    assert vehicles.CATALOGUE["harv"].aliases == ("harv_latdir", "harv-latdir")
+    assert vehicles.lookup("harv_latdir").title == "F-18/HARV lat-dir"

@@ -1,48 +1,63 @@
-"""``alloc ams ...``: AMS summary, pictures and coverage tables (mounted by ``alloc.cli``)."""
+"""``alloc ams ...``: AMS summary, pictures and coverage tables (mounted by ``alloc.cli``).
+
+Every sub-command reads one vehicle, ``--vehicle NAME|FILE`` (default ``ice``), as every
+``alloc`` command does; the vehicle's ``[methods.<method>]`` defaults (ICE's daisy groups)
+apply.  ``--problem NAME`` is the former spelling: still accepted, with a one-line notice on
+stderr once the vehicle is read, and refused together with ``--vehicle``.
+"""
 
 from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any, Optional
 
 import typer
 
 from .. import vehicles
-from ..cli import OneLineErrors, output_file
-from ..exceptions import ProblemError
-from ..problem import Problem
+from ..cli import VEHICLE_HELP, OneLineErrors, load_vehicle_option, output_file
+from ..exceptions import AllocError
 from ..registry import DEFAULT_METHOD
 from ..registry import methods as registered_methods
+from ..vehicle_file import Vehicle
 
 app = typer.Typer(cls=OneLineErrors, help="Attainable moment set: geometry summary, 3-D pictures, method coverage.",
                   no_args_is_help=True)
 
 #: largest Monte Carlo sample of one command (memory: about 8 (k + m) bytes per demand, twice)
 MAX_SAMPLES = 1_000_000
+#: the vehicle a sub-command reads when none is named
+DEFAULT_VEHICLE = "ice"
 _SEED = typer.Option(0, min=0, max=2**63 - 1, help="seed of the Monte Carlo sampler (>= 0)")
-
-def get_problem(name: str) -> Problem:
-    try:
-        return vehicles.problem(name)
-    except ProblemError as exc:
-        raise typer.BadParameter(str(exc), param_hint="--problem") from None
+_VEHICLE = typer.Option(None, "--vehicle", metavar="NAME|FILE", help=f"{VEHICLE_HELP}; default {DEFAULT_VEHICLE}")
+_PROBLEM = typer.Option(None, "--problem", metavar="NAME",
+                        help="deprecated spelling of --vehicle (prints a notice); not with --vehicle")
 
 
-def default_options(problem: str, method: str) -> dict:
-    """Daisy chaining needs groups: the catalogue's, surfaces first (Eq 1.25)."""
-    return {"groups": vehicles.daisy_groups(problem)} if method == "daisy" else {}
+def get_vehicle(vehicle: str | None, problem: str | None) -> Vehicle:
+    """The vehicle of ``--vehicle`` or the deprecated ``--problem`` (one of them, default ``ice``)."""
+    if vehicle is not None and problem is not None:
+        raise typer.BadParameter("give --vehicle only (--problem is its deprecated spelling)",
+                                 param_hint="--vehicle/--problem")
+    if problem is not None:  # the notice after the vehicle is read: an invalid name stays a one-line error
+        v = load_vehicle_option(problem, "--problem")
+        typer.echo("alloc ams: note: --problem is deprecated; use --vehicle NAME|FILE", err=True)
+        return v
+    return load_vehicle_option(DEFAULT_VEHICLE if vehicle is None else vehicle)
 
 
-_PROBLEM_HELP = "a named problem: " + " | ".join(vehicles.names())
+def default_options(vehicle: Vehicle, method: str) -> dict[str, Any]:
+    """The vehicle's defaults for ``method`` (:func:`alloc.vehicles.method_options`)."""
+    return vehicles.method_options(vehicle, method)
 
 
 @app.command()
-def summary(problem: str = typer.Option("ice", help=_PROBLEM_HELP),
+def summary(vehicle: Optional[str] = _VEHICLE, problem: Optional[str] = _PROBLEM,
             as_json: bool = typer.Option(False, "--json", help="print JSON")) -> None:
     """Volume, facets, vertices of the AMS (volume in the product of the axes' units)."""
     from .geometry import AttainableSet
 
-    s = AttainableSet(get_problem(problem)).summary()
+    s = AttainableSet(get_vehicle(vehicle, problem).problem()).summary()
     if as_json:
         typer.echo(json.dumps(s, indent=2))
         return
@@ -51,7 +66,7 @@ def summary(problem: str = typer.Option("ice", help=_PROBLEM_HELP),
 
 
 @app.command()
-def plot(problem: str = typer.Option("ice", help=_PROBLEM_HELP),
+def plot(vehicle: Optional[str] = _VEHICLE, problem: Optional[str] = _PROBLEM,
          method: str = typer.Option(DEFAULT_METHOD, help="method whose reached region is drawn inside "
                                     "(see `alloc methods`)"),
          out: Path = typer.Option(..., "--out", help="PNG file to write (required; an existing file is refused "
@@ -64,14 +79,16 @@ def plot(problem: str = typer.Option("ice", help=_PROBLEM_HELP),
     from .plot import plot_ams
 
     output_file(out, force, "--out")
-    plot_ams(get_problem(problem), method, out, samples=samples, seed=seed, name=vehicles.lookup(problem).title,
-             **default_options(problem, method))
+    v = get_vehicle(vehicle, problem)
+    options = default_options(v, method)
+    plot_ams(v.problem(), method, out, samples=samples, seed=seed, name=v.description or v.name, **options)
     typer.echo(f"wrote {out}")
 
 
 @app.command("coverage")
-def coverage_cmd(problem: str = typer.Option("ice", help=_PROBLEM_HELP),
-                 method: list[str] = typer.Option(None, help="methods (default: all registered)"),
+def coverage_cmd(vehicle: Optional[str] = _VEHICLE, problem: Optional[str] = _PROBLEM,
+                 method: list[str] = typer.Option(None, help="methods (default: all registered that the vehicle "
+                                                  "can run; a skipped one is named on stderr)"),
                  samples: int = typer.Option(20_000, min=1, max=MAX_SAMPLES,
                                              help="Monte Carlo sample size (affine methods: exact polytope, "
                                                   "no sample)"),
@@ -80,9 +97,17 @@ def coverage_cmd(problem: str = typer.Option("ice", help=_PROBLEM_HELP),
     """Fraction of the AMS volume each method reaches exactly (Bordignon-Durham), in per cent."""
     from .coverage import coverage
 
-    p = get_problem(problem)
-    rows = [coverage(p, m, samples=samples, seed=seed, **default_options(problem, m))
-            for m in (method or registered_methods())]
+    v = get_vehicle(vehicle, problem)
+    p = v.problem()
+    runs: list[tuple[str, dict[str, Any]]] = []
+    for m in method or registered_methods():
+        try:
+            runs.append((m, default_options(v, m)))
+        except AllocError as exc:
+            if method:  # asked for by name: an error, as everywhere
+                raise
+            typer.echo(f"alloc ams coverage: note: {m} skipped on {v.name}: {exc}", err=True)
+    rows = [coverage(p, m, samples=samples, seed=seed, **options) for m, options in runs]
     if as_json:
         typer.echo(json.dumps([r.to_dict() for r in rows], indent=2))
         return
