@@ -48,33 +48,35 @@ _NOT_REAL = {"c": "complex", "b": "boolean", "U": "text", "S": "text", "M": "dat
              "V": "structured"}
 
 
-def _not_real(value: Any) -> str | None:
-    """What the first element of ``value`` that is not a real number is, or ``None``.
+_PLAIN = {float, int}
 
-    Walks nested lists and tuples (and object arrays) without recursion; a numeric array
-    inside is judged by its dtype.  Python ``bool`` is refused although it is an ``int``:
-    ``True`` as an effectiveness or a limit is a caller's mistake, never a number.
+
+def _not_real(value: Any) -> str | None:
+    """What the first kind of element of ``value`` that is not a real number is, or ``None``.
+
+    Judged by type, once per distinct element type (the elements are gathered by numpy into
+    an object array, in C); nested sequences that numpy cannot make regular are left to the
+    conversion to report.  Python ``bool`` is refused although it is an ``int``: ``True`` as
+    an effectiveness or a limit is a caller's mistake, never a number.
     """
-    stack = [value]
-    while stack:
-        x = stack.pop()
-        if isinstance(x, (list, tuple)):
-            stack.extend(x)
-        elif isinstance(x, np.ndarray):
-            if x.dtype.kind == "O":
-                stack.extend(x.ravel().tolist())
-            elif x.dtype.kind in _NOT_REAL:
-                return _NOT_REAL[x.dtype.kind]
-        elif isinstance(x, (bool, np.bool_)):
+    if isinstance(value, np.ndarray) and value.dtype.kind != "O":
+        return _NOT_REAL.get(value.dtype.kind)
+    if type(value) in (list, tuple) and set(map(type, value)) <= _PLAIN:
+        return None  # a flat list of floats (a demand): no object array
+    try:
+        cells = np.array(value, dtype=object).ravel()
+    except (TypeError, ValueError):
+        return None  # not an array at all: the conversion reports it
+    for t in set(map(type, cells)):
+        if issubclass(t, (bool, np.bool_)):
             return "boolean"
-        elif isinstance(x, Real):
+        if issubclass(t, Real) or issubclass(t, (list, tuple, np.ndarray)):
             continue
-        elif isinstance(x, (complex, np.complexfloating)):
+        if issubclass(t, (complex, np.complexfloating)):
             return "complex"
-        elif isinstance(x, (str, bytes)):
+        if issubclass(t, (str, bytes)):
             return "text"
-        else:
-            return "null" if x is None else type(x).__name__
+        return "null" if t is type(None) else t.__name__
     return None
 
 
