@@ -300,7 +300,7 @@ def test_largest_admitted_facet_builds_keep_the_bounds(name, k, m, options):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(("k", "m"), [(16, 128), (32, 64), (6, 512), (32, 512)])
+@pytest.mark.parametrize(("k", "m"), [(16, 128), (32, 64), (32, 150), (6, 250), (6, 512), (32, 512)])
 def test_calls_at_the_caps_finish_within_their_declarations(k, m):
     rng = np.random.default_rng(7 * k + m)
     p = _problem(rng, k, m)

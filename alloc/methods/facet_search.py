@@ -583,7 +583,8 @@ class SphericalTable(FacetSearch):
         the ray casts' temporaries (chunks of 2 million tile tests: 41 MiB measured at m = 20)."""
         res = options.get("resolution", cls.options["resolution"].default)
         extra = 0
-        if problem.k == 3 and isinstance(res, (int, np.integer)) and not isinstance(res, (bool, np.bool_)) and res > 0:
+        if (problem.k == 3 and isinstance(res, (int, np.integer)) and not isinstance(res, (bool, np.bool_))
+                and res > 0 and not cls.redirected(problem, options)):
             extra = 8 * 10 * int(res) ** 2 + _TABLE_TEMPORARY_BYTES
         return super().build_memory(problem, **options) + extra
 
