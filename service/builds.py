@@ -9,17 +9,22 @@ holder would then stall everybody), a build process can: it holds no lock the se
 needs and runs at niceness +:data:`BUILD_NICE` under ``SCHED_IDLE`` (Linux), so the kernel
 gives the event's threads the CPU first.
 
-Two lanes, each bounded in concurrency and queue (429 beyond):
+Three lanes, each bounded in concurrency and queue (429 beyond), each served by priority
+(:data:`REBUILD` before :data:`REQUEST`):
 
-* ``process``: builds predicted costly (:func:`service.cost.is_costly`:
-  facet enumerations, direction tables) and other bounded work (AMS summaries), in
-  ``ALLOC_BUILD_WORKERS`` spawned processes;
-* ``thread``: every other build (an SVD or a QP set-up of at most 6 x 64: milliseconds),
-  2 threads of the service process.
+* ``process``: builds predicted costly (:func:`service.cost.is_costly`: facet enumerations,
+  direction tables), batches predicted costly (:func:`service.cost.is_costly_batch`), and
+  other bounded work (AMS summaries), in ``ALLOC_BUILD_WORKERS`` spawned processes.  A
+  costly rebuild after an event waits for no queued request, only for the job running
+  (at most ``ALLOC_BUILD_BUDGET_S`` or ``ALLOC_BATCH_BUDGET_S``, both priced before they start);
+* ``thread``: every other build for a request (an SVD or a QP set-up of at most 6 x 64:
+  milliseconds) and cheap batches, 2 threads of the service process;
+* ``rebuild``: the cheap rebuilds after an event, 2 threads that no request can use, so
+  the allocators an event invalidated are rebuilt however busy the other lanes are.
 
-The build processes start with the first costly build (a few seconds: imports, and the
-numba kernels the service compiled at its start-up, loaded from numba's cache) and stop
-with the store (terminated, not waited for) or with the service process.
+The build processes are started with the service, in the background (a few seconds:
+imports, and the numba kernels loaded from their cache), and stop with the store
+(terminated, not waited for) or with the service process.
 
 An allocator comes back from the build process only when it is small enough to be worth
 keeping (at most :data:`TRANSFER_BYTES`, and what the cache would keep for its key):
@@ -31,6 +36,8 @@ the build process and only the result comes back.
 from __future__ import annotations
 
 import asyncio
+import heapq
+import itertools
 import logging
 import os
 import pickle
@@ -49,11 +56,12 @@ import numpy as np
 import alloc
 
 from .config import OPTION_CAPS
-from .cost import FACET_SECONDS, build_seconds, estimate_bytes
+from .cost import FACET_SECONDS, answer_bytes, batch_seconds, build_seconds, call_seconds, estimate_bytes
+from .responses import batch_json
 from .errors import InvalidRequest, ServiceUnavailable, TooManyRequests, field_error
 
-__all__ = ["Builder", "Built", "Call", "build", "build_allocator", "check_build_cost", "BUILD_NICE",
-           "TRANSFER_BYTES"]
+__all__ = ["Builder", "Built", "Call", "build", "build_allocator", "check_build_cost", "check_batch_cost", "BUILD_NICE",
+           "TRANSFER_BYTES", "REBUILD", "REQUEST"]
 
 _log = logging.getLogger("service")
 #: niceness added to the build processes (over the service's own)
@@ -93,6 +101,31 @@ def check_build_cost(problem: alloc.Problem, method: str, options: dict[str, Any
     raise _reject("method", f"{cost}); use 'da' (the same allocation as an LP)")
 
 
+def check_batch_cost(problem: alloc.Problem, method: str, options: dict[str, Any], rows: int, budget: float,
+                     max_answer: int) -> float:
+    """Refuse, before it starts, a batch predicted to take over ``budget`` seconds (its build
+    plus ``rows`` calls at the method's declared per-call cost) or to answer more than
+    ``max_answer`` bytes; return the predicted seconds."""
+    seconds = check_build_cost(problem, method, options, budget)
+    if method not in alloc.methods():
+        return seconds
+    per_call = call_seconds(problem, method, options)
+    seconds = batch_seconds(problem, method, options, rows)
+    if seconds > budget:
+        fits = max(0, int((budget - (seconds - rows * per_call)) / per_call))
+        raise _reject("V", f"{method}: predicted batch time {seconds:.3g} s ({rows:,} rows x {per_call * 1e3:.3g} ms, "
+                           f"the method's declared worst-case call at m = {problem.m}, k = {problem.k}) exceeds the "
+                           f"service's batch budget of {budget:g} s (ALLOC_BATCH_BUDGET_S); send at most {fits:,} "
+                           f"rows per request")
+    size = answer_bytes(problem, rows)
+    if size > max_answer:
+        fits = max(0, int(rows * (max_answer - 1024) / (size - 1024)))
+        raise _reject("V", f"predicted answer of {size:,} bytes for {rows:,} rows at m = {problem.m} exceeds the "
+                           f"service's answer limit of {max_answer:,} bytes (ALLOC_MAX_ANSWER_BYTES); send at most "
+                           f"{fits:,} rows per request")
+    return seconds
+
+
 def build_allocator(problem: alloc.Problem, method: str, options: dict[str, Any], budget: float) -> alloc.Allocator:
     """``alloc.make_allocator`` after the cost check, with bad option *values* reported as 422.
 
@@ -113,17 +146,20 @@ def build_allocator(problem: alloc.Problem, method: str, options: dict[str, Any]
 
 @dataclass(frozen=True)
 class Call:
-    """What a request wants of an allocator: one demand, or a batch (``V``)."""
+    """What a request wants of an allocator: one demand, or a batch (``V``, answered as the
+    JSON bytes of its :class:`~service.schemas.BatchOut` with the fields ``extra``)."""
 
     v: np.ndarray | None = None
     u_prev: np.ndarray | None = None
     dt: float | None = None
     V: np.ndarray | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
     token: str = field(default_factory=lambda: uuid.uuid4().hex)
 
     def run(self, allocator: alloc.Allocator) -> Any:
         if self.V is not None:
-            return allocator.batch(self.V)
+            # serialised where it ran: a 16 MB answer built on the event loop stalled it
+            return batch_json(allocator.batch(self.V), **self.extra)
         return allocator(self.v, u_prev=self.u_prev, dt=self.dt)
 
 
@@ -189,17 +225,30 @@ def _init_build_process(parent: int, nice: int) -> None:
         pass  # niceness alone
 
 
-class _Lane:
-    """One bounded pool (threads or processes) with a bounded queue."""
+#: priorities of work in a lane's queue, most urgent first: the rebuild after an event is
+#: authenticated work that every allocation of the vehicle waits for; everything else is not
+REBUILD, REQUEST = 0, 1
 
-    def __init__(self, name: str, workers: int, queue: int) -> None:
-        self.name, self.workers, self.limit = name, workers, workers + queue
+
+class _Lane:
+    """One bounded pool (threads or processes) with a bounded queue, served by priority.
+
+    At most ``workers`` jobs are handed to the pool at a time; the rest wait here in a heap
+    (priority, arrival), so a :data:`REBUILD` job starts before every :data:`REQUEST` job
+    queued ahead of it, as soon as a worker is free (a running job is not interrupted).
+    """
+
+    def __init__(self, name: str, kind: str, workers: int, queue: int) -> None:
+        self.name, self.kind, self.workers, self.limit = name, kind, workers, workers + queue
         self.pool: ThreadPoolExecutor | ProcessPoolExecutor | None = None
-        self.inflight = 0
+        self.inflight = 0  # queued here + handed to the pool
+        self.running = 0  # handed to the pool
+        self._waiting: list[tuple[int, int, Future[Any], Callable[..., Any], tuple[Any, ...]]] = []
+        self._arrivals = itertools.count()
 
     def executor(self) -> ThreadPoolExecutor | ProcessPoolExecutor:
         if self.pool is None:
-            if self.name == "process":
+            if self.kind == "process":
                 self.pool = ProcessPoolExecutor(self.workers, mp_context=get_context("spawn"),
                                                 initializer=_init_build_process,
                                                 initargs=(os.getpid(), BUILD_NICE))
@@ -207,44 +256,97 @@ class _Lane:
                 self.pool = ThreadPoolExecutor(self.workers, thread_name_prefix=f"alloc-{self.name}")
         return self.pool
 
+    def enqueue(self, priority: int, fn: Callable[..., Any], args: tuple[Any, ...]) -> Future[Any]:
+        """Queue ``fn(*args)`` (the caller holds the builder's lock); its future resolves with the job."""
+        outer: Future[Any] = Future()
+        heapq.heappush(self._waiting, (priority, next(self._arrivals), outer, fn, args))
+        self.inflight += 1
+        return outer
+
+    def dispatch(self, lock: Any) -> None:
+        """Hand waiting jobs to free workers, most urgent first (the caller holds ``lock``)."""
+        while self._waiting and self.running < self.workers:
+            _, _, outer, fn, args = heapq.heappop(self._waiting)
+            if not outer.set_running_or_notify_cancel():
+                self.inflight -= 1
+                continue
+            try:
+                inner = self.executor().submit(fn, *args)
+            except BrokenProcessPool:  # a build process died (killed, out of memory): start new ones
+                self.pool = None
+                inner = self.executor().submit(fn, *args)
+            self.running += 1
+
+            def finished(done: Future[Any], outer: Future[Any] = outer) -> None:
+                with lock:
+                    self.running -= 1
+                    self.inflight -= 1
+                    self.dispatch(lock)
+                if done.cancelled():
+                    outer.set_exception(BrokenProcessPool("the pool stopped before the job ran"))
+                elif (exc := done.exception()) is not None:
+                    outer.set_exception(exc)
+                else:
+                    outer.set_result(done.result())
+            inner.add_done_callback(finished)
+
+    def drop_waiting(self) -> None:
+        """Cancel the queued jobs (shutdown)."""
+        for _, _, outer, _, _ in self._waiting:
+            if outer.cancel():
+                self.inflight -= 1
+        self._waiting.clear()
+
 
 class Builder:
-    """The two lanes (module docstring), single-flight per key."""
+    """The lanes (module docstring), single-flight per key.
+
+    ``rebuild``: 2 threads that only the rebuilds after an event use (cheap ones), so no
+    request can queue ahead of them; ``thread``: cheap builds and cheap batches for requests;
+    ``process``: costly builds (a costly rebuild first), costly batches, AMS summaries.
+    """
 
     def __init__(self, processes: int, queue: int) -> None:
-        self._lanes = {"process": _Lane("process", processes, queue), "thread": _Lane("thread", 2, 64)}
+        self._lanes = {"process": _Lane("process", "process", processes, queue),
+                       "thread": _Lane("thread", "thread", 2, 64),
+                       "rebuild": _Lane("rebuild", "thread", 2, 64)}
         self._inflight: dict[Hashable, Future[Any]] = {}
-        self._lock = threading.Lock()
+        self._lock = threading.RLock()  # a job done at once runs its callbacks under it
 
     def submit(self, key: Hashable, lane_name: str, fn: Callable[..., Any], *args: Any,
-               then: Callable[[Future[Any]], None] | None = None) -> Future[Any]:
-        """``fn(*args)`` on lane ``"process"`` (``fn`` and ``args`` picklable) or ``"thread"``;
-        a second submit of a ``key`` in flight gets the first one's future.  ``then(future)``
-        runs once when it is done (only for the submit that started it)."""
+               then: Callable[[Future[Any]], None] | None = None, priority: int = REQUEST) -> Future[Any]:
+        """``fn(*args)`` on lane ``"process"`` (``fn`` and ``args`` picklable), ``"thread"`` or
+        ``"rebuild"``; a second submit of a ``key`` in flight gets the first one's future.
+        ``then(future)`` runs once when it is done (only for the submit that started it)."""
         lane = self._lanes[lane_name]
         with self._lock:
             fut = self._inflight.get(key)
             if fut is not None:
                 return fut
             if lane.inflight >= lane.limit:
-                raise TooManyRequests(f"the service is running {lane.inflight} builds in its {lane.name} lane "
+                raise TooManyRequests(f"the service is running {lane.inflight} jobs in its {lane.name} lane "
                                       f"(the most it queues); retry shortly")
-            try:
-                fut = lane.executor().submit(fn, *args)
-            except BrokenProcessPool:  # a build process died (killed, out of memory): start new ones
-                lane.pool = None
-                fut = lane.executor().submit(fn, *args)
+            fut = lane.enqueue(priority, fn, args)
             self._inflight[key] = fut
-            lane.inflight += 1
 
         def done(finished: Future[Any]) -> None:
             if then is not None:
                 then(finished)
             with self._lock:
                 self._inflight.pop(key, None)
-                lane.inflight -= 1
         fut.add_done_callback(done)
+        with self._lock:
+            lane.dispatch(self._lock)
         return fut
+
+    def start_processes(self) -> None:
+        """Start the build processes now (they warm up in the background, seconds under load),
+        so the first costly build or batch does not wait for them."""
+        with self._lock:
+            lane = self._lanes["process"]
+            pool = lane.executor()
+        for _ in range(lane.workers):
+            pool.submit(os.getpid)
 
     @staticmethod
     async def outcome(fut: Future[Any]) -> Any:
@@ -269,6 +371,7 @@ class Builder:
         with self._lock:
             pools = [lane.pool for lane in self._lanes.values()]
             for lane in self._lanes.values():
+                lane.drop_waiting()
                 lane.pool = None
         for pool in pools:
             if pool is None:

@@ -31,7 +31,12 @@ import alloc
 from alloc.methods.facet_search import FACET_LIMIT, FACET_SECONDS, facet_build_seconds
 from alloc.registry import CHEAP_BUILD_SECONDS, get_method
 
-__all__ = ["FACET_SECONDS", "DEFAULT_BUILD_BUDGET_S", "build_seconds", "estimate_bytes", "is_costly"]
+__all__ = ["FACET_SECONDS", "DEFAULT_BUILD_BUDGET_S", "build_seconds", "call_seconds", "batch_seconds",
+           "answer_bytes", "estimate_bytes", "is_costly", "is_costly_batch", "CHEAP_BATCH_SECONDS"]
+
+#: a batch predicted (build + rows x per-call cost) above this runs in the build process, not
+#: on a service thread: a thread shares the GIL with the event loop for as long as it runs
+CHEAP_BATCH_SECONDS = 0.02
 
 #: the default build budget: the declared build time of a facet enumeration at the library's
 #: facet limit, so the service admits every build the library's ``backend="auto"`` would choose
@@ -42,6 +47,35 @@ def build_seconds(problem: alloc.Problem, method: str, options: Mapping[str, Any
     """Predicted build time of ``make_allocator(problem, method, **options)``: the method's
     declared :meth:`~alloc.registry.Method.build_cost` (seconds, the project's machine)."""
     return float(get_method(method).build_cost(problem, **dict(options)))
+
+
+def call_seconds(problem: alloc.Problem, method: str, options: Mapping[str, Any]) -> float:
+    """Declared worst-case seconds of one call of the built allocator: the method's
+    :meth:`~alloc.registry.Method.call_cost` (the project's machine, conservative)."""
+    return float(get_method(method).call_cost(problem, **dict(options)))
+
+
+def batch_seconds(problem: alloc.Problem, method: str, options: Mapping[str, Any], rows: int) -> float:
+    """Predicted time of a batch of ``rows`` demands: the build plus ``rows`` declared calls."""
+    return build_seconds(problem, method, options) + rows * call_seconds(problem, method, options)
+
+
+#: bytes of one number in an answer, at most: shortest round-trip float (``-1.2345678901234567e-123``,
+#: 24 characters) and its separator
+_NUMBER_BYTES = 26
+#: bytes of one row's status (``"unattainable",``) and the rows' brackets
+_ROW_BYTES = 16 + 3 * 4
+
+
+def answer_bytes(problem: alloc.Problem, rows: int) -> int:
+    """Largest JSON answer of a batch of ``rows`` (``u``: m numbers a row; ``v_achieved`` and
+    ``unallocated``: k each; a status), an upper bound computed before the batch runs."""
+    return 1024 + rows * ((problem.m + 2 * problem.k) * _NUMBER_BYTES + _ROW_BYTES)
+
+
+def is_costly_batch(seconds: float) -> bool:
+    """A batch that goes to the build process (predicted above :data:`CHEAP_BATCH_SECONDS`)."""
+    return seconds > CHEAP_BATCH_SECONDS
 
 
 def is_costly(seconds: float) -> bool:

@@ -18,7 +18,10 @@ from .config import Settings
 from .errors import Unauthorized
 from .store import Idempotency, VehicleStore
 
-__all__ = ["StoreDep", "SettingsDep", "IdempotencyKey", "require_api_key", "idempotency"]
+__all__ = ["StoreDep", "SettingsDep", "IdempotencyKey", "require_api_key", "idempotency", "end_parse_turn"]
+
+#: the scope key service.main.BodySizeLimit stores a request's parse-turn release under
+PARSE_TURN_KEY = "alloc.parse_turn"
 
 #: the ``Idempotency-Key`` request header of the write endpoints (printable ASCII, no spaces)
 IdempotencyKey = Annotated[str | None, Header(
@@ -61,3 +64,11 @@ def idempotency(request: Request, key: str | None, body: BaseModel) -> Idempoten
     scope = f"{request.method} {request.url.path.rstrip('/')}"
     digest = hashlib.sha256(f"{scope}\n".encode() + body.model_dump_json().encode()).hexdigest()
     return Idempotency(scope, key, digest)
+
+
+def end_parse_turn(request: Request) -> None:
+    """The request's body is parsed and validated: let the next large body be parsed
+    (:class:`service.main.BodySizeLimit`).  Routes taking large bodies call it first."""
+    end = request.scope.get(PARSE_TURN_KEY)
+    if end is not None:
+        end()

@@ -29,7 +29,7 @@ from .schemas import EVENT_KINDS
 
 __all__ = [
     "ServiceError", "NotFound", "Conflict", "Unauthorized", "PayloadTooLarge", "InvalidRequest", "TooManyRequests",
-    "ServiceUnavailable", "problem_response", "install_handlers", "PROBLEM_JSON",
+    "ServiceUnavailable", "Overloaded", "NotReady", "problem_response", "install_handlers", "PROBLEM_JSON",
 ]
 
 PROBLEM_JSON = "application/problem+json"
@@ -64,6 +64,10 @@ class TooManyRequests(ServiceError, status=429, slug="too-many-requests", title=
     """The build lanes and their queues are full (a bounded resource, not an error of the request)."""
 class ServiceUnavailable(ServiceError, status=503, slug="service-unavailable", title="Build process unavailable"):
     """A build process stopped (killed, out of memory) during the request's build."""
+class Overloaded(ServiceError, status=503, slug="overloaded", title="Service at a capacity limit"):
+    """A bounded resource (answer bytes held for clients) is spent; retry shortly."""
+class NotReady(ServiceError, status=503, slug="not-ready", title="Not ready"):
+    """This worker is starting or shutting down (``/v1/ready``)."""
 class PayloadTooLarge(ServiceError, status=413, slug="payload-too-large", title="Request body too large"):
     """A body over ``ALLOC_MAX_BODY_BYTES``."""
 class InvalidRequest(ServiceError, status=422, slug="invalid-request", title="Invalid request"):
@@ -83,10 +87,11 @@ def field_error(field: str, reason: str, *, prefix: Sequence[str | int] = ("body
 
 def problem_response(
     status: int, slug: str, title: str, detail: str,
-    errors: Sequence[dict[str, Any]] = (), headers: dict[str, str] | None = None,
+    errors: Sequence[dict[str, Any]] = (), headers: dict[str, str] | None = None, **members: Any,
 ) -> JSONResponse:
+    """A problem document; ``members`` are its extension members (RFC 9457 section 3.2)."""
     content = {"type": f"urn:alloc:problem:{slug}", "title": title, "status": status, "detail": detail,
-               "errors": list(errors)}
+               "errors": list(errors), **members}
     return JSONResponse(content, status_code=status, media_type=PROBLEM_JSON, headers=headers)
 
 
@@ -140,13 +145,15 @@ def _strip_tags(loc: list[str | int], body: Any) -> list[str | int]:
     return out
 
 
-def _validation_errors(exc: RequestValidationError) -> list[dict[str, Any]]:
+def _validation_errors(exc: RequestValidationError, limit: int) -> tuple[list[dict[str, Any]], int]:
+    """The first ``limit`` errors in problem form, and how many there were."""
     body = getattr(exc, "body", None)
+    errors = exc.errors()
     out = []
-    for err in exc.errors():
+    for err in errors[:limit]:
         loc = [p for p in err.get("loc", ()) if isinstance(p, (str, int))]
         out.append(_error(_strip_tags(loc, body), str(err.get("msg", "invalid value"))))
-    return out
+    return out, len(errors)
 
 
 def install_handlers(app: FastAPI) -> None:
@@ -167,9 +174,15 @@ def install_handlers(app: FastAPI) -> None:
 
     @app.exception_handler(RequestValidationError)
     async def _validation(request: Request, exc: RequestValidationError) -> JSONResponse:
-        errors = _validation_errors(exc)
+        # bounded: a body can carry tens of thousands of errors, and listing them all held the
+        # event loop for seconds; the first ones and the count say what is wrong
+        limit = getattr(getattr(request.app.state, "settings", None), "max_validation_errors", 20)
+        errors, total = _validation_errors(exc, limit)
         detail = "; ".join(f"{'/'.join(map(str, e['loc']))}: {e['reason']}" for e in errors[:5])
-        return problem_response(422, "validation-error", "Request validation failed", detail, errors)
+        if total > len(errors):
+            detail += f" (the first {len(errors)} of {total} errors are listed)"
+        return problem_response(422, "validation-error", "Request validation failed", detail, errors,
+                                error_count=total)
 
     @app.exception_handler(StarletteHTTPException)
     async def _http(request: Request, exc: StarletteHTTPException) -> JSONResponse:

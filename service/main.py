@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 import gc
 import logging
 import os
@@ -21,14 +22,15 @@ import alloc
 from . import timing
 from .config import MAX_AXES, MAX_BATCH, MAX_EFFECTORS, Settings
 from .db import make_engine, make_sessionmaker
+from .deps import PARSE_TURN_KEY
 from .docs import install_docs
 from .errors import PROBLEM_JSON, PayloadTooLarge, install_handlers, problem_response
 from .routes import allocation, ams, methods, system, vehicles
-from .priority import GATE_STATE_KEY, PriorityGate, PriorityMiddleware
+from .priority import GATE_STATE_KEY, SCOPE_KEY, PriorityGate, PriorityMiddleware
 from .server import GuardedHttpToolsProtocol
 from .store import VehicleStore
 
-__all__ = ["create_app", "serve", "warm_up", "BodySizeLimit", "ServerTiming", "UVICORN_DEFAULTS"]
+__all__ = ["create_app", "serve", "warm_up", "BodySizeLimit", "ServerTiming", "uvicorn_options"]
 
 _log = logging.getLogger("service")
 
@@ -47,16 +49,23 @@ current health, record failures and repairs, read the history.
 """
 
 
+#: a body larger than this takes a parse turn (one at a time) before the application reads it
+HEAVY_BODY_BYTES = 64 * 1024
+
+
 class BodySizeLimit:
     """ASGI middleware: requests whose body exceeds ``limit`` bytes get 413 problem+json.
 
     Checks ``Content-Length`` up front and counts streamed (chunked) bodies, which are
     buffered here (at most ``limit`` bytes) and replayed to the application.  (FastAPI's
     own ``max_body_size`` answers ``text/plain`` when it rejects on ``Content-Length``.)
+    A body over :data:`HEAVY_BODY_BYTES` of a request other than a priority write is parsed
+    in its turn, one at a time, once it has fully arrived (a slow sender holds no turn).
     """
 
     def __init__(self, app: ASGIApp, limit: int) -> None:
         self.app, self.limit = app, limit
+        self._parse_turn: asyncio.Semaphore | None = None
 
     async def _reject(self, scope: Scope, receive: Receive, send: Send, detail: str) -> None:
         err = PayloadTooLarge
@@ -98,7 +107,29 @@ class BodySizeLimit:
                 return {"type": "http.request", "body": body, "more_body": False}
             return await receive()
 
-        await self.app(scope, replay, send)
+        if len(body) <= HEAVY_BODY_BYTES or scope.get(SCOPE_KEY):
+            await self.app(scope, replay, send)
+            return
+        # A large body costs the event loop tens of ms to parse and validate (json.loads of
+        # 0.5 MB: 15-50 ms); one at a time, so a write waits for at most one of them at
+        # each of its steps however many large requests arrive.  The route ends the turn
+        # when it starts (validation done: end_parse_turn), the error handler by returning.
+        if self._parse_turn is None:
+            self._parse_turn = asyncio.Semaphore(1)
+        turn = self._parse_turn
+        await turn.acquire()
+        released = False
+
+        def end_turn() -> None:
+            nonlocal released
+            if not released:
+                released = True
+                turn.release()
+        scope[PARSE_TURN_KEY] = end_turn
+        try:
+            await self.app(scope, replay, send)
+        finally:
+            end_turn()
 
 
 class ServerTiming:
@@ -167,12 +198,16 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     store = VehicleStore(engine, make_sessionmaker(engine), cache_size=settings.cache_size,
                          cache_bytes=settings.cache_bytes, inline_cache_bytes=settings.inline_cache_bytes,
                          build_budget=settings.build_budget_s, build_workers=settings.build_workers,
-                         build_queue=settings.build_queue)
+                         build_queue=settings.build_queue, idempotency_ttl_s=settings.idempotency_ttl_s,
+                         batch_budget=settings.batch_budget_s, max_answer_bytes=settings.max_answer_bytes,
+                         answer_bytes_in_flight=settings.answer_bytes_in_flight)
 
     @asynccontextmanager
     async def lifespan(app: FastAPI):  # type: ignore[no-untyped-def]
+        t0 = time.perf_counter()
         if settings.warmup:
             _log.info("numba kernels warmed in %.2f s", warm_up())
+            store.builder.start_processes()  # costly builds and batches: warm before the first one
         # A thread waiting for the GIL (an event's writer thread, a build finishing) gets it
         # within 1 ms instead of 5 ms: an event does a dozen GIL hand-offs, and under a
         # request flood each one would otherwise wait the full interval.
@@ -182,7 +217,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         # which keeps GC pauses out of the latency tail.
         gc.collect()
         gc.freeze()
+        app.state.startup_seconds, app.state.ready = time.perf_counter() - t0, True
         yield {GATE_STATE_KEY: gate}  # lifespan state: where the HTTP protocol finds the gate
+        app.state.ready = False  # shutting down: /v1/ready answers 503 from here on
         store.close()
         engine.dispose()
 
@@ -201,20 +238,21 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     return app
 
 
-#: uvicorn's connection settings (see service/README.md, "Connection hygiene")
-UVICORN_DEFAULTS: dict[str, Any] = {
-    "access_log": False,  # a log line per request costs about as much as a pseudo-inverse allocation
-    "timeout_keep_alive": 5,  # idle keep-alive connections closed after 5 s
-    "limit_concurrency": 512,  # connections + tasks per process; 503 beyond
-    "backlog": 1024,
-    "h11_max_incomplete_event_size": 16 * 1024,
-    "timeout_graceful_shutdown": 10,
-}
+def uvicorn_options(settings: Settings) -> dict[str, Any]:
+    """uvicorn's connection settings, from the service's (service/README.md, "Connection hygiene");
+    the rest of the connection policy is :class:`service.server.GuardedHttpToolsProtocol`'s."""
+    return {
+        "access_log": False,  # a log line per request costs about as much as a pseudo-inverse allocation
+        "timeout_keep_alive": settings.keep_alive_s,
+        "limit_concurrency": settings.max_connections,  # connections + tasks per process; 503 beyond
+        "backlog": 2 * settings.max_connections,
+        "timeout_graceful_shutdown": 10,
+    }
 
 
 def serve(host: str = "127.0.0.1", port: int = 8000, data_dir: str | Path | None = None,
           database_url: str | None = None, api_key: str | None = None, workers: int = 1,
-          api_key_file: str | Path | None = None, **uvicorn_options: Any) -> None:
+          api_key_file: str | Path | None = None, **uvicorn_settings: Any) -> None:
     """Run the service with uvicorn: ``workers`` processes on one port and one database.
 
     Any number of workers (and of replicas on the same database) is safe: every request
@@ -222,6 +260,9 @@ def serve(host: str = "127.0.0.1", port: int = 8000, data_dir: str | Path | None
     settings are passed to the workers through the ``ALLOC_*`` environment.
     """
     import uvicorn
+    from uvicorn.config import STARTUP_FAILURE
+
+    from .supervisor import ReadinessSupervisor
 
     if data_dir is not None:
         os.environ["ALLOC_DATA_DIR"] = str(Path(data_dir).resolve())
@@ -237,9 +278,17 @@ def serve(host: str = "127.0.0.1", port: int = 8000, data_dir: str | Path | None
         reasons = "; ".join(str(err["msg"]).removeprefix("Value error, ") for err in exc.errors())
         raise SystemExit(f"alloc service: refusing to start: {reasons}") from None
     make_engine(settings.resolved_database_url).dispose()  # migrate once, before the workers start
-    options = {**UVICORN_DEFAULTS, **uvicorn_options}
-    uvicorn.run("service.main:create_app", factory=True, host=host, port=port, workers=workers,
-                http=GuardedHttpToolsProtocol, **options)
+    options = {**uvicorn_options(settings), **uvicorn_settings}
+    config = uvicorn.Config("service.main:create_app", factory=True, host=host, port=port, workers=workers,
+                            http=GuardedHttpToolsProtocol, **options)
+    if workers > 1:
+        # workers are health-checked once ready, restarted only when not ready in time (service.supervisor)
+        ReadinessSupervisor(config, [config.bind_socket()], settings.startup_timeout_s).run()
+        return
+    server = uvicorn.Server(config)
+    server.run()
+    if not server.started:
+        sys.exit(STARTUP_FAILURE)
 
 
 def _main() -> None:

@@ -14,18 +14,22 @@ cannot carry NaN) and never a 500.
 
 from __future__ import annotations
 
+import threading
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 from fastapi import Response
 from pydantic import BaseModel
+from starlette.types import Receive, Scope, Send
 
 import alloc
 
-from .errors import InvalidRequest, field_error
+from .errors import InvalidRequest, Overloaded, field_error
 from .schemas import AllocationOut, BatchOut
 
-__all__ = ["model_response", "allocation_response", "batch_response"]
+__all__ = ["model_response", "allocation_response", "batch_response", "batch_json", "AnswerBudget",
+           "StreamedAnswer", "CHUNK_BYTES"]
 
 
 def model_response(model: BaseModel, status_code: int = 200) -> Response:
@@ -45,5 +49,71 @@ def allocation_response(result: alloc.Result, **extra: Any) -> Response:
 
 
 def batch_response(result: alloc.BatchResult, **extra: Any) -> Response:
+    return Response(batch_json(result, **extra), media_type="application/json")
+
+
+def batch_json(result: alloc.BatchResult, **extra: Any) -> bytes:
+    """A batch's answer as JSON bytes (built where the batch ran, off the event loop)."""
     _require_finite(result.method, result.u, result.v_achieved)
-    return model_response(BatchOut.of(result, **extra))
+    return BatchOut.of(result, **extra).model_dump_json().encode()
+
+
+#: bytes handed to the server per write of a streamed answer: the server's write buffer
+#: then holds at most its high-water mark plus one chunk per connection
+CHUNK_BYTES = 64 * 1024
+
+
+class AnswerBudget:
+    """Bytes of large answers held for clients at once (``ALLOC_ANSWER_BYTES_IN_FLIGHT``).
+
+    A batch reserves its predicted answer size before it runs (503 with ``Retry-After``
+    when the budget is spent) and frees it when its answer has been written out or the
+    connection dropped (a client that does not read is dropped after
+    ``ALLOC_WRITE_TIMEOUT_S``: :mod:`service.server`).
+    """
+
+    def __init__(self, limit: int) -> None:
+        self.limit, self.held = limit, 0
+        self._lock = threading.Lock()
+
+    def reserve(self, nbytes: int) -> Callable[[], None]:
+        """Hold ``nbytes``; returns the function that frees them (idempotent)."""
+        with self._lock:
+            if self.held + nbytes > self.limit:
+                raise Overloaded(f"the service holds {self.held:,} bytes of answers for clients, and "
+                                         f"this answer's {nbytes:,} would exceed ALLOC_ANSWER_BYTES_IN_FLIGHT = "
+                                         f"{self.limit:,}; retry shortly")
+            self.held += nbytes
+        freed = False
+
+        def free() -> None:
+            nonlocal freed
+            with self._lock:
+                if not freed:
+                    freed = True
+                    self.held -= nbytes
+        return free
+
+
+class StreamedAnswer(Response):
+    """A JSON answer written in :data:`CHUNK_BYTES` pieces, each after the client took the
+    previous ones (the server's flow control), and its reservation freed when done or
+    when the client went away."""
+
+    media_type = "application/json"
+
+    def __init__(self, body: bytes, free: Callable[[], None]) -> None:
+        super().__init__(status_code=200, headers={"content-length": str(len(body))})
+        self._payload, self._free = body, free
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        try:
+            await send({"type": "http.response.start", "status": self.status_code, "headers": self.raw_headers})
+            view = memoryview(self._payload)
+            for start in range(0, max(len(view), 1), CHUNK_BYTES):
+                end = start + CHUNK_BYTES
+                await send({"type": "http.response.body", "body": bytes(view[start:end]),
+                            "more_body": end < len(view)})
+        finally:
+            self._payload = b""
+            self._free()

@@ -15,7 +15,7 @@ from datetime import datetime
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, StrictInt
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, StrictInt, model_validator
 
 import alloc
 from alloc.health import FailureKind
@@ -46,8 +46,20 @@ Options = Annotated[dict[str, Any], Field(max_length=16, description="method opt
 EffectorRef = Label | Annotated[StrictInt, Field(ge=0, lt=MAX_EFFECTORS)]
 
 
+#: members of one JSON object in a request, at most (the largest model has 17 fields): checked
+#: before the fields, so a body of 40,000 unknown members costs one error, not 40,000
+MAX_MEMBERS = 64
+
+
 class _In(BaseModel):
     model_config = ConfigDict(extra="forbid")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _bounded_members(cls, data: Any) -> Any:
+        if isinstance(data, dict) and len(data) > MAX_MEMBERS:
+            raise ValueError(f"{len(data):,} members; a request object has at most {MAX_MEMBERS}")
+        return data
 
 
 # ---------------------------------------------------------------- problems
@@ -109,7 +121,9 @@ class _Single(_Demand):
 
 
 class _Batch(_Demand):
-    V: Annotated[list[AxisVector], Field(min_length=1, max_length=MAX_BATCH, description="N demands, N x k")]
+    # fail_fast: a batch of 10,000 bad rows is refused at its first bad row, not with 60,000 errors
+    V: Annotated[list[AxisVector], Field(min_length=1, max_length=MAX_BATCH, fail_fast=True,
+                                         description="N demands, N x k")]
 
 
 _EXAMPLE_PROBLEM = {"B": [[1.0, 1.0, 0.5], [0.5, -0.5, 0.0]], "umin": [-1.0, -1.0, -1.0],
@@ -199,7 +213,7 @@ class MethodOut(BaseModel):
 
 # -------------------------------------------------------------------- AMS
 class _AmsQuery(_In):
-    directions: Annotated[list[AxisVector], Field(max_length=MAX_DIRECTIONS)] | None = Field(
+    directions: Annotated[list[AxisVector], Field(max_length=MAX_DIRECTIONS, fail_fast=True)] | None = Field(
         default=None, description="directions d (k values each); default: +/- each axis")
 
 
@@ -382,6 +396,12 @@ class ServiceHealth(BaseModel):
     methods: int
 
 
+class ServiceReady(BaseModel):
+    status: Literal["ready"]
+    startup_seconds: float = Field(description="seconds this worker took to start (imports excluded)")
+    warmed: bool = Field(description="numba kernels loaded or compiled before the worker became ready")
+
+
 class ProblemError(BaseModel):
     loc: list[str | int] = Field(description="FastAPI-style location, e.g. [\"body\", \"umin\"]")
     pointer: str | None = Field(description="JSON Pointer (RFC 6901) into the request body")
@@ -395,7 +415,8 @@ class ProblemDetails(BaseModel):
     title: str
     status: int
     detail: str
-    errors: list[ProblemError]
+    errors: list[ProblemError] = Field(description="the first ALLOC_MAX_VALIDATION_ERRORS (20) errors")
+    error_count: int | None = Field(default=None, description="validation errors: how many there were in all")
 
 
 def _problem(description: str) -> dict[str, Any]:
@@ -410,5 +431,6 @@ PROBLEM_RESPONSES: dict[int | str, dict[str, Any]] = {
 }
 #: additionally, on routes with a vehicle id / on write routes
 NOT_FOUND = {404: _problem("unknown vehicle")}
+NOT_READY = {503: _problem("not ready: this worker is starting or shutting down")}
 UNAUTHORIZED = {401: _problem("missing or wrong X-API-Key (when ALLOC_API_KEY is set)"),
                 409: _problem("Idempotency-Key reused with a different body, or too many concurrent writes")}

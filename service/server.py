@@ -1,33 +1,57 @@
-"""Connection hygiene for uvicorn: request timeouts and framing errors as problem+json.
+"""Connection hygiene for uvicorn: every resource a connection holds has a bound and a deadline.
 
 uvicorn bounds idle keep-alive connections (``timeout_keep_alive``) and concurrent
 connections (``limit_concurrency``, 503 beyond) but not a request that is sent slowly or
-never finished: 2,000 half-sent requests stay open and exhaust file descriptors.  The
-protocol below closes a connection whose request (headers and body) has not fully
-arrived ``request_timeout`` seconds after its first byte (or after the connection opened),
-answering ``408`` as problem+json, and answers malformed framing (bad
-``Content-Length``, garbage request line) with ``400`` problem+json instead of text.
+never finished, nor the size of its head under httptools (h11's
+``max_incomplete_event_size`` does not apply: a 40 MB header stalled the loop 1.4 s), nor
+an answer a client never reads (held in the write buffer for as long as the connection
+lives).  The protocol below adds, with the limits of :class:`service.config.Settings`:
+
+* a whole-request deadline (``ALLOC_REQUEST_TIMEOUT_S``): a request whose head and body
+  have not arrived in time is answered ``408`` and closed;
+* head limits: the request line and headers at most ``ALLOC_MAX_HEADER_BYTES``, at most
+  ``ALLOC_MAX_HEADERS`` fields, checked on the raw bytes before the parser buffers them
+  (``431``, closed);
+* a write deadline (``ALLOC_WRITE_TIMEOUT_S``): when the client has not taken the answer's
+  bytes (the write buffer stays above its high-water mark) for that long, the connection
+  is dropped and the buffer freed;
+* an accept policy: at most ``ALLOC_MAX_CONNECTIONS_PER_CLIENT`` connections per client
+  address (``503``, closed), and room kept for newcomers: beyond
+  ``ALLOC_MAX_CONNECTIONS - ALLOC_RESERVED_CONNECTIONS`` open connections, the oldest one
+  that is not running a request (its request still arriving, or idle between requests) is
+  closed for each new one.  Stalled connections then cannot take the capacity an event's
+  connection needs: it arrives, finishes its request within a millisecond and is never the
+  oldest.
+
+Framing errors (bad ``Content-Length``, garbage request line) are answered ``400``
+problem+json instead of text.
 """
 
 from __future__ import annotations
 
 import asyncio
 import json
-import os
 import time
+from collections import Counter, OrderedDict
+from functools import lru_cache
 from typing import Any
 
 from uvicorn.protocols.http.httptools_impl import HttpToolsProtocol
 
+from .config import Settings
 from .errors import PROBLEM_JSON
 from .priority import GATE_STATE_KEY, SCOPE_KEY
 
-__all__ = ["GuardedHttpToolsProtocol", "REQUEST_TIMEOUT_S", "problem_bytes"]
+__all__ = ["GuardedHttpToolsProtocol", "problem_bytes", "limits"]
 
-#: seconds for a whole request (headers and body) to arrive (``ALLOC_REQUEST_TIMEOUT_S``)
-REQUEST_TIMEOUT_S = float(os.environ.get("ALLOC_REQUEST_TIMEOUT_S", "10"))
+_REASONS = {400: "Bad Request", 408: "Request Timeout", 431: "Request Header Fields Too Large",
+            503: "Service Unavailable"}
 
-_REASONS = {400: "Bad Request", 408: "Request Timeout"}
+
+@lru_cache(maxsize=1)
+def limits() -> Settings:
+    """This process's settings (a worker reads them from the ``ALLOC_*`` environment)."""
+    return Settings()
 
 
 def problem_bytes(status: int, slug: str, title: str, detail: str) -> bytes:
@@ -39,16 +63,35 @@ def problem_bytes(status: int, slug: str, title: str, detail: str) -> bytes:
     return head + body
 
 
-class GuardedHttpToolsProtocol(HttpToolsProtocol):
-    """uvicorn's httptools protocol with a whole-request timeout and problem+json framing errors."""
+class _HeadTooLarge(Exception):
+    """Raised from a parser callback: the request's head is over a limit."""
 
-    request_timeout = REQUEST_TIMEOUT_S
+
+class GuardedHttpToolsProtocol(HttpToolsProtocol):
+    """uvicorn's httptools protocol with the deadlines and limits of the module docstring."""
+
+    #: this process's connections not running a request, oldest first (the eviction order)
+    _evictable: OrderedDict[GuardedHttpToolsProtocol, None] = OrderedDict()
+    #: this process's open connections per client address
+    _per_client: Counter[str] = Counter()
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
+        settings = limits()
+        self.request_timeout = settings.request_timeout_s
+        self.write_timeout = settings.write_timeout_s
+        self.max_head, self.max_headers = settings.max_header_bytes, settings.max_headers
+        self.open_limit = settings.max_connections - settings.reserved_connections
+        self.per_client_limit = settings.max_connections_per_client
         self._request_timer: asyncio.TimerHandle | None = None
+        self._write_timer: asyncio.TimerHandle | None = None
         self._receiving = True
+        self._in_head, self._head_bytes, self._head_tail, self._header_count = True, 0, b"", 0
+        self._refusal: bytes | None = None
+        self._address: str | None = None
+        self._running = False  # between a request's last byte and its answer's
 
+    # ----------------------------------------------------------- deadlines
     def _arm(self) -> None:
         if self._request_timer is None:
             self._request_timer = self.loop.call_later(self.request_timeout, self._request_timed_out)
@@ -61,25 +104,112 @@ class GuardedHttpToolsProtocol(HttpToolsProtocol):
     def _request_timed_out(self) -> None:
         self._request_timer = None
         if self._receiving and not self.transport.is_closing():
-            self.transport.write(problem_bytes(408, "request-timeout", "Request timeout",
-                                               f"the request did not arrive within {self.request_timeout:g} s"))
-            self.transport.close()
+            self._close_with(problem_bytes(408, "request-timeout", "Request timeout",
+                                           f"the request did not arrive within {self.request_timeout:g} s"))
 
+    def pause_writing(self) -> None:
+        super().pause_writing()
+        if self._write_timer is None:
+            self._write_timer = self.loop.call_later(self.write_timeout, self._write_timed_out)
+
+    def resume_writing(self) -> None:
+        if self._write_timer is not None:
+            self._write_timer.cancel()
+            self._write_timer = None
+        super().resume_writing()
+
+    def _write_timed_out(self) -> None:
+        # the client took none of the answer for write_timeout seconds: drop it, free its buffer
+        self._write_timer = None
+        if not self.transport.is_closing():
+            self.logger.warning("dropped %s: it read none of its answer for %g s", self._address, self.write_timeout)
+            self.transport.abort()
+
+    def _close_with(self, response: bytes) -> None:
+        self._disarm()
+        self.transport.write(response)
+        self.transport.close()
+
+    # ------------------------------------------------------ accept policy
     def connection_made(self, transport: asyncio.Transport) -> None:  # type: ignore[override]
         super().connection_made(transport)
+        self._address = self.client[0] if self.client else "?"
+        self._per_client[self._address] += 1
+        if self._per_client[self._address] > self.per_client_limit:
+            self._close_with(problem_bytes(503, "too-many-connections", "Too many connections",
+                                           f"at most {self.per_client_limit} open connections per client address"))
+            return
+        self._evictable[self] = None
+        self._make_room()
         self._arm()
+
+    def _make_room(self) -> None:
+        """Beyond the open limit, close the oldest connections not running a request."""
+        excess = len(self.connections) - self.open_limit
+        while excess > 0 and self._evictable:
+            oldest = next(iter(self._evictable))
+            if oldest is self:
+                break
+            del self._evictable[oldest]
+            if not oldest.transport.is_closing():
+                oldest._close_with(problem_bytes(503, "connection-evicted", "Connection closed to make room",
+                                                 "the service closed this connection, which was not running a "
+                                                 "request, to accept a newer one; retry"))
+            excess -= 1
 
     def connection_lost(self, exc: Exception | None) -> None:
         self._disarm()
+        if self._write_timer is not None:
+            self._write_timer.cancel()
+            self._write_timer = None
+        self._evictable.pop(self, None)
+        if self._address is not None:
+            self._per_client[self._address] -= 1
+            if self._per_client[self._address] <= 0:
+                del self._per_client[self._address]
+            self._address = None
         super().connection_lost(exc)
+
+    # --------------------------------------------------------- the request
+    def data_received(self, data: bytes) -> None:
+        if not self._receiving:
+            self._receiving = True
+        if not self._running:
+            self._evictable.setdefault(self)  # a request arriving: evictable until it has arrived
+        self._arm()
+        if self._in_head and not self._head_fits(data):
+            self._close_with(problem_bytes(431, "header-too-large", "Request header fields too large",
+                                           f"the request line and headers exceed {self.max_head:,} bytes"))
+            return
+        super().data_received(data)
+
+    def _head_fits(self, data: bytes) -> bool:
+        """Whether the head still fits its byte limit, judged on the raw bytes: the head ends
+        within the budget left, or this chunk is within it (a chunk may carry the body too)."""
+        budget = self.max_head - self._head_bytes
+        if len(data) <= budget:
+            self._head_bytes += len(data)
+            self._head_tail = data[-3:]
+            return True
+        return (self._head_tail + data[:budget]).find(b"\r\n\r\n") >= 0
 
     def on_message_begin(self) -> None:
         super().on_message_begin()
+        self._header_count = 0
         # when the request's first bytes were parsed: ServerTiming reports the wait from
         # here to the application starting (a busy event loop shows as "dispatch")
         self.scope["alloc.received"] = time.perf_counter()  # type: ignore[typeddict-unknown-key]
 
+    def on_header(self, name: bytes, value: bytes) -> None:
+        self._header_count += 1
+        if self._header_count > self.max_headers:
+            self._refusal = problem_bytes(431, "too-many-headers", "Request header fields too large",
+                                          f"more than {self.max_headers} header fields")
+            raise _HeadTooLarge  # the parser stops; send_400_response answers with the refusal
+        super().on_header(name, value)
+
     def on_headers_complete(self) -> None:
+        self._in_head, self._head_bytes, self._head_tail = False, 0, b""
         # A priority request (service.priority) closes the gate now, before the loop runs
         # any request task queued ahead of it; not when uvicorn answers 503 itself.
         gate = self.app_state.get(GATE_STATE_KEY)
@@ -92,18 +222,20 @@ class GuardedHttpToolsProtocol(HttpToolsProtocol):
             if priority:
                 gate.enter()
 
-    def data_received(self, data: bytes) -> None:
-        if not self._receiving:
-            self._receiving = True
-        self._arm()
-        super().data_received(data)
-
     def on_message_complete(self) -> None:
         self._receiving = False
+        self._in_head = True  # what follows on this connection is the next request's head
+        self._evictable.pop(self, None)  # running a request: not evicted for a newcomer
+        self._running = True
         self._disarm()
         super().on_message_complete()
 
+    def on_response_complete(self) -> None:
+        self._running = False
+        super().on_response_complete()
+        if not self.transport.is_closing():
+            self._evictable[self] = None  # idle between requests
+
     def send_400_response(self, msg: str) -> None:
-        self._disarm()
-        self.transport.write(problem_bytes(400, "bad-framing", "Malformed HTTP request", msg))
-        self.transport.close()
+        refusal, self._refusal = self._refusal, None
+        self._close_with(refusal or problem_bytes(400, "bad-framing", "Malformed HTTP request", msg))

@@ -17,10 +17,21 @@ An event racing a delete either commits first (and is deleted with the vehicle) 
 finds the row gone (404): a deleted vehicle stays deleted.
 
 Publishing a failure never waits for optional work: the event commits, the new state
-is published in this process, the response returns; only then are the allocators that
-were in use for the old health rebuilt, at most :data:`PREBUILD_LIMIT` of them, for
-that vehicle only, on the build pool (other processes rebuild lazily on their next
-request, keyed by the new version).
+is published in this process, the rebuilds of the allocators that were in use for the
+old health are submitted (at most :data:`PREBUILD_LIMIT`, that vehicle only, on the
+builder's ``rebuild`` lane, which no request can use, or first in the build process's
+queue), and the response returns; the next allocation finds its rebuild in flight
+(other processes rebuild lazily on their next request, keyed by the new version).
+
+Writes sent with an ``Idempotency-Key`` happen once: the key, the fingerprint of the
+request and the answer are inserted in the write's own transaction
+(:class:`~service.db.IdempotencyRow`), so a retry, through any process and after any
+crash, either finds the committed answer or finds nothing committed at all.
+
+Batches are priced before they start (rows x the method's declared per-call cost, and
+the size of their answer: :func:`~service.builds.check_batch_cost`), their answer bytes
+reserved in :class:`~service.responses.AnswerBudget`, run and serialised off the event
+loop, and streamed.
 
 Allocators are cached in a :class:`AllocatorCache` bounded in entries and in bytes
 (measured by :func:`service.cost.estimate_bytes`); inline problems share a smaller byte
@@ -57,10 +68,13 @@ from sqlalchemy.orm import Session, sessionmaker
 import alloc
 
 from . import timing
-from .builds import TRANSFER_BYTES, Builder, Built, Call, build, build_allocator, check_build_cost
-from .cost import is_costly
+from .builds import (
+    REBUILD, REQUEST, TRANSFER_BYTES, Builder, Built, Call, build, build_allocator, check_batch_cost, check_build_cost,
+)
+from .cost import answer_bytes, is_costly, is_costly_batch
 from .db import EventRow, IdempotencyRow, VehicleRow, utcnow
 from .errors import Conflict, NotFound, ServiceError
+from .responses import AnswerBudget, StreamedAnswer
 from .health import Health, apply_event, dump_health, load_health, to_problem
 from .schemas import EventIn, VehicleCreate
 
@@ -285,7 +299,8 @@ class VehicleStore:
 
     def __init__(self, engine: Engine, sessions: sessionmaker[Session], *, cache_size: int, cache_bytes: int,
                  inline_cache_bytes: int, build_budget: float, build_workers: int, build_queue: int,
-                 idempotency_ttl_s: float = 86400.0) -> None:
+                 idempotency_ttl_s: float = 86400.0, batch_budget: float = 2.0,
+                 max_answer_bytes: int = 16 * 1024 * 1024, answer_bytes_in_flight: int = 96 * 1024 * 1024) -> None:
         self._sessions = sessions
         self._probe = VersionProbe(engine)
         self._states: OrderedDict[str, VehicleState] = OrderedDict()
@@ -294,6 +309,8 @@ class VehicleStore:
         self.builder = Builder(build_workers, build_queue)
         self.build_budget = build_budget
         self.idempotency_ttl_s = idempotency_ttl_s
+        self.batch_budget, self.max_answer_bytes = batch_budget, max_answer_bytes
+        self.answers = AnswerBudget(answer_bytes_in_flight)
         # Writes (events, deletes) get threads of their own: they never queue behind the
         # shared thread pool of the sync routes or behind builds.
         self._writers: ThreadPoolExecutor | None = None
@@ -495,7 +512,7 @@ class VehicleStore:
             key = (new.id, new.version, method, okey)
             try:
                 seconds = check_build_cost(new.problem, method, options, self.build_budget)
-                self._start_build(key, new.problem, method, options, None, seconds)
+                self._start_build(key, new.problem, method, options, None, seconds, rebuild=True)
                 started += 1
             except ServiceError:
                 continue  # refused or the pools are full: the next request builds it (or reports why)
@@ -513,10 +530,12 @@ class VehicleStore:
 
     # --------------------------------------------------------- allocators
     def _start_build(self, key: Hashable, problem: alloc.Problem, method: str, options: dict[str, Any],
-                     call: Call | None, seconds: float) -> Future[Built]:
-        """Submit a build (a costly one to the build process, a cheap one to a thread); the
-        allocator it returns is cached under ``key``."""
-        lane = "process" if is_costly(seconds) else "thread"
+                     call: Call | None, seconds: float, *, rebuild: bool = False) -> Future[Built]:
+        """Submit a build (a costly one to the build process, a cheap one to a thread; a cheap
+        rebuild after an event to the rebuild threads); the allocator it returns is cached under
+        ``key``.  A batch's ``seconds`` include its calls (:func:`service.cost.batch_seconds`)."""
+        costly = is_costly_batch(seconds) if call is not None and call.V is not None else is_costly(seconds)
+        lane = "process" if costly else "rebuild" if rebuild else "thread"
         keep = self.allocators.keep_limit(key)
         if lane == "process":
             keep = min(keep, TRANSFER_BYTES)
@@ -525,17 +544,17 @@ class VehicleStore:
             if not fut.cancelled() and fut.exception() is None and (built := fut.result()).allocator is not None:
                 self.allocators.put(key, built.allocator, built.nbytes)
         return self.builder.submit(key, lane, build, problem, method, options, self.build_budget, keep, call,
-                                   then=cache)
+                                   then=cache, priority=REBUILD if rebuild else REQUEST)
 
     async def _allocate(self, key: Hashable, problem: Callable[[], alloc.Problem], method: str,
                         options: dict[str, Any], call: Call) -> Any:
         """``call`` answered by the allocator cached under ``key``, built if missing.
 
-        A cached allocator is called here, on the event loop (never concurrently); a batch,
-        or an allocator too large to keep, is answered where it was built.
+        A cached allocator is called here, on the event loop (never concurrently); an
+        allocator too large to keep is answered where it was built.
         """
         found = self.allocators.lookup(key)
-        if found is not None and call.V is None:
+        if found is not None:
             return call.run(found)
         p = problem()
         seconds = check_build_cost(p, method, options, self.build_budget)  # refuse before queueing
@@ -546,17 +565,44 @@ class VehicleStore:
             built = await self.builder.outcome(self._start_build(private, p, method, options, call, seconds))
         return built.result if built.allocator is None else call.run(built.allocator)
 
+    async def _batch(self, problem: alloc.Problem, method: str, options: dict[str, Any], V: Any,
+                     extra: dict[str, Any]) -> StreamedAnswer:
+        """A batch, priced before it starts (rows x the method's declared per-call cost, and its
+        answer's size: 422 naming the limit), its answer's bytes reserved (503 when the
+        answer budget is spent), run and serialised off the event loop (a costly one in the
+        build process), then streamed."""
+        rows = np.asarray(V, dtype=float)
+        seconds = check_batch_cost(problem, method, options, len(rows), self.batch_budget, self.max_answer_bytes)
+        free = self.answers.reserve(answer_bytes(problem, len(rows)))
+        try:
+            call = Call(V=rows, extra=extra)
+            built: Built = await self.builder.outcome(
+                self._start_build(("private", call.token), problem, method, options, call, seconds))
+        except BaseException:
+            free()
+            raise
+        return StreamedAnswer(built.result, free)
+
     async def vehicle_allocate(self, state: VehicleState, method: str, options: dict[str, Any],
                                call: Call) -> Any:
-        """``call`` (one demand or a batch) at the vehicle's health ``state``."""
-        key = (state.id, state.version, method, options_key(options)) if call.V is None else ("private", call.token)
+        """``call`` (one demand) at the vehicle's health ``state``."""
+        key = (state.id, state.version, method, options_key(options))
         return await self._allocate(key, lambda: state.problem, method, options, call)
+
+    async def vehicle_batch(self, state: VehicleState, method: str, options: dict[str, Any], V: Any) -> StreamedAnswer:
+        """A batch at the vehicle's health ``state`` (:meth:`_batch`)."""
+        return await self._batch(state.problem, method, options, V,
+                                 {"vehicle_id": state.id, "health_version": state.version})
 
     async def inline_allocate(self, problem_key: str, build_problem: Callable[[], alloc.Problem],
                               method: str, options: dict[str, Any], call: Call) -> Any:
-        """``call`` for an inline problem (``problem_key`` identifies it in the cache)."""
-        key = ("inline", problem_key, method, options_key(options)) if call.V is None else ("private", call.token)
+        """``call`` (one demand) for an inline problem (``problem_key`` identifies it in the cache)."""
+        key = ("inline", problem_key, method, options_key(options))
         return await self._allocate(key, build_problem, method, options, call)
+
+    async def inline_batch(self, problem: alloc.Problem, method: str, options: dict[str, Any], V: Any) -> StreamedAnswer:
+        """A batch for an inline problem (:meth:`_batch`)."""
+        return await self._batch(problem, method, options, V, {})
 
     async def run_bounded(self, work: Callable[..., Any], *args: Any) -> Any:
         """``work(*args)`` (picklable) in the build process (bounded concurrency and queue, 429 beyond)."""

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import pickle
 
 import numpy as np
@@ -41,7 +43,10 @@ def test_build_returns_the_allocator_only_when_it_may_be_kept():
     answered = build(p, "da_facet", {}, 3.0, 0, call)  # too large to keep: the answer comes back instead
     assert answered.allocator is None and answered.token == call.token
     assert np.array_equal(answered.result.u, kept.allocator(v).u)
-    batch = build(p, "pinv", {}, 3.0, 1 << 30, Call(V=np.array([v, -v])))  # a batch: always answered there
-    assert batch.allocator is None and batch.result.u.shape == (2, p.m)
+    # a batch: always answered there, as the JSON bytes of its answer (serialised off the event loop)
+    batch = build(p, "pinv", {}, 3.0, 1 << 30, Call(V=np.array([v, -v]), extra={"health_version": 3}))
+    answer = json.loads(batch.result)
+    assert batch.allocator is None and np.array(answer["u"]).shape == (2, p.m) and answer["health_version"] == 3
+    assert answer["u"] == alloc.make_allocator(p, "pinv").batch(np.array([v, -v])).u.tolist()
     prebuilt = build(p, "da_facet", {}, 3.0, 0, None)  # a prebuild of one too large to keep: nothing
     assert prebuilt.allocator is None and prebuilt.result is None

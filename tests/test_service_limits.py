@@ -31,7 +31,7 @@ MiB = 1024 * 1024
 @pytest.fixture(scope="module")
 def server(tmp_path_factory):
     proc = ServiceProcess(tmp_path_factory.mktemp("limits"), api_key=KEY,
-                          env={"ALLOC_REQUEST_TIMEOUT_S": "1.5"}).start(timeout=180.0)
+                          env={"ALLOC_REQUEST_TIMEOUT_S": "1.5", "ALLOC_MAX_CONNECTIONS_PER_CLIENT": "400"}).start(timeout=180.0)
     yield proc
     proc.stop()
 

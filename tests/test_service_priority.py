@@ -158,5 +158,8 @@ def test_whole_wait_is_the_gate_bound_plus_the_line_ahead():
         await asyncio.gather(*(other() for _ in range(q)))
         return waits
     waits = asyncio.run(scenario())
-    # slack for a shared machine: the line costs q c of CPU, which a loaded machine stretches
-    assert MAX_WAIT_S * 0.9 <= min(waits) and max(waits) <= MAX_WAIT_S + 2 * q * cost + 0.3, (min(waits), max(waits))
+    # slack for a shared machine: the line costs q c of CPU, which a loaded machine stretches by
+    # about the run queue per core
+    stretch = max(2.0, os.getloadavg()[0] / (os.cpu_count() or 1))
+    assert MAX_WAIT_S * 0.9 <= min(waits) and max(waits) <= MAX_WAIT_S + stretch * q * cost + 0.3, (min(waits),
+                                                                                                   max(waits))

@@ -1,13 +1,20 @@
-"""``/v1/health``: liveness and database check."""
+"""``/v1/health``: liveness and database check; ``/v1/ready``: readiness, for a load balancer.
+
+Liveness says the process answers (and its database does); readiness says it should be
+sent traffic: its start-up (numba kernels loaded or compiled, ``ALLOC_WARMUP``) is done and
+it is not shutting down.  uvicorn accepts connections only after start-up, so a worker
+that answers at all is normally ready; ``/v1/ready`` turns 503 as soon as shutdown begins.
+"""
 
 from __future__ import annotations
 
-from fastapi import APIRouter
+from fastapi import APIRouter, Request
 
 import alloc
 
 from ..deps import StoreDep
-from ..schemas import PROBLEM_RESPONSES, ServiceHealth
+from ..errors import NotReady
+from ..schemas import NOT_READY, PROBLEM_RESPONSES, ServiceHealth, ServiceReady
 
 router = APIRouter(prefix="/v1", tags=["system"], responses=PROBLEM_RESPONSES)
 
@@ -18,3 +25,14 @@ async def health(store: StoreDep) -> ServiceHealth:
     # pool is busy with sync routes
     store.ping()
     return ServiceHealth(status="ok", version=alloc.__version__, database="ok", methods=len(alloc.methods()))
+
+
+@router.get("/ready", response_model=ServiceReady, summary="Readiness check (503 while starting or stopping)",
+            responses=NOT_READY)
+async def ready(request: Request, store: StoreDep) -> ServiceReady:
+    state = request.app.state
+    if not getattr(state, "ready", False):
+        raise NotReady("this worker is starting or shutting down; send traffic elsewhere")
+    store.ping()
+    return ServiceReady(status="ready", startup_seconds=round(state.startup_seconds, 3),
+                        warmed=state.settings.warmup)

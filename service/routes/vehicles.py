@@ -10,12 +10,12 @@ from typing import Annotated
 
 import json
 
-from fastapi import APIRouter, BackgroundTasks, Depends, Path, Query, Request, Response, status
+from fastapi import APIRouter, Depends, Path, Query, Request, Response, status
 
 from .. import ams
 from ..db import EventRow
-from ..deps import IdempotencyKey, StoreDep, idempotency, require_api_key
-from ..responses import allocation_response, batch_response
+from ..deps import IdempotencyKey, StoreDep, end_parse_turn, idempotency, require_api_key
+from ..responses import allocation_response
 from ..health import health_out
 from ..schemas import (
     NOT_FOUND, PROBLEM_RESPONSES, UNAUTHORIZED,
@@ -88,14 +88,15 @@ async def delete_vehicle(vehicle_id: VehicleId, store: StoreDep) -> Response:
 @router.post("/{vehicle_id}/events", response_model=EventRecorded, status_code=status.HTTP_201_CREATED,
              dependencies=WriteAccess, responses=UNAUTHORIZED, summary="Record a failure or repair of one effector")
 async def record_event(vehicle_id: VehicleId, body: EventIn, store: StoreDep, request: Request,
-                       tasks: BackgroundTasks, idempotency_key: IdempotencyKey = None) -> Response:
+                       idempotency_key: IdempotencyKey = None) -> Response:
     # Committed (fsync'd) on the writer threads and visible to every process before the
-    # response; the allocators that were in use are rebuilt after it (bounded, this
-    # vehicle only, on the build pool).
+    # response; the allocators that were in use are rebuilt (bounded, this vehicle only, on
+    # the rebuild lane) starting before the response, so the next allocation finds its
+    # rebuild in flight rather than queueing a build of its own behind other requests'.
     answer = await store.write(store.record_event_once, vehicle_id, body,
                                idempotency(request, idempotency_key, body), _render_event)
     if answer.state is not None:
-        tasks.add_task(store.prebuild, answer.state)
+        store.prebuild(answer.state)
     return _answer(answer)
 
 
@@ -115,7 +116,8 @@ def get_health(vehicle_id: VehicleId, store: StoreDep) -> HealthOut:
 
 @router.post("/{vehicle_id}/allocate", response_model=AllocationOut,
              summary="Allocate one demand at the vehicle's current health")
-async def allocate(vehicle_id: VehicleId, body: VehicleAllocateRequest, store: StoreDep) -> Response:
+async def allocate(vehicle_id: VehicleId, body: VehicleAllocateRequest, store: StoreDep, request: Request) -> Response:
+    end_parse_turn(request)
     state = store.get(vehicle_id)
     result = await store.vehicle_allocate(state, body.method, body.options, Call(body.v, body.u_prev, body.dt))
     return allocation_response(result, vehicle_id=state.id, health_version=state.version)
@@ -123,14 +125,14 @@ async def allocate(vehicle_id: VehicleId, body: VehicleAllocateRequest, store: S
 
 @router.post("/{vehicle_id}/allocate/batch", response_model=BatchOut,
              summary="Allocate many demands at the vehicle's current health")
-async def allocate_batch(vehicle_id: VehicleId, body: VehicleBatchRequest, store: StoreDep) -> Response:
-    state = store.get(vehicle_id)
-    result = await store.vehicle_allocate(state, body.method, body.options, Call(V=body.V))
-    return batch_response(result, vehicle_id=state.id, health_version=state.version)
+async def allocate_batch(vehicle_id: VehicleId, body: VehicleBatchRequest, store: StoreDep, request: Request) -> Response:
+    end_parse_turn(request)
+    return await store.vehicle_batch(store.get(vehicle_id), body.method, body.options, body.V)
 
 
 @router.post("/{vehicle_id}/ams", response_model=AmsOut, summary="AMS summary at the vehicle's current health")
-async def ams_summary(vehicle_id: VehicleId, body: AmsVehicleRequest, store: StoreDep) -> AmsOut:
+async def ams_summary(vehicle_id: VehicleId, body: AmsVehicleRequest, store: StoreDep, request: Request) -> AmsOut:
+    end_parse_turn(request)
     state = store.get(vehicle_id)
     out = await store.run_bounded(ams.summarize, state.problem, body.directions, store.build_budget)
     return out.model_copy(update={"vehicle_id": state.id, "health_version": state.version})

@@ -1,0 +1,390 @@
+"""The standing attack suite: a real uvicorn process on loopback, one attack class at a time,
+and the reconfiguration promise measured during each (issue 23).
+
+Each attack runs for a bounded time while a probe records, round after round, an
+authenticated event (a jam), the first allocation after it (``qp`` at the vehicle's new
+health) and ``/v1/health``.  The same probe without an attack gives the floor of the run.
+Targets on a quiet machine (issue 23): event p99 < 50 ms, first allocation after an event
+p99 < 100 ms, ``/v1/health`` < 100 ms.  A shared machine is not quiet (an fsync'd event
+alone took 100-400 ms at load 8 on 2 cores), so each attack is held to the larger of the
+target scaled by the run queue per core (``os.getloadavg()[0] / os.cpu_count()``, at least
+1) and :data:`FLOOR_FACTOR` times the floor's p99 measured in the same run without an
+attack.  The figures are printed (and written to ``$ALLOC_ATTACK_REPORT`` as JSON when set).
+
+Attack classes (default run, bounded in count and time; larger under ``-m slow``):
+batch pricing (the most expensive batches the service admits, and refusals of the rest),
+validation-error floods, header floods (size and count), answers that are never read,
+and slowloris with reconnects from other loopback addresses.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import selectors
+import socket
+import threading
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+
+import httpx
+import numpy as np
+import pytest
+
+from alloc.vehicles import ice
+from service.process import ServiceProcess
+
+KEY = "attack-key"
+H = {"X-API-Key": KEY}
+MiB = 1024 * 1024
+ANSWER_BUDGET = 48 * MiB
+WRITE_TIMEOUT_S = 6.0
+TARGETS_MS = {"event": 50.0, "allocation": 100.0, "health": 100.0}
+#: an attack may slow the reconfiguration path by at most this factor over the same run's floor
+FLOOR_FACTOR = 3.0
+#: the floor itself, on any machine this suite runs on
+FLOOR_LIMIT_MS = 2000.0
+REPORT: dict[str, dict] = {}
+FLOOR: dict[str, float] = {}
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory):
+    env = {"ALLOC_REQUEST_TIMEOUT_S": "3", "ALLOC_WRITE_TIMEOUT_S": str(WRITE_TIMEOUT_S),
+           "ALLOC_ANSWER_BYTES_IN_FLIGHT": str(ANSWER_BUDGET)}
+    proc = ServiceProcess(tmp_path_factory.mktemp("attacks"), api_key=KEY, env=env).start(timeout=300.0)
+    yield proc
+    proc.stop()
+    if path := os.environ.get("ALLOC_ATTACK_REPORT"):
+        with open(path, "w") as fh:
+            json.dump({"loadavg": os.getloadavg(), "cpus": os.cpu_count(), "attacks": REPORT}, fh, indent=1)
+
+
+@pytest.fixture(scope="module")
+def vehicle(server) -> str:
+    with httpx.Client(base_url=server.url, timeout=60.0) as c:
+        vid = c.post("/v1/vehicles", json=ice().to_dict(), headers=H).json()["id"]
+        assert c.post(f"/v1/vehicles/{vid}/allocate", json={"v": [0.1, 0.2, 0.0], "method": "qp"}).status_code == 200
+    return vid
+
+
+def slack() -> float:
+    return max(1.0, os.getloadavg()[0] / (os.cpu_count() or 1))
+
+
+def p99(values: list[float]) -> float:
+    return float(np.percentile(values, 99)) if values else float("nan")
+
+
+def probe(server, vid: str, seconds: float, rounds_max: int = 40) -> dict[str, list[float]]:
+    """Event, the first allocation after it, health: ms each, for ``seconds`` (at most ``rounds_max`` rounds)."""
+    out: dict[str, list[float]] = {"event": [], "allocation": [], "health": []}
+    deadline = time.monotonic() + seconds
+    with httpx.Client(base_url=server.url, timeout=30.0) as c:
+        k = 0
+        while time.monotonic() < deadline and k < rounds_max:
+            position = float(k % 7 - 3)
+            t0 = time.perf_counter()
+            r = c.post(f"/v1/vehicles/{vid}/events", json={"effector": "elevon_l", "kind": "jam", "position": position},
+                       headers=H)
+            t1 = time.perf_counter()
+            assert r.status_code == 201, r.text
+            version = r.json()["health"]["health_version"]
+            a = c.post(f"/v1/vehicles/{vid}/allocate", json={"v": [0.1, 0.2, 0.0], "method": "qp"})
+            t2 = time.perf_counter()
+            assert a.status_code == 200, a.text
+            assert a.json()["health_version"] == version and a.json()["u"][0] == position  # the event applied
+            h = c.get("/v1/health")
+            t3 = time.perf_counter()
+            assert h.status_code == 200
+            out["event"].append((t1 - t0) * 1e3)
+            out["allocation"].append((t2 - t1) * 1e3)
+            out["health"].append((t3 - t2) * 1e3)
+            k += 1
+            time.sleep(0.05)
+    return out
+
+
+def check(name: str, figures: dict[str, list[float]], allowance_ms: float = 0.0, **extra: object) -> None:
+    """Record the figures and assert the bounds (module docstring), plus ``allowance_ms`` where
+    the service's construction allows a stated extra wait."""
+    if not FLOOR:
+        pytest.skip("the floor was not measured (run the module, or test_floor first)")
+    s = slack()
+    row = {k: {"p50_ms": round(float(np.median(v)), 2), "p99_ms": round(p99(v), 2), "n": len(v)}
+           for k, v in figures.items()}
+    REPORT[name] = {**row, "slack": round(s, 2), "loadavg": os.getloadavg()[0], "allowance_ms": allowance_ms, **extra}
+    print(f"\n{name}: " + ", ".join(f"{k} p50 {r['p50_ms']} ms p99 {r['p99_ms']} ms (n={r['n']})"
+                                     for k, r in row.items()) + f"; load {os.getloadavg()[0]:.1f}, slack {s:.1f}")
+    for kind, target in TARGETS_MS.items():
+        assert figures[kind], f"{name}: no {kind} measured"
+        bound = max(target * s, FLOOR_FACTOR * FLOOR[kind]) + allowance_ms
+        assert p99(figures[kind]) < bound, f"{name}: {kind} p99 {p99(figures[kind]):.1f} ms >= {bound:.0f} ms"
+
+
+@contextmanager
+def attack(fn: Callable[[threading.Event], None], clients: int) -> Iterator[None]:
+    """``clients`` threads running ``fn(stop)`` until the block ends."""
+    stop = threading.Event()
+    errors: list[BaseException] = []
+
+    def run() -> None:
+        try:
+            fn(stop)
+        except BaseException as exc:  # noqa: BLE001 - reported after the block
+            errors.append(exc)
+    threads = [threading.Thread(target=run, daemon=True) for _ in range(clients)]
+    for t in threads:
+        t.start()
+    time.sleep(0.5)  # the attack is under way before the probe starts
+    try:
+        yield
+    finally:
+        stop.set()
+        for t in threads:
+            t.join(timeout=60)
+    assert not errors, errors[0]
+
+
+def test_floor(server, vehicle):
+    figures = probe(server, vehicle, 5.0, rounds_max=30)
+    for kind, values in figures.items():
+        assert p99(values) < FLOOR_LIMIT_MS, (kind, p99(values))
+        FLOOR[kind] = p99(values)
+    check("no attack (floor)", figures)
+
+
+# ------------------------------------------------------------------ batch pricing
+def _cgi_body(rows: int) -> dict:
+    rng = np.random.default_rng(3)
+    m = 64
+    return {"B": rng.normal(size=(6, m)).tolist(), "umin": [-1.0] * m, "umax": [1.0] * m,
+            "V": rng.normal(size=(rows, 6)).tolist(), "method": "cgi",
+            "options": {"priorities": [float(i) for i in range(6)]}}
+
+
+def test_batch_pricing_refuses_before_running_and_admitted_batches_do_not_delay_events(server, vehicle):
+    """The issue's batch (10,000 rows, m = 64, cgi, 6 priority levels: ~7 minutes) is refused at
+    once naming the budget; batches at the largest admitted size flood the service meanwhile."""
+    with httpx.Client(base_url=server.url, timeout=60.0) as c:
+        t0 = time.perf_counter()
+        r = c.post("/v1/allocate/batch", json=_cgi_body(10_000))
+        refused_ms = (time.perf_counter() - t0) * 1e3
+        assert r.status_code == 422 and r.json()["errors"][0]["pointer"] == "/V", r.text
+        detail = r.json()["detail"]
+        assert "ALLOC_BATCH_BUDGET_S" in detail and "predicted batch time" in detail
+        fits = int(detail.split("send at most ")[1].split(" rows")[0].replace(",", ""))
+    assert 0 < fits < 10_000
+    body = json.dumps(_cgi_body(max(fits, 1)))
+    statuses: list[int] = []
+
+    def flood(stop: threading.Event) -> None:
+        with httpx.Client(base_url=server.url, timeout=120.0) as c:
+            while not stop.is_set():
+                statuses.append(c.post("/v1/allocate/batch", content=body,
+                                       headers={"content-type": "application/json"}).status_code)
+    with attack(flood, clients=4):
+        figures = probe(server, vehicle, 6.0)
+    assert statuses and set(statuses) <= {200, 429, 503}, statuses
+    check("batch pricing (4 clients, largest admitted cgi batch at m = 64)", figures,
+          refused_ms=round(refused_ms, 1), admitted_rows=fits, batches=statuses.count(200))
+
+
+# ---------------------------------------------------------- validation-error floods
+def test_validation_error_flood(server, vehicle):
+    """60,000 bad entries in a 0.3 MB body, 40,000 unknown members: each a short 422 with the count.
+
+    Parsing such a body holds the event loop (``json.loads`` of 0.5 MB of members: 15-50 ms);
+    large bodies are parsed one at a time (``service.main.BodySizeLimit``), so a request
+    waits for at most one parse at each of its two loop steps: the allowance is twice the
+    flood request's own latency, measured alone."""
+    bad_rows = json.dumps({"B": [[1.0] * 6] * 6, "umin": [-1.0] * 6, "umax": [1.0] * 6,
+                           "V": [["x"] * 6 for _ in range(10_000)]})
+    members = json.dumps({"B": [[1.0]], "umin": [-1.0], "umax": [1.0], "v": [0.0],
+                          **{f"k{i}": 0 for i in range(40_000)}})
+    with httpx.Client(base_url=server.url, timeout=30.0) as c:
+        r = c.post("/v1/allocate/batch", content=bad_rows, headers={"content-type": "application/json"})
+        assert r.status_code == 422 and len(r.content) < 20_000 and r.json()["error_count"] <= 20, len(r.content)
+        r = c.post("/v1/allocate", content=members, headers={"content-type": "application/json"})
+        assert r.status_code == 422 and len(r.content) < 20_000, len(r.content)
+        alone = []
+        for body, path in ((bad_rows, "/v1/allocate/batch"), (members, "/v1/allocate")) * 3:
+            t0 = time.perf_counter()
+            c.post(path, content=body, headers={"content-type": "application/json"})
+            alone.append((time.perf_counter() - t0) * 1e3)
+    sizes: list[int] = []
+
+    def flood(stop: threading.Event) -> None:
+        with httpx.Client(base_url=server.url, timeout=60.0) as c:
+            while not stop.is_set():
+                for body, path in ((bad_rows, "/v1/allocate/batch"), (members, "/v1/allocate")):
+                    r = c.post(path, content=body, headers={"content-type": "application/json"})
+                    assert r.status_code == 422
+                    sizes.append(len(r.content))
+    with attack(flood, clients=4):
+        figures = probe(server, vehicle, 6.0)
+    check("validation-error flood (4 clients)", figures, allowance_ms=2 * max(alone), answers=len(sizes),
+          largest_answer=max(sizes), alone_ms=round(max(alone), 1))
+
+
+# ------------------------------------------------------------------ header floods
+def _raw(port: int, data: bytes, source: str = "127.0.0.1") -> bytes:
+    """Send ``data`` on a fresh connection, return what the server answers (until it closes)."""
+    s = socket.socket()
+    s.settimeout(30.0)
+    s.bind((source, 0))
+    s.connect(("127.0.0.1", port))
+    out = b""
+    try:
+        s.sendall(data)
+    except OSError:
+        pass  # the server refused and closed before the rest was sent: read its answer
+    try:
+        while chunk := s.recv(65536):
+            out += chunk
+    except OSError:
+        pass
+    finally:
+        s.close()
+    return out
+
+
+def test_header_floods_are_refused_before_they_are_buffered(server, vehicle):
+    huge = b"GET /v1/health HTTP/1.1\r\nHost: x\r\nX-Pad: " + b"a" * (5 * MiB) + b"\r\n\r\n"
+    many = b"GET /v1/health HTTP/1.1\r\nHost: x\r\n" + b"".join(b"X-%d: 1\r\n" % i for i in range(5000)) + b"\r\n"
+    t0 = time.perf_counter()
+    answer = _raw(server.port, many)
+    assert answer.startswith(b"HTTP/1.1 431") and b"problem+json" in answer, answer[:200]
+    answer = _raw(server.port, huge)
+    assert answer == b"" or answer.startswith(b"HTTP/1.1 431"), answer[:200]  # refused (maybe reset mid-send)
+    refused_ms = (time.perf_counter() - t0) * 1e3
+    sent = [0]
+
+    def flood(stop: threading.Event) -> None:
+        while not stop.is_set():
+            for data in (huge, many):
+                _raw(server.port, data)
+                sent[0] += 1
+    with attack(flood, clients=4):
+        figures = probe(server, vehicle, 6.0)
+    check("header flood (4 clients, 5 MiB header / 5,000 fields)", figures, refused_ms=round(refused_ms, 1),
+          sent=sent[0])
+
+
+# ------------------------------------------------------------------ unread answers
+def _unread_batch_request(port: int, body: bytes, source: str) -> socket.socket:
+    s = socket.socket()
+    s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)  # the client reads nothing: keep its buffer small
+    s.bind((source, 0))
+    s.connect(("127.0.0.1", port))
+    s.sendall(b"POST /v1/allocate/batch HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\n"
+              b"Content-Length: %d\r\n\r\n" % len(body) + body)
+    return s
+
+
+def test_unread_answers_are_dropped_and_memory_stays_bounded(server, vehicle):
+    """Connections that request the largest answers and never read them: each answer's bytes
+    are reserved (ALLOC_ANSWER_BYTES_IN_FLIGHT, 503 beyond), the connection is dropped after
+    ALLOC_WRITE_TIMEOUT_S, and the service's memory grows by at most that budget."""
+    m, rows = 64, 8000
+    rng = np.random.default_rng(4)
+    body = json.dumps({"B": rng.normal(size=(6, m)).tolist(), "umin": [-1.0] * m, "umax": [1.0] * m,
+                       "V": rng.normal(size=(rows, 6)).tolist(), "method": "pinv"}).encode()
+    with httpx.Client(base_url=server.url, timeout=120.0) as c:  # the answer is large, and admitted
+        r = c.post("/v1/allocate/batch", content=body, headers={"content-type": "application/json"})
+        assert r.status_code == 200 and len(r.content) > 10 * MiB, (r.status_code, len(r.content))
+        # what one such body costs the event loop: its parse and validation (refused after them)
+        refused = json.dumps({**json.loads(body), "method": "no-such-method"}).encode()
+        alone = []
+        for _ in range(3):
+            t0 = time.perf_counter()
+            assert c.post("/v1/allocate/batch", content=refused,
+                          headers={"content-type": "application/json"}).status_code == 422
+            alone.append((time.perf_counter() - t0) * 1e3)
+    base = server.rss()
+    socks = []
+    for i in range(40):  # arriving over 2 s (a burst of large bodies is the validation flood's class)
+        socks.append(_unread_batch_request(server.port, body, f"127.0.0.{2 + i % 8}"))
+        time.sleep(0.05)
+    t_opened = time.monotonic()
+    try:
+        time.sleep(2.5)  # their bodies parsed (that burst is the validation flood's class): answers held now
+        figures = probe(server, vehicle, WRITE_TIMEOUT_S - 3.0)
+        grown = server.rss() - base
+        time.sleep(max(0.0, t_opened + WRITE_TIMEOUT_S + 3.0 - time.monotonic()))
+        dropped = 0
+        for s in socks:  # after the write deadline every connection is closed by the server
+            s.settimeout(10.0)
+            try:
+                while s.recv(1 << 20):
+                    pass
+                dropped += 1
+            except OSError:
+                dropped += 1  # reset: dropped
+    finally:
+        for s in socks:
+            s.close()
+    assert dropped == len(socks)
+    # the documented bound: the answer budget, plus per connection a socket buffer and a chunk
+    bound = ANSWER_BUDGET + len(socks) * 512 * 1024 + 32 * MiB
+    assert grown < bound, (grown / MiB, bound / MiB)
+    # large bodies are parsed one at a time, a request waits for at most one parse at each of
+    # its two loop steps (test_validation_error_flood)
+    check("unread answers (40 connections, 16 MB answers)", figures, allowance_ms=2 * max(alone),
+          rss_growth_mib=round(grown / MiB, 1), bound_mib=round(bound / MiB, 1), parse_ms=round(max(alone), 1))
+
+
+# ------------------------------------------------------------ slowloris, reconnecting
+def _slowloris(port: int, sources: list[str], per_source: int, stop: threading.Event, opened: list[int]) -> None:
+    """Keep ``per_source`` half-sent requests open from each source address, reopening each one
+    as soon as the server closes it."""
+    sel = selectors.DefaultSelector()
+
+    def open_one(source: str) -> None:
+        s = socket.socket()
+        s.setblocking(False)
+        s.bind((source, 0))
+        try:
+            s.connect(("127.0.0.1", port))
+        except BlockingIOError:
+            pass
+        sel.register(s, selectors.EVENT_WRITE, source)
+    for source in sources:
+        for _ in range(per_source):
+            open_one(source)
+    while not stop.is_set():
+        for key, mask in sel.select(timeout=0.1):
+            s, source = key.fileobj, key.data
+            if mask & selectors.EVENT_WRITE:
+                try:
+                    s.send(b"POST /v1/allocate HTTP/1.1\r\nHost: x\r\nContent-Length: 1000\r\n")  # never finished
+                    sel.modify(s, selectors.EVENT_READ, source)
+                    opened[0] += 1
+                    continue
+                except OSError:
+                    pass
+            else:
+                try:
+                    if s.recv(65536):
+                        continue  # an answer (408/503): the close follows
+                except OSError:
+                    pass
+            sel.unregister(s)
+            s.close()
+            open_one(source)
+    for key in list(sel.get_map().values()):
+        key.fileobj.close()
+
+
+@pytest.mark.parametrize("connections", [600, pytest.param(2000, marks=pytest.mark.slow)])
+def test_slowloris_with_reconnects_cannot_take_the_events_capacity(server, vehicle, connections):
+    """More half-sent requests than the service's connection limit, from 8 other loopback
+    addresses, reopened as soon as they are closed: events still get through, every one."""
+    sources = [f"127.0.0.{2 + i}" for i in range(8)]
+    opened = [0]
+    with attack(lambda stop: _slowloris(server.port, sources, connections // len(sources), stop, opened), clients=1):
+        time.sleep(1.0)
+        figures = probe(server, vehicle, 6.0)
+    assert opened[0] >= connections
+    check(f"slowloris with reconnects ({connections} connections from 8 addresses)", figures, opened=opened[0])
