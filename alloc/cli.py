@@ -465,8 +465,8 @@ def _floats(text: str, what: str) -> list[float]:
     return values
 
 
-def _options(pairs: list[str]) -> dict[str, Any]:
-    """``key=value`` pairs; a value is read as JSON (numbers, lists, true) or else kept as text."""
+def parse_options(pairs: list[str]) -> dict[str, Any]:
+    """``--option key=value`` pairs; a value is read as JSON (numbers, lists, true) or else kept as text."""
     out: dict[str, Any] = {}
     for pair in pairs:
         key, sep, value = pair.partition("=")
@@ -590,7 +590,7 @@ def allocate_command(
     step = _merge(dt, from_file, "dt", "--dt")
     name = _merge(method, from_file, "method", "--method")
     name = default_method() if name is None else name
-    options = _options(option)
+    options = parse_options(option)
     file_options = from_file.get("options", {})
     if not isinstance(file_options, dict):
         raise typer.BadParameter(f"{problem}: options: must be a JSON object", param_hint="--problem")

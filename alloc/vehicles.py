@@ -396,12 +396,13 @@ def _needs_from_vehicle(method: str) -> list[str]:
     return [name for name, opt in spec.items() if opt.type == "groups" and opt.default is None]
 
 
-def method_options(vehicle: str | os.PathLike[str] | Vehicle, method: str,
+def method_options(vehicle: str | os.PathLike[str] | Vehicle | None, method: str,
                    options: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """The options every tool gives ``method`` on ``vehicle``: ``{**vehicle defaults, **options}``.
 
     The vehicle's defaults are its ``[methods.<method>]`` table; the caller's ``options``
-    override them one by one.
+    override them one by one.  ``vehicle=None`` (a problem that is no catalogue vehicle, such
+    as a simulator scenario without one): no defaults, the same check.
 
     Raises
     ------
@@ -410,11 +411,13 @@ def method_options(vehicle: str | os.PathLike[str] | Vehicle, method: str,
         method cannot do without (:func:`_needs_from_vehicle`); UnknownMethodError for an
         unregistered method.
     """
-    v = get_vehicle(vehicle)
-    merged = {**v.method_options(method), **(options or {})}
+    v = None if vehicle is None else get_vehicle(vehicle)
+    merged = {**({} if v is None else v.method_options(method)), **(options or {})}
     for name in _needs_from_vehicle(method):
         if merged.get(name) is None:
+            who = "no vehicle declares them" if v is None else f"vehicle {v.name!r} declares none"
             raise OptionError(
-                f"{name}: method {method!r} needs effector {name} and vehicle {v.name!r} declares none; give "
-                f"--option {name}='[[...], ...]' or add [methods.{method}] {name} = [...] to its file", field=name)
+                f"{name}: method {method!r} needs effector {name} and {who} (without them it is another method); "
+                f"give the option, e.g. --option {name}='[[0, 1], [2]]', or [methods.{method}] {name} in the "
+                "vehicle file", field=name)
     return merged

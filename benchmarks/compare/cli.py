@@ -1,4 +1,8 @@
-"""``alloc bench quick|full|report|scaling`` (also ``python -m benchmarks.compare ...``).
+"""``alloc bench quick|full|smoke|report|scaling|openloop`` (also ``python -m benchmarks.compare ...``).
+
+``alloc bench openloop --vehicle NAME|FILE`` runs the sweep's open-loop measures
+(:mod:`.openloop`) on any vehicle, a user's file among them, with the vehicle's method
+defaults, and prints the rows (nothing is written).
 
 Runs are fresh unless asked otherwise: every sweep writes into ``--out`` (default: a new
 folder ``bench-<sweep>-<UTC timestamp>`` under the current directory, ignored by git) and
@@ -20,7 +24,7 @@ from typing import NoReturn
 
 import typer
 
-from alloc.cli import OneLineErrors, finite, read_json_file
+from alloc.cli import VEHICLE_HELP, OneLineErrors, finite, load_vehicle_option, read_json_file
 
 from .sweep import Spec, check_simulator_support, full_sweep, quick_sweep, smoke_sweep
 
@@ -245,3 +249,51 @@ def scaling(workers: str = typer.Option("1,2,4", help="worker counts, comma-sepa
     for r in rows:
         typer.echo(f"| {r['engine']} | {r['workers']} | {r['wall_s']:.1f} | {r['runs_per_s']:.2f} | "
                    f"{r['speedup']:.2f} | {r['load_avg_1min']:.2f} |")
+
+
+#: columns of ``alloc bench openloop``'s table (the JSON rows hold every column)
+_OPEN_COLUMNS = ("method", "coverage", "unatt_err_mean", "unatt_angle_mean", "effort_mean", "rate_violation_max",
+                 "traj_err_mean", "fallbacks")
+
+
+@app.command()
+def openloop(vehicle: str = typer.Option(..., "--vehicle", metavar="NAME|FILE", help=VEHICLE_HELP),
+             method: list[str] = typer.Option(None, "--method", help="methods (default: every registered one the "
+                                              "vehicle can run; a skipped one is named on stderr); repeatable"),
+             samples: int = typer.Option(2000, "--samples", min=1, max=1_000_000,
+                                         help="Monte Carlo coverage sample (affine methods: exact polytope)"),
+             demands: int = typer.Option(200, "--demands", min=1, max=100_000,
+                                         help="demands outside and inside the AMS"),
+             steps: int = typer.Option(300, "--steps", min=1, max=100_000, help="steps of the demand trajectory"),
+             seed: int = typer.Option(0, "--seed", min=0, max=2**32 - 1, help="seed of every sample"),
+             as_json: bool = typer.Option(False, "--json", help="print the rows as JSON")) -> None:
+    """Open-loop measures of methods on one vehicle: coverage, unattainable error, effort, rates (the sweep's rows)."""
+    import alloc
+    from alloc.vehicles import method_options
+
+    from .openloop import run_open
+    from .sweep import open_spec
+
+    v = load_vehicle_option(vehicle)
+    names: list[str] = []
+    for m in method or alloc.methods():
+        try:
+            method_options(v, m)
+        except alloc.AllocError as exc:
+            if method:  # asked for by name: an error, as everywhere
+                raise
+            typer.echo(f"alloc bench openloop: note: {m} skipped on {v.name}: {exc}", err=True)
+            continue
+        names.append(m)
+    rows = []
+    for m in names:
+        spec = {**open_spec(v.name, m, samples=samples, demands=demands, steps=steps, seed=seed), "vehicle": vehicle}
+        rows.append(run_open(spec)[0])
+    if as_json:
+        typer.echo(json.dumps(rows, indent=2))
+        return
+    typer.echo(f"{v.name}: {v.k} axes x {v.m} effectors; samples {samples}, demands {demands}, steps {steps}, seed {seed}")
+    typer.echo("| " + " | ".join(_OPEN_COLUMNS) + " |")
+    typer.echo("|" + "---|" * len(_OPEN_COLUMNS))
+    for r in rows:
+        typer.echo("| " + " | ".join(r[c] if isinstance(r[c], str) else f"{r[c]:.4g}" for c in _OPEN_COLUMNS) + " |")

@@ -30,46 +30,69 @@ import numpy as np
 import alloc
 from alloc import vehicles
 from alloc.ams import AttainableSet, coverage, sample_ams
+from alloc.exceptions import AllocError
 from alloc.testing import random_problem
+from alloc.vehicle_file import Vehicle
 
 from .sweep import Spec
 
-__all__ = ["problem_by_name", "method_options", "run_open", "unattainable_demands", "TRAJ_DT"]
+__all__ = ["problem_by_name", "vehicle_by_name", "method_options", "run_open", "unattainable_demands", "TRAJ_DT"]
 
 TRAJ_DT = 0.01
 #: seed of the random problem suite (problem ``random<i>`` uses ``[RANDOM_SUITE_SEED, i]``)
 RANDOM_SUITE_SEED = 2024
 
-# Daisy chaining needs groups (Eq 1.25): the catalogue's, as indices (harv_lon has 5 effectors too).
-_ICE_DAISY = [[vehicles.ICE_EFFECTORS.index(n) for n in g] for g in vehicles.daisy_groups("ice")]
-_HARV_DAISY = [[vehicles.HARV_LATDIR_EFFECTORS.index(n) for n in g] for g in vehicles.daisy_groups("harv")]
 #: the sweep's ICE rows use the problem the ICE loop's allocator is given (Eq 4.24)
 _CATALOGUE_NAME = {"ice": "ice-design"}
 
 
-def problem_by_name(name: str) -> alloc.Problem:
-    """``ice`` (the seed's design problem of Eq 4.24, which the ICE loop's allocator is
-    given), ``harv_latdir`` (Eq 4.16, 3 axes) or ``random<i>`` (3 x 8, general position,
-    with limits, preferences, weights and rate limits; ``Wv`` reduced to its diagonal
-    because ``lp`` accepts only weight vectors, Eqs 1.18-1.19)."""
+def _random_index(name: str) -> int | None:
+    return int(name[6:]) if name.startswith("random") and name[6:].isdigit() else None
 
-    if name.startswith("random") and name[6:].isdigit():
-        rng = np.random.default_rng([RANDOM_SUITE_SEED, int(name[6:])])
+
+def vehicle_by_name(name: str) -> Vehicle | None:
+    """The vehicle a sweep's problem name reads: ``ice`` (the design problem of Eq 4.24, which
+    the ICE loop's allocator is given: catalogue ``ice-design``), any other catalogue name
+    (``harv_latdir``) or a vehicle file; ``None`` for the random suite, which is no vehicle."""
+    if _random_index(name) is not None:
+        return None
+    try:
+        return vehicles.get_vehicle(_CATALOGUE_NAME.get(name, name))
+    except AllocError as exc:
+        raise KeyError(f"problem: {exc}; or random<i>") from None
+
+
+def _spec_vehicle(spec: Spec) -> Vehicle | None:
+    """A spec's vehicle: ``spec["vehicle"]`` as ``--vehicle`` reads it (``alloc bench openloop``), else by its problem name."""
+    if "vehicle" in spec:
+        return vehicles.get_vehicle(spec["vehicle"])
+    return vehicle_by_name(spec["problem"])
+
+
+def problem_by_name(name: str) -> alloc.Problem:
+    """The problem of a sweep's problem name (:func:`vehicle_by_name`), or ``random<i>`` (3 x 8,
+    general position, with limits, preferences, weights and rate limits; ``Wv`` reduced to its
+    diagonal because ``lp`` accepts only weight vectors, Eqs 1.18-1.19)."""
+    i = _random_index(name)
+    if i is not None:
+        rng = np.random.default_rng([RANDOM_SUITE_SEED, i])
         p = random_problem(rng, 3, 8, "general")
         return p.replace(Wv=np.diag(np.diag(p.Wv)))
-    try:
-        return vehicles.problem(_CATALOGUE_NAME.get(name, name))
-    except alloc.ProblemError:
-        raise KeyError(f"problem: unknown {name!r}; ice, harv_latdir or random<i>") from None
+    vehicle = vehicle_by_name(name)
+    assert vehicle is not None
+    return vehicle.problem()
+
+
+def _options(vehicle: Vehicle | None, method: str) -> dict[str, Any]:
+    # The random suite is no vehicle and declares no groups: daisy runs there as one group
+    # (pinv_scale's answer), as the committed rows were measured; every vehicle gets its own.
+    return {} if vehicle is None else vehicles.method_options(vehicle, method)
 
 
 def method_options(problem: str, method: str) -> dict[str, Any]:
-    """Options a method needs on a problem (daisy groups; every other method runs on defaults)."""
-    if method == "daisy" and problem.startswith("ice"):
-        return {"groups": _ICE_DAISY}
-    if method == "daisy" and problem.startswith("harv"):
-        return {"groups": _HARV_DAISY}
-    return {}
+    """The options ``method`` runs with on a sweep's problem: the vehicle's defaults
+    (:func:`alloc.vehicles.method_options`; ICE's and the HARV's daisy groups), none on the random suite."""
+    return _options(vehicle_by_name(problem), method)
 
 
 def _rng(spec: Spec, purpose: str) -> np.random.Generator:
@@ -114,9 +137,10 @@ def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:
 def run_open(spec: Spec) -> tuple[dict[str, Any], dict[str, Any]]:
     """Row and timings of one open-loop spec (see the module docstring for the measures)."""
     t0 = time.perf_counter()
-    problem = problem_by_name(spec["problem"])
+    vehicle = _spec_vehicle(spec)
+    problem = problem_by_name(spec["problem"]) if vehicle is None else vehicle.problem()
     method = spec["method"]
-    options = method_options(spec["problem"], method)
+    options = _options(vehicle, method)
     allocate = alloc.make_allocator(problem, method, **options)
     ams = AttainableSet(problem)
     u0 = np.clip(problem.up, problem.umin, problem.umax)

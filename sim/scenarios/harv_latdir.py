@@ -193,6 +193,7 @@ SCENARIO = MimoScenario(
     loop_shaped_design=loop_shaped_design, failure=failure, pilot=_roll_pilot, pilot_element=PILOT_ELEMENT,
     commands=lambda t: np.zeros((t.size, 2)), output_bound=OUTPUT_BOUND, default_duration=50.0,
     default_method="ganging", design_options=("observer", "hedge", "cross_hedge"), input_options=("phi_command",),
+    catalogue_vehicle="harv",
 )
 
 

@@ -240,7 +240,7 @@ SCENARIO = MimoScenario(
     name="ice", vehicle=vehicle, references=REFERENCES, smc_design=smc_design,
     loop_shaped_design=loop_shaped_design, failure=lambda name, time: _failure_by_name(name, time),
     pilot=_roll_pilot, pilot_element=PILOT_ELEMENT, commands=_commands, output_bound=OUTPUT_BOUND,
-    default_duration=40.0, default_method="pinv",
+    default_duration=40.0, default_method="pinv", catalogue_vehicle="ice",
 )
 
 

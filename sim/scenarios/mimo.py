@@ -16,6 +16,8 @@ from typing import Any
 
 import numpy as np
 
+from alloc import vehicles
+from sim.allocation import STATIC
 from sim.blocks import DEFAULT_DT
 from sim.loop import TF, Failure, LoopShapedDesign, LoopSpec, Pilot, SMCDesign, Vehicle, simulate
 from sim.pilot import pilot_parameters
@@ -55,6 +57,9 @@ class MimoScenario:
     default_method : str
     design_options, input_options : tuple of str
         Extra run options forwarded to ``smc_design`` and to ``pilot``.
+    catalogue_vehicle : str or None
+        The :mod:`alloc.vehicles` entry whose ``[methods.<name>]`` defaults (ICE's daisy
+        groups) the allocator gets under the run's ``method_options``.
     """
 
     name: str
@@ -71,6 +76,7 @@ class MimoScenario:
     default_method: str
     design_options: tuple[str, ...] = ("observer", "hedge")
     input_options: tuple[str, ...] = ()
+    catalogue_vehicle: str | None = None
 
 
 def run_mimo(
@@ -124,6 +130,9 @@ def run_mimo(
         design = scenario.loop_shaped_design()
     else:
         raise ValueError(f"controller={controller!r}; expected 'smc' or 'loopshape'")
+    method = scenario.default_method if method is None else method
+    if method != STATIC:  # the seed's printed matrix takes no options
+        method_options = vehicles.method_options(scenario.catalogue_vehicle, method, method_options)
     n = int(round(duration / dt)) + 1
     stick = scenario.pilot(
         pilot_parameters(pilot, scenario.pilot_element, gain=pilot_gain, delay=pilot_delay),
@@ -132,7 +141,7 @@ def run_mimo(
     spec = LoopSpec(
         scenario=scenario.name, vehicle=scenario.vehicle(), references=scenario.references, controller=design,
         commands=scenario.commands(np.arange(n) * dt), pilots=(stick,), failure=fail,
-        method=scenario.default_method if method is None else method, method_options=method_options,
+        method=method, method_options=method_options,
         allocator_knows_failure=allocator_knows_failure, actuators=actuators, noise=noise, duration=duration,
         dt=dt, seed=seed, output_bound=scenario.output_bound, record_every=record_every,
         frame_period=frame_period, rate_aware=rate_aware, u_prev_source=u_prev_source, preferred=preferred,
