@@ -13,19 +13,33 @@
  * Packed output of a kernel (alloc._kernels.packed_out): u (m), B u (k), v (k), v - B u (k).
  * The kernel returns (out, code, iterations); code 0 = exact, 1 = unattainable.
  *
- * Thread safety: each FastCall owns one re-entrant lock (a PyThread lock plus owner and
- * depth, both read and written only with the GIL held).  The C path holds it around a kernel
- * call whose path was set up as stateful (``lock_plain``/``lock_rate``: the kernel mutates a
- * cache or warm start); ``_acquire()``/``_release()`` give the Python path the same lock, so
- * the C and Python paths of one allocator exclude each other.  Uncontended it is a
- * sem_trywait/sem_post pair (tens of nanoseconds); contended, the waiter releases the GIL.
+ * Thread safety: each FastCall owns one re-entrant lock.  The C path holds it around a
+ * kernel call whose path was set up as stateful (``lock_plain``/``lock_rate``: the kernel
+ * mutates a cache or warm start); ``_acquire()``/``_release()`` give the Python path the same
+ * lock, so the C and Python paths of one allocator exclude each other.
+ *
+ * The lock's state (owner, depth, waiters) is read and written only with the GIL held, so
+ * the uncontended take and drop are a few plain loads and stores (a PyThread lock's
+ * sem_trywait/sem_post pair measured 123 ns, a pthread mutex 33 ns; benchmarks/bench_lock.py).
+ * A thread that finds the lock held by another waits on a condition variable with the GIL
+ * released; the owner's drop bumps a generation count under the mutex and wakes the waiters,
+ * which re-check with the GIL (no wake-up is lost: a waiter reads the generation with the
+ * GIL before it releases it, and only a GIL holder can bump it).  No thread ever waits for
+ * the GIL while holding the mutex.  The design needs the GIL: a free-threaded build (and
+ * Windows, without pthreads) does not build this extension, and alloc then runs the Python
+ * path with a threading.RLock.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
 #define NPY_NO_DEPRECATED_API NPY_1_7_API_VERSION
 #include <numpy/arrayobject.h>
 #include <time.h>
+#include <pthread.h>
 #include <pythread.h>
+
+#if defined(Py_GIL_DISABLED) || defined(_WIN32)
+#error "alloc._fastcall's lock relies on the GIL and pthreads; alloc runs its Python call path instead"
+#endif
 
 #define MAXARGS 40
 
@@ -42,31 +56,53 @@ typedef struct {
     Py_ssize_t k, m;
     double maxmag;
     int lock_plain, lock_rate; /* hold the lock around the plain / rate kernel */
-    PyThread_type_lock lock;   /* NULL only if allocation failed (tp_new then fails) */
-    unsigned long owner;       /* thread holding the lock (valid while depth > 0) */
-    long depth;                /* re-entry count of the owner */
+    /* the lock (see the top of this file): owner, depth, waiters with the GIL held */
+    unsigned long owner; /* thread holding the lock (valid while depth > 0) */
+    long depth;          /* re-entry count of the owner; 0 = free */
+    long waiters;        /* threads waiting for it */
+    unsigned long gen;   /* bumped by each drop that finds waiters (under mutex, with the GIL) */
+    int sync_ready;      /* mutex and cond initialised */
+    pthread_mutex_t mutex;
+    pthread_cond_t cond;
 } FastCall;
 
 /* Take the allocator's lock (re-entrant).  Called with the GIL held. */
 static void lock_take(FastCall *self) {
     unsigned long me = PyThread_get_thread_ident();
-    if (self->depth > 0 && self->owner == me) {
+    if (self->depth == 0) {
+        self->owner = me;
+        self->depth = 1;
+        return;
+    }
+    if (self->owner == me) {
         self->depth++;
         return;
     }
-    if (!PyThread_acquire_lock(self->lock, NOWAIT_LOCK)) {
+    self->waiters++;
+    while (self->depth != 0) {
+        unsigned long seen = self->gen;
         Py_BEGIN_ALLOW_THREADS
-        PyThread_acquire_lock(self->lock, WAIT_LOCK);
+        pthread_mutex_lock(&self->mutex);
+        while (self->gen == seen)
+            pthread_cond_wait(&self->cond, &self->mutex);
+        pthread_mutex_unlock(&self->mutex);
         Py_END_ALLOW_THREADS
     }
+    self->waiters--;
     self->owner = me;
     self->depth = 1;
 }
 
+/* Drop one level of the lock (the caller holds it).  Called with the GIL held. */
 static void lock_drop(FastCall *self) {
     if (--self->depth == 0) {
         self->owner = 0;
-        PyThread_release_lock(self->lock);
+        if (self->waiters > 0) {
+            pthread_mutex_lock(&self->mutex);
+            self->gen++;
+            pthread_cond_broadcast(&self->cond);
+            pthread_mutex_unlock(&self->mutex);
+        }
     }
 }
 
@@ -303,11 +339,16 @@ static PyObject *fc_new(PyTypeObject *type, PyObject *args, PyObject *kw) {
         return NULL;
     FastCall *self = (FastCall *)op;
     self->lock_plain = self->lock_rate = 1;
-    self->lock = PyThread_allocate_lock();
-    if (self->lock == NULL) {
+    if (pthread_mutex_init(&self->mutex, NULL) != 0) {
         Py_DECREF(op);
         return PyErr_NoMemory();
     }
+    if (pthread_cond_init(&self->cond, NULL) != 0) {
+        pthread_mutex_destroy(&self->mutex);
+        Py_DECREF(op);
+        return PyErr_NoMemory();
+    }
+    self->sync_ready = 1;
     return op;
 }
 
@@ -341,9 +382,10 @@ static void fc_dealloc(PyObject *op) {
     PyObject_GC_UnTrack(op);
     fc_clear(op);
     FastCall *self = (FastCall *)op;
-    if (self->lock != NULL) {
-        PyThread_free_lock(self->lock);
-        self->lock = NULL;
+    if (self->sync_ready) {
+        pthread_cond_destroy(&self->cond);
+        pthread_mutex_destroy(&self->mutex);
+        self->sync_ready = 0;
     }
     Py_TYPE(op)->tp_free(op);
 }

@@ -19,6 +19,7 @@ from __future__ import annotations
 import subprocess
 import sys
 import threading
+import time
 import warnings
 from collections.abc import Iterator
 from typing import Any
@@ -219,6 +220,33 @@ def test_a_waiting_thread_gets_the_lock_when_it_is_released() -> None:
     f._release()
     assert done.wait(30)
     t.join()
+
+
+def test_the_lock_excludes_and_wakes_every_waiter() -> None:
+    """8 threads increment a counter inside the lock with the GIL released in the middle
+    (time.sleep(0)): mutual exclusion keeps every increment; a lost wake-up would leave a
+    thread waiting (the joins time out)."""
+    f = alloc.make_allocator(alloc.vehicles.problem("ice"), "qp")
+    count = [0]
+    rounds = 300
+
+    def work() -> None:
+        for _ in range(rounds):
+            f._acquire()
+            try:
+                seen = count[0]
+                time.sleep(0)  # another thread runs here: it must wait for the lock
+                count[0] = seen + 1
+            finally:
+                f._release()
+
+    threads = [threading.Thread(target=work, daemon=True) for _ in range(THREADS)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(120)
+    assert not any(t.is_alive() for t in threads), "a thread never got the lock"
+    assert count[0] == THREADS * rounds
 
 
 ALL_CASES = ([(pname, m, {}) for m in alloc.methods() for pname in ("ice", "6x16", "6x30")]
