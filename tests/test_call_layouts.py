@@ -208,3 +208,40 @@ print("ok")
 """
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
     assert out.returncode == 0 and out.stdout.strip().endswith("ok"), out.stderr[-3000:]
+
+
+# ------------------------------------------------------------------ the first arguments
+NOT_PROBLEMS = [({"B": [[1.0]], "umin": [-1.0], "umax": [1.0]}, "dict"), (None, "NoneType None"), ("ice", "str 'ice'"),
+                (np.ones((3, 11)), "numpy.ndarray of shape (3, 11)"), (3.5, "float 3.5"), ([[1.0, 2.0]], "list"),
+                (alloc.vehicles.problem("ice").B, "numpy.ndarray of shape (3, 11)")]
+ENTRY_POINTS: dict[str, Callable[[object, object], object]] = {
+    "make_allocator": lambda p, m: alloc.make_allocator(p, m),
+    "Allocator": lambda p, m: alloc.Allocator(p, m),
+    "allocate": lambda p, m: alloc.allocate(p, np.zeros(3), m),
+    "allocate_batch": lambda p, m: alloc.allocate_batch(p, np.zeros((2, 3)), m),
+}
+
+
+@pytest.mark.parametrize("entry", sorted(ENTRY_POINTS))
+@pytest.mark.parametrize(("value", "named"), NOT_PROBLEMS, ids=[n for _, n in NOT_PROBLEMS])
+def test_a_problem_that_is_not_a_problem_is_a_named_type_error(entry: str, value: object, named: str) -> None:
+    from alloc.exceptions import ProblemError, ProblemTypeError
+
+    with pytest.raises(ProblemTypeError) as info:
+        ENTRY_POINTS[entry](value, "pinv")
+    err = info.value
+    assert isinstance(err, TypeError) and isinstance(err, ProblemError) and isinstance(err, alloc.AllocError)
+    assert err.field == "problem"
+    assert str(err).startswith(f"problem: expected an alloc.Problem, got {named}")
+
+
+@pytest.mark.parametrize("entry", sorted(ENTRY_POINTS))
+@pytest.mark.parametrize("method", [3, None, b"qp", ["qp"], alloc.vehicles], ids=["int", "None", "bytes", "list", "module"])
+def test_a_method_that_is_not_a_name_is_a_named_type_error(entry: str, method: object) -> None:
+    from alloc.exceptions import MethodTypeError, UnknownMethodError
+
+    with pytest.raises(MethodTypeError) as info:
+        ENTRY_POINTS[entry](alloc.vehicles.problem("ice"), method)
+    err = info.value
+    assert isinstance(err, TypeError) and isinstance(err, UnknownMethodError)
+    assert err.field == "method" and str(err).startswith(f"method: expected a method name (str), got {type(method).__name__}")
