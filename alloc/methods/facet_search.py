@@ -73,6 +73,9 @@ _TOL = 1e-10  # Eq 1.17 slack, relative (rays through an edge satisfy two tiles 
 #   da_facet    k=6, m=20            15,504   0.72 s    46 us        60-71 MiB
 #   da_bisect   k=3, m=64 / 141 / 200         0.40 / 2.04 / 5.10 s (about 200 us per subset)
 #   da_table    k=3, m=64 / 100, resolution 64  9.1 / 22.0 s (the direction table dominates)
+#   largest admitted (declared / measured): k=3, m=223 da_facet 5.2 / 3.4 s, da_bisect
+#   12.1 / 6.4 s, 1,011 / 683 MiB; k=6, m=28 14.7 / 8.2-9.1 s, 1,008 / 743 MiB; k=4, m=71
+#   8.6 / 3.2-3.9 s, 991 / 603 MiB
 #
 # Every table holds a row of m (or (k-1) x m) numbers per tile, so time and memory grow
 # with S x k m.  The model: FACET_SECONDS per subset up to k m = 480, growing in proportion
@@ -96,7 +99,8 @@ _TABLE_CELL_SECONDS, _TABLE_CELL_SUBSET_SECONDS = 300e-6, 2.0e-6
 _TABLE_TEMPORARY_BYTES = 96 << 20
 # Declared call cost (``Method.call_cost``): a nominal call scans every tile (about two per
 # subset) with a k x k product, a rate-limited call recomputes every facet's gap, O(m) each;
-# measured worst calls (under load): see ``benchmarks/bench_cost_bounds.py``.
+# declared / worst measured under load: k=3, m=141 33 / 8.9 ms; k=6, m=22 60 / 5.8 ms; k=3, m=200
+# (da_bisect) 90 / 22 ms; k=2, m=512 6.3 / 1.5 ms (``benchmarks/bench_cost_bounds.py``).
 _CALL_BASE_S, _CALL_SUBSET_K2_S, _CALL_SUBSET_M_S = 1e-3, 0.05e-6, 0.02e-6
 
 
