@@ -21,17 +21,20 @@ hash, the function's bytecode, the Python and numba versions and the CPU (name a
 On a user's first use of a kernel from a fallback directory (2-3), the shipped entries for this
 CPU are copied there, so that directory holds the kernels compiled for it as well.  On another
 CPU, or with another numba version, the shipped entries do not apply: each kernel is compiled
-on first use into the location above, with one line on stderr per method::
+on first use into the location above, with one line on stderr per method (one line, wrapped here)::
 
-    alloc: compiling kernels for qp (not in the kernel cache for this CPU; first use on this machine) ...
+    alloc: compiling kernels for qp (not in the kernel cache for this CPU; first use on this machine,
+    up to a minute; saved in /home/me/.cache/alloc-toolkit/alloc_4be1...) ...
 
 ``NUMBA_CACHE_DIR`` (numba's own setting) still wins: the kernels are then cached only there.
 ``python -m alloc._jit_cache`` warms the cache (``warm``) or says where the kernels load from
 (``where``).
 
-This module imports numba, and importing it installs the locator; ``alloc/__init__.py`` imports
-it as soon as numba itself is imported (``import alloc`` stays cheap), before any kernel is
-decorated.
+This module imports numba, and importing it installs the locator: numba's per-function cache
+(``FunctionCache``) gets :class:`KernelCacheImpl`, which tries :class:`KernelCacheLocator` before
+numba's own locators and saves nothing where nothing is writable (a locator alone cannot stop a
+save).  ``alloc/__init__.py`` imports this module as soon as numba itself is imported (``import
+alloc`` stays cheap), before any kernel is decorated.
 """
 
 from __future__ import annotations
@@ -76,8 +79,8 @@ def _ours(py_file: str) -> bool:
 
 @functools.lru_cache(maxsize=None)
 def _content_hash(path: str, mtime: float, size: int) -> bytes:
-    # numba >= 0.61's own stamp (a content hash, unlike the mtime and size of earlier
-    # versions, which an install changes): the same value, so caches made by either agree
+    # the stamp numba 0.68's own locators use (a content hash; earlier versions used the mtime
+    # and size, which an install changes): the same value, so caches made by either agree
     with open(path, "rb") as f:
         return hashlib.sha256(f.read()).digest()
 
