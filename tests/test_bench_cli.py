@@ -73,10 +73,10 @@ def test_explicit_out_gets_everything_and_is_never_resumed_silently(clone: Path)
 
 def test_ams_plot_needs_an_explicit_out(tmp_path: Path) -> None:
     runner = CliRunner()
-    missing = runner.invoke(app, ["ams", "plot", "--problem", "harv", "--samples", "50"])
+    missing = runner.invoke(app, ["ams", "plot", "--vehicle", "harv", "--samples", "50"])
     assert missing.exit_code != 0 and "--out" in missing.output
     png = tmp_path / "a.png"
-    ok = runner.invoke(app, ["ams", "plot", "--problem", "harv", "--samples", "50", "--out", str(png)])
+    ok = runner.invoke(app, ["ams", "plot", "--vehicle", "harv", "--samples", "50", "--out", str(png)])
     assert ok.exit_code == 0, ok.output
     assert png.stat().st_size > 1000
 

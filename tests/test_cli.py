@@ -39,6 +39,18 @@ def test_allocate_json_equals_library():
     assert data["status"] == "exact"
 
 
+def test_allocate_vehicle_daisy_uses_the_vehicles_groups():
+    """ICE's [methods.daisy] groups reach daisy (without them it answered pinv_scale's u = 0 here)."""
+    from alloc.vehicles import daisy_groups
+
+    out = runner.invoke(app, ["allocate", "--vehicle", "ice", "--v", "0.5,1,0.2", "--method", "daisy", "--json"])
+    assert out.exit_code == 0, out.output
+    data = json.loads(out.output)
+    lib = alloc.allocate(ice(), [0.5, 1, 0.2], "daisy", groups=daisy_groups("ice"))
+    assert data["u"] == lib.u.tolist() and data["status"] == "exact"
+    assert not np.array_equal(lib.u, alloc.allocate(ice(), [0.5, 1, 0.2], "pinv_scale").u)
+
+
 def test_allocate_bad_demand_is_a_clear_error():
     out = runner.invoke(app, ["allocate", "--vehicle", "ice", "--v", "2,30"])
     assert out.exit_code == 2

@@ -134,3 +134,12 @@ def test_list_names_every_scenario_and_failure():
     assert res.exit_code == 0, res.output
     assert "harv_latdir_failure2:" in res.stdout and "failure failure2" in res.stdout
     assert "--failure seed:" in res.stdout
+
+
+def test_vehicle_names_its_scenario():
+    """``--vehicle`` takes a scenario's name or a catalogue vehicle whose alias is one (harv: harv_latdir)."""
+    res = runner.invoke(app, ["--vehicle", "harv", "--duration", "0.1", "--no-noise", "--method", "daisy"])
+    assert res.exit_code == 0, res.output
+    summary = json.loads(res.stdout)
+    assert summary["scenario"] == "harv_latdir" and summary["method"] == "daisy" and summary["allocator_calls"] == 201
+    assert runner.invoke(app, ["--vehicle", "ice-design"]).exit_code == 2  # a vehicle with a model but no scenario
