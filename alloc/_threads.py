@@ -7,6 +7,13 @@ the next chunk of rows from a shared counter until none is left, so a thread slo
 work on the machine takes fewer chunks and the batch does not wait for it.
 :func:`threads_for` is how many threads a batch of ``n`` rows gets: one per core
 (``MAX_THREADS``, default the core count), at least ``ROWS_PER_THREAD`` rows each.
+
+Thread safety: the allocator's batch holds its lock (:class:`alloc.api.Allocator`) in the
+calling thread while the pool works, so no other call of that allocator runs meanwhile; the
+pool threads never take that lock (they would wait for their own caller).  Each pool thread
+therefore works only on private state -- ``fn`` reads shared read-only data and writes its
+own rows, and :func:`run_chunks` gives each thread its own context from ``make_worker`` (a
+copy of a solver's caches) -- so the threads of one batch never write the same memory.
 """
 
 from __future__ import annotations
