@@ -259,6 +259,23 @@ def test_daisy_flies_its_groups_in_the_loop(tmp_path):
     assert np.abs(grouped.effectors - one_group.effectors).max() > 1.0  # deg: a different allocator flew
 
 
+# ------------------------------------------------------------------ the comparison
+def test_bench_openloop_reads_a_users_file_with_its_defaults(tmp_path):
+    from benchmarks.compare.openloop import run_open
+    from benchmarks.compare.sweep import open_spec
+
+    path = write_quad(tmp_path)
+    sizes = ["--samples", "100", "--demands", "10", "--steps", "10"]
+    rows = ok_json(["bench", "openloop", "--vehicle", str(path), "--method", "pinv", "--method", "daisy", "--json",
+                    *sizes])
+    for row, method in zip(rows, ["pinv", "daisy"], strict=True):
+        spec = {**open_spec("my-quad", method, samples=100, demands=10, steps=10), "vehicle": str(path)}
+        assert row == run_open(spec)[0]
+    assert rows[1]["problem"] == "my-quad"
+    # B is square and invertible: pinv (and daisy as one group) reach the whole AMS; the file's groups do not
+    assert rows[0]["coverage"] == 1.0 and rows[1]["coverage"] < 1.0
+
+
 # ------------------------------------------------------------------ errors: one line, exit 2
 def test_error_cases_are_one_line_exit_2(tmp_path):
     quad = write_quad(tmp_path)
