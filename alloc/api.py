@@ -13,7 +13,7 @@ from ._kernels import finish_batch, finish_owned, fused_affine, owned_demand
 from ._threads import split_rows, threads_for
 from .exceptions import AllocError, DemandError, MethodTypeError, ProblemTypeError, SolverError
 from .problem import MAX_MAGNITUDE, Problem, as_float_array, check_magnitude
-from .registry import FloatArray, Method, build
+from .registry import DEFAULT_METHOD, FloatArray, Method, build
 from .result import EXACT_RTOL, BatchResult, Result, Status
 
 __all__ = ["Allocator", "make_allocator", "allocate", "allocate_batch"]
@@ -213,6 +213,13 @@ class Allocator(_CallBase):  # type: ignore[misc,valid-type]
     def __getstate__(self) -> dict[str, Any]:
         return {name: getattr(self, name) for name in Allocator.__slots__ if hasattr(self, name)}
 
+    def __copy__(self) -> Allocator:
+        """A deep copy: a copy has its own lock, so it must not share the method's mutable
+        state (caches, backend models) with the original."""
+        import copy
+
+        return copy.deepcopy(self)
+
     def __setstate__(self, state: dict[str, Any]) -> None:
         for name, value in state.items():
             setattr(self, name, value)
@@ -375,7 +382,7 @@ class Allocator(_CallBase):  # type: ignore[misc,valid-type]
         return BatchResult(_frozen(U), Varr, _frozen(Vach), _frozen(status), self.method, time.perf_counter() - t0)
 
 
-def make_allocator(problem: Problem, method: str = "pinv", **options: Any) -> Allocator:
+def make_allocator(problem: Problem, method: str = DEFAULT_METHOD, **options: Any) -> Allocator:
     """Build ``method`` for ``problem`` once; the returned callable allocates fast (and may be
     shared by threads: see :class:`Allocator`).
 
@@ -406,7 +413,7 @@ def make_allocator(problem: Problem, method: str = "pinv", **options: Any) -> Al
 def allocate(
     problem: Problem,
     v: ArrayLike,
-    method: str = "pinv",
+    method: str = DEFAULT_METHOD,
     *,
     u_prev: ArrayLike | None = None,
     dt: float | None = None,
@@ -416,6 +423,6 @@ def allocate(
     return Allocator(problem, method, **options)(v, u_prev=u_prev, dt=dt)
 
 
-def allocate_batch(problem: Problem, V: ArrayLike, method: str = "pinv", **options: Any) -> BatchResult:
+def allocate_batch(problem: Problem, V: ArrayLike, method: str = DEFAULT_METHOD, **options: Any) -> BatchResult:
     """Allocate the rows of ``V`` (N, k); vectorised for the pseudo-inverse family and ganging."""
     return Allocator(problem, method, **options).batch(V)

@@ -265,3 +265,16 @@ def test_threads_get_the_serial_answers_at_length(pname: str, method: str, optio
     except alloc.AllocError as exc:  # e.g. lp's simplex above its size cap: nothing to share
         pytest.skip(f"{method} {options} not built on {pname}: {exc}")
     assert hammer(pname, method, options, n) == {"during": 0, "after": 0}
+
+
+def test_a_copy_shares_no_mutable_state_with_its_original() -> None:
+    """A copy has its own lock, so it gets its own method state (caches, backend models)."""
+    import copy
+
+    p = alloc.vehicles.problem("ice")
+    for method in ("qp", "lp", "cgi", "da"):
+        f = alloc.make_allocator(p, method)
+        for g in (copy.copy(f), copy.deepcopy(f)):
+            assert g.impl is not f.impl and g._safe is not f._safe
+            v = np.array([0.1, 0.05, -0.02])
+            assert np.array_equal(g(v).u, f(v).u)
