@@ -458,6 +458,27 @@ def flood_only(runs: int) -> None:
             conn.close()
 
 
+def attack_table(path: str, run: bool) -> None:
+    """The attack suite's figures (``ALLOC_ATTACK_REPORT``) as a markdown table: generated, not typed."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    if run:
+        root = Path(__file__).resolve().parent.parent
+        subprocess.run([sys.executable, "-m", "pytest", "tests/test_service_attacks.py", "-q", "-p", "no:cacheprovider"],
+                       cwd=root, env={**os.environ, "ALLOC_ATTACK_REPORT": str(Path(path).resolve())}, check=False)
+    report = json.loads(Path(path).read_text())
+    print(f"Attack suite, {report['cpus']} CPUs, load average at the end {report['loadavg'][0]:.1f} / "
+          f"{report['loadavg'][1]:.1f} / {report['loadavg'][2]:.1f} (targets on a quiet machine: event p99 < 50 ms, "
+          f"first allocation after it p99 < 100 ms, /v1/health < 100 ms)\n")
+    print("| attack | event p50 / p99 ms | next allocation p50 / p99 ms | /v1/health p50 / p99 ms | rounds | load |")
+    print("|---|---|---|---|---|---|")
+    for name, row in report["attacks"].items():
+        cells = [f"{row[k]['p50_ms']:.0f} / {row[k]['p99_ms']:.0f}" for k in ("event", "allocation", "health")]
+        print(f"| {name} | {' | '.join(cells)} | {row['event']['n']} | {row['loadavg']:.1f} |")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--n", type=int, default=2000, help="closed-loop single requests per case")
@@ -469,7 +490,15 @@ def main() -> None:
     parser.add_argument("--attacks-only", action="store_true", help="skip the open-loop cases")
     parser.add_argument("--flood-only", type=int, default=0, metavar="RUNS",
                         help="only the option flood: RUNS runs, each on a fresh vehicle, each next to a no-flood floor")
+    parser.add_argument("--attack-suite", metavar="REPORT.json", default=None,
+                        help="run the standing attack suite (tests/test_service_attacks.py) writing its figures "
+                             "to REPORT.json, then print them as a markdown table")
+    parser.add_argument("--attack-table", metavar="REPORT.json", default=None,
+                        help="print the markdown table of an attack-suite report already written")
     args = parser.parse_args()
+    if args.attack_suite or args.attack_table:
+        attack_table(args.attack_suite or args.attack_table, run=bool(args.attack_suite))
+        return
     if args.nice:
         os.nice(args.nice)
     if args.flood_only:

@@ -339,14 +339,14 @@ class Builder:
             lane.dispatch(self._lock)
         return fut
 
-    def start_processes(self) -> None:
+    def start_processes(self) -> list[Future[int]]:
         """Start the build processes now (they warm up in the background, seconds under load),
-        so the first costly build or batch does not wait for them."""
+        so the first costly build or batch does not wait for them; the futures resolve once
+        they have (each to a build process's pid)."""
         with self._lock:
             lane = self._lanes["process"]
             pool = lane.executor()
-        for _ in range(lane.workers):
-            pool.submit(os.getpid)
+        return [pool.submit(os.getpid) for _ in range(lane.workers)]
 
     @staticmethod
     async def outcome(fut: Future[Any]) -> Any:

@@ -28,7 +28,7 @@ import alloc
 from .errors import InvalidRequest, Overloaded, field_error
 from .schemas import AllocationOut, BatchOut
 
-__all__ = ["model_response", "allocation_response", "batch_response", "batch_json", "AnswerBudget",
+__all__ = ["model_response", "allocation_response", "batch_json", "AnswerBudget",
            "StreamedAnswer", "CHUNK_BYTES"]
 
 
@@ -46,10 +46,6 @@ def _require_finite(method: str, *arrays: np.ndarray) -> None:
 def allocation_response(result: alloc.Result, **extra: Any) -> Response:
     _require_finite(result.method, result.u, result.v_achieved)
     return model_response(AllocationOut.of(result, **extra))
-
-
-def batch_response(result: alloc.BatchResult, **extra: Any) -> Response:
-    return Response(batch_json(result, **extra), media_type="application/json")
 
 
 def batch_json(result: alloc.BatchResult, **extra: Any) -> bytes:

@@ -294,6 +294,18 @@ def _failpoint(name: str) -> None:
         os.kill(os.getpid(), signal.SIGKILL)
 
 
+def _demand_rows(V: Any, k: int) -> np.ndarray:
+    """A batch's demands as an N x k array, or the library's error naming ``V`` (a ragged or
+    mis-shaped batch is the caller's error, found before it is priced)."""
+    try:
+        rows = np.asarray(V, dtype=float)
+    except ValueError as exc:
+        raise alloc.DemandError(f"V: not a numeric array of consistent shape ({exc})", field="V") from exc
+    if rows.ndim != 2 or rows.shape[1] != k:
+        raise alloc.DemandError(f"V: expected shape (N, {k}), got {rows.shape}", field="V")
+    return rows
+
+
 class VehicleStore:
     """Vehicles in the database; their states and allocators cached per version in this process."""
 
@@ -571,7 +583,7 @@ class VehicleStore:
         answer's size: 422 naming the limit), its answer's bytes reserved (503 when the
         answer budget is spent), run and serialised off the event loop (a costly one in the
         build process), then streamed."""
-        rows = np.asarray(V, dtype=float)
+        rows = _demand_rows(V, problem.k)
         seconds = check_batch_cost(problem, method, options, len(rows), self.batch_budget, self.max_answer_bytes)
         free = self.answers.reserve(answer_bytes(problem, len(rows)))
         try:

@@ -479,3 +479,11 @@ def test_hardover_event_holds_the_upper_stop(client):
     assert r.status_code == 201, r.text
     assert r.json()["event"]["params"] == {"position": 30.0}
     assert client.post(f"/v1/vehicles/{vid}/allocate", json={"v": [0.1, 0.2, 0.0]}).json()["u"][0] == 30.0
+
+
+def test_ragged_or_misshaped_batches_are_422_on_V(client):
+    """Found by the fuzzer once batches were priced before they ran: a ragged V is the caller's error."""
+    vid = vehicle(client)
+    for V in ([[0.0], [0.0, 0.0]], [[0.0, 0.0]], [[0.0, 0.0, 0.0, 0.0]]):
+        assert_problem(client.post(f"/v1/vehicles/{vid}/allocate/batch", json={"V": V}), 422, "/V", "V")
+        assert_problem(client.post("/v1/allocate/batch", json={**SIMPLE, "V": [[0.0, 1.0]] + V}), 422, "/V", "V")

@@ -32,6 +32,10 @@ _vehicle = app.state.store.create(VehicleCreate(**harv_latdir().to_dict(), name=
 app.state.store.record_event(
     _vehicle.id, TypeAdapter(EventIn).validate_python({"effector": "rudder", "kind": "jam", "position": 3.0}))
 _alternate = itertools.cycle([True, False])
+# as the lifespan does (in-process requests without ``with TestClient`` never run it), and waited
+# for: a build process warming its kernels on a loaded machine takes longer than a case's 10 s
+for _started in app.state.store.builder.start_processes():
+    _started.result(timeout=600)
 
 
 @pytest.fixture(scope="module", autouse=True)
