@@ -19,6 +19,7 @@ from pydantic import AfterValidator, BaseModel, ConfigDict, Field, StrictInt, mo
 
 import alloc
 from alloc.health import FailureKind
+from alloc.registry import DEFAULT_METHOD
 
 from .config import MAX_AXES, MAX_BATCH, MAX_DIRECTIONS, MAX_EFFECTORS, MAX_MAGNITUDE, MIN_WEIGHT
 
@@ -109,7 +110,7 @@ class ProblemOut(BaseModel):
 
 # ------------------------------------------------------------- allocation
 class _Demand(_In):
-    method: MethodName = "pinv"
+    method: MethodName = DEFAULT_METHOD
     options: Options = Field(default_factory=dict)
 
 

@@ -93,8 +93,6 @@ def test_the_cli_default_method_is_the_registry_constant():
     assert next(p for p in plot.params if p.name == "method").default == DEFAULT_METHOD
 
 
-@pytest.mark.xfail(strict=True, reason="the library's and the HTTP schema's default (pinv) await their owners' "
-                                       "switch to alloc.registry.DEFAULT_METHOD (issue 22)")
 def test_one_default_method_everywhere():
     import inspect
 
