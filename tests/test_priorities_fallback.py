@@ -48,6 +48,10 @@ def test_solver_failure_returns_admissible_fallback(method, failure, monkeypatch
         return np.full(p.m, np.nan), 5
 
     monkeypatch.setattr(allocate.impl, "solve", broken)
+    # the compiled one-call paths never reach ``impl.solve``: unwire them, so the call takes
+    # the path whose failure handling is under test (every input form reaches the fast path)
+    allocate._packed = allocate._packed_rate = allocate._W = None
+    allocate._wire()
     u_prev = np.full(p.m, 1.0)
     r = allocate([5.0, 20.0, 1.0], u_prev=u_prev, dt=0.01)
     lo, hi = p.effective_bounds(u_prev, 0.01)
