@@ -65,15 +65,15 @@ def test_cli_summary_plot_and_coverage(tmp_path):
     from alloc.ams.cli import app
 
     runner = CliRunner()
-    res = runner.invoke(app, ["summary", "--problem", "ice", "--json"])
+    res = runner.invoke(app, ["summary", "--vehicle", "ice", "--json"])
     assert res.exit_code == 0, res.output
     s = json.loads(res.output)
     assert s["facets"] == 78 and s["vertices"] == 86
     out = tmp_path / "ams.png"
-    res = runner.invoke(app, ["plot", "--problem", "harv", "--method", "cgi", "--samples", "500", "--out", str(out)])
+    res = runner.invoke(app, ["plot", "--vehicle", "harv", "--method", "cgi", "--samples", "500", "--out", str(out)])
     assert res.exit_code == 0, res.output
     assert out.stat().st_size > 10_000
-    res = runner.invoke(app, ["coverage", "--problem", "harv", "--method", "pinv", "--json"])
+    res = runner.invoke(app, ["coverage", "--vehicle", "harv", "--method", "pinv", "--json"])
     assert res.exit_code == 0, res.output
     assert json.loads(res.output)[0]["fraction"] == pytest.approx(0.5458, abs=1e-3)
 
