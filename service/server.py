@@ -17,11 +17,12 @@ lives).  The protocol below adds, with the limits of :class:`service.config.Sett
   is dropped and the buffer freed;
 * an accept policy: at most ``ALLOC_MAX_CONNECTIONS_PER_CLIENT`` connections per client
   address (``503``, closed), and room kept for newcomers: beyond
-  ``ALLOC_MAX_CONNECTIONS - ALLOC_RESERVED_CONNECTIONS`` open connections, the oldest one
-  that is not running a request (its request still arriving, or idle between requests) is
-  closed for each new one.  Stalled connections then cannot take the capacity an event's
-  connection needs: it arrives, finishes its request within a millisecond and is never the
-  oldest.
+  ``ALLOC_MAX_CONNECTIONS - ALLOC_RESERVED_CONNECTIONS`` open connections, one connection is
+  closed for each new one: the oldest that has never had a request answered (a half-sent
+  request), else the oldest idle one.  Stalled connections then cannot take the capacity an
+  event's connection needs: a new one finishes its request within a millisecond and is never
+  the oldest, and one that keeps its connection open between events is closed only when no
+  half-sent request is left to close.
 
 Framing errors (bad ``Content-Length``, garbage request line) are answered ``400``
 problem+json instead of text.
@@ -70,8 +71,12 @@ class _HeadTooLarge(Exception):
 class GuardedHttpToolsProtocol(HttpToolsProtocol):
     """uvicorn's httptools protocol with the deadlines and limits of the module docstring."""
 
-    #: this process's connections not running a request, oldest first (the eviction order)
+    #: this process's connections that have not had a request answered yet and are not running
+    #: one, oldest first: evicted first (a half-sent request is here for as long as it lives)
     _evictable: OrderedDict[GuardedHttpToolsProtocol, None] = OrderedDict()
+    #: connections that have had requests answered, idle or sending the next one: evicted only
+    #: when no connection of the first kind is left (a writer keeping its connection is here)
+    _idle: OrderedDict[GuardedHttpToolsProtocol, None] = OrderedDict()
     #: this process's open connections per client address
     _per_client: Counter[str] = Counter()
 
@@ -90,6 +95,7 @@ class GuardedHttpToolsProtocol(HttpToolsProtocol):
         self._refusal: bytes | None = None
         self._address: str | None = None
         self._running = False  # between a request's last byte and its answer's
+        self._served = False  # a request of this connection has been answered
 
     # ----------------------------------------------------------- deadlines
     def _arm(self) -> None:
@@ -146,11 +152,12 @@ class GuardedHttpToolsProtocol(HttpToolsProtocol):
     def _make_room(self) -> None:
         """Beyond the open limit, close the oldest connections not running a request."""
         excess = len(self.connections) - self.open_limit
-        while excess > 0 and self._evictable:
-            oldest = next(iter(self._evictable))
+        while excess > 0 and (self._evictable or self._idle):
+            tier = self._evictable if self._evictable else self._idle
+            oldest = next(iter(tier))
             if oldest is self:
                 break
-            del self._evictable[oldest]
+            del tier[oldest]
             if not oldest.transport.is_closing():
                 oldest._close_with(problem_bytes(503, "connection-evicted", "Connection closed to make room",
                                                  "the service closed this connection, which was not running a "
@@ -163,6 +170,7 @@ class GuardedHttpToolsProtocol(HttpToolsProtocol):
             self._write_timer.cancel()
             self._write_timer = None
         self._evictable.pop(self, None)
+        self._idle.pop(self, None)
         if self._address is not None:
             self._per_client[self._address] -= 1
             if self._per_client[self._address] <= 0:
@@ -174,8 +182,8 @@ class GuardedHttpToolsProtocol(HttpToolsProtocol):
     def data_received(self, data: bytes) -> None:
         if not self._receiving:
             self._receiving = True
-        if not self._running:
-            self._evictable.setdefault(self)  # a request arriving: evictable until it has arrived
+        if not self._running:  # a request arriving: evictable until it has arrived
+            (self._idle if self._served else self._evictable).setdefault(self)
         self._arm()
         if self._in_head and not self._head_fits(data):
             self._close_with(problem_bytes(431, "header-too-large", "Request header fields too large",
@@ -226,15 +234,16 @@ class GuardedHttpToolsProtocol(HttpToolsProtocol):
         self._receiving = False
         self._in_head = True  # what follows on this connection is the next request's head
         self._evictable.pop(self, None)  # running a request: not evicted for a newcomer
+        self._idle.pop(self, None)
         self._running = True
         self._disarm()
         super().on_message_complete()
 
     def on_response_complete(self) -> None:
-        self._running = False
+        self._running, self._served = False, True
         super().on_response_complete()
         if not self.transport.is_closing():
-            self._evictable[self] = None  # idle between requests
+            self._idle[self] = None  # idle between requests
 
     def send_400_response(self, msg: str) -> None:
         refusal, self._refusal = self._refusal, None
