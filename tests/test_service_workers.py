@@ -92,7 +92,7 @@ def test_starting_workers_are_not_health_checked_until_ready():
     env = {**os.environ, "GIL_HOLD_N": str(n), "PYTHONPATH": f"{ROOT / 'tests'}:{ROOT}"}
     logs = {}
     for which in ("uvicorn", "ours"):
-        proc = subprocess.run([sys.executable, "-c", _SUPERVISE, which, "25"], cwd=ROOT, env=env,
+        proc = subprocess.run([sys.executable, "-c", _SUPERVISE, which, "15"], cwd=ROOT, env=env,
                               capture_output=True, timeout=180)
         logs[which] = proc.stderr.decode(errors="replace")
     started = {k: log.count("Application startup complete") for k, log in logs.items()}
