@@ -158,6 +158,14 @@ def _positive(value: Any, path: str) -> float:
     return x
 
 
+def _weight(value: Any, path: str) -> float:
+    """A diagonal weight entry: positive and inside the weight domain (>= 1 / MAX_MAGNITUDE)."""
+    w = _positive(value, path)
+    if w < 1.0 / MAX_MAGNITUDE:
+        raise _fail(path, f"must be >= {1.0 / MAX_MAGNITUDE:g}, got {w:g}")
+    return w
+
+
 def _list(value: Any, path: str, n: int | None = None, *, low: int = 0, high: int | None = None) -> list[Any]:
     if not isinstance(value, (list, tuple)):
         raise _fail(path, f"expected a list, got {_kind(value)}")
@@ -377,10 +385,7 @@ class Effector:
                 raise _fail(f"{path}.preferred", f"{p:g} is outside [min, max] = [{lo:g}, {hi:g}]")
             kw["preferred"] = p
         if "weight" in t:
-            w = _positive(t["weight"], f"{path}.weight")
-            if w < 1.0 / MAX_MAGNITUDE:
-                raise _fail(f"{path}.weight", f"must be >= {1.0 / MAX_MAGNITUDE:g}, got {w:g}")
-            kw["weight"] = w
+            kw["weight"] = _weight(t["weight"], f"{path}.weight")
         if "dynamics" in t:
             kw["dynamics"] = Dynamics.from_dict(t["dynamics"], f"{path}.dynamics")
         if "effectiveness" in t and "rotor" in t:
@@ -434,10 +439,7 @@ class Axis:
             if f in t:
                 kw[f] = _text(t[f], f"{path}.{f}")
         if "weight" in t:
-            w = _positive(t["weight"], f"{path}.weight")
-            if w < 1.0 / MAX_MAGNITUDE:
-                raise _fail(f"{path}.weight", f"must be >= {1.0 / MAX_MAGNITUDE:g}, got {w:g}")
-            kw["weight"] = w
+            kw["weight"] = _weight(t["weight"], f"{path}.weight")
         if "wrench" in t:
             wr = _text(t["wrench"], f"{path}.wrench")
             if wr not in WRENCH_COMPONENTS:
