@@ -19,7 +19,7 @@ Divergence rule (documented once, applied by every scenario through
 :func:`divergence_check`): a run is *diverged* when any state or output is
 non-finite, or when any controlled output exceeds the scenario's bound
 ``|output| > output_bound`` (a per-channel bound far outside the flight
-envelope, chosen by the scenario).  The closed-loop engine (:mod:`sim.loop`)
+envelope, chosen by the scenario).  The closed-loop engine (:mod:`sim.engine`)
 applies the same bound to each channel's reference-model output: a reference
 that leaves it is a pilot-loop runaway (the pilot keeps asking for more while
 the plant output stays bounded), a loss of control as well.  A diverged run stops at the first

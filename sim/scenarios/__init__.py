@@ -16,7 +16,7 @@ Two runners fly every scenario:
 
 * :func:`sim.scenarios.mimo.run_mimo` flies a :class:`~sim.scenarios.mimo.MimoScenario`
   (vehicle, allocator, actuators, pilot; ICE and F-18/HARV) through the compiled
-  engine :mod:`sim.loop`; such a scenario takes every option of ``run_mimo``
+  engine :mod:`sim.engine`; such a scenario takes every option of ``run_mimo``
   (frame period, Eq 1.28 on/off, ``u_prev`` source, pilot model, noise, ...) and
   registers with :func:`sim.scenarios.mimo.mimo_scenario`.
 * :func:`sim.scenarios.classic.run_classic` integrates a hand-written right-hand

@@ -28,7 +28,7 @@ import numpy as np
 from alloc.vehicles import HARV_LATDIR_EFFECTORS
 
 from sim.blocks import ActuatorFailure, ActuatorSpec, HedgeTerm, sum_of_sines
-from sim.loop import Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle
+from sim.model import Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle
 from sim.scenarios.mimo import MimoScenario, mimo_scenario, run_mimo
 from sim.result import SimResult
 from sim.scenarios import register_scenario

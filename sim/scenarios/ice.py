@@ -12,7 +12,7 @@ sqrt(37.168*41.3) = 39 rad/s are the ones quoted in the failure list.
 Substitutions (ours, not the seed's): the pilot models of Fig 4-86 are images
 not recoverable from the scan.  The alpha sum-of-sines is fed straight into
 the alpha reference model; the roll channel uses a crossover-model pilot
-``p_c = 2.0 (phi_c - phi)`` delayed 0.2 s (see :class:`sim.loop.Pilot`).
+``p_c = 2.0 (phi_c - phi)`` delayed 0.2 s (see :class:`sim.model.Pilot`).
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ import numpy as np
 from alloc.vehicles import ICE_B_FULL, ICE_BK_SEED, ICE_EFFECTORS
 
 from sim.blocks import ActuatorFailure, ActuatorSpec, HedgeTerm, sum_of_sines
-from sim.loop import Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle
+from sim.model import Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle
 from sim.scenarios.mimo import MimoScenario, mimo_scenario, run_mimo
 from sim.result import SimResult
 

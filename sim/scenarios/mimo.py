@@ -3,7 +3,7 @@
 A MIMO scenario is data: a :class:`MimoScenario` (vehicle, reference models,
 SMC and loop-shaped designs, failures, pilot, direct commands, divergence
 bound).  :func:`run_mimo` turns it and the run options into a
-:class:`sim.loop.LoopSpec` and flies it.  Adding a scenario is one module that
+:class:`sim.settings.LoopSpec` and flies it.  Adding a scenario is one module that
 builds a ``MimoScenario`` and registers a ``run(**options)`` that calls
 ``run_mimo(SCENARIO, **options)`` with :func:`mimo_scenario`.
 """
@@ -19,7 +19,9 @@ import numpy as np
 from alloc import vehicles
 from sim.allocation import STATIC
 from sim.blocks import DEFAULT_DT
-from sim.loop import TF, Failure, LoopShapedDesign, LoopSpec, Pilot, SMCDesign, Vehicle, simulate
+from sim.engine import simulate
+from sim.model import TF, Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle
+from sim.settings import LoopSpec
 from sim.pilot import pilot_parameters
 from sim.result import SimResult
 from sim.scenarios import Scenario, register_scenario
@@ -109,7 +111,7 @@ def run_mimo(
     step_times: list | None = None,
     **options: Any,
 ) -> SimResult:
-    """Fly ``scenario`` with these run options (see :class:`sim.loop.LoopSpec` for their meaning).
+    """Fly ``scenario`` with these run options (see :class:`sim.settings.LoopSpec` for their meaning).
 
     ``controller`` is ``"smc"`` (the seed's observer-based SMC with hedging; its
     design options, e.g. ``observer``, ``hedge``, pass through) or ``"loopshape"``
@@ -121,7 +123,7 @@ def run_mimo(
         known = sorted(scenario.design_options + scenario.input_options)
         raise TypeError(f"{scenario.name}: unknown option(s) {sorted(unknown)}; scenario options: {known}")
     duration = scenario.default_duration if duration is None else float(duration)
-    # a failure by the scenario's name, or any sim.loop.Failure (e.g. the benchmark's catalogue)
+    # a failure by the scenario's name, or any sim.model.Failure (e.g. the benchmark's catalogue)
     fail = failure if isinstance(failure, Failure) or failure is None else scenario.failure(failure, failure_time)
     if controller == "smc":
         design: SMCDesign | LoopShapedDesign = scenario.smc_design(
@@ -158,7 +160,7 @@ def mimo_scenario(
 
     The registry's default duration and method are the scenario's.  ``run``
     is marked ``accepts_failure_objects``: :func:`run_mimo` takes a
-    :class:`sim.loop.Failure` as well as a failure name (the benchmark
+    :class:`sim.model.Failure` as well as a failure name (the benchmark
     catalogue hands its failures over that way).
     """
 
