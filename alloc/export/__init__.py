@@ -1,0 +1,369 @@
+"""Flight-computer kernels: an allocator as dependency-free C99 (``alloc export``).
+
+:func:`export_c` takes a :class:`~alloc.Problem` or a vehicle and a method and writes a
+self-contained ``.h``/``.c`` pair: fixed sizes, no heap, no recursion, no library calls but
+``sqrt`` and ``fabs``, ``float`` or ``double`` chosen at generation, every constant the
+method can precompute (pseudo-inverses, the level rows of the active set) printed in the
+source.  One entry point per kernel::
+
+    int alloc_<method>_allocate(const T *v, const T *u_prev, T dt, T *u);
+
+returning the status (0 exact, 1 unattainable, 2 fallback).  The ``double`` build transcribes
+the library's compiled code in the same order of operations: it returns the library's
+answers bit for bit and the same statuses (tests/test_export.py checks it); the ``float``
+build agrees to :data:`FLOAT_TOLERANCE` and clamps its output to its bounds exactly.
+
+Methods: ``pinv``, ``pinv_clip``, ``ganging`` (``u = clip(c + P v)``), ``pinv_scale`` (the
+increment scaled into the box) and the active-set ``wls`` and ``qp`` (with ``priorities``),
+whose iteration count per level is capped at the library's own cap (stated and argued in
+the header, enforced: reaching it returns the safe answer with status 2).
+
+Health at run time: the active-set kernels take reduced limits and jams through
+``alloc_<method>_set_limits``; the closed-form kernels bake the distribution matrix of the
+problem's health into their constants, so a jam or an effectiveness change there means
+generating again (``Problem.with_health``), as does an effectiveness change for any method.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+from ..exceptions import AllocError, OptionError, UnknownMethodError
+from ..problem import MAX_MAGNITUDE, Problem
+from ..result import EXACT_RTOL
+from . import templates
+
+__all__ = ["export_c", "ExportedKernel", "ExportError", "EXPORTABLE", "PRECISIONS", "GENERATOR_VERSION",
+           "FLOAT_TOLERANCE", "FLOAT_EXACT_RTOL", "FLOAT_VMAX", "iteration_bound"]
+
+#: bumped whenever the generated code changes for the same input
+GENERATOR_VERSION = "1"
+#: the methods :func:`export_c` generates, in the order the docs list them
+EXPORTABLE = ("pinv", "pinv_clip", "ganging", "pinv_scale", "wls", "qp")
+PRECISIONS = ("double", "float")
+#: ``float`` builds: the status ``exact`` tolerance (the library's 1e-6 is 8 float ulps at 1,
+#: below what a float residual with its rounding bound can certify)
+FLOAT_EXACT_RTOL = 1e-4
+#: ``float`` builds: the valid input domain (the library's 1e50 is beyond float's range)
+FLOAT_VMAX = 1e30
+#: ``float`` builds agree with the library within ``FLOAT_TOLERANCE * max(1, |u|_max range)``
+#: on the effector commands (measured by tests/test_export.py)
+FLOAT_TOLERANCE = 1e-3
+
+_ACTIVE_SET_METHODS = ("wls", "qp")
+
+
+class ExportError(AllocError, ValueError):
+    """A problem, method or option the C generator cannot export (naming the field)."""
+
+
+@dataclass(frozen=True)
+class ExportedKernel:
+    """A generated kernel: the C sources and what they were made from."""
+
+    #: the C prefix of every public name (``alloc_qp``)
+    prefix: str
+    method: str
+    precision: str
+    header: str
+    source: str
+    #: file names of the pair (``alloc_qp.h``, ``alloc_qp.c``)
+    header_name: str
+    source_name: str
+    k: int
+    m: int
+    #: iteration cap per level (active-set methods), else None
+    maxit: int | None = None
+    #: levels of the active set (its total cap is ``levels * maxit``)
+    levels: int = 0
+    options: dict[str, Any] = field(default_factory=dict)
+
+    def write(self, out: str | os.PathLike[str]) -> tuple[Path, Path]:
+        """Write the pair into folder ``out`` (created); returns the two paths."""
+        folder = Path(out)
+        folder.mkdir(parents=True, exist_ok=True)
+        h, c = folder / self.header_name, folder / self.source_name
+        h.write_text(self.header)
+        c.write_text(self.source)
+        return h, c
+
+
+# --------------------------------------------------------------------------- formatting
+
+class _Real:
+    """How constants of one precision are printed and what the precision's limits are."""
+
+    def __init__(self, precision: str) -> None:
+        self.double = precision == "double"
+        self.ctype = "double" if self.double else "float"
+
+    def value(self, x: float, what: str) -> float:
+        """``x`` in this precision (a float64 holding it); non-finite only if ``x`` is infinite."""
+        x = float(x)
+        if self.double or np.isinf(x):
+            return x
+        y = float(np.float32(x))
+        if not np.isfinite(y):
+            raise ExportError(f"{what}: {x:g} does not fit a float build (|x| > {np.finfo(np.float32).max:g})",
+                              field=what.split("[")[0])
+        return y
+
+    def literal(self, x: float, what: str) -> str:
+        y = self.value(x, what)
+        if np.isinf(y):
+            inf = "HUGE_VAL" if self.double else "HUGE_VALF"
+            return inf if y > 0 else f"-{inf}"
+        text = repr(y)
+        return text if self.double else text + "f"
+
+    def array(self, a: Any, what: str) -> str:
+        arr = np.asarray(a, dtype=float)
+        if arr.ndim == 1:
+            return "{" + ", ".join(self.literal(x, f"{what}[{i}]") for i, x in enumerate(arr)) + "}"
+        rows = ",\n    ".join(self.array(row, f"{what}[{i}]") for i, row in enumerate(arr))
+        return "{\n    " + rows + "\n}"
+
+    def inward(self, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Limits in this precision rounded inward (a float output within them is within the
+        true limits); a jam (``lo == hi``) keeps its nearest float."""
+        if self.double:
+            return lo, hi
+        l32, h32 = lo.astype(np.float32), hi.astype(np.float32)
+        up = l32.astype(float) < lo
+        l32[up] = np.nextafter(l32[up], np.float32(np.inf))
+        down = h32.astype(float) > hi
+        h32[down] = np.nextafter(h32[down], np.float32(-np.inf))
+        crossed = l32 > h32
+        l32[crossed] = h32[crossed] = lo[crossed].astype(np.float32)
+        return l32.astype(float), h32.astype(float)
+
+    @property
+    def consts(self) -> dict[str, str]:
+        if self.double:
+            return {"FABS": "fabs", "SQRT": "sqrt", "REAL_MAX": "DBL_MAX", "VMAX": repr(MAX_MAGNITUDE),
+                    "RTOL": repr(EXACT_RTOL), "EPS": repr(float(np.finfo(float).eps))}
+        return {"FABS": "fabsf", "SQRT": "sqrtf", "REAL_MAX": "FLT_MAX", "VMAX": f"{FLOAT_VMAX!r}f",
+                "RTOL": f"{FLOAT_EXACT_RTOL!r}f", "EPS": "FLT_EPSILON"}
+
+
+def _ints(a: Any) -> str:
+    return "{" + ", ".join(str(int(x)) for x in a) + "}"
+
+
+def _fill(text: str, fields: Mapping[str, str], prefix: str) -> str:
+    for key, value in fields.items():
+        text = text.replace(f"@{key}@", value)
+    return text.replace("PREFIX_", prefix + "_").replace("PFX_", prefix.upper() + "_")
+
+
+# --------------------------------------------------------------------------- the bound
+
+def iteration_bound(method: str, m: int, k: int, levels: int, maxit: int) -> str:
+    """The header's statement of the iteration bound of an active-set kernel and its argument."""
+    worst = (m + 1) * 3 ** m
+    return f""" *
+ * Iteration bound.  Each level stops after at most PFX_MAXIT = {maxit} iterations (the
+ * library's cap, 50 + 10 (m + k)); {levels} level(s), so at most PFX_MAXIT_TOTAL = {levels * maxit}
+ * iterations a call, each of bounded cost (every inner loop has a fixed trip count: the
+ * Jacobi SVD at most 40 sweeps over p (p - 1) / 2 column pairs), so a call's worst-case time is
+ * bounded.  A level reaching the cap returns status 2 with the safe answer (the weighted
+ * pseudo-inverse of Eq 1.23 clipped to the call's bounds), as the library does.
+ * Why the cap is not reached: each iteration either fixes one free effector at a bound (a
+ * blocking step; at most m in a row) or ends at the minimiser of the level on its working
+ * set.  There the multipliers are tested and one effector with the wrong sign is freed, so the
+ * level's objective strictly decreases on the next step unless the step is zero; a zero step
+ * frees the same effector at most once until the iterate moves (the tabu rule).  In exact
+ * arithmetic no working set (each effector free, at its lower or at its upper bound) is
+ * revisited at a subspace minimiser, so a level ends within (m + 1) 3^m = {worst}
+ * iterations.  That combinatorial bound is far above the cap; the cap is an enforced budget,
+ * not a proof of convergence within it, and the largest count seen is measured on seeded
+ * random and adversarial demands (docs/export.md).
+"""
+
+
+# --------------------------------------------------------------------------- the generator
+
+def _resolve(problem_or_vehicle: Any, method: str, options: Mapping[str, Any] | None) -> tuple[Problem, str, dict]:
+    if isinstance(problem_or_vehicle, Problem):
+        return problem_or_vehicle, f"alloc.Problem {problem_or_vehicle.k} x {problem_or_vehicle.m}", dict(options or {})
+    from .. import vehicles
+
+    vehicle = vehicles.get_vehicle(problem_or_vehicle)
+    merged = vehicles.method_options(vehicle, method, options)
+    title = f"vehicle {vehicle.name!r}" + (f" ({vehicle.description})" if vehicle.description else "")
+    return vehicle.problem(), title, merged
+
+
+def _check_method(method: Any) -> str:
+    if not isinstance(method, str) or method not in EXPORTABLE:
+        raise UnknownMethodError(f"method: {method!r} cannot be exported to C; exportable: {', '.join(EXPORTABLE)}",
+                                 field="method")
+    return method
+
+
+def _checksum(problem: Problem) -> str:
+    h = hashlib.sha256()
+    for a in (problem.B, problem.umin, problem.umax, problem.up, problem.Wu, problem.Wv, problem.rate_min,
+              problem.rate_max):
+        h.update(np.ascontiguousarray(a, dtype=float).tobytes())
+    return h.hexdigest()[:16]
+
+
+def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "double",
+             options: Mapping[str, Any] | None = None, prefix: str | None = None,
+             maxit: int | None = None) -> ExportedKernel:
+    """Generate the C99 kernel of ``method`` on a problem or vehicle.
+
+    Parameters
+    ----------
+    problem_or_vehicle : Problem, str, path or Vehicle
+        The problem, or a vehicle (catalogue name or file: its ``[methods.<method>]``
+        defaults apply under ``options``, as everywhere).
+    method : str
+        One of :data:`EXPORTABLE`.
+    precision : {"double", "float"}
+        The scalar type ``T`` of the kernel.
+    options : mapping, optional
+        The method's options, validated as :func:`alloc.make_allocator` does.  ``wls`` and
+        ``qp`` export the compiled active set (``backend="active_set"``, the default);
+        ``incremental`` pseudo-inverses are not exported.
+    prefix : str, optional
+        C prefix of the public names and file names; default ``alloc_<method>``.
+    maxit : int, optional
+        Iteration cap per level of the active set; default the library's
+        ``50 + 10 (m + k)``.  Lower only to exercise the cap (tests).
+
+    Returns
+    -------
+    ExportedKernel
+        The header and source text (:meth:`ExportedKernel.write` saves them).
+
+    Raises
+    ------
+    UnknownMethodError
+        for a method that is not exportable (listing those that are).
+    OptionError
+        naming an option the export does not support, or one the method refuses.
+    ExportError
+        naming the field for a precision, prefix or constant the export cannot take.
+    """
+    from ..api import make_allocator
+
+    method = _check_method(method)
+    if precision not in PRECISIONS:
+        raise ExportError(f"precision: expected one of {', '.join(PRECISIONS)}, got {precision!r}", field="precision")
+    problem, title, opts = _resolve(problem_or_vehicle, method, options)
+    if opts.get("incremental"):
+        raise OptionError(f"incremental: {method} with incremental=True is not exported (the bias is u_prev)",
+                          field="incremental")
+    if method in _ACTIVE_SET_METHODS and opts.get("backend", "active_set") != "active_set":
+        raise OptionError(f"backend: only the compiled active set is exported, got {opts['backend']!r}",
+                          field="backend")
+    prefix = f"alloc_{method}" if prefix is None else prefix
+    if not (isinstance(prefix, str) and prefix.isidentifier() and prefix.isascii()):
+        raise ExportError(f"prefix: expected a C identifier, got {prefix!r}", field="prefix")
+    allocator = make_allocator(problem, method, **opts)
+    if allocator.impl is None:
+        raise ExportError(f"method: {method} could not be built for this problem ({allocator.build_error})",
+                          field="method")
+    real = _Real(precision)
+    k, m = problem.k, problem.m
+    umin, umax = real.inward(np.asarray(problem.umin, dtype=float), np.asarray(problem.umax, dtype=float))
+    up = np.minimum(np.maximum(np.asarray(problem.up, dtype=float), umin), umax)
+    safe = allocator._safe._pinv
+    safe_c, safe_p = (problem.up, np.zeros((m, k))) if safe is None else (safe.c, safe.P)
+    c = real.consts
+    shown = {key: value for key, value in opts.items()}
+    fields = {
+        "TITLE": f"{method} allocation kernel, {k} axes x {m} effectors, {real.ctype}",
+        "VERSION": _version(), "GENERATOR": GENERATOR_VERSION,
+        "PROBLEM": f"{title}, {k} x {m}, data sha256 {_checksum(problem)}",
+        "METHOD": f"{method}: {type(allocator.impl).summary}", "EQUATION": type(allocator.impl).equation,
+        "OPTIONS": "" if not shown else "\n * Options : " + ", ".join(f"{a}={_short(b)}" for a, b in shown.items()),
+        "REAL": real.ctype, "K": str(k), "M": str(m),
+        "AXES": ", ".join(problem.axes), "EFFECTORS": ", ".join(problem.names),
+        "VMAX": c["VMAX"], "RTOL": c["RTOL"], "FABS": c["FABS"], "SQRT": c["SQRT"], "REAL_MAX": c["REAL_MAX"],
+        "HEADER_NAME": f"{prefix}.h", "SOURCE_NAME": f"{prefix}.c",
+        "ROUND_GAMMA": real.literal((m + 2) * (2.220446049250313e-16 if real.double else 2.0 ** -23), "gamma"),
+        "B": real.array(problem.B, "B"), "UMIN": real.array(umin, "umin"), "UMAX": real.array(umax, "umax"),
+        "UP": real.array(up, "up"), "RATE_MIN": real.array(problem.rate_min, "rate_min"),
+        "RATE_MAX": real.array(problem.rate_max, "rate_max"),
+        "SAFE_C": real.array(safe_c, "SafeCommand.c"), "SAFE_P": real.array(safe_p, "SafeCommand.P"),
+        "BOUND": "", "HEALTH": "", "LIMITS_QUAL": "const ", "HEALTH_DECL": "", "MAXIT_DEFINE": "",
+    }
+    impl = allocator.impl
+    levels = 0
+    if method in ("pinv", "pinv_clip", "ganging"):
+        map_c, map_p = impl.fused
+        fields.update(MAP_C=real.array(map_c, "c"), MAP_P=real.array(map_p, "P"))
+        body = templates.AFFINE
+    elif method == "pinv_scale":
+        fields.update(MAP_P=real.array(impl._P, "P"))
+        body = templates.SCALED
+    else:
+        body, levels, maxit = _active_set_fields(impl._impl, problem, real, fields, maxit)
+    source = _fill(templates.COMMON + body, fields, prefix)
+    header = _fill(templates.HEADER, fields, prefix)
+    return ExportedKernel(prefix=prefix, method=method, precision=precision, header=header, source=source,
+                          header_name=f"{prefix}.h", source_name=f"{prefix}.c", k=k, m=m,
+                          maxit=maxit if levels else None, levels=levels, options=shown)
+
+
+def _active_set_fields(lexico: Any, problem: Problem, real: _Real, fields: dict[str, str],
+                       maxit: int | None) -> tuple[str, int, int]:
+    """The active set's constants, read from the library's packed solver state
+    (:func:`alloc._active_set.pack`), so the C runs on exactly the library's data."""
+    from .. import _active_set as aset
+
+    mats, vecs, ivecs = lexico._state[:3]
+    head = ivecs[aset._HEAD]
+    n, m, k, nlev = (int(head[i]) for i in (aset._N, aset._M, aset._K, aset._NLEV))
+    final, diag, ncw, nlw = (int(head[i]) for i in (aset._FINAL, aset._DIAG, aset._NCW, aset._NLW))
+    if head[aset._DYN]:
+        raise ExportError("method: a moving preference point (dynamic) is not exported", field="method")
+    cap = int(head[aset._MAXIT]) if maxit is None else maxit
+    if not (isinstance(cap, (int, np.integer)) and not isinstance(cap, bool) and 1 <= cap <= 1_000_000):
+        raise ExportError(f"maxit: expected an integer in [1, 1000000], got {maxit!r}", field="maxit")
+    eps = 2.220446049250313e-16 if real.double else 2.0 ** -23
+    if real.double:
+        tiny = {"SIGMA_RTOL": aset.SIGMA_RTOL, "JACOBI_EPS": aset.JACOBI_EPS, "JACOBI_TOL_FLOOR": 1e-15,
+                "JACOBI_SMALL": 1e-30, "SIGMA_TINY": 1e-290, "CHOL_TINY": 1e-300, "MU_EPS": aset.MU_EPS}
+    else:  # the same roles at float's round-off and range
+        tiny = {"SIGMA_RTOL": 1e-5, "JACOBI_EPS": eps, "JACOBI_TOL_FLOOR": 4.0 * eps, "JACOBI_SMALL": 1e-12,
+                "SIGMA_TINY": 1e-35, "CHOL_TINY": 1e-37, "MU_EPS": 1e3 * eps}
+    fields.update({key: real.literal(value, key) for key, value in tiny.items()})
+    fields.update(
+        N=str(n), NLEV=str(nlev), FINAL=str(final), DIAG=str(diag), NCW=str(ncw), NLW=str(nlw),
+        ML="1" if diag else "M",
+        A=real.array(mats[aset._A, :n, :m], "A"), T=real.array(mats[aset._T, :n, :n], "T"),
+        PERM=_ints(ivecs[aset._PERM, :n]), STARTS=_ints(ivecs[aset._STARTS, :nlev + 1]),
+        GAM=real.array(vecs[aset._GAM, :nlev], "gamma"), WU=real.array(mats[aset._WU, :m, :m], "Wu"),
+        P0=real.array(mats[aset._P0, :m, :k], "P0"),
+    )
+    levels = nlev + final
+    fields["BOUND"] = iteration_bound("", m, k, levels, cap)
+    fields["HEALTH"] = (" *\n * Health at run time: PREFIX_set_limits(umin, umax) sets reduced limits or jams\n"
+                        " * (umin[j] == umax[j]) within the nominal limits; an effectiveness change needs a new\n"
+                        " * export.  The cold start and the safe answer keep the nominal Eq 1.23 matrix.\n")
+    fields["HEALTH_DECL"] = templates.HEALTH_DECL
+    fields["LIMITS_QUAL"] = ""
+    fields["MAXIT_DEFINE"] = (f"/* iteration cap per level and per call (see the bound above) */\n"
+                              f"#define PFX_MAXIT {cap}\n#define PFX_MAXIT_TOTAL {levels * cap}\n")
+    return templates.ACTIVE_SET, levels, cap
+
+
+def _short(value: Any) -> str:
+    text = repr(value.tolist() if isinstance(value, np.ndarray) else value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def _version() -> str:
+    from .. import __version__
+
+    return __version__
