@@ -628,6 +628,26 @@ def allocate_command(
         typer.echo(f"  {axis:<12} demand {want: .6g}  achieved {got: .6g}")
 
 
+@app.command("export", cls=DefaultMethodCommand)
+def export_command(
+    vehicle: str = typer.Option(..., "--vehicle", metavar="NAME|FILE", help=VEHICLE_HELP),
+    method: Optional[str] = typer.Option(None, "--method", "-m", help="method to export (alloc.export.EXPORTABLE)"),
+    precision: str = typer.Option("double", "--precision", help="scalar type of the kernel: double or float"),
+    out: Path = typer.Option(..., "--out", help="folder for the .h/.c pair (created)"),
+    option: list[str] = typer.Option([], "--option", "-o", help="method option key=value (as for allocate)"),
+    prefix: Optional[str] = typer.Option(None, "--prefix", help="C prefix of the names and files; default "
+                                         "alloc_<method>"),
+) -> None:
+    """Write the allocator as a self-contained C99 kernel (alloc_<method>.h/.c; see docs/export.md)."""
+    from .export import export_c
+
+    name = default_method() if method is None else method
+    kernel = export_c(load_vehicle_option(vehicle), name, precision=precision, options=parse_options(option),
+                      prefix=prefix)
+    for path in kernel.write(out):
+        typer.echo(str(path))
+
+
 def main() -> None:  # pragma: no cover - console entry point
     app()
 
