@@ -1,0 +1,620 @@
+"""Failure detection and isolation by hypothesis tests on residuals (seed section 1.3.1).
+
+Residuals.  Each sample brings the positions a healthy effector would have (``u``: the
+command, or an actuator model's output), the measured virtual-control response ``y`` (k)
+and, where a position sensor exists, the measured positions.  With the failures already
+known applied (a jammed effector held, an effectiveness scaled), the residuals are
+
+    r = (y - B_eff u_known) / sigma          (k, whitened moment residual)
+    q_j = (position_j - u_known_j) / sigma_p (per effector with a sensor)
+
+Every failure kind of :mod:`alloc.health` acts on one effector ``j`` as a deviation of its
+effective position ``d_t`` from ``u_t``: ``r_t = b~_j d_t + noise`` (``b~_j = b_j / sigma``),
+and ``q_t = d_t / sigma_p`` for the kinds that move the surface (all but effectiveness).
+
+Detection (stage 1).  Over the last ``window`` samples, for each healthy effector, the
+generalised likelihood ratio of "``d_t = theta_1 + theta_2 u_t``" (which contains every
+kind's first-order signature: a jam ``p - u``, a loss of effectiveness ``(f - 1) u``) against
+"no failure".  Under no failure, with white Gaussian noise of the stated level, twice the
+log ratio is exactly chi-square with ``d = rank`` degrees of freedom (``d <= 2``, ``<= 4`` with
+a position sensor) -- Wilks' theorem is exact for a linear Gaussian model.  The threshold is
+
+    gamma = chi2.isf(alpha, d_max),   alpha = F * hop_seconds / 3600 / m_tested
+
+for a design false-alarm rate ``F`` per hour: one test per effector every ``hop`` samples,
+Bonferroni over effectors and tests, so the rate of alarms is at most ``F``; equal to it
+(up to the union's overlap, small at small ``alpha``) when ``hop = window`` (independent
+tests).  Overlapping windows (``hop < window``, the default ``window / 4``) are correlated and
+alarm less than ``F``.  No excitation, no decision: when ``u_j`` is constant the model has
+rank 1 and a surface jammed exactly where it is commanded produces no residual -- there is
+nothing to detect and nothing is reported.
+
+Isolation and classification (stage 2), on an alarm.  For every healthy effector, every
+kind, and every onset on a grid of ``hop`` samples within the buffer, the maximum-likelihood
+fit of the kind's own signature (``jam``: ``p - u``; ``hardover``: a jam at a limit;
+``effectiveness``: ``(f - 1) u`` with the surface where commanded; ``float``: ``-u``, no
+moment, the surface where commanded, as the simulator's float acts; ``limits``:
+``clip(u, lo, hi) - u``; ``rate_limits``: the deviation of a rate-limited copy of ``u``).
+Scores are the log-likelihood ratios less ``(n_params / 2) ln n`` (the Bayesian information
+criterion); the confidence is the posterior with equal priors (the effector's, summed over
+its kinds, times the kind's within it; jam and hard-over, effectiveness and float, are
+nested pairs and count as one for the kind's confidence).  A :class:`Detection` is emitted
+when both reach ``min_confidence``; otherwise the alarm stays pending while data arrive
+and is dropped unreported after a buffer's length (ambiguous: no decision).
+
+After a detection the event is applied to the detector's model (the prediction accounts
+for it), the effector is no longer tested, and the buffers restart.
+
+Memory is bounded: ring buffers of ``2 window`` samples and a list of at most
+``MAX_KEPT`` detections.  :meth:`FailureDetector.to_dict` gives the whole state.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+from scipy.special import logsumexp
+from scipy.stats import chi2
+
+from ..exceptions import OptionError
+from ..health import EffectorHealth, FailureEvent, FailureKind, apply_event, health_from_dict, health_to_dict
+from ..problem import Problem
+from ._checks import (
+    SampleError,
+    StateError,
+    sample_vector,
+    setting_real,
+    setting_vector,
+    state_array,
+    state_mapping,
+)
+
+__all__ = ["FailureDetector", "Detection", "MAX_KEPT"]
+
+#: detections kept in the state (older ones are dropped; the caller has received them)
+MAX_KEPT = 64
+#: rate-limit candidates, fractions of the nominal rate
+_RATE_FRACTIONS = np.geomspace(0.02, 0.8, 16)
+
+
+@dataclass(frozen=True)
+class Detection:
+    """One isolated failure with its evidence.
+
+    ``event`` the :class:`~alloc.health.FailureEvent` (effector name, kind, estimated
+    parameters); ``time`` of the decision and ``onset`` (estimated start), in seconds;
+    ``statistic`` and ``threshold`` of the stage-1 test (twice the log likelihood ratio,
+    chi-square under no failure); ``confidence`` = ``effector_confidence * kind_confidence``;
+    ``parameter`` and ``parameter_std`` the estimated jam position or effectiveness fraction
+    (``None`` for the kinds with none or several); ``samples`` the fit used.
+    """
+
+    event: FailureEvent
+    time: float
+    onset: float
+    statistic: float
+    threshold: float
+    confidence: float
+    effector_confidence: float
+    kind_confidence: float
+    parameter: float | None
+    parameter_std: float | None
+    samples: int
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        ev = self.event
+        d["event"] = {"effector": ev.effector, "kind": ev.kind.value,
+                      **{f: getattr(ev, f) for f in ("position", "fraction", "lo", "hi", "rate_min", "rate_max")
+                         if getattr(ev, f) is not None}}
+        return d
+
+
+@dataclass
+class _Fit:
+    kind: FailureKind
+    llr: float
+    n_params: int
+    params: dict[str, float]
+    parameter: float | None = None
+    parameter_std: float | None = None
+    samples: int = 0  # the suffix (samples since the onset) it was fitted on
+
+
+class FailureDetector:
+    """Streaming per-effector failure detection and isolation (see the module docstring).
+
+    Parameters
+    ----------
+    problem : Problem
+        The nominal vehicle: ``B``, limits, rate limits, names.
+    noise_std : float or array (k,)
+        Standard deviation of the white measurement noise of each response axis.
+    sample_time : float
+        Seconds between samples.
+    false_alarm_rate : float
+        Design false alarms per hour (an upper bound, see the module docstring).
+    window : float
+        Seconds of data in each stage-1 test.
+    hop : int, optional
+        Samples between tests (default a quarter window; the window's length gives
+        independent tests).
+    position_noise_std : float or array (m,), optional
+        Position sensor noise; ``None``: no position sensors.
+    min_confidence : float
+        Posterior needed to report (effector and kind).
+    """
+
+    def __init__(self, problem: Problem, noise_std: Any, sample_time: float, *, false_alarm_rate: float = 0.1,
+                 window: float = 0.25, hop: int | None = None, position_noise_std: Any = None,
+                 min_confidence: float = 0.95) -> None:
+        if not isinstance(problem, Problem):
+            raise OptionError(f"problem: expected an alloc.Problem, got {type(problem).__name__}")
+        self.problem = problem
+        k, m = problem.k, problem.m
+        self.noise_std = setting_vector("noise_std", noise_std, k, positive=True)
+        self.dt = setting_real("sample_time", sample_time, 0.0, 3600.0, lo_open=True)
+        self.false_alarm_rate = setting_real("false_alarm_rate", false_alarm_rate, 0.0, 3.6e9, lo_open=True)
+        self.window_seconds = setting_real("window", window, 0.0, 3600.0, lo_open=True)
+        self.N = max(4, int(round(self.window_seconds / self.dt)))
+        if self.N > 100_000:
+            raise OptionError(f"window: {self.N} samples; at most 100000")
+        if hop is None:
+            self.hop = max(1, self.N // 4)
+        else:
+            if isinstance(hop, bool) or not isinstance(hop, (int, np.integer)) or not 1 <= hop <= self.N:
+                raise OptionError(f"hop: expected an integer in [1, {self.N}] (samples), got {hop!r}")
+            self.hop = int(hop)
+        self.has_position = position_noise_std is not None
+        self.position_std = (setting_vector("position_noise_std", position_noise_std, m, positive=True)
+                             if self.has_position else np.full(m, np.inf))
+        self.min_confidence = setting_real("min_confidence", min_confidence, 0.0, 1.0, lo_open=True, hi_open=True)
+        self.L = 2 * self.N
+        self.health: dict[str, EffectorHealth] = {}
+        self.detections: list[Detection] = []
+        self.alarm_count = 0  # stage-1 alarms (isolated or not)
+        self.unisolated_count = 0  # alarms dropped without a decision
+        self.samples = 0
+        self.last_time = -math.inf
+        self._pending: dict[str, Any] | None = None
+        self._restart()
+        self._rate_state = np.array(problem.up, dtype=float)  # predicted positions of rate-limited effectors
+
+    # ------------------------------------------------------------------ design
+    @property
+    def tested(self) -> np.ndarray:
+        """Indices of the effectors tested (healthy, movable)."""
+        names = self.problem.names
+        movable = self.problem.umax > self.problem.umin
+        return np.array([j for j in range(self.problem.m) if movable[j] and names[j] not in self.health], dtype=int)
+
+    @property
+    def dof(self) -> int:
+        """Degrees of freedom of the stage-1 statistic at full rank."""
+        return 4 if self.has_position else 2
+
+    def threshold(self) -> float:
+        """The stage-1 threshold ``gamma = chi2.isf(alpha, d)`` (module docstring)."""
+        m_tested = max(1, len(self.tested))
+        alpha = self.false_alarm_rate * self.hop * self.dt / 3600.0 / m_tested
+        return float(chi2.isf(min(alpha, 0.5), self.dof))
+
+    # ------------------------------------------------------------------ model
+    def _effective(self) -> tuple[np.ndarray, np.ndarray]:
+        """``B_eff`` and the health-derived jam positions (NaN where not held)."""
+        B = np.array(self.problem.B, dtype=float)
+        held = np.full(self.problem.m, np.nan)
+        for name, h in self.health.items():
+            j = self.problem.index(name)
+            if h.floating:
+                B[:, j] = 0.0
+            else:
+                B[:, j] *= h.effectiveness
+                if h.jam_position is not None:
+                    held[j] = h.jam_position
+        return B, held
+
+    def _known_positions(self, u: np.ndarray) -> np.ndarray:
+        """Where the effectors are, given the failures known: held, clipped, rate-limited."""
+        out = u.copy()
+        for name, h in self.health.items():
+            j = self.problem.index(name)
+            if h.jam_position is not None:
+                out[j] = h.jam_position
+            elif h.limits is not None:
+                out[j] = min(max(out[j], h.limits[0]), h.limits[1])
+            if h.rate_limits is not None and h.jam_position is None:
+                prev = self._rate_state[j]
+                out[j] = prev + min(max(out[j] - prev, h.rate_limits[0] * self.dt), h.rate_limits[1] * self.dt)
+                self._rate_state[j] = out[j]
+        return out
+
+    def _restart(self) -> None:
+        k, m, L = self.problem.k, self.problem.m, self.L
+        self._U = np.zeros((L, m))
+        self._R = np.zeros((L, k))
+        self._Q = np.zeros((L, m))
+        self._T = np.zeros(L)
+        self._head = 0
+        self._count = 0
+        self._since_test = 0
+        self._pending = None
+        self._B_eff, _ = self._effective()
+        self._Bw = self._B_eff / self.noise_std[:, None]
+
+    # ------------------------------------------------------------------ streaming
+    def update(self, u: Any, y: Any, position: Any = None, time: float | None = None) -> list[Detection]:
+        """One sample; returns the detections it completes (usually none).
+
+        ``u`` (m,) the healthy positions (command or actuator model), ``y`` (k,) the measured
+        response, ``position`` (m,) the measured positions (only with position sensors; NaN
+        for a missing reading), ``time`` in seconds (default ``samples * sample_time``;
+        strictly increasing).  SampleError naming the field otherwise (nothing changes).
+        """
+        m = self.problem.m
+        u = sample_vector("u", u, m)
+        y = sample_vector("y", y, self.problem.k)
+        if position is not None:
+            if not self.has_position:
+                raise SampleError("position: this detector has no position sensors (position_noise_std = None)")
+            pos = np.array(position, dtype=float) if not isinstance(position, np.ndarray) else position.astype(float)
+            if pos.shape != (m,) or np.isinf(pos).any():
+                raise SampleError(f"position: expected shape ({m},) of finite values or NaN, got {pos.shape}")
+        else:
+            pos = None
+        t = self.samples * self.dt if time is None else setting_real_time(time)
+        if not t > self.last_time:
+            raise SampleError(f"time: {t:g} is not after the previous sample's {self.last_time:g}")
+        known = self._known_positions(u)
+        r = (y - self._B_eff @ known) / self.noise_std
+        q = np.zeros(m)
+        if pos is not None:
+            ok = ~np.isnan(pos)
+            q[ok] = (pos[ok] - known[ok]) / self.position_std[ok]
+        i = self._head
+        self._U[i], self._R[i], self._Q[i], self._T[i] = known, r, q, t
+        self._head = (i + 1) % self.L
+        self._count = min(self._count + 1, self.L)
+        self._since_test += 1
+        self.samples += 1
+        self.last_time = t
+        if self._count < self.N or self._since_test < self.hop:
+            return []
+        self._since_test = 0
+        return self._test(t)
+
+    def _window(self, n: int) -> tuple[np.ndarray, ...]:
+        idx = (self._head - n + np.arange(n)) % self.L
+        return self._U[idx], self._R[idx], self._Q[idx], self._T[idx]
+
+    def _stage1(self, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """Stage-1 statistics of the tested effectors over the last ``n`` samples."""
+        tested = self.tested
+        U, R, Q, _ = self._window(n)
+        Uc = U[:, tested] - U[:, tested].mean(axis=0)
+        Bw = self._Bw[:, tested]
+        c = np.einsum("ij,ij->j", Bw, Bw)
+        S = R @ Bw  # (n, t): b~_j . r~
+        stat = _linear_glr(S, Uc, c)
+        if self.has_position:
+            stat = stat + _linear_glr(Q[:, tested], Uc, np.ones(len(tested)))
+        return tested, stat
+
+    def _test(self, t: float) -> list[Detection]:
+        if len(self.tested) == 0:
+            return []
+        gamma = self.threshold()
+        if self._pending is None:
+            tested, stat = self._stage1(self.N)
+            if not (stat > gamma).any():
+                return []
+            self.alarm_count += 1
+            self._pending = {"time": t, "statistic": float(stat.max()), "hops": 0}
+        pending = self._pending
+        detection = self._isolate(pending, gamma)
+        if detection is not None:
+            self._emit(detection)
+            return [detection]
+        pending["hops"] += 1
+        if pending["hops"] > self.L // self.hop:
+            self.unisolated_count += 1
+            self._pending = None
+        return []
+
+    # ------------------------------------------------------------------ stage 2
+    def _onset(self, U: np.ndarray, R: np.ndarray, Q: np.ndarray, tested: np.ndarray) -> int:
+        """Samples since the estimated onset: the suffix maximising the stage-1 model's log
+        likelihood ratio less ``(d / 2) ln n`` over every tested effector (the GLR change-time
+        estimate), from reverse cumulative sums (every suffix at once)."""
+        Bw = self._Bw[:, tested]
+        c = np.einsum("ij,ij->j", Bw, Bw)
+        parts = [(R @ Bw, c)]
+        if self.has_position:
+            parts.append((Q[:, tested], np.ones(len(tested))))
+        Ut = U[:, tested]
+        n = np.arange(1, len(U) + 1, dtype=float)[:, None]
+        rsum = lambda x: np.cumsum(x[::-1], axis=0)  # noqa: E731 - row i: the sum over the last i + 1 samples
+        su, suu = rsum(Ut), rsum(Ut * Ut)
+        uuc = suu - su * su / n
+        varies = uuc > 1e-12 * np.maximum(suu, 1e-300)
+        stat = np.zeros_like(su)
+        for S, cj in parts:
+            cc = np.where(cj > 0, cj, np.inf)
+            ss, ssu = rsum(S), rsum(S * Ut)
+            s1c = ssu - ss * su / n
+            stat += ss * ss / (n * cc) + np.where(varies, s1c * s1c / (cc * np.where(varies, uuc, 1.0)), 0.0)
+        score = 0.5 * stat.max(axis=1) - 0.5 * self.dof * np.log(n[:, 0])
+        return int(np.argmax(score)) + 1
+
+    def _isolate(self, pending: dict[str, Any], gamma: float) -> Detection | None:
+        tested = self.tested
+        n_all = self._count
+        U, R, Q, T = self._window(n_all)
+        n_onset = self._onset(U, R, Q, tested)
+        fits: list[tuple[int, _Fit]] = []
+        for j in tested:
+            fits += [(int(j), f) for f in self._fits(int(j), U[:, j], R, Q[:, j], n_onset)]
+        if not fits:
+            return None
+        scores = np.array([f.llr - 0.5 * f.n_params * math.log(f.samples) for _, f in fits])
+        post = np.exp(scores - logsumexp(scores))
+        ib = int(np.argmax(scores))  # ties: the first listed (the simpler kind, see _fits)
+        jbest, fit = fits[ib]
+        eff_conf = float(sum(pw for (j, _), pw in zip(fits, post) if j == jbest))
+        # the kind's confidence: the posterior of this effector's hypotheses that tell an
+        # allocator the same thing as the best (a jam at 59.9 and a hard-over at 60 do)
+        same = sum(pw for (j, f), pw in zip(fits, post) if j == jbest and self._same_consequence(jbest, fit, f))
+        kind_conf = min(1.0, float(same / max(eff_conf, 1e-300)))
+        if 2.0 * fit.llr < gamma or eff_conf < self.min_confidence or kind_conf < self.min_confidence:
+            return None
+        name = self.problem.names[jbest]
+        event = FailureEvent(name, fit.kind, **fit.params)
+        return Detection(event=event, time=float(T[-1]), onset=float(T[n_all - fit.samples]),
+                         statistic=pending["statistic"], threshold=gamma, confidence=eff_conf * kind_conf,
+                         effector_confidence=eff_conf, kind_confidence=kind_conf, parameter=fit.parameter,
+                         parameter_std=fit.parameter_std, samples=int(fit.samples))
+
+    def _same_consequence(self, j: int, f: _Fit, g: _Fit) -> bool:
+        """Whether two fits of effector ``j`` give an allocator the same problem, within three
+        standard deviations: both hold the surface with the same moment (a float's is zero,
+        as is that of an effectiveness indistinguishable from zero), or both leave it
+        movable with the same effectiveness, limits or rate limits."""
+        if f.kind == g.kind and f.kind in (FailureKind.LIMITS, FailureKind.RATE_LIMITS):
+            return f.params == g.params
+        bw = self._Bw[:, j]
+        sd = lambda fit: 0.0 if fit.parameter_std is None else fit.parameter_std  # noqa: E731
+
+        def held(fit: _Fit) -> tuple[float, float] | None:  # (held position's moment scale, its std)
+            if fit.kind is FailureKind.FLOAT:
+                return 0.0, 0.0
+            if fit.kind in (FailureKind.JAM, FailureKind.HARDOVER):
+                return float(fit.params["position"]), sd(fit)
+            if fit.kind is FailureKind.EFFECTIVENESS and fit.parameter is not None and fit.parameter <= 3 * sd(fit):
+                return 0.0, 0.0  # no control power left: as good as floating
+            return None
+
+        hf, hg = held(f), held(g)
+        if hf is not None and hg is not None:
+            if FailureKind.FLOAT in (f.kind, g.kind) or FailureKind.EFFECTIVENESS in (f.kind, g.kind):
+                other = hg if hf == (0.0, 0.0) else hf  # the moment of the held one must be zero
+                return float(np.linalg.norm(bw) * (abs(other[0]) - 3 * other[1])) <= 3.0
+            return abs(hf[0] - hg[0]) <= 3 * math.hypot(hf[1], hg[1]) + 1e-12
+        if f.kind is FailureKind.EFFECTIVENESS and g.kind is FailureKind.EFFECTIVENESS:
+            return abs(f.parameter - g.parameter) <= 3 * math.hypot(sd(f), sd(g))
+        return False
+
+    def _fits(self, j: int, u: np.ndarray, R: np.ndarray, q: np.ndarray, n_onset: int) -> list[_Fit]:
+        """Maximum-likelihood fit of every kind's signature for effector ``j``.
+
+        The closed-form kinds (float, hard-over, jam, effectiveness) are fitted on every
+        suffix (onset) at once from reverse cumulative sums, each at its best onset; limits and
+        rate limits on the onsets of the stage-1 model and of the best jam and the whole
+        buffer.  Listed simplest first (ties go to the first).
+        """
+        p = self.problem
+        bw = self._Bw[:, j]
+        c = float(bw @ bw)
+        N = len(u)
+        if c <= 0 and not self.has_position:
+            return []
+        a = (R @ bw) / c if c > 0 else np.zeros(N)  # moment-based deviation estimate, variance 1 / c
+        wq = 1.0 / float(self.position_std[j]) ** 2 if self.has_position else 0.0
+        qd = q * float(self.position_std[j]) if self.has_position else np.zeros(N)  # position units
+        wc = c + wq
+        a_comb = (c * a + wq * qd) / wc  # combined deviation estimate, variance 1 / wc
+        lo0, hi0 = float(p.umin[j]), float(p.umax[j])
+        rsum = lambda x: np.cumsum(x[::-1])  # noqa: E731 - entry i: the last i + 1 samples
+        n = np.arange(1, N + 1, dtype=float)
+        A, AU, U1, U2, AP = rsum(a_comb), rsum(a_comb * u), rsum(u), rsum(u * u), rsum(a * u)
+        logn = np.log(n)
+
+        def held_llr(P: np.ndarray) -> np.ndarray:  # the surface at P: sum wc (a d - d^2 / 2), d = P - u
+            return wc * (P * A - AU - 0.5 * (n * P * P - 2 * P * U1 + U2))
+
+        def best(llr: np.ndarray, k: int) -> int:
+            return int(np.argmax(llr - 0.5 * k * logn))
+
+        fits = []
+        if c > 0:  # float: no moment (theta = -1 on u), the surface where commanded
+            llr = c * (-AP - 0.5 * U2)
+            i = best(llr, 0)
+            fits.append(_Fit(FailureKind.FLOAT, float(llr[i]), 0, {}, samples=i + 1))
+        llr_lo, llr_hi = held_llr(np.full(N, lo0)), held_llr(np.full(N, hi0))
+        i_lo, i_hi = best(llr_lo, 0), best(llr_hi, 0)
+        stop, i, llr = (lo0, i_lo, llr_lo) if llr_lo[i_lo] >= llr_hi[i_hi] else (hi0, i_hi, llr_hi)
+        fits.append(_Fit(FailureKind.HARDOVER, float(llr[i]), 0, {"position": stop}, stop, 0.0, samples=i + 1))
+        P = np.clip((A + U1) / n, lo0, hi0)
+        llr = held_llr(P)
+        i_jam = best(llr, 1)
+        fits.append(_Fit(FailureKind.JAM, float(llr[i_jam]), 1, {"position": float(P[i_jam])}, float(P[i_jam]),
+                         1.0 / math.sqrt((i_jam + 1) * wc), samples=i_jam + 1))
+        if c > 0:
+            ok = U2 > 0
+            theta = np.where(ok, AP / np.where(ok, U2, 1.0), 0.0)
+            f = np.clip(1.0 + theta, 0.0, 1.0)
+            th = f - 1.0
+            llr = np.where(ok, c * (th * AP - 0.5 * th * th * U2), -np.inf)
+            i = best(llr, 1)
+            if np.isfinite(llr[i]):
+                fits.append(_Fit(FailureKind.EFFECTIVENESS, float(llr[i]), 1, {"fraction": float(f[i])}, float(f[i]),
+                                 1.0 / math.sqrt(c * U2[i]), samples=i + 1))
+        for length in sorted({n_onset, i_jam + 1, N}):
+            fits += self._range_fits(j, u[N - length:], a_comb[N - length:], wc, lo0, hi0)
+        return fits
+
+    def _range_fits(self, j: int, u: np.ndarray, a_comb: np.ndarray, wc: float, lo0: float,
+                    hi0: float) -> list[_Fit]:
+        """Reduced limits and reduced rate limits on one suffix."""
+        n = len(u)
+        fits = []
+        # reduced limits: the two sides separate (a sample beyond one side never touches the other)
+        cand = np.unique(np.clip(np.concatenate([u, a_comb + u]), lo0, hi0))
+        D_hi = np.minimum(0.0, cand[:, None] - u[None, :])
+        D_lo = np.maximum(0.0, cand[:, None] - u[None, :])
+        llr_hi = (wc * (a_comb * D_hi - 0.5 * D_hi ** 2)).sum(axis=1)
+        llr_lo = (wc * (a_comb * D_lo - 0.5 * D_lo ** 2)).sum(axis=1)
+        ih = int(np.argmax(llr_hi))
+        use_hi = bool(llr_hi[ih] > 0)
+        hi_c = float(cand[ih]) if use_hi else hi0
+        llr_lo = np.where(cand < hi_c, llr_lo, -np.inf)  # the pair must stay ordered
+        il = int(np.argmax(llr_lo))
+        use_lo = bool(llr_lo[il] > 0)
+        lo_c = float(cand[il]) if use_lo else lo0
+        # a surface never seen moving inside the fitted limits is a jam (nothing tells them apart)
+        margin = 3.0 / math.sqrt(n * wc)
+        moving_inside = int(((u > lo_c + margin) & (u < hi_c - margin)).sum())
+        if lo_c < hi_c and (use_hi or use_lo) and moving_inside >= 3:
+            llr = float(max(llr_hi[ih], 0.0) + max(llr_lo[il], 0.0))
+            fits.append(_Fit(FailureKind.LIMITS, llr, int(use_hi) + int(use_lo), {"lo": lo_c, "hi": hi_c},
+                             samples=n))
+        p = self.problem
+        rate = float(min(-p.rate_min[j], p.rate_max[j]))
+        if math.isfinite(rate) and rate > 0 and n > 1:
+            # the surface's position at the suffix's start is unknown when the onset lies before
+            # the buffer: a grid of starts (the commanded one, and nine across the range)
+            starts = np.concatenate([[u[0]], np.linspace(lo0, hi0, 9)])
+            rates = np.repeat(rate * _RATE_FRACTIONS, len(starts))
+            delta = np.tile(starts, len(_RATE_FRACTIONS))
+            D = np.zeros((len(rates), n))
+            D[:, 0] = delta - u[0]
+            for t in range(1, n):
+                delta = delta + np.clip(u[t] - delta, -rates * self.dt, rates * self.dt)
+                D[:, t] = delta - u[t]
+            llr_r = (wc * (a_comb * D - 0.5 * D ** 2)).sum(axis=1)
+            # a surface that moves less over the suffix than a jam's position is known to is a jam
+            llr_r[rates * (n - 1) * self.dt < 3.0 / math.sqrt(n * wc)] = -np.inf
+            free_start = np.tile(np.arange(len(starts)) > 0, len(_RATE_FRACTIONS))
+            ir = int(np.argmax(llr_r - 0.5 * free_start * math.log(n)))
+            if np.isfinite(llr_r[ir]):
+                fits.append(_Fit(FailureKind.RATE_LIMITS, float(llr_r[ir]), 1 + int(free_start[ir]),
+                                 {"rate_min": -float(rates[ir]), "rate_max": float(rates[ir])}, float(rates[ir]),
+                                 samples=n))
+        return fits
+
+    def _emit(self, detection: Detection) -> None:
+        _, self.health = apply_event(self.problem, self.health, detection.event)
+        j = self.problem.index(detection.event.effector)
+        self._rate_state[j] = float(self._U[(self._head - 1) % self.L, j])
+        self.detections.append(detection)
+        del self.detections[:-MAX_KEPT]
+        self._restart()
+
+    # ------------------------------------------------------------------ durable state
+    def to_dict(self) -> dict[str, Any]:
+        """The whole state as JSON-ready values (bounded: ``O(window (k + m))`` numbers)."""
+        order = (self._head - self._count + np.arange(self._count)) % self.L
+        return {
+            "kind": "detector", "noise_std": self.noise_std.tolist(), "sample_time": self.dt,
+            "false_alarm_rate": self.false_alarm_rate, "window": self.window_seconds, "hop": self.hop,
+            "position_noise_std": self.position_std.tolist() if self.has_position else None,
+            "min_confidence": self.min_confidence, "health": health_to_dict(self.health),
+            "samples": self.samples, "last_time": None if math.isinf(self.last_time) else self.last_time,
+            "alarm_count": self.alarm_count, "unisolated_count": self.unisolated_count,
+            "since_test": self._since_test, "pending": self._pending, "rate_state": self._rate_state.tolist(),
+            "buffer": {"U": self._U[order].tolist(), "R": self._R[order].tolist(), "Q": self._Q[order].tolist(),
+                       "T": self._T[order].tolist()},
+            "detections": [d.to_dict() for d in self.detections],
+        }
+
+    @classmethod
+    def from_dict(cls, problem: Problem, data: Any) -> FailureDetector:
+        """Inverse of :meth:`to_dict` for the same ``problem``; StateError naming the field."""
+        d = state_mapping(data, "detector", ("noise_std", "sample_time", "false_alarm_rate", "window", "hop",
+                                             "position_noise_std", "min_confidence", "health", "samples",
+                                             "last_time", "alarm_count", "unisolated_count", "since_test",
+                                             "pending", "rate_state", "buffer", "detections"))
+        try:
+            det = cls(problem, d["noise_std"], d["sample_time"], false_alarm_rate=d["false_alarm_rate"],
+                      window=d["window"], hop=d["hop"], position_noise_std=d["position_noise_std"],
+                      min_confidence=d["min_confidence"])
+            det.health = health_from_dict(d["health"])
+            for name in det.health:
+                problem.index(name)
+        except (OptionError, ValueError) as exc:
+            raise StateError(f"state: {exc}") from None
+        for name in ("samples", "alarm_count", "unisolated_count", "since_test"):
+            if isinstance(d[name], bool) or not isinstance(d[name], int) or d[name] < 0:
+                raise StateError(f"{name}: expected a non-negative integer")
+        det.samples, det.alarm_count, det.unisolated_count = d["samples"], d["alarm_count"], d["unisolated_count"]
+        det.last_time = -math.inf if d["last_time"] is None else float(d["last_time"])
+        det._restart()
+        det._since_test = d["since_test"]
+        buf = d["buffer"]
+        if not isinstance(buf, dict):
+            raise StateError("buffer: expected a mapping")
+        T = np.asarray(buf.get("T", []), dtype=float).ravel()
+        n = T.size
+        if n > det.L:
+            raise StateError(f"buffer: {n} samples; at most {det.L}")
+        k, m = problem.k, problem.m
+        det._U[:n] = state_array("U", buf.get("U", []) if n else np.zeros((0, m)), (n, m))
+        det._R[:n] = state_array("R", buf.get("R", []) if n else np.zeros((0, k)), (n, k))
+        det._Q[:n] = state_array("Q", buf.get("Q", []) if n else np.zeros((0, m)), (n, m))
+        det._T[:n] = T
+        det._head, det._count = n % det.L, n
+        det._rate_state = state_array("rate_state", d["rate_state"], (m,))
+        pending = d["pending"]
+        if pending is not None and not (isinstance(pending, dict) and {"time", "statistic", "hops"} <= set(pending)):
+            raise StateError("pending: expected null or a mapping with time, statistic, hops")
+        det._pending = pending
+        det.detections = [_detection_from_dict(x) for x in d["detections"]][-MAX_KEPT:]
+        return det
+
+
+def setting_real_time(value: Any) -> float:
+    from ..problem import as_real
+
+    return as_real("time", value, SampleError)
+
+
+def _detection_from_dict(d: Any) -> Detection:
+    if not isinstance(d, dict) or "event" not in d:
+        raise StateError("detections: expected mappings with an event")
+    try:
+        ev = dict(d["event"])
+        event = FailureEvent(ev.pop("effector"), ev.pop("kind"), **ev)
+        rest = {k: v for k, v in d.items() if k != "event"}
+        return Detection(event=event, **rest)
+    except (TypeError, ValueError, KeyError) as exc:
+        raise StateError(f"detections: {exc}") from None
+
+
+def _linear_glr(S: np.ndarray, Uc: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """Twice the log GLR of ``s_t = c (theta_1 + theta_2 u_t) + N(0, c)`` per column.
+
+    With ``x_t = [1, u_t - mean u]`` (orthogonal columns): ``(sum s)^2 / (n c) +
+    (sum s u)^2 / (c sum u^2)``; a column whose ``u`` does not vary contributes only the first
+    term (rank 1: no information on the second parameter, none invented).
+    """
+    n = S.shape[0]
+    cc = np.where(c > 0, c, np.inf)
+    s0 = S.sum(axis=0)
+    s1 = np.einsum("ij,ij->j", S, Uc)
+    uu = np.einsum("ij,ij->j", Uc, Uc)
+    scale = np.maximum(np.abs(Uc).max(axis=0, initial=0.0), 1e-300)
+    varies = uu > (1e-12 * scale) ** 2 * n
+    term2 = np.where(varies, s1 * s1 / (cc * np.where(varies, uu, 1.0)), 0.0)
+    return s0 * s0 / (n * cc) + term2
