@@ -1,0 +1,317 @@
+"""Fly a user's vehicle file in the closed loop: ``alloc sim --vehicle FILE``.
+
+A vehicle file with a ``[model]`` section (:mod:`alloc.vehicle_file`) carries everything the
+loop needs; this module assembles it:
+
+* **actuators** from each effector's ``dynamics`` (``bandwidth`` or ``time_constant``: first
+  order; ``wn``/``zeta`` or ``poles``: second order), its limits and rate limit.  An effector
+  without dynamics gets a first-order lag of ``static_bandwidth`` (1000 rad/s, two orders
+  above the bundled vehicles' actuators).  A nominal actuator ``delay`` is refused: the loop
+  models a delay only as a failure.
+* **trim**: the axes' operating point (``axes[i].trim``, a hovering multicopter's thrust) is
+  met by ``u0``, the default method's allocation of it; the loop flies deviations
+  ``du = u - u0`` (the linear model's input), and every recorded position and limit is
+  shifted back, so outputs are in the file's units around the file's numbers.
+* **controller** by the seed's section 4.3 procedure (:func:`sim.autodesign.auto_design`),
+  its report in ``result.settings["design"]``; ``controller="loopshape"`` flies its linear
+  baseline instead.
+* **commands**: the seed's sum of sines (Table 4-2, Eq 4.13) into every channel's reference
+  model, channel ``i`` phase-shifted by ``i pi / 4`` (ICE's roll channel: ``pi / 4``), scaled so
+  its peak pseudo-command is ``command_fraction`` of ``rho``.  No pilot model: a user's
+  vehicle names no attitude the pilot would fly.
+* **failures** by name, ``<kind>:<effector>[@<value>[:<value>]]`` (several joined by ``+``),
+  any kind of the failure-kind table (:mod:`alloc.health`) or a per-actuator simulator-only
+  one, the values filling the kind's parameters in order.  ``float:motor1`` is a rotor loss
+  (no thrust, no moment); ``effectiveness:motor1@0.5`` half of it; ``jam:elevon_l@5`` a
+  surface stuck at 5 (file units; without a value, where it is at the failure);
+  ``hardover:x`` runs to ``max``; ``limits:x@lo:hi``; ``bandwidth:x@wn`` (never told).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from alloc.exceptions import ProblemError
+from sim.autodesign import DESIGN_OPTIONS, AutoDesign, auto_design
+from sim.blocks import DEFAULT_DT, SUM_OF_SINES_TABLE_4_2, ActuatorFailure, ActuatorSpec, sum_of_sines
+from sim.loop import Failure, LoopSpec, Vehicle, simulate
+from sim.result import SimResult
+
+__all__ = ["FlightModel", "flight_model", "vehicle_failure", "fly", "DEFAULT_DURATION", "DEFAULT_FAILURE_TIME",
+           "FAILURE_SYNTAX"]
+
+#: simulated seconds of a run unless told (the failure halfway)
+DEFAULT_DURATION = 20.0
+DEFAULT_FAILURE_TIME = 10.0
+#: how a failure is named on a user's vehicle
+FAILURE_SYNTAX = "<kind>:<effector>[@<value>[:<value>]] (several joined by '+'), e.g. float:motor1, jam:elevon_l@5"
+#: divergence bound on a controlled output, x its command peak
+OUTPUT_BOUND_FACTOR = 20.0
+
+
+@dataclass(frozen=True)
+class FlightModel:
+    """A vehicle file made ready to fly: the loop's vehicle (deviations from trim), design, commands.
+
+    ``trim_u`` is ``u0`` (file units); ``command_scale`` the sum-of-sines ``xi`` per channel.
+    """
+
+    source: Any
+    vehicle: Vehicle
+    trim_u: np.ndarray
+    design: AutoDesign
+    command_scale: np.ndarray
+    output_bound: np.ndarray
+    units: dict[str, Any]
+
+    def commands(self, t: np.ndarray) -> np.ndarray:
+        """Direct commands into the reference models, one column per channel."""
+        return np.column_stack([sum_of_sines(t, xi, phase_step=i * np.pi / 4)
+                                for i, xi in enumerate(self.command_scale)])
+
+    def failure(self, name: str, time: float) -> Failure:
+        return vehicle_failure(self, name, time)
+
+
+def _actuator(e: Any, index: int, lo: float, hi: float, static_bandwidth: float) -> ActuatorSpec:
+    rate = math.inf if e.rate_max is None else float(e.rate_max)
+    if e.rate_min is not None and -e.rate_min != rate:
+        raise ProblemError(f"effectors[{index}].rate_min: the simulator's actuators have a symmetric rate limit; "
+                           f"got {e.rate_min:g} and rate_max {rate:g}", field=f"effectors[{index}].rate_min")
+    d = e.dynamics
+    if d is not None and d.delay > 0.0:
+        raise ProblemError(f"effectors[{index}].dynamics.delay: a nominal actuator delay is not modelled by the loop "
+                           "(a delay is injected only by a failure); remove it or fold it into the dynamics",
+                           field=f"effectors[{index}].dynamics.delay")
+    if d is None or (d.bandwidth is None and d.time_constant is None and d.wn is None and d.poles is None):
+        return ActuatorSpec.first_order(e.name, static_bandwidth, lo, hi, rate)
+    if d.bandwidth is not None:
+        return ActuatorSpec.first_order(e.name, d.bandwidth, lo, hi, rate)
+    if d.time_constant is not None:
+        return ActuatorSpec.first_order(e.name, 1.0 / d.time_constant, lo, hi, rate)
+    if d.wn is not None:
+        return ActuatorSpec.second_order(e.name, d.wn, d.zeta, lo, hi, rate)
+    return ActuatorSpec.two_real_poles(e.name, d.poles[0], d.poles[1], lo, hi, rate)
+
+
+def _trim(file_vehicle: Any) -> np.ndarray:
+    """``u0`` meeting the axes' trim (zero when every trim is zero)."""
+    trim = file_vehicle.trim
+    if not np.any(trim):
+        return np.zeros(file_vehicle.m)
+    import alloc
+
+    res = alloc.make_allocator(file_vehicle.problem(), alloc.registry.DEFAULT_METHOD)(trim)
+    if res.status != alloc.Status.EXACT:
+        raise ProblemError(f"axes[].trim: the effectors cannot meet the trim {trim.tolist()} "
+                           f"(best {res.v_achieved.tolist()})", field="axes")
+    return np.asarray(res.u, dtype=float)
+
+
+def _command_peak(design: AutoDesign, A: np.ndarray, B: np.ndarray, C_ctl: np.ndarray, allocation: np.ndarray) -> np.ndarray:
+    """Peak pseudo-command per unit ``xi`` of the sum of sines: ``sum_j |A_j| |R(j w_j)| / |P_ii(j w_j)|``.
+
+    ``P(s) = C_ctl (sI - A)^-1 B allocation demand_map`` is what each channel's output does per
+    unit pseudo-command; following ``r = R cmd`` takes ``u_c = r / P_ii`` per sine.
+    """
+    n, k = A.shape[0], C_ctl.shape[0]
+    path = B @ allocation @ design.demand_map
+    peak = np.zeros(k)
+    for amp, w in SUM_OF_SINES_TABLE_4_2:
+        P = C_ctl @ np.linalg.solve(1j * w * np.eye(n) - A, path)
+        for i, (num, den) in enumerate(design.references):
+            R = np.polyval(num, 1j * w) / np.polyval(den, 1j * w)
+            peak[i] += abs(amp) * abs(R) / max(abs(P[i, i]), np.finfo(float).tiny)
+    return peak
+
+
+def flight_model(source: Any, *, design: Mapping[str, Any] | None = None,
+                 frame_period: float = DEFAULT_DT) -> FlightModel:
+    """The :class:`FlightModel` of a vehicle (file path, catalogue name or :class:`alloc.vehicle_file.Vehicle`).
+
+    ``design`` overrides :data:`sim.autodesign.DESIGN_OPTIONS` by name.
+    """
+    from alloc import vehicles
+
+    fv = vehicles.get_vehicle(source)
+    if fv.model is None:
+        raise ProblemError(f"model: vehicle {fv.name!r} has no [model] section; the closed loop needs its linear "
+                           "model (states, outputs, A, B, C, D, controlled)", field="model")
+    model = fv.model
+    if not model.controlled:
+        raise ProblemError(f"model.controlled: vehicle {fv.name!r} names no controlled outputs (one per axis)",
+                           field="model.controlled")
+    A, B, C, D = model.arrays()
+    u0 = _trim(fv)
+    lo = np.array([e.min for e in fv.effectors]) - u0
+    hi = np.array([e.max for e in fv.effectors]) - u0
+    static_bw = dict(design or {}).get("static_bandwidth") or DESIGN_OPTIONS["static_bandwidth"][0]
+    actuators = tuple(_actuator(e, i, lo[i], hi[i], float(static_bw)) for i, e in enumerate(fv.effectors))
+    controlled = tuple(model.outputs.index(c) for c in model.controlled)
+    measured = tuple(range(len(model.outputs)))
+    B_axes = np.array(fv.B, dtype=float)
+    problem = fv.problem()
+    Wu = None if problem.Wu is None else np.diag(np.asarray(problem.Wu, dtype=float)) if np.ndim(problem.Wu) == 2 \
+        else np.asarray(problem.Wu, dtype=float)
+    ad = auto_design(A, B, C, D, controlled=controlled, measured=measured, output_names=model.outputs,
+                     B_axes=B_axes, umin=lo, umax=hi, actuators=actuators, Wu=Wu, frame_period=frame_period,
+                     options=design)
+    opt = ad.report["options"]
+    from sim.autodesign import _weighted_pinv
+
+    allocation = _weighted_pinv(B_axes, Wu)
+    peak = _command_peak(ad, A, B, C[list(controlled)], allocation)
+    xi = opt["command_fraction"] * ad.smc.rho / peak
+    command_peak = xi * sum(abs(a) for a, _ in SUM_OF_SINES_TABLE_4_2)
+    gains = np.zeros(len(model.outputs))
+    gains[list(controlled)] = opt["noise_fraction"] * command_peak
+    vehicle = Vehicle(
+        name=fv.name, A=A, B=B, C=C, D=D, output_names=tuple(model.outputs), actuators=actuators,
+        controlled=controlled, measured=measured, noise_gains=gains, B_alloc=B_axes,
+        # no seed matrix for a user's aircraft: ``static`` is the unconstrained (weighted) pseudo-inverse
+        Bk_seed=allocation @ ad.demand_map, demand_map=ad.demand_map, Wu=Wu, names=fv.effector_names,
+    )
+    ad.report["commands"] = {
+        "signal": "seed Table 4-2 sum of sines (Eq 4.13) into each reference model, channel i phase i pi/4",
+        "xi": xi.tolist(), "peak": command_peak.tolist(),
+        "rule": f"peak pseudo-command = {opt['command_fraction']:g} x rho (linear plant, weighted pseudo-inverse)",
+        "pilot": None,
+    }
+    ad.report["noise"] = {"gains": gains.tolist(), "rule": f"{opt['noise_fraction']:g} x command peak on the "
+                          "controlled outputs (seed: 0.1414 on ICE's 5-10 deg commands), 0 elsewhere"}
+    ad.report["trim"] = {"u0": u0.tolist(), "axes": fv.trim.tolist(),
+                         "rule": "default method's allocation of the axes' trim; the loop flies u - u0"}
+    ad.report["actuators"] = [{"name": a.name, "order": a.order, "wn": a.wn, "rate": a.rate} for a in actuators]
+    units = {"channels": {model.outputs[c]: "" for c in controlled},
+             "effectors": {e.name: e.unit for e in fv.effectors},
+             "axes": {a.name: a.unit for a in fv.axes}}
+    return FlightModel(source=fv, vehicle=vehicle, trim_u=u0, design=ad, command_scale=xi,
+                       output_bound=OUTPUT_BOUND_FACTOR * command_peak, units=units)
+
+
+def _value(text: str, what: str, part: str) -> float:
+    try:
+        x = float(text)
+    except ValueError:
+        raise ProblemError(f"failure: {part!r}: {what} {text!r} is not a number", field="failure") from None
+    if not math.isfinite(x):
+        raise ProblemError(f"failure: {part!r}: {what} must be finite, got {text!r}", field="failure")
+    return x
+
+
+def _kind_spec(kind: str, part: str) -> Any:
+    """The failure-kind table row of ``kind`` (:mod:`alloc.health`), per-actuator simulator-only rows included."""
+    from alloc.health import SIMULATOR_ONLY, FailureKind
+
+    if kind in SIMULATOR_ONLY and SIMULATOR_ONLY[kind].per_actuator:
+        return SIMULATOR_ONLY[kind]
+    if kind in FailureKind:
+        return FailureKind(kind).spec
+    kinds = [str(k) for k in FailureKind] + [k for k, spec in SIMULATOR_ONLY.items() if spec.per_actuator]
+    raise ProblemError(f"failure: {part!r}: expected {FAILURE_SYNTAX}; kinds: {', '.join(kinds)}", field="failure")
+
+
+def vehicle_failure(fm: FlightModel, name: str, time: float) -> Failure:
+    """The :class:`sim.loop.Failure` named ``name`` (:data:`FAILURE_SYNTAX`) at ``time``.
+
+    The values after ``@`` fill the kind's parameters in the order of its row in
+    :data:`alloc.health.FAILURE_KINDS` (``limits:x@lo:hi``); a parameter left out takes the
+    row's default (a jam without a position holds the position at the instant of failure).
+    Positions are in the file's units.
+    """
+    from alloc.health import PARAMETERS, Range
+
+    if not isinstance(name, str) or not name:
+        raise ProblemError(f"failure: expected {FAILURE_SYNTAX}, got {name!r}", field="failure")
+    names = list(fm.vehicle.effector_names)
+    failures = []
+    for part in name.split("+"):
+        kind, sep, rest = part.partition(":")
+        spec = _kind_spec(kind, part)
+        if not sep:
+            raise ProblemError(f"failure: {part!r}: expected {FAILURE_SYNTAX}", field="failure")
+        effector, at, text = rest.partition("@")
+        if effector not in names:
+            raise ProblemError(f"failure: {part!r}: unknown effector {effector!r}; effectors: {', '.join(names)}",
+                               field="failure")
+        i = names.index(effector)
+        values = text.split(":") if at else []
+        if len(values) > len(spec.params):
+            takes = ", ".join(spec.params) or "no value"
+            raise ProblemError(f"failure: {part!r}: {kind} takes {takes}", field="failure")
+        params = {}
+        for param, text_value in zip(spec.params, values, strict=False):
+            x = _value(text_value, param, part)
+            known = PARAMETERS.get(param)
+            # the loop flies deviations from trim: a position moves with it
+            params[param] = x - fm.trim_u[i] if known is not None and known.range == Range.POSITION else x
+        try:
+            failures.append(ActuatorFailure(i, kind, **params))
+        except ProblemError as exc:
+            raise ProblemError(f"failure: {part!r}: {exc}", field="failure") from None
+    return Failure(name=name, time=float(time), description=f"{name} at t = {time:g} s", actuators=tuple(failures))
+
+
+def fly(
+    source: Any, *, method: str | None = None, failure: str | Failure | None = None,
+    failure_time: float | None = None, duration: float | None = None, allocator_knows_failure: bool = False,
+    controller: str = "smc", design: Mapping[str, Any] | None = None, method_options: dict | None = None,
+    seed: int = 0, dt: float = DEFAULT_DT, noise: bool = True, record_every: int = 10, progress: bool = False,
+    **run_options: Any,
+) -> SimResult:
+    """Fly a vehicle file's model with the auto-designed controller (or its baseline) and any allocator.
+
+    ``run_options`` are :class:`sim.loop.LoopSpec` fields (``frame_period``, ``rate_aware``,
+    ``u_prev_source``, ``preferred``, ``rate_horizon``, ``rate_window``, ``anti_windup``,
+    ``boundary_layer``, ``actuators``).  Positions and limits in the result are in the
+    file's units (trim added back); ``result.settings`` carries ``design`` (the section 4.3
+    report), ``units`` and ``trim_u``.
+    """
+    import alloc
+    from alloc import vehicles
+
+    frame_period = run_options.get("frame_period")
+    fm = flight_model(source, design=design, frame_period=frame_period or dt)
+    method = alloc.registry.DEFAULT_METHOD if method is None else method
+    from sim.allocation import STATIC
+
+    if method != STATIC:
+        method_options = vehicles.method_options(fm.source, method, method_options)
+    duration = DEFAULT_DURATION if duration is None else float(duration)
+    if isinstance(failure, str):
+        failure = fm.failure(failure, DEFAULT_FAILURE_TIME if failure_time is None else failure_time)
+    if controller == "smc":
+        law: Any = fm.design.smc
+    elif controller == "loopshape":
+        law = fm.design.baseline
+    else:
+        raise ProblemError(f"controller: {controller!r}; expected 'smc' or 'loopshape'", field="controller")
+    n = int(round(duration / dt)) + 1
+    spec = LoopSpec(
+        scenario=fm.vehicle.name, vehicle=fm.vehicle, references=fm.design.references, controller=law,
+        commands=fm.commands(np.arange(n) * dt), pilots=(), failure=failure, method=method,
+        method_options=method_options, allocator_knows_failure=allocator_knows_failure, duration=duration, dt=dt,
+        seed=seed, noise=noise, output_bound=fm.output_bound, record_every=record_every, **run_options,
+    )
+    result = simulate(spec, progress=progress)
+    _to_file_units(result, fm.trim_u)
+    result.settings["controller"] = controller
+    result.settings["design"] = fm.design.report
+    result.settings["units"] = fm.units
+    result.settings["trim_u"] = fm.trim_u.tolist()
+    return result
+
+
+def _to_file_units(result: SimResult, u0: np.ndarray) -> None:
+    """Positions and limits around the file's numbers: ``u = du + u0``."""
+    if not np.any(u0):
+        return
+    if result.effectors is not None:
+        result.effectors = result.effectors + u0
+    if result.effector_limits is not None:
+        result.effector_limits = tuple(np.asarray(x) + u0 for x in result.effector_limits)
