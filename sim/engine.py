@@ -50,14 +50,7 @@ from sim.injection import inject_failure
 from sim.model import TF, Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle
 from sim.packed import DIVERGED, N_MISC, FloatSlot, IntSlot, Misc, Packed, advance, observe, record_columns
 from sim.result import SimResult
-from sim.settings import (
-    ANTI_WINDUP_RULES,
-    BOUNDARY_LAYER_RULES,
-    U_PREV_SOURCES,
-    LoopSpec,
-    anti_windup_on,
-    boundary_layer_at,
-)
+from sim.settings import LoopSpec, anti_windup_on, boundary_layer_at
 
 __all__ = ["simulate"]
 
@@ -95,12 +88,6 @@ def simulate(
         spec = LoopSpec(**fields)
     elif fields:
         raise TypeError(f"simulate: give a LoopSpec or keywords, not both (got {sorted(fields)})")
-    if spec.u_prev_source not in U_PREV_SOURCES:
-        raise ValueError(f"u_prev_source: {spec.u_prev_source!r}; expected one of {U_PREV_SOURCES}")
-    if spec.anti_windup not in ANTI_WINDUP_RULES:
-        raise ValueError(f"anti_windup: {spec.anti_windup!r}; expected one of {ANTI_WINDUP_RULES}")
-    if spec.boundary_layer not in BOUNDARY_LAYER_RULES:
-        raise ValueError(f"boundary_layer: {spec.boundary_layer!r}; expected one of {BOUNDARY_LAYER_RULES}")
     frame = spec.frame_steps()
     scenario, vehicle, references, controller = spec.scenario, spec.vehicle, spec.references, spec.controller
     commands, pilots, failure, method = spec.commands, spec.pilots, spec.failure, spec.method
@@ -238,13 +225,7 @@ def simulate(
     result = _result(rec[:n], cols, scenario, method, vehicle, failure, pilots, diverged=n_done <= n_steps)
     result.allocator_t = np.arange(n_calls) * tframe
     result.allocator_status = call_status[:n_calls].copy()
-    result.settings = {
-        "frame_period": tframe, "dt": dt, "rate_aware": bool(rate_aware), "u_prev_source": spec.u_prev_source,
-        "rate_horizon": spec.rate_horizon, "rate_window": spec.rate_window, "anti_windup": spec.anti_windup,
-        "boundary_layer": spec.boundary_layer,
-        "preferred": spec.preferred, "allocator_knows_failure": bool(allocator_knows_failure), "noise": bool(noise), "seed": int(seed),
-        "pilots": [p.describe() for p in pilots],
-    }
+    result.settings = {**spec.record(), "pilots": [p.describe() for p in pilots]}
     return result
 
 

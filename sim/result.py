@@ -37,10 +37,12 @@ from typing import Any
 
 import numpy as np
 
+from alloc.result import Status
+
 __all__ = ["SimResult", "STATUS_NAMES", "divergence_check", "tracking_metrics"]
 
-#: allocator status codes (index = code), as :class:`alloc.Status` values
-STATUS_NAMES = ("exact", "unattainable", "fallback")
+#: allocator status codes (index = code): the :class:`alloc.Status` values in their declared order
+STATUS_NAMES: tuple[str, ...] = tuple(status.value for status in Status)
 
 # An effector counts as "in saturation" when within this fraction of its
 # position (or rate) range of the limit; exact equality is fragile with
@@ -155,11 +157,14 @@ class SimResult:
         """Seconds during which any effector moves at its rate limit."""
         return self._time_in_saturation(self.effector_rates, self.rate_limits)
 
-    def status_fraction(self, name: str) -> float | None:
-        """Fraction of allocator calls that returned status ``name`` (None: no calls recorded)."""
+    def status_fraction(self, status: Status | str) -> float | None:
+        """Fraction of allocator calls that returned ``status`` (None: no calls recorded).
+
+        Raises ``ValueError`` for a name that is not an :class:`alloc.Status`.
+        """
         if self.allocator_status is None or self.allocator_status.size == 0:
             return None
-        return float(np.mean(self.allocator_status == STATUS_NAMES.index(name)))
+        return float(np.mean(self.allocator_status == STATUS_NAMES.index(Status(status).value)))
 
     def summary(self) -> dict[str, Any]:
         """JSON-serialisable metrics (see module docstring for definitions)."""
@@ -190,8 +195,8 @@ class SimResult:
             "time_in_position_saturation": self.time_in_position_saturation,
             "time_in_rate_saturation": self.time_in_rate_saturation,
             "allocator_calls": None if self.allocator_status is None else int(self.allocator_status.size),
-            "fallback_fraction": self.status_fraction("fallback"),
-            "unattainable_fraction": self.status_fraction("unattainable"),
+            "fallback_fraction": self.status_fraction(Status.FALLBACK),
+            "unattainable_fraction": self.status_fraction(Status.UNATTAINABLE),
             "settings": self.settings,
         }
 

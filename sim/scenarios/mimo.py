@@ -10,21 +10,21 @@ builds a ``MimoScenario`` and registers a ``run(**options)`` that calls
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, fields, replace
 from typing import Any
 
 import numpy as np
 
 from alloc import vehicles
 from sim.allocation import STATIC
-from sim.blocks import DEFAULT_DT
 from sim.engine import simulate
 from sim.model import TF, Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle
-from sim.settings import LoopSpec
 from sim.pilot import pilot_parameters
 from sim.result import SimResult
 from sim.scenarios import Scenario, register_scenario
+from sim.settings import LoopSpec, RunSettings
 
 __all__ = ["MimoScenario", "run_mimo", "mimo_scenario"]
 
@@ -84,73 +84,73 @@ class MimoScenario:
 def run_mimo(
     scenario: MimoScenario,
     *,
-    method: str | None = None,
-    failure: str | Failure | None = None,
-    duration: float | None = None,
-    seed: int = 0,
-    dt: float = DEFAULT_DT,
-    allocator_knows_failure: bool = False,
     progress: bool = False,
-    controller: str = "smc",
-    actuators: bool = True,
-    noise: bool = True,
-    failure_time: float | None = None,
-    pilot: str = "standin",
-    pilot_gain: float | None = None,
-    pilot_delay: float | None = None,
-    record_every: int = 10,
-    method_options: dict | None = None,
-    frame_period: float | None = None,
-    rate_aware: bool = True,
-    u_prev_source: str = "command",
-    preferred: str = "mid",
-    rate_horizon: str = "actuator",
-    rate_window: str = "binding",
-    anti_windup: str = "auto",
-    boundary_layer: str = "frame",
     step_times: list | None = None,
     **options: Any,
 ) -> SimResult:
-    """Fly ``scenario`` with these run options (see :class:`sim.settings.LoopSpec` for their meaning).
+    """Fly ``scenario`` with these run options: the :class:`sim.settings.RunSettings` fields
+    (the signature lists them; their meaning, defaults and ranges are the fields') plus the
+    scenario's design and input options.
 
     ``controller`` is ``"smc"`` (the seed's observer-based SMC with hedging; its
     design options, e.g. ``observer``, ``hedge``, pass through) or ``"loopshape"``
     (the seed's loop-shaped baseline).  ``pilot`` names a pilot model of
     :mod:`sim.pilot`; ``pilot_gain`` / ``pilot_delay`` override its values.
+    ``result.settings`` records every setting as flown (:meth:`RunSettings.record`: the
+    scenario's method, failure time and duration filled in).
+
+    Raises
+    ------
+    SettingError
+        A setting out of its type, choices or range (before anything is built).
+    TypeError
+        An option that is neither a setting nor one of the scenario's.
     """
-    unknown = set(options) - set(scenario.design_options) - set(scenario.input_options)
+    settings, extra = RunSettings.split(options)
+    unknown = set(extra) - set(scenario.design_options) - set(scenario.input_options)
     if unknown:
         known = sorted(scenario.design_options + scenario.input_options)
         raise TypeError(f"{scenario.name}: unknown option(s) {sorted(unknown)}; scenario options: {known}")
-    duration = scenario.default_duration if duration is None else float(duration)
+    duration = scenario.default_duration if settings.duration is None else settings.duration
+    failure = settings.failure
     # a failure by the scenario's name, or any sim.model.Failure (e.g. the benchmark's catalogue)
-    fail = failure if isinstance(failure, Failure) or failure is None else scenario.failure(failure, failure_time)
-    if controller == "smc":
+    fail = failure if isinstance(failure, Failure) or failure is None else scenario.failure(failure, settings.failure_time)
+    if settings.controller == "smc":
         design: SMCDesign | LoopShapedDesign = scenario.smc_design(
-            **{k: v for k, v in options.items() if k in scenario.design_options})
-    elif controller == "loopshape":
-        design = scenario.loop_shaped_design()
+            **{k: v for k, v in extra.items() if k in scenario.design_options})
     else:
-        raise ValueError(f"controller={controller!r}; expected 'smc' or 'loopshape'")
-    method = scenario.default_method if method is None else method
+        design = scenario.loop_shaped_design()
+    method = scenario.default_method if settings.method is None else settings.method
+    method_options = settings.method_options
     if method != STATIC:  # the seed's printed matrix takes no options
         method_options = vehicles.method_options(scenario.catalogue_vehicle, method, method_options)
-    n = int(round(duration / dt)) + 1
+    flown = replace(settings, method=method, method_options=method_options, duration=duration,
+                    failure_time=None if fail is None else fail.time)
+    n = int(round(duration / flown.dt)) + 1
     stick = scenario.pilot(
-        pilot_parameters(pilot, scenario.pilot_element, gain=pilot_gain, delay=pilot_delay),
-        **{k: v for k, v in options.items() if k in scenario.input_options},
+        pilot_parameters(flown.pilot, scenario.pilot_element, gain=flown.pilot_gain, delay=flown.pilot_delay),
+        **{k: v for k, v in extra.items() if k in scenario.input_options},
     )
     spec = LoopSpec(
         scenario=scenario.name, vehicle=scenario.vehicle(), references=scenario.references, controller=design,
-        commands=scenario.commands(np.arange(n) * dt), pilots=(stick,), failure=fail,
-        method=method, method_options=method_options,
-        allocator_knows_failure=allocator_knows_failure, actuators=actuators, noise=noise, duration=duration,
-        dt=dt, seed=seed, output_bound=scenario.output_bound, record_every=record_every,
-        frame_period=frame_period, rate_aware=rate_aware, u_prev_source=u_prev_source, preferred=preferred,
-        rate_horizon=rate_horizon, rate_window=rate_window, anti_windup=anti_windup,
-        boundary_layer=boundary_layer,
+        commands=scenario.commands(np.arange(n) * flown.dt), pilots=(stick,), failure=fail, method=method,
+        duration=duration, output_bound=scenario.output_bound, **flown.loop_settings(),
     )
-    return simulate(spec, progress=progress, step_times=step_times)
+    result = simulate(spec, progress=progress, step_times=step_times)
+    result.settings = {**flown.record(), "pilots": result.settings["pilots"]}
+    return result
+
+
+def _signature() -> inspect.Signature:
+    """``run_mimo``'s signature as :func:`inspect.signature` shows it: every setting by name."""
+    keyword = inspect.Parameter.KEYWORD_ONLY
+    own = inspect.signature(run_mimo).parameters
+    settings = [inspect.Parameter(f.name, keyword, default=f.default, annotation=f.type) for f in fields(RunSettings)]
+    return inspect.Signature([own["scenario"], *settings, own["progress"], own["step_times"], own["options"]],
+                             return_annotation=SimResult)
+
+
+run_mimo.__signature__ = _signature()  # type: ignore[attr-defined]
 
 
 def mimo_scenario(
