@@ -1,1 +1,38 @@
-"""Estimation, detection and identifiable allocation (seed section 1.3.1-1.3.2)."""
+"""Estimation, detection and identifiable allocation (seed section 1.3.1-1.3.2).
+
+Without an oracle an allocator must learn what failed from what it measures.  This package
+holds the library's part, streaming (one sample per call), with bounded memory and a state
+that round-trips through a JSON-ready dict (``to_dict`` / ``from_dict``):
+
+:class:`RecursiveLeastSquares`, :class:`EffectivenessRLS`
+    the effectiveness matrix by least squares with exponential forgetting and the Eq 1.4
+    parameter-change penalty, with its exact error covariance (:mod:`.rls`).
+:class:`FrequencyDomainEstimator`
+    the seed's frequency-domain estimator (Eqs 1.5-1.12) over a stated band, with a windowed
+    restart so it follows a change (:mod:`.frequency`).
+:class:`FailureDetector`
+    per-effector hypothesis tests on residuals with thresholds from a design false-alarm
+    rate, isolating each failure kind of :mod:`alloc.health` into a
+    :class:`~alloc.health.FailureEvent` with its evidence (:mod:`.detection`).
+:class:`NullSpaceExcitation`, :class:`RandomWeightAllocator`
+    identifiable allocation for every registry allocator: excitation in the null space of
+    ``B`` (``B u`` unchanged), and the seed's random weights (:mod:`.excitation`).
+
+Bad settings raise :class:`~alloc.exceptions.OptionError` (a TypeError), bad samples
+:class:`SampleError` and unusable stored states :class:`StateError` (ValueErrors), all
+:class:`~alloc.exceptions.AllocError` naming the field.
+"""
+
+from __future__ import annotations
+
+from ._checks import SampleError, StateError
+from .detection import Detection, FailureDetector
+from .excitation import NullSpaceExcitation, RandomWeightAllocator, regressor_condition
+from .frequency import FrequencyDomainEstimator, FrequencyEstimate
+from .rls import EffectivenessRLS, RecursiveLeastSquares
+
+__all__ = [
+    "RecursiveLeastSquares", "EffectivenessRLS", "FrequencyDomainEstimator", "FrequencyEstimate",
+    "FailureDetector", "Detection", "NullSpaceExcitation", "RandomWeightAllocator", "regressor_condition",
+    "SampleError", "StateError",
+]
