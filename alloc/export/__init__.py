@@ -55,6 +55,9 @@ FLOAT_VMAX = 1e30
 #: ``float`` builds agree with the library within ``FLOAT_TOLERANCE * max(1, |u|_max range)``
 #: on the effector commands (measured by tests/test_export.py)
 FLOAT_TOLERANCE = 1e-3
+#: bytes of factorisation tables an active-set kernel precomputes by default (``table=None``):
+#: every free set of every level (2^m rows a level); beyond it the kernel factorises at run time
+TABLE_BUDGET = 256 * 1024
 
 _ACTIVE_SET_METHODS = ("wls", "qp")
 
@@ -217,7 +220,7 @@ def _checksum(problem: Problem) -> str:
 
 def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "double",
              options: Mapping[str, Any] | None = None, prefix: str | None = None,
-             maxit: int | None = None) -> ExportedKernel:
+             maxit: int | None = None, table: bool | None = None) -> ExportedKernel:
     """Generate the C99 kernel of ``method`` on a problem or vehicle.
 
     Parameters
@@ -238,6 +241,10 @@ def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "d
     maxit : int, optional
         Iteration cap per level of the active set; default the library's
         ``50 + 10 (m + k)``.  Lower only to exercise the cap (tests).
+    table : bool, optional
+        Active set: precompute the factorisation of every free set (2^m per level, the library's
+        own ``_factor``, so the answers stay bit for bit) instead of factorising at run time;
+        default: when the tables fit :data:`TABLE_BUDGET` bytes.
 
     Returns
     -------
@@ -307,7 +314,7 @@ def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "d
         fields.update(MAP_P=real.array(impl._P, "P"))
         body = templates.SCALED
     else:
-        body, levels, maxit = _active_set_fields(impl._impl, problem, real, fields, maxit)
+        body, levels, maxit = _active_set_fields(impl._impl, problem, real, fields, maxit, table)
     source = _fill(templates.COMMON + body, fields, prefix)
     header = _fill(templates.HEADER, fields, prefix)
     return ExportedKernel(prefix=prefix, method=method, precision=precision, header=header, source=source,
@@ -316,7 +323,7 @@ def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "d
 
 
 def _active_set_fields(lexico: Any, problem: Problem, real: _Real, fields: dict[str, str],
-                       maxit: int | None) -> tuple[str, int, int]:
+                       maxit: int | None, table: bool | None) -> tuple[str, int, int]:
     """The active set's constants, read from the library's packed solver state
     (:func:`alloc._active_set.pack`), so the C runs on exactly the library's data."""
     from .. import _active_set as aset
@@ -347,6 +354,16 @@ def _active_set_fields(lexico: Any, problem: Problem, real: _Real, fields: dict[
         P0=real.array(mats[aset._P0, :m, :k], "P0"),
     )
     levels = nlev + final
+    keys = _table_keys(ivecs, aset)
+    ml = 1 if diag else m
+    entry = m * ml + m * ncw + ncw * ncw + ncw + m * nlw + nlw * nlw + nlw
+    size = len(keys) * (1 << m) * entry * (8 if real.double else 4)
+    if table is None:
+        table = size <= TABLE_BUDGET
+    if table and m > 20:
+        raise ExportError(f"table: 2^{m} free sets a level is too many to tabulate", field="table")
+    fields["TABLE"] = "1" if table else "0"
+    fields["TABLES"] = _tables(mats, ivecs, aset, keys, real) if table else ""
     fields["BOUND"] = iteration_bound("", m, k, levels, cap)
     fields["HEALTH"] = (" *\n * Health at run time: PREFIX_set_limits(umin, umax) sets reduced limits or jams\n"
                         " * (umin[j] == umax[j]) within the nominal limits; an effectiveness change needs a new\n"
@@ -367,3 +384,43 @@ def _version() -> str:
     from .. import __version__
 
     return __version__
+
+
+def _table_keys(ivecs: np.ndarray, aset: Any) -> list[tuple[int, int]]:
+    """``(r0, r1)`` of each factorisation a level looks up: level ``l`` its rows, the final
+    level of a multi-level problem every row as held rows (a one-level problem's final level
+    reads level 0's)."""
+    head = ivecs[aset._HEAD]
+    n, nlev, final = int(head[aset._N]), int(head[aset._NLEV]), int(head[aset._FINAL])
+    starts = ivecs[aset._STARTS]
+    keys = [(int(starts[lv]), int(starts[lv + 1])) for lv in range(nlev)]
+    share = nlev == 1 and int(starts[0]) == 0
+    if final and not share:
+        keys.append((n, n))
+    return keys
+
+
+def _tables(mats: np.ndarray, ivecs: np.ndarray, aset: Any, keys: list[tuple[int, int]], real: _Real) -> str:
+    """The C tables of every free set's factorisation, computed by the library's own compiled
+    ``_factor`` (so a table lookup gives the bits a run-time factorisation gives)."""
+    head = ivecs[aset._HEAD]
+    m, diag, ncw, nlw = (int(head[i]) for i in (aset._M, aset._DIAG, aset._NCW, aset._NLW))
+    ml = 1 if diag else m
+    A, Wu = np.ascontiguousarray(mats[aset._A]), np.ascontiguousarray(mats[aset._WU])
+    names = ("TAB_L", "TAB_YC", "TAB_VC", "TAB_SC", "TAB_YA", "TAB_VA", "TAB_SA")
+    widths = (m * ml, m * ncw, ncw * ncw, ncw, m * nlw, nlw * nlw, nlw)
+    rows: dict[str, list[str]] = {name: [] for name in names}
+    for r0, r1 in keys:
+        per_key: dict[str, list[str]] = {name: [] for name in names}
+        for bits in range(1 << m):
+            free = np.array([j for j in range(m) if bits >> j & 1] + [0] * m, dtype=np.int64)[:m]
+            nf = bin(bits).count("1")
+            blocks = (np.zeros((m, ml)), np.zeros((m, ncw)), np.zeros((ncw, ncw)), np.zeros(ncw),
+                      np.zeros((m, nlw)), np.zeros((nlw, nlw)), np.zeros(nlw))
+            aset._factor(A, r0, r1, Wu, bool(diag), free, nf, *blocks)
+            for name, block in zip(names, blocks):
+                per_key[name].append(real.array(block.ravel(), name))
+        for name in names:
+            rows[name].append("{\n    " + ",\n    ".join(per_key[name]) + "\n}")
+    return "\n".join(f"static const real {name}[{len(keys)}][{1 << m}][{width}] = {{\n" + ",\n".join(rows[name])
+                     + "\n};" for name, width in zip(names, widths))

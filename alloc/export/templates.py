@@ -305,6 +305,8 @@ ACTIVE_SET = r"""
 #define NCW @NCW@
 #define NLW @NLW@
 #define ML @ML@
+/* 1: the factorisation of every free set is a constant table (looked up, never computed) */
+#define TABLE @TABLE@
 /* singular values below SIGMA_RTOL of the largest are round-off; the Jacobi SVD's unit
    round-off; multipliers are tested against MU_EPS times the round-off of their computation */
 #define SIGMA_RTOL @SIGMA_RTOL@
@@ -331,10 +333,62 @@ struct work {
     int freeset[M], fidx[M], tabu[M], pinned[M];
     /* the factorisation of the current free set: L L' = Wu[F, F] (a diagonal L as a column),
        Yc/Vc/sc the SVD of the held rows, Ya/Va/sa that of the level's rows, projected */
-    real L[M][ML];
-    real Yc[M * NCW], Vc[NCW * NCW], sc[NCW];
-    real Ya[M * NLW], Va[NLW * NLW], sa[NLW];
+    const real *L, *Yc, *Vc, *sc, *Ya, *Va, *sa;
+#if !TABLE
+    real Lw[M * ML], Ycw[M * NCW], Vcw[NCW * NCW], scw[NCW], Yaw[M * NLW], Vaw[NLW * NLW], saw[NLW];
+#endif
 };
+
+/* L[q, s] of the current factorisation (a diagonal L is stored as its column of pivots) */
+#define LQ(w, q, s) ((w)->L[(q) * ML + (DIAG ? 0 : (s))])
+
+/* x = L^-1 x */
+static void lsolve(const struct work *w, int n, real *x)
+{
+    int q, t;
+    for (q = 0; q < n; ++q) {
+        real acc = x[q];
+        if (!DIAG) {
+            for (t = 0; t < q; ++t) acc -= LQ(w, q, t) * x[t];
+        }
+        x[q] = acc / LQ(w, q, q);
+    }
+}
+
+/* x = L^-T x */
+static void ltsolve(const struct work *w, int n, real *x)
+{
+    int q, t;
+    for (q = n - 1; q >= 0; --q) {
+        real acc = x[q];
+        if (!DIAG) {
+            for (t = q + 1; t < n; ++t) acc -= LQ(w, t, q) * x[t];
+        }
+        x[q] = acc / LQ(w, q, q);
+    }
+}
+
+#if TABLE
+/* the factorisations of every free set of every level, computed by the generator with the
+   library's own code (alloc._active_set._factor): row [key][free-set bits] */
+@TABLES@
+
+static void lookup(struct work *w, int key)
+{
+    unsigned long bits = 0;
+    int j;
+    for (j = 0; j < M; ++j) {
+        if (w->freeset[j]) bits |= 1UL << j;
+    }
+    w->L = TAB_L[key][bits];
+    w->Yc = TAB_YC[key][bits];
+    w->Vc = TAB_VC[key][bits];
+    w->sc = TAB_SC[key][bits];
+    w->Ya = TAB_YA[key][bits];
+    w->Va = TAB_VA[key][bits];
+    w->sa = TAB_SA[key][bits];
+}
+#else
 
 /* one-sided Jacobi SVD of X[:n, :p] (row stride ld) in place: columns U diag(sig), V p x p */
 static void jacobi(real *X, int ld, int n, int p, real *V, real *sig, real ref)
@@ -400,41 +454,15 @@ static void jacobi(real *X, int ld, int n, int p, real *V, real *sig, real ref)
 }
 
 /* X[:n, c] = L^-1 X[:n, c] (row stride ld) */
-static void lsolve_col(struct work *w, int n, real *X, int ld, int c)
+static void lsolve_col(const struct work *w, int n, real *X, int ld, int c)
 {
     int q, s;
     for (q = 0; q < n; ++q) {
         real acc = X[q * ld + c];
         if (!DIAG) {
-            for (s = 0; s < q; ++s) acc -= w->L[q][s] * X[s * ld + c];
+            for (s = 0; s < q; ++s) acc -= LQ(w, q, s) * X[s * ld + c];
         }
-        X[q * ld + c] = acc / w->L[q][DIAG ? 0 : q];
-    }
-}
-
-/* x = L^-1 x */
-static void lsolve(struct work *w, int n, real *x)
-{
-    int q, t;
-    for (q = 0; q < n; ++q) {
-        real acc = x[q];
-        if (!DIAG) {
-            for (t = 0; t < q; ++t) acc -= w->L[q][t] * x[t];
-        }
-        x[q] = acc / w->L[q][DIAG ? 0 : q];
-    }
-}
-
-/* x = L^-T x */
-static void ltsolve(struct work *w, int n, real *x)
-{
-    int q, t;
-    for (q = n - 1; q >= 0; --q) {
-        real acc = x[q];
-        if (!DIAG) {
-            for (t = q + 1; t < n; ++t) acc -= w->L[t][q] * x[t];
-        }
-        x[q] = acc / w->L[q][DIAG ? 0 : q];
+        X[q * ld + c] = acc / LQ(w, q, q);
     }
 }
 
@@ -443,56 +471,63 @@ static void factor(struct work *w, int r0, int r1, int nf)
 {
     int nl = r1 - r0, nc = r0, q, s, t, c, i, twice;
     const int *F = w->fidx;
-    real ref = 0;
+    real ref = 0, *L = w->Lw, *Yc = w->Ycw, *Vc = w->Vcw, *sc = w->scw, *Ya = w->Yaw, *Va = w->Vaw;
+    w->L = w->Lw;
+    w->Yc = w->Ycw;
+    w->Vc = w->Vcw;
+    w->sc = w->scw;
+    w->Ya = w->Yaw;
+    w->Va = w->Vaw;
+    w->sa = w->saw;
     for (q = 0; q < nf; ++q) {
         if (DIAG) {
-            w->L[q][0] = SQRT(WU[F[q]][F[q]]);
+            L[q * ML] = SQRT(WU[F[q]][F[q]]);
         } else {
             for (s = 0; s <= q; ++s) {
                 real acc = WU[F[q]][F[s]];
-                for (t = 0; t < s; ++t) acc -= w->L[q][t] * w->L[s][t];
+                for (t = 0; t < s; ++t) acc -= LQ(w, q, t) * LQ(w, s, t);
                 if (q == s) {
-                    w->L[q][DIAG ? 0 : q] = SQRT(rmax(acc, CHOL_TINY));
+                    L[q * ML + (DIAG ? 0 : q)] = SQRT(rmax(acc, CHOL_TINY));
                 } else {
-                    w->L[q][DIAG ? 0 : s] = acc / w->L[s][DIAG ? 0 : s];
+                    L[q * ML + (DIAG ? 0 : s)] = acc / LQ(w, s, s);
                 }
             }
         }
     }
     for (c = 0; c < nc; ++c) {
-        for (q = 0; q < nf; ++q) w->Yc[q * NCW + c] = A[c][F[q]];
-        lsolve_col(w, nf, w->Yc, NCW, c);
+        for (q = 0; q < nf; ++q) Yc[q * NCW + c] = A[c][F[q]];
+        lsolve_col(w, nf, Yc, NCW, c);
     }
-    if (nc > 0) jacobi(w->Yc, NCW, nf, nc, w->Vc, w->sc, 0);
+    if (nc > 0) jacobi(Yc, NCW, nf, nc, Vc, sc, 0);
     for (i = 0; i < nl; ++i) {
-        for (q = 0; q < nf; ++q) w->Ya[q * NLW + i] = A[r0 + i][F[q]];
-        lsolve_col(w, nf, w->Ya, NLW, i);
-        for (q = 0; q < nf; ++q) ref = rmax(ref, ABS(w->Ya[q * NLW + i]));
+        for (q = 0; q < nf; ++q) Ya[q * NLW + i] = A[r0 + i][F[q]];
+        lsolve_col(w, nf, Ya, NLW, i);
+        for (q = 0; q < nf; ++q) ref = rmax(ref, ABS(Ya[q * NLW + i]));
         for (twice = 0; twice < 2; ++twice) {
             for (c = 0; c < nc; ++c) {
-                if (w->sc[c] > 0) {
+                if (sc[c] > 0) {
                     real acc = 0;
-                    for (q = 0; q < nf; ++q) acc += w->Yc[q * NCW + c] * w->Ya[q * NLW + i];
-                    for (q = 0; q < nf; ++q) w->Ya[q * NLW + i] -= acc * w->Yc[q * NCW + c];
+                    for (q = 0; q < nf; ++q) acc += Yc[q * NCW + c] * Ya[q * NLW + i];
+                    for (q = 0; q < nf; ++q) Ya[q * NLW + i] -= acc * Yc[q * NCW + c];
                 }
             }
         }
     }
-    if (nl > 0) jacobi(w->Ya, NLW, nf, nl, w->Va, w->sa, ref);
+    if (nl > 0) jacobi(Ya, NLW, nf, nl, Va, w->saw, ref);
 }
+#endif
 
 /* one level on w->u (feasible on entry) and w->freeset: iterations, or -1 at the cap */
 static int level(struct work *w, int r0, int r1, int lev, real gam, const real *up, const real *lo,
                  const real *hi)
 {
     int nl = r1 - r0, nc = r0, it, i, j, q, s, c, r, last = -1;
+    /* a one-level problem's final level holds level 0's rows: its factors are level 0's, and
+       their level blocks are read as its held blocks */
     int share = nl == 0 && lev == 1 && NLEV == 1 && STARTS[0] == 0;
-    int kr0 = share ? 0 : r0, kr1 = share ? r0 : r1;
-    real gam2 = gam * gam;
-    /* a one-level problem's final level holds level 0's rows: its factors are level 0's */
-    const real *Yc = share ? w->Ya : w->Yc, *Vc = share ? w->Va : w->Vc, *sc = share ? w->sa : w->sc;
     int wc = share ? NLW : NCW;
-    const real *Ya = w->Ya, *Va = w->Va, *sa = w->sa;
+    real gam2 = gam * gam;
+    const real *Yc, *Vc, *sc, *Ya, *Va, *sa;
     real *u = w->u, *e = w->e, *tmp = w->tmp, *h = w->h, *y = w->y, *g = w->g, *scale = w->scale;
     real *lam = w->lam;
     int *freeset = w->freeset, *fidx = w->fidx, *tabu = w->tabu, *pinned = w->pinned;
@@ -515,7 +550,17 @@ static int level(struct work *w, int r0, int r1, int lev, real gam, const real *
         for (j = 0; j < M; ++j) {
             if (freeset[j]) fidx[nf++] = j;
         }
-        factor(w, kr0, kr1, nf);
+#if TABLE
+        lookup(w, share ? 0 : lev);
+#else
+        factor(w, share ? 0 : r0, share ? r0 : r1, nf);
+#endif
+        Yc = share ? w->Ya : w->Yc;
+        Vc = share ? w->Va : w->Vc;
+        sc = share ? w->sa : w->sc;
+        Ya = w->Ya;
+        Va = w->Va;
+        sa = w->sa;
         /* h = L^-1 (Wu (u - up))_F */
         for (j = 0; j < M; ++j) tmp[j] = u[j] - up[j];
         for (q = 0; q < nf; ++q) {
