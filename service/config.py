@@ -8,6 +8,8 @@
 ``ALLOC_API_KEY_FILE``              with surrounding whitespace, refuses to start.  The file form
                                     holds the key (one trailing newline allowed); never on argv
 ``ALLOC_MAX_BODY_BYTES``            request body limit, larger bodies get 413 (default 4 MiB)
+``ALLOC_BODY_BYTES_IN_FLIGHT``      request bodies held at once (until parsed), 503 beyond (64 MiB)
+``ALLOC_WRITER_BODY_BYTES``         ... of which kept for authenticated writes (default 8 MiB)
 ``ALLOC_MAX_HEADER_BYTES``          request line and headers together, 431 beyond (default 16 KiB)
 ``ALLOC_MAX_HEADERS``               header fields per request, 431 beyond (default 64)
 ``ALLOC_MAX_VALIDATION_ERRORS``     entries listed in a 422's ``errors`` (the rest counted; 20)
@@ -45,8 +47,9 @@ Memory bound (documented, checked by ``tests/test_service_limits.py`` and
 start-up RSS of the service and of its ``ALLOC_BUILD_WORKERS`` build processes, plus
 ``ALLOC_CACHE_BYTES``, plus up to 1,024 vehicle states (~70 MiB at m = 64), plus one build
 in flight per build process of at most ~90 MiB (a facet enumeration at the cost cap, see
-:mod:`service.cost`), plus the request bodies in flight (``ALLOC_MAX_BODY_BYTES`` each, at
-most ``ALLOC_MAX_CONNECTIONS``), plus ``ALLOC_ANSWER_BYTES_IN_FLIGHT`` of answers (an answer
+:mod:`service.cost`), plus the request bodies in flight (``ALLOC_BODY_BYTES_IN_FLIGHT``, and
+uvicorn's read buffer of at most 64 KiB plus one read per open connection before a body
+reaches the budget), plus ``ALLOC_ANSWER_BYTES_IN_FLIGHT`` of answers (an answer
 held for a client that does not read is freed after ``ALLOC_WRITE_TIMEOUT_S``).
 """
 
@@ -98,6 +101,8 @@ class Settings(BaseSettings):
     api_key: str | None = None
     api_key_file: Path | None = None
     max_body_bytes: int = Field(default=4 * MiB, gt=0)
+    body_bytes_in_flight: int = Field(default=64 * MiB, gt=0)
+    writer_body_bytes: int = Field(default=8 * MiB, ge=0)
     max_header_bytes: int = Field(default=16 * 1024, ge=1024, le=1024 * 1024)
     max_headers: int = Field(default=64, ge=8, le=1024)
     max_validation_errors: int = Field(default=20, ge=1, le=1000)
@@ -137,6 +142,10 @@ class Settings(BaseSettings):
             # one trailing newline is how a file written by `echo` or an editor ends
             text = text[:-2] if text.endswith("\r\n") else text[:-1] if text.endswith("\n") else text
             self.api_key = _check_key(text, f"the key in ALLOC_API_KEY_FILE ({self.api_key_file})")
+        if self.max_body_bytes > self.body_bytes_in_flight - self.writer_body_bytes:
+            raise ValueError(f"ALLOC_MAX_BODY_BYTES = {self.max_body_bytes} must be at most ALLOC_BODY_BYTES_IN_FLIGHT "
+                             f"- ALLOC_WRITER_BODY_BYTES = {self.body_bytes_in_flight - self.writer_body_bytes}: "
+                             f"a body of the largest size could otherwise never be accepted")
         if self.reserved_connections >= self.max_connections:
             raise ValueError(f"ALLOC_RESERVED_CONNECTIONS = {self.reserved_connections} must be below "
                              f"ALLOC_MAX_CONNECTIONS = {self.max_connections}")

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import asyncio
 import gc
 import logging
 import os
@@ -22,11 +21,11 @@ import alloc
 from . import timing
 from .config import MAX_AXES, MAX_BATCH, MAX_EFFECTORS, Settings
 from .db import make_engine, make_sessionmaker
-from .deps import PARSE_TURN_KEY
 from .docs import install_docs
-from .errors import PROBLEM_JSON, PayloadTooLarge, install_handlers, problem_response
+from .bodies import BodyBudget, BodySizeLimit
+from .errors import PROBLEM_JSON, install_handlers
 from .routes import allocation, ams, methods, system, vehicles
-from .priority import GATE_STATE_KEY, SCOPE_KEY, PriorityGate, PriorityMiddleware
+from .priority import GATE_STATE_KEY, PriorityGate, PriorityMiddleware
 from .server import GuardedHttpToolsProtocol
 from .store import VehicleStore
 
@@ -47,89 +46,6 @@ current health, record failures and repairs, read the history.
 * Any number of worker processes and replicas may share one database: every request reads
   the vehicle's committed health version.
 """
-
-
-#: a body larger than this takes a parse turn (one at a time) before the application reads it
-HEAVY_BODY_BYTES = 64 * 1024
-
-
-class BodySizeLimit:
-    """ASGI middleware: requests whose body exceeds ``limit`` bytes get 413 problem+json.
-
-    Checks ``Content-Length`` up front and counts streamed (chunked) bodies, which are
-    buffered here (at most ``limit`` bytes) and replayed to the application.  (FastAPI's
-    own ``max_body_size`` answers ``text/plain`` when it rejects on ``Content-Length``.)
-    A body over :data:`HEAVY_BODY_BYTES` of a request other than a priority write is parsed
-    in its turn, one at a time, once it has fully arrived (a slow sender holds no turn).
-    """
-
-    def __init__(self, app: ASGIApp, limit: int) -> None:
-        self.app, self.limit = app, limit
-        self._parse_turn: asyncio.Semaphore | None = None
-
-    async def _reject(self, scope: Scope, receive: Receive, send: Send, detail: str) -> None:
-        err = PayloadTooLarge
-        response = problem_response(err.status, err.slug, err.title, detail,
-                                    [{"loc": ["body"], "pointer": "", "reason": detail}])
-        await response(scope, receive, send)
-
-    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
-        if scope["type"] != "http":
-            await self.app(scope, receive, send)
-            return
-        limit = self.limit
-        for name, value in scope.get("headers", ()):
-            if name == b"content-length":
-                if not value.isdigit() or int(value) > limit:
-                    await self._reject(scope, receive, send, f"body of {value.decode(errors='replace')} "
-                                                             f"bytes exceeds the limit of {limit} bytes")
-                    return
-        chunks, size = [], 0
-        while True:
-            message = await receive()
-            if message["type"] != "http.request":
-                break
-            chunk = message.get("body", b"")
-            size += len(chunk)
-            if size > limit:
-                await self._reject(scope, receive, send, f"body exceeds the limit of {limit} bytes")
-                return
-            chunks.append(chunk)
-            if not message.get("more_body", False):
-                break
-        body = b"".join(chunks)
-        replayed = False
-
-        async def replay() -> Message:
-            nonlocal replayed
-            if not replayed:
-                replayed = True
-                return {"type": "http.request", "body": body, "more_body": False}
-            return await receive()
-
-        if len(body) <= HEAVY_BODY_BYTES or scope.get(SCOPE_KEY):
-            await self.app(scope, replay, send)
-            return
-        # A large body costs the event loop tens of ms to parse and validate (json.loads of
-        # 0.5 MB: 15-50 ms); one at a time, so a write waits for at most one of them at
-        # each of its steps however many large requests arrive.  The route ends the turn
-        # when it starts (validation done: end_parse_turn), the error handler by returning.
-        if self._parse_turn is None:
-            self._parse_turn = asyncio.Semaphore(1)
-        turn = self._parse_turn
-        await turn.acquire()
-        released = False
-
-        def end_turn() -> None:
-            nonlocal released
-            if not released:
-                released = True
-                turn.release()
-        scope[PARSE_TURN_KEY] = end_turn
-        try:
-            await self.app(scope, replay, send)
-        finally:
-            end_turn()
 
 
 class ServerTiming:
@@ -232,7 +148,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         app.include_router(module.router)
     install_docs(app)
     install_handlers(app)
-    app.add_middleware(BodySizeLimit, limit=settings.max_body_bytes)
+    app.add_middleware(BodySizeLimit, limit=settings.max_body_bytes, gate=gate,
+                       budget=BodyBudget(settings.body_bytes_in_flight, settings.writer_body_bytes))
     app.add_middleware(PriorityMiddleware, gate=gate)  # before anything reads a body
     app.add_middleware(ServerTiming)  # outermost: includes the body limit's buffering
     return app

@@ -153,6 +153,7 @@ class PriorityMiddleware:
         priority = scope.get(SCOPE_KEY)
         if priority is None:  # not marked by the protocol: classify here
             priority = gate.claims(scope["method"], scope["path"], scope.get("headers", ()))
+            scope[SCOPE_KEY] = priority  # type: ignore[literal-required]
             if priority:
                 gate.enter()
         if not priority:

@@ -5,11 +5,12 @@ from __future__ import annotations
 from fastapi import APIRouter, Request, Response
 
 from ..builds import Call
+from ..bodies import JsonRoute
 from ..deps import StoreDep, end_parse_turn
 from ..responses import allocation_response
 from ..schemas import PROBLEM_RESPONSES, AllocateRequest, AllocationOut, BatchAllocateRequest, BatchOut, ProblemIn
 
-router = APIRouter(prefix="/v1/allocate", tags=["allocation"], responses=PROBLEM_RESPONSES)
+router = APIRouter(prefix="/v1/allocate", tags=["allocation"], responses=PROBLEM_RESPONSES, route_class=JsonRoute)
 
 _PROBLEM_FIELDS = set(ProblemIn.model_fields)
 

@@ -5,10 +5,11 @@ from __future__ import annotations
 from fastapi import APIRouter, Request
 
 from .. import ams
+from ..bodies import JsonRoute
 from ..deps import StoreDep, end_parse_turn
 from ..schemas import PROBLEM_RESPONSES, AmsOut, AmsRequest
 
-router = APIRouter(prefix="/v1/ams", tags=["ams"], responses=PROBLEM_RESPONSES)
+router = APIRouter(prefix="/v1/ams", tags=["ams"], responses=PROBLEM_RESPONSES, route_class=JsonRoute)
 
 
 @router.post("", response_model=AmsOut, summary="AMS volume and largest moments along directions")

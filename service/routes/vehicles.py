@@ -13,6 +13,7 @@ import json
 from fastapi import APIRouter, Depends, Path, Query, Request, Response, status
 
 from .. import ams
+from ..bodies import JsonRoute
 from ..db import EventRow
 from ..deps import IdempotencyKey, StoreDep, end_parse_turn, idempotency, require_api_key
 from ..responses import allocation_response
@@ -26,7 +27,8 @@ from ..schemas import (
 from ..builds import Call
 from ..store import Answer, VehicleState
 
-router = APIRouter(prefix="/v1/vehicles", tags=["vehicles"], responses={**PROBLEM_RESPONSES, **NOT_FOUND})
+router = APIRouter(prefix="/v1/vehicles", tags=["vehicles"], responses={**PROBLEM_RESPONSES, **NOT_FOUND},
+                   route_class=JsonRoute)
 VehicleId = Annotated[str, Path(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_-]+$",
                                 description="vehicle id from POST /v1/vehicles")]
 WriteAccess = [Depends(require_api_key)]
