@@ -331,8 +331,8 @@ class FailureKind(str, metaclass=_KindsMeta):
         """The kind's row of the specification table."""
         return _TABLE[self]
 
-    def __repr__(self) -> str:
-        return f"FailureKind({self.value!r})"
+    def __repr__(self) -> str:  # as its name, so messages read "a 'jam' failure"
+        return repr(self.value)
 
     def __reduce__(self) -> tuple[Any, ...]:
         return FailureKind, (self.value,)

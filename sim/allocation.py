@@ -3,8 +3,8 @@
 The simulator calls the same :func:`alloc.make_allocator` a user would, on the
 vehicle's allocation :class:`alloc.Problem` (effectiveness ``B_alloc``,
 Table limits, rate limits, seed weights).  When the scenario says the
-allocator knows the failure, the failed effectors' new limits (jam position,
-reduced position and rate limits, lost effectiveness) go into the Problem.
+allocator knows the failure, it is told each effector failure by the kind's told
+rule (:data:`alloc.health.FAILURE_KINDS`) through :meth:`alloc.Problem.with_health`.
 
 One extra method lives here because it is not an allocation algorithm: the
 seed's printed static distribution matrix, ``static`` (``u = B_k u_c``, seed
@@ -22,7 +22,7 @@ from numba import njit
 from sim.result import STATUS_NAMES
 
 if TYPE_CHECKING:
-    from sim.loop import Failure, Vehicle
+    from sim.model import Failure, Vehicle
 
 __all__ = ["LoopAllocator", "STATIC", "PREFERRED_POSITIONS", "RATE_HORIZONS", "actuator_lag", "allocation_problem",
            "build_allocator", "health_events", "preferred_positions", "rate_horizon_scale", "RATE_WINDOWS"]
@@ -63,34 +63,18 @@ def preferred_positions(vehicle: Vehicle, rule: str = "mid") -> np.ndarray:
 def health_events(vehicle: Vehicle, failure: Failure) -> list[Any]:
     """The failure's effector events in the one health vocabulary (:mod:`alloc.health`).
 
-    Simulator ``ActuatorFailure`` kinds map one to one on :class:`alloc.health.FailureKind`
-    (``limits`` with a ``rate`` gives a ``limits`` and a ``rate_limits`` event);
-    ``bandwidth`` (and the failure's added delay) change actuator *dynamics*,
-    which a static problem cannot express: they are simulator-only and never told.
+    Each :class:`sim.blocks.ActuatorFailure` of a told kind is the :class:`alloc.health.FailureEvent`
+    of the same kind and parameters; the simulator-only kinds (:data:`alloc.health.SIMULATOR_ONLY`:
+    ``bandwidth``, and the failure's added delay) change actuator *dynamics*, which a static
+    problem cannot express, and are never told.  A jam without a position is told the position
+    the actuator held when the failure was injected (the engine passes the failure as injected,
+    :meth:`sim.blocks.ActuatorBank.apply_failure`); before injection it has none, and telling it
+    raises ProblemError naming ``position``.
     """
-    from alloc.health import FailureEvent, FailureKind
+    from alloc.health import SIMULATOR_ONLY, FailureEvent
 
-    events = []
-    for f in failure.actuators:
-        name = vehicle.effector_names[f.index]
-        if f.kind == "bandwidth":
-            continue
-        if f.kind in (FailureKind.JAM, FailureKind.HARDOVER):
-            events.append(FailureEvent(name, f.kind, position=f.position))
-        elif f.kind == FailureKind.FLOAT:
-            events.append(FailureEvent(name, FailureKind.FLOAT))
-        elif f.kind == FailureKind.EFFECTIVENESS:
-            events.append(FailureEvent(name, FailureKind.EFFECTIVENESS, fraction=float(f.fraction)))
-        elif f.kind == FailureKind.LIMITS:
-            if f.lo is not None or f.hi is not None:
-                lo = vehicle.umin[f.index] if f.lo is None else f.lo
-                hi = vehicle.umax[f.index] if f.hi is None else f.hi
-                events.append(FailureEvent(name, FailureKind.LIMITS, lo=lo, hi=hi))
-            if f.rate is not None:
-                events.append(FailureEvent(name, FailureKind.RATE_LIMITS, rate_min=-f.rate, rate_max=f.rate))
-        else:  # pragma: no cover - ActuatorFailure validates its kind
-            raise ValueError(f"kind: unknown actuator failure kind {f.kind!r}")
-    return events
+    return [FailureEvent(vehicle.effector_names[f.index], f.kind, **f.params)
+            for f in failure.actuators if f.kind not in SIMULATOR_ONLY]
 
 
 def allocation_problem(vehicle: Vehicle, failure: Failure | None = None, *, preferred: str = "mid") -> Any:

@@ -13,14 +13,19 @@ Every block here is independent of any vehicle; the vehicles in
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 from numba import njit
 from scipy import signal
 
-from alloc.health import FailureKind
+from alloc.exceptions import ProblemError
+from alloc.health import (
+    PARAMETERS, SIMULATOR_ONLY, SIMULATOR_PARAMETERS, Effect, FailureKind, check_parameters, resolve_defaults,
+)
+from alloc.problem import as_real, short_repr
 
 __all__ = [
     "DEFAULT_DT",
@@ -187,37 +192,100 @@ class ActuatorSpec:
         return replace(self, wn2=self.wn2 * scale * scale, c1=self.c1 * scale)
 
 
-@dataclass(frozen=True)
+def _actuator_kind(kind: object) -> Any:
+    """The table row of an actuator failure kind: a registered :class:`alloc.health.FailureKind`
+    or a per-actuator :data:`alloc.health.SIMULATOR_ONLY` entry; ProblemError naming ``kind`` otherwise."""
+    if isinstance(kind, str) and kind in SIMULATOR_ONLY and SIMULATOR_ONLY[kind].per_actuator:
+        return SIMULATOR_ONLY[kind]
+    if isinstance(kind, str) and kind in FailureKind:
+        return FailureKind(kind).spec
+    raise ProblemError(f"kind: unknown actuator failure kind {short_repr(kind)}; expected one of "
+                       f"{', '.join(ActuatorFailure.KINDS)}")
+
+
+class _ActuatorKinds:
+    """``ActuatorFailure.KINDS``: the kinds an actuator failure takes, read from the tables when asked."""
+
+    def __get__(self, obj: object, owner: type | None = None) -> tuple[str, ...]:
+        return (*(k.value for k in FailureKind), *(k for k, s in SIMULATOR_ONLY.items() if s.per_actuator))
+
+
 class ActuatorFailure:
     """Failure of one effector, applied at the scenario's failure time.
 
-    The kinds are :class:`alloc.health.FailureKind` values with their one
-    meaning (``jam``, ``hardover``, ``float``, ``effectiveness``, ``limits``;
-    here ``limits`` also carries a new symmetric ``rate``, i.e. the health
-    model's ``rate_limits``), plus the simulator-only ``bandwidth`` (natural
-    frequency ``wn``), a change of actuator dynamics that is never told to an
-    allocator (:func:`sim.allocation.health_events`).  In the plant, ``float``
-    and ``effectiveness`` scale the effector's control power (0 and
-    ``fraction``); ``hardover`` drives the surface to ``position`` (default the
-    upper limit) at its rate limit.
+    ``kind`` is a row of :data:`alloc.health.FAILURE_KINDS` (``jam``, ``hardover``, ``float``,
+    ``effectiveness``, ``limits``, ``rate_limits``, ``repair`` and any registered kind) or a
+    per-actuator simulator-only row of :data:`alloc.health.SIMULATOR_ONLY` (``bandwidth``, natural
+    frequency ``wn``; never told to an allocator).  The keyword parameters are the row's, with its
+    units, ranges and defaults: ``ActuatorFailure(0, "jam", position=5.0)``.  What the failure
+    does to the actuator is the row's effects (:meth:`ActuatorBank.apply_failure`); a jam given no
+    ``position`` holds the position the actuator has at the instant of failure.  A parameter
+    not given reads as ``None`` (``failure.position``).
+
+    The simulator's actuators have one symmetric rate limit, so ``rate_limits`` here needs
+    ``rate_min == -rate_max``.
     """
 
+    __slots__ = ("index", "kind", "params")
+    #: every kind an actuator failure takes (the told kinds, then the per-actuator simulator-only ones)
+    KINDS = _ActuatorKinds()
     index: int
     kind: str
-    position: float | None = None
-    wn: float | None = None
-    lo: float | None = None
-    hi: float | None = None
-    rate: float | None = None
-    fraction: float | None = None
+    params: dict[str, float]
 
-    KINDS = tuple(k.value for k in FailureKind if k not in (FailureKind.RATE_LIMITS, FailureKind.REPAIR)) + (
-        "bandwidth",
-    )
+    def __init__(self, index: int, kind: str, **params: float) -> None:
+        spec = _actuator_kind(kind)
+        if isinstance(index, (bool, np.bool_)) or not isinstance(index, (int, np.integer)) or index < 0:
+            raise ProblemError(f"index: expected an effector index >= 0, got {short_repr(index)}")
+        unknown = sorted(set(params) - set(spec.params))
+        if unknown:
+            takes = ", ".join(spec.params) or "no parameters"
+            raise ProblemError(f"{unknown[0]}: a {spec.name!r} failure does not take it (it takes {takes})")
+        values = {name: as_real(name, value) for name, value in params.items() if value is not None}
+        for name, default in spec.params.items():
+            if default is None and name not in values:
+                raise ProblemError(f"{name}: required for a {spec.name!r} failure")
+        check_parameters(spec.name, values)
+        if Effect.RATE_LIMITS in spec.effects and values["rate_min"] != -values["rate_max"]:
+            raise ProblemError(f"rate_min: the simulator's actuators have one symmetric rate limit; a "
+                               f"{spec.name!r} failure needs rate_min = -rate_max, got [{values['rate_min']:g}, "
+                               f"{values['rate_max']:g}]")
+        setattr_ = object.__setattr__
+        setattr_(self, "index", int(index))
+        setattr_(self, "kind", spec.name)
+        setattr_(self, "params", values)
 
-    def __post_init__(self) -> None:
-        if self.kind not in self.KINDS:
-            raise ValueError(f"ActuatorFailure.kind={self.kind!r}; expected one of {self.KINDS}")
+    @property
+    def spec(self) -> Any:
+        """The kind's row (:class:`alloc.health.KindSpec` or :class:`alloc.health.SimulatorOnlySpec`)."""
+        return _actuator_kind(self.kind)
+
+    def __getattr__(self, name: str) -> float | None:
+        if name in PARAMETERS or name in SIMULATOR_PARAMETERS:
+            return self.params.get(name)
+        raise AttributeError(f"ActuatorFailure has no attribute {name!r}")
+
+    def __setattr__(self, name: str, value: object) -> None:
+        raise AttributeError("ActuatorFailure is immutable")
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, ActuatorFailure):
+            return NotImplemented
+        return (self.index, self.kind, self.params) == (other.index, other.kind, other.params)
+
+    def __hash__(self) -> int:
+        return hash((self.index, str(self.kind), tuple(sorted(self.params.items()))))
+
+    def __repr__(self) -> str:
+        params = "".join(f", {k}={v!r}" for k, v in self.params.items())
+        return f"ActuatorFailure({self.index}, {str(self.kind)!r}{params})"
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return _actuator_failure, (self.index, str(self.kind), self.params)
+
+
+def _actuator_failure(index: int, kind: str, params: dict[str, float]) -> ActuatorFailure:
+    return ActuatorFailure(index, kind, **params)
 
 
 class ActuatorBank:
@@ -241,6 +309,9 @@ class ActuatorBank:
         self.hardover = np.zeros(self.m, dtype=bool)
         self.hard_pos = np.zeros(self.m)
         self.rate_out = np.zeros(self.m)
+        #: control power left per effector (the plant scales its columns of B and D by it)
+        self.effectiveness = np.ones(self.m)
+        self.nominal = list(specs)
         self.set_specs(specs)
 
     def set_specs(self, specs: Sequence[ActuatorSpec]) -> None:
@@ -256,28 +327,53 @@ class ActuatorBank:
     def limits(self) -> tuple[np.ndarray, np.ndarray]:
         return self.lo.copy(), self.hi.copy()
 
-    def apply_failure(self, f: ActuatorFailure) -> None:
-        """Change one effector's model (effectiveness failures belong to the plant)."""
+    def apply_failure(self, f: ActuatorFailure) -> ActuatorFailure:
+        """Execute the effects of ``f``'s kind on its actuator, in order; return ``f`` as executed.
+
+        The returned failure has every default filled in (a jam without ``position`` holds the
+        position the actuator has now, a hard-over runs to its nominal upper limit), so a told
+        allocator is told the same numbers.  Effectiveness (``trail``, ``scale``) is
+        :attr:`effectiveness`, which the plant applies.
+        """
         i = f.index
-        s = self.specs[i]
-        if f.kind == "jam":
-            self.jammed[i] = True
-            self.jam_pos[i] = self.pos[i] if f.position is None else f.position
-            self.pos[i] = self.jam_pos[i]
-            self.rate[i] = 0.0
-        elif f.kind == "hardover":
-            self.hardover[i] = True
-            self.hard_pos[i] = s.hi if f.position is None else f.position
-        elif f.kind == "bandwidth":
-            self.specs[i] = s.with_bandwidth(float(f.wn))
-        elif f.kind == "limits":
-            self.specs[i] = replace(
-                s,
-                lo=s.lo if f.lo is None else f.lo,
-                hi=s.hi if f.hi is None else f.hi,
-                rate=s.rate if f.rate is None else f.rate,
-            )
+        if not 0 <= i < self.m:
+            raise ProblemError(f"index: effector {i} out of range for {self.m} actuators")
+        nominal = self.nominal[i]
+        params = resolve_defaults(f.spec, f.params, limits=(nominal.lo, nominal.hi), position=float(self.pos[i]))
+        for effect in f.spec.effects:
+            _EFFECTS[effect](self, i, params)
         self.set_specs(self.specs)
+        return ActuatorFailure(i, f.kind, **params)
+
+    def _hold(self, i: int, p: dict[str, float]) -> None:
+        self.jammed[i] = True
+        self.jam_pos[i] = p["position"]
+        self.pos[i] = self.jam_pos[i]
+        self.rate[i] = 0.0
+
+    def _run_to_stop(self, i: int, p: dict[str, float]) -> None:
+        self.hardover[i] = True
+        self.hard_pos[i] = p["position"]
+
+    def _trail(self, i: int, p: dict[str, float]) -> None:
+        self.effectiveness[i] = 0.0
+
+    def _scale(self, i: int, p: dict[str, float]) -> None:
+        self.effectiveness[i] = p["fraction"]
+
+    def _limits(self, i: int, p: dict[str, float]) -> None:
+        self.specs[i] = replace(self.specs[i], lo=p["lo"], hi=p["hi"])
+
+    def _rate_limits(self, i: int, p: dict[str, float]) -> None:
+        self.specs[i] = replace(self.specs[i], rate=p["rate_max"])  # symmetric (ActuatorFailure checks)
+
+    def _repair(self, i: int, p: dict[str, float]) -> None:
+        self.specs[i] = self.nominal[i]
+        self.jammed[i] = self.hardover[i] = False
+        self.effectiveness[i] = 1.0
+
+    def _bandwidth(self, i: int, p: dict[str, float]) -> None:
+        self.specs[i] = self.specs[i].with_bandwidth(p["wn"])
 
     def step(self, u: np.ndarray) -> np.ndarray:
         """Advance one step with command ``u`` held; return the new positions."""
@@ -287,6 +383,16 @@ class ActuatorBank:
             self.lo, self.hi, self.rmax, self.jammed, self.jam_pos, self.hardover, self.hard_pos, self.dt,
         )
         return self.pos.copy()
+
+
+#: how the bank executes each per-actuator effect (``delay`` acts on the whole failure: the injection's)
+_EFFECTS: dict[Effect, Callable[[ActuatorBank, int, dict[str, float]], None]] = {
+    Effect.HOLD: ActuatorBank._hold, Effect.RUN_TO_STOP: ActuatorBank._run_to_stop, Effect.TRAIL: ActuatorBank._trail,
+    Effect.SCALE: ActuatorBank._scale, Effect.LIMITS: ActuatorBank._limits, Effect.RATE_LIMITS: ActuatorBank._rate_limits,
+    Effect.REPAIR: ActuatorBank._repair, Effect.BANDWIDTH: ActuatorBank._bandwidth,
+}
+if set(_EFFECTS) != set(Effect) - {Effect.DELAY}:  # a new effect without its execution fails at import
+    raise ImportError(f"sim.blocks: no actuator execution for {sorted(e.name for e in set(Effect) - set(_EFFECTS))}")
 
 
 @njit(cache=True, inline="always")

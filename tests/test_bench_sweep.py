@@ -25,7 +25,7 @@ def test_catalogue_failures(scenario: str) -> None:
     for name in catalogue_names():
         f = make_failure(scenario, name, 3.0)
         assert f.time == 3.0 and f.A is None and f.B is None and f.delay is None  # effector-only
-        assert len(f.actuators) == int(name[-1])
+        assert len({a.index for a in f.actuators}) == int(name[-1])
         a = f.actuators[0]
         i = a.index
         if name.startswith("jam"):
@@ -34,11 +34,13 @@ def test_catalogue_failures(scenario: str) -> None:
             assert a.kind == "hardover" and a.position == vehicle.umax[i]
         elif name.startswith("float"):
             assert a.kind == "float"
-        elif name.startswith("loe"):
+        elif name.startswith("effectiveness"):
             assert a.kind == "effectiveness" and a.fraction == 0.25
-        else:
+        else:  # the catalogue's limits: reduced position and rate limits (rate_limits rides with it)
             assert a.kind == "limits" and (a.lo, a.hi) == (0.25 * vehicle.umin[i], 0.25 * vehicle.umax[i])
-            assert a.rate == pytest.approx(0.2 * vehicle.rate_max[i])
+            rate = f.actuators[1]
+            assert rate.kind == "rate_limits" and rate.index == i
+            assert rate.rate_max == -rate.rate_min == pytest.approx(0.2 * vehicle.rate_max[i])
     with pytest.raises(ValueError, match="catalogue"):
         make_failure(scenario, "jam3", 1.0)
 

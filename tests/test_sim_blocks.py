@@ -225,15 +225,9 @@ def _reference_loop(*, vehicle, references, controller, commands, pilots, failur
     for step in range(n_steps + 1):
         if not failed and step * dt >= failure.time - 0.5 * dt:
             failed = True
-            eff = np.ones(m)
             for f in failure.actuators:
-                if f.kind == "float":
-                    eff[f.index] = 0.0
-                elif f.kind == "effectiveness":
-                    eff[f.index] = f.fraction
-                else:
-                    bank.apply_failure(f)
-            plant.fail(effectiveness=eff)
+                bank.apply_failure(f)
+            plant.fail(effectiveness=bank.effectiveness)
             if failure.delay is not None:
                 delay.set_delay(failure.delay)
             u_act = bank.pos.copy()

@@ -379,7 +379,7 @@ def _plot_history(out: Path, picked: Sequence[Row], name: str, title: str) -> st
 
 # ----------------------------------------------------------------------------- closed-loop sections
 def _failure_description(scenario: str, failure: str) -> str:
-    from .failures import FAILED_EFFECTORS, is_catalogue
+    from .failures import FAILED_EFFECTORS, canonical_name, is_catalogue
 
     if is_catalogue(failure):
         from alloc import vehicles
@@ -387,7 +387,7 @@ def _failure_description(scenario: str, failure: str) -> str:
         names = {"ice": vehicles.ICE_EFFECTORS, "harv_latdir": vehicles.HARV_LATDIR_EFFECTORS}.get(scenario)
         idx = FAILED_EFFECTORS.get(scenario, ())[: int(failure[-1])]
         who = ", ".join(names[i] for i in idx) if names else "?"
-        return f"{failure[:-1]} of {who} (catalogue, effector only; see benchmarks/compare/failures.py)"
+        return f"{canonical_name(failure)[:-1]} of {who} (catalogue, effector only; see benchmarks/compare/failures.py)"
     try:
         from sim.scenarios import get_scenario
 
@@ -397,10 +397,11 @@ def _failure_description(scenario: str, failure: str) -> str:
 
 
 def _failure_order(failures: Sequence[str]) -> list[str]:
-    from .failures import catalogue_names
+    from .failures import canonical_name, catalogue_names
 
     cat = catalogue_names()
-    return sorted(failures, key=lambda f: (f in cat, cat.index(f) if f in cat else 0, f))
+    place = {f: cat.index(canonical_name(f)) for f in failures if canonical_name(f) in cat}  # loe1 as effectiveness1
+    return sorted(failures, key=lambda f: (f in place, place.get(f, 0), f))
 
 
 def _heatmap_table(cells: Sequence[Row], failures: Sequence[str]) -> str:

@@ -103,8 +103,10 @@ def failure(name: str, time: float | None = None) -> Failure:
         return Failure(
             "failure1", 25.0 if time is None else time, FAILURES[name], A=2.0 * A, B=0.75 * B,
             actuators=(
-                ActuatorFailure(3, "limits", lo=-15.0, hi=15.0, rate=30.0),
-                ActuatorFailure(4, "limits", lo=-15.0, hi=15.0, rate=30.0),
+                ActuatorFailure(3, "limits", lo=-15.0, hi=15.0),
+                ActuatorFailure(3, "rate_limits", rate_min=-30.0, rate_max=30.0),
+                ActuatorFailure(4, "limits", lo=-15.0, hi=15.0),
+                ActuatorFailure(4, "rate_limits", rate_min=-30.0, rate_max=30.0),
             ),
             delay=delay,
         )
@@ -113,7 +115,8 @@ def failure(name: str, time: float | None = None) -> Failure:
             "failure2", 0.0 if time is None else time, FAILURES[name],
             actuators=(
                 ActuatorFailure(4, "effectiveness", fraction=0.1),
-                ActuatorFailure(4, "limits", lo=-3.0, hi=3.0, rate=6.0),
+                ActuatorFailure(4, "limits", lo=-3.0, hi=3.0),
+                ActuatorFailure(4, "rate_limits", rate_min=-6.0, rate_max=6.0),
             ),
         )
     raise KeyError(f"unknown HARV lat-dir failure {name!r}; known: {sorted(FAILURES)}")

@@ -85,8 +85,8 @@ def failure(name: str, time: float = 10.0) -> Failure:
         return Failure(
             "failure2", time, FAILURES[name], A=A_FAIL, B=B_FAIL,
             actuators=(
-                ActuatorFailure(0, "limits", rate=30.0),
-                ActuatorFailure(1, "limits", rate=6.0),
+                ActuatorFailure(0, "rate_limits", rate_min=-30.0, rate_max=30.0),
+                ActuatorFailure(1, "rate_limits", rate_min=-6.0, rate_max=6.0),
                 ActuatorFailure(1, "bandwidth", wn=10.0),
             ),
             delay=0.05,

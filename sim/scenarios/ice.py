@@ -155,7 +155,8 @@ def failure(time: float = 20.0) -> Failure:
         B=0.75 * B,
         D=0.75 * D,
         actuators=(
-            ActuatorFailure(i("de3"), "limits", lo=-15.0, hi=15.0, rate=10.0),
+            ActuatorFailure(i("de3"), "limits", lo=-15.0, hi=15.0),
+            ActuatorFailure(i("de3"), "rate_limits", rate_min=-10.0, rate_max=10.0),
             ActuatorFailure(i("de4"), "bandwidth", wn=10.0),
             ActuatorFailure(i("de2"), "jam", position=5.0),
             ActuatorFailure(i("de10"), "bandwidth", wn=10.0),
