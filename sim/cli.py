@@ -20,13 +20,16 @@ from __future__ import annotations
 
 import json
 import shlex
+from dataclasses import fields
 from pathlib import Path
 from typing import Any, Optional
 
 import typer
 
 from alloc.exceptions import AllocError
-from alloc.cli import VEHICLE_HELP, finite, load_vehicle_option, output_file, parse_options
+from alloc.cli import VEHICLE_HELP, load_vehicle_option, output_file, parse_options
+from sim.cli_settings import flag_of, setting_words, with_setting_options
+from sim.settings import RunSettings
 from sim.scenarios import get_scenario, scenarios
 
 __all__ = ["sim_command", "EXIT_DIVERGED", "NO_FAILURE"]
@@ -39,10 +42,6 @@ EXIT_DIVERGED = 1
 EXIT_USAGE = 2
 #: ``--failure`` value of a nominal run, for scenarios that inject a failure by default.
 NO_FAILURE = "none"
-#: Longest run (simulated seconds): 90 times the seed's longest; the 2 kHz loop records 200 rows/s.
-MAX_DURATION = 3600.0
-#: Longest pilot time delay (s), far beyond the seed's 0.2-0.3 s.
-MAX_PILOT_DELAY = 10.0
 
 
 def list_scenarios(value: bool) -> None:
@@ -83,62 +82,13 @@ def scenario_of_vehicle(source: str) -> str:
         "loop on a vehicle file's [model] (the seed's section 4.3 design) is not built yet", param_hint="--vehicle")
 
 
+@with_setting_options
 def sim_command(
     scenario: Optional[str] = typer.Argument(None, help=f"scenario name: {', '.join(scenarios())} (see --list); "
                                              "or give --vehicle"),
     vehicle: Optional[str] = typer.Option(None, "--vehicle", metavar="NAME|FILE",
                                           help=f"{VEHICLE_HELP}: flies the scenario of that name (harv: harv_latdir); "
                                           "instead of SCENARIO"),
-    method: Optional[str] = typer.Option(
-        None, "--method", help="allocation method (see `alloc methods`) or 'static'; default: the scenario's "
-        "(the seed's choice: pinv for ice, ganging for the HARV)"),
-    option: list[str] = typer.Option(
-        [], "--option", "-o", help="method option key=value (value parsed as JSON, else text; see `alloc methods`), "
-        "over the vehicle's [methods.<method>] defaults; repeatable"),
-    failure: Optional[str] = typer.Option(
-        None, "--failure", help="failure name (see --list); default: the scenario's own "
-        f"(harv_latdir_failure2: failure2), else none; '{NO_FAILURE}' for a nominal run"),
-    failure_time: Optional[float] = typer.Option(
-        None, "--failure-time", parser=finite(0.0, unit=" s"),
-        help="failure time in seconds, >= 0 and before the end of the run; default: the seed's"),
-    duration: Optional[float] = typer.Option(
-        None, "--duration", parser=finite(0.0, MAX_DURATION, low_open=True, unit=" s"),
-        help=f"simulated seconds, 0 < duration <= {MAX_DURATION:g}; default: the scenario's (ice 40 s)"),
-    seed: int = typer.Option(0, "--seed", min=0, max=2**32 - 1, help="noise seed (0 to 2^32 - 1)"),
-    noise: Optional[bool] = typer.Option(None, "--noise/--no-noise", help="sensor noise (default: on, seed gains)"),
-    controller: Optional[str] = typer.Option(None, "--controller", help="'smc' (default); 'loopshape' (ice, HARV) "
-                                             "or 'lqr' (pendulum)"),
-    pilot: Optional[str] = typer.Option(None, "--pilot", help="pilot model: 'standin' (default) or 'crossover'"),
-    pilot_gain: Optional[float] = typer.Option(None, "--pilot-gain", parser=finite(0.0),
-                                               help="override the pilot model's gain (>= 0)"),
-    pilot_delay: Optional[float] = typer.Option(
-        None, "--pilot-delay", parser=finite(0.0, MAX_PILOT_DELAY, unit=" s"),
-        help=f"override the pilot's time delay in seconds (0 to {MAX_PILOT_DELAY:g})"),
-    frame_rate: Optional[float] = typer.Option(
-        None, "--frame-rate", parser=finite(0.0, low_open=True, unit=" Hz"),
-        help="flight-control frame rate in Hz (its period a multiple of the 0.5 ms step); default: 2000, "
-             "the integration rate"),
-    rate_aware: Optional[bool] = typer.Option(
-        None, "--rate-aware/--rate-blind", help="allocator gets u_prev and dt = frame period (seed Eq 1.28; default on)"
-    ),
-    rate_window: Optional[str] = typer.Option(
-        None, "--rate-window", help="Eq 1.28 box: 'binding' (default, only where the answer breaks a rate limit) or 'always'"
-    ),
-    anti_windup: Optional[str] = typer.Option(
-        None, "--anti-windup", help="hold the SMC integral while the allocator falls short: 'auto' (default), 'on', 'off'"
-    ),
-    boundary_layer: Optional[str] = typer.Option(
-        None, "--boundary-layer",
-        help="SMC boundary layer at the frame rate: 'frame' (default, eps * max(1, T / 0.5 ms)) or 'fixed' (seed eps)",
-    ),
-    u_prev: Optional[str] = typer.Option(None, "--u-prev", help="'command' (default, the seed's) or 'position'"),
-    preferred: Optional[str] = typer.Option(
-        None, "--preferred", help="one-sided effectors' preferred position: 'mid' (default) or 'zero' (seed up = 0)"
-    ),
-    told: bool = typer.Option(
-        False, "--told/--blind", "--allocator-knows-failure",
-        help="tell the allocator the failed effectors' new limits (default: blind)",
-    ),
     json_path: Optional[Path] = typer.Option(None, "--json", help="write the JSON summary to this new file"),
     csv_path: Optional[Path] = typer.Option(None, "--csv", help="write the time histories to this new file (CSV)"),
     parquet_path: Optional[Path] = typer.Option(
@@ -148,6 +98,7 @@ def sim_command(
     force: bool = typer.Option(False, "--force", help="overwrite output files that exist"),
     list_: bool = typer.Option(False, "--list", callback=list_scenarios, is_eager=True, expose_value=False,
                                help="list the scenarios, their defaults and failures, and exit"),
+    settings: Optional[dict[str, Any]] = None,
 ) -> None:
     """Run SCENARIO in closed loop and print its JSON summary (exit 1 if it diverged).
 
@@ -158,7 +109,11 @@ def sim_command(
     Nothing is written unless asked (--json, --csv, --parquet, --plot); an existing file is refused unless --force.
 
     Invalid arguments: exit 2 and one line on stderr.
+
+    The run settings' options (--method ... --record-every) are those of sim.settings.RunSettings.
     """
+    settings = dict(settings or {})
+    failure, duration, failure_time = (settings.get(k) for k in ("failure", "duration", "failure_time"))
     if (scenario is None) == (vehicle is None):
         raise typer.BadParameter("give a SCENARIO or --vehicle NAME|FILE (one of them)", param_hint="SCENARIO/--vehicle")
     scenario = scenario_of_vehicle(vehicle) if vehicle is not None else scenario
@@ -166,7 +121,7 @@ def sim_command(
         run = get_scenario(scenario)
     except KeyError as exc:
         raise typer.BadParameter(str(exc.args[0]), param_hint="SCENARIO") from None
-    if failure is None:
+    if "failure" not in settings:
         failure = run.default_failure
     elif failure == NO_FAILURE:
         failure = None
@@ -184,20 +139,12 @@ def sim_command(
     taken: dict[Path, str] = {}
     for path, hint in ((json_path, "--json"), (csv_path, "--csv"), (parquet_path, "--parquet"), (plot_path, "--plot")):
         output_file(path, force, hint, taken=taken)
-    kwargs: dict[str, Any] = dict(failure=failure, duration=duration, seed=seed, allocator_knows_failure=told)
-    if option:
-        kwargs["method_options"] = parse_options(option)
-    optional = dict(
-        method=method, failure_time=failure_time, noise=noise, controller=controller, pilot=pilot,
-        pilot_gain=pilot_gain, pilot_delay=pilot_delay, rate_aware=rate_aware, u_prev_source=u_prev,
-        preferred=preferred, frame_period=None if frame_rate is None else 1.0 / frame_rate,
-        boundary_layer=boundary_layer, rate_window=rate_window, anti_windup=anti_windup,
-    )
-    kwargs.update({k: v for k, v in optional.items() if v is not None})
+    kwargs: dict[str, Any] = {**settings, "failure": failure}
     try:
         result = run(progress=simulated > PROGRESS_AFTER, **kwargs)
-    except AllocError as exc:  # the method and its options (the vehicle's defaults among them)
-        raise typer.BadParameter(str(exc), param_hint="--method") from None
+    except AllocError as exc:  # a setting (sim.settings.SettingError), the method and its options
+        hint = flag_of(exc.field) if exc.field in _SETTING_NAMES else "--method"
+        raise typer.BadParameter(str(exc), param_hint=hint) from None
     except TypeError as exc:
         raise typer.BadParameter(f"scenario {scenario!r} does not take this option: {exc}") from None
     except (ValueError, KeyError) as exc:
@@ -225,29 +172,13 @@ def sim_command(
         raise typer.Exit(EXIT_DIVERGED)
 
 
+#: every run setting's name (an error naming one is reported against its option)
+_SETTING_NAMES = frozenset(f.name for f in fields(RunSettings))
+
+
 def command_line(scenario: str, **options: Any) -> str:
     """The ``alloc sim`` command that reproduces a run with these scenario options (for tables)."""
-    flags = {"method": "--method", "failure": "--failure", "failure_time": "--failure-time",
-             "duration": "--duration", "seed": "--seed", "controller": "--controller", "pilot": "--pilot",
-             "pilot_gain": "--pilot-gain", "pilot_delay": "--pilot-delay", "u_prev_source": "--u-prev",
-             "preferred": "--preferred",
-             "boundary_layer": "--boundary-layer", "rate_window": "--rate-window", "anti_windup": "--anti-windup"}
     words = ["alloc", "sim", scenario]
     if "failure" in options and options["failure"] is None and get_scenario(scenario).default_failure is not None:
         options = {**options, "failure": NO_FAILURE}  # nominal, where the scenario's default injects one
-    for key, value in options.items():
-        if value is None:
-            continue
-        if key in flags:
-            words += [flags[key], str(value)]
-        elif key == "noise":
-            words.append("--noise" if value else "--no-noise")
-        elif key == "rate_aware":
-            words.append("--rate-aware" if value else "--rate-blind")
-        elif key == "allocator_knows_failure":
-            words.append("--told" if value else "--blind")
-        elif key == "frame_period":
-            words += ["--frame-rate", f"{1.0 / value:g}"]
-        else:
-            raise TypeError(f"command_line: no flag for option {key!r}")
-    return shlex.join(words)
+    return shlex.join(words + setting_words(options))

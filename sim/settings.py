@@ -34,7 +34,7 @@ from sim.model import TF, Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle
 from sim.pilot import PILOT_MODELS
 
 __all__ = ["Setting", "SettingError", "SettingTypeError", "LoopSettings", "RunSettings", "LoopSpec",
-           "setting_of", "check_setting", "U_PREV_SOURCES", "BOUNDARY_LAYER_RULES", "ANTI_WINDUP_RULES",
+           "setting_of", "value_types", "check_setting", "U_PREV_SOURCES", "BOUNDARY_LAYER_RULES", "ANTI_WINDUP_RULES",
            "CONTROLLERS", "SEED_FRAME_PERIOD", "MAX_DURATION", "MAX_PILOT_DELAY", "MAX_DT", "MAX_RECORD_EVERY",
            "anti_windup_on", "boundary_layer_at"]
 
@@ -184,8 +184,8 @@ class LoopSettings:
     actuators: bool = _setting(True, "actuator dynamics; off: ideal effectors (command = position, limits kept; "
                                "the seed's SMC without parasitic dynamics)", flag="--actuators/--ideal-actuators")
     frame_period: float | None = _setting(
-        None, "period T of the flight-control computer (pilot sampling, controller, allocator), a multiple of dt; "
-        "the option takes its rate in Hz", unit="s", low=0.0, low_open=True, flag="--frame-rate", per_second=True,
+        None, "period T of the flight-control computer (pilot sampling, controller, allocator), a multiple of dt",
+        unit="s", low=0.0, low_open=True, flag="--frame-rate", per_second=True,
         none_means="dt (2000 Hz, the seed's single-rate loop)")
     rate_aware: bool = _setting(True, "the allocator gets u_prev and dt = T (seed Eq 1.28)",
                                 flag="--rate-aware/--rate-blind")
@@ -208,7 +208,7 @@ class LoopSettings:
                                              aliases=("--allocator-knows-failure",))
     method_options: dict[str, Any] | None = _setting(
         None, "method options key=value (value parsed as JSON, else text; see `alloc methods`), over the "
-        "vehicle's [methods.<method>] defaults; repeatable", flag="--option", aliases=("-o",),
+        "vehicle file's methods.<method> defaults; repeatable", flag="--option", aliases=("-o",),
         none_means="the vehicle's defaults")
     record_every: int = _setting(10, "record every n-th integration step", low=1, high=MAX_RECORD_EVERY,
                                  flag="--record-every", verdict=False)
@@ -308,6 +308,11 @@ def _own_fields() -> tuple[str, ...]:
 @cache
 def _hints() -> dict[str, tuple[tuple[type, ...], bool]]:
     return {name: _kind(hint) for name, hint in get_type_hints(RunSettings).items()}
+
+
+def value_types(name: str) -> tuple[tuple[type, ...], bool]:
+    """The value types setting ``name`` takes (bool, int, float, str, Mapping, Failure) and whether None is one."""
+    return _hints()[name]
 
 
 def setting_of(name: str) -> Setting:
