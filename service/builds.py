@@ -59,6 +59,7 @@ from .config import OPTION_CAPS
 from .cost import FACET_SECONDS, answer_bytes, batch_seconds, build_seconds, call_seconds, estimate_bytes
 from .responses import batch_json
 from .errors import InvalidRequest, ServiceUnavailable, TooManyRequests, field_error
+from .warm import warm_up
 
 __all__ = ["Builder", "Built", "Call", "build", "build_allocator", "check_build_cost", "check_batch_cost", "BUILD_NICE",
            "TRANSFER_BYTES", "REBUILD", "REQUEST"]
@@ -216,7 +217,6 @@ def _init_build_process(parent: int, nice: int) -> None:
     global _in_build_process
     _in_build_process = True
     threading.Thread(target=_exit_with_parent, args=(parent,), daemon=True, name="alloc-parent").start()
-    from .main import warm_up
     warm_up()  # at normal priority: a process starved in its initializer is of no use and cannot be stopped
     os.nice(nice)
     try:  # run only when the service's threads do not want the CPU (Linux; lowering needs no privilege)

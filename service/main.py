@@ -6,12 +6,12 @@ import gc
 import logging
 import os
 import sys
+import threading
 import time
 from contextlib import asynccontextmanager
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 from fastapi import FastAPI
 from pydantic import ValidationError
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
@@ -28,6 +28,7 @@ from .routes import allocation, ams, methods, system, vehicles
 from .priority import GATE_STATE_KEY, PriorityGate, PriorityMiddleware
 from .server import GuardedHttpToolsProtocol
 from .store import VehicleStore
+from .warm import start_background_warm_up, warm_up
 
 __all__ = ["create_app", "serve", "warm_up", "BodySizeLimit", "ServerTiming", "uvicorn_options"]
 
@@ -79,33 +80,6 @@ class ServerTiming:
         await self.app(scope, receive, timed_send)
 
 
-_warmed = False
-
-
-def warm_up() -> float:
-    """Build and call every registered method once on a small problem (and a batch), so the
-    numba kernels are compiled (or loaded from their on-disk cache) before the first request,
-    not during a user's call.  Returns the seconds spent."""
-    global _warmed
-    t0 = time.perf_counter()
-    if _warmed:
-        return 0.0
-    B = np.array([[1.0, -1.0, 0.5, 0.2], [0.3, 0.4, -1.0, 0.8], [0.2, 0.1, 0.3, -1.0]])
-    problem = alloc.Problem(B, [-1.0] * 4, [1.0] * 4, rate_min=[-5.0] * 4, rate_max=[5.0] * 4)
-    v = np.array([0.3, -0.2, 0.1])
-    for name in alloc.methods():
-        try:
-            options = {"resolution": 8} if "resolution" in alloc.method_info(name)["options"] else {}
-            allocator = alloc.make_allocator(problem, name, **options)
-        except alloc.AllocError:
-            continue  # a method that needs options this problem cannot give (none today)
-        allocator(v)
-        allocator(v, u_prev=np.zeros(4), dt=0.01)
-        allocator.batch(np.stack([v, -v]))
-    _warmed = True
-    return time.perf_counter() - t0
-
-
 def create_app(settings: Settings | None = None) -> FastAPI:
     """Build the application: database (migrated), store, routers, error handlers, body limit."""
     settings = settings or Settings()
@@ -121,9 +95,6 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     @asynccontextmanager
     async def lifespan(app: FastAPI):  # type: ignore[no-untyped-def]
         t0 = time.perf_counter()
-        if settings.warmup:
-            _log.info("numba kernels warmed in %.2f s", warm_up())
-            store.builder.start_processes()  # costly builds and batches: warm before the first one
         # A thread waiting for the GIL (an event's writer thread, a build finishing) gets it
         # within 1 ms instead of 5 ms: an event does a dozen GIL hand-offs, and under a
         # request flood each one would otherwise wait the full interval.
@@ -133,9 +104,19 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         # which keeps GC pauses out of the latency tail.
         gc.collect()
         gc.freeze()
+        stop = threading.Event()
+        warming = None
+        if settings.warmup:
+            # The kernels load on a thread once the service answers (service.warm); the build
+            # processes for costly builds and batches start after that, so that their own
+            # imports and warm-up do not compete with this process's for the CPU.
+            warming = start_background_warm_up(stop, then=store.builder.start_processes)
         app.state.startup_seconds, app.state.ready = time.perf_counter() - t0, True
         yield {GATE_STATE_KEY: gate}  # lifespan state: where the HTTP protocol finds the gate
         app.state.ready = False  # shutting down: /v1/ready answers 503 from here on
+        stop.set()
+        if warming is not None:
+            warming.join(timeout=10)  # at most the method it is warming: no build process started after the close
         store.close()
         engine.dispose()
 

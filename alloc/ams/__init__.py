@@ -8,13 +8,65 @@
 * :func:`coverage` -- the Bordignon-Durham fraction of the AMS a method reaches.
 * :mod:`alloc.ams.plot` (matplotlib) and :mod:`alloc.ams.cli` (``alloc ams ...``).
 
-This package imports nothing from :mod:`alloc.methods` (``tests/test_layering.py``).
+Two layers share this package: :mod:`alloc.ams.geometry` sits below the allocation methods
+(the facet searches build on it) and imports none of them; :mod:`alloc.ams.coverage` sits
+above the allocator (it allocates to measure a method).  So the names are loaded on first
+use (PEP 562): ``from alloc.ams import AttainableSet`` loads the geometry alone, not the
+allocator nor ``scipy.optimize`` (``tests/test_layering.py``).
 """
 
-from .coverage import CoverageResult, coverage, sample_ams
-from .geometry import DIRECTION_TOL, AttainableSet, Facet, FacetTiling, generator_classes, zonotope_volume
+from __future__ import annotations
+
+import importlib
+import sys
+import types
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:  # the lazily loaded names, for type checkers and IDEs
+    from .coverage import CoverageResult, coverage, sample_ams
+    from .geometry import DIRECTION_TOL, AttainableSet, Facet, FacetTiling, generator_classes, zonotope_volume
+
+#: public name -> the submodule defining it (loaded on first attribute access)
+_LAZY: dict[str, str] = {
+    "AttainableSet": "geometry", "Facet": "geometry", "FacetTiling": "geometry", "DIRECTION_TOL": "geometry",
+    "generator_classes": "geometry", "zonotope_volume": "geometry",
+    "CoverageResult": "coverage", "sample_ams": "coverage",
+}
 
 __all__ = [
     "AttainableSet", "Facet", "FacetTiling", "DIRECTION_TOL", "generator_classes", "zonotope_volume",
     "coverage", "CoverageResult", "sample_ams",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'alloc.ams' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{module}", __name__), name)
+    globals()[name] = value  # later look-ups skip this function
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))
+
+
+class _Package(types.ModuleType):
+    """The ``alloc.ams`` module object: ``alloc.ams.coverage`` stays the function.
+
+    The submodule :mod:`alloc.ams.coverage` has the function's name; importing it makes the
+    import system bind the module on this package, which would hide the function.  That
+    binding is ignored here (the submodule is always ``sys.modules["alloc.ams.coverage"]``).
+    """
+
+    @property
+    def coverage(self) -> Any:
+        return importlib.import_module(".coverage", __name__).coverage
+
+    @coverage.setter
+    def coverage(self, value: Any) -> None:
+        pass
+
+
+sys.modules[__name__].__class__ = _Package
