@@ -259,3 +259,123 @@ def test_docs_are_offline(server):
             for ref in refs:
                 assert ref.startswith("/"), ref
                 assert c.get(ref).status_code == 200, ref
+
+
+# ------------------------------------------------------- request bodies (service.bodies)
+def _run_bodies(requests: list[tuple[int, bool, bool]], total: int, reserved: int, limit: int):
+    """Drive :class:`service.bodies.BodySizeLimit` with ``requests`` (size, priority, chunked), all
+    held by the application at once until every one has arrived; returns each one's status,
+    the largest budget held and the budget's state at the end."""
+    import asyncio
+
+    from service.bodies import BodyBudget, BodySizeLimit
+    from service.priority import SCOPE_KEY
+
+    budget = BodyBudget(total, reserved)
+    peak = {"all": 0, "open": 0}
+    release = asyncio.Event()
+    arrived: list[int] = []
+
+    async def app(scope, receive, send):
+        body = (await receive())["body"]
+        arrived.append(len(body))
+        peak["all"] = max(peak["all"], budget.held)
+        await release.wait()  # the application holds the body (as a slow route would)
+        await send({"type": "http.response.start", "status": 200, "headers": []})
+        await send({"type": "http.response.body", "body": b"ok"})
+
+    middleware = BodySizeLimit(app, limit, budget)
+
+    async def one(size: int, priority: bool, chunked: bool) -> tuple[int, dict]:
+        headers = [] if chunked else [(b"content-length", str(size).encode())]
+        scope = {"type": "http", "method": "POST", "path": "/v1/allocate", "headers": headers, SCOPE_KEY: priority}
+        pieces = [b"x" * min(65536, size - i) for i in range(0, size, 65536)] or [b""]
+        messages = [{"type": "http.request", "body": p, "more_body": i < len(pieces) - 1} for i, p in enumerate(pieces)]
+        out: dict = {}
+
+        async def receive():
+            await asyncio.sleep(0)
+            return messages.pop(0) if messages else {"type": "http.disconnect"}
+
+        async def send(message):
+            if message["type"] == "http.response.start":
+                out["status"] = message["status"]
+                out["headers"] = dict(message["headers"])
+            else:
+                out.setdefault("body", b"")
+                out["body"] += message.get("body", b"")
+        await middleware(scope, receive, send)
+        return out["status"], out
+
+    async def main():
+        tasks = [asyncio.create_task(one(*r)) for r in requests]
+        for _ in range(200):  # everything admitted has reached the application, the rest refused
+            await asyncio.sleep(0)
+        release.set()
+        return await asyncio.gather(*tasks)
+    results = asyncio.run(main())
+    return results, peak, budget
+
+
+def test_body_budget_refuses_beyond_it_and_keeps_the_writers_share():
+    MB = 1_000_000
+    # 10 unauthenticated 1 MB bodies against a 6 MB budget with 2 MB kept for writers: 4 admitted
+    results, peak, budget = _run_bodies([(MB, False, False)] * 10 + [(MB, True, False)] * 2, 6 * MB, 2 * MB, 2 * MB)
+    statuses = [s for s, _ in results]
+    assert statuses[:10].count(200) == 4 and statuses[:10].count(503) == 6, statuses
+    assert statuses[10:] == [200, 200]  # the writers' share was there for them
+    refusal = results[4][1]
+    assert refusal["headers"][b"content-type"] == b"application/problem+json"
+    assert refusal["headers"][b"retry-after"] == b"1"
+    assert json.loads(refusal["body"])["limit"] == "ALLOC_BODY_BYTES_IN_FLIGHT"
+    assert peak["all"] == 6 * MB and budget.held == 0 and budget.refused == 6
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_body_budget_hostile_mixes(seed):
+    """Seeded mixes of sizes (empty to over the limit), declared and chunked bodies, writers and
+    others: the budget is never exceeded, others never take the writers' share, every request
+    is answered 200, 413 or 503, and nothing stays reserved."""
+    rng = np.random.default_rng(seed)
+    total, reserved, limit = int(rng.integers(1, 8)) * MiB, 0, 0
+    reserved = int(rng.integers(0, total // 2 + 1))
+    limit = int(rng.integers(1, total - reserved + 1))
+    n = int(rng.integers(1, 40))
+    requests = [(int(rng.choice([0, 1, rng.integers(1, limit + 1), limit, limit + 1 + rng.integers(0, 1000)])),
+                 bool(rng.random() < 0.3), bool(rng.random() < 0.4)) for _ in range(n)]
+    results, peak, budget = _run_bodies(requests, total, reserved, limit)
+    admitted_others = sum(size for (size, prio, _), (status, _) in zip(requests, results) if status == 200 and not prio)
+    admitted = sum(size for (size, _, _), (status, _) in zip(requests, results) if status == 200)
+    for (size, _, chunked), (status, _) in zip(requests, results):
+        assert status in (200, 413, 503)
+        if size <= limit:
+            assert status != 413, (size, limit)
+        else:  # a declared size is refused for it first; a chunked one when either limit is reached
+            assert status == 413 or (chunked and status == 503), (size, limit, status)
+    assert peak["all"] <= total and admitted <= total and admitted_others <= total - reserved
+    assert budget.held == 0
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_json_bodies_parse_as_the_standard_library_does(seed):
+    """service.bodies.parse_json (pydantic-core) against json.loads on seeded documents: the same
+    values, floats bit for bit (extreme exponents, subnormals, long mantissas), and broken
+    documents raise JSONDecodeError (FastAPI's 422) at a position inside the document."""
+    from service.bodies import parse_json
+
+    rng = np.random.default_rng(seed)
+    floats = np.concatenate([rng.normal(size=200), rng.normal(size=50) * 10.0 ** rng.integers(-320, 308, size=50),
+                             [5e-324, -0.0, 1.7976931348623157e308, 2.2250738585072014e-308]])
+    formats = ["%r", "%.17g", "%.25e", "%.3f"]
+    doc = ("{" + ", ".join(f'"k{i}": [' + ", ".join(formats[(i + j) % 4] % float(x) for j, x in enumerate(floats[i::7])) + "]"
+                           for i in range(7)) + ', "s": "a\\u00e9\\n\\"b", "n": [1, -2, 123456789012345678901234567890]}')
+    mine, theirs = parse_json(doc.encode()), json.loads(doc)
+    assert mine == theirs
+    for key in (f"k{i}" for i in range(7)):
+        assert np.array_equal(np.array(mine[key]).view(np.int64), np.array(theirs[key]).view(np.int64))
+    broken = doc.encode()
+    cut = int(rng.integers(1, len(broken) - 1))
+    for bad in (broken[:cut], broken[:cut] + b",,}" + broken[cut:], b"[" * 5000, b"\xff"):
+        with pytest.raises(json.JSONDecodeError) as info:
+            parse_json(bad)
+        assert 0 <= info.value.pos <= len(bad)
