@@ -149,10 +149,11 @@ def sim_command(
         raise typer.BadParameter(f"scenario {scenario!r} does not take this option: {exc}") from None
     except (ValueError, KeyError) as exc:
         raise typer.BadParameter(str(exc.args[0] if isinstance(exc, KeyError) and exc.args else exc)) from None
+    # against the run's end, not its last recorded sample (--record-every N records every N-th step)
     if failure is not None and not result.diverged and (result.failure_time is None
-                                                         or result.failure_time >= result.duration):
+                                                         or result.failure_time >= simulated):
         at = "" if result.failure_time is None else f" at t = {result.failure_time:g} s"
-        raise typer.BadParameter(f"the run ended at t = {result.duration:g} s, before the failure{at}: nothing was "
+        raise typer.BadParameter(f"the run ended at t = {simulated:g} s, before the failure{at}: nothing was "
                                  "injected; pass a longer --duration or an earlier --failure-time",
                                  param_hint="--duration")
     summary = result.summary()

@@ -150,7 +150,8 @@ def setting_words(options: Mapping[str, Any]) -> list[str]:
         if off:
             words.append(on if value else off)
         elif spec.per_second:
-            words += [spec.flag, f"{1.0 / value:g}"]
+            rate = 1.0 / value
+            words += [spec.flag, f"{rate:g}" if float(f"{rate:g}") == rate else repr(rate)]
         elif isinstance(value, Mapping):
             for k, v in value.items():
                 words += [spec.flag, f"{k}={v if isinstance(v, str) else json.dumps(v)}"]
@@ -158,3 +159,29 @@ def setting_words(options: Mapping[str, Any]) -> list[str]:
             words += [spec.flag, str(value)]
     return words
 
+
+
+def settings_table() -> str:
+    """The run settings as a Markdown table (``docs/simulator.md`` holds it; a test keeps them equal)."""
+    rows = ["| setting | option | default | allowed | verdict | meaning |", "|---|---|---|---|---|---|"]
+    for f in setting_fields():
+        spec = setting_of(f.name)
+        options = " ".join(f"`{o}`" for o in (spec.flag, *spec.aliases))
+        if f.default is None:
+            default = spec.none_means or "none"
+        elif isinstance(f.default, bool):
+            default = spec.flag.partition("/")[0 if f.default else 2]
+            default = f"`{default}`"
+        else:
+            default = f"`{f.default}`"
+        if spec.choices:
+            allowed = ", ".join(f"`{c}`" for c in spec.choices)
+        elif spec.per_second:
+            allowed = f"> 0 {spec.unit}, a multiple of dt (the option: its rate in Hz)"
+        else:
+            kind = value_types(f.name)[0][0]
+            allowed = spec.range_text() or {bool: "true / false", str: "a name the scenario checks",
+                                             Mapping: "key=value pairs"}[kind]
+        rows.append(f"| `{f.name}` | {options} | {default} | {allowed} | {'yes' if spec.verdict else 'no'} | "
+                    f"{spec.help} |")
+    return "\n".join(rows) + "\n"

@@ -50,8 +50,8 @@ CONTROLLERS = ("smc", "loopshape")
 MAX_DURATION = 3600.0
 #: Longest pilot time delay (s), far beyond the seed's 0.2-0.3 s.
 MAX_PILOT_DELAY = 10.0
-#: Longest integration step (s), 10 times the seed's: the actuators' explicit two-stage step
-#: needs ``dt`` well inside the stability bound of their fastest poles.
+#: Longest integration step (s), 10 times the seed's.  Measured (nominal, no noise, 10 s): ICE and
+#: both HARV scenarios stay bounded at 5 ms, lat-dir's tracking error twice the seed step's.
 MAX_DT = 0.005
 #: Sparsest recording: one sample in this many integration steps.
 MAX_RECORD_EVERY = 100_000
@@ -208,7 +208,7 @@ class LoopSettings:
                                              aliases=("--allocator-knows-failure",))
     method_options: dict[str, Any] | None = _setting(
         None, "method options key=value (value parsed as JSON, else text; see `alloc methods`), over the "
-        "vehicle file's methods.<method> defaults; repeatable", flag="--option", aliases=("-o",),
+        "vehicle file's methods.METHOD defaults; repeatable", flag="--option", aliases=("-o",),
         none_means="the vehicle's defaults")
     record_every: int = _setting(10, "record every n-th integration step", low=1, high=MAX_RECORD_EVERY,
                                  flag="--record-every", verdict=False)
