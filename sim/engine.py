@@ -185,11 +185,11 @@ def simulate(
     n_done = n_steps + 1
 
     def fail_now(u_last: np.ndarray) -> LoopAllocator:
-        inject_failure(failure, plant, bank, delay, packed, u_last)
+        injected = inject_failure(failure, plant, bank, delay, packed, u_last)  # defaults filled in: what is told
         if actuators:
             packed.view(FloatSlot.UACT)[:] = bank.pos  # a jammed surface is at its jam position at once
         if allocator_knows_failure:
-            return build_allocator(vehicle, method, method_options or {}, failure=failure, **alloc_options)
+            return build_allocator(vehicle, method, method_options or {}, failure=injected, **alloc_options)
         return allocator
 
     if fail_step == 0:

@@ -6,6 +6,8 @@ writes the changed arrays through the packed buffer's views (:class:`sim.packed.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from sim.blocks import ActuatorBank, DelayLine, ScheduledPlant
@@ -18,17 +20,15 @@ __all__ = ["inject_failure"]
 def inject_failure(
     failure: Failure, plant: ScheduledPlant, bank: ActuatorBank, delay: DelayLine, packed: Packed,
     u_last: np.ndarray,
-) -> None:
-    """Apply a failure to the plant, the actuators and the actuator delay (``u_last``: last command pushed)."""
-    eff = np.ones(bank.m)
-    for f in failure.actuators:
-        if f.kind == "float":
-            eff[f.index] = 0.0
-        elif f.kind == "effectiveness":
-            eff[f.index] = float(f.fraction)
-        else:
-            bank.apply_failure(f)  # a jam writes pos/rate straight into the packed buffer
-    plant.fail(effectiveness=eff)
+) -> Failure:
+    """Apply a failure to the plant, the actuators and the actuator delay (``u_last``: last command pushed).
+
+    The bank executes each actuator failure's effects (its kind's row of :data:`alloc.health.FAILURE_KINDS`);
+    returned is the failure as injected, every default filled in (a jam without a position holds
+    the one it has now), which is what a told allocator is told.
+    """
+    actuators = tuple(bank.apply_failure(f) for f in failure.actuators)  # a jam writes pos/rate into the packed buffer
+    plant.fail(effectiveness=bank.effectiveness)
     packed.view(FloatSlot.AD)[:] = plant.Ad
     packed.view(FloatSlot.BD)[:] = plant.Bd
     packed.view(FloatSlot.D)[:] = plant.D
@@ -43,3 +43,4 @@ def inject_failure(
         packed.view(IntSlot.DN)[:] = delay.n
         packed.view(IntSlot.DSTATE)[:] = 0, length
         packed.view(FloatSlot.DBUF)[:length] = u_last
+    return replace(failure, actuators=actuators)
