@@ -193,7 +193,8 @@ def _quasi_sliding_radius(frame_period: float, rule: str) -> float:
     State: the controller (reference models, observers, hedges, ZOH-discretised at ``T``) and the
     integral of ``e``; ``u_c = rho / eps_T (K0 e + K_-1 int e)``, allocated by the seed's ``B_k``.
     """
-    from sim.loop import _controller_system, boundary_layer_at
+    from sim.engine import _controller_system
+    from sim.settings import boundary_layer_at
 
     v, d = ice.vehicle(), ice.smc_design()
     k, m, nz = 3, 11, 11
@@ -221,7 +222,7 @@ def test_seed_boundary_layer_sampled_at_100_hz_is_an_unstable_discrete_loop():
 
 
 def test_boundary_layer_and_anti_windup_rules_are_the_seed_at_the_seed_rate():
-    from sim.loop import anti_windup_on, boundary_layer_at
+    from sim.settings import anti_windup_on, boundary_layer_at
 
     eps = np.ones(3)
     assert boundary_layer_at(eps, 0.0005) is eps and boundary_layer_at(eps, 0.01, "fixed") is eps
