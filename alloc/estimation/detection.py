@@ -77,7 +77,7 @@ __all__ = ["FailureDetector", "Detection", "MAX_KEPT"]
 #: detections kept in the state (older ones are dropped; the caller has received them)
 MAX_KEPT = 64
 #: rate-limit candidates, fractions of the nominal rate
-_RATE_FRACTIONS = np.geomspace(0.02, 0.8, 16)
+_RATE_FRACTIONS = np.geomspace(0.02, 0.9, 40)
 
 
 @dataclass(frozen=True)
@@ -89,7 +89,8 @@ class Detection:
     ``statistic`` and ``threshold`` of the stage-1 test (twice the log likelihood ratio,
     chi-square under no failure); ``confidence`` = ``effector_confidence * kind_confidence``;
     ``parameter`` and ``parameter_std`` the estimated jam position or effectiveness fraction
-    (``None`` for the kinds with none or several); ``samples`` the fit used.
+    (the rate of a rate limit, without a std; ``None`` for the kinds with none or several);
+    ``samples`` the fit used; ``end_position`` a rate-limited surface's estimated position.
     """
 
     event: FailureEvent
@@ -103,6 +104,7 @@ class Detection:
     parameter: float | None
     parameter_std: float | None
     samples: int
+    end_position: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
@@ -122,6 +124,7 @@ class _Fit:
     parameter: float | None = None
     parameter_std: float | None = None
     samples: int = 0  # the suffix (samples since the onset) it was fitted on
+    end_position: float | None = None  # a rate-limited surface's position at the last sample
 
 
 class FailureDetector:
@@ -173,6 +176,8 @@ class FailureDetector:
                              if self.has_position else np.full(m, np.inf))
         self.min_confidence = setting_real("min_confidence", min_confidence, 0.0, 1.0, lo_open=True, hi_open=True)
         self.L = 2 * self.N
+        self._Bn = np.array(problem.B, dtype=float) / self.noise_std[:, None]  # the columns' directions
+        self._design()
         self.health: dict[str, EffectorHealth] = {}
         self.detections: list[Detection] = []
         self.alarm_count = 0  # stage-1 alarms (isolated or not)
@@ -186,10 +191,9 @@ class FailureDetector:
     # ------------------------------------------------------------------ design
     @property
     def tested(self) -> np.ndarray:
-        """Indices of the effectors tested (healthy, movable)."""
-        names = self.problem.names
-        movable = self.problem.umax > self.problem.umin
-        return np.array([j for j in range(self.problem.m) if movable[j] and names[j] not in self.health], dtype=int)
+        """Indices of the effectors tested: every movable one, a failed one against its
+        current model (so a failure reported wrongly, or changing, is reported again)."""
+        return self._tested
 
     @property
     def dof(self) -> int:
@@ -198,9 +202,13 @@ class FailureDetector:
 
     def threshold(self) -> float:
         """The stage-1 threshold ``gamma = chi2.isf(alpha, d)`` (module docstring)."""
-        m_tested = max(1, len(self.tested))
+        return self._gamma
+
+    def _design(self) -> None:
+        self._tested = np.flatnonzero(self.problem.umax > self.problem.umin)
+        m_tested = max(1, len(self._tested))
         alpha = self.false_alarm_rate * self.hop * self.dt / 3600.0 / m_tested
-        return float(chi2.isf(min(alpha, 0.5), self.dof))
+        self._gamma = float(chi2.isf(min(alpha, 0.5), self.dof))
 
     # ------------------------------------------------------------------ model
     def _effective(self) -> tuple[np.ndarray, np.ndarray]:
@@ -235,6 +243,7 @@ class FailureDetector:
     def _restart(self) -> None:
         k, m, L = self.problem.k, self.problem.m, self.L
         self._U = np.zeros((L, m))
+        self._K = np.zeros((L, m))
         self._R = np.zeros((L, k))
         self._Q = np.zeros((L, m))
         self._T = np.zeros(L)
@@ -243,7 +252,9 @@ class FailureDetector:
         self._since_test = 0
         self._pending = None
         self._B_eff, _ = self._effective()
-        self._Bw = self._B_eff / self.noise_std[:, None]
+        self._f_known = np.ones(m)  # the known effectiveness of each effector (0: floating)
+        for name, h in self.health.items():
+            self._f_known[self.problem.index(name)] = 0.0 if h.floating else h.effectiveness
 
     # ------------------------------------------------------------------ streaming
     def update(self, u: Any, y: Any, position: Any = None, time: float | None = None) -> list[Detection]:
@@ -275,7 +286,7 @@ class FailureDetector:
             ok = ~np.isnan(pos)
             q[ok] = (pos[ok] - known[ok]) / self.position_std[ok]
         i = self._head
-        self._U[i], self._R[i], self._Q[i], self._T[i] = known, r, q, t
+        self._U[i], self._K[i], self._R[i], self._Q[i], self._T[i] = u, known, r, q, t
         self._head = (i + 1) % self.L
         self._count = min(self._count + 1, self.L)
         self._since_test += 1
@@ -288,14 +299,14 @@ class FailureDetector:
 
     def _window(self, n: int) -> tuple[np.ndarray, ...]:
         idx = (self._head - n + np.arange(n)) % self.L
-        return self._U[idx], self._R[idx], self._Q[idx], self._T[idx]
+        return self._U[idx], self._R[idx], self._Q[idx], self._T[idx], self._K[idx]
 
     def _stage1(self, n: int) -> tuple[np.ndarray, np.ndarray]:
         """Stage-1 statistics of the tested effectors over the last ``n`` samples."""
         tested = self.tested
-        U, R, Q, _ = self._window(n)
+        U, R, Q, _, _ = self._window(n)
         Uc = U[:, tested] - U[:, tested].mean(axis=0)
-        Bw = self._Bw[:, tested]
+        Bw = self._Bn[:, tested]
         c = np.einsum("ij,ij->j", Bw, Bw)
         S = R @ Bw  # (n, t): b~_j . r~
         stat = _linear_glr(S, Uc, c)
@@ -329,7 +340,7 @@ class FailureDetector:
         """Samples since the estimated onset: the suffix maximising the stage-1 model's log
         likelihood ratio less ``(d / 2) ln n`` over every tested effector (the GLR change-time
         estimate), from reverse cumulative sums (every suffix at once)."""
-        Bw = self._Bw[:, tested]
+        Bw = self._Bn[:, tested]
         c = np.einsum("ij,ij->j", Bw, Bw)
         parts = [(R @ Bw, c)]
         if self.has_position:
@@ -352,11 +363,11 @@ class FailureDetector:
     def _isolate(self, pending: dict[str, Any], gamma: float) -> Detection | None:
         tested = self.tested
         n_all = self._count
-        U, R, Q, T = self._window(n_all)
+        U, R, Q, T, K = self._window(n_all)
         n_onset = self._onset(U, R, Q, tested)
         fits: list[tuple[int, _Fit]] = []
         for j in tested:
-            fits += [(int(j), f) for f in self._fits(int(j), U[:, j], R, Q[:, j], n_onset)]
+            fits += [(int(j), f) for f in self._fits(int(j), U[:, j], R, Q[:, j], K[:, j], n_onset)]
         if not fits:
             return None
         scores = np.array([f.llr - 0.5 * f.n_params * math.log(f.samples) for _, f in fits])
@@ -370,12 +381,32 @@ class FailureDetector:
         kind_conf = min(1.0, float(same / max(eff_conf, 1e-300)))
         if 2.0 * fit.llr < gamma or eff_conf < self.min_confidence or kind_conf < self.min_confidence:
             return None
+        current = self._current_fit(jbest)
+        if current is not None and (current.kind == fit.kind or self._same_consequence(jbest, current, fit)) \
+                and fit.kind not in (FailureKind.LIMITS, FailureKind.RATE_LIMITS):
+            return None  # nothing new about this effector
         name = self.problem.names[jbest]
         event = FailureEvent(name, fit.kind, **fit.params)
         return Detection(event=event, time=float(T[-1]), onset=float(T[n_all - fit.samples]),
                          statistic=pending["statistic"], threshold=gamma, confidence=eff_conf * kind_conf,
                          effector_confidence=eff_conf, kind_confidence=kind_conf, parameter=fit.parameter,
-                         parameter_std=fit.parameter_std, samples=int(fit.samples))
+                         parameter_std=fit.parameter_std, samples=int(fit.samples), end_position=fit.end_position)
+
+    def _current_fit(self, j: int) -> _Fit | None:
+        """What is known of effector ``j``, as a fit (``None``: healthy)."""
+        h = self.health.get(self.problem.names[j])
+        if h is None:
+            return None
+        if h.floating:
+            return _Fit(FailureKind.FLOAT, 0.0, 0, {})
+        if h.jam_position is not None:
+            return _Fit(FailureKind.JAM, 0.0, 0, {"position": h.jam_position}, h.jam_position, 0.0)
+        if h.effectiveness != 1.0 and h.limits is None and h.rate_limits is None:
+            return _Fit(FailureKind.EFFECTIVENESS, 0.0, 0, {"fraction": h.effectiveness}, h.effectiveness, 0.0)
+        if h.limits is not None:
+            return _Fit(FailureKind.LIMITS, 0.0, 0, {"lo": h.limits[0], "hi": h.limits[1]})
+        rl = h.rate_limits or (0.0, 0.0)
+        return _Fit(FailureKind.RATE_LIMITS, 0.0, 0, {"rate_min": rl[0], "rate_max": rl[1]})
 
     def _same_consequence(self, j: int, f: _Fit, g: _Fit) -> bool:
         """Whether two fits of effector ``j`` give an allocator the same problem, within three
@@ -384,7 +415,7 @@ class FailureDetector:
         movable with the same effectiveness, limits or rate limits."""
         if f.kind == g.kind and f.kind in (FailureKind.LIMITS, FailureKind.RATE_LIMITS):
             return f.params == g.params
-        bw = self._Bw[:, j]
+        bw = self._Bn[:, j]
         sd = lambda fit: 0.0 if fit.parameter_std is None else fit.parameter_std  # noqa: E731
 
         def held(fit: _Fit) -> tuple[float, float] | None:  # (held position's moment scale, its std)
@@ -406,7 +437,8 @@ class FailureDetector:
             return abs(f.parameter - g.parameter) <= 3 * math.hypot(sd(f), sd(g))
         return False
 
-    def _fits(self, j: int, u: np.ndarray, R: np.ndarray, q: np.ndarray, n_onset: int) -> list[_Fit]:
+    def _fits(self, j: int, u: np.ndarray, R: np.ndarray, q: np.ndarray, known: np.ndarray,
+              n_onset: int) -> list[_Fit]:
         """Maximum-likelihood fit of every kind's signature for effector ``j``.
 
         The closed-form kinds (float, hard-over, jam, effectiveness) are fitted on every
@@ -415,31 +447,39 @@ class FailureDetector:
         buffer.  Listed simplest first (ties go to the first).
         """
         p = self.problem
-        bw = self._Bw[:, j]
+        bw = self._Bn[:, j]
         c = float(bw @ bw)
         N = len(u)
         if c <= 0 and not self.has_position:
             return []
-        a = (R @ bw) / c if c > 0 else np.zeros(N)  # moment-based deviation estimate, variance 1 / c
+        # deviations from the command (position units): the residual is against the current
+        # model, so its known part (a held position, a scaled moment) is added back
+        f0 = float(self._f_known[j])
+        dm0, dp0 = f0 * known - u, known - u  # the current model's own deviations
+        a = (R @ bw) / c + dm0 if c > 0 else np.zeros(N)  # moment-based estimate, variance 1 / c
         wq = 1.0 / float(self.position_std[j]) ** 2 if self.has_position else 0.0
-        qd = q * float(self.position_std[j]) if self.has_position else np.zeros(N)  # position units
+        qd = q * float(self.position_std[j]) + dp0 if self.has_position else np.zeros(N)
+        # every fit is scored against the current model: its own likelihood ratio over healthy
+        # is subtracted, suffix by suffix (zero for a healthy effector)
+        base = c * (a * dm0 - 0.5 * dm0 * dm0) + wq * (qd * dp0 - 0.5 * dp0 * dp0)
         wc = c + wq
         a_comb = (c * a + wq * qd) / wc  # combined deviation estimate, variance 1 / wc
         lo0, hi0 = float(p.umin[j]), float(p.umax[j])
         rsum = lambda x: np.cumsum(x[::-1])  # noqa: E731 - entry i: the last i + 1 samples
         n = np.arange(1, N + 1, dtype=float)
         A, AU, U1, U2, AP = rsum(a_comb), rsum(a_comb * u), rsum(u), rsum(u * u), rsum(a * u)
+        BASE = rsum(base)
         logn = np.log(n)
 
         def held_llr(P: np.ndarray) -> np.ndarray:  # the surface at P: sum wc (a d - d^2 / 2), d = P - u
-            return wc * (P * A - AU - 0.5 * (n * P * P - 2 * P * U1 + U2))
+            return wc * (P * A - AU - 0.5 * (n * P * P - 2 * P * U1 + U2)) - BASE
 
         def best(llr: np.ndarray, k: int) -> int:
             return int(np.argmax(llr - 0.5 * k * logn))
 
         fits = []
         if c > 0:  # float: no moment (theta = -1 on u), the surface where commanded
-            llr = c * (-AP - 0.5 * U2)
+            llr = c * (-AP - 0.5 * U2) - BASE
             i = best(llr, 0)
             fits.append(_Fit(FailureKind.FLOAT, float(llr[i]), 0, {}, samples=i + 1))
         llr_lo, llr_hi = held_llr(np.full(N, lo0)), held_llr(np.full(N, hi0))
@@ -456,17 +496,18 @@ class FailureDetector:
             theta = np.where(ok, AP / np.where(ok, U2, 1.0), 0.0)
             f = np.clip(1.0 + theta, 0.0, 1.0)
             th = f - 1.0
-            llr = np.where(ok, c * (th * AP - 0.5 * th * th * U2), -np.inf)
+            llr = np.where(ok, c * (th * AP - 0.5 * th * th * U2) - BASE, -np.inf)
             i = best(llr, 1)
             if np.isfinite(llr[i]):
                 fits.append(_Fit(FailureKind.EFFECTIVENESS, float(llr[i]), 1, {"fraction": float(f[i])}, float(f[i]),
                                  1.0 / math.sqrt(c * U2[i]), samples=i + 1))
         for length in sorted({n_onset, i_jam + 1, N}):
-            fits += self._range_fits(j, u[N - length:], a_comb[N - length:], wc, lo0, hi0)
+            fits += self._range_fits(j, u[N - length:], a_comb[N - length:], wc, lo0, hi0,
+                                     float(base[N - length:].sum()))
         return fits
 
     def _range_fits(self, j: int, u: np.ndarray, a_comb: np.ndarray, wc: float, lo0: float,
-                    hi0: float) -> list[_Fit]:
+                    hi0: float, base: float) -> list[_Fit]:
         """Reduced limits and reduced rate limits on one suffix."""
         n = len(u)
         fits = []
@@ -487,7 +528,7 @@ class FailureDetector:
         margin = 3.0 / math.sqrt(n * wc)
         moving_inside = int(((u > lo_c + margin) & (u < hi_c - margin)).sum())
         if lo_c < hi_c and (use_hi or use_lo) and moving_inside >= 3:
-            llr = float(max(llr_hi[ih], 0.0) + max(llr_lo[il], 0.0))
+            llr = float(max(llr_hi[ih], 0.0) + max(llr_lo[il], 0.0)) - base
             fits.append(_Fit(FailureKind.LIMITS, llr, int(use_hi) + int(use_lo), {"lo": lo_c, "hi": hi_c},
                              samples=n))
         p = self.problem
@@ -503,7 +544,7 @@ class FailureDetector:
             for t in range(1, n):
                 delta = delta + np.clip(u[t] - delta, -rates * self.dt, rates * self.dt)
                 D[:, t] = delta - u[t]
-            llr_r = (wc * (a_comb * D - 0.5 * D ** 2)).sum(axis=1)
+            llr_r = (wc * (a_comb * D - 0.5 * D ** 2)).sum(axis=1) - base
             # a surface that moves less over the suffix than a jam's position is known to is a jam
             llr_r[rates * (n - 1) * self.dt < 3.0 / math.sqrt(n * wc)] = -np.inf
             free_start = np.tile(np.arange(len(starts)) > 0, len(_RATE_FRACTIONS))
@@ -511,13 +552,18 @@ class FailureDetector:
             if np.isfinite(llr_r[ir]):
                 fits.append(_Fit(FailureKind.RATE_LIMITS, float(llr_r[ir]), 1 + int(free_start[ir]),
                                  {"rate_min": -float(rates[ir]), "rate_max": float(rates[ir])}, float(rates[ir]),
-                                 samples=n))
+                                 samples=n, end_position=float(D[ir, -1] + u[-1])))
         return fits
 
     def _emit(self, detection: Detection) -> None:
-        _, self.health = apply_event(self.problem, self.health, detection.event)
+        ev = detection.event
+        # a new finding replaces what was known of that effector (a jam would otherwise
+        # take precedence over reduced limits, see alloc.health)
+        _, health = apply_event(self.problem, self.health, FailureEvent(ev.effector, FailureKind.REPAIR))
+        _, self.health = apply_event(self.problem, health, ev)
         j = self.problem.index(detection.event.effector)
-        self._rate_state[j] = float(self._U[(self._head - 1) % self.L, j])
+        self._rate_state[j] = (float(self._U[(self._head - 1) % self.L, j]) if detection.end_position is None
+                               else detection.end_position)
         self.detections.append(detection)
         del self.detections[:-MAX_KEPT]
         self._restart()
@@ -534,7 +580,7 @@ class FailureDetector:
             "samples": self.samples, "last_time": None if math.isinf(self.last_time) else self.last_time,
             "alarm_count": self.alarm_count, "unisolated_count": self.unisolated_count,
             "since_test": self._since_test, "pending": self._pending, "rate_state": self._rate_state.tolist(),
-            "buffer": {"U": self._U[order].tolist(), "R": self._R[order].tolist(), "Q": self._Q[order].tolist(),
+            "buffer": {"U": self._U[order].tolist(), "K": self._K[order].tolist(), "R": self._R[order].tolist(), "Q": self._Q[order].tolist(),
                        "T": self._T[order].tolist()},
             "detections": [d.to_dict() for d in self.detections],
         }
@@ -571,6 +617,7 @@ class FailureDetector:
             raise StateError(f"buffer: {n} samples; at most {det.L}")
         k, m = problem.k, problem.m
         det._U[:n] = state_array("U", buf.get("U", []) if n else np.zeros((0, m)), (n, m))
+        det._K[:n] = state_array("K", buf.get("K", []) if n else np.zeros((0, m)), (n, m))
         det._R[:n] = state_array("R", buf.get("R", []) if n else np.zeros((0, k)), (n, k))
         det._Q[:n] = state_array("Q", buf.get("Q", []) if n else np.zeros((0, m)), (n, m))
         det._T[:n] = T
