@@ -60,7 +60,7 @@ from alloc.exceptions import OptionError, ProblemError
 from sim.blocks import DEFAULT_DT, ActuatorSpec, observer_gain
 from sim.loop import TF, LoopShapedDesign, SMCDesign
 
-__all__ = ["DESIGN_OPTIONS", "AutoDesign", "auto_design", "relative_order", "pseudo_command_map",
+__all__ = ["DESIGN_OPTIONS", "AutoDesign", "auto_design", "design_options", "relative_order", "pseudo_command_map",
            "channel_reach", "limit_frequency", "closed_loop_poles"]
 
 #: Overridable design choices: name -> (default, meaning).  ``None``: computed by the rule.
@@ -76,7 +76,7 @@ DESIGN_OPTIONS: dict[str, tuple[Any, str]] = {
     "observer_bandwidth": (None, "rad/s; default: the reference bandwidth (step 8)"),
     "observer": (True, "observers on (false: feed back the measured outputs, seed Fig 4-95)"),
     "stability_margin": (0.05, "1/s; every closed-loop eigenvalue left of -margin (step 10)"),
-    "command_fraction": (0.1, "peak pseudo-command of the sum-of-sines commands / rho"),
+    "command_fraction": (0.05, "peak pseudo-command of the sum-of-sines commands / rho"),
     "noise_fraction": (0.02, "sensor-noise gain on a controlled output / its command peak"),
     "static_bandwidth": (1000.0, "rad/s; first-order lag standing in for an effector without dynamics"),
 }
@@ -116,7 +116,8 @@ class AutoDesign:
     report: dict[str, Any] = field(default_factory=dict)
 
 
-def _options(overrides: Mapping[str, Any] | None) -> dict[str, Any]:
+def design_options(overrides: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """Every design choice: :data:`DESIGN_OPTIONS`' defaults with ``overrides`` checked and applied."""
     overrides = dict(overrides or {})
     unknown = sorted(set(overrides) - set(DESIGN_OPTIONS))
     if unknown:
@@ -288,7 +289,7 @@ def auto_design(
     OptionError
         an unknown design option (a ``TypeError``); a malformed value is a ProblemError.
     """
-    opt = _options(options)
+    opt = design_options(options)
     controlled, measured = tuple(controlled), tuple(measured)
     k = len(controlled)
     report: dict[str, Any] = {"procedure": "seed section 4.3", "channels": [output_names[c] for c in controlled]}

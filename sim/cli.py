@@ -58,11 +58,13 @@ def list_scenarios(value: bool) -> None:
     raise typer.Exit()
 
 
-def scenario_of_vehicle(source: str) -> str:
-    """The scenario ``--vehicle source`` flies, or a one-line usage error saying why there is none."""
+def scenario_of_vehicle(source: str) -> Any:
+    """What ``--vehicle source`` flies: a scenario's name, or a vehicle file's
+    :class:`sim.user_vehicle.VehicleScenario`; a one-line usage error when there is nothing to fly."""
     if source in scenarios():
         return source
     from alloc import vehicles
+    from sim.user_vehicle import VehicleScenario
 
     vehicle = load_vehicle_option(source)
     try:
@@ -77,9 +79,7 @@ def scenario_of_vehicle(source: str) -> str:
         raise typer.BadParameter(
             f"vehicle {vehicle.name}: no [model] section; alloc sim needs a linear model (the [model] table of the "
             "vehicle format: states, outputs, A, B, C, D, controlled; see alloc/vehicle_file.py)", param_hint="--vehicle")
-    raise typer.BadParameter(
-        f"vehicle {vehicle.name}: alloc sim flies the seed's scenarios only ({', '.join(scenarios())}); closing the "
-        "loop on a vehicle file's [model] (the seed's section 4.3 design) is not built yet", param_hint="--vehicle")
+    return VehicleScenario(vehicle)
 
 
 @with_setting_options
@@ -89,6 +89,9 @@ def sim_command(
     vehicle: Optional[str] = typer.Option(None, "--vehicle", metavar="NAME|FILE",
                                           help=f"{VEHICLE_HELP}: flies the scenario of that name (harv: harv_latdir); "
                                           "instead of SCENARIO"),
+    design: list[str] = typer.Option(
+        [], "--design", help="vehicle file only: override a choice of the seed's section 4.3 design, key=value "
+        "(see sim/autodesign.py DESIGN_OPTIONS; the JSON summary's settings.design reports every choice); repeatable"),
     json_path: Optional[Path] = typer.Option(None, "--json", help="write the JSON summary to this new file"),
     csv_path: Optional[Path] = typer.Option(None, "--csv", help="write the time histories to this new file (CSV)"),
     parquet_path: Optional[Path] = typer.Option(
@@ -104,7 +107,7 @@ def sim_command(
 
     Units: seconds; effector positions in degrees; outputs in the seed's units.
 
-    A vehicle file (--vehicle FILE) is refused in one line: the closed loop flies the seed's scenarios only.
+    A vehicle file with a [model] (--vehicle FILE) flies the seed's section 4.3 design of its model (units: the file's).
 
     Nothing is written unless asked (--json, --csv, --parquet, --plot); an existing file is refused unless --force.
 
@@ -116,16 +119,23 @@ def sim_command(
     failure, duration, failure_time = (settings.get(k) for k in ("failure", "duration", "failure_time"))
     if (scenario is None) == (vehicle is None):
         raise typer.BadParameter("give a SCENARIO or --vehicle NAME|FILE (one of them)", param_hint="SCENARIO/--vehicle")
-    scenario = scenario_of_vehicle(vehicle) if vehicle is not None else scenario
-    try:
-        run = get_scenario(scenario)
-    except KeyError as exc:
-        raise typer.BadParameter(str(exc.args[0]), param_hint="SCENARIO") from None
+    flown = scenario_of_vehicle(vehicle) if vehicle is not None else scenario
+    if isinstance(flown, str):
+        scenario = flown
+        try:
+            run = get_scenario(scenario)
+        except KeyError as exc:
+            raise typer.BadParameter(str(exc.args[0]), param_hint="SCENARIO") from None
+    else:  # a vehicle file's model, the seed's section 4.3 design (sim.user_vehicle)
+        run, scenario = flown, flown.name
+    if design and isinstance(flown, str):
+        raise typer.BadParameter(f"{scenario} flies the seed's own design; --design is for a vehicle file's "
+                                 "auto-design", param_hint="--design")
     if "failure" not in settings:
         failure = run.default_failure
     elif failure == NO_FAILURE:
         failure = None
-    elif failure not in run.failures:
+    elif not (run.accepts_failure(failure) if hasattr(run, "accepts_failure") else failure in run.failures):
         known = sorted(run.failures) + [NO_FAILURE]
         raise typer.BadParameter(f"unknown failure {failure!r} for {scenario}; known: {known}", param_hint="--failure")
     simulated = run.default_duration if duration is None else duration
@@ -140,6 +150,8 @@ def sim_command(
     for path, hint in ((json_path, "--json"), (csv_path, "--csv"), (parquet_path, "--parquet"), (plot_path, "--plot")):
         output_file(path, force, hint, taken=taken)
     kwargs: dict[str, Any] = {**settings, "failure": failure}
+    if design:
+        kwargs["design"] = parse_options(design)
     try:
         result = run(progress=simulated > PROGRESS_AFTER, **kwargs)
     except AllocError as exc:  # a setting (sim.settings.SettingError), the method and its options

@@ -1,7 +1,9 @@
 """PNG plots of a :class:`sim.result.SimResult`: tracking per channel, effector positions and rates.
 
 Channels carry the seed's names and units (``alpha`` deg, ``p_s`` deg/s,
-``beta`` deg); effectors the vehicle's names, one colour each (tab20 cycle);
+``beta`` deg), or a vehicle file's names and units (``result.settings["units"]``,
+:mod:`sim.user_vehicle`: rotors in their own unit, not degrees); effectors the
+vehicle's names, one colour each (tab20 cycle);
 the failure time is a labelled line; the run's settings are in the title.
 Uses :class:`matplotlib.figure.Figure` directly, so no backend is chosen here.
 """
@@ -45,6 +47,18 @@ def settings_line(result: SimResult) -> str:
     return "  ".join(parts)
 
 
+def _units(result: SimResult) -> tuple[dict[str, str], str, str]:
+    """Channel units, effector position and rate units: the run's own (a vehicle file's) or the seed's degrees.
+
+    A vehicle file's effectors of different units share an axis labelled with all of them.
+    """
+    given = result.settings.get("units") if result.settings else None
+    if not given:
+        return {}, "deg", "deg/s"
+    units = sorted(set(given.get("effectors", {}).values())) or ["1"]
+    return dict(given.get("channels", {})), ", ".join(units), ", ".join(f"{u}/s" for u in units)
+
+
 def plot_result(result: SimResult, path: str | Path) -> Path:
     """Write a multi-panel PNG: one row per channel (reference vs output), pilot loop, effectors, rates."""
     nch = len(result.channels)
@@ -54,11 +68,15 @@ def plot_result(result: SimResult, path: str | Path) -> Path:
     fig = Figure(figsize=(10, 2.1 * rows + 0.6))
     axes = fig.subplots(rows, 1, sharex=True, squeeze=False)[:, 0]
     t = result.t
+    channel_units, position_unit, rate_unit = _units(result)
     for j, name in enumerate(result.channels):
         ax = axes[j]
         ax.plot(t, result.reference[:, j], "k--", lw=1, label="reference")
         ax.plot(t, result.output[:, j], color="tab:blue", lw=1, label="output")
-        ax.set_ylabel(channel_label(name))
+        if name in channel_units:  # a vehicle file's output: its name (and unit, when the file gives one)
+            ax.set_ylabel(f"{name} ({channel_units[name]})" if channel_units[name] else name)
+        else:
+            ax.set_ylabel(channel_label(name))
         ax.legend(loc="upper right", fontsize=7)
     i = nch
     if outer:
@@ -75,9 +93,9 @@ def plot_result(result: SimResult, path: str | Path) -> Path:
             c = cmap(n % cmap.N)
             axes[i].plot(t, result.effectors[:, n], lw=0.8, color=c, label=name)
             axes[i + 1].plot(t, result.effector_rates[:, n], lw=0.8, color=c)
-        axes[i].set_ylabel("position (deg)")
+        axes[i].set_ylabel(f"position ({position_unit})")
         axes[i].legend(fontsize=6, ncol=6, loc="upper right")
-        axes[i + 1].set_ylabel("rate (deg/s)")
+        axes[i + 1].set_ylabel(f"rate ({rate_unit})")
     for n, ax in enumerate(axes):
         if result.failure_time is not None:
             ax.axvline(result.failure_time, color="r", lw=0.8, ls=":",

@@ -37,12 +37,12 @@ from typing import Any
 import numpy as np
 
 from alloc.exceptions import ProblemError
-from sim.autodesign import DESIGN_OPTIONS, AutoDesign, auto_design
+from sim.autodesign import AutoDesign, auto_design, design_options
 from sim.blocks import DEFAULT_DT, SUM_OF_SINES_TABLE_4_2, ActuatorFailure, ActuatorSpec, sum_of_sines
 from sim.loop import Failure, LoopSpec, Vehicle, simulate
 from sim.result import SimResult
 
-__all__ = ["FlightModel", "flight_model", "vehicle_failure", "fly", "DEFAULT_DURATION", "DEFAULT_FAILURE_TIME",
+__all__ = ["FlightModel", "VehicleScenario", "flight_model", "vehicle_failure", "fly", "DEFAULT_DURATION", "DEFAULT_FAILURE_TIME",
            "FAILURE_SYNTAX"]
 
 #: simulated seconds of a run unless told (the failure halfway)
@@ -150,8 +150,8 @@ def flight_model(source: Any, *, design: Mapping[str, Any] | None = None,
     u0 = _trim(fv)
     lo = np.array([e.min for e in fv.effectors]) - u0
     hi = np.array([e.max for e in fv.effectors]) - u0
-    static_bw = dict(design or {}).get("static_bandwidth") or DESIGN_OPTIONS["static_bandwidth"][0]
-    actuators = tuple(_actuator(e, i, lo[i], hi[i], float(static_bw)) for i, e in enumerate(fv.effectors))
+    static_bw = design_options(design)["static_bandwidth"]
+    actuators = tuple(_actuator(e, i, lo[i], hi[i], static_bw) for i, e in enumerate(fv.effectors))
     controlled = tuple(model.outputs.index(c) for c in model.controlled)
     measured = tuple(range(len(model.outputs)))
     B_axes = np.array(fv.B, dtype=float)
@@ -248,8 +248,13 @@ def vehicle_failure(fm: FlightModel, name: str, time: float) -> Failure:
         for param, text_value in zip(spec.params, values, strict=False):
             x = _value(text_value, param, part)
             known = PARAMETERS.get(param)
-            # the loop flies deviations from trim: a position moves with it
-            params[param] = x - fm.trim_u[i] if known is not None and known.range == Range.POSITION else x
+            if known is not None and known.range == Range.POSITION:
+                e = fm.source.effectors[i]
+                if not e.min <= x <= e.max:
+                    raise ProblemError(f"failure: {part!r}: {param} {x:g} is outside {effector}'s limits "
+                                       f"[{e.min:g}, {e.max:g}]", field="failure")
+                x -= fm.trim_u[i]  # the loop flies deviations from trim
+            params[param] = x
         try:
             failures.append(ActuatorFailure(i, kind, **params))
         except ProblemError as exc:
@@ -315,3 +320,48 @@ def _to_file_units(result: SimResult, u0: np.ndarray) -> None:
         result.effectors = result.effectors + u0
     if result.effector_limits is not None:
         result.effector_limits = tuple(np.asarray(x) + u0 for x in result.effector_limits)
+
+
+class VehicleScenario:
+    """A vehicle file as a scenario of :func:`sim.scenarios.get_scenario`'s shape (``alloc sim --vehicle FILE``).
+
+    ``failures`` lists a rotor loss (``float``) and a jam at the failure instant for every
+    effector, as examples; any name of :data:`FAILURE_SYNTAX` is accepted
+    (:meth:`accepts_failure`).  Calling it flies :func:`fly`; the pilot options of the seed's
+    scenarios are refused (a vehicle file names no pilot).
+    """
+
+    accepts_failure_objects = True
+    default_failure = None
+
+    def __init__(self, source: Any) -> None:
+        from alloc import registry, vehicles
+
+        self.vehicle = vehicles.get_vehicle(source)
+        if self.vehicle.model is None:
+            raise ProblemError(f"model: vehicle {self.vehicle.name!r} has no [model] section; alloc sim needs its "
+                               "linear model (states, outputs, A, B, C, D, controlled)", field="model")
+        self.name = self.vehicle.name
+        self.description = (f"{self.vehicle.name}: vehicle file, {self.vehicle.k} axes x {self.vehicle.m} effectors, "
+                            "seed section 4.3 design (sim.autodesign)")
+        self.default_duration = DEFAULT_DURATION
+        self.default_method = registry.DEFAULT_METHOD
+        self.failures = {}
+        for e in self.vehicle.effectors:
+            self.failures[f"float:{e.name}"] = f"{e.name} floats: no control power (a rotor loss)"
+            self.failures[f"jam:{e.name}@<position>"] = f"{e.name} held at <position> ({e.unit})"
+
+    def accepts_failure(self, name: str) -> bool:
+        """Whether ``name`` parses as a failure of this vehicle (:data:`FAILURE_SYNTAX`)."""
+        kinds = name.split("+")
+        names = self.vehicle.effector_names
+        return all(":" in k and k.partition(":")[2].partition("@")[0] in names for k in kinds)
+
+    def __call__(self, *, pilot: str | None = None, pilot_gain: float | None = None, pilot_delay: float | None = None,
+                 **options: Any) -> SimResult:
+        given = [n for n, v in (("pilot", pilot), ("pilot_gain", pilot_gain), ("pilot_delay", pilot_delay))
+                 if v is not None]
+        if given:
+            raise TypeError(f"{given[0]}: a vehicle file's run has no pilot model (direct commands into the "
+                            "reference models)")
+        return fly(self.vehicle, **options)

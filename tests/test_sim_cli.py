@@ -142,4 +142,7 @@ def test_vehicle_names_its_scenario():
     assert res.exit_code == 0, res.output
     summary = json.loads(res.stdout)
     assert summary["scenario"] == "harv_latdir" and summary["method"] == "daisy" and summary["allocator_calls"] == 201
-    assert runner.invoke(app, ["--vehicle", "ice-design"]).exit_code == 2  # a vehicle with a model but no scenario
+    # a vehicle with a model but no scenario flies its model with the section 4.3 auto-design (sim.user_vehicle)
+    res = runner.invoke(app, ["--vehicle", "ice-design", "--duration", "0.1", "--no-noise"])
+    assert res.exit_code == 0, res.output
+    assert json.loads(res.stdout)["settings"]["design"]["procedure"] == "seed section 4.3"

@@ -295,7 +295,7 @@ def test_error_cases_are_one_line_exit_2(tmp_path):
         (["ams", "summary", "--vehicle", "ice", "--problem", "ice"], ("--vehicle only",)),
         (["ams", "plot", "--vehicle", "hexa-x", "--method", "daisy", "--out", str(tmp_path / "a.png")], ("groups",)),
         (["sim", "--vehicle", str(quad)], ("vehicle my-quad: no [model] section", "linear model")),
-        (["sim", "--vehicle", "hexa-x"], ("vehicle hexa-x", "not built yet")),
+        (["sim", "--vehicle", "hexa-x", "--failure", "float:motor9"], ("float:motor9", "hexa-x")),
         (["sim", "ice", "--vehicle", "ice"], ("one of them",)),
         (["sim", "harv_lon", "--method", "daisy", "--duration", "0.1"], ("groups",)),
         (["bench", "openloop", "--vehicle", "hexa-x", "--method", "daisy"], ("groups",)),
