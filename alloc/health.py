@@ -61,7 +61,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 import numpy as np
 
 from .exceptions import AllocError, ProblemError
-from .problem import as_real, short_repr
+from .domain import as_real, short_repr
 
 if TYPE_CHECKING:
     from .problem import Problem
@@ -224,7 +224,7 @@ class SimulatorOnlySpec:
         return SIMULATOR_PARAMETERS[name]
 
 
-_NAME = re.compile(r"^[a-z][a-z_]{1,30}$")
+_NAME = re.compile(r"^[a-z][a-z0-9_]{1,30}$")
 
 
 def _refuse(spec: Any, reason: str) -> FailureKindError:
@@ -235,7 +235,7 @@ def _check_columns(spec: Any, known: Mapping[str, Parameter], reads: Mapping[Any
                    rules: tuple[Any, ...]) -> None:
     """The consistency of one entry: a name, a meaning, effects, parameters that exist and are read."""
     if not (isinstance(spec.name, str) and _NAME.match(spec.name)):
-        raise _refuse(spec, "a name is 2-31 lower-case letters or underscores")
+        raise _refuse(spec, "a name is 2-31 lower-case letters, digits or underscores, first a letter")
     if not (isinstance(spec.meaning, str) and spec.meaning.strip()):
         raise _refuse(spec, "no meaning: say in one sentence what failed")
     if not (isinstance(spec.effects, tuple) and spec.effects and all(isinstance(e, Effect) for e in spec.effects)):
@@ -277,7 +277,10 @@ def _check_spec(spec: Any) -> KindSpec:
         raise _refuse(spec, f"its example must give every required parameter {list(spec.required)} and no other "
                             f"than {list(spec.params)}, got {short_repr(spec.example)}")
     for name, value in spec.example.items():
-        as_real(f"{spec.name}.example.{name}", value, FailureKindError)
+        try:
+            as_real(name, value)
+        except ProblemError as exc:
+            raise _refuse(spec, f"example: {exc}") from None
     return spec
 
 

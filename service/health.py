@@ -1,9 +1,9 @@
 """Vehicle health over HTTP: a thin adapter over :mod:`alloc.health`.
 
-The failure kinds, their meanings and their precedence are defined once, in
-:mod:`alloc.health` (``FailureKind``, ``EffectorHealth``, ``apply_event``,
+The failure kinds, their parameters, meanings and precedence are defined once, in
+the table of :mod:`alloc.health` (``FAILURE_KINDS``, ``EffectorHealth``, ``apply_event``,
 ``apply_health``).  This module only maps the JSON event bodies of
-:mod:`service.schemas` to :class:`alloc.health.FailureEvent`, reports the library's
+:mod:`service.schemas` (derived from that table) to :class:`alloc.health.FailureEvent`, reports the library's
 validation errors as 422 against the field they name (``exc.field``), and shapes the
 health for responses and for the database (``health_to_dict``).
 """
@@ -15,6 +15,7 @@ from typing import Any
 import alloc
 from alloc.health import (
     HEALTHY, EffectorHealth, FailureEvent, FailureKind, Health, apply_health, health_from_dict, health_to_dict,
+    resolve_event,
 )
 from alloc.health import apply_event as _apply_event
 
@@ -24,18 +25,19 @@ from .schemas import EffectorHealthOut, EventIn
 __all__ = ["EffectorHealth", "Health", "apply_event", "to_problem", "health_out", "load_health", "dump_health",
            "to_failure_event"]
 
-#: the parameters each kind records in the event history (the JSON body's fields)
-_PARAMS = ("position", "fraction", "lo", "hi", "rate_min", "rate_max")
-
 
 def to_failure_event(event: EventIn) -> FailureEvent:
-    """The library's :class:`~alloc.health.FailureEvent` for a JSON event body."""
-    return FailureEvent(event.effector, FailureKind(event.kind),
-                        **{p: getattr(event, p) for p in _PARAMS if getattr(event, p, None) is not None})
+    """The library's :class:`~alloc.health.FailureEvent` for a JSON event body (its kind's parameters)."""
+    kind = FailureKind(event.kind)
+    return FailureEvent(event.effector, kind,
+                        **{p: getattr(event, p) for p in kind.spec.params if getattr(event, p) is not None})
 
 
 def apply_event(nominal: alloc.Problem, health: Health, event: EventIn) -> tuple[str, Health, dict[str, Any]]:
     """Validate ``event`` against the vehicle; return ``(effector name, new health, params)``.
+
+    ``params`` are the event's parameters as applied, defaults resolved (a hard-over records the
+    stop it ran to), for the event history.
 
     Raises
     ------
@@ -45,14 +47,12 @@ def apply_event(nominal: alloc.Problem, health: Health, event: EventIn) -> tuple
     """
     failure = to_failure_event(event)
     try:
-        name, new = _apply_event(nominal, health, failure)
+        applied = resolve_event(nominal, failure)
+        name, new = _apply_event(nominal, health, applied)
     except alloc.AllocError as exc:
         field = exc.field or "effector"
         raise InvalidRequest(str(exc), [field_error(field, str(exc))]) from exc
-    params = {p: getattr(failure, p) for p in _PARAMS if getattr(failure, p) is not None}
-    if failure.kind is FailureKind.HARDOVER and "position" not in params:
-        params["position"] = new[name].jam_position  # the stop it ran to, recorded explicitly
-    return name, new, params
+    return name, new, applied.params
 
 
 def to_problem(nominal: alloc.Problem, health: Health) -> alloc.Problem:

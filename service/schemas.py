@@ -12,13 +12,13 @@ index, ``"1.5"`` is not a number.  An unlimited rate is written ``null``.
 from __future__ import annotations
 
 from datetime import datetime
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, Union
 
 import numpy as np
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, StrictInt, model_validator
 
 import alloc
-from alloc.health import FailureKind
+from alloc.health import PARAMETERS, FailureKind, KindSpec, Range
 from alloc.registry import DEFAULT_METHOD
 
 from .config import MAX_AXES, MAX_BATCH, MAX_DIRECTIONS, MAX_EFFECTORS, MAX_MAGNITUDE, MIN_WEIGHT
@@ -298,77 +298,47 @@ class _Event(_In):
     note: Annotated[str, Field(max_length=500, pattern=r"^[^\x00]*$")] | None = None
 
 
-class JamEvent(_Event):
-    """The effector is stuck at ``position`` (within its nominal limits)."""
-
-    model_config = _examples({"effector": "left", "kind": "jam", "position": 0.5, "note": "actuator seized"})
-
-    kind: Literal["jam"]
-    position: Finite
-
-
-class EffectivenessEvent(_Event):
-    """The effector produces ``fraction`` of its nominal moment (its column of B scaled)."""
-
-    model_config = _examples({"effector": "right", "kind": "effectiveness", "fraction": 0.6})
-
-    kind: Literal["effectiveness"]
-    fraction: Annotated[float, Field(strict=True, ge=0.0, le=1.0)]
+#: the JSON type of a parameter of each range (the ranges against the nominal problem are the library's)
+_RANGE_TYPES: dict[Range, Any] = {
+    Range.POSITION: Finite,
+    Range.FRACTION: Annotated[float, Field(strict=True, ge=0.0, le=1.0)],
+    Range.RATE_MIN: Annotated[float, Field(strict=True, le=0.0, ge=-MAX_MAGNITUDE, allow_inf_nan=False)],
+    Range.RATE_MAX: Annotated[float, Field(strict=True, ge=0.0, le=MAX_MAGNITUDE, allow_inf_nan=False)],
+}
 
 
-class LimitsEvent(_Event):
-    """Reduced position limits ``[lo, hi]``, within the nominal ones."""
+def _event_model(spec: KindSpec) -> type[_Event]:
+    """The JSON body of one failure kind, from its row of :data:`alloc.health.FAILURE_KINDS`.
 
-    model_config = _examples({"effector": 2, "kind": "limits", "lo": -0.5, "hi": 0.5})
-
-    kind: Literal["limits"]
-    lo: Finite
-    hi: Finite
-
-
-class RateLimitsEvent(_Event):
-    """Reduced rate limits, ``rate_min <= 0 <= rate_max``, within the nominal ones."""
-
-    model_config = _examples({"effector": "left", "kind": "rate_limits", "rate_min": -20.0, "rate_max": 20.0})
-
-    kind: Literal["rate_limits"]
-    rate_min: Annotated[float, Field(strict=True, le=0.0, ge=-MAX_MAGNITUDE, allow_inf_nan=False)]
-    rate_max: Annotated[float, Field(strict=True, ge=0.0, le=MAX_MAGNITUDE, allow_inf_nan=False)]
-
-
-class HardoverEvent(_Event):
-    """The effector ran to a stop and stays there: a jam at ``position`` (default its nominal upper limit)."""
-
-    model_config = _examples({"effector": "left", "kind": "hardover"})
-
-    kind: Literal["hardover"]
-    position: Finite | None = None
+    Every parameter the library requires is required here (a position at the instant of
+    failure is a simulator's default: the service has no actuator to read it from); one with
+    a default is optional and the recorded event carries the value it resolved to.
+    """
+    kind = spec.name.value
+    annotations: dict[str, Any] = {"kind": Literal[kind]}  # type: ignore[valid-type]
+    namespace: dict[str, Any] = {"__module__": __name__, "__annotations__": annotations,
+                                 "__doc__": f"{spec.meaning[0].upper()}{spec.meaning[1:]} (see alloc.health).",
+                                 "model_config": _examples({"effector": "left", "kind": kind, **spec.example})}
+    for name, default in spec.params.items():
+        p = PARAMETERS[name]
+        about = f"{p.description} ({p.unit}; {p.range.value})"
+        if name in spec.required:
+            annotations[name] = Annotated[_RANGE_TYPES[p.range], Field(description=about)]
+        else:
+            annotations[name] = Annotated[_RANGE_TYPES[p.range] | None,
+                                          Field(description=f"{about}; default: {default.value}")]
+            namespace[name] = None
+    title = "".join(part.capitalize() for part in kind.split("_"))
+    return type(f"{title}Event", (_Event,), namespace)
 
 
-class FloatEvent(_Event):
-    """A floating surface: produces no moment and is not commanded (see alloc.health)."""
+#: one JSON body per failure kind, derived from the library's table (registered kinds included)
+EVENT_MODELS: dict[str, type[_Event]] = {kind.value: _event_model(kind.spec) for kind in FailureKind}
 
-    model_config = _examples({"effector": "centre", "kind": "float"})
-
-    kind: Literal["float"]
-
-
-class RepairEvent(_Event):
-    """Back to healthy: clears every failure of the effector."""
-
-    model_config = _examples({"effector": "left", "kind": "repair"})
-
-    kind: Literal["repair"]
-
-
-EventIn = Annotated[
-    JamEvent | HardoverEvent | EffectivenessEvent | LimitsEvent | RateLimitsEvent | FloatEvent | RepairEvent,
-    Field(discriminator="kind"),
-]
-
+EventIn = Annotated[Union[tuple(EVENT_MODELS.values())], Field(discriminator="kind")]  # noqa: UP007
 
 #: the event kinds: exactly the library's failure kinds (alloc.health.FailureKind)
-EVENT_KINDS = frozenset(k.value for k in FailureKind)
+EVENT_KINDS = frozenset(EVENT_MODELS)
 
 
 class EventOut(BaseModel):
