@@ -338,16 +338,18 @@ def _warm_cases() -> list[tuple[Any, dict[str, dict[str, Any]]]]:
     """(problem, {method: options}) pairs whose calls reach every kernel signature in use."""
     import numpy as np
 
-    import alloc
-    from alloc import vehicles
+    # the modules themselves, not the package: the package imports this module
+    from . import vehicles
+    from .problem import Problem
+    from .registry import method_info, methods
 
-    small = alloc.Problem(np.array([[1.0, -1.0, 0.5, 0.2], [0.3, 0.4, -1.0, 0.8], [0.2, 0.1, 0.3, -1.0]]),
+    small = Problem(np.array([[1.0, -1.0, 0.5, 0.2], [0.3, 0.4, -1.0, 0.8], [0.2, 0.1, 0.3, -1.0]]),
                           [-1.0] * 4, [1.0] * 4, rate_min=[-5.0] * 4, rate_max=[5.0] * 4)
     cases = []
     for problem, groups in ((small, [[0, 1], [2, 3]]), (vehicles.problem("ice"), vehicles.daisy_groups("ice"))):
         options: dict[str, dict[str, Any]] = {}
-        for name in alloc.methods():
-            spec = alloc.method_info(name)["options"]
+        for name in methods():
+            spec = method_info(name)["options"]
             opts: dict[str, Any] = {}
             if "groups" in spec:
                 opts["groups"] = groups
@@ -372,7 +374,8 @@ def warm(methods: list[str] | None = None, stream: Any = None) -> dict[str, floa
     """
     import numpy as np
 
-    import alloc
+    from .api import make_allocator
+    from .exceptions import AllocError
 
     spent: dict[str, float] = {}
     for problem, options in _warm_cases():
@@ -389,8 +392,8 @@ def warm(methods: list[str] | None = None, stream: Any = None) -> dict[str, floa
                 continue
             t0 = time.process_time()
             try:
-                allocator = alloc.make_allocator(problem, name, **opts)
-            except alloc.AllocError:
+                allocator = make_allocator(problem, name, **opts)
+            except AllocError:
                 continue  # options this problem cannot give
             allocator(V[0])
             allocator(V[1], u_prev=u_prev, dt=0.01)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import alloc
-from alloc import health, registry, vehicles
+from alloc import health, method, vehicles
 from alloc.ams import coverage
 from alloc.options import real
 from alloc.registry import Method, register
@@ -18,7 +18,7 @@ ROOT_DOC = "docs/ARCHITECTURE.md"
 def scratch_registry(monkeypatch):
     """Registrations made in a test disappear after it (built-ins registered first)."""
     alloc.methods()
-    monkeypatch.setattr(registry, "_REGISTRY", dict(registry._REGISTRY))
+    monkeypatch.setattr(method, "_REGISTRY", dict(method._REGISTRY))
 
 
 def _toy_method():

@@ -1,17 +1,28 @@
-"""The layers point one way: the library knows nothing of the simulator, the service or
-the benchmarks (docs/ARCHITECTURE.md).
+"""The layers point one way and form no circle: the library knows nothing of the simulator,
+the service or the benchmarks (docs/ARCHITECTURE.md), and no module depends on itself
+through others.
 
-The import graph is read from the source with :mod:`ast` (every ``import``, also those
-inside functions: a deferred import is still an arrow), so the test needs none of the
-optional packages.  A subprocess checks what ``import alloc`` really loads.
+The import graph is read from the source with :mod:`ast`, so the test needs none of the
+optional packages.  Every arrow counts: module-level imports, imports inside functions (a
+deferred import is still a dependency) and ``importlib.import_module`` calls (resolved
+from their literal argument, or from the table the call reads: see
+:func:`_dynamic_targets`; a call the reader cannot resolve fails the test).  Imports
+under ``if TYPE_CHECKING:`` are not executed and do not count.  Importing a submodule
+runs its package's ``__init__`` first; that is not a dependency of the importer, so
+``import a.b.c`` is one arrow, to ``a.b.c``; ``from a.b import name`` is an arrow to the
+submodule ``a.b.name`` when there is one, else to the package ``a.b`` (its ``__init__``).
+A subprocess checks what ``import alloc`` really loads.
 """
 
 from __future__ import annotations
 
 import ast
+import functools
 import json
 import subprocess
 import sys
+from collections.abc import Iterable
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
@@ -32,6 +43,16 @@ ALLOWED: dict[str, set[str]] = {
 CORE_THIRD_PARTY = {"numpy", "scipy", "numba", "typer"}
 
 
+@dataclass(frozen=True)
+class Arrow:
+    """One dependency of a module: ``target`` imported at ``line``, how (``kind``)."""
+
+    target: str
+    line: int
+    kind: str  # "module level", "deferred" or "importlib"
+    top: bool  # executed when the module is imported (module level, outside functions)
+
+
 def _module_name(path: Path) -> str:
     parts = list(path.relative_to(ROOT).with_suffix("").parts)
     if parts[-1] == "__init__":
@@ -39,30 +60,124 @@ def _module_name(path: Path) -> str:
     return ".".join(parts)
 
 
-def _imports(path: Path) -> list[tuple[str, int, bool]]:
-    """``(imported module, line, at module level)`` for every import in ``path``."""
-    name = _module_name(path)
-    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
-    tree = ast.parse(path.read_text(), filename=str(path))
-    top_level = {id(node) for node in tree.body}
-    # imports under ``if TYPE_CHECKING:`` at module level are not executed
-    typing_only = {id(n) for node in tree.body if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test)
-                   for n in ast.walk(node)}
-    out = []
-    for node in ast.walk(tree):
-        if id(node) in typing_only:
-            continue
-        if isinstance(node, ast.Import):
-            out += [(alias.name, node.lineno, id(node) in top_level) for alias in node.names]
-        elif isinstance(node, ast.ImportFrom):
-            if node.level:
-                base = package.split(".")
-                base = base[:len(base) - (node.level - 1)]
-                target = ".".join(base + ([node.module] if node.module else []))
-            else:
-                target = node.module or ""
-            out.append((target, node.lineno, id(node) in top_level))
+def _resolve(package: str, level: int, module: str | None) -> str:
+    """The absolute name of ``from <level dots><module> import ...`` inside ``package``."""
+    base = package.split(".")
+    base = base[:len(base) - (level - 1)]
+    return ".".join(base + ([module] if module else []))
+
+
+def _is_import_module(call: ast.Call) -> bool:
+    f = call.func
+    name = f.attr if isinstance(f, ast.Attribute) else getattr(f, "id", None)
+    return name in {"import_module", "__import__"} and bool(call.args)
+
+
+def _module_dicts(tree: ast.Module) -> dict[str, list[str]]:
+    """Module-level ``NAME = {...}`` / ``NAME: ... = {...}`` dict literals: their string values."""
+    out: dict[str, list[str]] = {}
+    for node in tree.body:
+        targets = node.targets if isinstance(node, ast.Assign) else [node.target] if isinstance(node, ast.AnnAssign) else []
+        value = getattr(node, "value", None)
+        if isinstance(value, ast.Dict) and len(targets) == 1 and isinstance(targets[0], ast.Name):
+            out[targets[0].id] = [v.value for v in value.values if isinstance(v, ast.Constant) and isinstance(v.value, str)]
     return out
+
+
+def _dict_read_into(function: ast.AST | None, name: str, dicts: dict[str, list[str]]) -> list[str] | None:
+    """The values of the module-level dict that ``name`` is read from in ``function``
+    (``name = TABLE.get(key)`` or ``name = TABLE[key]``), or None."""
+    if function is None:
+        return None
+    for node in ast.walk(function):
+        if isinstance(node, ast.Assign) and any(isinstance(t, ast.Name) and t.id == name for t in node.targets):
+            v = node.value
+            if isinstance(v, ast.Call) and isinstance(v.func, ast.Attribute) and v.func.attr == "get":
+                v = v.func.value
+            elif isinstance(v, ast.Subscript):
+                v = v.value
+            if isinstance(v, ast.Name) and v.id in dicts:
+                return dicts[v.id]
+    return None
+
+
+def _dynamic_targets(arg: ast.expr, package: str, function: ast.AST | None, dicts: dict[str, list[str]],
+                     modules: Iterable[str]) -> list[str] | None:
+    """The modules an ``import_module(arg)`` call can load, or None when they cannot be told.
+
+    * a literal (relative literals against the module's package);
+    * a name read from a module-level dict literal in the same function (``module =
+      _LAZY.get(name)``), or an f-string of one such name (``f".{module}"``): the dict's values;
+    * an f-string with a literal prefix ending in a dot (``f"sim.scenarios.{name}"``): every
+      module under that prefix.
+    """
+    def absolute(name: str) -> str:
+        if name.startswith("."):
+            level = len(name) - len(name.lstrip("."))
+            return _resolve(package, level, name.lstrip(".") or None)
+        return name
+
+    if isinstance(arg, ast.Constant) and isinstance(arg.value, str):
+        return [absolute(arg.value)]
+    if isinstance(arg, ast.Name):
+        values = _dict_read_into(function, arg.id, dicts)
+        return None if values is None else [absolute(v) for v in values]
+    if isinstance(arg, ast.JoinedStr):
+        parts = arg.values
+        names = [p.value for p in parts if isinstance(p, ast.FormattedValue)]
+        if len(names) == 1 and isinstance(names[0], ast.Name):
+            values = _dict_read_into(function, names[0].id, dicts)
+            if values is not None:
+                def fill(value: str) -> str:
+                    return "".join(p.value if isinstance(p, ast.Constant) else value for p in parts)
+                return [absolute(fill(v)) for v in values]
+        prefix = parts[0].value if parts and isinstance(parts[0], ast.Constant) else ""
+        if prefix.endswith(".") and len(prefix) > 1:
+            base = absolute(prefix[:-1]) if prefix.startswith(".") else prefix[:-1]
+            return sorted(m for m in modules if m.startswith(base + "."))
+    return None
+
+
+def _arrows_of(name: str, source: str, is_package: bool, modules: Iterable[str] = ()) -> list[Arrow]:
+    """Every arrow of module ``name`` (``source``; ``is_package``: it is an ``__init__``).
+    A dynamic import the reader cannot resolve is an arrow to ``"?"``."""
+    modules = set(modules)
+    package = name if is_package else name.rpartition(".")[0]
+    tree = ast.parse(source)
+    dicts = _module_dicts(tree)
+    out: list[Arrow] = []
+    # one walk: (node, the outermost function it is in, at module level)
+    todo: list[tuple[ast.AST, ast.AST | None, bool]] = [(node, None, True) for node in reversed(tree.body)]
+    while todo:
+        node, fn, top = todo.pop()
+        if top and isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
+            todo += [(n, fn, False) for n in reversed(node.orelse)]  # the body is not executed
+            continue
+        kind = "deferred" if fn is not None else "module level"
+        if isinstance(node, ast.Import):
+            out += [Arrow(alias.name, node.lineno, kind, top) for alias in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            target = _resolve(package, node.level, node.module) if node.level else node.module or ""
+            for alias in node.names:
+                sub = f"{target}.{alias.name}"
+                out.append(Arrow(sub if sub in modules else target, node.lineno, kind, top))
+        elif isinstance(node, ast.Call) and _is_import_module(node):
+            targets = _dynamic_targets(node.args[0], package, fn, dicts, modules)
+            out += [Arrow(t, node.lineno, "importlib", False) for t in (targets if targets is not None else ["?"])]
+        inner = node if fn is None and isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) else fn
+        todo += [(child, inner, False) for child in reversed(list(ast.iter_child_nodes(node)))]
+    return out
+
+
+@functools.lru_cache(maxsize=1)
+def _project_modules() -> dict[str, Path]:
+    return {_module_name(p): p for pkg in PACKAGES for p in (ROOT / pkg).rglob("*.py")}
+
+
+def _imports(path: Path) -> list[tuple[str, int, bool]]:
+    """``(imported module, line, at module level)`` for every arrow of ``path``."""
+    arrows = _arrows_of(_module_name(path), path.read_text(), path.name == "__init__.py", _project_modules())
+    return [(a.target, a.line, a.top) for a in arrows]
 
 
 def _source_files() -> list[Path]:
@@ -130,45 +245,199 @@ def test_core_imports_only_base_dependencies_at_module_level(path):
     assert not wrong, "optional packages must be imported where they are used:\n" + "\n".join(wrong)
 
 
-def _top_level_graph() -> dict[str, set[str]]:
-    modules = {_module_name(p): p for p in (ROOT / "alloc").rglob("*.py")}
-    graph: dict[str, set[str]] = {}
-    for name, path in modules.items():
-        edges = set()
-        for target, _, top in _imports(path):
-            if not top or not target.startswith("alloc"):
-                continue
-            # ``from . import x`` names a submodule when one exists
-            edges.add(target)
-        graph[name] = {t for t in edges if t in modules and t != name}
+def _graph(sources: dict[str, tuple[str, bool]]) -> dict[str, dict[str, Arrow]]:
+    """module -> {imported project module: its first arrow}, over ``{module: (source, is_package)}``."""
+    graph: dict[str, dict[str, Arrow]] = {}
+    for name, (source, is_package) in sources.items():
+        edges: dict[str, Arrow] = {}
+        for arrow in _arrows_of(name, source, is_package, sources):
+            if arrow.target in sources and arrow.target != name:
+                edges.setdefault(arrow.target, arrow)
+        graph[name] = edges
     return graph
 
 
-def test_core_has_no_import_cycle_between_modules():
-    """Module-level imports inside ``alloc`` form no cycle (package ``__init__`` files aside:
-    importing a submodule always runs its package first, that is not a dependency)."""
-    graph = {m: {t for t in ts if not m.startswith(t + ".")} for m, ts in _top_level_graph().items()}
-    packages = {m for m in graph if (ROOT / m.replace(".", "/") / "__init__.py").exists()}
-    state: dict[str, int] = {}
+def _unresolved(sources: dict[str, tuple[str, bool]]) -> list[str]:
+    return [f"{name}:{a.line}" for name, (source, is_package) in sources.items()
+            for a in _arrows_of(name, source, is_package, sources) if a.target == "?"]
+
+
+def _cycles(graph: dict[str, dict[str, Arrow]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan), each as its
+    sorted modules; :func:`_closed_path` gives a cycle through one for a message."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
     stack: list[str] = []
+    on_stack: set[str] = set()
+    components: list[list[str]] = []
 
-    def visit(node: str) -> None:
-        state[node] = 1
-        stack.append(node)
-        for nxt in sorted(graph.get(node, ())):
-            if nxt in packages:
-                continue
-            if state.get(nxt) == 1:
-                cycle = stack[stack.index(nxt):] + [nxt]
-                pytest.fail("import cycle: " + " -> ".join(cycle))
-            if nxt not in state:
-                visit(nxt)
-        stack.pop()
-        state[node] = 2
+    def connect(v: str) -> None:  # recursion depth <= number of modules (a few hundred)
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in sorted(graph[v]):
+            if w not in index:
+                connect(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                components.append(sorted(component))
 
-    for node in sorted(graph):
-        if node not in state:
-            visit(node)
+    for v in sorted(graph):
+        if v not in index:
+            connect(v)
+    return sorted(components)
+
+
+def _closed_path(graph: dict[str, dict[str, Arrow]], component: set[str]) -> list[str]:
+    """A shortest cycle through the component's first module (breadth first)."""
+    start = min(component)
+    parent: dict[str, str] = {}
+    frontier = [start]
+    while frontier:
+        nxt = []
+        for v in frontier:
+            for w in sorted(graph[v]):
+                if w not in component:
+                    continue
+                if w == start:
+                    path = [v]
+                    while path[-1] != start:
+                        path.append(parent[path[-1]])
+                    return [start, *reversed(path[:-1]), start] if len(path) > 1 else [start, v, start]
+                if w not in parent:
+                    parent[w] = v
+                    nxt.append(w)
+        frontier = nxt
+    raise AssertionError(f"no cycle through {start}")  # pragma: no cover - a component has one
+
+
+def _describe(graph: dict[str, dict[str, Arrow]], component: list[str]) -> str:
+    path = _closed_path(graph, set(component))
+    return f"{len(component)} modules: " + " -> ".join(path) + "\n" + "\n".join(
+        f"    {a} -> {b} ({graph[a][b].kind}, line {graph[a][b].line})" for a, b in zip(path, path[1:]))
+
+
+def _project_sources() -> dict[str, tuple[str, bool]]:
+    return {name: (path.read_text(), path.name == "__init__.py") for name, path in _project_modules().items()}
+
+
+@functools.lru_cache(maxsize=1)
+def _project_graph() -> dict[str, dict[str, Arrow]]:
+    return _graph(_project_sources())
+
+
+#: Cycles known at the time of writing, each with the agent or owner that breaks it: the
+#: modules of the cycle (``pkg.*``: any module under ``pkg``).  A listed cycle is reported as
+#: an expected failure while it exists; any other cycle (or a listed one that grew by a
+#: module) fails :func:`test_no_import_cycle_between_modules`.
+KNOWN_CYCLES: dict[frozenset[str], str] = {
+    frozenset({"alloc.methods.direct", "alloc.methods.facet_search"}):
+        "det: the facet searches fall back to da's LP (direct), which reuses the facet search's limits",
+    frozenset({"alloc.vehicle_file", "alloc.importers.px4"}):
+        "vehicle files: load_vehicle reads PX4 .params through the importer, which builds a Vehicle",
+    frozenset({"sim.allocation", "sim.loop"}): "settings/kinds: the simulator loop and its allocation block",
+    frozenset({"sim.scenarios", "sim.scenarios.*"}):
+        "settings: get_scenario imports the scenario module, which registers itself with the package's decorator",
+}
+
+
+def _known(component: list[str]) -> frozenset[str] | None:
+    """The :data:`KNOWN_CYCLES` entry ``component`` is, or None."""
+    for entry in KNOWN_CYCLES:
+        exact = {m for m in entry if not m.endswith(".*")}
+        under = tuple(m[:-1] for m in entry if m.endswith(".*"))
+        if exact <= set(component) and all(m in exact or m.startswith(under or ("\0",)) for m in component):
+            return entry
+    return None
+
+
+def test_no_dynamic_import_is_left_unresolved():
+    unresolved = _unresolved(_project_sources())
+    assert not unresolved, ("import_module calls whose targets the layering test cannot tell (use a literal or a "
+                            "module-level dict of module names):\n" + "\n".join(unresolved))
+
+
+def test_no_import_cycle_between_modules():
+    """Counting module-level, deferred and ``importlib`` arrows, across all four packages."""
+    graph = _project_graph()
+    new = [c for c in _cycles(graph) if _known(c) is None]
+    assert not new, "import cycles:\n" + "\n".join(_describe(graph, c) for c in new)
+
+
+@pytest.mark.parametrize("cycle", sorted(KNOWN_CYCLES, key=sorted), ids=lambda c: "<->".join(sorted(c)))
+def test_known_cycle(cycle):
+    graph = _project_graph()
+    found = [c for c in _cycles(graph) if _known(c) == cycle]
+    if found:
+        pytest.xfail(f"known cycle ({KNOWN_CYCLES[cycle]}): {_describe(graph, found[0])}")
+
+
+def test_the_cycle_finder_counts_deferred_and_importlib_arrows():
+    """Seeded generator of module graphs: a random DAG has no cycle; one back arrow of any
+    kind (module level, in a function, ``importlib`` literal, relative, from a dict of
+    names, through a package ``__init__``) closes one, and the finder names its modules."""
+    import random
+
+    rng = random.Random(20261201)
+    forms = [
+        lambda a, b, i: f"import {b}\n",
+        lambda a, b, i: f"def f{i}():\n    import {b}\n",
+        lambda a, b, i: f"def f{i}():\n    from {b} import thing\n",
+        lambda a, b, i: f"import importlib\n\n\ndef f{i}():\n    importlib.import_module({b!r})\n",
+        lambda a, b, i: f"from importlib import import_module\n\n\ndef f{i}():\n    import_module('.{b[4:]}', __package__)\n",
+        lambda a, b, i: (f"import importlib\n_TABLE{i} = {{'x': {b!r}}}\n\n\ndef f{i}(k):\n"
+                         f"    module = _TABLE{i}.get(k)\n    return importlib.import_module(module)\n"),
+        lambda a, b, i: (f"from importlib import import_module\n_LAZY{i} = {{'x': {b[4:]!r}}}\n\n\n"
+                         f"def f{i}(name):\n    module = _LAZY{i}[name]\n    return import_module(f'pkg.{{module}}')\n"),
+    ]
+    for trial in range(60):
+        n = rng.randint(3, 9)
+        order = rng.sample([f"pkg.m{i}" for i in range(n)], n)  # arrows only forward in this order: a DAG
+        body = {m: "" for m in order}
+        count = 0
+        for i, a in enumerate(order):
+            for j, b in enumerate(order[i + 1:], i + 1):
+                if j == i + 1 or rng.random() < 0.3:  # a chain through all, and more
+                    count += 1
+                    body[a] += rng.choice(forms)(a, b, count)
+        sources = {"pkg": ("", True), **{m: (src, False) for m, src in body.items()}}
+        assert _cycles(_graph(sources)) == [], (trial, sources)
+        lo, hi = sorted(rng.sample(range(n), 2))
+        back = rng.choice(forms)(order[hi], order[lo], 0)
+        sources[order[hi]] = (sources[order[hi]][0] + back, False)
+        graph = _graph(sources)
+        cycles = _cycles(graph)
+        assert cycles == [sorted(order[lo:hi + 1])], (trial, back, cycles)
+        path = _closed_path(graph, set(cycles[0]))
+        assert path[0] == path[-1] and all(b in graph[a] for a, b in zip(path, path[1:])), path
+    # through a package: ``from pkg import name`` runs pkg/__init__, which imports pkg.m0
+    sources = {"pkg": ("from .m0 import thing\n", True), "pkg.m0": ("def f():\n    from pkg import other\n", False)}
+    assert _cycles(_graph(sources)) == [["pkg", "pkg.m0"]]
+    # a submodule imported by its full name is not an arrow to its package
+    sources = {"pkg": ("from .m0 import thing\n", True), "pkg.m0": ("import pkg.m1\n", False), "pkg.m1": ("", False)}
+    assert _cycles(_graph(sources)) == []
+    # an argument the reader cannot tell is reported, not ignored
+    sources = {"pkg": ("", True), "pkg.m0": ("import importlib\n\n\ndef f(x):\n    importlib.import_module(x)\n", False)}
+    assert _unresolved(sources) == ["pkg.m0:5"]
+
+
+def test_the_core_graph_is_read_with_its_lazy_names():
+    """The facade packages' lazy names (``alloc/__init__``, ``alloc/ams/__init__``) are arrows."""
+    graph = _project_graph()
+    assert {"alloc.api", "alloc.problem", "alloc.registry", "alloc._jit_cache"} <= set(graph["alloc"])
+    assert {"alloc.ams.geometry", "alloc.ams.coverage"} <= set(graph["alloc.ams"])
+    assert "alloc.methods" in graph["alloc.registry"]  # the registry's look-ups load the built-in methods
+    assert "alloc.health" in graph["alloc.problem"] and "alloc.problem" not in graph["alloc.health"]
 
 
 def _loaded_after(code: str) -> list[str]:

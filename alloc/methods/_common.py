@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..exceptions import OptionError
-from ..registry import FloatArray
+from ..method import FloatArray
 
 
 #: Stage 2 of the two-stage methods keeps stage 1's moment within this relative band

@@ -15,7 +15,7 @@ from ..exceptions import OptionError, ProblemError
 from ..options import groups as groups_option
 from ..options import levels, real
 from ..problem import Problem
-from ..registry import CALL_LIMIT_SECONDS, FloatArray, Method, register
+from ..method import CALL_LIMIT_SECONDS, FloatArray, Method, register
 
 #: Bytes the compiled cascade's cache of free-set pseudo-inverses may hold (64 MiB: all 4,096
 #: slots up to k m = 2,048, 512 slots at the size caps, 32 x 512)

@@ -33,7 +33,7 @@ from .._kernels import facet_polish
 from ..exceptions import SolverError
 from ..options import choice
 from ..problem import Problem
-from ..registry import FloatArray, Method, register
+from ..method import FloatArray, Method, register
 from ..solvers import backends, make_backend
 from ._common import check_backend, row_basis
 from .facet_search import FACET_LIMIT, FacetSearch, facet_build_seconds

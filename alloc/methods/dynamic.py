@@ -33,7 +33,7 @@ from .._linalg import sqrt_factor
 from ..exceptions import OptionError, ProblemError
 from ..problem import MAX_MAGNITUDE, MIN_WEIGHT, Problem, as_float_array, check_magnitude
 from ..options import weight
-from ..registry import FloatArray, Method, register
+from ..method import FloatArray, Method, register
 from .pseudo_inverse import distribution_matrix
 from .quadratic import LexicoLS
 

@@ -44,11 +44,11 @@ from typing import Any
 
 import numpy as np
 
-from ..ams import AttainableSet
+from ..ams.geometry import AttainableSet
 from ..exceptions import OptionError
 from ..options import integer
 from ..problem import Problem
-from ..registry import BUILD_LIMIT_BYTES, BUILD_LIMIT_SECONDS, FloatArray, Method, register
+from ..method import BUILD_LIMIT_BYTES, BUILD_LIMIT_SECONDS, FloatArray, Method, register
 from . import _facet_kernels as _kernels
 
 __all__ = ["FacetSearch", "EdgeBisect", "SphericalTable", "FACET_LIMIT", "FACET_SECONDS", "FACET_BYTES",

@@ -8,7 +8,7 @@ from .._kernels import affine, affine_clip_batch
 from ..exceptions import ProblemError
 from ..options import matrix
 from ..problem import Problem, as_float_array, check_magnitude
-from ..registry import Method, register
+from ..method import Method, register
 from .pseudo_inverse import distribution_matrix
 
 

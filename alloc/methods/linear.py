@@ -33,7 +33,7 @@ from .._simplex import OPTIMAL, LexicographicL1
 from ..exceptions import SolverError
 from ..options import choice, levels
 from ..problem import Problem
-from ..registry import Method, register
+from ..method import Method, register
 from ..result import exact_tolerance
 from ._common import KEEP_RTOL
 from ..solvers import backends, make_backend

@@ -30,7 +30,7 @@ from .._linalg import RCOND, check_rcond, max_scale, weighted_pinv
 from ..exceptions import OptionError, SolverError
 from ..options import flag, real
 from ..problem import MAX_MAGNITUDE, Problem
-from ..registry import FloatArray, Method, register
+from ..method import FloatArray, Method, register
 from ..result import EXACT_RTOL
 
 _OPTIONS = {

@@ -32,7 +32,7 @@ from .._linalg import check_real_option
 from ..exceptions import OptionError, SolverError
 from ..options import choice, levels, real
 from ..problem import MAX_MAGNITUDE, Problem
-from ..registry import FloatArray, Method, register
+from ..method import FloatArray, Method, register
 from ..result import EXACT_RTOL, exact_tolerance
 from ..solvers import backends, make_backend
 from ._common import KEEP_RTOL, check_backend, row_basis
