@@ -89,23 +89,14 @@ def simulate(
     elif fields:
         raise TypeError(f"simulate: give a LoopSpec or keywords, not both (got {sorted(fields)})")
     frame = spec.frame_steps()
-    scenario, vehicle, references, controller = spec.scenario, spec.vehicle, spec.references, spec.controller
-    commands, pilots, failure, method = spec.commands, spec.pilots, spec.failure, spec.method
-    method_options, allocator_knows_failure, rate_aware = spec.method_options, spec.allocator_knows_failure, spec.rate_aware
-    actuators, noise, duration, dt, seed = spec.actuators, spec.noise, spec.duration, spec.dt, spec.seed
-    output_bound, record_every = spec.output_bound, spec.record_every
+    vehicle, failure, method, pilots = spec.vehicle, spec.failure, spec.method, spec.pilots
+    dt, record_every = spec.dt, spec.record_every
     tframe = frame * dt
     k = len(vehicle.controlled)
     m = len(vehicle.actuators)
-    n_steps = int(round(duration / dt))
-    rng = np.random.default_rng(seed)
-    meas = np.asarray(vehicle.measured)
-    # Noise on the measured outputs only, precomputed (vectorised filtering).
-    ny = vehicle.C.shape[0]
-    noise_all = np.zeros((n_steps + 1, ny))
-    if noise:
-        noise_all[:, meas] = band_limited_noise(n_steps + 1, dt, vehicle.noise_gains, rng)
-
+    n_steps = int(round(spec.duration / dt))
+    t_grid = np.arange(n_steps + 1) * dt
+    inputs = _inputs(spec, t_grid)
     plant = ScheduledPlant(
         vehicle.A, vehicle.B, vehicle.C, vehicle.D, dt,
         A_fail=None if failure is None else failure.A,
@@ -114,68 +105,23 @@ def simulate(
     )
     bank = ActuatorBank(vehicle.actuators, dt)
     delay = DelayLine(m, dt, 0.0)
-    alloc_options = dict(rate_aware=rate_aware, preferred=spec.preferred, frame_period=tframe,
+    alloc_options = dict(rate_aware=spec.rate_aware, preferred=spec.preferred, frame_period=tframe,
                          rate_horizon=spec.rate_horizon, rate_window=spec.rate_window)
-    allocator: LoopAllocator = build_allocator(vehicle, method, method_options or {}, **alloc_options)
+    method_options = spec.method_options or {}
+    allocator: LoopAllocator = build_allocator(vehicle, method, method_options, **alloc_options)
     position_feedback = spec.u_prev_source == "position"
-
-    smc = isinstance(controller, SMCDesign)
-    controller_slots = _controller_slots(vehicle, controller, references, tframe, spec.boundary_layer)
-    n_pilots = len(pilots)
-    t_grid = np.arange(n_steps + 1) * dt
-    pilot_floats, pilot_ints = _pilot_slots(pilots, ny, tframe)
-    inputs = np.hstack([
-        np.asarray(commands, dtype=float)[: n_steps + 1],
-        noise_all,
-        np.column_stack([p.attitude_command(t_grid) for p in pilots]) if pilots else np.zeros((n_steps + 1, 0)),
-    ])
-
     # Failure step: the first with t >= t_fail - dt/2 (never: n_steps + 1).
     fail_step = n_steps + 1
     if failure is not None:
         due = np.nonzero(t_grid >= failure.time - 0.5 * dt)[0]
         fail_step = int(due[0]) if due.size else n_steps + 1
-    # The actuator delay ring holds the longest delay of the run.
-    ring = 1
-    if failure is not None and failure.delay is not None:
-        ring = int(DelayLine(m, dt, failure.delay).n.max()) + 1
-
-    misc = np.zeros(N_MISC, dtype=np.int64)
-    misc[[Misc.N_STEPS, Misc.RECORD_EVERY, Misc.FAIL_STEP]] = n_steps, record_every, fail_step
-    misc[Misc.SMC] = smc
-    misc[Misc.OBSERVED] = smc and controller.observer_poles is not None
-    misc[Misc.SIGN] = smc and controller.eps is None
-    misc[Misc.ACTUATORS] = actuators
-    misc[Misc.FRAME] = frame
-    misc[Misc.PFILTER] = any(p.filtered for p in pilots)
-    misc[Misc.ANTI_WINDUP] = smc and anti_windup_on(spec.anti_windup, tframe)
-    nx, nc, nk = vehicle.A.shape[0], controller_slots[FloatSlot.ADC].shape[0], controller_slots[FloatSlot.AK].shape[0]
-    packed = Packed(
-        floats={
-            FloatSlot.X: np.zeros(nx), FloatSlot.AD: plant.Ad, FloatSlot.BD: plant.Bd, FloatSlot.C: plant.C, FloatSlot.D: plant.D, FloatSlot.UACT: bank.pos,
-            **controller_slots,
-            FloatSlot.INTEG: np.zeros(k), FloatSlot.DEMAND: vehicle.demand_map, FloatSlot.BOUND: np.broadcast_to(output_bound, (k,)),
-            FloatSlot.DT: np.array(dt), FloatSlot.TFRAME: np.array(tframe),
-            FloatSlot.POS: bank.pos, FloatSlot.RATE: bank.rate, FloatSlot.RATE_OUT: np.zeros(m), FloatSlot.WN2: bank.wn2, FloatSlot.C1: bank.c1,
-            FloatSlot.LO: bank.lo, FloatSlot.HI: bank.hi, FloatSlot.RMAX: bank.rmax, FloatSlot.JAM_POS: bank.jam_pos,
-            FloatSlot.HARD_POS: bank.hard_pos, FloatSlot.DBUF: np.zeros((ring, m)),
-            **pilot_floats,
-            FloatSlot.Y: np.zeros(ny), FloatSlot.Z: np.zeros(ny), FloatSlot.CMD: np.zeros(k), FloatSlot.R: np.zeros(k),
-            FloatSlot.E: np.zeros(k), FloatSlot.UC: np.zeros(k), FloatSlot.V: np.zeros(k), FloatSlot.UDEL: np.zeros(m), FloatSlot.O: np.zeros(3 * k),
-            FloatSlot.SCRATCH: np.zeros((2, max(nx, ny, nc, nk, k, *pilot_floats[FloatSlot.PAF].shape, n_pilots))),
-        },
-        ints={
-            IntSlot.FIRST: bank.first, IntSlot.JAMMED: bank.jammed, IntSlot.HARDOVER: bank.hardover,
-            IntSlot.DN: delay.n, IntSlot.DSTATE: np.array([0, 1]), **pilot_ints,
-            IntSlot.MEAS: meas, IntSlot.CTRL: np.asarray(vehicle.controlled), IntSlot.MISC: misc,
-        },
-    )
+    packed = _pack(spec, plant, bank, delay, frame, n_steps, fail_step)
     # The bank's position and rate live in the packed buffer (failures write there).
     bank.pos, bank.rate = packed.view(FloatSlot.POS), packed.view(FloatSlot.RATE)
     F, I = packed.F, packed.I
     v = packed.view(FloatSlot.V)
 
-    cols = record_columns(k, m, n_pilots)
+    cols = record_columns(k, m, len(pilots))
     rec = np.zeros((n_steps // record_every + 1, cols["extra"].stop))
     u_cmd = np.zeros(m)
     v_achieved = np.zeros(k)
@@ -186,10 +132,10 @@ def simulate(
 
     def fail_now(u_last: np.ndarray) -> LoopAllocator:
         injected = inject_failure(failure, plant, bank, delay, packed, u_last)  # defaults filled in: what is told
-        if actuators:
+        if spec.actuators:
             packed.view(FloatSlot.UACT)[:] = bank.pos  # a jammed surface is at its jam position at once
-        if allocator_knows_failure:
-            return build_allocator(vehicle, method, method_options or {}, failure=injected, **alloc_options)
+        if spec.allocator_knows_failure:
+            return build_allocator(vehicle, method, method_options, failure=injected, **alloc_options)
         return allocator
 
     if fail_step == 0:
@@ -197,7 +143,7 @@ def simulate(
     status = observe(0, F, I, inputs)
     iterator = range(n_steps + 1)
     if progress:
-        iterator = tqdm(iterator, total=n_steps + 1, unit="step", mininterval=0.5, desc=scenario)
+        iterator = tqdm(iterator, total=n_steps + 1, unit="step", mininterval=0.5, desc=spec.scenario)
     timed = step_times is not None
     times = np.full(n_steps + 1, np.nan) if timed else None
     clock = time.perf_counter
@@ -222,11 +168,75 @@ def simulate(
         step_times.append(times[:n_done])
     n = (n_done + record_every - 1) // record_every  # samples recorded before step n_done
     n_calls = (n_done + frame - 1) // frame
-    result = _result(rec[:n], cols, scenario, method, vehicle, failure, pilots, diverged=n_done <= n_steps)
+    result = _result(rec[:n], cols, spec.scenario, method, vehicle, failure, pilots, diverged=n_done <= n_steps)
     result.allocator_t = np.arange(n_calls) * tframe
     result.allocator_status = call_status[:n_calls].copy()
     result.settings = {**spec.record(), "pilots": [p.describe() for p in pilots]}
     return result
+
+
+def _inputs(spec: LoopSpec, t_grid: np.ndarray) -> np.ndarray:
+    """Per integration step: direct commands (k), measurement noise (ny), pilots' attitude commands.
+
+    Noise is on the measured outputs only, precomputed (vectorised filtering) from ``spec.seed``.
+    """
+    vehicle, n = spec.vehicle, t_grid.size
+    noise = np.zeros((n, vehicle.C.shape[0]))
+    if spec.noise:
+        rng = np.random.default_rng(spec.seed)
+        noise[:, np.asarray(vehicle.measured)] = band_limited_noise(n, spec.dt, vehicle.noise_gains, rng)
+    return np.hstack([
+        np.asarray(spec.commands, dtype=float)[:n],
+        noise,
+        np.column_stack([p.attitude_command(t_grid) for p in spec.pilots]) if spec.pilots else np.zeros((n, 0)),
+    ])
+
+
+def _pack(
+    spec: LoopSpec, plant: ScheduledPlant, bank: ActuatorBank, delay: DelayLine, frame: int, n_steps: int,
+    fail_step: int,
+) -> Packed:
+    """The packed buffers of the run: plant, controller, actuators, delay ring, pilots, signals, constants."""
+    vehicle, controller, failure, pilots, dt = spec.vehicle, spec.controller, spec.failure, spec.pilots, spec.dt
+    tframe = frame * dt
+    k, m, ny = len(vehicle.controlled), len(vehicle.actuators), vehicle.C.shape[0]
+    smc = isinstance(controller, SMCDesign)
+    controller_slots = _controller_slots(vehicle, controller, spec.references, tframe, spec.boundary_layer)
+    pilot_floats, pilot_ints = _pilot_slots(pilots, ny, tframe)
+    # The actuator delay ring holds the longest delay of the run.
+    ring = 1
+    if failure is not None and failure.delay is not None:
+        ring = int(DelayLine(m, dt, failure.delay).n.max()) + 1
+    misc = np.zeros(N_MISC, dtype=np.int64)
+    misc[[Misc.N_STEPS, Misc.RECORD_EVERY, Misc.FAIL_STEP]] = n_steps, spec.record_every, fail_step
+    misc[Misc.SMC] = smc
+    misc[Misc.OBSERVED] = smc and controller.observer_poles is not None
+    misc[Misc.SIGN] = smc and controller.eps is None
+    misc[Misc.ACTUATORS] = spec.actuators
+    misc[Misc.FRAME] = frame
+    misc[Misc.PFILTER] = any(p.filtered for p in pilots)
+    misc[Misc.ANTI_WINDUP] = smc and anti_windup_on(spec.anti_windup, tframe)
+    nx, nc, nk = vehicle.A.shape[0], controller_slots[FloatSlot.ADC].shape[0], controller_slots[FloatSlot.AK].shape[0]
+    return Packed(
+        floats={
+            FloatSlot.X: np.zeros(nx), FloatSlot.AD: plant.Ad, FloatSlot.BD: plant.Bd, FloatSlot.C: plant.C, FloatSlot.D: plant.D, FloatSlot.UACT: bank.pos,
+            **controller_slots,
+            FloatSlot.INTEG: np.zeros(k), FloatSlot.DEMAND: vehicle.demand_map, FloatSlot.BOUND: np.broadcast_to(spec.output_bound, (k,)),
+            FloatSlot.DT: np.array(dt), FloatSlot.TFRAME: np.array(tframe),
+            FloatSlot.POS: bank.pos, FloatSlot.RATE: bank.rate, FloatSlot.RATE_OUT: np.zeros(m), FloatSlot.WN2: bank.wn2, FloatSlot.C1: bank.c1,
+            FloatSlot.LO: bank.lo, FloatSlot.HI: bank.hi, FloatSlot.RMAX: bank.rmax, FloatSlot.JAM_POS: bank.jam_pos,
+            FloatSlot.HARD_POS: bank.hard_pos, FloatSlot.DBUF: np.zeros((ring, m)),
+            **pilot_floats,
+            FloatSlot.Y: np.zeros(ny), FloatSlot.Z: np.zeros(ny), FloatSlot.CMD: np.zeros(k), FloatSlot.R: np.zeros(k),
+            FloatSlot.E: np.zeros(k), FloatSlot.UC: np.zeros(k), FloatSlot.V: np.zeros(k), FloatSlot.UDEL: np.zeros(m), FloatSlot.O: np.zeros(3 * k),
+            FloatSlot.SCRATCH: np.zeros((2, max(nx, ny, nc, nk, k, *pilot_floats[FloatSlot.PAF].shape, len(pilots)))),
+        },
+        ints={
+            IntSlot.FIRST: bank.first, IntSlot.JAMMED: bank.jammed, IntSlot.HARDOVER: bank.hardover,
+            IntSlot.DN: delay.n, IntSlot.DSTATE: np.array([0, 1]), **pilot_ints,
+            IntSlot.MEAS: np.asarray(vehicle.measured), IntSlot.CTRL: np.asarray(vehicle.controlled), IntSlot.MISC: misc,
+        },
+    )
 
 
 def _result(
