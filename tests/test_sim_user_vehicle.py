@@ -223,3 +223,22 @@ def test_tailless_jammed_surface_flies_blind_and_told():
     # jammed at its preferred (mid-range) position, the surface costs a blind allocator little:
     # told is not better here (measured 0.3 % worse in the sum), and no more than 5 % worse
     assert rms[True].sum() <= 1.05 * rms[False].sum(), (rms[True], rms[False])
+
+
+def test_bench_closedloop_compares_methods_on_a_file(tmp_path):
+    path = alloc.load_vehicle("hexa-x").save(tmp_path / "my-hexa.toml")
+    args = ["bench", "closedloop", "--vehicle", str(path), "--failure", "float:motor1", "--method", "qp",
+            "--method", "static", "--duration", "3", "--failure-time", "1.5", "--json"]
+    res = runner.invoke(app, args, prog_name="alloc")
+    assert res.exit_code == 0, res.stdout + res.stderr
+    rows = {(r["method"], r["told"]): r for r in json.loads(res.stdout)}
+    assert set(rows) == {("qp", False), ("qp", True), ("static", False), ("static", True)}
+    for r in rows.values():
+        assert not r["diverged"] and r["scenario"] == "hexa-x" and r["failure"] == "float:motor1"
+        assert np.isfinite(r["p_rms_before"]) and r["p_rms_before"] < 0.1
+    assert rows["qp", True]["p_rms_after"] <= rows["qp", False]["p_rms_after"]
+    # a fixed matrix cannot be told anything: static's told and blind runs are the same run
+    assert rows["static", True]["p_rms_after"] == rows["static", False]["p_rms_after"]
+    bad = runner.invoke(app, ["bench", "closedloop", "--vehicle", str(path), "--failure", "jam:rotor9"],
+                        prog_name="alloc")
+    assert bad.exit_code == 2 and "rotor9" in bad.stderr and len(bad.stderr.strip().splitlines()) == 1

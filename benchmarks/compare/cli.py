@@ -2,7 +2,10 @@
 
 ``alloc bench openloop --vehicle NAME|FILE`` runs the sweep's open-loop measures
 (:mod:`.openloop`) on any vehicle, a user's file among them, with the vehicle's method
-defaults, and prints the rows (nothing is written).
+defaults, and prints the rows (nothing is written).  ``alloc bench closedloop --vehicle FILE
+--failure NAME`` flies a vehicle file's model (the seed's section 4.3 auto-design,
+:mod:`sim.user_vehicle`) with every method, blind and told, and prints the sweep's
+closed-loop rows (:mod:`.closedloop`).
 
 Runs are fresh unless asked otherwise: every sweep writes into ``--out`` (default: a new
 folder ``bench-<sweep>-<UTC timestamp>`` under the current directory, ignored by git) and
@@ -297,3 +300,72 @@ def openloop(vehicle: str = typer.Option(..., "--vehicle", metavar="NAME|FILE", 
     typer.echo("|" + "---|" * len(_OPEN_COLUMNS))
     for r in rows:
         typer.echo("| " + " | ".join(r[c] if isinstance(r[c], str) else f"{r[c]:.4g}" for c in _OPEN_COLUMNS) + " |")
+
+
+#: columns of ``alloc bench closedloop``'s table besides the channels' ``rms_before``/``rms_after``
+_CLOSED_COLUMNS = ("method", "told", "diverged", "recover_s", "effort_after", "unattainable_after")
+
+
+@app.command()
+def closedloop(vehicle: str = typer.Option(..., "--vehicle", metavar="NAME|FILE",
+                                           help=f"{VEHICLE_HELP}, with a [model] section"),
+               failure: str = typer.Option(..., "--failure", help="the failure: <kind>:<effector>[@<value>[:<value>]] "
+                                           "(several joined by '+'), e.g. float:motor1, jam:amt_l@30"),
+               method: list[str] = typer.Option(None, "--method", help="methods (default: every registered one the "
+                                                "vehicle can run; a skipped one is named on stderr); repeatable"),
+               failure_time: float = typer.Option(4.0, "--failure-time", parser=finite(0.0, unit=" s"),
+                                                  help="failure time (s), before the end of the run"),
+               duration: float = typer.Option(8.0, "--duration", parser=finite(0.0, 3600.0, low_open=True, unit=" s"),
+                                              help="simulated seconds per run"),
+               seed: int = typer.Option(0, "--seed", min=0, max=2**32 - 1, help="noise seed"),
+               as_json: bool = typer.Option(False, "--json", help="print the rows as JSON")) -> None:
+    """Closed-loop comparison of methods on a vehicle file's model, blind and told (the sweep's rows; nothing written)."""
+    import alloc
+    from alloc.vehicles import method_options
+    from sim.allocation import STATIC
+    from sim.user_vehicle import flight_model, vehicle_failure
+
+    from .closedloop import run_closed
+    from .sweep import closed_spec
+
+    v = load_vehicle_option(vehicle)
+    if failure_time >= duration:
+        raise typer.BadParameter(f"{failure_time:g} s is not before the end of the run ({duration:g} s)",
+                                 param_hint="--failure-time")
+    vehicle_failure(flight_model(v), failure, failure_time)  # a malformed name fails here, before any run
+    names: list[str] = []
+    for m in method or alloc.methods():
+        if m == STATIC:  # the loop's fixed pseudo-inverse, no registry method (sim.allocation)
+            names.append(m)
+            continue
+        try:
+            method_options(v, m)
+        except alloc.AllocError as exc:
+            if method:
+                raise
+            typer.echo(f"alloc bench closedloop: note: {m} skipped on {v.name}: {exc}", err=True)
+            continue
+        names.append(m)
+    rows = []
+    for m in names:
+        for told in (False, True):
+            spec = {**closed_spec(v.name, failure, m, told=told, seed=seed, duration=duration,
+                                  failure_time=failure_time), "vehicle": vehicle}
+            rows.append(run_closed(spec)[0])
+    if as_json:
+        typer.echo(json.dumps(rows, indent=2))
+        return
+    channels = [c[: -len("_rms_after")] for c in rows[0] if c.endswith("_rms_after")] if rows else []
+    columns = [*_CLOSED_COLUMNS, *(f"{c}_{w}" for c in channels for w in ("rms_before", "rms_after"))]
+    typer.echo(f"{v.name}: failure {failure} at {failure_time:g} s, {duration:g} s runs, seed {seed}; tracking "
+               "errors in the model's output units")
+    typer.echo("| " + " | ".join(columns) + " |")
+    typer.echo("|" + "---|" * len(columns))
+    for r in rows:
+        typer.echo("| " + " | ".join(_cell(r.get(c)) for c in columns) + " |")
+
+
+def _cell(x: object) -> str:
+    if isinstance(x, bool) or x is None or isinstance(x, str):
+        return str(x)
+    return f"{x:.4g}"

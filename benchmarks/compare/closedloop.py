@@ -50,7 +50,18 @@ RECOVERY_WINDOW_S = 1.0
 
 
 def simulate_spec(spec: Spec) -> SimResult:
-    """The closed-loop simulation a spec describes."""
+    """The closed-loop simulation a spec describes.
+
+    A spec with a ``vehicle`` (a vehicle file or catalogue name with a ``[model]``) flies that
+    model with the seed's section 4.3 auto-design (:func:`sim.user_vehicle.fly`, which merges
+    the vehicle's method defaults); its failure is a name of :data:`sim.user_vehicle.FAILURE_SYNTAX`.
+    """
+    if spec.get("vehicle") is not None:
+        from sim.user_vehicle import fly
+
+        return fly(spec["vehicle"], method=spec["method"], failure=spec["failure"], failure_time=spec["failure_time"],
+                   duration=spec["duration"], seed=spec["seed"], allocator_knows_failure=spec["told"],
+                   noise=spec["noise"], **spec["sim"])
     scenario = spec["scenario"]
     run = get_scenario(scenario)
     options = None if spec["method"] == STATIC else (method_options(scenario, spec["method"]) or None)
