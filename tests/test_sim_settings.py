@@ -124,6 +124,14 @@ def test_cross_field_rules_are_checked():
     with pytest.raises(SettingError) as info:
         run_mimo(SCENARIO, rate_window="sometimes")
     assert info.value.field == "rate_window"
+    # the engine's own spec checks the same fields (LoopSpec inherits them)
+    with pytest.raises(SettingError) as info:
+        LoopSpec(scenario="x", vehicle=None, references=(), controller=None, commands=np.zeros((1, 0)),
+                 failure=None, method="pinv", duration=1.0, u_prev_source="measured")
+    assert info.value.field == "u_prev_source"
+    with pytest.raises(SettingError, match="duration: ") as info:
+        LoopSpec(scenario="x", vehicle=None, references=(), controller=None, commands=np.zeros((1, 0)),
+                 failure=None, method="pinv", duration=-1.0)
 
 
 def _cli_bad_words(name: str, rng: np.random.Generator) -> list[str]:
@@ -186,7 +194,7 @@ def _arrays(result) -> dict[str, np.ndarray]:
     return {k: v for k, v in vars(result).items() if isinstance(v, np.ndarray)}
 
 
-@pytest.mark.parametrize("case", range(6))
+@pytest.mark.parametrize("case", range(12))
 def test_recorded_settings_round_trip_to_the_same_run(case):
     rng = np.random.default_rng(1000 + case)
     scenario = ["ice", "harv_lon", "harv_latdir"][case % 3]
