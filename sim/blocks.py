@@ -330,6 +330,9 @@ class ActuatorBank:
     def apply_failure(self, f: ActuatorFailure) -> ActuatorFailure:
         """Execute the effects of ``f``'s kind on its actuator, in order; return ``f`` as executed.
 
+        Positions and rate limits are checked against the actuator's nominal ones (ProblemError
+        naming the parameter), as the library checks what it is told.
+
         The returned failure has every default filled in (a jam without ``position`` holds the
         position the actuator has now, a hard-over runs to its nominal upper limit), so a told
         allocator is told the same numbers.  Effectiveness (``trail``, ``scale``) is
@@ -340,6 +343,8 @@ class ActuatorBank:
             raise ProblemError(f"index: effector {i} out of range for {self.m} actuators")
         nominal = self.nominal[i]
         params = resolve_defaults(f.spec, f.params, limits=(nominal.lo, nominal.hi), position=float(self.pos[i]))
+        check_parameters(f.kind, params, effector=nominal.name, limits=(nominal.lo, nominal.hi),
+                         rate_limits=(-nominal.rate, nominal.rate))
         for effect in f.spec.effects:
             _EFFECTS[effect](self, i, params)
         self.set_specs(self.specs)

@@ -64,6 +64,98 @@ def test_actuator_failures_jam_hardover_bandwidth():
     assert bank.specs[2].c1 / (2 * bank.specs[2].wn) == pytest.approx(140.0 / (2 * np.sqrt(4000.0)))
 
 
+def test_every_table_effect_is_executed_and_repair_restores_the_nominal_actuator():
+    specs = [ActuatorSpec.second_order(f"e{i}", 30.0, 0.7, -30.0, 30.0, 100.0) for i in range(3)]
+    bank = ActuatorBank(specs, DT)
+    bank.pos[:] = [4.0, 3.0, 2.0]
+    done = [bank.apply_failure(f) for f in (
+        ActuatorFailure(0, "jam"), ActuatorFailure(1, "hardover"), ActuatorFailure(2, "float"),
+        ActuatorFailure(1, "effectiveness", fraction=0.4), ActuatorFailure(2, "limits", lo=-5.0, hi=6.0),
+        ActuatorFailure(2, "rate_limits", rate_min=-7.0, rate_max=7.0))]
+    # defaults filled in: the jam where the surface was, the hard-over at the nominal upper stop
+    assert done[0] == ActuatorFailure(0, "jam", position=4.0) and done[1].position == 30.0
+    assert (bank.jam_pos[0], bank.hard_pos[1], bank.jammed[0], bank.hardover[1]) == (4.0, 30.0, True, True)
+    np.testing.assert_array_equal(bank.effectiveness, [1.0, 0.4, 0.0])
+    assert (bank.lo[2], bank.hi[2], bank.rmax[2]) == (-5.0, 6.0, 7.0)
+    for i in range(3):
+        bank.apply_failure(ActuatorFailure(i, "repair"))
+    assert bank.specs == specs and not bank.jammed.any() and not bank.hardover.any()
+    np.testing.assert_array_equal(bank.effectiveness, 1.0)
+    assert ActuatorFailure.KINDS == ("jam", "hardover", "float", "effectiveness", "limits", "rate_limits", "repair",
+                                     "bandwidth")
+
+
+def test_hostile_actuator_failures_are_refused_naming_the_field_or_executed_within_limits():
+    """Seeded generator: kinds (table, simulator-only, unknown) with parameters of every sort."""
+    from alloc import ProblemError
+    from alloc.health import FAILURE_KINDS, SIMULATOR_ONLY
+
+    rng = np.random.default_rng(4242)
+    kinds = [*FAILURE_KINDS, "bandwidth", "delay", "drift", "loe", "", 3]
+    values = [0.5, -0.5, 2.0, -40.0, 0.0, 1e12, float("nan"), float("inf"), True, "1", None, 7]
+    names = ["position", "fraction", "lo", "hi", "rate_min", "rate_max", "wn", "rate", "delay"]
+    refused = executed = 0
+    for _ in range(2000):
+        kind = kinds[rng.integers(len(kinds))]
+        own = list(getattr(FAILURE_KINDS.get(kind, SIMULATOR_ONLY.get(kind)), "params", ()))
+        pool = own if own and rng.random() < 0.6 else names  # mostly the kind's own parameters
+        params = {pool[j]: values[rng.integers(len(values))]
+                  for j in rng.choice(len(pool), rng.integers(0, min(4, len(pool) + 1)), replace=False)}
+        index = int(rng.choice([0, 1, 2, 2, 1, -1]))
+        try:
+            f = ActuatorFailure(index, kind, **params)
+            bank = ActuatorBank([ActuatorSpec.second_order(f"e{i}", 30.0, 0.7, -30.0, 30.0, 100.0)
+                                 for i in range(3)], DT)
+            done = bank.apply_failure(f)
+        except ProblemError as exc:
+            refused += 1
+            assert exc.field in {"kind", "index", *names}, exc
+            assert isinstance(exc, ValueError)
+            continue
+        assert kind in FAILURE_KINDS or SIMULATOR_ONLY[kind].per_actuator
+        executed += 1
+        assert set(done.params) == {n for n, d in done.spec.params.items() if d is not None or n in f.params}
+        for _ in range(50):
+            pos = bank.step(np.array([50.0, -50.0, 10.0]))
+        assert np.isfinite(pos).all() and (pos >= bank.lo - 1e-12).all() and (pos <= bank.hi + 1e-12).all()
+        assert ((bank.effectiveness >= 0.0) & (bank.effectiveness <= 1.0)).all()
+    assert refused > 500 and executed > 150  # both branches reached (1,766 and 234 with this seed)
+
+
+def test_a_jam_without_a_position_holds_and_tells_the_position_at_the_failure(monkeypatch):
+    """Told and untold runs: the surface stays where it was at the instant of failure, and a
+    told allocator is told exactly that number."""
+    import sim.engine
+    from alloc import ProblemError
+    from sim.allocation import allocation_problem
+    from sim.loop import Failure
+    from sim.scenarios import ice
+
+    failure = Failure("jam_here", 0.5, "elevon_l jams where it is", actuators=(ActuatorFailure(0, "jam"),))
+    with pytest.raises(ProblemError, match="^position: required for a 'jam' failure"):
+        allocation_problem(ice.vehicle(), failure)  # before injection nobody knows the position
+    told = []
+    build = sim.engine.build_allocator
+
+    def spy(vehicle, method, options, *, failure=None, **kw):
+        if failure is not None:
+            told.append(allocation_problem(vehicle, failure))
+        return build(vehicle, method, options, failure=failure, **kw)
+
+    monkeypatch.setattr(sim.engine, "build_allocator", spy)
+    held = {}
+    for knows in (True, False):
+        run = get_scenario("ice")(failure=failure, method="qp", duration=0.8, seed=1, allocator_knows_failure=knows,
+                                  failure_time=0.5)
+        after = run.t >= 0.5
+        assert not run.diverged
+        held[knows] = run.effectors[after, 0]
+        assert np.all(held[knows] == held[knows][0]) and held[knows][0] != 0.0
+    assert held[True][0] == held[False][0]  # the same flight until the failure: the same jam position
+    (problem,) = told
+    assert problem.umin[0] == problem.umax[0] == held[True][0]
+
+
 def test_delay_line_per_component():
     d = DelayLine(2, DT, np.array([0.0, 0.002]))  # 0 and 4 steps
     outs = [d.push(np.array([k, k], dtype=float)) for k in range(10)]
