@@ -116,7 +116,8 @@ class SimResult:
     allocator_t: np.ndarray | None = None
     #: status of every allocator call, codes into :data:`STATUS_NAMES`
     allocator_status: np.ndarray | None = None
-    #: the run's settings (frame period, rate-aware, told, noise, pilot, ...), JSON-ready
+    #: the run's settings, JSON-ready: every :class:`sim.settings.RunSettings` field as flown (a MIMO
+    #: scenario; the engine alone records the :class:`~sim.settings.LoopSettings` ones) and ``pilots``
     settings: dict[str, Any] = field(default_factory=dict)
 
     # ------------------------------------------------------------------ metrics
