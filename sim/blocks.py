@@ -25,7 +25,7 @@ from alloc.exceptions import ProblemError
 from alloc.health import (
     PARAMETERS, SIMULATOR_ONLY, SIMULATOR_PARAMETERS, Effect, FailureKind, check_parameters, resolve_defaults,
 )
-from alloc.problem import as_real, short_repr
+from alloc.domain import as_real, short_repr
 
 __all__ = [
     "DEFAULT_DT",
