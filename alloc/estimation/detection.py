@@ -32,7 +32,8 @@ nothing to detect and nothing is reported.
 Isolation and classification (stage 2), on an alarm.  For every healthy effector, every
 kind, and every onset on a grid of ``hop`` samples within the buffer, the maximum-likelihood
 fit of the kind's own signature (``jam``: ``p - u``; ``hardover``: a jam at a limit;
-``effectiveness``: ``(f - 1) u`` with the surface where commanded; ``float``: ``-u``, no
+``effectiveness``: ``(f - 1) u`` with the surface where commanded; a hard-over also as a run
+to its stop at the nominal rate limit; ``float``: ``-u``, no
 moment, the surface where commanded, as the simulator's float acts; ``limits``:
 ``clip(u, lo, hi) - u``; ``rate_limits``: the deviation of a rate-limited copy of ``u``).
 Scores are the log-likelihood ratios less ``(n_params / 2) ln n`` (the Bayesian information
@@ -508,7 +509,7 @@ class FailureDetector:
 
     def _range_fits(self, j: int, u: np.ndarray, a_comb: np.ndarray, wc: float, lo0: float,
                     hi0: float, base: float) -> list[_Fit]:
-        """Reduced limits and reduced rate limits on one suffix."""
+        """Reduced limits, a hard-over's run to its stop and reduced rate limits on one suffix."""
         n = len(u)
         fits = []
         # reduced limits: the two sides separate (a sample beyond one side never touches the other)
@@ -532,6 +533,15 @@ class FailureDetector:
             fits.append(_Fit(FailureKind.LIMITS, llr, int(use_hi) + int(use_lo), {"lo": lo_c, "hi": hi_c},
                              samples=n))
         p = self.problem
+        # a hard-over runs to its stop at the nominal rate limit (as the simulator's does)
+        rate_up, rate_down = float(p.rate_max[j]), float(-p.rate_min[j])
+        steps = np.arange(n) * self.dt
+        for stop, rate_to in ((hi0, rate_up), (lo0, rate_down)):
+            if math.isfinite(rate_to) and rate_to > 0 and n > 1:
+                toward = np.sign(stop - u[0])
+                d = np.clip(u[0] + toward * rate_to * steps, min(stop, u[0]), max(stop, u[0])) - u
+                llr = float((wc * (a_comb * d - 0.5 * d * d)).sum()) - base
+                fits.append(_Fit(FailureKind.HARDOVER, llr, 0, {"position": stop}, stop, 0.0, samples=n))
         rate = float(min(-p.rate_min[j], p.rate_max[j]))
         if math.isfinite(rate) and rate > 0 and n > 1:
             # the surface's position at the suffix's start is unknown when the onset lies before
