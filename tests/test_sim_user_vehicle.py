@@ -55,7 +55,7 @@ def test_hexa_design_recovers_the_airframe(hexa):
                                report["switching"]["rho"], rtol=1e-12)  # seed step 6: rho / eps = K_rho
     assert report["switching"]["K_rho"] == 600.0  # 20 x 30 rad/s, under 0.5 / T = 1000
     assert report["check"]["max_real_eig"] < -report["options"]["stability_margin"]
-    assert report["check"]["uncontrolled_max_real_eig"] <= 1e-6  # the attitudes integrate the rates: neutral
+    assert report["check"]["neutral_modes"] == 3  # phi, theta, psi integrate the regulated rates
     assert report["baseline"]["found"] and report["baseline"]["K"] > 0
     json.dumps(report, allow_nan=False)  # the report goes into the JSON summary as it is
 
@@ -65,6 +65,7 @@ def test_tailless_reference_rule_is_seed_eq_4_22(tailless):
     assert all(num == (100.0,) and den == (1.0, 20.0, 100.0) for num, den in ref)  # seed Eq 4.22 alpha, p
     assert tailless.design.report["limit_frequency"]["value"] == 40.0
     np.testing.assert_array_equal(tailless.trim_u, 0.0)  # no axis trim: u0 = 0
+    assert tailless.design.report["check"]["neutral_modes"] == 1  # bank angle free with alpha, p_s, beta held
 
 
 def test_relative_order_two_is_refused():
