@@ -2,7 +2,7 @@
 allocator's call path; see alloc/_fastcall.c), and the numba kernels compiled into the build tree.
 
 The extension is optional: where it cannot be built, ``alloc`` runs the same call path in Python
-(``alloc.api.FAST_CALL``).  The kernels: after the build, :func:`alloc._jit_cache.warm` runs on
+(``alloc.api.has_c_call_path()``).  The kernels: after the build, :func:`alloc._jit_cache.warm` runs on
 the built tree, so a wheel (and ``pip install .``) carries every kernel compiled for the build
 machine's CPU, numba and Python in the packages' ``__pycache__``; the first allocation after the
 install loads them instead of compiling for about a minute.  ``ALLOC_BUILD_KERNELS=0`` skips it

@@ -55,10 +55,10 @@ import alloc  # noqa: E402
 from alloc import vehicles  # noqa: E402
 
 assert "site-packages" in alloc.__file__, f"not the installed package: {alloc.__file__}"
-from alloc.api import FAST_CALL  # noqa: E402
+from alloc.api import has_c_call_path  # noqa: E402
 
 # the C call path (alloc/_fastcall.c) is optional in general, but this machine has a compiler
-assert FAST_CALL, "alloc._fastcall was not built by `pip install .`"
+assert has_c_call_path(), "alloc._fastcall was not built by `pip install .`"
 p = vehicles.problem("ice")
 v = np.array([2.0, 30.0, 0.5])  # attainable: the README's example demand
 for method in alloc.methods():

@@ -32,9 +32,11 @@ caller raises :class:`~alloc.exceptions.SolverError` (the allocator's safe fallb
 Speed (measured in ``benchmarks/bench_alloc.py``): the factorisation of a free set depends
 on the level and the set alone, so it is cached per (level, free set) in the allocator's
 packed state (bitwise equal to a recomputation: the cache changes the cost, never the
-answer); a warm start from the previous call's working set is implemented but off
-(:data:`WARM_START`: it made answers depend on call history where they are unique only to
-round-off), so every call starts from the clipped Eq 1.23 answer; all work arrays
+answer).  Every call starts from the clipped Eq 1.23 answer, never from the previous call's
+working set: an answer is then a function of the call's data bit for bit.  (Warm starts made
+answers depend on call history where they are unique only to round-off: with ``Wv``
+eigenvalues 7.7e29 and 3.4e13, in the domain, a long-lived allocator returned another point
+than a fresh one; adversarial seed 10037684, moments 0.81 vs -0.39 on the weak axis.)  All work arrays
 live in the packed state (no allocation per call but the result).  The entry points that
 mutate that state hold the GIL (no ``nogil``): an allocator shared by threads stays safe.
 """
@@ -76,16 +78,16 @@ MU_EPS = 1e3 * np.finfo(float).eps
 # (``lexico_call``, ``lexico_batch_finished``) owns the arrays for the whole call.
 
 #: int header fields (``ivecs[0]``)
-_N, _M, _K, _NLEV, _FINAL, _DIAG, _MAXIT, _WORDS, _DYN, _WARM, _NCW, _NLW = range(12)
+_N, _M, _K, _NLEV, _FINAL, _DIAG, _MAXIT, _WORDS, _DYN, _NCW, _NLW = range(11)
 #: ``mats`` rows
 _A, _T, _WU, _B, _P0, _KV, _KU = range(7)
-#: ``ivecs[_MISC]`` columns: the next free cache slot, the warm-start flag, factorisations computed
-_NEXT_SLOT, _WARM_OK, _FACTORED = range(3)
+#: ``ivecs[_MISC]`` columns: the next free cache slot, factorisations computed
+_NEXT_SLOT, _FACTORED = range(2)
 #: ``vecs`` rows
-(_UP, _UMIN, _UMAX, _RMIN, _RMAX, _GAM, _UWARM, _U, _LO, _HI, _UPC, _BV, _R, _E, _LAM,
- _G, _H, _Y, _TMP, _SCALE, _CONST, _VLAST) = range(22)
+(_UP, _UMIN, _UMAX, _RMIN, _RMAX, _GAM, _U, _LO, _HI, _UPC, _BV, _R, _E, _LAM,
+ _G, _H, _Y, _TMP, _SCALE, _CONST) = range(20)
 #: ``ivecs`` rows
-_HEAD, _PERM, _STARTS, _WSTATE, _FREE, _PINNED, _TABU, _FIDX, _KEY, _MISC, _TABLE = range(11)
+_HEAD, _PERM, _STARTS, _FREE, _PINNED, _TABU, _FIDX, _KEY, _MISC, _TABLE = range(10)
 #: cache budget per allocator, floats (2 MiB), and entry cap (free sets beyond are computed, not
 #: kept); sized so an allocator stays small enough for the service to cache (a 32 MiB budget made
 #: every inline qp request rebuild a 14 MiB allocator: 4 ms a build, 300 req/s overloaded it)
@@ -95,14 +97,6 @@ _HEAD, _PERM, _STARTS, _WSTATE, _FREE, _PINNED, _TABU, _FIDX, _KEY, _MISC, _TABL
 #: it keeps 1,871 (it kept 703, and recomputed almost every second call's factorisation).
 CACHE_FLOATS = 1 << 18
 CACHE_ENTRIES = 1 << 11
-#: warm-start when ``max|v - v_previous| <= WARM_STEP * max(|v|, |v_previous|)``
-WARM_STEP = 0.05
-#: Warm starts are off: every call starts cold, so an answer is a function of the call's data
-#: bit for bit.  With them on, problems whose weights span more than 1/eps (``Wv`` eigenvalues
-#: 7.7e29 and 3.4e13, in the domain) have optima that are equal only to round-off of the
-#: dominant term, and a long-lived allocator returned another point than a fresh one (the
-#: adversarial suite, seed 10037684: moments 0.81 vs -0.39 on the weak axis).
-WARM_START = False
 
 
 @njit(cache=True, nogil=True, _nrt=False)
@@ -335,8 +329,8 @@ def _slot(bank, s, m, ncw, nlw):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True, _nrt=False)
-def _level(mats, vecs, ivecs, bankL, bank, r0, r1, lev, gam, diag, iup, ilo, ihi, maxit, m,
-           refine):  # pragma: no cover - compiled
+def _level(mats, vecs, ivecs, bankL, bank, r0, r1, lev, gam, diag, iup, ilo, ihi, maxit,
+           m):  # pragma: no cover - compiled
     """Solve one level in place on ``u`` (feasible on entry) and ``free`` (working set).
 
     Rows ``A[r0:r1]`` are this level's least-squares rows, rows ``A[:r0]`` its equality
@@ -347,11 +341,8 @@ def _level(mats, vecs, ivecs, bankL, bank, r0, r1, lev, gam, diag, iup, ilo, ihi
     frees effectors that cannot move.  An effector freed and then blocked by a zero step
     (a degenerate multiplier) is not freed again until the iterate moves.  Everything is
     addressed by row in the stacked arrays of :func:`pack` (``up``, ``lo``, ``hi`` are the
-    rows ``iup``, ``ilo``, ``ihi`` of ``vecs``; the cache slot is indexed flat): no allocation.  With ``refine``
-    (a warm start: the iterate came from another demand) a full step is followed by one
-    more step on the same working set before the multipliers are tested (iterative
-    refinement: the answer is then as exact as from the cold start).  Returns the
-    iteration count, or -1 when the cap was hit.
+    rows ``iup``, ``ilo``, ``ihi`` of ``vecs``; the cache slot is indexed flat): no allocation.
+    Returns the iteration count, or -1 when the cap was hit.
     """
     nl = r1 - r0
     nc = r0
@@ -381,7 +372,6 @@ def _level(mats, vecs, ivecs, bankL, bank, r0, r1, lev, gam, diag, iup, ilo, ihi
     for j in range(m):
         tabu[j] = 0
     last = -1
-    refined = False
     gam2 = gam * gam
     for it in range(maxit):
         # --- residual e = b - A u of this level's rows.  A pure least-squares level whose
@@ -477,10 +467,6 @@ def _level(mats, vecs, ivecs, bankL, bank, r0, r1, lev, gam, diag, iup, ilo, ihi
                     tabu[t] = 0
             elif j == last:
                 tabu[j] = 1
-            refined = False
-            continue
-        if refine and not refined:
-            refined = True
             continue
         # --- full step: multipliers of the bounds held, mu = g + A[:r0]' lam
         for j in range(m):
@@ -583,7 +569,7 @@ def pack(A, T, perm, starts, gammas, final, Wu, diag, up, B, P0, umin, umax, rat
     for i, M in ((_A, A), (_T, T), (_WU, Wu), (_B, B), (_P0, P0)) + (((_KV, Kv), (_KU, Ku)) if Kv is not None else ()):
         M = np.asarray(M, dtype=float)
         mats[i, :M.shape[0], :M.shape[1]] = M
-    vecs = np.zeros((22, max(m, n, k, nlev, 2)))
+    vecs = np.zeros((_CONST + 1, max(m, n, k, nlev, 2)))
     for i, x in ((_UP, up), (_UMIN, umin), (_UMAX, umax), (_RMIN, rate_min), (_RMAX, rate_max), (_GAM, gammas),
                  (_CONST, [vmax, rtol])):
         x = np.asarray(x, dtype=float)
@@ -596,9 +582,8 @@ def pack(A, T, perm, starts, gammas, final, Wu, diag, up, B, P0, umin, umax, rat
         own.append((n, 0))
     ncw = max(1, max(nc for nc, _ in own))
     nlw = max(1, max(nl for _, nl in own))
-    ivecs = np.zeros((_TABLE, max(m, n, nlev + 1, words + 1, 12)), dtype=np.int64)
-    ivecs[_HEAD, :12] = [n, m, k, nlev, int(final), int(diag), int(maxit), words, int(Kv is not None),
-                         int(WARM_START), ncw, nlw]
+    ivecs = np.zeros((_TABLE, max(m, n, nlev + 1, words + 1, _NLW + 1)), dtype=np.int64)
+    ivecs[_HEAD, :_NLW + 1] = [n, m, k, nlev, int(final), int(diag), int(maxit), words, int(Kv is not None), ncw, nlw]
     ivecs[_PERM, :n] = perm
     ivecs[_STARTS, :nlev + 1] = starts
     ivecs[_MISC, _NEXT_SLOT] = 1  # the next free cache slot (slot 0 is scratch)
@@ -619,23 +604,9 @@ def pack(A, T, perm, starts, gammas, final, Wu, diag, up, B, P0, umin, umax, rat
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _start(mats, vecs, ivecs, v, ilo, ihi, iup, warm, m, k):  # pragma: no cover - compiled
-    """The first iterate and working set.  Warm: the previous call's working set (held
-    effectors at their new bound, free ones at their previous value clipped); cold: the
-    Eq 1.23 pseudo-inverse answer ``up + P0 (v - B up)`` clipped, the clipped effectors held."""
-    if warm:
-        for j in range(m):
-            lo, hi = vecs[ilo, j], vecs[ihi, j]
-            if lo == hi or ivecs[_WSTATE, j] < 0:
-                vecs[_U, j] = lo
-                ivecs[_FREE, j] = 0
-            elif ivecs[_WSTATE, j] > 0:
-                vecs[_U, j] = hi
-                ivecs[_FREE, j] = 0
-            else:
-                vecs[_U, j] = min(max(vecs[_UWARM, j], lo), hi)
-                ivecs[_FREE, j] = 1
-        return
+def _start(mats, vecs, ivecs, v, ilo, ihi, iup, m, k):  # pragma: no cover - compiled
+    """The first iterate and working set: the Eq 1.23 pseudo-inverse answer
+    ``up + P0 (v - B up)`` clipped, the clipped effectors held."""
     for i in range(k):
         acc = v[i]
         for j in range(m):
@@ -657,9 +628,7 @@ def _run(mats, vecs, ivecs, bankL, bank, v, ilo, ihi, iup):  # pragma: no cover 
 
     ``b = T v[perm]``; level ``l`` is rows ``A[starts[l]:starts[l+1]]`` with weight
     ``gammas[l]``; ``final`` adds the preference level holding every row (stage 2 of ``qp``).
-    Warm-started when the previous call succeeded; a warm start that hits the cap is
-    retried cold.  On success the working set is kept for the next call.  The bounds and
-    the preference point are the rows ``ilo``, ``ihi``, ``iup`` of ``vecs``.
+    The bounds and the preference point are the rows ``ilo``, ``ihi``, ``iup`` of ``vecs``.
     """
     n, m, k, nlev = ivecs[_HEAD, _N], ivecs[_HEAD, _M], ivecs[_HEAD, _K], ivecs[_HEAD, _NLEV]
     maxit = ivecs[_HEAD, _MAXIT]
@@ -669,41 +638,22 @@ def _run(mats, vecs, ivecs, bankL, bank, v, ilo, ihi, iup):  # pragma: no cover 
         for q in range(n):
             acc += mats[_T, i, q] * v[ivecs[_PERM, q]]
         vecs[_BV, i] = acc
-    # warm only for a demand close to the previous one (the way a flight controller calls):
-    # from an unrelated working set a cold start takes fewer pivots
-    dv = 0.0
-    scale = 0.0
-    for i in range(k):
-        dv = max(dv, abs(v[i] - vecs[_VLAST, i]))
-        scale = max(scale, abs(v[i]), abs(vecs[_VLAST, i]))
-        vecs[_VLAST, i] = v[i]
-    warm = ivecs[_MISC, _WARM_OK] != 0 and ivecs[_HEAD, _WARM] != 0 and dv <= WARM_STEP * scale
-    ivecs[_MISC, _WARM_OK] = 0
-    while True:
-        _start(mats, vecs, ivecs, v, ilo, ihi, iup, warm, m, k)
-        for j in range(m):
-            ivecs[_PINNED, j] = 0
-        total = 0
-        ok = True
-        for l in range(nlev + (1 if ivecs[_HEAD, _FINAL] else 0)):
-            if l < nlev:
-                r0, r1, gam = ivecs[_STARTS, l], ivecs[_STARTS, l + 1], vecs[_GAM, l]
-            else:
-                r0, r1, gam = n, n, 1.0
-            it = _level(mats, vecs, ivecs, bankL, bank, r0, r1, l, gam, diag, iup, ilo, ihi, maxit, m, warm)
-            if it < 0:
-                total += maxit
-                ok = False
-                break
-            total += it
-        if ok or not warm:
+    _start(mats, vecs, ivecs, v, ilo, ihi, iup, m, k)
+    for j in range(m):
+        ivecs[_PINNED, j] = 0
+    total = 0
+    ok = True
+    for l in range(nlev + (1 if ivecs[_HEAD, _FINAL] else 0)):
+        if l < nlev:
+            r0, r1, gam = ivecs[_STARTS, l], ivecs[_STARTS, l + 1], vecs[_GAM, l]
+        else:
+            r0, r1, gam = n, n, 1.0
+        it = _level(mats, vecs, ivecs, bankL, bank, r0, r1, l, gam, diag, iup, ilo, ihi, maxit, m)
+        if it < 0:
+            total += maxit
+            ok = False
             break
-        warm = False  # the warm start hit the cap: retry cold (what a fresh allocator does)
-    if ok:
-        for j in range(m):
-            vecs[_UWARM, j] = vecs[_U, j]
-            ivecs[_WSTATE, j] = 0 if ivecs[_FREE, j] else (-1 if vecs[_U, j] <= vecs[ilo, j] else 1)
-        ivecs[_MISC, _WARM_OK] = 1
+        total += it
     return total, ok
 
 

@@ -16,7 +16,7 @@ from .problem import MAX_MAGNITUDE, Problem, as_float_array, check_magnitude
 from .registry import DEFAULT_METHOD, FloatArray, Method, build
 from .result import EXACT_RTOL, BatchResult, Result, Status
 
-__all__ = ["Allocator", "make_allocator", "allocate", "allocate_batch"]
+__all__ = ["Allocator", "make_allocator", "allocate", "allocate_batch", "has_c_call_path"]
 
 _EXACT, _UNATT, _FALLBACK = Status.EXACT, Status.UNATTAINABLE, Status.FALLBACK
 _F64 = np.dtype(np.float64)
@@ -44,11 +44,15 @@ class _PyCallBase:
 
 try:  # the call path in C (alloc/_fastcall.c, built at install); without it the same path in Python
     from ._fastcall import FastCall as _CallBase
-
-    FAST_CALL = True
 except ImportError:  # pragma: no cover - a build without a C compiler
     _CallBase = _PyCallBase  # type: ignore[assignment,misc]
-    FAST_CALL = False
+
+
+def has_c_call_path() -> bool:
+    """Whether an allocator's call runs in C: ``alloc._fastcall`` was built at install (it
+    needs a C compiler; without it the same path runs in Python, with the same answers).
+    A fact of the installation, read from :class:`Allocator`'s base class; not a switch."""
+    return _CallBase is not _PyCallBase
 
 #: dtype kinds converted to float64 at the boundary (others go to the problem's checks)
 _REAL_KINDS = frozenset("fiu")
@@ -131,7 +135,7 @@ class Allocator(_CallBase):  # type: ignore[misc,valid-type]
     backend raises -- at build or at call -- becomes the safe answer of
     :class:`~alloc.methods.pseudo_inverse.SafeCommand` with status ``fallback`` and the reason.
 
-    The call is :meth:`_call_py`; where ``alloc._fastcall`` is built (``FAST_CALL``), its fast
+    The call is :meth:`_call_py`; where ``alloc._fastcall`` is built (:func:`has_c_call_path`), its fast
     paths run in C (the same compiled kernel with the same arguments, so the same bits) and
     every other case goes to :meth:`_call_py`.
 
@@ -192,7 +196,7 @@ class Allocator(_CallBase):  # type: ignore[misc,valid-type]
 
     def _wire(self) -> None:
         """Hand the C call path (``alloc._fastcall``) the kernels of :meth:`_call_py`'s fast paths."""
-        if not FAST_CALL:
+        if _CallBase is _PyCallBase:
             return
         k, m = self.problem.k, self.problem.m
         if self._W is not None:
@@ -278,7 +282,7 @@ class Allocator(_CallBase):  # type: ignore[misc,valid-type]
         finally:
             self._release()
 
-    if not FAST_CALL:  # pragma: no cover
+    if _CallBase is _PyCallBase:  # pragma: no cover - the Python base has no __call__ of its own
         __call__ = _call_py
 
     def _solve(self, v: FloatArray, u_prev: ArrayLike | None, dt: float | None) -> Result:

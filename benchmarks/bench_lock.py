@@ -50,7 +50,7 @@ def main() -> None:
     ap.add_argument("--pairs", type=int, default=301)
     ap.add_argument("--calls", type=int, default=50)
     args = ap.parse_args()
-    if not api.FAST_CALL:
+    if not api.has_c_call_path():
         raise SystemExit("alloc._fastcall is not built: nothing to measure")
     p = alloc.vehicles.problem("ice")
     V = list(random_demands(np.random.default_rng(0), p, args.calls))

@@ -17,10 +17,10 @@ import numpy as np
 import pytest
 
 import alloc
-from alloc.api import FAST_CALL
+from alloc.api import has_c_call_path
 from alloc.testing import KINDS, random_problem
 
-pytestmark = pytest.mark.skipif(not FAST_CALL, reason="alloc._fastcall is not built (no C compiler at install)")
+pytestmark = pytest.mark.skipif(not has_c_call_path(), reason="alloc._fastcall is not built (no C compiler at install)")
 
 FLAGS = ("C_CONTIGUOUS", "F_CONTIGUOUS", "OWNDATA", "WRITEABLE", "ALIGNED")
 

@@ -440,6 +440,51 @@ def test_the_core_graph_is_read_with_its_lazy_names():
     assert "alloc.health" in graph["alloc.problem"] and "alloc.problem" not in graph["alloc.health"]
 
 
+def _module_level_switches(path: Path) -> list[str]:
+    """Module-level names in capitals bound to ``True``/``False`` (also inside a module-level
+    ``if``/``try``): a switch that changes behaviour when flipped."""
+    out = []
+    todo = list(ast.parse(path.read_text()).body)
+    while todo:
+        node = todo.pop()
+        if isinstance(node, (ast.If, ast.Try)):
+            todo += [*node.body, *node.orelse, *getattr(node, "finalbody", []),
+                     *(n for h in getattr(node, "handlers", []) for n in h.body)]
+        elif isinstance(node, (ast.Assign, ast.AnnAssign)) and isinstance(node.value, ast.Constant) \
+                and isinstance(node.value.value, bool):
+            targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+            out += [f"{path.relative_to(ROOT)}:{node.lineno} {t.id}" for t in targets
+                    if isinstance(t, ast.Name) and t.id.isupper()]
+    return out
+
+
+def test_the_library_has_no_module_level_switches(monkeypatch):
+    """Behaviour is chosen by arguments and options, never by flipping a module constant
+    (``alloc._active_set.WARM_START`` guarded dead branches; ``alloc.api.FAST_CALL`` applied
+    half-way when flipped)."""
+    found = [s for path in sorted((ROOT / "alloc").rglob("*.py")) for s in _module_level_switches(path)]
+    assert found == []
+    # the rule reads module-level try/except and if blocks too
+    fake = ROOT / "alloc" / "_switch_probe.py"
+    source = "try:\n    import x\n    FAST = True\nexcept ImportError:\n    FAST = False\nif x:\n    SLOW: bool = True\n"
+    monkeypatch.setattr(Path, "read_text", lambda self, _orig=Path.read_text: source if self == fake else _orig(self))
+    assert [f.split()[-1] for f in _module_level_switches(fake)] == ["SLOW", "FAST", "FAST"]
+
+
+def test_the_c_call_path_is_a_fact_of_the_class():
+    """``has_c_call_path()`` says which base the allocator has; nothing else decides it."""
+    import alloc
+    from alloc import api
+
+    try:
+        from alloc._fastcall import FastCall
+    except ImportError:  # pragma: no cover - a build without a C compiler
+        assert not api.has_c_call_path() and not hasattr(alloc.Allocator, "_fast_setup")
+    else:
+        assert api.has_c_call_path() and issubclass(alloc.Allocator, FastCall)
+    assert not hasattr(api, "FAST_CALL")
+
+
 def _loaded_after(code: str) -> list[str]:
     out = subprocess.run([sys.executable, "-c", code + "\nimport sys, json; print(json.dumps(sorted(sys.modules)))"],
                          capture_output=True, text=True, check=True, cwd=ROOT)
