@@ -60,8 +60,12 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from .exceptions import AllocError, ProblemError
 from .domain import as_real, short_repr
+from .effector_health import (
+    EFFECTOR_HEALTH_SCHEMA, HEALTHY, EffectorHealth, Health, _checked_health, apply_health, health_from_dict,
+    health_to_dict,
+)
+from .exceptions import AllocError, ProblemError
 
 if TYPE_CHECKING:
     from .problem import Problem
@@ -433,109 +437,6 @@ def resolve_defaults(spec: Any, params: Mapping[str, float], *, limits: tuple[fl
     return out
 
 
-# ------------------------------------------------------------------------------ health
-@dataclass(frozen=True, slots=True)
-class EffectorHealth:
-    """What has failed on one effector (healthy: every field at its default)."""
-
-    jam_position: float | None = None
-    floating: bool = False
-    effectiveness: float = 1.0
-    limits: tuple[float, float] | None = None
-    rate_limits: tuple[float, float] | None = None
-
-    def __post_init__(self) -> None:
-        """Each field checked and normalised (floats, tuples); ProblemError naming it otherwise.
-
-        Only what needs no problem is checked here (types, ``effectiveness`` in [0, 1],
-        ordered limits, ``rate_min <= 0 <= rate_max``); positions against the nominal limits
-        are :func:`apply_health`'s to check.
-        """
-        setter = object.__setattr__
-        if self.jam_position is not None:
-            setter(self, "jam_position", as_real("jam_position", self.jam_position))
-        if not isinstance(self.floating, (bool, np.bool_)):
-            raise ProblemError(f"floating: expected true or false, got {short_repr(self.floating)}")
-        setter(self, "floating", bool(self.floating))
-        eff = as_real("effectiveness", self.effectiveness)
-        if not 0.0 <= eff <= 1.0:
-            raise ProblemError(f"effectiveness: {eff:g} must be in [0, 1]")
-        setter(self, "effectiveness", eff)
-        if self.limits is not None:
-            lo, hi = _pair("limits", self.limits)
-            if lo > hi:
-                raise ProblemError(f"limits: [{lo:g}, {hi:g}] is not an ordered interval")
-            setter(self, "limits", (lo, hi))
-        if self.rate_limits is not None:
-            rmin, rmax = _pair("rate_limits", self.rate_limits)
-            if rmin > 0.0 or rmax < 0.0:
-                raise ProblemError(f"rate_limits: [{rmin:g}, {rmax:g}] must satisfy rate_min <= 0 <= rate_max")
-            setter(self, "rate_limits", (rmin, rmax))
-
-    @property
-    def status(self) -> str:
-        """``healthy``, ``degraded`` (effectiveness or limits), ``jammed`` or ``floating``."""
-        if self.floating:
-            return "floating"
-        if self.jam_position is not None:
-            return "jammed"
-        if self.effectiveness != 1.0 or self.limits is not None or self.rate_limits is not None:
-            return "degraded"
-        return "healthy"
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON form (see :data:`EFFECTOR_HEALTH_SCHEMA`)."""
-        return {
-            "jam_position": self.jam_position, "floating": self.floating, "effectiveness": self.effectiveness,
-            "limits": None if self.limits is None else list(self.limits),
-            "rate_limits": None if self.rate_limits is None else list(self.rate_limits),
-        }
-
-    @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> EffectorHealth:
-        """Inverse of :meth:`to_dict`; strict (see :data:`EFFECTOR_HEALTH_SCHEMA`): unknown
-        keys, text for numbers and anything but ``true``/``false`` for ``floating`` raise
-        ProblemError naming the field."""
-        if not isinstance(data, Mapping):
-            raise ProblemError(f"health: an effector's health must be an object, got {short_repr(data)}")
-        unknown = sorted(set(data) - set(EFFECTOR_HEALTH_SCHEMA["properties"]), key=str)
-        if unknown:
-            known = ", ".join(EFFECTOR_HEALTH_SCHEMA["properties"])
-            raise ProblemError(f"health: unknown field(s) {unknown}; accepted: {known}")
-        return cls(**data)
-
-
-def _pair(name: str, value: Any) -> tuple[float, float]:
-    """``[a, b]`` as two floats (each a real number in the domain), or ProblemError naming ``name``."""
-    if isinstance(value, (str, bytes, Mapping)) or not hasattr(value, "__len__") or len(value) != 2:
-        raise ProblemError(f"{name}: expected a pair [lo, hi], got {short_repr(value)}")
-    return as_real(name, value[0]), as_real(name, value[1])
-
-
-HEALTHY = EffectorHealth()
-#: effector name -> health; healthy effectors are absent
-Health = dict[str, EffectorHealth]
-
-#: JSON schema of one effector's health (shared with the service's OpenAPI document).
-EFFECTOR_HEALTH_SCHEMA: dict[str, Any] = {
-    "title": "EffectorHealth",
-    "type": "object",
-    "properties": {
-        "jam_position": {"type": ["number", "null"], "description": "held position of a jam or hard-over"},
-        "floating": {"type": "boolean", "description": "trails with the flow: no moment, held at up"},
-        "effectiveness": {"type": "number", "minimum": 0, "maximum": 1,
-                          "description": "fraction of the nominal column of B"},
-        "limits": {"type": ["array", "null"], "items": {"type": "number"}, "minItems": 2, "maxItems": 2,
-                   "description": "reduced position limits [lo, hi]"},
-        "rate_limits": {"type": ["array", "null"], "items": {"type": "number"}, "minItems": 2, "maxItems": 2,
-                        "description": "reduced rate limits [rate_min, rate_max], units per second"},
-    },
-    "additionalProperties": False,
-}
-
-
-
-
 #: what each told rule does to an effector's health (``p``: the event's resolved parameters)
 _TELL: Mapping[Told, Callable[[EffectorHealth, Mapping[str, float]], EffectorHealth]] = MappingProxyType({
     Told.HELD: lambda old, p: replace(old, jam_position=p["position"], floating=False),
@@ -670,69 +571,3 @@ def apply_event(nominal: Problem, health: Mapping[str, EffectorHealth], event: F
     else:
         out[name] = new
     return name, out
-
-
-def _checked_health(health: Any) -> Mapping[Any, EffectorHealth]:
-    """``health`` if it maps effectors to :class:`EffectorHealth`; ProblemError naming it otherwise."""
-    if not isinstance(health, Mapping):
-        raise ProblemError(f"health: expected a mapping of effector to EffectorHealth, got {type(health).__name__}")
-    for key, h in health.items():
-        if not isinstance(h, EffectorHealth):
-            raise ProblemError(f"health: the health of {short_repr(key)} must be an alloc.health.EffectorHealth, "
-                               f"got {type(h).__name__}")
-    return health
-
-
-def apply_health(nominal: Problem, health: Mapping[int | str, EffectorHealth]) -> Problem:
-    """The problem of a vehicle at ``health`` (``nominal`` itself when all are healthy).
-
-    Keys are effector names or indices.  See the module docstring for each kind's meaning.
-    Reduced position and rate limits act within the nominal ones (their intersection: a
-    failure never widens a limit); reduced limits that do not meet the nominal ones, or a
-    jam outside them, raise ProblemError.
-    """
-    p = nominal
-    rate_min, rate_max = nominal.rate_min.copy(), nominal.rate_max.copy()
-    for key, h in _checked_health(health).items():
-        i = nominal.index(key)
-        if h.effectiveness != 1.0 or h.floating:
-            p = p.with_effectiveness(i, 0.0 if h.floating else h.effectiveness)
-        if h.floating:
-            p = p.with_jam(i, float(nominal.up[i]))
-        elif h.jam_position is not None:
-            p = p.with_jam(i, h.jam_position)
-        elif h.limits is not None:
-            lo0, hi0 = float(nominal.umin[i]), float(nominal.umax[i])
-            lo, hi = max(h.limits[0], lo0), min(h.limits[1], hi0)
-            if lo > hi:
-                raise ProblemError(f"limits: reduced limits [{h.limits[0]:g}, {h.limits[1]:g}] of "
-                                   f"{nominal.names[i]!r} do not meet its nominal limits [{lo0:g}, {hi0:g}]")
-            p = p.with_limits(i, lo, hi)
-        if h.rate_limits is not None:  # rate_min <= 0 <= rate_max on both sides: never empty
-            rate_min[i] = max(h.rate_limits[0], nominal.rate_min[i])
-            rate_max[i] = min(h.rate_limits[1], nominal.rate_max[i])
-    if not (np.array_equal(rate_min, p.rate_min) and np.array_equal(rate_max, p.rate_max)):
-        p = p.replace(rate_min=rate_min, rate_max=rate_max)
-    return p
-
-
-def health_to_dict(health: Mapping[str, EffectorHealth]) -> dict[str, Any]:
-    """JSON form of a vehicle's health: ``{effector name: EffectorHealth.to_dict()}``."""
-    return {name: h.to_dict() for name, h in health.items()}
-
-
-def health_from_dict(data: Mapping[str, Any] | None) -> Health:
-    """Inverse of :func:`health_to_dict`; ProblemError naming the field for anything else."""
-    if data is None:
-        return {}
-    if not isinstance(data, Mapping):
-        raise ProblemError(f"health: expected an object of effector name to health, got {type(data).__name__}")
-    out = {}
-    for name, h in data.items():
-        if not isinstance(name, str):
-            raise ProblemError(f"health: effector names must be strings, got {short_repr(name)}")
-        try:
-            out[name] = EffectorHealth.from_dict(h)
-        except ProblemError as exc:
-            raise ProblemError(f"{exc} (effector {name!r})", field=exc.field) from None
-    return out
