@@ -4,12 +4,16 @@ The fast tests drive :mod:`alloc._jit_cache` in this process on a one-kernel pac
 a temporary directory (numba compiles it in well under a second).  The slow one installs the
 project into a fresh venv and runs ``.ci/check-core-install`` (an unprivileged user with no home
 imports and allocates from the root-owned install, no kernel compiled, within 5 s of CPU).
+The last ones check what starting costs by what it loads (no timing): importing the service
+loads no solver front-end, plot or ``scipy.optimize``; the geometry loads without the
+allocator; the service answers while its kernels warm on a thread.
 """
 
 from __future__ import annotations
 
 import importlib.util
 import io
+import json
 import os
 import re
 import shutil
@@ -17,6 +21,8 @@ import stat
 import subprocess
 import sys
 import textwrap
+import threading
+import time
 from pathlib import Path
 
 import pytest
@@ -221,3 +227,98 @@ def test_fresh_root_install_serves_an_unprivileged_user_without_compiling():
     assert sorted(m for m, _ in firsts) == ["pinv", "qp"], out.stdout
     assert all(float(cpu) < 5.0 for _, cpu in firsts), firsts
     assert "every kernel loaded from the wheel's cache" in out.stdout
+
+
+# ----------------------------------------------------------------- what starting costs
+#: packages a service start-up or a geometry user does not need: solver front-ends, plotting,
+#: scipy's optimizer (the exact coverage polytope), the coverage module itself
+NOT_AT_START = ("scipy.optimize", "cvxpy", "qpsolvers", "matplotlib", "highspy", "osqp", "clarabel",
+                "alloc.ams.coverage", "alloc.ams.plot", "sim", "benchmarks")
+
+
+def _loaded_by(code: str) -> set[str]:
+    out = subprocess.run([sys.executable, "-c", code + "\nimport sys, json\nprint(json.dumps(sorted(sys.modules)))"],
+                         capture_output=True, text=True, check=True, cwd=ROOT)
+    return set(json.loads(out.stdout.splitlines()[-1]))
+
+
+def _heavy(loaded: set[str]) -> list[str]:
+    return sorted(m for m in loaded if any(m == p or m.startswith(p + ".") for p in NOT_AT_START))
+
+
+def test_importing_the_service_loads_no_solver_front_end_plot_or_optimizer():
+    loaded = _loaded_by("import service.main")
+    assert _heavy(loaded) == []
+    assert "fastapi" in loaded and "service.warm" in loaded  # the probe sees what it should
+
+
+def test_the_geometry_loads_without_the_allocator():
+    loaded = _loaded_by("from alloc.ams import AttainableSet, zonotope_volume")
+    assert _heavy(loaded) == [] and "alloc.ams.geometry" in loaded
+    assert not {"alloc.api", "alloc.registry", "alloc.methods"} & loaded
+    # coverage is still one attribute away, and is the function (not its module)
+    loaded = _loaded_by("import alloc.ams, types\nassert isinstance(alloc.ams.coverage, types.FunctionType)")
+    assert {"alloc.ams.coverage", "scipy.optimize"} <= loaded
+
+
+def test_the_service_answers_before_its_kernels_are_warm(tmp_path, monkeypatch):
+    """The start-up does not wait for the kernel warm-up (service/warm.py): ``/v1/health`` and
+    ``/v1/ready`` answer while it runs; the build processes start only after it."""
+    from fastapi.testclient import TestClient
+
+    import service.warm
+    from service.builds import Builder
+    from service.config import Settings
+    from service.main import create_app
+
+    release, warming, order = threading.Event(), threading.Event(), []
+
+    def slow_warm_up(stop=None):
+        warming.set()
+        assert release.wait(30)
+        order.append("warmed")
+        return 0.0
+
+    monkeypatch.setattr(service.warm, "warm_up", slow_warm_up)
+    monkeypatch.setattr(Builder, "start_processes", lambda self: order.append("processes") or [])
+    app = create_app(Settings(data_dir=tmp_path, warmup=True))
+    with TestClient(app) as client:
+        assert warming.wait(30)
+        assert client.get("/v1/health").status_code == 200
+        assert client.get("/v1/ready").status_code == 200
+        assert order == []  # still warming: no build process yet
+        release.set()
+        deadline = time.monotonic() + 30
+        while len(order) < 2 and time.monotonic() < deadline:
+            time.sleep(0.01)
+    assert order == ["warmed", "processes"]
+
+
+def test_a_stopped_service_starts_no_build_process_after_warming(tmp_path, monkeypatch):
+    """Shutting down while the warm-up runs: the warm-up stops between methods and no build
+    process is started after the store closed."""
+    from fastapi.testclient import TestClient
+
+    import alloc
+    import service.warm
+    from service.builds import Builder
+    from service.config import Settings
+    from service.main import create_app
+
+    started, calls = threading.Event(), []
+    real_one = service.warm._warm_one
+
+    def one(name, problem, v):
+        started.set()
+        calls.append(name)
+        time.sleep(0.05)
+        real_one(name, problem, v)
+
+    monkeypatch.setattr(service.warm, "_warm_one", one)
+    monkeypatch.setattr(service.warm, "_warm", set())
+    monkeypatch.setattr(Builder, "start_processes", lambda self: calls.append("processes") or [])
+    with TestClient(create_app(Settings(data_dir=tmp_path, warmup=True))):
+        assert started.wait(30)
+    n = len(calls)
+    time.sleep(0.3)
+    assert len(calls) == n and "processes" not in calls and n < len(alloc.methods())
