@@ -42,7 +42,9 @@ name, :data:`DESIGN_OPTIONS`):
   and the hedge left out) must have every eigenvalue left of ``-stability_margin``.
 * baseline: the linear equivalent of the same law without observer (Eq 4.3,
   ``K (1 + K_-1 / s)`` on the measured error), with the largest crossover from the same
-  ladder that passes the same check.
+  ladder that passes the same check with every closed-loop mode damped at least 0.3 (a
+  classical margin; the SMC is held to none, its observers carry its robustness).  None when
+  no gain passes (the tailless example: no PI on the measured error stabilises it).
 """
 
 from __future__ import annotations
@@ -75,6 +77,7 @@ DESIGN_OPTIONS: dict[str, tuple[Any, str]] = {
     "rho_scale": (1.0, "rho = rho_scale x the channel's reach from trim (step 5)"),
     "observer_bandwidth": (None, "rad/s; default: the reference bandwidth (step 8)"),
     "observer": (True, "observers on (false: feed back the measured outputs, seed Fig 4-95)"),
+    "baseline_damping": (0.3, "least damping ratio of the baseline's closed loop (a classical loop-shaping margin)"),
     "stability_margin": (0.01, "1/s; every closed-loop eigenvalue but the neutral ones left of -margin (step 10)"),
     "command_fraction": (0.05, "peak pseudo-command of the sum-of-sines commands / rho"),
     "noise_fraction": (0.02, "sensor-noise gain on a controlled output / its command peak"),
@@ -347,8 +350,8 @@ def auto_design(
         return {"K_rho": k_rho, "max_real_eig": float(live.real.max()), "neutral_modes": int(np.count_nonzero(~visible)),
                 "min_damping": float(damping[worst]), "least_damped": [float(live[worst].real), float(abs(live[worst].imag))]}
 
-    def passes(row: dict[str, float]) -> bool:
-        return row["max_real_eig"] < -opt["stability_margin"]
+    def passes(row: dict[str, float], damping: float = 0.0) -> bool:
+        return row["max_real_eig"] < -opt["stability_margin"] and row["min_damping"] >= damping
 
     start = opt["crossover"] or min(opt["crossover_ratio"] * w_lim, cap)
     gains = [start] if opt["crossover"] else [start * 0.5**j for j in range(MAX_HALVINGS + 1)]
@@ -359,13 +362,14 @@ def auto_design(
     else:
         bandwidths = [wn * f for f in OBSERVER_LADDER]
 
-    def search(bws: Sequence[float | None]) -> tuple[dict[str, float] | None, float | None, list[dict[str, float]]]:
+    def search(bws: Sequence[float | None], damping: float = 0.0
+               ) -> tuple[dict[str, float] | None, float | None, list[dict[str, float]]]:
         tried = []
         for w_obs in bws:
             for k_rho in gains:
                 row = {**check(k_rho, None if w_obs is None else observers(w_obs)), "observer_bandwidth": w_obs}
                 tried.append(row)
-                if passes(row):
+                if passes(row, damping):
                     return row, w_obs, tried
         return None, None, tried
 
@@ -398,10 +402,12 @@ def auto_design(
                                 "pseudo-inverse for the allocator; delays and hedge excluded"}
 
     # baseline: the same PI law on the measured error (no observer), checked the same way
-    base, _, tried_base = search([None])
+    base, _, tried_base = search([None], opt["baseline_damping"])
     baseline = None if base is None else LoopShapedDesign(compensators=tuple(
         ((base["K_rho"], base["K_rho"] * integral[i]), (1.0, 0.0)) for i in range(k)))
     report["baseline"] = {"law": "u_c = K (1 + K_-1 / s) (r - y_measured) (seed Eq 4.3, no observer)",
+                          "rule": f"first K of the same ladder passing step 10 with every mode's damping >= "
+                                  f"{opt['baseline_damping']:g}",
                           "K": None if base is None else base["K_rho"], "found": base is not None,
                           "check": base, "tried": len(tried_base),
                           "best_max_real_eig": min(r["max_real_eig"] for r in tried_base)}
