@@ -17,11 +17,13 @@ generalised likelihood ratio of "``d_t = theta_1 + theta_2 u_t``" (which contain
 kind's first-order signature: a jam ``p - u``, a loss of effectiveness ``(f - 1) u``) against
 "no failure".  Under no failure, with white Gaussian noise of the stated level, twice the
 log ratio is exactly chi-square with ``d = rank`` degrees of freedom (``d <= 2``, ``<= 4`` with
-a position sensor) -- Wilks' theorem is exact for a linear Gaussian model.  The threshold is
+a position sensor).  The threshold is
 
     gamma = chi2.isf(alpha, d_max),   alpha = F * hop_seconds / 3600 / m_tested
 
-for a design false-alarm rate ``F`` per hour: one test per effector every ``hop`` samples,
+(the GLR test of a linear Gaussian model: Basseville and Nikiforov, *Detection of Abrupt
+Changes*, 1993, section 4.2; Wilks' theorem, exact here) for a design false-alarm rate ``F``
+per hour: one test per effector every ``hop`` samples,
 Bonferroni over effectors and tests, so the rate of alarms is at most ``F``; equal to it
 (up to the union's overlap, small at small ``alpha``) when ``hop = window`` (independent
 tests).  Overlapping windows (``hop < window``, the default ``window / 4``) are correlated and
@@ -29,22 +31,29 @@ alarm less than ``F``.  No excitation, no decision: when ``u_j`` is constant the
 rank 1 and a surface jammed exactly where it is commanded produces no residual -- there is
 nothing to detect and nothing is reported.
 
-Isolation and classification (stage 2), on an alarm.  For every healthy effector, every
-kind, and every onset on a grid of ``hop`` samples within the buffer, the maximum-likelihood
-fit of the kind's own signature (``jam``: ``p - u``; ``hardover``: a jam at a limit;
-``effectiveness``: ``(f - 1) u`` with the surface where commanded; a hard-over also as a run
-to its stop at the nominal rate limit; ``float``: ``-u``, no
-moment, the surface where commanded, as the simulator's float acts; ``limits``:
-``clip(u, lo, hi) - u``; ``rate_limits``: the deviation of a rate-limited copy of ``u``).
-Scores are the log-likelihood ratios less ``(n_params / 2) ln n`` (the Bayesian information
-criterion); the confidence is the posterior with equal priors (the effector's, summed over
-its kinds, times the kind's within it; jam and hard-over, effectiveness and float, are
-nested pairs and count as one for the kind's confidence).  A :class:`Detection` is emitted
-when both reach ``min_confidence``; otherwise the alarm stays pending while data arrive
-and is dropped unreported after a buffer's length (ambiguous: no decision).
+Isolation and classification (stage 2), on an alarm.  For every movable effector and every
+kind, the maximum-likelihood fit of the kind's own signature, each at its best onset within
+the buffer (the closed-form kinds on every onset at once by reverse cumulative sums, the
+others on the onsets of the stage-1 model, of the best jam and of the whole buffer):
+``jam``: ``p - u``; ``hardover``: a jam at a stop, or a run to it at the nominal rate limit
+(as the simulator's hard-over); ``float``: no moment, the surface where commanded (as the
+simulator's float acts); ``effectiveness``: ``(f - 1) u``, the surface where commanded;
+``limits``: ``clip(u, lo, hi) - u``; ``rate_limits``: a rate-limited copy of ``u`` from a
+free start.  Scores are the log-likelihood ratios less ``(n_params / 2) ln n`` (the Bayesian
+information criterion); the confidence is the posterior with equal priors: the effector's
+(summed over its kinds) times the share, within it, of the hypotheses that tell an
+allocator the same thing as the best (a jam at 59.9 and a hard-over at 60; a float and a jam
+at zero).  A :class:`Detection` is emitted when both reach ``min_confidence``; otherwise the
+alarm stays pending while data arrive and is dropped unreported after a buffer's length
+(ambiguous: no decision).  Two rules name what no data can tell apart: a surface never seen
+moving inside fitted reduced limits, and one that moves less than a jam's position is
+known to, are jammed.
 
-After a detection the event is applied to the detector's model (the prediction accounts
-for it), the effector is no longer tested, and the buffers restart.
+After a detection the event replaces what was known of that effector, the prediction
+accounts for it and the buffers restart.  Every movable effector stays under test against
+its current model (the fits are scored against it), so a limit first reported as a jam --
+while the command stayed beyond it -- is reported again as limits once the surface is seen
+inside, and an imperfect estimate is refined rather than blamed on a neighbour.
 
 Memory is bounded: ring buffers of ``2 window`` samples and a list of at most
 ``MAX_KEPT`` detections.  :meth:`FailureDetector.to_dict` gives the whole state.
@@ -62,7 +71,7 @@ from scipy.stats import chi2
 
 from ..exceptions import OptionError
 from ..health import EffectorHealth, FailureEvent, FailureKind, apply_event, health_from_dict, health_to_dict
-from ..problem import Problem
+from ..problem import Problem, as_real
 from ._checks import (
     SampleError,
     StateError,
@@ -277,7 +286,7 @@ class FailureDetector:
                 raise SampleError(f"position: expected shape ({m},) of finite values or NaN, got {pos.shape}")
         else:
             pos = None
-        t = self.samples * self.dt if time is None else setting_real_time(time)
+        t = self.samples * self.dt if time is None else as_real("time", time, SampleError)
         if not t > self.last_time:
             raise SampleError(f"time: {t:g} is not after the previous sample's {self.last_time:g}")
         known = self._known_positions(u)
@@ -639,12 +648,6 @@ class FailureDetector:
         det._pending = pending
         det.detections = [_detection_from_dict(x) for x in d["detections"]][-MAX_KEPT:]
         return det
-
-
-def setting_real_time(value: Any) -> float:
-    from ..problem import as_real
-
-    return as_real("time", value, SampleError)
 
 
 def _detection_from_dict(d: Any) -> Detection:

@@ -92,6 +92,9 @@ class NullSpaceExcitation:
         Hz: the multisine's frequencies; the PRBS's clock is ``1 / (2 band[1])``.
     seed : int
         The signal's random generator.
+
+    The wrapper keeps the signal's state: one per control loop (not for sharing between
+    threads, unlike the allocator it wraps).
     """
 
     def __init__(self, allocator: Allocator, sample_time: float, *, amplitude: Any = 1.0, signal: str = "multisine",
