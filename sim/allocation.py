@@ -82,11 +82,9 @@ def allocation_problem(vehicle: Vehicle, failure: Failure | None = None, *, pref
 
     Plant-level failures (A, B scaling) are unknown to the allocator by
     design (seed: "sudden, unknown failure"); effector failures are told
-    through :meth:`alloc.Problem.with_health` with the meanings of
-    :mod:`alloc.health` (see :func:`health_events`): jam and hard-over hold the
-    surface at its position, float means zero effectiveness *and* held at its
-    preferred position, limits and rate limits shrink the box, effectiveness
-    scales the column.  Bandwidth and delay failures are never told.
+    through :meth:`alloc.Problem.with_health` by each kind's told rules
+    (:data:`alloc.health.FAILURE_KINDS`, see :func:`health_events`).  Bandwidth
+    and delay failures are never told.
     ``preferred``: rule for the preferred positions (:func:`preferred_positions`).
     """
     import alloc
