@@ -12,12 +12,18 @@ per-user cache (its own empty ``TMPDIR``, ``HOME=/nonexistent``): the first allo
 (process CPU seconds, and the import, ``make_allocator`` and call steps in CPU and wall seconds,
 kernels compiled), as the installer (root: the package's own cache) and, where this runs as root,
 as the user ``nobody`` (the package read-only: its cache copied to a private directory on first
-use); ``pinv`` and ``qp`` ``--repeat`` times, every other method once.  Then the service's ready
-time: ``python -m service.main`` started, ``/v1/health`` polled every 20 ms until it answers 200.
-``--compile-baseline`` adds one sample each of pinv and qp with an empty cache (what the first
-allocation cost before the wheel carried the kernels).
+use); ``pinv`` and ``qp`` ``--repeat`` times, every other method once.  Then the service's
+start-up (as ``--service`` prints it).  ``--compile-baseline`` adds one sample each of pinv and qp
+with an empty cache (what the first allocation cost before the wheel carried the kernels).
+
+Service start-up (``--service``, the checkout ``--root`` with this Python; also part of
+``--fresh``): ``python -m service.main`` started; ready is its first 200 on ``/v1/health``
+(polled every 20 ms), in wall seconds and the server process's CPU seconds; then the latency
+of one ``da`` request sent at that moment (its kernels are usually still loading on the
+warm-up thread), and the time until ``/v1/ready`` reports every method's kernels loaded.
 
     python -m benchmarks.bench_startup --repeat 15
+    python -m benchmarks.bench_startup --service --repeat 5
     python -m benchmarks.bench_startup --root /path/to/old/checkout
     python -m benchmarks.bench_startup --fresh --repeat 5
 """
@@ -214,34 +220,101 @@ def _process_cpu(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-def service_ready(python: Path, scratch: Path, timeout: float = 300.0) -> dict[str, float]:
-    """Seconds from starting ``python -m service.main`` to its first 200 on ``/v1/health``, and
-    the server process's CPU seconds by then."""
+#: the first request after the service answers: a method other than the default (its kernels
+#: are then usually still loading on the warm-up thread)
+FIRST_REQUEST = json.dumps({"B": [[1.0, 0.5, 0.2], [0.1, 1.0, 0.3]], "umin": [-1, -1, -1], "umax": [1, 1, 1],
+                            "v": [0.3, 0.2], "method": "da"}).encode()
+
+
+def _get(port: int, path: str, timeout: float = 1.0) -> tuple[int, dict[str, Any]]:
+    with urllib.request.urlopen(f"http://127.0.0.1:{port}{path}", timeout=timeout) as answer:
+        return answer.status, json.loads(answer.read())
+
+
+def service_ready(python: Path, scratch: Path, timeout: float = 300.0,
+                  pythonpath: Path | None = None) -> dict[str, float]:
+    """One start of ``python -m service.main``: seconds (wall) and the server process's CPU
+    seconds to its first 200 on ``/v1/health`` (``ready``); the latency of a first ``da``
+    request sent right then (``first_request_s``); and the seconds and CPU until ``/v1/ready``
+    says every method's kernels are loaded (``warm``).  ``pythonpath``: a checkout to run."""
     port = _free_port()
     data = Path(tempfile.mkdtemp(dir=scratch))
     env = {k: v for k, v in os.environ.items() if not k.startswith("ALLOC_")}
+    if pythonpath is not None:
+        env["PYTHONPATH"] = str(pythonpath)
+    errors = open(data / "stderr.txt", "w+")  # a file: a pipe nobody reads can fill and stall the server
     t0 = time.perf_counter()
     server = subprocess.Popen([str(python), "-m", "service.main", "--port", str(port), "--data-dir", str(data),
-                               "--log-level", "warning"], env=env, cwd=str(scratch),
-                              stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+                               "--log-level", "warning"], env=env, cwd=str(pythonpath or scratch),
+                              stdout=subprocess.DEVNULL, stderr=errors)
+    row: dict[str, float] = {}
     try:
-        while time.perf_counter() - t0 < timeout:
+        def alive() -> None:
             if server.poll() is not None:
-                raise RuntimeError(f"the service exited {server.returncode}: {server.stderr.read()[-2000:]!r}")
+                errors.seek(0)
+                raise RuntimeError(f"the service exited {server.returncode}: {errors.read()[-2000:]!r}")
+
+        while "ready_wall" not in row:
+            alive()
+            if time.perf_counter() - t0 > timeout:
+                raise RuntimeError(f"the service did not answer /v1/health within {timeout} s")
             try:
-                with urllib.request.urlopen(f"http://127.0.0.1:{port}/v1/health", timeout=1) as answer:
-                    if answer.status == 200:
-                        return {"ready_wall": time.perf_counter() - t0, "ready_cpu": _process_cpu(server.pid)}
+                if _get(port, "/v1/health")[0] == 200:
+                    row.update(ready_wall=time.perf_counter() - t0, ready_cpu=_process_cpu(server.pid))
+            except OSError:
+                time.sleep(0.02)
+        t1 = time.perf_counter()
+        request = urllib.request.Request(f"http://127.0.0.1:{port}/v1/allocate", data=FIRST_REQUEST,
+                                         headers={"Content-Type": "application/json"})
+        with urllib.request.urlopen(request, timeout=timeout) as answer:
+            assert answer.status == 200 and json.loads(answer.read())["status"] == "exact"
+        row["first_request_s"] = time.perf_counter() - t1
+        while "warm_wall" not in row:
+            alive()
+            if time.perf_counter() - t0 > timeout:
+                raise RuntimeError(f"the service's kernels were not warm within {timeout} s")
+            try:
+                status, body = _get(port, "/v1/ready")
+                if status == 200 and body.get("warmed"):
+                    row.update(warm_wall=time.perf_counter() - t0, warm_cpu=_process_cpu(server.pid))
             except OSError:
                 pass
             time.sleep(0.02)
-        raise RuntimeError(f"the service did not answer /v1/health within {timeout} s")
+        return row
     finally:
         server.terminate()
         try:
             server.wait(10)
         except subprocess.TimeoutExpired:
             server.kill()
+        errors.close()
+
+
+def print_service_ready(ready: list[dict[str, float]]) -> None:
+    def cell(key: str) -> str:
+        x = [r[key] for r in ready]
+        return f"{np.median(x):.2f} ({min(x):.2f}-{max(x):.2f})"
+
+    print(f"\nService start-up (`python -m service.main`), {len(ready)} starts; medians (range)")
+    print("| ready: first 200 on /v1/health, wall s | ready, server CPU s | first `da` request then, s "
+          "| all kernels warm (/v1/ready warmed), wall s | warm, server CPU s |")
+    print("|---|---|---|---|---|")
+    print(f"| {cell('ready_wall')} | {cell('ready_cpu')} | {cell('first_request_s')} | {cell('warm_wall')} "
+          f"| {cell('warm_cpu')} |")
+
+
+def service_report(args: argparse.Namespace) -> None:
+    """The service start-up of the checkout ``--root`` with this Python (no fresh install)."""
+    scratch = Path(tempfile.mkdtemp(prefix="bench-startup-"))
+    try:
+        print(f"machine before: {machine_state()}")
+        ready = [service_ready(Path(sys.executable), scratch, pythonpath=args.root.resolve())
+                 for _ in range(args.repeat)]
+        print(f"machine after: {machine_state()}")
+        print(f"service from {args.root.resolve()}")
+        print_service_ready(ready)
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
 
 
 def fresh_report(args: argparse.Namespace) -> None:
@@ -289,11 +362,7 @@ def fresh_report(args: argparse.Namespace) -> None:
         print("|---|---|---|---|---|---|---|---|---|---|---|")
         for (method, user), rows in samples.items():
             print(_row(method, user, rows))
-        walls = [r["ready_wall"] for r in ready]
-        cpus = [r["ready_cpu"] for r in ready]
-        print(f"\nService ready (`python -m service.main`, first 200 on /v1/health), {len(ready)} starts: "
-              f"median {np.median(walls):.2f} s wall (range {min(walls):.2f}-{max(walls):.2f}), "
-              f"{np.median(cpus):.2f} s CPU of the server process")
+        print_service_ready(ready)
     finally:
         subprocess.run(["rm", "-rf", str(scratch)], check=False)
 
@@ -306,8 +375,12 @@ def main() -> None:
     parser.add_argument("--fresh", action="store_true", help="cold start after a fresh install (see above)")
     parser.add_argument("--venv", type=Path, default=None, help="with --fresh: a venv made by `pip install '.[service]'`")
     parser.add_argument("--compile-baseline", action="store_true", help="with --fresh: also an empty-cache sample")
+    parser.add_argument("--service", action="store_true",
+                        help="only the service start-up of --root (ready, first request, warm), --repeat starts")
     args = parser.parse_args()
-    if args.fresh:
+    if args.service:
+        service_report(args)
+    elif args.fresh:
         fresh_report(args)
     else:
         checkout_table(args.root, args.repeat)

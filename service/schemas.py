@@ -370,7 +370,8 @@ class ServiceHealth(BaseModel):
 class ServiceReady(BaseModel):
     status: Literal["ready"]
     startup_seconds: float = Field(description="seconds this worker took to start (imports excluded)")
-    warmed: bool = Field(description="numba kernels loaded or compiled before the worker became ready")
+    warmed: bool = Field(description="every method's numba kernels loaded in this worker (they load on a thread "
+                                     "after start)")
 
 
 class ProblemError(BaseModel):

@@ -25,7 +25,7 @@ import numpy as np
 
 import alloc
 
-__all__ = ["warm_up", "start_background_warm_up"]
+__all__ = ["warm_up", "is_warm", "start_background_warm_up"]
 
 _log = logging.getLogger("service")
 _lock = threading.Lock()

@@ -1,8 +1,9 @@
 """``/v1/health``: liveness and database check; ``/v1/ready``: readiness, for a load balancer.
 
 Liveness says the process answers (and its database does); readiness says it should be
-sent traffic: its start-up (numba kernels loaded or compiled, ``ALLOC_WARMUP``) is done and
-it is not shutting down.  uvicorn accepts connections only after start-up, so a worker
+sent traffic: its start-up (database, application) is done and it is not shutting down.
+The numba kernels load on a thread after the start-up (``ALLOC_WARMUP``, :mod:`service.warm`);
+``warmed`` says whether they all have (a request before that loads its method's kernels).  uvicorn accepts connections only after start-up, so a worker
 that answers at all is normally ready; ``/v1/ready`` turns 503 as soon as shutdown begins.
 """
 
@@ -15,6 +16,7 @@ import alloc
 from ..deps import StoreDep
 from ..errors import NotReady
 from ..schemas import NOT_READY, PROBLEM_RESPONSES, ServiceHealth, ServiceReady
+from ..warm import is_warm
 
 router = APIRouter(prefix="/v1", tags=["system"], responses=PROBLEM_RESPONSES)
 
@@ -35,4 +37,4 @@ async def ready(request: Request, store: StoreDep) -> ServiceReady:
         raise NotReady("this worker is starting or shutting down; send traffic elsewhere")
     store.ping()
     return ServiceReady(status="ready", startup_seconds=round(state.startup_seconds, 3),
-                        warmed=state.settings.warmup)
+                        warmed=state.settings.warmup and is_warm())
