@@ -150,11 +150,11 @@ def test_false_alarms_match_the_design_rate() -> None:
 
 
 def test_no_failure_no_detection_on_ice() -> None:
-    """A simulated minute of ICE at the seed's noise (0.7 per axis, see docs/estimation.md),
+    """Half a simulated minute of ICE at the seed's noise (0.7 per axis, see docs/estimation.md),
     design 0.1 false alarms per hour: no detection."""
     p = vehicles.problem("ice")
     rng = np.random.default_rng(3)
-    n = 6_000
+    n = 3_000
     mid, amp = (p.umin + p.umax) / 2, (p.umax - p.umin) / 4
     t = np.arange(n)[:, None] * DT
     U = mid + amp * np.sin(2 * np.pi * rng.uniform(0.2, 1.0, p.m) * t + rng.uniform(0, 6, p.m))
