@@ -1,0 +1,264 @@
+"""Generated C kernels (alloc.export) timed natively against wls-alloc (Rust, crates.io).
+
+Usage::
+
+    python -m benchmarks.bench_export [--calls 5000] [--passes 5] [--markdown out.md] [--json out.json]
+                                      [--no-rust] [--quick]
+
+For each problem (ICE 3 x 11, the hexa-x hexacopter 4 x 6, the 6 x 12 tilt-rotor hexacopter of
+bench_alloc) and each demand sequence (random: half attainable, half 2.5x past the attainable
+set; sines: a sum of sines at 2 kHz), every kernel is compiled with ``cc -O2`` into the native
+driver ``benchmarks/native/driver.c``, which times each call on its own (no Python in the
+loop) and prints the median, p99 and maximum time, the timer's own floor (an empty timed
+region) and the iterations.  ``wls-alloc`` (``benchmarks/native/wls_alloc_bench``, built here
+with ``cargo build --release``) runs on the same demands and limits with its own defaults
+(f32, its gamma from a condition bound of 4e5, warm start kept from call to call as it does
+by default; "cold" resets it each call).  Also reported: each kernel's code size (``size``:
+text + data) and stack (``-fstack-usage``: the sum of every function's frame, an upper bound
+of the deepest call chain since nothing recurses), and the agreement of every kernel with the
+library (through ctypes, not timed): bitwise-equal calls, max |u - u_library| and status
+mismatches.  ``--markdown`` writes the tables of docs/export.md with the machine's state.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ctypes
+import json
+import os
+import platform
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+import alloc
+import alloc.vehicles
+from alloc.export import export_c
+
+from .bench_alloc import hexacopter, random_sequence, sines_sequence
+
+HERE = Path(__file__).resolve().parent
+DRIVER = HERE / "native" / "driver.c"
+RUST = HERE / "native" / "wls_alloc_bench"
+CFLAGS = ["-std=c99", "-O2", "-Wall", "-Wextra", "-Werror", "-pedantic"]
+STATUS = {"exact": 0, "unattainable": 1, "fallback": 2}
+#: (label, method, precision, options)
+KERNELS = (("qp", "qp", "double", {}), ("qp float", "qp", "float", {}), ("wls", "wls", "double", {}),
+           ("wls float", "wls", "float", {}), ("pinv_scale", "pinv_scale", "double", {}),
+           ("pinv", "pinv", "double", {}))
+
+
+def problems() -> dict[str, alloc.Problem]:
+    return {"ICE 3x11": alloc.vehicles.problem("ice"), "hexa-x 4x6": alloc.vehicles.problem("hexa-x"),
+            "hexacopter 6x12": hexacopter()}
+
+
+def compile_driver(kernel, folder: Path) -> tuple[Path, dict]:
+    """The native driver linked with ``kernel``; and the kernel's code size and stack."""
+    h, c = kernel.write(folder)
+    exe = folder / f"drv_{kernel.prefix}"
+    upper = kernel.prefix.upper()
+    subprocess.run([_cc(), *CFLAGS, f"-I{folder}", f'-DKERNEL_HEADER="{h.name}"', f"-DPREFIX={kernel.prefix}",
+                    f"-DPREFIX_UPPER={upper}", str(DRIVER), str(c), "-o", str(exe), "-lm"], check=True)
+    obj = folder / f"{kernel.prefix}.o"
+    subprocess.run([_cc(), *CFLAGS, "-fstack-usage", "-c", str(c), "-o", str(obj)], check=True, cwd=folder)
+    return exe, {"code_bytes": _code_size(obj), "stack_bytes": _stack(obj.with_suffix(".su"))}
+
+
+def _cc() -> str:
+    cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
+    if cc is None:
+        raise SystemExit("bench_export: no C compiler (cc, gcc) on PATH")
+    return cc
+
+
+def _code_size(obj: Path) -> int | None:
+    if shutil.which("size") is None:
+        return None
+    out = subprocess.run(["size", str(obj)], capture_output=True, text=True, check=True).stdout.splitlines()
+    text, data, bss = (int(x) for x in out[1].split()[:3])
+    return text + data
+
+
+def _stack(su: Path) -> int | None:
+    if not su.exists():
+        return None
+    return sum(int(line.split("\t")[1]) for line in su.read_text().splitlines() if "\t" in line)
+
+
+def run_json(cmd: list[str]) -> dict:
+    out = subprocess.run(cmd, capture_output=True, text=True, check=True).stdout
+    return json.loads(out.strip().splitlines()[-1])
+
+
+def build_rust(folder: Path) -> Path | None:
+    """wls-alloc's harness, built from crates.io; None (with the reason printed) if it cannot be."""
+    cargo = shutil.which("cargo")
+    if cargo is None:
+        print("wls-alloc: skipped (no cargo on PATH)")
+        return None
+    target = folder / "rust-target"
+    run = subprocess.run([cargo, "build", "--release", "--quiet", "--target-dir", str(target)], cwd=RUST,
+                         capture_output=True, text=True)
+    if run.returncode != 0:
+        print(f"wls-alloc: skipped (cargo build failed: {run.stderr.strip().splitlines()[-1:]})")
+        return None
+    return target / "release" / "wls_alloc_bench"
+
+
+def rust_problem(p: alloc.Problem, path: Path) -> None:
+    wv = np.sqrt(np.diagonal(p.Wv))  # the crate squares its weights
+    wu = np.sqrt(np.diagonal(p.Wu))
+    np.concatenate([[p.k, p.m], p.B.ravel(), wv, wu, p.umin, p.umax, p.up]).astype("<f8").tofile(path)
+
+
+def agreement(kernel, folder: Path, p: alloc.Problem, V: np.ndarray, options: dict) -> dict:
+    """The kernel against the library on ``V`` through ctypes: bitwise-equal calls, max |du|, statuses."""
+    h, c = kernel.write(folder)
+    so = folder / f"{kernel.prefix}.so"
+    subprocess.run([_cc(), *CFLAGS, "-shared", "-fPIC", str(c), "-o", str(so), "-lm"], check=True)
+    lib = ctypes.CDLL(str(so))
+    double = kernel.precision == "double"
+    dtype = np.float64 if double else np.float32
+    f = getattr(lib, f"{kernel.prefix}_allocate")
+    f.restype = ctypes.c_int
+    f.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_double if double else ctypes.c_float, ctypes.c_void_p]
+    allocator = alloc.make_allocator(p, kernel.method, **options)
+    same = mismatched = 0
+    worst = 0.0
+    for v in V:
+        r = allocator(v)
+        vv = np.ascontiguousarray(v, dtype=dtype)
+        u = np.zeros(p.m, dtype=dtype)
+        status = f(vv.ctypes.data, None, 0.0, u.ctypes.data)
+        same += bool(np.array_equal(u.astype(float), r.u))
+        mismatched += status != STATUS[r.status.value]
+        worst = max(worst, float(np.abs(u - r.u).max()))
+    return {"calls": len(V), "bitwise": same, "max_du": worst, "status_mismatches": mismatched}
+
+
+def machine() -> dict:
+    model = ""
+    try:
+        model = next(x.split(":", 1)[1].strip() for x in open("/proc/cpuinfo") if x.startswith("model name"))
+    except (OSError, StopIteration):
+        pass
+    cc = subprocess.run([_cc(), "--version"], capture_output=True, text=True).stdout.splitlines()[0]
+    rustc = shutil.which("rustc")
+    rust = subprocess.run([rustc, "--version"], capture_output=True, text=True).stdout.strip() if rustc else "none"
+    return {"date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "cpu": model, "cores": os.cpu_count(),
+            "load_1min": os.getloadavg()[0], "cc": cc, "rustc": rust, "python": platform.python_version()}
+
+
+def main(argv: list[str] | None = None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--calls", type=int, default=5000, help="demands per sequence")
+    ap.add_argument("--passes", type=int, default=5, help="passes over the demands (each call timed)")
+    ap.add_argument("--agree", type=int, default=1000, help="demands checked against the library")
+    ap.add_argument("--no-rust", action="store_true", help="skip wls-alloc")
+    ap.add_argument("--quick", action="store_true", help="1,000 calls, 2 passes, 200 checked")
+    ap.add_argument("--json", help="write the results here")
+    ap.add_argument("--markdown", help="write docs/export.md's tables here")
+    args = ap.parse_args(argv)
+    if args.quick:
+        args.calls, args.passes, args.agree = 1000, 2, 200
+    out: dict = {"machine": machine(), "calls": args.calls, "passes": args.passes, "rows": [], "agreement": []}
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        rust = None if args.no_rust else build_rust(folder)
+        for pname, p in problems().items():
+            seqs = {"random": random_sequence(p, args.calls, seed=1), "sines": sines_sequence(p, args.calls, seed=1)}
+            files = {}
+            for sname, V in seqs.items():
+                files[sname] = folder / f"{pname.split()[0]}_{sname}.bin"
+                np.ascontiguousarray(V, dtype="<f8").tofile(files[sname])
+            for label, method, precision, options in KERNELS:
+                prefix = f"k_{re.sub(r'[^a-z0-9]', '_', pname.lower())}_{label.replace(' ', '_')}"
+                kernel = export_c(p, method, precision=precision, options=options, prefix=prefix)
+                sub = folder / prefix
+                exe, sizes = compile_driver(kernel, sub)
+                table = "#define TABLE 1" in kernel.source
+                out["agreement"].append({"problem": pname, "kernel": label, "table": table,
+                                         **agreement(kernel, sub, p, seqs["random"][:args.agree], options)})
+                for sname, path in files.items():
+                    res = run_json([str(exe), str(path), str(args.calls), str(args.passes)])
+                    out["rows"].append({"problem": pname, "sequence": sname, "kernel": label, "table": table,
+                                        **sizes, **res})
+                    _print_row(out["rows"][-1])
+            if rust is not None:
+                prob = folder / f"{pname.split()[0]}_problem.bin"
+                rust_problem(p, prob)
+                for sname, path in files.items():
+                    for mode in ("warm", "cold"):
+                        res = run_json([str(rust), str(prob), str(path), str(args.calls), str(args.passes), mode])
+                        out["rows"].append({"problem": pname, "sequence": sname, "kernel": f"wls-alloc {mode}",
+                                            "table": False, "code_bytes": None, "stack_bytes": None, **res})
+                        _print_row(out["rows"][-1])
+    _print_summary(out)
+    if args.json:
+        Path(args.json).write_text(json.dumps(out, indent=2))
+    if args.markdown:
+        Path(args.markdown).write_text(markdown(out))
+    return out
+
+
+def _print_row(r: dict) -> None:
+    floor = max(r["floor_median_ns"], 1.0)
+    print(f"{r['problem']:<16} {r['sequence']:<7} {r['kernel']:<16} median {r['median_ns']:8.0f} ns "
+          f"p99 {r['p99_ns']:8.0f} max {r['max_ns']:10.0f}  ({r['median_ns'] / floor:5.1f}x floor "
+          f"{floor:.0f} ns)  it {r['iterations_median']}/{r['iterations_max']}", flush=True)
+
+
+def _ratio(out: dict, problem: str, sequence: str, kernel: str, ref: str = "wls-alloc warm") -> float | None:
+    rows = {r["kernel"]: r for r in out["rows"] if r["problem"] == problem and r["sequence"] == sequence}
+    if kernel not in rows or ref not in rows:
+        return None
+    return rows[kernel]["median_ns"] / rows[ref]["median_ns"]
+
+
+def _print_summary(out: dict) -> None:
+    print("\nmedian / wls-alloc (warm) median, same run:")
+    for problem in problems():
+        for sequence in ("random", "sines"):
+            parts = [f"{k} {_ratio(out, problem, sequence, k):.2f}x" for k in ("qp", "wls", "qp float", "wls float")
+                     if _ratio(out, problem, sequence, k) is not None]
+            print(f"  {problem:<16} {sequence:<7} " + ", ".join(parts))
+    print("\nagreement with the library (random demands):")
+    for a in out["agreement"]:
+        print(f"  {a['problem']:<16} {a['kernel']:<11} bitwise {a['bitwise']}/{a['calls']} max|du| {a['max_du']:.1e} "
+              f"status mismatches {a['status_mismatches']}")
+
+
+def markdown(out: dict) -> str:
+    m = out["machine"]
+    lines = [f"Measured {m['date']} on {m['cores']} cores ({m['cpu'] or 'unknown CPU'}), load average "
+             f"{m['load_1min']:.1f} at the start, {m['cc']}, {m['rustc']}; {out['calls']:,} demands a sequence, "
+             f"{out['passes']} passes, every call timed on its own by the native driver (no Python).", "",
+             "| problem | demands | kernel | median ns | p99 ns | max ns | x floor | x wls-alloc | iterations median / max "
+             "| code bytes | stack bytes |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in out["rows"]:
+        ratio = _ratio(out, r["problem"], r["sequence"], r["kernel"])
+        lines.append(
+            f"| {r['problem']} | {r['sequence']} | {r['kernel']}{' (table)' if r['table'] else ''} | {r['median_ns']:.0f} "
+            f"| {r['p99_ns']:.0f} | {r['max_ns']:.0f} | {r['median_ns'] / max(r['floor_median_ns'], 1.0):.1f} "
+            f"| {'' if ratio is None else f'{ratio:.2f}'} | {r['iterations_median']} / {r['iterations_max']} "
+            f"| {r['code_bytes'] if r['code_bytes'] is not None else ''} "
+            f"| {r['stack_bytes'] if r['stack_bytes'] is not None else ''} |")
+    lines += ["", "Agreement with the library on the random demands (through ctypes):", "",
+              "| problem | kernel | calls | bitwise equal | max abs(u - u_library) | status mismatches |",
+              "|---|---|---|---|---|---|"]
+    for a in out["agreement"]:
+        lines.append(f"| {a['problem']} | {a['kernel']}{' (table)' if a['table'] else ''} | {a['calls']} | "
+                     f"{a['bitwise']} | {a['max_du']:.1e} | {a['status_mismatches']} |")
+    return "\n".join(lines) + "\n"
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
