@@ -621,3 +621,49 @@ def free_set_pinv(SB, rdiag, S, free, rcond, floor):  # pragma: no cover - compi
                 t += Z[q, l] * S[l, i]
             P[q, i] = rdiag[F[q]] * t
     return P
+
+
+# Fixed-order products for the methods' per-call paths: numpy's ``@`` takes BLAS or its own
+# loops by the operands' layout (contiguous or strided, their alignment), which round
+# differently, so an allocator and its copy could answer a few ulps apart.
+@njit(cache=True, nogil=True)
+def matvec(A, x):  # pragma: no cover - compiled
+    """``A @ x`` summed left to right in each row."""
+    n, p = A.shape
+    y = np.empty(n)
+    for i in range(n):
+        s = 0.0
+        for j in range(p):
+            s += A[i, j] * x[j]
+        y[i] = s
+    return y
+
+
+@njit(cache=True, nogil=True)
+def rmatvec(A, x):  # pragma: no cover - compiled
+    """``A.T @ x`` summed in row order of ``A``."""
+    n, p = A.shape
+    y = np.zeros(p)
+    for i in range(n):
+        for j in range(p):
+            y[j] += A[i, j] * x[i]
+    return y
+
+
+@njit(cache=True, nogil=True)
+def increment(P, B, b, v):  # pragma: no cover - compiled
+    """``b + P (v - B b)`` (the incremental pseudo-inverse about ``b``), in a fixed order."""
+    k, m = B.shape
+    r = np.empty(k)
+    for i in range(k):
+        s = 0.0
+        for j in range(m):
+            s += B[i, j] * b[j]
+        r[i] = v[i] - s
+    u = np.empty(m)
+    for j in range(m):
+        s = 0.0
+        for i in range(k):
+            s += P[j, i] * r[i]
+        u[j] = b[j] + s
+    return u

@@ -72,6 +72,40 @@ def test_contract_check_catches_a_planted_violation(monkeypatch):
     assert any("dishonest exact" in s for s in hostile.check(c)["fail"])
 
 
+def test_slow_call_rule_counts_cpu_not_waiting(monkeypatch):
+    """A call is slow by the CPU seconds it costs (the registry's unit), not by wall time:
+    a call that waits 0.3 s passes a 0.1 CPU-second limit, one that computes 0.3 s fails it,
+    and a wait beyond the wall-clock backstop fails as well."""
+    import time
+
+    import alloc
+
+    c = {"seed": -1, "method": "pinv", "options": {},
+         "fields": {"B": [[1.0, 1.0]], "umin": [-1, -1], "umax": [1, 1]}, "calls": [{"v": [0.5]}]}
+    hostile.check(c)
+    real = alloc.Allocator.__call__
+    monkeypatch.setattr(hostile, "CALL_LIMIT", 0.1)
+
+    def waiting(self, v, **kw):
+        time.sleep(0.3)
+        return real(self, v, **kw)
+
+    def computing(self, v, **kw):
+        t0 = time.thread_time()
+        while time.thread_time() - t0 < 0.3:
+            pass
+        return real(self, v, **kw)
+
+    monkeypatch.setattr(alloc.Allocator, "__call__", waiting)
+    assert hostile.check(c)["fail"] == []
+    monkeypatch.setattr(hostile, "CALL_WALL_LIMIT", 0.2)
+    assert any(s.startswith("slow call") for s in hostile.check(c)["fail"])
+    monkeypatch.setattr(hostile, "CALL_WALL_LIMIT", 20.0)
+    monkeypatch.setattr(alloc.Allocator, "__call__", computing)
+    fails = hostile.check(c)["fail"]
+    assert len(fails) == 1 and fails[0].startswith("slow call: 0.3")
+
+
 def test_issue_22_classes_are_drawn_without_changing_the_earlier_classes():
     cases = [hostile.case(s) for s in range(2000)]
     counts = Counter(k for c in cases for k in hostile.case_classes(c))

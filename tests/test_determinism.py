@@ -10,6 +10,7 @@ cannot be copied).  The answers agree to 1e-12.
 from __future__ import annotations
 
 import copy
+import zlib
 
 import numpy as np
 import pytest
@@ -75,3 +76,142 @@ def test_long_lived_equals_fresh_random_problem(method):
     fresh = _fresh_factory(p, method, {})
     for v, kw in calls:
         np.testing.assert_allclose(long_lived(v, **kw).u, fresh()(v, **kw).u, rtol=0, atol=1e-12)
+
+
+# ------------------------------------------------------------------ bit for bit, any layout
+#: options beyond the defaults whose call paths differ (LP backends, the incremental
+#: pseudo-inverse, cgi's level-by-level cascade)
+LAYOUT_VARIANTS = VARIANTS + [("da", {"backend": "facet"}), ("pinv", {"incremental": True}),
+                              ("pinv_scale", {"incremental": True}), ("cgi", {"priorities": "by axis"}),
+                              ("qp", {"priorities": "by axis"}), ("lp", {"priorities": "by axis"})]
+#: problems per variant, calls per problem
+N_LAYOUT_PROBLEMS, N_LAYOUT_CALLS = 6, 4
+
+
+def _misaligned(a: np.ndarray, offset: int) -> np.ndarray:
+    """A copy of ``a`` that starts ``offset`` floats into a larger buffer (8-byte aligned only)."""
+    buf = np.empty(a.size + offset + 1)
+    out = buf[offset:offset + a.size]
+    out[...] = a
+    return out
+
+
+def _strided(a: np.ndarray) -> np.ndarray:
+    buf = np.empty(2 * a.size)
+    buf[::2] = a
+    return buf[::2]
+
+
+def layout_problems(seed: int, n: int) -> list[alloc.Problem]:
+    """Seeded problems that take every call path of the methods: full-rank and flat sets
+    (k > m, rank-deficient B), jammed and one-sided effectors, ``up`` off zero, rate limits."""
+    rng = np.random.default_rng(seed)
+    out = []
+    kinds = ["general", "rank_deficient", "jammed", "coplanar", "duplicate", "zero_column"]
+    for i in range(n):
+        k = int(rng.choice([1, 2, 3, 3, 4]))
+        m = int(rng.integers(max(1, k - 1), 8))
+        p = random_problem(rng, k, m, kinds[i % len(kinds)])
+        if i % 3 == 0 and k > 1:  # k > rank: a flat attainable set
+            B = np.array(p.B)
+            B[-1] = 0.3 * B[0]
+            p = p.replace(B=B)
+        out.append(p)
+    return out
+
+
+def _layout_calls(p: alloc.Problem, rng: np.random.Generator, n: int):
+    U = rng.uniform(p.umin, p.umax, size=(n, p.m))
+    V = U @ p.B.T * rng.choice([0.5, 1.0, 3.0], size=(n, 1)) + 0.01 * rng.standard_normal((n, p.k))
+    calls = []
+    for i, v in enumerate(V):
+        kw = {} if i % 2 == 0 else {"u_prev": rng.uniform(p.umin, p.umax), "dt": 0.02}
+        calls.append((v, kw))
+    return calls
+
+
+def _answer(f, v, kw):
+    r = f(v, **kw)
+    return r.u.tobytes(), r.v_achieved.tobytes(), r.status
+
+
+def _layouts(v: np.ndarray, kw: dict):
+    """The same call with its arrays as given, misaligned by one float and strided."""
+    yield "as given", v, kw
+    for name, make in (("offset by one float", lambda a: _misaligned(a, 1)), ("strided", _strided)):
+        yield name, make(v), {x: make(y) if isinstance(y, np.ndarray) else y for x, y in kw.items()}
+
+
+@pytest.mark.parametrize("method,options", LAYOUT_VARIANTS,
+                         ids=[f"{m}-{'-'.join(f'{a}={b}' for a, b in o.items()) or 'default'}" for m, o in LAYOUT_VARIANTS])
+def test_answers_do_not_depend_on_memory_layout(method, options):
+    """The original allocator, two deep copies, a copy and a pickle round trip (their arrays at
+    other addresses) answer every call -- demand and ``u_prev`` as given, offset by one float
+    in a larger buffer, and strided -- bit for bit, status included; the batch as well."""
+    import pickle
+
+    rng = np.random.default_rng(2212)
+    for p in layout_problems(zlib.crc32(f"{method}{options}".encode()), N_LAYOUT_PROBLEMS):
+        opts = {x: list(range(p.k, 0, -1)) if y == "by axis" else y for x, y in options.items()}
+        try:
+            f = alloc.make_allocator(p, method, **opts)
+        except alloc.AllocError:
+            continue  # an option this problem refuses (a backend, a size)
+        twins = {"deepcopy": copy.deepcopy(f), "deepcopy 2": copy.deepcopy(f), "copy": copy.copy(f),
+                 "pickle": pickle.loads(pickle.dumps(f))}
+        calls = _layout_calls(p, rng, N_LAYOUT_CALLS)
+        for v, kw in calls:
+            want = _answer(f, v, kw)
+            for name, vv, kk in _layouts(v, kw):
+                assert _answer(f, vv, kk) == want, f"{method} {options}: {name} input differs on {p!r}"
+            for name, twin in twins.items():
+                assert _answer(twin, v, kw) == want, f"{method} {options}: {name} answers differ on {p!r}"
+        V = np.array([v for v, _ in calls])
+        want_b = f.batch(V)
+        for name, twin in twins.items():
+            got = twin.batch(_misaligned(V.ravel(), 1).reshape(V.shape))
+            assert got.u.tobytes() == want_b.u.tobytes() and list(got.status) == list(want_b.status), \
+                f"{method} {options}: {name} batch differs on {p!r}"
+
+
+def test_da_table_deepcopy_answers_bit_for_bit_on_a_flat_set():
+    """Hostile seed 30000408: on a flat set (k = 4 > m = 3) the search ran numpy products over
+    the set's basis, a strided view in the original and a contiguous array in its deep copy,
+    which round differently; the compiled flat search answers both bit for bit."""
+    B = [[-2.005300279472917, -1.2441694943889845, 1.752706010801285],
+         [-2.5568999761759126, -1.9995305738226383, 2.2351792790739173],
+         [-1.980911506057848, -1.3408990484891268, 1.731485422915185],
+         [1.2842195245986237, 1.6150645662880676, -1.1231579256306097]]
+    umin = [-1.3562687775164036e48, -1.2103896882114235e47, -1.1041135561204125e47]
+    umax = [1.493372969772889e48, 6.9068285472364255e47, 4.960878082633313e47]
+    v = np.array([-3.252012546471413e48, -4.198935484037509e48, -3.226646326946874e48, 2.186397103164009e48])
+    original = alloc.make_allocator(alloc.Problem(B, umin, umax), "da_table")
+    for _ in range(4):  # copies land at other addresses
+        twin = copy.deepcopy(original)
+        assert original(v).u.tobytes() == twin(v).u.tobytes()
+
+
+@pytest.mark.parametrize("method", ["da_facet", "da_bisect", "da_table"])
+def test_flat_compiled_search_agrees_with_the_reference(method):
+    """The compiled flat-set search (:func:`alloc.methods._facet_kernels.flat_ray_exit_solve`,
+    in its own basis of the set's hull) against the numpy reference (``AttainableSet.ray_exit``
+    in the set's basis), nominal and rate-limited, on seeded flat problems: the same status,
+    ``u`` within 1e-9 of the box's span, ``B u`` within 1e-9 of its scale."""
+    rng = np.random.default_rng(30000408)
+    checked = 0
+    for p in layout_problems(99, 30):
+        f = alloc.make_allocator(p, method)
+        impl = f.impl
+        if getattr(impl, "_lp", None) is not None or not impl._flat:
+            continue
+        for v, kw in _layout_calls(p, rng, 8):
+            lo, hi = p.effective_bounds(kw.get("u_prev"), kw.get("dt")) if kw else (p.umin, p.umax)
+            u, it = impl.solve(v, lo, hi, None)
+            ur, itr = impl._solve_reference(v, lo, hi, None)
+            span = float(np.abs(hi - lo).max()) + 1e-300
+            scale = float(np.abs(p.B).sum(axis=1).max()) * max(span, float(np.abs(u).max()))
+            assert it == itr
+            assert np.abs(u - ur).max() <= 1e-9 * span, (p, v, kw)
+            assert np.abs(p.B @ (u - ur)).max() <= 1e-9 * scale
+            checked += 1
+    assert checked >= 40

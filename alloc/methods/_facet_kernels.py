@@ -14,7 +14,7 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["facet_solve", "bisect_solve", "ray_exit_solve"]
+__all__ = ["facet_solve", "bisect_solve", "ray_exit_solve", "flat_ray_exit_solve"]
 
 _TOL = 1e-10  # Eq 1.17 slack, as in facet_search.py
 _EPS = np.finfo(np.float64).eps
@@ -427,39 +427,19 @@ def _qr_back(Q, R, rhs, p0):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def ray_exit_solve(v, up, lo, hi, B, Br, Nr, NB, member, sign, active, tile_hi, tile_span,
-                   facet_ptr):  # pragma: no cover - compiled
-    """Direct allocation in a box ``[lo, hi]`` inside the position limits (full-rank set).
-
-    Support-function form (``AttainableSet.ray_exit``): ``a* = min gap_f / (n_f . d)``
-    over facets with ``n_f . d > 0``, gaps from this box; ``u*`` from Eq 1.16 on the hit
-    facet's tiles (least squares, as ``point_on_facet``).  Returns ``(u, iterations)``.
-    """
-    k, m = B.shape
-    u0 = np.empty(m)
-    for j in range(m):
-        u0[j] = min(max(up[j], lo[j]), hi[j])
-    d = np.empty(k)
-    dmax, vmax, dn2 = 0.0, 1.0, 0.0
-    for i in range(k):
-        s = 0.0
-        for j in range(m):
-            s += B[i, j] * u0[j]
-        d[i] = v[i] - s
-        if abs(d[i]) > dmax or d[i] != d[i]:
-            dmax = abs(d[i])
-        if abs(v[i]) > vmax:
-            vmax = abs(v[i])
-        dn2 += d[i] * d[i]
-    if not dmax > 1e-14 * vmax:
-        return u0, 0
-    dn = math.sqrt(dn2)
+def _exit_in_box(y, dn, u0, lo, hi, Br, Nr, NB, member, sign, active, tile_hi, tile_span,
+                 facet_ptr):  # pragma: no cover - compiled
+    """``(u*, a*)`` of the ray ``Br u0 + a y`` (``y`` in the set's coordinates, ``|d| = dn``)
+    in the box ``[lo, hi]``: ``a* = min gap_f / (n_f . y)`` over facets with ``n_f . y > 0``,
+    gaps from this box; ``u*`` from Eq 1.16 on the hit facet's tiles (least squares, as
+    ``point_on_facet``).  ``a* = inf`` when no facet lies ahead (a degenerate structure)."""
+    r, m = Br.shape
     F = Nr.shape[0]
     best_f, best_ratio = 0, np.inf
     for f in range(F):
         nd = 0.0
-        for i in range(k):
-            nd += Nr[f, i] * d[i]
+        for i in range(r):
+            nd += Nr[f, i] * y[i]
         ratio = np.inf
         if nd > 1e-12 * dn:
             gap = 0.0
@@ -472,25 +452,25 @@ def ray_exit_solve(v, up, lo, hi, B, Br, Nr, NB, member, sign, active, tile_hi, 
             if ratio != ratio:
                 break
     a = max(0.0, best_ratio)
-    if a == 0.0:
-        return u0, 1
+    ustar = u0.copy()
+    if a == 0.0 or a == np.inf:
+        return ustar, a
     f = best_f
     # point on facet f: Eq 1.16 on each of its tiles in this box
-    q = np.empty(k)
-    for i in range(k):
+    q = np.empty(r)
+    for i in range(r):
         s = 0.0
         for j in range(m):
             s += Br[i, j] * u0[j]
-        q[i] = s + a * d[i]
+        q[i] = s + a * y[i]
     n_free = tile_span.shape[1]
     Ut = np.empty(m)
     St = np.zeros((n_free, m))
-    E = np.zeros((k, n_free))
-    rhs = np.empty(k)
-    ustar = u0.copy()
+    E = np.zeros((r, n_free))
+    rhs = np.empty(r)
     best = -np.inf
-    rcond = _EPS * max(k, n_free)
-    Qw = np.empty((n_free, k))
+    rcond = _EPS * max(r, n_free)
+    Qw = np.empty((n_free, r))
     Rw = np.empty((n_free, n_free))
     for t in range(facet_ptr[f], facet_ptr[f + 1]):
         for j in range(m):
@@ -499,7 +479,7 @@ def ray_exit_solve(v, up, lo, hi, B, Br, Nr, NB, member, sign, active, tile_hi, 
             c = tile_span[t, e]
             for j in range(m):
                 St[e, j] = member[c, j] * (sign[j] * (hi[j] - lo[j]))
-        for i in range(k):
+        for i in range(r):
             s = 0.0
             for j in range(m):
                 s += Br[i, j] * Ut[j]
@@ -526,4 +506,100 @@ def ray_exit_solve(v, up, lo, hi, B, Br, Nr, NB, member, sign, active, tile_hi, 
                 ustar[j] = Ut[j] + s
         if margin >= -1e-12:
             break
+    return ustar, a
+
+
+@njit(cache=True, nogil=True)
+def _base_and_demand(v, up, lo, hi, B, u0, d):  # pragma: no cover - compiled
+    """``u0 = clip(up, lo, hi)``, ``d = v - B u0``; False when ``d`` is negligible."""
+    k, m = B.shape
+    for j in range(m):
+        u0[j] = min(max(up[j], lo[j]), hi[j])
+    dmax, vmax = 0.0, 1.0
+    for i in range(k):
+        s = 0.0
+        for j in range(m):
+            s += B[i, j] * u0[j]
+        d[i] = v[i] - s
+        if abs(d[i]) > dmax or d[i] != d[i]:
+            dmax = abs(d[i])
+        if abs(v[i]) > vmax:
+            vmax = abs(v[i])
+    return dmax > 1e-14 * vmax
+
+
+@njit(cache=True, nogil=True)
+def ray_exit_solve(v, up, lo, hi, B, Br, Nr, NB, member, sign, active, tile_hi, tile_span,
+                   facet_ptr):  # pragma: no cover - compiled
+    """Direct allocation in a box ``[lo, hi]`` inside the position limits (full-rank set).
+
+    Support-function form (``AttainableSet.ray_exit``, :func:`_exit_in_box`).  Returns
+    ``(u, iterations)``; iterations ``-1`` when no facet lies ahead of the ray (a
+    degenerate structure: the caller's safe answer).
+    """
+    k, m = B.shape
+    u0 = np.empty(m)
+    d = np.empty(k)
+    if not _base_and_demand(v, up, lo, hi, B, u0, d):
+        return u0, 0
+    dn2 = 0.0
+    for i in range(k):
+        dn2 += d[i] * d[i]
+    ustar, a = _exit_in_box(d, math.sqrt(dn2), u0, lo, hi, Br, Nr, NB, member, sign, active, tile_hi, tile_span,
+                            facet_ptr)
+    if a == np.inf:
+        return u0, -1
+    return _eq_1_15(u0, a, ustar), 1
+
+
+@njit(cache=True, nogil=True)
+def flat_ray_exit_solve(v, up, lo, hi, B, range_proj, Q, Br, Nr, NB, member, sign, active, tile_hi, tile_span,
+                        facet_ptr):  # pragma: no cover - compiled
+    """Direct allocation on a flat set (rank ``r < k``) in a box ``[lo, hi]``.
+
+    As the core's ``da``: the ray follows the part of ``d = v - B u0`` in the range of
+    ``B`` (``range_proj``); a ray off the set's own hull (orthonormal basis ``Q`` (k, r))
+    leaves at once (``u0``); otherwise :func:`_exit_in_box` in the set's coordinates
+    ``y = Q' d``.  Returns ``(u, iterations)`` as :func:`ray_exit_solve`.
+    """
+    k, m = B.shape
+    r = Q.shape[1]
+    u0 = np.empty(m)
+    d0 = np.empty(k)
+    if not _base_and_demand(v, up, lo, hi, B, u0, d0):
+        return u0, 0
+    d = np.empty(k)
+    dmax, vmax = 0.0, 1.0
+    for i in range(k):
+        s = 0.0
+        for j in range(k):
+            s += range_proj[i, j] * d0[j]
+        d[i] = s
+        if abs(s) > dmax or s != s:
+            dmax = abs(s)
+        if abs(v[i]) > vmax:
+            vmax = abs(v[i])
+    if not dmax > 1e-14 * vmax:
+        return u0, 0
+    dn2 = 0.0
+    for i in range(k):
+        dn2 += d[i] * d[i]
+    dn = math.sqrt(dn2)
+    y = np.empty(r)
+    for e in range(r):
+        s = 0.0
+        for i in range(k):
+            s += Q[i, e] * d[i]
+        y[e] = s
+    off2 = 0.0
+    for i in range(k):
+        s = d[i]
+        for e in range(r):
+            s -= Q[i, e] * y[e]
+        off2 += s * s
+    if r == 0 or not math.sqrt(off2) <= 1e-12 * dn:
+        return u0, 1  # leaves the set's hull at once
+    ustar, a = _exit_in_box(y, dn, u0, lo, hi, Br, Nr, NB, member, sign, active, tile_hi, tile_span, facet_ptr)
+    if a == np.inf:
+        return u0, -1
     return _eq_1_15(u0, a, ustar), 1

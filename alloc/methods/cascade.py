@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from .._kernels import _FREE_BITS, cascade, daisy_chain, free_set_insert, free_set_pinv
+from .._kernels import _FREE_BITS, cascade, daisy_chain, free_set_insert, free_set_pinv, matvec
 from .._linalg import ABS_FLOOR, RCOND, check_rcond, max_scale, priority_groups, sqrt_factor, weighted_pinv
 from ..exceptions import OptionError, ProblemError
 from ..options import groups as groups_option
@@ -237,12 +237,12 @@ class CascadedGeneralizedInverse(Method):
             sub = [np.arange(done.size), np.arange(done.size, rows.size)]
             Wv = p.Wv[np.ix_(rows, rows)]
             for _ in range(p.m + 1):
-                r = v[level] - p.B[level] @ u
+                r = v[level] - matvec(p.B[level], u)  # fixed order (alloc._kernels.matvec): any copy, same bits
                 if not free.any() or np.abs(r).max() <= 1e-12 * max(1.0, float(np.abs(v).max())):
                     break
                 F = np.flatnonzero(free)
                 P = self._level_pinv(li, free, rows, F, Wv, sub)
-                du = P[:, done.size:] @ r
+                du = matvec(np.ascontiguousarray(P[:, done.size:]), r)
                 s = max_scale(u[F], du, lo[F], hi[F])
                 u[F] = np.minimum(np.maximum(u[F] + s * du, lo[F]), hi[F])
                 steps += 1

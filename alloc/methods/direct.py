@@ -29,7 +29,7 @@ import math
 
 import numpy as np
 
-from .._kernels import facet_polish
+from .._kernels import facet_polish, matvec, rmatvec
 from ..exceptions import SolverError
 from ..options import choice
 from ..problem import Problem
@@ -104,18 +104,18 @@ class DirectAllocation(Method):
         # with sigma the largest entry of Q B D.  Equalities on the row space of B only
         # (a rank-deficient B has dependent rows; directions below 1e-8 of the largest
         # singular value carry less moment than the exact tolerance and are dropped).
-        self._Q = row_basis(p.B, rtol=1e-8)
+        self._Q = np.array(row_basis(p.B, rtol=1e-8), order="C")  # own, contiguous: one kernel signature
         self._c0 = (p.umax + p.umin) / 2.0
         self._D = (p.umax - p.umin) / 2.0
         self._moving = self._D > 0
         QBD = (self._Q @ p.B) * self._D
         self._sigma = float(np.abs(QBD).max()) if QBD.size and np.abs(QBD).max() > 0 else 1.0
-        self._QBs = self._Q @ p.B / self._sigma  # applied to u - c
+        self._QBs = np.array(self._Q @ p.B / self._sigma, order="C")  # applied to u - c
         self._A = np.hstack([QBD / self._sigma, np.zeros((self._Q.shape[0], 1))])
         self._c = np.zeros(p.m + 1)
         self._c[-1] = -1.0
         reach = float(np.linalg.norm(p.B, axis=0) @ (p.umax - p.umin))
-        self._B = np.ascontiguousarray(p.B)
+        self._B = np.array(p.B, order="C")  # writable: a pickled copy's arrays are, one kernel signature
         self._lb = np.concatenate([np.where(self._moving, -1.0, 0.0), [0.0]])
         # along a unit direction, the distance to the AMS boundary never exceeds its extent
         self._ub = np.concatenate([np.where(self._moving, 1.0, 0.0), [2.0 * reach / self._sigma + 1.0]])
@@ -150,11 +150,14 @@ class DirectAllocation(Method):
         facets keep the LP's answer.
         """
         p = self.problem
+        # fixed-order products (alloc._kernels.matvec): numpy's ``@`` rounds by the operands'
+        # layout, and a copy of this allocator must answer bit for bit
         dmax = float(np.abs(d).max())
         ds = d / dmax  # |d| without overflow or underflow of its square
-        norm = dmax * float(np.sqrt(ds @ ds))
+        ds2 = float(matvec(ds.reshape(1, -1), ds)[0])
+        norm = dmax * math.sqrt(ds2)
         A = self._A
-        A[:, -1] = -(self._Q @ (ds / float(np.sqrt(ds @ ds))))
+        A[:, -1] = -matvec(self._Q, ds / math.sqrt(ds2))
         if lo is p.umin and hi is p.umax:
             # read-only: the backend re-sends them only after a rate-limited call changed them
             lb, ub = self._lb, self._ub
@@ -162,7 +165,7 @@ class DirectAllocation(Method):
         else:
             lb, ub = self._lb.copy(), self._ub.copy()
             lb[:-1], ub[:-1] = self._to_x(lo), self._to_x(hi)
-            rhs = self._QBs @ (u0 - self._c0)
+            rhs = matvec(self._QBs, u0 - self._c0)
         x, it = self._model.solve(A=A, lb=lb, ub=ub, bl=rhs, bu=rhs)
         ustar = np.minimum(np.maximum(self._c0 + self._D * x[:-1], lo), hi)
         a = float(x[-1]) * (self._sigma / norm)
@@ -181,12 +184,12 @@ class DirectAllocation(Method):
             u0, Bu0 = self._u0, self._Bu0
         else:
             u0 = np.minimum(np.maximum(p.up, lo), hi)
-            Bu0 = p.B @ u0
+            Bu0 = matvec(self._B, u0)
         d = v - Bu0
         if self._Q.shape[0] != p.k:
             # Only the part of the demand in the range of B can be reached; the rest is
             # reported as unallocated (rank-deficient B).
-            d = self._Q.T @ (self._Q @ d)
+            d = rmatvec(self._Q, matvec(self._Q, d))
         if not float(np.abs(d).max()) > 1e-14 * max(1.0, float(np.abs(v).max())):
             return u0, 0
         a, ustar, it = self.boundary(d, u0, lo, hi)

@@ -29,7 +29,10 @@ Rate limits: the facet *structure* depends only on the columns' directions, so w
 ``u_prev``/``dt`` the search is the support-function form over the same facets with gaps
 recomputed from the call's bounds (:meth:`AttainableSet.ray_exit`): exact, no LP.  Other
 ``k`` than 3 make ``da_bisect``/``da_table`` use the sequential search.  A flat AMS
-(rank B < k) is handled by :class:`AttainableSet` (a demand off its hull has ``a* = 0``).
+(rank B < k) is searched the same way in an orthonormal basis of its hull (a demand off its
+hull has ``a* = 0``; :meth:`AttainableSet.ray_exit` is the reference).  Every per-call
+product is a compiled loop in a fixed order, never numpy's ``@``: BLAS and numpy's own loops
+round differently by the operands' layout, and a copy of an allocator must answer bit for bit.
 
 The geometry is :mod:`alloc.ams`'s public API only (:class:`~alloc.ams.AttainableSet`, its
 :attr:`~alloc.ams.AttainableSet.tiling` and ``ray_exit``); the per-call searches are compiled
@@ -45,7 +48,7 @@ from typing import Any
 import numpy as np
 
 from ..ams.geometry import AttainableSet
-from ..exceptions import OptionError
+from ..exceptions import OptionError, SolverError
 from ..options import integer
 from ..problem import Problem
 from ..method import BUILD_LIMIT_BYTES, BUILD_LIMIT_SECONDS, FloatArray, Method, register
@@ -213,6 +216,7 @@ class FacetSearch(Method):
             U, sv, _ = np.linalg.svd(p.B, full_matrices=False)
             Qb = U[:, sv > 1e-10 * sv[0]] if sv.size and sv[0] > 0 else np.zeros((p.k, 0))
             self._range_proj = Qb @ Qb.T
+            self._prepare_flat_kernel()
             return
         k = p.k
         scale = np.abs(ams.tiling.normal_columns).sum(axis=1) * np.abs(p.umax - p.umin).max() + 1e-300
@@ -244,6 +248,26 @@ class FacetSearch(Method):
                       f64(ams.sign, dtype=float), f64(ams.active), f64(t.tile_hi), f64(t.tile_span),
                       np.searchsorted(t.tile_facet, np.arange(ams.n_facets + 1)).astype(np.intp))
 
+    def _prepare_flat_kernel(self) -> None:
+        """The flat set's tables in an orthonormal basis ``Q`` of its hull (the row space of
+        its facet normals), for the compiled search: every call is then loops in a fixed
+        order, whatever the memory layout of the arrays (numpy's BLAS paths are not)."""
+        ams, p = self.ams, self.problem
+        k, m, r = p.k, p.m, ams.rank
+        f64 = np.ascontiguousarray
+        if r == 0:
+            Q, Br, Nr = np.zeros((k, 0)), np.zeros((0, m)), np.zeros((0, 0))
+            NB, tile_hi, tile_span = np.zeros((0, m)), np.zeros((0, m), dtype=bool), np.zeros((0, 0), dtype=np.intp)
+            ptr = np.zeros(1, dtype=np.intp)
+        else:
+            t = ams.tiling
+            Q = np.linalg.svd(ams.normals, full_matrices=False)[2][:r].T  # (k, r)
+            Br, Nr, NB, tile_hi, tile_span = Q.T @ p.B, ams.normals @ Q, t.normal_columns, t.tile_hi, t.tile_span
+            ptr = np.searchsorted(t.tile_facet, np.arange(ams.n_facets + 1)).astype(np.intp)
+        self._kflat = (f64(p.B), f64(self._range_proj), f64(Q), f64(Br), f64(Nr), f64(NB),
+                       f64(ams.tiling.class_members), f64(ams.sign, dtype=float), f64(ams.active), f64(tile_hi),
+                       f64(tile_span, dtype=np.intp), f64(ptr))
+
     def _nominal(self, lo: FloatArray, hi: FloatArray) -> bool:
         return (lo is self._umin or np.array_equal(lo, self._umin)) and (
             hi is self._umax or np.array_equal(hi, self._umax))
@@ -274,10 +298,14 @@ class FacetSearch(Method):
         if self._lp is not None:
             return self._lp.solve(v, lo, hi, u_prev)
         if self._flat:
-            return self._solve_reference(v, lo, hi, u_prev)
-        if not self._nominal(lo, hi):
-            return _kernels.ray_exit_solve(v, self.problem.up, lo, hi, *self._kray)
-        return self._solve_nominal(v)
+            u, iterations = _kernels.flat_ray_exit_solve(v, self.problem.up, lo, hi, *self._kflat)
+        elif not self._nominal(lo, hi):
+            u, iterations = _kernels.ray_exit_solve(v, self.problem.up, lo, hi, *self._kray)
+        else:
+            return self._solve_nominal(v)
+        if iterations < 0:
+            raise SolverError("AMS: no facet ahead of the ray (degenerate facet structure)")
+        return u, iterations
 
     def _solve_nominal(self, v: FloatArray) -> tuple[FloatArray, int]:
         return _kernels.facet_solve(v, self._kp0, self._ku0, self._kNz, self._kMinv, self._kU, self._kS)

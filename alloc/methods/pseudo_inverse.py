@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._kernels import affine, affine_clip_batch, fused_scaled, scaled_increment, scaled_increment_batch
+from .._kernels import affine, affine_clip_batch, fused_scaled, increment, scaled_increment, scaled_increment_batch
 from .._linalg import RCOND, check_rcond, max_scale, weighted_pinv
 from ..exceptions import OptionError, SolverError
 from ..options import flag, real
@@ -68,7 +68,7 @@ class _PinvBase(Method):
 
     def _unconstrained(self, v: FloatArray, u_prev: FloatArray | None) -> FloatArray:
         if self.incremental and u_prev is not None:
-            return u_prev + self.P @ (v - self.problem.B @ u_prev)
+            return increment(self._P, self._B, u_prev, v)  # fixed order: bit for bit in any copy
         return affine(self.c, self.P, v)
 
 
