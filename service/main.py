@@ -22,7 +22,7 @@ from . import timing
 from .config import MAX_AXES, MAX_BATCH, MAX_EFFECTORS, Settings
 from .db import make_engine, make_sessionmaker
 from .docs import install_docs
-from .bodies import BodyBudget, BodySizeLimit
+from .bodies import GC_THRESHOLDS, BodyBudget, BodySizeLimit
 from .errors import PROBLEM_JSON, install_handlers
 from .routes import allocation, ams, methods, system, vehicles
 from .priority import GATE_STATE_KEY, PriorityGate, PriorityMiddleware
@@ -104,6 +104,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         # which keeps GC pauses out of the latency tail.
         gc.collect()
         gc.freeze()
+        gc.set_threshold(*GC_THRESHOLDS)  # parsed bodies' garbage: shorter pauses (service.bodies)
         stop = threading.Event()
         warming = None
         if settings.warmup:

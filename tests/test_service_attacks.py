@@ -24,7 +24,7 @@ import multiprocessing
 import os
 import selectors
 import socket
-import threading
+import subprocess
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -45,13 +45,21 @@ WRITE_TIMEOUT_S = 6.0
 TARGETS_MS = {"event": 50.0, "allocation": 100.0, "health": 100.0}
 #: an attack may slow the reconfiguration path by at most this factor over the same run's floor
 FLOOR_FACTOR = 3.0
-#: steps of an event that wait for the event loop or the GIL (dispatch, the writer thread's
-#: start and its commit, the resume): each may wait for one large body's parse in flight
-PARSE_STEPS = 4
+#: large bodies' parses an event may wait for: the one running when it arrived (no other
+#: starts while a priority write is in flight: service.bodies)
+PARSES_WAITED = 1
 #: the floor itself, on any machine this suite runs on
 FLOOR_LIMIT_MS = 2000.0
 REPORT: dict[str, dict] = {}
 FLOOR: dict[str, float] = {}
+#: the server's RSS after the floor (its start-up, the vehicle, the probe's allocators), and the
+#: largest seen by the last probe (service and build processes together)
+RSS: dict[str, int] = {}
+#: the variable part of the documented memory bound (service/config.py) at the suite's settings:
+#: the allocator cache (128 MiB), 1,024 vehicle states (~70 MiB), one build in flight (~90 MiB),
+#: the body budget (64 MiB), uvicorn's read buffer per open connection (512 x 128 KiB) and the
+#: answer budget
+MEMORY_BOUND = (128 + 70 + 90 + 64 + 64) * MiB + ANSWER_BUDGET
 SLOWEST: dict[str, tuple[float, str]] = {}  # of the last probe: where the slowest request's time went
 
 
@@ -63,8 +71,12 @@ def server(tmp_path_factory):
     yield proc
     proc.stop()
     if path := os.environ.get("ALLOC_ATTACK_REPORT"):
+        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                                cwd=os.path.dirname(__file__)).stdout.strip() or "?"
         with open(path, "w") as fh:
-            json.dump({"loadavg": os.getloadavg(), "cpus": os.cpu_count(), "attacks": REPORT}, fh, indent=1)
+            json.dump({"loadavg": os.getloadavg(), "cpus": os.cpu_count(), "nice": os.nice(0),
+                       "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "commit": commit,
+                       "targets_ms": TARGETS_MS, "attacks": REPORT}, fh, indent=1)
 
 
 @pytest.fixture(scope="module")
@@ -73,6 +85,21 @@ def vehicle(server) -> str:
         vid = c.post("/v1/vehicles", json=ice().to_dict(), headers=H).json()["id"]
         assert c.post(f"/v1/vehicles/{vid}/allocate", json={"v": [0.1, 0.2, 0.0], "method": "qp"}).status_code == 200
     return vid
+
+
+def rss_now(server) -> int:
+    """RSS of the service and of the build processes it has now (``server.rss()`` waits for them
+    to exist; the probe must not)."""
+    try:
+        pids = [server.proc.pid, *server.build_processes(timeout=0.05)]
+    except RuntimeError:
+        pids = [server.proc.pid]
+    total = 0
+    for pid in pids:
+        for line in open(f"/proc/{pid}/status").read().splitlines():
+            if line.startswith("VmRSS:"):
+                total += int(line.split()[1]) * 1024
+    return total
 
 
 def slack() -> float:
@@ -99,6 +126,7 @@ def probe(server, vid: str, seconds: float, rounds_max: int = 40,
     timings: dict[str, tuple[float, str]] = {}  # the slowest of each kind and its Server-Timing
     deadline = time.monotonic() + seconds
     c = client or httpx.Client(base_url=server.url, timeout=30.0).__enter__()
+    RSS["peak"] = rss_now(server)
     try:
         k = 0
         while time.monotonic() < deadline and k < rounds_max:
@@ -122,6 +150,7 @@ def probe(server, vid: str, seconds: float, rounds_max: int = 40,
                 if ms > timings.get(kind, (0.0, ""))[0]:
                     timings[kind] = (ms, reply.headers.get("server-timing", ""))
             k += 1
+            RSS["peak"] = max(RSS["peak"], rss_now(server))
             time.sleep(0.05)
     finally:
         c.close()
@@ -135,6 +164,10 @@ def check(name: str, figures: dict[str, list[float]], allowance_ms: float = 0.0,
     if not FLOOR:
         pytest.skip("the floor was not measured (run the module, or test_floor first)")
     s = slack()
+    if "rss_growth_mib" not in extra and "start" in RSS:  # memory growth during the attack, against the bound
+        grown = RSS["peak"] - RSS["start"]
+        extra = {**extra, "rss_growth_mib": round(grown / MiB, 1), "bound_mib": round(MEMORY_BOUND / MiB, 1)}
+        assert grown < MEMORY_BOUND, (name, grown / MiB, MEMORY_BOUND / MiB)
     row = {k: {"p50_ms": round(float(np.median(v)), 2), "p99_ms": round(p99(v), 2), "n": len(v)}
            for k, v in figures.items()}
     REPORT[name] = {**row, "slack": round(s, 2), "loadavg": os.getloadavg()[0], "allowance_ms": allowance_ms, **extra}
@@ -148,34 +181,44 @@ def check(name: str, figures: dict[str, list[float]], allowance_ms: float = 0.0,
 
 
 @contextmanager
-def attack(fn: Callable[[threading.Event], None], clients: int) -> Iterator[None]:
-    """``clients`` threads running ``fn(stop)`` until the block ends."""
-    stop = threading.Event()
-    errors: list[BaseException] = []
+def attack(fn: Callable[[Any], list], clients: int) -> Iterator[list]:
+    """``clients`` processes running ``fn(stop)`` until the block ends; the block's value is
+    filled, when it ends, with what they returned (concatenated).  Processes, not threads: an
+    attacker's thread would take the probe's GIL in this process, and its latency would count
+    against the service (forked, so ``fn`` may be a closure)."""
+    ctx = multiprocessing.get_context("fork")
+    stop, out = ctx.Event(), ctx.Queue()
 
     def run() -> None:
         try:
-            fn(stop)
+            out.put(("ok", fn(stop)))
         except BaseException as exc:  # noqa: BLE001 - reported after the block
-            errors.append(exc)
-    threads = [threading.Thread(target=run, daemon=True) for _ in range(clients)]
-    for t in threads:
-        t.start()
+            out.put(("error", repr(exc)))
+    procs = [ctx.Process(target=run, daemon=True) for _ in range(clients)]
+    for p in procs:
+        p.start()
     time.sleep(0.5)  # the attack is under way before the probe starts
+    results: list = []
     try:
-        yield
+        yield results
     finally:
         stop.set()
-        for t in threads:
-            t.join(timeout=60)
+        answers = [out.get(timeout=120) for _ in procs]
+        for p in procs:
+            p.join(timeout=60)
+    errors = [value for kind, value in answers if kind == "error"]
     assert not errors, errors[0]
+    for _, value in answers:
+        results.extend(value)
 
 
 def test_floor(server, vehicle):
+    server.build_processes(timeout=300.0)  # warm-up done, build processes up: part of start-up RSS
     figures = probe(server, vehicle, 4.0, rounds_max=30)
     for kind, values in figures.items():
         assert p99(values) < FLOOR_LIMIT_MS, (kind, p99(values))
         FLOOR[kind] = p99(values)
+    RSS["start"] = rss_now(server)
     check("no attack (floor)", figures)
 
 
@@ -201,14 +244,14 @@ def test_batch_pricing_refuses_before_running_and_admitted_batches_do_not_delay_
         fits = int(detail.split("send at most ")[1].split(" rows")[0].replace(",", ""))
     assert 0 < fits < 10_000
     body = json.dumps(_cgi_body(max(fits, 1)))
-    statuses: list[int] = []
-
-    def flood(stop: threading.Event) -> None:
+    def flood(stop: Any) -> list[int]:
+        statuses = []
         with httpx.Client(base_url=server.url, timeout=120.0) as c:
             while not stop.is_set():
                 statuses.append(c.post("/v1/allocate/batch", content=body,
                                        headers={"content-type": "application/json"}).status_code)
-    with attack(flood, clients=4):
+        return statuses
+    with attack(flood, clients=4) as statuses:
         figures = probe(server, vehicle, 4.0)
     assert statuses and set(statuses) <= {200, 429, 503}, statuses
     check("batch pricing (4 clients, largest admitted cgi batch at m = 64)", figures,
@@ -219,11 +262,10 @@ def test_batch_pricing_refuses_before_running_and_admitted_batches_do_not_delay_
 def test_validation_error_flood(server, vehicle):
     """60,000 bad entries in a 0.3 MB body, 40,000 unknown members: each a short 422 with the count.
 
-    Parsing such a body holds the event loop (``json.loads`` of 0.5 MB of members: 15-50 ms);
-    large bodies are parsed one at a time (``service.main.BodySizeLimit``), so a request
-    waits for at most one parse at each of its steps that need the event loop or the GIL
-    (:data:`PARSE_STEPS` for an event: dispatch, the writer thread's start and commit, the
-    resume): the allowance is that many times the flood request's own latency, measured alone."""
+    Parsing such a body holds the event loop; large bodies are parsed one at a time and none
+    starts while an event is in flight (``service.bodies.BodySizeLimit``), so an event waits
+    for at most the one parse running when it arrived (:data:`PARSES_WAITED`): the allowance
+    is the flood request's own latency, measured alone."""
     bad_rows = json.dumps({"B": [[1.0] * 6] * 6, "umin": [-1.0] * 6, "umax": [1.0] * 6,
                            "V": [["x"] * 6 for _ in range(10_000)]})
     members = json.dumps({"B": [[1.0]], "umin": [-1.0], "umax": [1.0], "v": [0.0],
@@ -238,18 +280,18 @@ def test_validation_error_flood(server, vehicle):
             t0 = time.perf_counter()
             c.post(path, content=body, headers={"content-type": "application/json"})
             alone.append((time.perf_counter() - t0) * 1e3)
-    sizes: list[int] = []
-
-    def flood(stop: threading.Event) -> None:
+    def flood(stop: Any) -> list[int]:
+        sizes = []
         with httpx.Client(base_url=server.url, timeout=60.0) as c:
             while not stop.is_set():
                 for body, path in ((bad_rows, "/v1/allocate/batch"), (members, "/v1/allocate")):
                     r = c.post(path, content=body, headers={"content-type": "application/json"})
                     assert r.status_code == 422
                     sizes.append(len(r.content))
-    with attack(flood, clients=4):
+        return sizes
+    with attack(flood, clients=4) as sizes:
         figures = probe(server, vehicle, 4.0)
-    check("validation-error flood (4 clients)", figures, allowance_ms=PARSE_STEPS * max(alone), answers=len(sizes),
+    check("validation-error flood (4 clients)", figures, allowance_ms=PARSES_WAITED * max(alone), answers=len(sizes),
           largest_answer=max(sizes), alone_ms=round(max(alone), 1))
 
 
@@ -284,17 +326,16 @@ def test_header_floods_are_refused_before_they_are_buffered(server, vehicle):
     answer = _raw(server.port, huge)
     assert answer == b"" or answer.startswith(b"HTTP/1.1 431"), answer[:200]  # refused (maybe reset mid-send)
     refused_ms = (time.perf_counter() - t0) * 1e3
-    sent = [0]
-
-    def flood(stop: threading.Event) -> None:
+    def flood(stop: Any) -> list[int]:
+        sent = []
         while not stop.is_set():
             for data in (huge, many):
-                _raw(server.port, data)
-                sent[0] += 1
-    with attack(flood, clients=4):
+                sent.append(len(_raw(server.port, data)))
+        return sent
+    with attack(flood, clients=4) as sent:
         figures = probe(server, vehicle, 4.0)
     check("header flood (4 clients, 5 MiB header / 5,000 fields)", figures, refused_ms=round(refused_ms, 1),
-          sent=sent[0])
+          sent=len(sent))
 
 
 # ------------------------------------------------------------------ unread answers
@@ -335,10 +376,18 @@ def test_unread_answers_are_dropped_and_memory_stays_bounded(server, vehicle):
         socks.append(_unread_batch_request(server.port, body, f"127.0.0.{2 + i % 8}"))
     t_opened = time.monotonic()
     try:
-        # the probe starts after the 40 requests' arrival (a burst: parse, validation, the
-        # refusals beyond the answer budget), while their answers are held
-        time.sleep(1.5)
-        figures = probe(server, vehicle, WRITE_TIMEOUT_S - 2.0)
+        # the probe starts once the 40 requests' arrival (a burst of large bodies: parse,
+        # validation, the refusals beyond the answer budget; the validation flood's class) has
+        # been handled, while their answers are held: health answers as fast as in the floor
+        with httpx.Client(base_url=server.url, timeout=30.0) as c:
+            while time.monotonic() - t_opened < WRITE_TIMEOUT_S / 2:
+                t0 = time.perf_counter()
+                c.get("/v1/health")
+                if (time.perf_counter() - t0) * 1e3 < max(FLOOR["health"], 20.0):
+                    break
+                time.sleep(0.05)
+        burst_ms = (time.monotonic() - t_opened) * 1e3
+        figures = probe(server, vehicle, max(1.5, t_opened + WRITE_TIMEOUT_S - 0.5 - time.monotonic()))
         grown = server.rss() - base
         time.sleep(max(0.0, t_opened + WRITE_TIMEOUT_S + 3.0 - time.monotonic()))
         dropped = 0
@@ -358,8 +407,9 @@ def test_unread_answers_are_dropped_and_memory_stays_bounded(server, vehicle):
     bound = ANSWER_BUDGET + len(socks) * 512 * 1024 + 32 * MiB
     assert grown < bound, (grown / MiB, bound / MiB)
     # bodies over 64 KiB are parsed one at a time (test_validation_error_flood)
-    check("unread answers (40 connections, 14 MB answers)", figures, allowance_ms=PARSE_STEPS * max(alone),
-          rss_growth_mib=round(grown / MiB, 1), bound_mib=round(bound / MiB, 1), parse_ms=round(max(alone), 1))
+    check("unread answers (40 connections, 14 MB answers)", figures, allowance_ms=PARSES_WAITED * max(alone),
+          rss_growth_mib=round(grown / MiB, 1), bound_mib=round(bound / MiB, 1), parse_ms=round(max(alone), 1),
+          burst_handled_ms=round(burst_ms))
 
 
 # ------------------------------------------------------------ slowloris, reconnecting
@@ -427,8 +477,17 @@ def test_slowloris_with_reconnects_cannot_take_the_events_capacity(server, vehic
             assert client.get("/v1/health").status_code == 200  # kept open (ALLOC_KEEP_ALIVE_S = 5 s)
             time.sleep(0.5)
         figures = probe(server, vehicle, 4.0, client=client)
+        fresh = []  # writers that open a new connection for their event, under the same attack
+        for k in range(3):
+            t0 = time.perf_counter()
+            with httpx.Client(base_url=server.url, timeout=30.0) as c:
+                r = c.post(f"/v1/vehicles/{vehicle}/events", json={"effector": "elevon_l", "kind": "jam",
+                                                                  "position": float(k)}, headers=H)
+            assert r.status_code == 201, r.text
+            fresh.append(round((time.perf_counter() - t0) * 1e3, 1))
     finally:
         stop.set()
         attacker.join(timeout=30)
     assert opened.value >= connections
-    check(f"slowloris with reconnects ({connections} connections from 8 addresses)", figures, opened=opened.value)
+    check(f"slowloris with reconnects ({connections} connections from 8 addresses)", figures, opened=opened.value,
+          fresh_connection_event_ms=fresh)
