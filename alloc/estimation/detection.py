@@ -511,14 +511,40 @@ class FailureDetector:
             if np.isfinite(llr[i]):
                 fits.append(_Fit(FailureKind.EFFECTIVENESS, float(llr[i]), 1, {"fraction": float(f[i])}, float(f[i]),
                                  1.0 / math.sqrt(c * U2[i]), samples=i + 1))
+        fits += self._runs_to_stop(j, u, a_comb, wc, lo0, hi0, base)
         for length in sorted({n_onset, i_jam + 1, N}):
             fits += self._range_fits(j, u[N - length:], a_comb[N - length:], wc, lo0, hi0,
                                      float(base[N - length:].sum()))
         return fits
 
+    def _runs_to_stop(self, j: int, u: np.ndarray, a_comb: np.ndarray, wc: float, lo0: float, hi0: float,
+                      base: np.ndarray) -> list[_Fit]:
+        """A hard-over as the simulator's: from where it was commanded at the onset, the surface
+        runs to a stop at its nominal rate limit and stays; every onset at once (an ``N x N``
+        table of suffix by sample)."""
+        p = self.problem
+        N = len(u)
+        fits = []
+        start = np.arange(N)  # the onset sample of each suffix (suffix length N - start)
+        t = np.arange(N)
+        after = t[None, :] - start[:, None]  # samples since the onset, negative before it
+        inside = after >= 0
+        for stop, rate in ((hi0, float(p.rate_max[j])), (lo0, float(-p.rate_min[j]))):
+            if not (math.isfinite(rate) and rate > 0) or N < 2:
+                continue
+            u0 = u[start][:, None]
+            toward = np.sign(stop - u0)
+            pos = np.clip(u0 + toward * rate * self.dt * np.maximum(after, 0), np.minimum(stop, u0),
+                          np.maximum(stop, u0))
+            d = np.where(inside, pos - u[None, :], 0.0)
+            llr = (wc * (a_comb[None, :] * d - 0.5 * d * d)).sum(axis=1) - np.cumsum(base[::-1])[::-1]
+            i = int(np.argmax(llr))
+            fits.append(_Fit(FailureKind.HARDOVER, float(llr[i]), 0, {"position": stop}, stop, 0.0, samples=N - i))
+        return fits
+
     def _range_fits(self, j: int, u: np.ndarray, a_comb: np.ndarray, wc: float, lo0: float,
                     hi0: float, base: float) -> list[_Fit]:
-        """Reduced limits, a hard-over's run to its stop and reduced rate limits on one suffix."""
+        """Reduced limits and reduced rate limits on one suffix."""
         n = len(u)
         fits = []
         # reduced limits: the two sides separate (a sample beyond one side never touches the other)
@@ -542,15 +568,6 @@ class FailureDetector:
             fits.append(_Fit(FailureKind.LIMITS, llr, int(use_hi) + int(use_lo), {"lo": lo_c, "hi": hi_c},
                              samples=n))
         p = self.problem
-        # a hard-over runs to its stop at the nominal rate limit (as the simulator's does)
-        rate_up, rate_down = float(p.rate_max[j]), float(-p.rate_min[j])
-        steps = np.arange(n) * self.dt
-        for stop, rate_to in ((hi0, rate_up), (lo0, rate_down)):
-            if math.isfinite(rate_to) and rate_to > 0 and n > 1:
-                toward = np.sign(stop - u[0])
-                d = np.clip(u[0] + toward * rate_to * steps, min(stop, u[0]), max(stop, u[0])) - u
-                llr = float((wc * (a_comb * d - 0.5 * d * d)).sum()) - base
-                fits.append(_Fit(FailureKind.HARDOVER, llr, 0, {"position": stop}, stop, 0.0, samples=n))
         rate = float(min(-p.rate_min[j], p.rate_max[j]))
         if math.isfinite(rate) and rate > 0 and n > 1:
             # the surface's position at the suffix's start is unknown when the onset lies before
