@@ -226,6 +226,11 @@ def test_bad_input_names_the_field() -> None:
         assert info.value.field == field
     with pytest.raises(OptionError, match="noise_std"):
         FailureDetector(p, [0.5, 0.0, 0.5], DT)
+    sensed = FailureDetector(p, 0.5, DT, position_noise_std=0.1)
+    for position in (None, [np.nan] * p.m):
+        with pytest.raises(SampleError) as info:
+            sensed.update(np.zeros(p.m), np.zeros(p.k), position=position)
+        assert info.value.field == "position"
     with pytest.raises(StateError, match="kind"):
         FailureDetector.from_dict(p, {"kind": "rls"})
     state = det.to_dict()

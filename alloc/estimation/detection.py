@@ -271,8 +271,8 @@ class FailureDetector:
         """One sample; returns the detections it completes (usually none).
 
         ``u`` (m,) the healthy positions (command or actuator model), ``y`` (k,) the measured
-        response, ``position`` (m,) the measured positions (only with position sensors; NaN
-        for a missing reading), ``time`` in seconds (default ``samples * sample_time``;
+        response, ``position`` (m,) the measured positions (required with position sensors,
+        refused without), ``time`` in seconds (default ``samples * sample_time``;
         strictly increasing).  SampleError naming the field otherwise (nothing changes).
         """
         m = self.problem.m
@@ -281,9 +281,10 @@ class FailureDetector:
         if position is not None:
             if not self.has_position:
                 raise SampleError("position: this detector has no position sensors (position_noise_std = None)")
-            pos = np.array(position, dtype=float) if not isinstance(position, np.ndarray) else position.astype(float)
-            if pos.shape != (m,) or np.isinf(pos).any():
-                raise SampleError(f"position: expected shape ({m},) of finite values or NaN, got {pos.shape}")
+            pos = sample_vector("position", position, m)
+        elif self.has_position:
+            # a missing reading is not evidence of no deviation: every sample carries them all
+            raise SampleError("position: this detector has position sensors; every sample needs their readings")
         else:
             pos = None
         t = self.samples * self.dt if time is None else as_real("time", time, SampleError)
@@ -291,10 +292,7 @@ class FailureDetector:
             raise SampleError(f"time: {t:g} is not after the previous sample's {self.last_time:g}")
         known = self._known_positions(u)
         r = (y - self._B_eff @ known) / self.noise_std
-        q = np.zeros(m)
-        if pos is not None:
-            ok = ~np.isnan(pos)
-            q[ok] = (pos[ok] - known[ok]) / self.position_std[ok]
+        q = np.zeros(m) if pos is None else (pos - known) / self.position_std
         i = self._head
         self._U[i], self._K[i], self._R[i], self._Q[i], self._T[i] = u, known, r, q, t
         self._head = (i + 1) % self.L
