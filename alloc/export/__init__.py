@@ -178,7 +178,7 @@ def _fill(text: str, fields: Mapping[str, str], prefix: str) -> str:
 
 # --------------------------------------------------------------------------- the bound
 
-def iteration_bound(method: str, m: int, k: int, levels: int, maxit: int) -> str:
+def iteration_bound(m: int, k: int, levels: int, maxit: int) -> str:
     """The header's statement of the iteration bound of an active-set kernel and its argument."""
     worst = (m + 1) * 3 ** m
     return f""" *
@@ -375,7 +375,7 @@ def _active_set_fields(lexico: Any, problem: Problem, real: _Real, fields: dict[
         raise ExportError(f"table: 2^{m} free sets a level is too many to tabulate", field="table")
     fields["TABLE"] = "1" if table else "0"
     fields["TABLES"] = _tables(mats, ivecs, aset, keys, real) if table else ""
-    fields["BOUND"] = iteration_bound("", m, k, levels, cap)
+    fields["BOUND"] = iteration_bound(m, k, levels, cap)
     fields["HEALTH"] = (" *\n * Health at run time: PREFIX_set_limits(umin, umax) sets reduced limits or jams\n"
                         " * (umin[j] == umax[j]) within the nominal limits; an effectiveness change needs a new\n"
                         " * export.  The cold start and the safe answer keep the nominal Eq 1.23 matrix.\n")
