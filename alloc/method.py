@@ -20,6 +20,7 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
+from .options import Option
 from .problem import Problem
 
 __all__ = ["Method", "register", "FloatArray", "CHEAP_BUILD_SECONDS", "BUILD_LIMIT_SECONDS", "BUILD_LIMIT_BYTES",
