@@ -13,7 +13,7 @@ Eq 4.12, 4.19, 4.24), used to reproduce the seed's designs exactly.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -77,7 +77,8 @@ def health_events(vehicle: Vehicle, failure: Failure) -> list[Any]:
             for f in failure.actuators if f.kind not in SIMULATOR_ONLY]
 
 
-def allocation_problem(vehicle: Vehicle, failure: Failure | None = None, *, preferred: str = "mid") -> Any:
+def allocation_problem(vehicle: Vehicle, failure: Failure | None = None, *, preferred: str = "mid",
+                       health: Mapping[str, Any] | None = None) -> Any:
     """The vehicle's :class:`alloc.Problem`; with ``failure``, as told of the failed effectors.
 
     Plant-level failures (A, B scaling) are unknown to the allocator by
@@ -86,6 +87,8 @@ def allocation_problem(vehicle: Vehicle, failure: Failure | None = None, *, pref
     (:data:`alloc.health.FAILURE_KINDS`, see :func:`health_events`).  Bandwidth
     and delay failures are never told.
     ``preferred``: rule for the preferred positions (:func:`preferred_positions`).
+    ``health``: effector name -> :class:`alloc.health.EffectorHealth` instead of a failure
+    (a detector's belief, :mod:`sim.detection`); giving both raises ValueError.
     """
     import alloc
     from alloc.health import apply_event
@@ -101,12 +104,16 @@ def allocation_problem(vehicle: Vehicle, failure: Failure | None = None, *, pref
         names=vehicle.effector_names,
         axes=vehicle.channels,
     )
+    if failure is not None and health is not None:
+        raise ValueError("allocation_problem: give a failure (told) or a health (detected), not both")
+    if health is not None:
+        return problem.with_health(dict(health)) if health else problem
     if failure is None:
         return problem
-    health: dict[str, Any] = {}
+    told: dict[str, Any] = {}
     for event in health_events(vehicle, failure):
-        _, health = apply_event(problem, health, event)
-    return problem.with_health(health)
+        _, told = apply_event(problem, told, event)
+    return problem.with_health(told)
 
 
 #: Horizons of the Eq 1.28 rate box (see :func:`build_allocator`).
@@ -151,6 +158,7 @@ def build_allocator(
     options: dict[str, Any],
     *,
     failure: Failure | None = None,
+    health: Mapping[str, Any] | None = None,
     rate_aware: bool = True,
     preferred: str = "mid",
     frame_period: float | None = None,
@@ -159,7 +167,8 @@ def build_allocator(
 ) -> LoopAllocator:
     """Allocator callable for the loop.
 
-    ``static`` ignores the failure (a fixed matrix cannot be told anything).
+    ``static`` ignores the failure and the health (a fixed matrix cannot be told anything).
+    ``health`` (a detector's belief) replaces ``failure`` (see :func:`allocation_problem`).
     For ``ganging`` the seed's distribution ``B_k`` (in demand units) is the default gang.
 
     With ``rate_aware`` (default) every call passes ``u_prev`` and the frame
@@ -213,7 +222,7 @@ def build_allocator(
     if method == "ganging" and "G" not in opts:
         # alloc's gang acts on the demand v = demand_map u_c: G = B_k demand_map^-1.
         opts["G"] = vehicle.Bk_seed @ np.linalg.inv(vehicle.demand_map)
-    problem = allocation_problem(vehicle, failure, preferred=preferred)
+    problem = allocation_problem(vehicle, failure, preferred=preferred, health=health)
     if rate_aware and frame_period is not None:
         scale = rate_horizon_scale(vehicle, frame_period, rate_horizon)
         problem = problem.replace(rate_min=scale * problem.rate_min, rate_max=scale * problem.rate_max)

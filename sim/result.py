@@ -119,6 +119,8 @@ class SimResult:
     #: the run's settings, JSON-ready: every :class:`sim.settings.RunSettings` field as flown (a MIMO
     #: scenario; the engine alone records the :class:`~sim.settings.LoopSettings` ones) and ``pilots``
     settings: dict[str, Any] = field(default_factory=dict)
+    #: a ``detected`` run's detections (:func:`sim.detection.detection_record`), None otherwise
+    detections: list[dict[str, Any]] | None = None
 
     # ------------------------------------------------------------------ metrics
     @property
@@ -199,6 +201,7 @@ class SimResult:
             "fallback_fraction": self.status_fraction(Status.FALLBACK),
             "unattainable_fraction": self.status_fraction(Status.UNATTAINABLE),
             "settings": self.settings,
+            **({} if self.detections is None else {"detections": self.detections}),
         }
 
     def time_histories(self) -> dict[str, np.ndarray | list[str]]:

@@ -35,11 +35,16 @@ from sim.pilot import PILOT_MODELS
 
 __all__ = ["Setting", "SettingError", "SettingTypeError", "LoopSettings", "RunSettings", "LoopSpec",
            "setting_of", "value_types", "check_setting", "U_PREV_SOURCES", "BOUNDARY_LAYER_RULES", "ANTI_WINDUP_RULES",
-           "CONTROLLERS", "SEED_FRAME_PERIOD", "MAX_DURATION", "MAX_PILOT_DELAY", "MAX_DT", "MAX_RECORD_EVERY",
+           "CONTROLLERS", "HEALTH_MODES", "MAX_NOISE_SCALE", "SEED_FRAME_PERIOD", "MAX_DURATION", "MAX_PILOT_DELAY", "MAX_DT", "MAX_RECORD_EVERY",
            "anti_windup_on", "boundary_layer_at"]
 
 #: ``u_prev`` the allocator may be told (see :class:`LoopSettings`).
 U_PREV_SOURCES = ("command", "position")
+#: Where the allocator's effector health comes from: never told (blind), told each failure as
+#: it is injected (told, the oracle), or only from the in-loop detector (:mod:`sim.detection`).
+HEALTH_MODES = ("blind", "told", "detected")
+#: Largest sensor-noise scale (50 times the seed's).
+MAX_NOISE_SCALE = 50.0
 #: Rules for the SMC boundary layer at a frame period ``T`` (see :func:`boundary_layer_at`).
 BOUNDARY_LAYER_RULES = ("frame", "fixed")
 #: Rules for the SMC's integral term when the allocator falls short (see :func:`anti_windup_on`).
@@ -181,6 +186,8 @@ class LoopSettings:
     seed: int = _setting(0, "noise seed", low=0, high=2**32 - 1, flag="--seed", verdict=False)
     noise: bool = _setting(True, "band-limited sensor noise on the measured outputs (seed gains)",
                            flag="--noise/--no-noise")
+    noise_scale: float = _setting(1.0, "sensor noise as a multiple of the seed's (its gains times this)", low=0.0,
+                                  high=MAX_NOISE_SCALE, flag="--noise-scale")
     actuators: bool = _setting(True, "actuator dynamics; off: ideal effectors (command = position, limits kept; "
                                "the seed's SMC without parasitic dynamics)", flag="--actuators/--ideal-actuators")
     frame_period: float | None = _setting(
@@ -206,6 +213,11 @@ class LoopSettings:
     allocator_knows_failure: bool = _setting(False, "tell the allocator the failed effectors' new limits (told) "
                                              "or not (blind)", flag="--told/--blind",
                                              aliases=("--allocator-knows-failure",))
+    health: str | None = _setting(None, "where the allocator's effector health comes from: blind (never told), "
+                                  "told (each failure as injected: the oracle) or detected (only the in-loop "
+                                  "detector on the simulated sensors, sim.detection); --told/--blind are its "
+                                  "aliases", choices=HEALTH_MODES, flag="--health",
+                                  none_means="told with --told, else blind")
     method_options: dict[str, Any] | None = _setting(
         None, "method options key=value (value parsed as JSON, else text; see `alloc methods`), over the "
         "vehicle file's methods.METHOD defaults; repeatable", flag="--option", aliases=("-o",),
@@ -216,7 +228,21 @@ class LoopSettings:
     def __post_init__(self) -> None:
         for f in fields(LoopSettings):
             object.__setattr__(self, f.name, check_setting(f.name, getattr(self, f.name)))
+        self._resolve_health()
         self.frame_steps()
+
+    def _resolve_health(self) -> None:
+        """``health`` and ``allocator_knows_failure`` are one choice: either may be given, they must agree."""
+        if self.allocator_knows_failure and self.health not in (None, "told"):
+            raise SettingError(f"health: {self.health!r} contradicts allocator_knows_failure = True (--told); "
+                               "give one of them", field="health")
+
+    @property
+    def health_mode(self) -> str:
+        """``health`` as flown: the field, else ``told`` with ``allocator_knows_failure``, else ``blind``."""
+        if self.health is not None:
+            return self.health
+        return "told" if self.allocator_knows_failure else "blind"
 
     def frame_steps(self) -> int:
         """Integration steps per flight-control frame (``T / dt``, an integer >= 1)."""
@@ -236,11 +262,14 @@ class LoopSettings:
     def record(self) -> dict[str, Any]:
         """This run's settings, JSON-ready, as ``SimResult.settings`` records them.
 
-        ``frame_period`` is recorded as the period flown (``dt`` when None).
+        ``frame_period`` is recorded as the period flown (``dt`` when None);
+        ``health`` and ``allocator_knows_failure`` are recorded as flown (:attr:`health_mode`).
         """
         out = {name: _jsonable(getattr(self, name)) for name in self._recorded()}
         if "frame_period" in out:
             out["frame_period"] = self.frame_steps() * self.dt
+        out["health"] = self.health_mode
+        out["allocator_knows_failure"] = self.health_mode == "told"
         return out
 
     def _recorded(self) -> list[str]:

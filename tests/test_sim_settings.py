@@ -187,6 +187,7 @@ def _random_settings(rng: np.random.Generator, scenario: str) -> dict[str, objec
             out[f.name] = str(rng.choice(spec.choices))
         elif isinstance(f.default, bool):
             out[f.name] = bool(rng.random() < 0.5)
+    out["allocator_knows_failure"] = out["health"] == "told"  # one choice, two names (--told is --health told)
     return out
 
 

@@ -1,0 +1,211 @@
+"""The detector in the loop (``--health detected``): what it measures, its noise, its delay.
+
+In a ``detected`` run the allocator starts from the nominal problem and learns of a failure
+only from :class:`alloc.estimation.FailureDetector` running on the simulated sensors; nothing
+of the injected failure (kind, effector, parameters, time) ever reaches it.  This module is
+the glue between the engine and the library's detector:
+
+Signals (per detector sample, every :attr:`DetectionDesign.sample_time`)
+    * ``y``: the measured response of the vehicle's *response outputs* -- the measured outputs
+      whose derivative the effectors drive directly (``C_i B != 0``) and that have no
+      feedthrough (``D_i = 0``): on ICE ``vel, alphaw, qb, betaw, ps, rs``, on HARV lat-dir
+      ``beta, p, r`` (the rate gyros and the air-data angles).  ``y = z'_i - C_i A x``: the
+      derivative of the measured output less the nominal model's free response, which for the
+      linear plant is ``C_i B_now u_surface`` (plus ``C_i (A_now - A) x`` after a plant
+      failure).  The derivative's noise is the simulator's own sensor noise on that output
+      (:func:`sim.blocks.band_limited_noise`, the seed's filter and gains, scaled by
+      ``noise_scale``), differenced over the sample period -- the noise a flight computer
+      sees when it differentiates the same noisy measurement the observers use.  The free
+      response ``C_i A x`` is removed with the plant's state (a stated simplification: a
+      flight computer would use its state estimate).
+    * ``u``: where healthy surfaces would be: a nominal copy of the actuators (Table limits,
+      rates, dynamics) driven by the allocator's commands.
+    * no position sensors (the seed's vehicles list none among their measured outputs).
+
+Noise level told to the detector
+    the standard deviation of the differenced noise at the sample period, measured once on
+    an hour of the noise model (seeded, fixed; 36,000 samples, about 0.4 % standard error).
+    At the default 0.1 s the differenced noise is nearly white (lag-1 autocorrelation 0.13,
+    lags 2-4 between -0.23 and -0.11; at 0.02 s it is 0.77, 0.47, 0.26), which is what the
+    detector's chi-square thresholds assume; faster sampling would correlate it and break the
+    stated false-alarm rate.
+
+Delay
+    a detection decided at ``t`` reaches the allocator at the first frame at or after
+    ``t + processing_delay`` (the detector's own latency -- its window and its hop -- comes
+    on top, inside the detector).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from functools import cache
+from typing import Any
+
+import numpy as np
+
+from alloc.effector_health import EffectorHealth
+from alloc.estimation import Detection, FailureDetector
+from sim.blocks import actuator_heun_step, band_limited_noise
+from sim.model import Vehicle
+
+__all__ = ["DetectionDesign", "InLoopDetector", "response_outputs", "response_noise_std", "DEFAULT_DESIGN"]
+
+
+@dataclass(frozen=True)
+class DetectionDesign:
+    """The in-loop detector's free parameters (each disclosed; none tuned to a verdict).
+
+    Attributes
+    ----------
+    sample_time : float
+        Seconds between detector samples (0.1 s: the differenced seed noise is white there).
+    window : float
+        Seconds of data in each stage-1 test (0.4 s: four samples, the detector's minimum).
+    hop : int
+        Samples between tests (1: a test at every sample).
+    false_alarm_rate : float
+        Design false alarms per hour (the detector's bound; 0.1, the library's default).
+    min_confidence : float
+        Posterior needed to report (the library's default 0.95).
+    processing_delay : float
+        Seconds from a detection to the allocator's rebuilt problem (20 ms).
+    """
+
+    sample_time: float = 0.1
+    window: float = 0.4
+    hop: int = 1
+    false_alarm_rate: float = 0.1
+    min_confidence: float = 0.95
+    processing_delay: float = 0.02
+
+    def record(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+DEFAULT_DESIGN = DetectionDesign()
+
+
+def response_outputs(vehicle: Vehicle) -> tuple[int, ...]:
+    """Measured outputs whose derivative the effectors drive directly and with no feedthrough."""
+    out = []
+    for i in vehicle.measured:
+        drive = vehicle.C[i] @ vehicle.B
+        if np.abs(vehicle.D[i]).max(initial=0.0) == 0.0 and np.abs(drive).max(initial=0.0) > 0.0:
+            out.append(int(i))
+    return tuple(out)
+
+
+@cache
+def _differenced_noise_std(dt: float, sample_time: float) -> float:
+    """Std of ``(n(t) - n(t - Ts)) / Ts`` of the seed's noise model at unit gain (one seeded hour)."""
+    every = int(round(sample_time / dt))
+    n = int(round(3600.0 / dt)) + every
+    noise = band_limited_noise(n, dt, np.ones(1), np.random.default_rng(20261202))[:, 0]
+    d = (noise[every::every] - noise[: -every : every][: noise[every::every].size]) / sample_time
+    return float(d.std())
+
+
+def response_noise_std(vehicle: Vehicle, dt: float, sample_time: float, noise_scale: float = 1.0) -> np.ndarray:
+    """Per response output: the differenced sensor noise's std at the sample period."""
+    gains = np.zeros(vehicle.C.shape[0])
+    gains[np.asarray(vehicle.measured)] = vehicle.noise_gains
+    rows = list(response_outputs(vehicle))
+    return _differenced_noise_std(dt, sample_time) * gains[rows] * noise_scale
+
+
+class InLoopDetector:
+    """The detector on the simulated sensors of one run (see the module docstring).
+
+    Parameters
+    ----------
+    vehicle : Vehicle
+        The nominal vehicle (what the flight computer's designers know).
+    dt : float
+        Integration step.
+    noise : ndarray (N + 1, ny)
+        The run's measurement noise on every output, per integration step (the engine's).
+    noise_scale : float
+        The run's noise scale (the detector is told the scaled level, as a designer who
+        characterised the sensors would be).
+    actuators : bool
+        Whether the run has actuator dynamics (else the nominal model is the clipped command).
+    preferred : ndarray (m,)
+        Preferred positions (the detector's problem's ``up``).
+    design : DetectionDesign
+    """
+
+    def __init__(self, vehicle: Vehicle, dt: float, noise: np.ndarray, *, noise_scale: float, actuators: bool,
+                 preferred: np.ndarray, design: DetectionDesign = DEFAULT_DESIGN) -> None:
+        import alloc
+
+        self.design = design
+        self.every = max(1, int(round(design.sample_time / dt)))
+        self.sample_time = self.every * dt
+        self.rows = list(response_outputs(vehicle))
+        self.C = vehicle.C[self.rows]
+        self.A = np.asarray(vehicle.A, dtype=float)
+        self.noise = noise[:, self.rows]
+        self.dt = dt
+        problem = alloc.Problem(self.C @ vehicle.B, vehicle.umin, vehicle.umax, up=preferred,
+                                rate_min=-vehicle.rate_max, rate_max=vehicle.rate_max, names=vehicle.effector_names)
+        self.detector = FailureDetector(
+            problem, response_noise_std(vehicle, dt, self.sample_time, noise_scale), self.sample_time,
+            false_alarm_rate=design.false_alarm_rate, window=design.window, hop=design.hop,
+            min_confidence=design.min_confidence)
+        self.actuators = actuators
+        m = len(vehicle.actuators)
+        spec = vehicle.actuators
+        self._first = np.array([s.order == 1 for s in spec], dtype=np.int64)  # the packed kernel's dtypes (one compile)
+        self._wn2 = np.array([s.wn2 for s in spec], dtype=float)
+        self._c1 = np.array([s.c1 for s in spec], dtype=float)
+        self._lo, self._hi = vehicle.umin.astype(float), vehicle.umax.astype(float)
+        self._rmax = vehicle.rate_max.astype(float)
+        self._false = np.zeros(m, dtype=np.int64)
+        self._zeros = np.zeros(m)
+        self.pos = np.zeros(m)
+        self._rate = np.zeros(m)
+        self._rate_out = np.zeros(m)
+        self.delay_steps = int(np.ceil(design.processing_delay / dt - 1e-9))
+
+    def step_model(self, u_cmd: np.ndarray) -> None:
+        """Advance the nominal actuator copy one integration step with ``u_cmd`` held."""
+        if self.actuators:
+            actuator_heun_step(self.pos, self._rate, self._rate_out, u_cmd, self._first, self._wn2, self._c1,
+                               self._lo, self._hi, self._rmax, self._false, self._zeros, self._false, self._zeros,
+                               self.dt)
+        else:
+            np.clip(u_cmd, self._lo, self._hi, out=self.pos)
+
+    def due(self, step: int) -> bool:
+        """Whether ``step`` is a detector sample (never step 0: the noise difference needs a past)."""
+        return step >= self.every and step % self.every == 0
+
+    def sample(self, step: int, x: np.ndarray, surfaces: np.ndarray, A_now: np.ndarray,
+               B_now: np.ndarray) -> list[Detection]:
+        """One detector sample at integration step ``step`` (state ``x`` and surface positions there).
+
+        ``A_now``, ``B_now`` are the plant's physics at that instant (the sensors measure their
+        effect: ``z' = C (A_now x + B_now u)``); the response is that less the nominal free
+        response ``C A x``, plus the differenced sensor noise.
+        """
+        y = self.C @ ((A_now - self.A) @ x + B_now @ surfaces)
+        y = y + (self.noise[step] - self.noise[step - self.every]) / self.sample_time
+        return self.detector.update(self.pos, y, time=step * self.dt)
+
+    @property
+    def health(self) -> dict[str, EffectorHealth]:
+        """The detector's current belief (a copy)."""
+        return dict(self.detector.health)
+
+
+def detection_record(detection: Detection, applied_time: float, failure_time: float | None) -> dict[str, Any]:
+    """One detection as the JSON summary lists it."""
+    d = detection.to_dict()
+    event = d.pop("event")
+    return {
+        "effector": event.pop("effector"), "kind": event.pop("kind"), "time": detection.time,
+        "applied_time": applied_time,
+        "delay": None if failure_time is None or detection.time < failure_time else detection.time - failure_time,
+        "parameters": event, **{k: v for k, v in d.items() if k != "time"},
+    }

@@ -1,0 +1,149 @@
+"""``--health detected``: the allocator's health only from the in-loop detector (sim.detection).
+
+A short ICE jam is detected on the right effector with the right kind and reaches the allocator
+after the stated delay; a no-failure run detects nothing; the allocator is built on the nominal
+problem until the first detection and the detector never receives the failure; the settings and
+CLI map ``--told/--blind`` onto ``health``; seeded hostile settings are refused naming the field.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+import sim.engine as engine
+import sim.detection as detection
+from alloc.cli import app as alloc_app
+from benchmarks.compare.failures import make_failure
+from sim.model import Failure
+from sim.blocks import ActuatorFailure
+from sim.scenarios import get_scenario
+from sim.settings import HEALTH_MODES, RunSettings, SettingError
+
+runner = CliRunner()
+
+
+def _ice(**kw):
+    return get_scenario("ice")(method="qp", seed=1, **kw)
+
+
+@pytest.fixture(scope="module")
+def jam_run():
+    return _ice(failure=make_failure("ice", "jam1", 1.5), duration=3.0, health="detected")
+
+
+def test_a_silent_jam_is_detected_on_the_jammed_effector_with_its_kind(jam_run):
+    dets = jam_run.summary()["detections"]
+    assert dets, "no detection"
+    first = dets[0]
+    assert first["effector"] == "elevon_l" and first["kind"] == "jam"
+    # the catalogue jam holds half the upper deflection (15 deg); the detector estimates it
+    assert abs(first["parameters"]["position"] - 15.0) < 1.0
+    assert 0.0 <= first["delay"] <= 0.5 and first["delay"] == pytest.approx(first["time"] - 1.5)
+    assert first["confidence"] >= 0.95 and first["statistic"] > first["threshold"]
+    # reaches the allocator at the first frame >= 20 ms later (frames are 0.5 ms here)
+    assert first["applied_time"] == pytest.approx(first["time"] + detection.DEFAULT_DESIGN.processing_delay, abs=1e-9)
+    assert jam_run.settings["health"] == "detected" and jam_run.settings["allocator_knows_failure"] is False
+    json.dumps(jam_run.summary())  # JSON-ready
+
+
+def test_no_failure_no_detection():
+    res = _ice(duration=6.0, health="detected")
+    assert res.summary()["detections"] == [] and not res.diverged
+
+
+def test_the_allocator_is_nominal_until_the_first_detection_and_the_detector_never_sees_the_failure(monkeypatch):
+    builds: list[dict] = []
+    real_build = engine.build_allocator
+
+    def spy_build(vehicle, method, options, **kw):
+        builds.append(kw)
+        return real_build(vehicle, method, options, **kw)
+
+    seen: list[object] = []
+    real_init, real_sample = detection.InLoopDetector.__init__, detection.InLoopDetector.sample
+
+    def spy_init(self, *args, **kwargs):
+        seen.extend([*args, *kwargs.values()])
+        real_init(self, *args, **kwargs)
+
+    def spy_sample(self, *args):
+        seen.extend(args)
+        return real_sample(self, *args)
+
+    monkeypatch.setattr(engine, "build_allocator", spy_build)
+    monkeypatch.setattr(detection.InLoopDetector, "__init__", spy_init)
+    monkeypatch.setattr(detection.InLoopDetector, "sample", spy_sample)
+    res = _ice(failure=make_failure("ice", "jam1", 1.0), duration=2.0, health="detected")
+    dets = res.summary()["detections"]
+    assert dets and dets[0]["effector"] == "elevon_l"
+    # first build: the nominal problem; every later one from the detector's belief, never the failure
+    assert builds[0].get("failure") is None and builds[0].get("health") is None
+    assert all(b.get("failure") is None for b in builds)
+    assert len(builds) == 1 + len(dets) and all(b["health"] for b in builds[1:])
+    assert not any(isinstance(a, (Failure, ActuatorFailure)) for a in seen)
+    # the allocator's status before the first detection is the blind run's, frame for frame
+    blind = _ice(failure=make_failure("ice", "jam1", 1.0), duration=2.0)
+    n = int(round(dets[0]["applied_time"] / 0.0005))
+    assert np.array_equal(res.allocator_status[:n], blind.allocator_status[:n])
+    assert np.array_equal(res.effectors[: n // 10], blind.effectors[: n // 10])
+
+
+def test_health_and_the_told_blind_aliases_are_one_setting():
+    assert RunSettings().health_mode == "blind"
+    assert RunSettings(allocator_knows_failure=True).health_mode == "told"
+    assert RunSettings(health="told").record()["allocator_knows_failure"] is True
+    assert RunSettings(health="detected").record()["health"] == "detected"
+    for mode in HEALTH_MODES:
+        rec = RunSettings(health=mode).record()
+        assert RunSettings.from_record(rec).health_mode == mode
+    with pytest.raises(SettingError) as info:
+        RunSettings(health="detected", allocator_knows_failure=True)
+    assert info.value.field == "health"
+
+
+@pytest.mark.parametrize("seed", range(2))
+def test_hostile_health_and_noise_settings_are_refused_naming_the_field(seed):
+    rng = np.random.default_rng(seed)
+    word = "".join(rng.choice(list("abcdetxz"), size=int(rng.integers(1, 9))))
+    for value in (word, "DETECTED", "detected ", "", 1, True):
+        with pytest.raises(SettingError) as info:
+            RunSettings(health=value)
+        assert info.value.field == "health"
+    for value in (-float(rng.uniform(1e-6, 1)), float("nan"), float("inf"), 51.0, "2"):
+        with pytest.raises(SettingError) as info:
+            RunSettings(noise_scale=value)
+        assert info.value.field == "noise_scale"
+
+
+def test_the_cli_flies_detected_and_maps_the_aliases():
+    base = ["sim", "ice", "--method", "qp", "--duration", "2"]
+    out = runner.invoke(alloc_app, [*base, "--health", "detected"])
+    assert out.exit_code == 0, out.output
+    summary = json.loads(out.output)
+    assert summary["settings"]["health"] == "detected" and summary["detections"] == []
+    seeded = [*base, "--failure", "seed", "--failure-time", "1"]
+    told = runner.invoke(alloc_app, [*seeded, "--told"])
+    assert told.exit_code == 0, told.output
+    s = json.loads(told.output)
+    assert s["settings"]["health"] == "told" and s["settings"]["allocator_knows_failure"] and "detections" not in s
+    bad = runner.invoke(alloc_app, [*seeded, "--told", "--health", "detected"])
+    assert bad.exit_code == 2 and "health" in bad.output
+
+
+def test_response_outputs_and_noise_are_the_simulators():
+    ice = get_scenario("ice")
+    from sim.scenarios.harv_latdir import vehicle as harv_vehicle
+    from sim.scenarios.ice import vehicle as ice_vehicle
+
+    v = ice_vehicle()
+    assert [v.output_names[i] for i in detection.response_outputs(v)] == ["vel", "alphaw", "qb", "betaw", "ps", "rs"]
+    h = harv_vehicle()
+    assert [h.output_names[i] for i in detection.response_outputs(h)] == ["beta", "p", "r"]
+    std = detection.response_noise_std(h, 0.0005, 0.1)
+    # measured once, 1 h of the seed's noise model: 0.0707 and 0.1414 gains differenced over 0.1 s
+    assert std[1] == pytest.approx(2 * std[0]) and 0.4 < std[1] < 0.65
+    del ice
