@@ -214,6 +214,7 @@ def closed_loop_poles(
     A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray, controlled: Sequence[int], measured: Sequence[int],
     actuators: Sequence[ActuatorSpec], allocation: np.ndarray, demand_map: np.ndarray, k_rho: np.ndarray,
     integral: np.ndarray, observer_poles: Sequence[Sequence[float]] | None,
+    observer_gains: Sequence[np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Eigenvalues of the linear closed loop of step 10 (reference inputs zero) and which are the channels'.
 
@@ -251,7 +252,7 @@ def closed_loop_poles(
     Acl[ii, :] = -E
     if obs:
         for i, poles in enumerate(observer_poles):
-            G = observer_gain(A, Cz, poles)
+            G = observer_gain(A, Cz, poles) if observer_gains is None else observer_gains[i]
             rows = slice(n + na + i * n, n + na + (i + 1) * n)
             Acl[rows, :] = (B - G @ Dz) @ ucmd
             Acl[rows, ix] += G @ Cz
@@ -264,6 +265,21 @@ def closed_loop_poles(
     # that those "remain stable": neutral is the most they may be.
     neutral = np.abs(eig) <= NEUTRAL_TOL * max(1.0, float(np.abs(eig).max()))
     return eig, ~neutral
+
+
+def _check_observable(A: np.ndarray, Cz: np.ndarray) -> None:
+    """ProblemError (field ``model.C``) unless ``(A, Cz)`` is observable: seed section 3.3's observers need it."""
+    n = A.shape[0]
+    blocks, row = [], Cz
+    for _ in range(n):
+        blocks.append(row)
+        row = row @ A
+    sv = np.linalg.svd(np.vstack(blocks), compute_uv=False)
+    rank = int(np.count_nonzero(sv > max(sv.max(initial=0.0), 1.0) * n * np.finfo(float).eps * 1e3))
+    if rank < n:
+        raise ProblemError(f"model.C: the measured outputs do not observe the state (observability rank {rank} of "
+                           f"{n}); the observers of seed section 3.3 need it: fly without them (design "
+                           "observer=false) or measure more outputs", field="model.C")
 
 
 def _weighted_pinv(B_axes: np.ndarray, Wu: np.ndarray | None) -> np.ndarray:
@@ -298,6 +314,9 @@ def auto_design(
     # step 3: square architecture, relative order, pseudo-command map
     orders = [relative_order(A, B, C[c], D[c]) for c in controlled]
     for i, p in enumerate(orders):
+        if p > A.shape[0]:
+            raise ProblemError(f"model.controlled[{i}]: no effector reaches output {output_names[controlled[i]]!r} "
+                               "(C A^j B = 0 for every j)", field=f"model.controlled[{i}]")
         if p != 1:
             raise ProblemError(f"model.controlled[{i}]: output {output_names[controlled[i]]!r} has relative order "
                                f"{p}; the loop's sliding function sigma = K0 e + K_-1 int(e) (seed Eq 4.7) needs 1",
@@ -341,9 +360,13 @@ def auto_design(
     def observers(w_obs: float) -> tuple[tuple[float, ...], ...]:
         return tuple(tuple(-(w_obs + 0.1 * j) for j in range(n)) for _ in controlled)
 
+    placed: dict[Any, list[np.ndarray]] = {}  # one placement per observer set, not per K_rho
+
     def check(k_rho: float, poles: Any) -> dict[str, float]:
+        if poles is not None and poles not in placed:
+            placed[poles] = [observer_gain(A, C[list(measured)], p) for p in poles]
         eig, visible = closed_loop_poles(A, B, C, D, controlled, measured, actuators, allocation, demand_map,
-                                         np.full(k, k_rho), integral, poles)
+                                         np.full(k, k_rho), integral, poles, None if poles is None else placed[poles])
         live = eig[visible]
         damping = -live.real / np.abs(live)
         worst = int(np.argmin(damping))
@@ -373,7 +396,13 @@ def auto_design(
                     return row, w_obs, tried
         return None, None, tried
 
-    found, w_obs, tried = search(bandwidths)
+    if opt["observer"]:
+        _check_observable(A, C[list(measured)])
+    try:
+        found, w_obs, tried = search(bandwidths)
+    except (ValueError, np.linalg.LinAlgError) as exc:  # place_poles on a nearly unobservable pair
+        raise ProblemError(f"model.C: the observers' poles cannot be placed ({exc}); fly without observers "
+                           "(design observer=false) or measure more outputs", field="model.C") from exc
     if found is None:
         worst = min(tried, key=lambda r: r["max_real_eig"])
         raise ProblemError(f"model.controlled: no K_rho from {start:g} rad/s down to {gains[-1]:g} and no observer "

@@ -105,8 +105,9 @@ def _trim(file_vehicle: Any) -> np.ndarray:
     if not np.any(trim):
         return np.zeros(file_vehicle.m)
     import alloc
+    from alloc.registry import DEFAULT_METHOD
 
-    res = alloc.make_allocator(file_vehicle.problem(), alloc.registry.DEFAULT_METHOD)(trim)
+    res = alloc.make_allocator(file_vehicle.problem(), DEFAULT_METHOD)(trim)
     if res.status != alloc.Status.EXACT:
         raise ProblemError(f"axes[].trim: the effectors cannot meet the trim {trim.tolist()} "
                            f"(best {res.v_achieved.tolist()})", field="axes")
@@ -277,12 +278,12 @@ def fly(
     file's units (trim added back); ``result.settings`` carries ``design`` (the section 4.3
     report), ``units`` and ``trim_u``.
     """
-    import alloc
     from alloc import vehicles
+    from alloc.registry import DEFAULT_METHOD
 
     frame_period = run_options.get("frame_period")
     fm = flight_model(source, design=design, frame_period=frame_period or dt)
-    method = alloc.registry.DEFAULT_METHOD if method is None else method
+    method = DEFAULT_METHOD if method is None else method
     from sim.allocation import STATIC
 
     if method != STATIC:

@@ -243,3 +243,78 @@ def test_bench_closedloop_compares_methods_on_a_file(tmp_path):
     bad = runner.invoke(app, ["bench", "closedloop", "--vehicle", str(path), "--failure", "jam:rotor9"],
                         prog_name="alloc")
     assert bad.exit_code == 2 and "rotor9" in bad.stderr and len(bad.stderr.strip().splitlines()) == 1
+
+
+def _random_vehicle(rng: random.Random) -> dict:
+    """Seeded: a small vehicle document with a random model (scales 1e-3..1e3, singular columns, unobservable
+    outputs, unreachable outputs, trims, every form of actuator dynamics)."""
+    g = np.random.default_rng(rng.randrange(2**32))
+    n, m = rng.randint(1, 5), rng.randint(1, 5)
+    k = rng.randint(1, min(m, 3))
+    p = rng.randint(k, n + 2)
+    scale = 10.0 ** g.uniform(-3, 3)
+    B_axes = g.normal(size=(k, m)) * scale
+    if rng.random() < 0.2:
+        B_axes[:, 0] = 0.0
+    M = g.normal(size=(n, k))
+    if rng.random() < 0.2:
+        M[:, -1] = 0.0
+    B = M @ B_axes + (g.normal(size=(n, m)) * 0.1 * scale if rng.random() < 0.5 else 0.0)
+    A = g.normal(size=(n, n)) * rng.choice([0.0, 0.1, 1.0, 10.0])
+    C = g.normal(size=(p, n)) if rng.random() < 0.3 else np.eye(p, n)
+    if rng.random() < 0.5:  # a well-posed one: every state measured, k rate-like states driven by the axes
+        n = p = max(n, k)
+        A = g.normal(size=(n, n)) * rng.choice([0.0, 0.1, 1.0])
+        M = np.vstack([np.diag(10.0 ** g.uniform(-1, 1, k)), g.normal(size=(n - k, k)) * 0.1])
+        B, C = M @ B_axes, np.eye(n)
+    dynamics = rng.choice([{"bandwidth": 30.0}, {"poles": [40.0, 100.0]}, {"wn": 20.0, "zeta": 0.7}, None,
+                           {"time_constant": 0.05}])
+    effectors = []
+    for j in range(m):
+        lo = rng.choice([-1.0, 0.0, -30.0])
+        e = {"name": f"e{j}", "min": lo, "max": max(rng.choice([1.0, 30.0, 0.5]), lo + 0.1)}
+        if rng.random() < 0.7:
+            e["rate_max"] = rng.choice([1.0, 100.0])
+        if dynamics:
+            e["dynamics"] = dynamics
+        effectors.append(e)
+    return {"format": "alloc-vehicle/1", "name": "hostile",
+            "axes": [{"name": f"a{i}", "trim": rng.choice([0.0, 0.0, 0.3])} for i in range(k)],
+            "effectors": effectors, "effectiveness": {"B": B_axes.tolist()},
+            "model": {"states": [f"x{i}" for i in range(n)], "outputs": [f"y{i}" for i in range(p)], "A": A.tolist(),
+                      "B": B.tolist(), "C": C.tolist(), "controlled": rng.sample([f"y{i}" for i in range(p)], k)}}
+
+
+def _hostile_models(cases: int, flights: int) -> None:
+    rng = random.Random(SEED)
+    designed = flown = 0
+    for _ in range(cases):
+        try:
+            vehicle = vehicle_from_dict(_random_vehicle(rng))
+        except ProblemError:
+            continue
+        try:
+            fm = flight_model(vehicle)
+        except ProblemError as exc:
+            assert (exc.field or "").startswith(("model", "axes")), exc
+            continue
+        designed += 1
+        report = fm.design.report
+        assert report["check"]["max_real_eig"] < -report["options"]["stability_margin"]
+        assert np.all(np.isfinite(fm.design.smc.rho)) and np.all(fm.design.smc.eps > 0)
+        if flown < flights:
+            flown += 1
+            res = fly(vehicle, duration=0.3, noise=False)
+            lo = np.array([e.min for e in vehicle.effectors])
+            hi = np.array([e.max for e in vehicle.effectors])
+            _assert_admissible(res, lo, hi)
+    assert designed > 0
+
+
+def test_hostile_models_design_or_refuse():
+    _hostile_models(cases=20, flights=2)
+
+
+@pytest.mark.slow
+def test_hostile_models_design_or_refuse_many():
+    _hostile_models(cases=300, flights=30)
