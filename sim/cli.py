@@ -3,10 +3,10 @@ summary, write JSON, CSV and PNG.
 
 ``--vehicle`` takes what every ``alloc`` command takes (:func:`alloc.vehicles.get_vehicle`):
 a scenario's name, or a catalogue vehicle whose name or alias is a scenario's (``harv`` flies
-``harv_latdir``).  Any other vehicle -- a user's file -- is refused in one line naming what is
-missing: a file without a ``[model]`` has no plant to fly; a file with one would need the
-seed's section 4.3 design applied to it, which the simulator does not do yet.  The
-scenario's vehicle's ``[methods.<method>]`` defaults (ICE's daisy groups) reach the allocator
+``harv_latdir``).  Any other vehicle -- a user's file -- with a ``[model]`` flies that model
+with the seed's section 4.3 design applied to it (:class:`sim.user_vehicle.VehicleScenario`;
+``--design key=value`` overrides a choice, ``--failure <kind>:<effector>[@value]``); a file
+without one is refused in one line (no plant to fly).  The scenario's vehicle's ``[methods.<method>]`` defaults (ICE's daisy groups) reach the allocator
 (:func:`sim.scenarios.mimo.run_mimo`).
 
 Registered as the entry point ``sim`` of the group ``alloc.commands`` (``pyproject.toml``).
