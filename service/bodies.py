@@ -208,8 +208,9 @@ class _JsonRequest(Request):
 
 
 class JsonRoute(APIRoute):
-    """A route whose JSON body is parsed by :func:`parse_json` (about 5x faster than Starlette's
-    ``json.loads`` on a large body, so the event loop is held that much less)."""
+    """A route whose JSON body is parsed by :func:`parse_json`: 4-5x faster than Starlette's
+    ``json.loads`` on a batch body (rows of numbers), about as fast on an object of 40,000
+    members (building the dict dominates), so the event loop is held that much less."""
 
     def get_route_handler(self) -> Callable[[Request], Coroutine[Any, Any, Response]]:
         handler = super().get_route_handler()
