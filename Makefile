@@ -19,7 +19,7 @@ install: $(STAMP)
 	$(BIN)/python -m alloc._jit_cache warm --quiet
 
 test: $(STAMP)
-	$(BIN)/pytest -q
+	$(BIN)/pytest -q --durations=25
 
 test-all: $(STAMP)
 	$(BIN)/pytest -q -m ''

@@ -202,6 +202,7 @@ def test_sixteen_clients_mixed_30s(cluster):
     _mixed_run(cluster, 30.0)
 
 
+@pytest.mark.slow  # about 50 s; the default run's replicas are separate processes on one database already
 def test_uvicorn_workers_share_one_truth(tmp_path):
     """``alloc serve --workers 2`` (uvicorn's own worker processes on one port)."""
     proc = ServiceProcess(tmp_path / "data", api_key=KEY, workers=2).start(timeout=180.0)
