@@ -3,10 +3,10 @@
 uvicorn's multiprocess supervisor pings every worker with a 5 s deadline
 (``timeout_worker_healthcheck``) from the moment it is spawned.  A worker answers from a
 thread that starts only after the worker has imported the application's modules, and it
-is not serving until its start-up (here: loading or compiling the numba kernels,
-:func:`service.main.warm_up`) is done; on a loaded machine that takes longer than 5 s,
-so the supervisor killed workers that were still starting (71 kills and no worker up in
-about 400 s at load 13, issue 23).
+is not serving until its start-up (imports, database migration) is done; the numba kernels
+load afterwards on a thread (:mod:`service.warm`).  On a loaded machine start-up can take
+longer than 5 s, and uvicorn's supervisor killed workers that were still starting (71 kills
+and no worker up in about 400 s at load 13, issue 23).
 
 :class:`ReadinessSupervisor` keeps uvicorn's supervisor and changes one thing: a worker
 that is still starting is asked whether it is ready without waiting for the answer, and
