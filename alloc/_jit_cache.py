@@ -345,8 +345,12 @@ def _warm_cases() -> list[tuple[Any, dict[str, dict[str, Any]]]]:
 
     small = Problem(np.array([[1.0, -1.0, 0.5, 0.2], [0.3, 0.4, -1.0, 0.8], [0.2, 0.1, 0.3, -1.0]]),
                           [-1.0] * 4, [1.0] * 4, rate_min=[-5.0] * 4, rate_max=[5.0] * 4)
+    # a flat attainable set (a fourth row dependent on the first): the facet searches' flat-set kernel
+    flat = Problem(np.vstack([small.B, 0.3 * small.B[0]]), [-1.0] * 4, [1.0] * 4, rate_min=[-5.0] * 4,
+                   rate_max=[5.0] * 4)
     cases = []
-    for problem, groups in ((small, [[0, 1], [2, 3]]), (vehicles.problem("ice"), vehicles.daisy_groups("ice"))):
+    for problem, groups in ((small, [[0, 1], [2, 3]]), (flat, [[0, 1], [2, 3]]),
+                            (vehicles.problem("ice"), vehicles.daisy_groups("ice"))):
         options: dict[str, dict[str, Any]] = {}
         for name in methods():
             spec = method_info(name)["options"]

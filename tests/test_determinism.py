@@ -215,3 +215,49 @@ def test_flat_compiled_search_agrees_with_the_reference(method):
             assert np.abs(p.B @ (u - ur)).max() <= 1e-9 * scale
             checked += 1
     assert checked >= 40
+
+
+def _kernel_signatures() -> dict[str, int]:
+    """Compiled versions of every numba kernel loaded from the library."""
+    import sys
+
+    from numba.core.registry import CPUDispatcher
+
+    out = {}
+    for name, module in list(sys.modules.items()):
+        if name.startswith("alloc") and module is not None:
+            for attr, obj in vars(module).items():
+                if isinstance(obj, CPUDispatcher):
+                    out[f"{name}.{attr}"] = len(obj.signatures)
+    return out
+
+
+def test_a_round_tripped_allocator_compiles_nothing():
+    """A deep copy's or a pickled allocator's arrays keep the types the kernels were compiled
+    for (layout, dtype, writeability): after the original's calls, theirs compile no new
+    version of any kernel (a compile is seconds inside a call).  Full-rank, flat and rank-0
+    sets, nominal, rate-limited and batch calls, every method."""
+    import pickle
+
+    B = [[1.0, 0.5, -0.3, 0.2], [0.2, 1.0, 0.7, -0.5], [0.1, -0.4, 1.0, 0.3]]
+    problems = [alloc.Problem(B, [-1] * 4, [1] * 4, rate_min=[-1] * 4, rate_max=[1] * 4),
+                alloc.Problem(B + [[0.3, 0.15, -0.09, 0.06]], [-1] * 4, [1] * 4, rate_min=[-1] * 4, rate_max=[1] * 4),
+                alloc.Problem(B, [0.5] * 4, [0.5] * 4, rate_min=[0.0] * 4, rate_max=[0.0] * 4)]
+
+    def exercise(f, p):
+        v = np.array([0.3, -0.2, 0.4, 0.1][:p.k])
+        f(v)
+        f(v, u_prev=np.full(p.m, 0.5), dt=0.01)
+        f.batch(np.array([v, 2 * v]))
+
+    for method in alloc.methods():
+        for p in problems:
+            f = alloc.make_allocator(p, method)
+            exercise(f, p)
+            exercise(f, p)
+            before = _kernel_signatures()
+            for twin in (copy.deepcopy(f), pickle.loads(pickle.dumps(f))):
+                exercise(twin, p)
+            after = _kernel_signatures()
+            grown = {k: (before.get(k, 0), n) for k, n in after.items() if n > before.get(k, 0)}
+            assert not grown, f"{method} on {p!r}: a round-tripped allocator compiled {grown}"

@@ -118,6 +118,18 @@ def facet_build_bytes(subsets: int, entries: int) -> int:
     return FACET_BYTES * subsets * entries
 
 
+def _kernel_array(a: Any, dtype: Any = None) -> np.ndarray:
+    """``a`` as a C-contiguous, writable array (copied only when it is not one).
+
+    numba compiles one version of a kernel per argument type, and writeability is part of
+    the type: the tiling's read-only views would be one type in the original and another in
+    a pickled copy (unpickled arrays are writable), so the copy's first call would compile."""
+    a = np.asarray(a, dtype=dtype)
+    if a.flags.c_contiguous and a.flags.writeable:
+        return a
+    return np.array(a, order="C")
+
+
 def _int_option(value: object, field: str, lo: int, hi: int, method: str = "da_bisect") -> int:
     """An integer option in ``[lo, hi]`` (bounded: it sizes build-time tables); OptionError otherwise."""
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or not lo <= value <= hi:
@@ -239,7 +251,7 @@ class FacetSearch(Method):
     def _prepare_kernels(self) -> None:
         """Contiguous copies of the tables the compiled kernels read (full-rank sets only)."""
         ams = self.ams
-        f64 = np.ascontiguousarray
+        f64 = _kernel_array
         self._kMinv, self._kU, self._kS = f64(self._Minv), f64(self._U), f64(self._S)
         self._kNz, self._kp0, self._ku0 = f64(self._Nz), f64(self._p0), f64(self._u0)
         # rate-limited box: the facet structure with gaps and tiles placed per call
@@ -254,7 +266,7 @@ class FacetSearch(Method):
         order, whatever the memory layout of the arrays (numpy's BLAS paths are not)."""
         ams, p = self.ams, self.problem
         k, m, r = p.k, p.m, ams.rank
-        f64 = np.ascontiguousarray
+        f64 = _kernel_array
         if r == 0:
             Q, Br, Nr = np.zeros((k, 0)), np.zeros((0, m)), np.zeros((0, 0))
             NB, tile_hi, tile_span = np.zeros((0, m)), np.zeros((0, m), dtype=bool), np.zeros((0, 0), dtype=np.intp)
@@ -463,10 +475,10 @@ class EdgeBisect(FacetSearch):
         order = np.argsort(self._facet_of_tile, kind="stable")
         self._ktile_pos = order.astype(np.intp)
         self._ktile_ptr = np.searchsorted(self._facet_of_tile[order], np.arange(ams.n_facets + 1)).astype(np.intp)
-        self._kbisect = (np.ascontiguousarray(self._W), np.ascontiguousarray(self._G), np.ascontiguousarray(self._c),
-                         np.ascontiguousarray(lut), np.ascontiguousarray(self._pair_cross), self._ktile_ptr,
-                         self._ktile_pos, np.ascontiguousarray(self._fractions),
-                         np.ascontiguousarray(self._first_angles), self.max_rounds)
+        self._kbisect = (_kernel_array(self._W), _kernel_array(self._G), _kernel_array(self._c),
+                         _kernel_array(lut), _kernel_array(self._pair_cross), self._ktile_ptr,
+                         self._ktile_pos, _kernel_array(self._fractions),
+                         _kernel_array(self._first_angles), self.max_rounds)
 
     def _solve_nominal(self, v):
         if not self._bisect:
