@@ -318,3 +318,25 @@ def test_hostile_models_design_or_refuse():
 @pytest.mark.slow
 def test_hostile_models_design_or_refuse_many():
     _hostile_models(cases=300, flights=30)
+
+
+def test_ice_design_file_crosses_near_the_seeds_design():
+    """The auto-design of the ICE design file against the seed's own ICE design (Eq 4.27, Table 4-6).
+
+    The seed's switching gain ``rho / eps`` is in axis units (w', p', v' per unit sigma); times the
+    rate each axis gives its channel (``C_ctl B W`` with the seed's weighted pseudo-inverse ``W``)
+    it is the crossover of step 4b: 868, 966 and 903 rad/s.  The rule here gives 800 (20 x the
+    40 rad/s limit frequency).
+    """
+    import sim.scenarios.ice as ice
+    from sim.autodesign import _weighted_pinv
+
+    seed = ice.smc_design()
+    v = ice.vehicle()
+    gain = ice.C[list(ice.CONTROLLED)] @ ice.B @ _weighted_pinv(v.B_alloc, v.Wu)
+    seed_crossover = seed.rho / seed.eps * np.diag(gain)
+    np.testing.assert_allclose(seed_crossover, [868.0, 966.0, 903.0], rtol=2e-3)
+    ours = flight_model("ice-design").design
+    ratio = ours.report["switching"]["K_rho"] / seed_crossover
+    assert np.all((0.8 <= ratio) & (ratio <= 1.25)), ratio
+    assert all(num == (100.0,) and den == (1.0, 20.0, 100.0) for num, den in ours.references)  # seed Eq 4.22
