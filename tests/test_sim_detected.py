@@ -147,3 +147,24 @@ def test_response_outputs_and_noise_are_the_simulators():
     # measured once, 1 h of the seed's noise model: 0.0707 and 0.1414 gains differenced over 0.1 s
     assert std[1] == pytest.approx(2 * std[0]) and 0.4 < std[1] < 0.65
     del ice
+
+
+def test_the_sweep_has_a_detected_arm_next_to_told_and_blind():
+    from benchmarks.compare.closedloop import run_closed
+    from benchmarks.compare.report import closed_scores, detected_share
+    from benchmarks.compare.sweep import ARMS, closed_grid, closed_spec, detected_sweep
+
+    assert closed_spec("ice", "jam1", "qp", told=True, seed=1, duration=1.0, failure_time=0.5)["id"].endswith(
+        "/qp/told/s01")  # ids of the two original arms unchanged
+    assert {s["health"] for s in detected_sweep(1)} == set(ARMS) and len(detected_sweep(2)) == 2 * 2 * 3 * 2
+    specs = closed_grid("ice", ["jam1"], ["static", "qp"], [1], settings=[{"frame_period": 0.01}], duration=2.0,
+                        failure_time=1.0, arms=ARMS)
+    assert [s["health"] for s in specs] == ["blind", "blind", "told", "detected"]
+    rows = [run_closed(s)[0] for s in specs]
+    assert [r["health"] for r in rows] == ["blind", "blind", "told", "detected"]
+    scored = closed_scores(rows)
+    share = detected_share(scored, resamples=50)
+    assert len(share) == 1 and share[0]["method"] == "qp" and share[0]["seeds"] == 1
+    b, t, d = (r["score"] for r in scored[1:])
+    expected = (b - d) / (b - t) if b > t else float("nan")
+    assert share[0]["share"] == pytest.approx(expected, nan_ok=True)

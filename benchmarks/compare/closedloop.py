@@ -2,8 +2,9 @@
 
 Runs :func:`sim.scenarios.get_scenario` (``scenario``) with the spec's failure (by name, or a
 catalogue failure from :mod:`.failures`), failure time, duration, noise seed and simulator
-setting (``spec["sim"]``, passed through by keyword), the allocator blind to the failure or told
-of it (``allocator_knows_failure``).  Row columns:
+setting (``spec["sim"]``, passed through by keyword), the allocator blind to the failure, told
+of it (``allocator_knows_failure``) or learning of it from the in-loop detector (``health``
+``detected``; the row's ``health`` names the arm).  Row columns:
 
 * ``<channel>_rms_before|after``, ``<channel>_max_before|after`` -- tracking error
   (reference - output) before and after the failure (:meth:`sim.result.SimResult.summary`).
@@ -68,6 +69,8 @@ def simulate_spec(spec: Spec) -> SimResult:
     kwargs = dict(method=spec["method"], duration=spec["duration"], seed=spec["seed"],
                   allocator_knows_failure=spec["told"], failure_time=spec["failure_time"], noise=spec["noise"],
                   method_options=options, **spec["sim"])
+    if spec.get("health") == "detected":
+        kwargs["health"] = "detected"
     if not is_catalogue(spec["failure"]):
         return run(failure=spec["failure"], **kwargs)
     failure = make_failure(scenario, spec["failure"], spec["failure_time"])
@@ -121,7 +124,8 @@ def run_closed(spec: Spec) -> tuple[dict[str, Any], dict[str, Any], dict[str, np
     summary = res.summary()
     row: dict[str, Any] = {
         "id": spec["id"], "scenario": spec["scenario"], "setting": setting_tag(spec["sim"]),
-        "failure": spec["failure"], "method": spec["method"], "told": spec["told"], "seed": spec["seed"],
+        "failure": spec["failure"], "method": spec["method"], "told": spec["told"],
+        "health": spec.get("health", "told" if spec["told"] else "blind"), "seed": spec["seed"],
         "duration": spec["duration"], "failure_time": spec["failure_time"], "noise": spec["noise"],
         "diverged": summary["diverged"], "simulated": summary["duration"],
     }

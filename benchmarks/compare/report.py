@@ -48,7 +48,7 @@ from .stats import bootstrap_median, paired_ratio, rank_with_ties, spearman
 from .sweep import STATIC, Spec
 from .timing import TIMINGS_CSV
 
-__all__ = ["make_report", "load_rows", "closed_scores", "cell_summaries", "told_blind", "coverage_agreement",
+__all__ = ["make_report", "load_rows", "closed_scores", "cell_summaries", "told_blind", "detected_share", "coverage_agreement",
            "parse_markdown_table", "pooled_rows", "verdicts_by_setting", "verdict_stability", "ALL_SETTINGS"]
 
 Row = dict[str, Any]
@@ -149,6 +149,8 @@ def _channels(rows: Sequence[Row]) -> list[str]:
 def _mode(row: Row) -> str:
     if "mode" in row:  # a summary
         return row["mode"]
+    if row.get("health"):  # the arm (rows written before the detected arm have none)
+        return row["health"]
     return "told" if row["told"] else "blind"
 
 
@@ -214,12 +216,43 @@ def cell_summaries(rows: Sequence[Row]) -> list[Row]:
     return cells
 
 
+def detected_share(rows: Sequence[Row], resamples: int = 2000, seed: int = 0) -> list[Row]:
+    """The oracle's benefit that survives detection, per (scenario, setting, failure, method):
+    ``(median blind - median detected) / (median blind - median told)`` of the scores over the seeds
+    all three arms ran, with a 95 % bootstrap interval resampling those seeds (NaN where told is no
+    better than blind, or a score is not finite)."""
+    rng = np.random.default_rng(seed)
+
+    def share(b: np.ndarray, t: np.ndarray, d: np.ndarray) -> float:
+        gain = np.median(b) - np.median(t)
+        return float((np.median(b) - np.median(d)) / gain) if np.isfinite(gain) and gain > 0 else math.nan
+
+    out = []
+    for (scenario, setting, failure, method), grp in _groups(rows, ("scenario", "setting", "failure", "method")).items():
+        arms = {a: {int(r["seed"]): float(r["score"]) for r in grp if _mode(r) == a} for a in ("blind", "told", "detected")}
+        seeds = sorted(set(arms["blind"]) & set(arms["told"]) & set(arms["detected"]))
+        if not seeds:
+            continue
+        b, t, d = (np.array([arms[a][s] for s in seeds]) for a in ("blind", "told", "detected"))
+        est = share(b, t, d) if np.isfinite(np.concatenate([b, t, d])).all() else math.nan
+        boots = []
+        for _ in range(resamples if not math.isnan(est) else 0):
+            i = rng.integers(len(seeds), size=len(seeds))
+            boots.append(share(b[i], t[i], d[i]))
+        boots_arr = np.array([x for x in boots if not math.isnan(x)])
+        lo, hi = (np.percentile(boots_arr, [2.5, 97.5]) if boots_arr.size else (math.nan, math.nan))
+        out.append({"scenario": scenario, "setting": setting, "failure": failure, "method": method,
+                    "seeds": len(seeds), "share": est, "share_lo": float(lo), "share_hi": float(hi)})
+    out.sort(key=lambda r: (r["scenario"], r["setting"], r["failure"], r["method"]))
+    return out
+
+
 def told_blind(rows: Sequence[Row]) -> list[Row]:
     """Paired told/blind ratio per (scenario, setting, failure, method) (see module docstring)."""
     out = []
     for (scenario, setting, failure, method), grp in _groups(rows, ("scenario", "setting", "failure", "method")).items():
-        told = {int(r["seed"]): r["score"] for r in grp if r["told"]}
-        blind = {int(r["seed"]): r["score"] for r in grp if not r["told"]}
+        told = {int(r["seed"]): r["score"] for r in grp if _mode(r) == "told"}
+        blind = {int(r["seed"]): r["score"] for r in grp if _mode(r) == "blind"}
         seeds = sorted(set(told) & set(blind))
         if not seeds:
             continue
@@ -795,6 +828,8 @@ def make_report(out: Path | str, specs: Sequence[Spec], meta: dict[str, Any] | N
         all_agree += agree
         _write_csv(out / f"{name}_cells.csv", cells)
         _write_csv(out / f"{name}_told_blind.csv", ratios)
+        if any(_mode(r) == "detected" for r in rows):
+            _write_csv(out / f"{name}_detected_share.csv", detected_share(rows))
         for (scenario,), grp in _groups(rows, ("scenario",)).items():
             if len({r["setting"] for r in grp}) > 1:
                 section, pcells, pratios = _across_section(out, scenario, grp,

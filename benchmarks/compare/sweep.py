@@ -14,7 +14,8 @@ any run starts, a setting the simulator in this checkout does not accept.
 
 Glossary: ``told`` -- the allocator is given the failed effectors' new limits
 (``allocator_knows_failure=True``, reconfiguration); ``blind`` -- it keeps the nominal
-problem.  ``static`` is the seed's printed distribution matrix (Eq 4.24 for ICE), which
+problem; ``detected`` -- it learns of a failure only from the in-loop detector
+(``health="detected"``, :mod:`sim.detection`; the failure is silent).  ``static`` is the seed's printed distribution matrix (Eq 4.24 for ICE), which
 cannot be told anything, so it only runs blind.  Failures: see :mod:`.failures`.
 """
 
@@ -30,8 +31,8 @@ import alloc
 from .failures import catalogue_names, is_catalogue
 
 __all__ = [
-    "Spec", "STATIC", "FRAME_PERIOD", "PILOT_SETTINGS", "open_spec", "closed_spec", "closed_grid",
-    "setting_tag", "quick_sweep", "full_sweep", "tiny_sweep", "smoke_sweep", "check_simulator_support", "SCENARIO_TIMES",
+    "Spec", "STATIC", "ARMS", "FRAME_PERIOD", "PILOT_SETTINGS", "open_spec", "closed_spec", "closed_grid",
+    "setting_tag", "detected_sweep", "quick_sweep", "full_sweep", "tiny_sweep", "smoke_sweep", "check_simulator_support", "SCENARIO_TIMES",
     "FULL_TIMES", "FULL_PILOTS",
 ]
 
@@ -39,6 +40,9 @@ Spec = dict[str, Any]
 
 #: The seed's printed static distribution (a simulator method, not a registry one).
 STATIC = "static"
+
+#: Closed-loop arms: where the allocator's health comes from (``alloc sim --health``).
+ARMS = ("blind", "told", "detected")
 
 #: Scenario keyword for the flight-control frame period (s) of the multi-rate loop; the sweep's
 #: frame-rate axis (Hz) is written as this period.  Absent = the seed's 0.5 ms step.
@@ -86,15 +90,19 @@ def open_spec(problem: str, method: str, *, samples: int, demands: int, steps: i
 
 def closed_spec(scenario: str, failure: str, method: str, *, told: bool, seed: int,
                 duration: float, failure_time: float, noise: bool = True,
-                sim: dict[str, Any] | None = None, history: bool = False) -> Spec:
+                sim: dict[str, Any] | None = None, history: bool = False, health: str | None = None) -> Spec:
     """One closed-loop run (see :mod:`.closedloop`); ``sim``: scenario keywords passed through;
-    ``history``: keep the run's time history (``histories/<id>.npz``) for the report's figures."""
-    mode = "told" if told else "blind"
+    ``history``: keep the run's time history (``histories/<id>.npz``) for the report's figures;
+    ``health``: the arm (:data:`ARMS`; default ``told`` or ``blind`` from ``told``)."""
+    mode = health or ("told" if told else "blind")
+    if mode not in ARMS:
+        raise ValueError(f"health: {mode!r}; expected one of {ARMS}")
     sim = dict(sim or {})
     return {
         "id": f"closed/{scenario}/{setting_tag(sim)}/{failure}/{method}/{mode}/s{seed:02d}", "kind": "closed",
-        "scenario": scenario, "failure": failure, "method": method, "told": told, "seed": seed,
+        "scenario": scenario, "failure": failure, "method": method, "told": mode == "told", "seed": seed,
         "duration": duration, "failure_time": failure_time, "noise": noise, "sim": sim, "history": history,
+        "health": mode,
     }
 
 
@@ -111,18 +119,20 @@ def settings_product(*axes: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
 
 def closed_grid(scenario: str, failures: Sequence[str], methods: Sequence[str], seeds: Sequence[int], *,
                 settings: Sequence[dict[str, Any]] = ({},), duration: float, failure_time: float,
-                history_failures: Sequence[str] = (), noise: bool = True) -> list[Spec]:
-    """Every combination; ``static`` blind only; histories kept for the first seed and setting of
-    ``history_failures``."""
+                history_failures: Sequence[str] = (), noise: bool = True,
+                arms: Sequence[str] = ("blind", "told")) -> list[Spec]:
+    """Every combination of ``arms`` (:data:`ARMS`); ``static`` blind only; histories kept for the
+    first seed and setting of ``history_failures``."""
     specs = []
     for j, sim in enumerate(settings):
         for failure in failures:
             for method in methods:
-                for told in ((False,) if method == STATIC else (False, True)):
+                for arm in (("blind",) if method == STATIC else arms):
                     for s in seeds:
                         keep = j == 0 and s == seeds[0] and failure in history_failures
-                        specs.append(closed_spec(scenario, failure, method, told=told, seed=s, duration=duration,
-                                                 failure_time=failure_time, noise=noise, sim=sim, history=keep))
+                        specs.append(closed_spec(scenario, failure, method, told=arm == "told", seed=s,
+                                                 duration=duration, failure_time=failure_time, noise=noise, sim=sim,
+                                                 history=keep, health=arm))
     return specs
 
 
@@ -138,6 +148,14 @@ def _open_sweep(problems: list[str], methods: list[str], **kw: Any) -> list[Spec
 def all_methods() -> list[str]:
     """Every registry method and the seed's static matrix."""
     return [STATIC, *alloc.methods()]
+
+
+def detected_sweep(seeds: int = 3) -> list[Spec]:
+    """The three arms side by side, small: ICE's single jam and hard-over, ``qp`` and ``wls``,
+    blind, told and detected, ``seeds`` noise seeds, 10 s with the failure at 5 s, 100 Hz frame."""
+    return [spec for failure in ("jam1", "hardover1") for spec in
+            closed_grid("ice", [failure], ["qp", "wls"], list(range(1, seeds + 1)),
+                        settings=[{FRAME_PERIOD: 0.01}], duration=10.0, failure_time=5.0, arms=ARMS)]
 
 
 def quick_sweep() -> list[Spec]:
