@@ -42,7 +42,8 @@ from typing import Any
 import numpy as np
 
 from ..exceptions import ProblemError
-from ..vehicle_file import FORMAT, Vehicle, vehicle_from_dict
+from ..vehicle_file.fields import FORMAT
+from ..vehicle_file.vehicle import Vehicle, vehicle_from_dict
 
 __all__ = ["FRAMES", "YAW_CW", "YAW_CCW", "frame_factors", "normalise_rpy_factors", "read_factor_table",
            "vehicle_from_factors", "vehicle_from_frame"]

@@ -69,7 +69,9 @@ from typing import Any
 import numpy as np
 
 from ..exceptions import ProblemError
-from ..vehicle_file import FORMAT, WRENCH_COMPONENTS, Vehicle, rotor_wrench, vehicle_from_dict
+from ..vehicle_file.fields import FORMAT, WRENCH_COMPONENTS
+from ..vehicle_file.parts import rotor_wrench
+from ..vehicle_file.vehicle import Vehicle, vehicle_from_dict
 
 __all__ = ["read_params", "vehicle_from_params", "px4_scales", "AIRFRAMES", "SURFACE_TYPES", "DEFAULTS"]
 

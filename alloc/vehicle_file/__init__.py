@@ -1,0 +1,139 @@
+"""Vehicle description files: format ``alloc-vehicle/1`` (TOML or JSON).
+
+A vehicle file names the effectors and the axes of one aircraft and carries everything an
+allocation problem, a method's defaults and (optionally) the simulator need::
+
+    format = "alloc-vehicle/1"
+    name = "hexa-x"
+    description = "6 rotors, X layout"
+
+    [[axes]]                      # the virtual controls v (rows of B), in order
+    name = "roll"
+    unit = "N m"
+
+    [[effectors]]                 # the effectors u (columns of B), in order
+    name = "m1"
+    kind = "rotor"                # surface | rotor | thrust-vector | thruster | other
+    unit = "1"                    # the unit of the command u (rad, deg, N, 1 = normalised)
+    min = 0.0
+    max = 1.0
+    rate_max = 10.0               # optional, units per second (rate_min defaults to -rate_max)
+    preferred = 0.0               # optional: u_pref (default 0 clipped into [min, max])
+    weight = 1.0                  # optional: diagonal entry of Wu
+    dynamics = { bandwidth = 40.0, delay = 0.01 }   # optional actuator model
+    rotor = { position = [0.0, 0.5, 0.0], axis = [0.0, 0.0, -1.0], ct = 6.5, km = -0.05 }
+
+    [effectiveness]               # or B directly (instead of each effector's rotor/effectiveness)
+    B = [[...], ...]              # rows = axes, columns = effectors: axis unit per effector unit
+
+    [methods.daisy]               # per-vehicle method defaults (alloc's option names)
+    groups = [["m1", "m2"], ["m3"]]
+
+    [model]                       # optional rigid-body linear model x' = A x + B u, y = C x + D u
+    states = [...]; outputs = [...]; A = [...]; B = [...]; C = [...]; D = [...]
+
+The effectiveness of an effector is given one of three ways: the whole matrix
+(``[effectiveness] B``), its column (``effectiveness = [...]``, one entry per axis: a
+surface's derivatives), or its rotor geometry (``rotor = {...}``).  A rotor's column is
+PX4's (``ActuatorEffectivenessRotors::computeEffectivenessMatrix``, see
+:func:`rotor_wrench`): thrust ``ct * a`` and moment ``ct * (p x a) - ct * km * a`` for the
+unit axis ``a`` and the position ``p`` in body axes (x forward, y right, z down; metres);
+each axis then names the wrench component it is (``wrench = "roll"``, ``"pitch"``,
+``"yaw"``, ``"fx"``, ``"fy"``, ``"fz"``; inferred from an axis named so).
+
+Actuator dynamics (``dynamics``): exactly one of ``bandwidth`` (``a / (s + a)``, rad/s),
+``time_constant`` (``1 / (tau s + 1)``, s), ``wn`` with ``zeta`` (``wn^2 / (s^2 + 2 zeta wn
+s + wn^2)``) or ``poles = [a, b]`` (``a b / ((s + a)(s + b))``, seed Table 4-5), and an
+optional ``delay`` in seconds.  The allocator never sees them (:mod:`alloc.health`); the
+simulator does.
+
+Every malformed document raises :class:`~alloc.exceptions.ProblemError` (a ``ValueError``)
+whose message starts with the field's path, ``effectors[3].rate_max: must be > 0, got -1``;
+:attr:`~alloc.exceptions.AllocError.field` carries the path.  The structure is also
+published as a JSON Schema (:data:`SCHEMA_PATH`, ``alloc/schemas/vehicle-1.schema.json``);
+the loader's checks are a superset of the schema's (shapes, names, limits).
+
+The package, bottom up: :mod:`~alloc.vehicle_file.fields` (the constants and the field
+readers), :mod:`~alloc.vehicle_file.parts` (dynamics, rotors, effectors, axes, the linear
+model), :mod:`~alloc.vehicle_file.vehicle` (the vehicle and its documents) and
+:mod:`~alloc.vehicle_file.toml_writer`; the importers (:mod:`alloc.importers`) build on
+those, and :func:`load_vehicle` here, which reads any of the formats, sits above them.
+"""
+
+from __future__ import annotations
+
+import json
+import tomllib
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from ..exceptions import ProblemError
+from .fields import DATA_DIR, EFFECTOR_KINDS, FORMAT, SCHEMA_PATH, WRENCH_COMPONENTS
+from .parts import Axis, Dynamics, Effector, LinearModel, Rotor, rotor_wrench
+from .toml_writer import to_toml
+from .vehicle import Vehicle, vehicle_from_dict, vehicle_from_problem
+
+__all__ = [
+    "FORMAT", "SCHEMA_PATH", "DATA_DIR", "EFFECTOR_KINDS", "WRENCH_COMPONENTS",
+    "Dynamics", "Rotor", "Effector", "Axis", "LinearModel", "Vehicle",
+    "load_vehicle", "vehicle_from_dict", "vehicle_from_problem", "vehicle_names", "rotor_wrench", "to_toml",
+]
+
+
+# --------------------------------------------------------------------------- reading
+def vehicle_names() -> list[str]:
+    """The bundled vehicle files' names (``load_vehicle(name)`` reads one)."""
+    return sorted(p.stem for p in DATA_DIR.glob("*.toml"))
+
+
+def load_vehicle(source: str | Path | Mapping[str, Any]) -> Vehicle:
+    """Read a vehicle: a file (``.toml``, ``.json``, PX4 ``.params``), a document, or a bundled name.
+
+    A bare name without an extension that is not a file (``"ice"``) is a bundled vehicle
+    file (:func:`vehicle_names`).  PX4 parameter files go through
+    :func:`alloc.importers.px4.vehicle_from_params` with its defaults.
+
+    Raises
+    ------
+    ProblemError
+        naming the field path of the first problem (``effectors[3].rate_max: ...``), or
+        ``path`` for an unreadable or unknown file.
+    """
+    if isinstance(source, Mapping):
+        return vehicle_from_dict(source)
+    if not isinstance(source, (str, Path)):
+        raise ProblemError(f"source: expected a path, a bundled name or a document, got {type(source).__name__}",
+                           field="source")
+    path = Path(source)
+    if not path.exists() and isinstance(source, str) and path.suffix == "" and "/" not in source:
+        bundled = DATA_DIR / f"{source}.toml"
+        if not bundled.exists():
+            raise ProblemError(f"path: no file {source!r} and no bundled vehicle of that name; bundled: "
+                               f"{', '.join(vehicle_names())}", field="path")
+        path = bundled
+    suffix = path.suffix.lower()
+    if suffix == ".params":
+        from ..importers.px4 import read_params, vehicle_from_params
+
+        return vehicle_from_params(read_params(path), name=path.stem)
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise ProblemError(f"path: cannot read {str(path)!r} ({exc.strerror})", field="path") from exc
+    try:
+        text = raw.decode("utf-8")
+        if suffix == ".toml":
+            doc = tomllib.loads(text)
+        elif suffix == ".json":
+            doc = json.loads(text)
+        else:
+            raise ProblemError(f"path: unknown extension {path.suffix!r}; use .toml, .json or .params", field="path")
+    except UnicodeDecodeError as exc:
+        raise ProblemError(f"path: {path.name} is not UTF-8 text ({exc.reason} at byte {exc.start})",
+                           field="path") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ProblemError(f"path: {path.name} is not valid TOML ({exc})", field="path") from None
+    except json.JSONDecodeError as exc:
+        raise ProblemError(f"path: {path.name} is not valid JSON ({exc})", field="path") from None
+    return vehicle_from_dict(doc)
