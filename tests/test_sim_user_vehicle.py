@@ -186,8 +186,13 @@ def test_cli_flies_a_users_file(tmp_path):
     assert summary["settings"]["design"]["switching"]["K_rho"] == 300.0
     assert summary["settings"]["units"]["axes"]["roll"] == "N m"
     assert (tmp_path / "run.png").stat().st_size > 10_000
-    bad = runner.invoke(app, ["sim", "--vehicle", str(path), "--failure", "float:motor9"], prog_name="alloc")
-    assert bad.exit_code == 2 and "motor9" in bad.stderr
+    for args, token in ((["--failure", "float:motor9"], "motor9"), (["--design", "bogus=1"], "bogus"),
+                        (["--design", "crossover=-5"], "design.crossover"), (["--pilot", "crossover"], "pilot")):
+        bad = runner.invoke(app, ["sim", "--vehicle", str(path), "--duration", "0.1", *args], prog_name="alloc")
+        assert bad.exit_code == 2 and token in bad.stderr, (args, bad.stderr)
+        assert len(bad.stderr.strip().splitlines()) == 1, bad.stderr
+    seed_run = runner.invoke(app, ["sim", "ice", "--design", "crossover=300"], prog_name="alloc")
+    assert seed_run.exit_code == 2 and "--design" in seed_run.stderr
 
 
 def test_plot_units_are_the_files():
