@@ -49,7 +49,6 @@ name, :data:`DESIGN_OPTIONS`):
 
 from __future__ import annotations
 
-import math
 import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -64,7 +63,7 @@ from sim.blocks import DEFAULT_DT, ActuatorSpec, observer_gain
 from sim.loop import TF, LoopShapedDesign, SMCDesign
 
 __all__ = ["DESIGN_OPTIONS", "AutoDesign", "auto_design", "design_options", "relative_order", "pseudo_command_map",
-           "channel_reach", "limit_frequency", "closed_loop_poles"]
+           "channel_reach", "limit_frequency", "closed_loop_poles", "weighted_pinv"]
 
 #: Overridable design choices: name -> (default, meaning).  ``None``: computed by the rule.
 DESIGN_OPTIONS: dict[str, tuple[Any, str]] = {
@@ -297,7 +296,8 @@ def _check_observable(A: np.ndarray, Cz: np.ndarray) -> None:
                            "observer=false) or measure more outputs", field="model.C")
 
 
-def _weighted_pinv(B_axes: np.ndarray, Wu: np.ndarray | None) -> np.ndarray:
+def weighted_pinv(B_axes: np.ndarray, Wu: np.ndarray | None) -> np.ndarray:
+    """``Wu^-1 B^T (B Wu^-1 B^T)^-1``: the linear allocator standing in for the method in the step-10 check."""
     W_inv = np.diag(1.0 / (np.ones(B_axes.shape[1]) if Wu is None else np.asarray(Wu, dtype=float)))
     return W_inv @ B_axes.T @ np.linalg.inv(B_axes @ W_inv @ B_axes.T)
 
@@ -369,7 +369,7 @@ def auto_design(
     # step 4b, 8 and 10: K_rho from the ladder, the observers' bandwidth from theirs, checked on
     # the linear closed loop with the actuators
     n = A.shape[0]
-    allocation = _weighted_pinv(B_axes, Wu)
+    allocation = weighted_pinv(B_axes, Wu)
     cap = opt["frame_gain"] / frame_period
 
     def observers(w_obs: float) -> tuple[tuple[float, ...], ...]:

@@ -37,13 +37,13 @@ from typing import Any
 import numpy as np
 
 from alloc.exceptions import ProblemError
-from sim.autodesign import AutoDesign, auto_design, design_options
+from sim.autodesign import AutoDesign, auto_design, design_options, weighted_pinv
 from sim.blocks import DEFAULT_DT, SUM_OF_SINES_TABLE_4_2, ActuatorFailure, ActuatorSpec, sum_of_sines
 from sim.loop import Failure, LoopSpec, Vehicle, simulate
 from sim.result import SimResult
 
-__all__ = ["FlightModel", "VehicleScenario", "flight_model", "vehicle_failure", "fly", "DEFAULT_DURATION", "DEFAULT_FAILURE_TIME",
-           "FAILURE_SYNTAX"]
+__all__ = ["FlightModel", "VehicleScenario", "flight_model", "vehicle_failure", "fly", "DEFAULT_DURATION",
+           "DEFAULT_FAILURE_TIME", "FAILURE_SYNTAX"]
 
 #: simulated seconds of a run unless told (the failure halfway)
 DEFAULT_DURATION = 20.0
@@ -75,6 +75,7 @@ class FlightModel:
                                 for i, xi in enumerate(self.command_scale)])
 
     def failure(self, name: str, time: float) -> Failure:
+        """:func:`vehicle_failure` of this model."""
         return vehicle_failure(self, name, time)
 
 
@@ -157,15 +158,15 @@ def flight_model(source: Any, *, design: Mapping[str, Any] | None = None,
     measured = tuple(range(len(model.outputs)))
     B_axes = np.array(fv.B, dtype=float)
     problem = fv.problem()
-    Wu = None if problem.Wu is None else np.diag(np.asarray(problem.Wu, dtype=float)) if np.ndim(problem.Wu) == 2 \
-        else np.asarray(problem.Wu, dtype=float)
+    Wu = None
+    if problem.Wu is not None:  # the loop's vehicle and the design take the diagonal weights
+        Wu = np.asarray(problem.Wu, dtype=float)
+        Wu = np.diag(Wu).copy() if Wu.ndim == 2 else Wu
     ad = auto_design(A, B, C, D, controlled=controlled, measured=measured, output_names=model.outputs,
                      B_axes=B_axes, umin=lo, umax=hi, actuators=actuators, Wu=Wu, frame_period=frame_period,
                      options=design)
     opt = ad.report["options"]
-    from sim.autodesign import _weighted_pinv
-
-    allocation = _weighted_pinv(B_axes, Wu)
+    allocation = weighted_pinv(B_axes, Wu)
     peak = _command_peak(ad, A, B, C[list(controlled)], allocation)
     xi = opt["command_fraction"] * ad.smc.rho / peak
     command_peak = xi * sum(abs(a) for a, _ in SUM_OF_SINES_TABLE_4_2)

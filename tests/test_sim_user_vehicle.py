@@ -334,11 +334,11 @@ def test_ice_design_file_crosses_near_the_seeds_design():
     40 rad/s limit frequency).
     """
     import sim.scenarios.ice as ice
-    from sim.autodesign import _weighted_pinv
+    from sim.autodesign import weighted_pinv
 
     seed = ice.smc_design()
     v = ice.vehicle()
-    gain = ice.C[list(ice.CONTROLLED)] @ ice.B @ _weighted_pinv(v.B_alloc, v.Wu)
+    gain = ice.C[list(ice.CONTROLLED)] @ ice.B @ weighted_pinv(v.B_alloc, v.Wu)
     seed_crossover = seed.rho / seed.eps * np.diag(gain)
     np.testing.assert_allclose(seed_crossover, [868.0, 966.0, 903.0], rtol=2e-3)
     ours = flight_model("ice-design").design
