@@ -227,7 +227,7 @@ def false_alarms(p: alloc.Problem, hours: float, seed: int) -> None:
     found = 0
     block = 6000
     for start in range(0, n, block):
-        Y = U @ p.B.T + rng.normal(size=U.shape) * SEED_NOISE
+        Y = U @ p.B.T + rng.normal(size=(len(U), p.k)) * SEED_NOISE
         for i in range(min(block, n - start)):
             found += len(det.update(U[i], Y[i]))
     print(f"## False alarms: {hours:g} simulated hours without failure, seed noise, design 0.1 per hour\n")
@@ -238,7 +238,7 @@ def false_alarms(p: alloc.Problem, hours: float, seed: int) -> None:
 def timing(p: alloc.Problem, seed: int) -> None:
     rng = np.random.default_rng(seed)
     _, U, _ = commands(p, 3000, True, seed)
-    Y = U @ p.B.T + rng.normal(size=U.shape) * SEED_NOISE
+    Y = U @ p.B.T + rng.normal(size=(len(U), p.k)) * SEED_NOISE
     rls = EffectivenessRLS(p.B, noise_std=SEED_NOISE)
     fde = FrequencyDomainEstimator(p.k, p.m, DT, band=(0.2, 2.0), spacing=0.1, window=6.0, noise_std=SEED_NOISE)
     det = FailureDetector(p, SEED_NOISE, DT)
