@@ -1,4 +1,4 @@
-"""``alloc bench quick|full|smoke|report|scaling|openloop`` (also ``python -m benchmarks.compare ...``).
+"""``alloc bench quick|full|smoke|report|scaling|openloop|closedloop`` (also ``python -m benchmarks.compare ...``).
 
 ``alloc bench openloop --vehicle NAME|FILE`` runs the sweep's open-loop measures
 (:mod:`.openloop`) on any vehicle, a user's file among them, with the vehicle's method
