@@ -14,9 +14,10 @@ answers bit for bit and the same statuses (tests/test_export.py checks it); the 
 build agrees to :data:`FLOAT_TOLERANCE` (see there) and clamps its output to its bounds exactly.
 
 Methods: ``pinv``, ``pinv_clip``, ``ganging`` (``u = clip(c + P v)``), ``pinv_scale`` (the
-increment scaled into the box) and the active-set ``wls`` and ``qp`` (with ``priorities``),
-whose iteration count per level is capped at the library's own cap (stated and argued in
-the header, enforced: reaching it returns the safe answer with status 2).
+increment scaled into the box) and the active-set ``wls``, ``qp`` (with ``priorities``) and
+``dynamic`` (its two solver instances, without and with ``u_prev``), whose iteration count per
+level is capped at the library's own cap (stated and argued in the header, enforced: reaching
+it returns the safe answer with status 2).
 
 Health at run time: the active-set kernels take reduced limits and jams through
 ``alloc_<method>_set_limits``; the closed-form kernels bake the distribution matrix of the
@@ -45,7 +46,7 @@ __all__ = ["export_c", "ExportedKernel", "ExportError", "EXPORTABLE", "PRECISION
 #: bumped whenever the generated code changes for the same input
 GENERATOR_VERSION = "1"
 #: the methods :func:`export_c` generates, in the order the docs list them
-EXPORTABLE = ("pinv", "pinv_clip", "ganging", "pinv_scale", "wls", "qp")
+EXPORTABLE = ("pinv", "pinv_clip", "ganging", "pinv_scale", "wls", "qp", "dynamic")
 PRECISIONS = ("double", "float")
 #: ``float`` builds: the status ``exact`` tolerance (the library's 1e-6 is 8 float ulps at 1,
 #: below what a float residual with its rounding bound can certify)
@@ -69,7 +70,7 @@ FLOAT_MU_EPS = 8 * 2.0 ** -23
 #: every free set of every level (2^m rows a level); beyond it the kernel factorises at run time
 TABLE_BUDGET = 256 * 1024
 
-_ACTIVE_SET_METHODS = ("wls", "qp")
+_ACTIVE_SET_METHODS = ("wls", "qp", "dynamic")
 
 
 class ExportError(AllocError, ValueError):
@@ -325,7 +326,8 @@ def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "d
         fields.update(MAP_P=real.array(impl._P, "P"))
         body = templates.SCALED
     else:
-        body, levels, maxit = _active_set_fields(impl._impl, problem, real, fields, maxit, table)
+        lexico = [impl._static, impl._dynamic] if method == "dynamic" else [impl._impl]
+        body, levels, maxit = _active_set_fields(lexico, problem, real, fields, maxit, table)
     source = _fill(templates.COMMON + body, fields, prefix)
     header = _fill(templates.HEADER, fields, prefix)
     return ExportedKernel(prefix=prefix, method=method, precision=precision, header=header, source=source,
@@ -333,18 +335,18 @@ def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "d
                           maxit=maxit if levels else None, levels=levels, options=shown)
 
 
-def _active_set_fields(lexico: Any, problem: Problem, real: _Real, fields: dict[str, str],
+def _active_set_fields(instances: list[Any], problem: Problem, real: _Real, fields: dict[str, str],
                        maxit: int | None, table: bool | None) -> tuple[str, int, int]:
-    """The active set's constants, read from the library's packed solver state
-    (:func:`alloc._active_set.pack`), so the C runs on exactly the library's data."""
+    """The active set's constants, read from the library's packed solver states
+    (:func:`alloc._active_set.pack`), so the C runs on exactly the library's data.  One
+    instance for ``qp`` and ``wls``; ``dynamic`` has two (without and with ``u_prev``), which
+    share every level row and differ in the preference weight, cold start and target."""
     from .. import _active_set as aset
 
-    mats, vecs, ivecs = lexico._state[:3]
+    mats, vecs, ivecs = instances[0]._state[:3]
     head = ivecs[aset._HEAD]
     n, m, k, nlev = (int(head[i]) for i in (aset._N, aset._M, aset._K, aset._NLEV))
-    final, diag, ncw, nlw = (int(head[i]) for i in (aset._FINAL, aset._DIAG, aset._NCW, aset._NLW))
-    if head[aset._DYN]:
-        raise ExportError("method: a moving preference point (dynamic) is not exported", field="method")
+    final, ncw, nlw = (int(head[i]) for i in (aset._FINAL, aset._NCW, aset._NLW))
     cap = int(head[aset._MAXIT]) if maxit is None else maxit
     if not (isinstance(cap, (int, np.integer)) and not isinstance(cap, bool) and 1 <= cap <= 1_000_000):
         raise ExportError(f"maxit: expected an integer in [1, 1000000], got {maxit!r}", field="maxit")
@@ -356,25 +358,25 @@ def _active_set_fields(lexico: Any, problem: Problem, real: _Real, fields: dict[
         tiny = {"SIGMA_RTOL": FLOAT_SIGMA_RTOL, "JACOBI_EPS": eps, "JACOBI_TOL_FLOOR": 4.0 * eps, "JACOBI_SMALL": 1e-12,
                 "SIGMA_TINY": 1e-35, "CHOL_TINY": 1e-37, "MU_EPS": FLOAT_MU_EPS}
     fields.update({key: real.literal(value, key) for key, value in tiny.items()})
+    diags = [int(lex._state[2][aset._HEAD, aset._DIAG]) for lex in instances]
+    ml = 1 if all(diags) else m  # a diagonal L is stored in column 0 of its row
     fields.update(
-        N=str(n), NLEV=str(nlev), FINAL=str(final), DIAG=str(diag), NCW=str(ncw), NLW=str(nlw),
-        ML="1" if diag else "M",
+        N=str(n), NLEV=str(nlev), FINAL=str(final), NCW=str(ncw), NLW=str(nlw), ML="1" if ml == 1 else "M",
+        NINST=str(len(instances)),
         A=real.array(mats[aset._A, :n, :m], "A"), T=real.array(mats[aset._T, :n, :n], "T"),
         PERM=_ints(ivecs[aset._PERM, :n]), STARTS=_ints(ivecs[aset._STARTS, :nlev + 1]),
-        GAM=real.array(vecs[aset._GAM, :nlev], "gamma"), WU=real.array(mats[aset._WU, :m, :m], "Wu"),
-        P0=real.array(mats[aset._P0, :m, :k], "P0"),
+        GAM=real.array(vecs[aset._GAM, :nlev], "gamma"),
     )
     levels = nlev + final
     keys = _table_keys(ivecs, aset)
-    ml = 1 if diag else m
     entry = m * ml + m * ncw + ncw * ncw + ncw + m * nlw + nlw * nlw + nlw
-    size = len(keys) * (1 << m) * entry * (8 if real.double else 4)
+    size = len(instances) * len(keys) * (1 << m) * entry * (8 if real.double else 4)
     if table is None:
         table = size <= TABLE_BUDGET
     if table and m > 20:
         raise ExportError(f"table: 2^{m} free sets a level is too many to tabulate", field="table")
     fields["TABLE"] = "1" if table else "0"
-    fields["TABLES"] = _tables(mats, ivecs, aset, keys, real) if table else ""
+    fields["INSTANCES"] = _instances(instances, aset, keys, real, ml, bool(table))
     fields["BOUND"] = iteration_bound(m, k, levels, cap)
     fields["HEALTH"] = (" *\n * Health at run time: PREFIX_set_limits(umin, umax) sets reduced limits or jams\n"
                         " * (umin[j] == umax[j]) within the nominal limits; an effectiveness change needs a new\n"
@@ -384,6 +386,35 @@ def _active_set_fields(lexico: Any, problem: Problem, real: _Real, fields: dict[
     fields["MAXIT_DEFINE"] = (f"/* iteration cap per level and per call (see the bound above) */\n"
                               f"#define PFX_MAXIT {cap}\n#define PFX_MAXIT_TOTAL {levels * cap}\n")
     return templates.ACTIVE_SET, levels, cap
+
+
+_TABLE_NAMES = ("L", "YC", "VC", "SC", "YA", "VA", "SA")
+
+
+def _instances(instances: list[Any], aset: Any, keys: list[tuple[int, int]], real: _Real, ml: int,
+               table: bool) -> str:
+    """Each instance's constants and tables, and the ``INSTANCES`` array of the C source."""
+    parts, inits = [], []
+    for i, lex in enumerate(instances):
+        mats, vecs, ivecs = lex._state[:3]
+        head = ivecs[aset._HEAD]
+        m, k = int(head[aset._M]), int(head[aset._K])
+        dyn, diag = bool(head[aset._DYN]), int(head[aset._DIAG])
+        parts.append(f"static const real WU_{i}[M][M] = {real.array(mats[aset._WU, :m, :m], 'Wu')};")
+        parts.append(f"static const real P0_{i}[M][K] = {real.array(mats[aset._P0, :m, :k], 'P0')};")
+        parts.append(f"static const real UPT_{i}[M] = {real.array(vecs[aset._UP, :m], 'up')};")
+        if dyn:
+            parts.append(f"static const real KV_{i}[M][K] = {real.array(mats[aset._KV, :m, :k], 'Kv')};")
+            parts.append(f"static const real KU_{i}[M][M] = {real.array(mats[aset._KU, :m, :m], 'Ku')};")
+        if table:
+            parts.append("/* the factorisations of every free set of every level, computed by the generator with\n"
+                         "   the library's own code (alloc._active_set._factor): row [key][free-set bits] */")
+            parts.append(_tables(mats, ivecs, aset, keys, real, ml, suffix=f"_{i}"))
+        kv, ku = (f"KV_{i}", f"KU_{i}") if dyn else ("NULL", "NULL")
+        tabs = "".join(f", TAB_{name}_{i}" for name in _TABLE_NAMES) if table else ""
+        inits.append(f"    {{{diag}, WU_{i}, P0_{i}, UPT_{i}, {kv}, {ku}{tabs}}}")
+    parts.append("static const struct instance INSTANCES[NINST] = {\n" + ",\n".join(inits) + "\n};")
+    return "\n".join(parts)
 
 
 def _short(value: Any) -> str:
@@ -426,14 +457,15 @@ def _float_cut(blocks: tuple[np.ndarray, ...], A: np.ndarray, r0: int, r1: int, 
         sa[sa <= rtol * ref] = 0.0
 
 
-def _tables(mats: np.ndarray, ivecs: np.ndarray, aset: Any, keys: list[tuple[int, int]], real: _Real) -> str:
+def _tables(mats: np.ndarray, ivecs: np.ndarray, aset: Any, keys: list[tuple[int, int]], real: _Real, ml: int,
+            suffix: str) -> str:
     """The C tables of every free set's factorisation, computed by the library's own compiled
     ``_factor`` (so a table lookup gives the bits a run-time factorisation gives)."""
     head = ivecs[aset._HEAD]
     m, diag, ncw, nlw = (int(head[i]) for i in (aset._M, aset._DIAG, aset._NCW, aset._NLW))
-    ml = 1 if diag else m
+    own = 1 if diag else m  # the library's L width; padded to the source's ml (column 0 holds a diagonal)
     A, Wu = np.ascontiguousarray(mats[aset._A]), np.ascontiguousarray(mats[aset._WU])
-    names = ("TAB_L", "TAB_YC", "TAB_VC", "TAB_SC", "TAB_YA", "TAB_VA", "TAB_SA")
+    names = tuple(f"TAB_{name}{suffix}" for name in _TABLE_NAMES)
     widths = (m * ml, m * ncw, ncw * ncw, ncw, m * nlw, nlw * nlw, nlw)
     rows: dict[str, list[str]] = {name: [] for name in names}
     for r0, r1 in keys:
@@ -441,12 +473,14 @@ def _tables(mats: np.ndarray, ivecs: np.ndarray, aset: Any, keys: list[tuple[int
         for bits in range(1 << m):
             free = np.array([j for j in range(m) if bits >> j & 1] + [0] * m, dtype=np.int64)[:m]
             nf = bin(bits).count("1")
-            blocks = (np.zeros((m, ml)), np.zeros((m, ncw)), np.zeros((ncw, ncw)), np.zeros(ncw),
+            blocks = (np.zeros((m, own)), np.zeros((m, ncw)), np.zeros((ncw, ncw)), np.zeros(ncw),
                       np.zeros((m, nlw)), np.zeros((nlw, nlw)), np.zeros(nlw))
             aset._factor(A, r0, r1, Wu, bool(diag), free, nf, *blocks)
             if not real.double:
                 _float_cut(blocks, A, r0, r1, free[:nf], FLOAT_SIGMA_RTOL)
-            for name, block in zip(names, blocks):
+            L = np.zeros((m, ml))
+            L[:, :own] = blocks[0]
+            for name, block in zip(names, (L,) + blocks[1:]):
                 per_key[name].append(real.array(block.ravel(), name))
         for name in names:
             rows[name].append("{\n    " + ",\n    ".join(per_key[name]) + "\n}")

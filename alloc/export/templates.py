@@ -300,7 +300,6 @@ ACTIVE_SET = r"""
 #define N @N@
 #define NLEV @NLEV@
 #define FINAL @FINAL@
-#define DIAG @DIAG@
 #define MAXIT PFX_MAXIT
 #define NCW @NCW@
 #define NLW @NLW@
@@ -324,11 +323,33 @@ static const real T[N][N] = @T@;
 static const int PERM[N] = @PERM@;
 static const int STARTS[NLEV + 1] = @STARTS@;
 static const real GAM[NLEV] = @GAM@;
-static const real WU[M][M] = @WU@;
-/* the cold start: up + P0 (v - B up) clipped (Eq 1.23 in the Wu metric) */
-static const real P0[M][K] = @P0@;
+/* 1 (qp, wls) or 2 solver instances (dynamic: without and with u_prev), each with its own
+   preference weight WU, cold start P0 (Eq 1.23 in the WU metric: up + P0 (v - B up) clipped)
+   and preference point: UPT, or with KV (and KU) the call's UPT + KV v (+ KU u_prev) */
+#define NINST @NINST@
+
+struct instance {
+    int diag;
+    const real (*wu)[M];
+    const real (*p0)[K];
+    const real *upt;
+    const real (*kv)[K];
+    const real (*ku)[M];
+#if TABLE
+    const real (*tab_l)[1 << M][M * ML];
+    const real (*tab_yc)[1 << M][M * NCW];
+    const real (*tab_vc)[1 << M][NCW * NCW];
+    const real (*tab_sc)[1 << M][NCW];
+    const real (*tab_ya)[1 << M][M * NLW];
+    const real (*tab_va)[1 << M][NLW * NLW];
+    const real (*tab_sa)[1 << M][NLW];
+#endif
+};
+
+@INSTANCES@
 
 struct work {
+    const struct instance *S;
     real u[M], e[N], bv[N], tmp[M], h[M], y[M], g[M], scale[M], lam[N];
     int freeset[M], fidx[M], tabu[M], pinned[M];
     /* the factorisation of the current free set: L L' = Wu[F, F] (a diagonal L as a column),
@@ -340,7 +361,7 @@ struct work {
 };
 
 /* L[q, s] of the current factorisation (a diagonal L is stored as its column of pivots) */
-#define LQ(w, q, s) ((w)->L[(q) * ML + (DIAG ? 0 : (s))])
+#define LQ(w, q, s) ((w)->L[(q) * ML + ((w)->S->diag ? 0 : (s))])
 
 /* x = L^-1 x */
 static void lsolve(const struct work *w, int n, real *x)
@@ -348,7 +369,7 @@ static void lsolve(const struct work *w, int n, real *x)
     int q, t;
     for (q = 0; q < n; ++q) {
         real acc = x[q];
-        if (!DIAG) {
+        if (!w->S->diag) {
             for (t = 0; t < q; ++t) acc -= LQ(w, q, t) * x[t];
         }
         x[q] = acc / LQ(w, q, q);
@@ -361,7 +382,7 @@ static void ltsolve(const struct work *w, int n, real *x)
     int q, t;
     for (q = n - 1; q >= 0; --q) {
         real acc = x[q];
-        if (!DIAG) {
+        if (!w->S->diag) {
             for (t = q + 1; t < n; ++t) acc -= LQ(w, t, q) * x[t];
         }
         x[q] = acc / LQ(w, q, q);
@@ -369,10 +390,6 @@ static void ltsolve(const struct work *w, int n, real *x)
 }
 
 #if TABLE
-/* the factorisations of every free set of every level, computed by the generator with the
-   library's own code (alloc._active_set._factor): row [key][free-set bits] */
-@TABLES@
-
 static void lookup(struct work *w, int key)
 {
     unsigned long bits = 0;
@@ -380,13 +397,13 @@ static void lookup(struct work *w, int key)
     for (j = 0; j < M; ++j) {
         if (w->freeset[j]) bits |= 1UL << j;
     }
-    w->L = TAB_L[key][bits];
-    w->Yc = TAB_YC[key][bits];
-    w->Vc = TAB_VC[key][bits];
-    w->sc = TAB_SC[key][bits];
-    w->Ya = TAB_YA[key][bits];
-    w->Va = TAB_VA[key][bits];
-    w->sa = TAB_SA[key][bits];
+    w->L = w->S->tab_l[key][bits];
+    w->Yc = w->S->tab_yc[key][bits];
+    w->Vc = w->S->tab_vc[key][bits];
+    w->sc = w->S->tab_sc[key][bits];
+    w->Ya = w->S->tab_ya[key][bits];
+    w->Va = w->S->tab_va[key][bits];
+    w->sa = w->S->tab_sa[key][bits];
 }
 #else
 
@@ -459,7 +476,7 @@ static void lsolve_col(const struct work *w, int n, real *X, int ld, int c)
     int q, s;
     for (q = 0; q < n; ++q) {
         real acc = X[q * ld + c];
-        if (!DIAG) {
+        if (!w->S->diag) {
             for (s = 0; s < q; ++s) acc -= LQ(w, q, s) * X[s * ld + c];
         }
         X[q * ld + c] = acc / LQ(w, q, q);
@@ -480,16 +497,16 @@ static void factor(struct work *w, int r0, int r1, int nf)
     w->Va = w->Vaw;
     w->sa = w->saw;
     for (q = 0; q < nf; ++q) {
-        if (DIAG) {
-            L[q * ML] = SQRT(WU[F[q]][F[q]]);
+        if (w->S->diag) {
+            L[q * ML] = SQRT(w->S->wu[F[q]][F[q]]);
         } else {
             for (s = 0; s <= q; ++s) {
-                real acc = WU[F[q]][F[s]];
+                real acc = w->S->wu[F[q]][F[s]];
                 for (t = 0; t < s; ++t) acc -= LQ(w, q, t) * LQ(w, s, t);
                 if (q == s) {
-                    L[q * ML + (DIAG ? 0 : q)] = SQRT(rmax(acc, CHOL_TINY));
+                    L[q * ML + (w->S->diag ? 0 : q)] = SQRT(rmax(acc, CHOL_TINY));
                 } else {
-                    L[q * ML + (DIAG ? 0 : s)] = acc / LQ(w, s, s);
+                    L[q * ML + (w->S->diag ? 0 : s)] = acc / LQ(w, s, s);
                 }
             }
         }
@@ -566,10 +583,10 @@ static int level(struct work *w, int r0, int r1, int lev, real gam, const real *
         for (q = 0; q < nf; ++q) {
             real acc = 0;
             j = fidx[q];
-            if (DIAG) {
-                acc = WU[j][j] * tmp[j];
+            if (w->S->diag) {
+                acc = w->S->wu[j][j] * tmp[j];
             } else {
-                for (s = 0; s < M; ++s) acc += WU[j][s] * tmp[s];
+                for (s = 0; s < M; ++s) acc += w->S->wu[j][s] * tmp[s];
             }
             h[q] = acc;
         }
@@ -635,10 +652,10 @@ static int level(struct work *w, int r0, int r1, int lev, real gam, const real *
         for (j = 0; j < M; ++j) {
             real acc = 0;
             if (gam2 > 0) {
-                if (DIAG) {
-                    acc = gam2 * WU[j][j] * tmp[j];
+                if (w->S->diag) {
+                    acc = gam2 * w->S->wu[j][j] * tmp[j];
                 } else {
-                    for (s = 0; s < M; ++s) acc += WU[j][s] * tmp[s];
+                    for (s = 0; s < M; ++s) acc += w->S->wu[j][s] * tmp[s];
                     acc *= gam2;
                 }
             }
@@ -660,11 +677,11 @@ static int level(struct work *w, int r0, int r1, int lev, real gam, const real *
         if (gam2 > 0) {
             for (j = 0; j < M; ++j) {
                 real acc;
-                if (DIAG) {
-                    acc = ABS(WU[j][j]) * (ABS(u[j]) + ABS(up[j]));
+                if (w->S->diag) {
+                    acc = ABS(w->S->wu[j][j]) * (ABS(u[j]) + ABS(up[j]));
                 } else {
                     acc = 0;
-                    for (s = 0; s < M; ++s) acc += ABS(WU[j][s]) * (ABS(u[s]) + ABS(up[s]));
+                    for (s = 0; s < M; ++s) acc += ABS(w->S->wu[j][s]) * (ABS(u[s]) + ABS(up[s]));
                 }
                 scale[j] += gam2 * acc;
             }
@@ -737,7 +754,7 @@ static int run(struct work *w, const real *v, const real *lo, const real *hi, co
     }
     for (j = 0; j < M; ++j) {
         real x = up[j];
-        for (i = 0; i < K; ++i) x += P0[j][i] * r[i];
+        for (i = 0; i < K; ++i) x += w->S->p0[j][i] * r[i];
         x = rmin(rmax(x, lo[j]), hi[j]);
         w->u[j] = x;
         w->freeset[j] = lo[j] < x && x < hi[j];
@@ -761,14 +778,42 @@ static int run(struct work *w, const real *v, const real *lo, const real *hi, co
     return total;
 }
 
+/* the call's preference point (alloc._active_set._target): UPT, or UPT + KV v (+ KU u_prev);
+   0 when it is not finite */
+static int target(const struct instance *S, const real *v, const real *u_prev, real *upc)
+{
+    int i, j, s, good = 1;
+    for (j = 0; j < M; ++j) {
+        real acc = S->upt[j];
+        for (i = 0; i < K; ++i) acc += S->kv[j][i] * v[i];
+        if (u_prev != NULL) {
+            for (s = 0; s < M; ++s) acc += S->ku[j][s] * u_prev[s];
+        }
+        upc[j] = acc;
+        if (!FINITE(acc)) good = 0;
+    }
+    return good;
+}
+
 int PREFIX_allocate(const real *v, const real *u_prev, real dt, real *u)
 {
     struct work w;
-    real lo[M], hi[M];
+    real lo[M], hi[M], upc[M];
+    const real *up;
     int j, ok, code;
     last_iterations = 0;
     if (bounds(v, u_prev, dt, lo, hi, u)) return 2;
-    last_iterations = run(&w, v, lo, hi, UP, &ok);
+    /* dynamic: the instance with u_prev when there is a rate window */
+    w.S = &INSTANCES[NINST > 1 && u_prev != NULL ? 1 : 0];
+    up = w.S->upt;
+    if (w.S->kv != NULL) {
+        if (!target(w.S, v, u_prev, upc)) {
+            safe_answer(v, lo, hi, u);
+            return 2;
+        }
+        up = upc;
+    }
+    last_iterations = run(&w, v, lo, hi, up, &ok);
     if (!ok) {
         safe_answer(v, lo, hi, u);
         return 2;
