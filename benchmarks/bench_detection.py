@@ -109,10 +109,11 @@ def run_delays(out: Path, seeds: int, scales: tuple[float, ...], frame_rate: flo
                     _write(out, "delays", {"key": key, **row})
 
 
-def run_false(out: Path, hours: float, flight: float, scale: float, frame_rate: float, dt: float) -> None:
+def run_false(out: Path, hours: float, flight: float, scale: float, frame_rate: float, dt: float,
+              first_seed: int = 0) -> None:
     done = _done(out, "false")
     n = int(math.ceil(hours * 3600.0 / flight))
-    for s in range(n):  # the scenarios in turn, so a stopped measurement has both
+    for s in range(first_seed, first_seed + n):  # the scenarios in turn, so a stopped measurement has both
         for scenario in SCENARIOS:
             key = f"{scenario}/{scale:g}/{flight:g}/{dt:g}/{s}"
             if key in done:
@@ -157,14 +158,20 @@ def first_on_failed(row: dict[str, Any]) -> dict[str, Any] | None:
     return None
 
 
+def last_on_failed(row: dict[str, Any]) -> dict[str, Any] | None:
+    """The last detection after the failure naming a failed effector (the detector's final belief)."""
+    found = [d for d in row["detections"] if d["delay"] is not None and d["effector"] in row["failed"]]
+    return found[-1] if found else None
+
+
 def false_alarms(row: dict[str, Any]) -> int:
     """Detections before the failure, or on an effector that did not fail (all of them without a failure)."""
     return sum(1 for d in row["detections"] if d["delay"] is None or d["effector"] not in row["failed"])
 
 
 def report_delays(rows: list[dict[str, Any]]) -> str:
-    header = ["scenario", "kind", "noise", "runs", "isolated", "kind right", "missed", "false alarms",
-              "delay median (s)", "delay p95 (s)", "goal"]
+    header = ["scenario", "kind", "noise", "runs", "isolated", "kind right first", "kind right finally", "missed",
+              "other detections", "delay median (s)", "delay p95 (s)", "goal"]
     out = []
     for scenario in SCENARIOS:
         for kind in catalogue_kinds():
@@ -175,6 +182,7 @@ def report_delays(rows: list[dict[str, Any]]) -> str:
                 firsts = [first_on_failed(r) for r in sel]
                 delays = np.array([d["delay"] for d in firsts if d is not None])
                 right = sum(1 for d in firsts if d is not None and d["kind"] == kind)
+                finally_right = sum(1 for r in sel if (last := last_on_failed(r)) is not None and last["kind"] == kind)
                 missed = sum(1 for d in firsts if d is None)
                 goal = ""
                 if kind in ("jam", "hardover"):
@@ -183,7 +191,7 @@ def report_delays(rows: list[dict[str, Any]]) -> str:
                 elif kind == "effectiveness":
                     ok = missed == 0 and delays.size and delays.max() <= LOE_GOAL
                     goal = f"all within {LOE_GOAL} s: {'met' if ok else 'NOT met'}"
-                out.append([scenario, kind, f"x{scale:g}", str(len(sel)), str(len(delays)), str(right), str(missed),
+                out.append([scenario, kind, f"x{scale:g}", str(len(sel)), str(len(delays)), str(right), str(finally_right), str(missed),
                             str(sum(false_alarms(r) for r in sel)),
                             f"{np.median(delays):.2f}" if delays.size else "-",
                             f"{np.percentile(delays, 95):.2f}" if delays.size else "-", goal])
@@ -286,6 +294,7 @@ def main() -> None:
     r.add_argument("--hours", type=float, default=5.0, help="simulated hours per scenario (false)")
     r.add_argument("--flight", type=float, default=300.0, help="seconds per no-failure run (false)")
     r.add_argument("--noise-false", type=float, default=1.0)
+    r.add_argument("--first-seed", type=int, default=0, help="first noise seed index (false; parallel processes)")
     r.add_argument("--dt", type=float, default=0.0005, help="integration step of the false section (s)")
     r.add_argument("--frame-rate", type=float, default=100.0, help="flight-control frame rate (Hz)")
     p = sub.add_parser("report")
@@ -297,7 +306,7 @@ def main() -> None:
     elif args.section == "delays":
         run_delays(args.out, args.seeds, tuple(float(x) for x in args.noise.split(",")), args.frame_rate)
     elif args.section == "false":
-        run_false(args.out, args.hours, args.flight, args.noise_false, args.frame_rate, args.dt)
+        run_false(args.out, args.hours, args.flight, args.noise_false, args.frame_rate, args.dt, args.first_seed)
     else:
         run_benefit(args.out, args.seeds, args.frame_rate)
 
