@@ -343,8 +343,6 @@ def _project_graph() -> dict[str, dict[str, Arrow]]:
 KNOWN_CYCLES: dict[frozenset[str], str] = {
     frozenset({"alloc.methods.direct", "alloc.methods.facet_search"}):
         "det: the facet searches fall back to da's LP (direct), which reuses the facet search's limits",
-    frozenset({"sim.scenarios", "sim.scenarios.*"}):
-        "settings: get_scenario imports the scenario module, which registers itself with the package's decorator",
 }
 
 

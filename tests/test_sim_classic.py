@@ -453,7 +453,7 @@ def test_run_classic_stops_at_the_first_sample_outside_the_bound_and_applies_aft
 def test_add_a_classic_scenario_walkthrough(monkeypatch):
     """docs/ARCHITECTURE.md "Add a scenario", classic branch: a PD-regulated double integrator
     x'' = g u, u = -2 x - 3 x' (poles -1, -2, so x = 2 e^-t - e^-2t from x = 1), registered by name."""
-    monkeypatch.setattr(sim.scenarios, "_REGISTRY", dict(sim.scenarios._REGISTRY))  # registration undone after
+    monkeypatch.setattr(sim.scenarios.registry, "_REGISTRY", dict(sim.scenarios.registry._REGISTRY))  # undone after
 
     @classic_scenario("_double_integrator", failures={"half_gain": "g = 1/2 from 1 s"}, default_duration=3.0,
                       description="double integrator, PD regulator")

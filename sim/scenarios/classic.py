@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 
 from sim.result import SimResult, divergence_check
-from sim.scenarios import Scenario, register_scenario
+from sim.scenarios.registry import Scenario, register_scenario
 
 __all__ = ["ClassicRun", "run_classic", "classic_scenario", "DEFAULT_DT"]
 

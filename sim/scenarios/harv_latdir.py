@@ -31,7 +31,7 @@ from sim.blocks import ActuatorFailure, ActuatorSpec, HedgeTerm, sum_of_sines
 from sim.model import Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle
 from sim.scenarios.mimo import MimoScenario, mimo_scenario, run_mimo
 from sim.result import SimResult
-from sim.scenarios import register_scenario
+from sim.scenarios.registry import register_scenario
 
 __all__ = ["A", "B", "SEED_BK", "vehicle", "allocation_problem", "failure", "run"]
 

@@ -23,7 +23,7 @@ from sim.engine import simulate
 from sim.model import TF, Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle
 from sim.pilot import pilot_parameters
 from sim.result import SimResult
-from sim.scenarios import Scenario, register_scenario
+from sim.scenarios.registry import Scenario, register_scenario
 from sim.settings import LoopSpec, RunSettings
 
 __all__ = ["MimoScenario", "run_mimo", "mimo_scenario"]
