@@ -14,7 +14,8 @@ answers bit for bit and the same statuses (tests/test_export.py checks it); the 
 build agrees to :data:`FLOAT_TOLERANCE` (see there) and clamps its output to its bounds exactly.
 
 Methods: ``pinv``, ``pinv_clip``, ``ganging`` (``u = clip(c + P v)``), ``pinv_scale`` (the
-increment scaled into the box) and the active-set ``wls``, ``qp`` (with ``priorities``) and
+increment scaled into the box), ``cgi`` (the cascaded generalized inverse over a table of every
+free set's pseudo-inverse; without priority levels) and the active-set ``wls``, ``qp`` (with ``priorities``) and
 ``dynamic`` (its two solver instances, without and with ``u_prev``), whose iteration count per
 level is capped at the library's own cap (stated and argued in the header, enforced: reaching
 it returns the safe answer with status 2).
@@ -46,7 +47,7 @@ __all__ = ["export_c", "ExportedKernel", "ExportError", "EXPORTABLE", "PRECISION
 #: bumped whenever the generated code changes for the same input
 GENERATOR_VERSION = "1"
 #: the methods :func:`export_c` generates, in the order the docs list them
-EXPORTABLE = ("pinv", "pinv_clip", "ganging", "pinv_scale", "wls", "qp", "dynamic")
+EXPORTABLE = ("pinv", "pinv_clip", "ganging", "pinv_scale", "cgi", "wls", "qp", "dynamic")
 PRECISIONS = ("double", "float")
 #: ``float`` builds: the status ``exact`` tolerance (the library's 1e-6 is 8 float ulps at 1,
 #: below what a float residual with its rounding bound can certify)
@@ -256,7 +257,9 @@ def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "d
     table : bool, optional
         Active set: precompute the factorisation of every free set (2^m per level, the library's
         own ``_factor``, so the answers stay bit for bit) instead of factorising at run time;
-        default: when the tables fit :data:`TABLE_BUDGET` bytes.
+        default: when the tables fit :data:`TABLE_BUDGET` bytes.  ``cgi`` always tabulates the
+        pseudo-inverse of every free set: refused (ExportError naming ``table``) beyond the
+        budget unless ``table=True``.
 
     Returns
     -------
@@ -325,6 +328,9 @@ def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "d
     elif method == "pinv_scale":
         fields.update(MAP_P=real.array(impl._P, "P"))
         body = templates.SCALED
+    elif method == "cgi":
+        fields.update(TAB_P=_cascade_table(impl, problem, real, table))
+        body = templates.CASCADE
     else:
         lexico = [impl._static, impl._dynamic] if method == "dynamic" else [impl._impl]
         body, levels, maxit = _active_set_fields(lexico, problem, real, fields, maxit, table)
@@ -333,6 +339,38 @@ def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "d
     return ExportedKernel(prefix=prefix, method=method, precision=precision, header=header, source=source,
                           header_name=f"{prefix}.h", source_name=f"{prefix}.c", k=k, m=m,
                           maxit=maxit if levels else None, levels=levels, options=shown)
+
+
+def _cascade_table(impl: Any, problem: Problem, real: _Real, table: bool | None) -> str:
+    """Every free set's weighted pseudo-inverse, computed as the library's ``cgi`` computes it
+    (so the kernel returns its bits): the C table of :data:`templates.CASCADE`."""
+    from .._kernels import free_set_pinv
+    from .._linalg import ABS_FLOOR
+
+    k, m = problem.k, problem.m
+    if impl.groups is not None and len(impl.groups) > 1:
+        raise OptionError("priorities: cgi with priority levels is not exported (use qp with priorities)",
+                          field="priorities")
+    size = (1 << m) * m * k * (8 if real.double else 4)
+    if table is False:
+        raise ExportError("table: cgi has no run-time form (its kernel reads every free set's pseudo-inverse "
+                          "from a table); give table=None or True", field="table")
+    if (table is None and size > TABLE_BUDGET) or m > 20:
+        raise ExportError(f"table: cgi needs the pseudo-inverse of every free set, {size:,} bytes for {m} effectors "
+                          f"(over the {TABLE_BUDGET:,}-byte budget; table=True takes it up to 20 effectors)",
+                          field="table")
+    rows = []
+    for bits in range(1 << m):
+        free = np.array([bool(bits >> j & 1) for j in range(m)])
+        P = np.zeros((m, k))
+        if free.any():
+            if impl._diagonal_Wu:
+                Pf = free_set_pinv(impl._SB, impl._rdiag, impl._S, free, impl.rcond, ABS_FLOOR)
+            else:
+                Pf = impl._pinv(free)
+            P[:Pf.shape[0]] = Pf
+        rows.append(real.array(P.ravel(), "P"))
+    return "{\n    " + ",\n    ".join(rows) + "\n}"
 
 
 def _active_set_fields(instances: list[Any], problem: Problem, real: _Real, fields: dict[str, str],
