@@ -13,8 +13,8 @@ and the boundary solution is scaled back along the ray (Eq 1.15):
 the demanded direction (status ``unattainable``).
 
 Backends: the exact facet search of :mod:`alloc.methods.facet_search` (``da_facet``:
-precomputed facet inverses, compiled) and this module's LP on a persistent DAQP (or HiGHS) model, polished
-on the facet it finds.  ``backend="auto"`` picks the backend a measured cost model says is
+precomputed facet inverses, compiled) and the LP of :mod:`alloc.methods._direct_lp` on a persistent
+DAQP (or HiGHS) model, polished on the facet it finds.  ``backend="auto"`` picks the backend a measured cost model says is
 cheaper per call (:func:`facet_is_cheaper`; never the facet search beyond ``FACET_LIMIT``).  With a rank-deficient ``B`` the ray
 follows the part of ``d`` in the range of ``B``; the rest is reported as unallocated.  When the ray leaves the AMS through an
 edge or a degenerate facet, ``u*`` is not unique (the moment is).  The facet-search
@@ -27,15 +27,11 @@ from typing import Any
 
 import math
 
-import numpy as np
-
-from .._kernels import facet_polish, matvec, rmatvec
-from ..exceptions import SolverError
+from ..method import Method, register
 from ..options import choice
 from ..problem import Problem
-from ..method import FloatArray, Method, register
-from ..solvers import backends, make_backend
-from ._common import check_backend, row_basis
+from ..solvers import backends
+from ._direct_lp import RayLP
 from .facet_search import FACET_LIMIT, FacetSearch, facet_build_seconds
 
 
@@ -65,7 +61,9 @@ def facet_is_cheaper(m: int, k: int) -> bool:
 
 
 @register("da", supports_batch=True)
-class DirectAllocation(Method):
+class DirectAllocation(RayLP):
+    """Direct allocation by the LP of :class:`~alloc.methods._direct_lp.RayLP` or the facet search."""
+
     equation = "Eqs 1.15-1.17"
     summary = "largest admissible moment along v (AMS boundary), scaled back when attainable"
     options = {"backend": choice("auto", "'auto': the cheaper of facet search and LP by a measured cost "
@@ -87,91 +85,14 @@ class DirectAllocation(Method):
         return facet_build_seconds(subsets) if subsets else super().build_cost(problem, **options)
 
     def __init__(self, problem: Problem, *, backend: str = "auto") -> None:
-        super().__init__(problem)
         self._facet = None
         if backend in ("auto", "facet"):
             if backend == "facet" or facet_is_cheaper(problem.m, problem.k):
+                Method.__init__(self, problem)
                 self._facet = FacetSearch(problem)
                 return
             backend = "daqp"
-        name = check_backend(backend, backends(lp=True), "da")
-        p = problem
-        # The LP is solved in scaled variables so that its data are O(1) whatever the
-        # magnitudes of B and the limits (1e-30 to 1e48 in the adversarial suite):
-        #   u = c + D x, x in [-1, 1] (c the centre of the box, D its half-widths),
-        #   t = distance along the unit ray in moment units / sigma,
-        #   (Q B D / sigma) x - t Q d_hat = Q B (u0 - c) / sigma,
-        # with sigma the largest entry of Q B D.  Equalities on the row space of B only
-        # (a rank-deficient B has dependent rows; directions below 1e-8 of the largest
-        # singular value carry less moment than the exact tolerance and are dropped).
-        self._Q = np.array(row_basis(p.B, rtol=1e-8), order="C")  # own, contiguous: one kernel signature
-        self._c0 = (p.umax + p.umin) / 2.0
-        self._D = (p.umax - p.umin) / 2.0
-        self._moving = self._D > 0
-        QBD = (self._Q @ p.B) * self._D
-        self._sigma = float(np.abs(QBD).max()) if QBD.size and np.abs(QBD).max() > 0 else 1.0
-        self._QBs = np.array(self._Q @ p.B / self._sigma, order="C")  # applied to u - c
-        self._A = np.hstack([QBD / self._sigma, np.zeros((self._Q.shape[0], 1))])
-        self._c = np.zeros(p.m + 1)
-        self._c[-1] = -1.0
-        reach = float(np.linalg.norm(p.B, axis=0) @ (p.umax - p.umin))
-        self._B = np.array(p.B, order="C")  # writable: a pickled copy's arrays are, one kernel signature
-        self._lb = np.concatenate([np.where(self._moving, -1.0, 0.0), [0.0]])
-        # along a unit direction, the distance to the AMS boundary never exceeds its extent
-        self._ub = np.concatenate([np.where(self._moving, 1.0, 0.0), [2.0 * reach / self._sigma + 1.0]])
-        self._lb.setflags(write=False)
-        self._ub.setflags(write=False)
-        self._u0 = np.array(p.up)  # base point without rate limits (up is within the limits)
-        self._Bu0 = p.B @ self._u0
-        self._rhs0 = self._QBs @ (self._u0 - self._c0)
-        z = self._rhs0  # feasible at set-up: u = up, t = 0
-        try:
-            self._model = make_backend(name, None, self._c, self._A, z, z, self._lb, self._ub)
-        except SolverError:
-            if name == "highs":
-                raise
-            # DAQP's proximal LP can refuse a nearly dependent equality set at set-up;
-            # HiGHS' simplex is the documented second backend of the same LP.
-            self._model = make_backend("highs", None, self._c, self._A, z, z, self._lb, self._ub)
-
-    def _to_x(self, u: FloatArray) -> FloatArray:
-        """Scaled coordinates ``x = (u - c) / D`` (0 for jammed effectors)."""
-        return np.divide(u - self._c0, self._D, out=np.zeros_like(u), where=self._moving)
-
-    def boundary(self, d, u0, lo, hi):
-        """``(a*, u*)``: the largest ``a`` with ``B(u - u0) = a d`` admissible, and its ``u``.
-
-        The LP runs along the unit direction ``d / |d|`` in scaled variables (see
-        ``__init__``) so that its bound on the distance (the AMS's extent) is a constant
-        and, without rate limits, no bound is re-sent per call.  The LP (DAQP's proximal
-        iterations) meets the equality to ~1e-8 relative; on a facet hit (``k - 1``
-        effectors strictly inside their limits) the point is then re-solved exactly from
-        Eq 1.16 on that facet (:func:`alloc._kernels.facet_polish`).  Edges and degenerate
-        facets keep the LP's answer.
-        """
-        p = self.problem
-        # fixed-order products (alloc._kernels.matvec): numpy's ``@`` rounds by the operands'
-        # layout, and a copy of this allocator must answer bit for bit
-        dmax = float(np.abs(d).max())
-        ds = d / dmax  # |d| without overflow or underflow of its square
-        ds2 = float(matvec(ds.reshape(1, -1), ds)[0])
-        norm = dmax * math.sqrt(ds2)
-        A = self._A
-        A[:, -1] = -matvec(self._Q, ds / math.sqrt(ds2))
-        if lo is p.umin and hi is p.umax:
-            # read-only: the backend re-sends them only after a rate-limited call changed them
-            lb, ub = self._lb, self._ub
-            rhs = self._rhs0
-        else:
-            lb, ub = self._lb.copy(), self._ub.copy()
-            lb[:-1], ub[:-1] = self._to_x(lo), self._to_x(hi)
-            rhs = matvec(self._QBs, u0 - self._c0)
-        x, it = self._model.solve(A=A, lb=lb, ub=ub, bl=rhs, bu=rhs)
-        ustar = np.minimum(np.maximum(self._c0 + self._D * x[:-1], lo), hi)
-        a = float(x[-1]) * (self._sigma / norm)
-        if self._Q.shape[0] == p.k:
-            a, ustar, _ = facet_polish(self._B, ustar, d, u0, lo, hi, a)
-        return a, ustar, it
+        super().__init__(problem, backend=backend)
 
     def solve_batch(self, V, lo, hi):
         return None if self._facet is None else self._facet.solve_batch(V, lo, hi)
@@ -179,20 +100,4 @@ class DirectAllocation(Method):
     def solve(self, v, lo, hi, u_prev):
         if self._facet is not None:
             return self._facet.solve(v, lo, hi, u_prev)
-        p = self.problem
-        if lo is p.umin and hi is p.umax:
-            u0, Bu0 = self._u0, self._Bu0
-        else:
-            u0 = np.minimum(np.maximum(p.up, lo), hi)
-            Bu0 = matvec(self._B, u0)
-        d = v - Bu0
-        if self._Q.shape[0] != p.k:
-            # Only the part of the demand in the range of B can be reached; the rest is
-            # reported as unallocated (rank-deficient B).
-            d = rmatvec(self._Q, matvec(self._Q, d))
-        if not float(np.abs(d).max()) > 1e-14 * max(1.0, float(np.abs(v).max())):
-            return u0, 0
-        a, ustar, it = self.boundary(d, u0, lo, hi)
-        if a >= 1.0:
-            return u0 + (ustar - u0) / a, it  # Eq 1.15: scale the boundary solution back
-        return ustar, it
+        return super().solve(v, lo, hi, u_prev)

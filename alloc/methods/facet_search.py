@@ -53,6 +53,7 @@ from ..options import integer
 from ..problem import Problem
 from ..method import BUILD_LIMIT_BYTES, BUILD_LIMIT_SECONDS, FloatArray, Method, register
 from . import _facet_kernels as _kernels
+from ._direct_lp import RayLP
 
 __all__ = ["FacetSearch", "EdgeBisect", "SphericalTable", "FACET_LIMIT", "FACET_SECONDS", "FACET_BYTES",
            "facet_build_seconds", "facet_build_bytes"]
@@ -211,9 +212,7 @@ class FacetSearch(Method):
         self.build_time = time.perf_counter() - t0
 
     def _use_lp(self, reason: str) -> None:
-        from .direct import DirectAllocation  # the LP formulation of the same problem (imports this module)
-
-        self._lp = DirectAllocation(self.problem, backend="daqp")
+        self._lp = RayLP(self.problem, backend="daqp")  # the LP formulation of the same problem
         self.lp_reason = reason
 
     # ------------------------------------------------------------ tables
