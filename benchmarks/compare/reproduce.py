@@ -1,0 +1,283 @@
+"""Re-run committed closed-loop sweep rows and compare them with the committed CSVs.
+
+``python -m benchmarks.compare.reproduce --sample N --seed S [--json]`` draws ``N`` closed-loop
+specs of a sweep folder (default ``benchmarks/reference/full``) with a seeded generator, re-runs
+each with the current code (:func:`benchmarks.compare.closedloop.run_closed`, no stored history)
+and prints, per row, ``same`` (every column bit for bit), ``within`` (every discrete column bit for
+bit, every continuous column within ``--rtol``) or ``differs``, then the largest relative
+difference per column over the sample.  Exit status 0 when no row differs, 1 otherwise.
+
+Two kinds of column, because they fail differently:
+
+* **discrete** (:data:`DISCRETE`: the spec's own fields, ``diverged``, ``simulated``,
+  ``recover_s``, the saturation times and the unattainable/fallback fractions) are counts,
+  flags or thresholds crossed; they must agree exactly.
+* **continuous** (``<channel>_rms|max_before|after``, ``effort_after``) are sums over a
+  trajectory.  The committed rows were computed on another CPU and dependency build than the
+  one a reader has; LAPACK/BLAS kernels are chosen per CPU and give results that differ in the
+  last bits (measured: the HARV lat-dir rows move by up to 1e-13 relative before and after the
+  failure), so these are compared to :data:`DEFAULT_RTOL` (1e-9: ten thousand times the
+  round-off seen, a million times below the smallest model change a sweep is meant to show).
+
+A diverged run is compared up to its divergence only: once the state grows without bound, the
+round-off difference grows with it (measured: an ICE ``daisy`` run that diverges 5 s after its
+failure diverges 35 ms later and its post-failure RMS moves by 3 %), so the columns computed over
+the diverging stretch (:func:`unjudged_columns`) are reported in ``unjudged`` and do not decide
+the verdict; ``diverged`` itself must still agree.
+
+A column in the CSV that the current code no longer writes (or the reverse) is listed in the
+row's ``missing`` / ``new``; it does not make the row differ.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import sys
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from alloc.exceptions import AllocError
+
+__all__ = [
+    "DEFAULT_REFERENCE", "DEFAULT_RTOL", "DISCRETE", "ReproduceError", "RowComparison",
+    "load_reference", "sample_ids", "unjudged_columns", "compare_row", "reproduce", "summarise", "main",
+]
+
+DEFAULT_REFERENCE = Path(__file__).resolve().parents[1] / "reference" / "full"
+DEFAULT_RTOL = 1e-9
+#: columns that are counts, flags, thresholds crossed or the spec itself: compared exactly
+DISCRETE = frozenset({
+    "id", "scenario", "setting", "failure", "method", "told", "health", "seed", "duration", "failure_time",
+    "noise", "diverged", "simulated", "recover_s", "unattainable_after", "fallback_after",
+    "time_in_position_saturation", "time_in_rate_saturation",
+})
+
+
+#: columns computed over the stretch after the failure (diverging, when the run diverged)
+_AFTER = frozenset({"simulated", "recover_s", "effort_after", "unattainable_after", "fallback_after",
+                    "time_in_position_saturation", "time_in_rate_saturation"})
+
+
+class ReproduceError(AllocError, ValueError):
+    """A reproduction request names a folder, row or number that cannot be used."""
+
+
+@dataclass(frozen=True)
+class RowComparison:
+    """One re-run row against its committed row.
+
+    ``verdict`` is ``"same"`` (bit for bit), ``"within"`` (discrete columns exact, continuous
+    within ``rtol``) or ``"differs"``; ``rel_diff`` maps every continuous column to
+    ``|new - committed| / max(|committed|, tiny)`` (0 when equal, ``inf`` when one side is
+    non-finite and the other is not); ``discrete_diffs`` maps each differing discrete column
+    to ``(committed text, new text)``.
+    """
+
+    id: str
+    verdict: str
+    rel_diff: dict[str, float]
+    discrete_diffs: dict[str, tuple[str, str]]
+    unjudged: dict[str, tuple[str, str]] = field(default_factory=dict)
+    missing: tuple[str, ...] = ()
+    new: tuple[str, ...] = ()
+    wall_s: float = 0.0
+    rtol: float = DEFAULT_RTOL
+
+
+def load_reference(folder: Path = DEFAULT_REFERENCE) -> tuple[dict[str, dict[str, Any]], dict[str, dict[str, str]]]:
+    """Closed-loop specs (by id) of a sweep folder and their committed rows (by id, as text)."""
+    folder = Path(folder)
+    specs_path = folder / "specs.json"
+    if not specs_path.is_file():
+        raise ReproduceError(f"reference: {folder} has no specs.json (not a sweep folder)")
+    specs = {s["id"]: s for s in json.loads(specs_path.read_text()) if s.get("kind") == "closed"}
+    rows: dict[str, dict[str, str]] = {}
+    for path in sorted(folder.glob("closed_*.csv")):
+        with path.open(newline="") as fh:
+            reader = csv.DictReader(fh)
+            if "id" not in (reader.fieldnames or []) or "diverged" not in (reader.fieldnames or []):
+                continue  # the cells, timings and told/blind tables beside the row tables
+            for r in reader:
+                rows[r["id"]] = r
+    specs = {k: v for k, v in specs.items() if k in rows}
+    if not specs:
+        raise ReproduceError(f"reference: {folder} has no closed-loop rows with a spec")
+    return specs, rows
+
+
+def sample_ids(specs: dict[str, dict[str, Any]], n: int, seed: int, *, exclude_methods: Sequence[str] = ()) -> list[str]:
+    """``n`` spec ids drawn without replacement by ``numpy.random.default_rng(seed)`` (sorted ids first)."""
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+        raise ReproduceError(f"sample: {n!r} is not a positive whole number")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ReproduceError(f"seed: {seed!r} is not a whole number >= 0")
+    pool = sorted(i for i, s in specs.items() if s["method"] not in set(exclude_methods))
+    if n > len(pool):
+        raise ReproduceError(f"sample: {n} is more than the {len(pool)} rows that can be drawn")
+    picked = np.random.default_rng(seed).choice(len(pool), size=n, replace=False)
+    return [pool[int(i)] for i in picked]
+
+
+def _text(value: Any) -> str:
+    """A value as the sweep's CSV writer stores it (``csv`` writes ``str``; ``None`` as empty)."""
+    return "" if value is None else str(value)
+
+
+def _number(text: str) -> float:
+    return math.nan if text == "" else float(text)
+
+
+def _relative(committed: float, new: float) -> float:
+    if committed == new or (math.isnan(committed) and math.isnan(new)):
+        return 0.0
+    if not (math.isfinite(committed) and math.isfinite(new)):
+        return math.inf
+    return abs(new - committed) / max(abs(committed), sys.float_info.min)
+
+
+def unjudged_columns(committed: dict[str, str], columns: Sequence[str]) -> set[str]:
+    """Columns of a committed row that cover its diverging stretch (empty if it did not diverge).
+
+    After the failure when the run diverged after its failure; every trajectory column when it
+    diverged before (``simulated <= failure_time``).
+    """
+    if committed.get("diverged") != "True":
+        return set()
+    after = {c for c in columns if c.endswith("_after") or c in _AFTER}
+    try:
+        before_failure = float(committed["simulated"]) <= float(committed["failure_time"])
+    except (KeyError, ValueError):
+        before_failure = True
+    if before_failure:
+        after |= {c for c in columns if c.endswith("_before")}
+    return after
+
+
+def compare_row(committed: dict[str, str], row: dict[str, Any], *, rtol: float = DEFAULT_RTOL,
+                wall_s: float = 0.0) -> RowComparison:
+    """Compare a freshly computed row with its committed text row (see the module docstring)."""
+    if not (isinstance(rtol, (int, float)) and not isinstance(rtol, bool) and math.isfinite(rtol) and rtol >= 0):
+        raise ReproduceError(f"rtol: {rtol!r} is not a finite number >= 0")
+    rel: dict[str, float] = {}
+    discrete: dict[str, tuple[str, str]] = {}
+    unjudged: dict[str, tuple[str, str]] = {}
+    skip = unjudged_columns(committed, list(row))
+    for name, value in row.items():
+        if name not in committed:
+            continue
+        old, new = committed[name], _text(value)
+        if name in skip:
+            if old != new:
+                unjudged[name] = (old, new)
+        elif name in DISCRETE:
+            if old != new:
+                discrete[name] = (old, new)
+        else:
+            rel[name] = _relative(_number(old), _number(new))
+    if discrete or any(r > rtol for r in rel.values()):
+        verdict = "differs"
+    elif unjudged or any(r > 0 for r in rel.values()):
+        verdict = "within"
+    else:
+        verdict = "same"
+    return RowComparison(
+        id=str(row.get("id", committed.get("id", ""))), verdict=verdict, rel_diff=rel, discrete_diffs=discrete,
+        unjudged=unjudged,
+        missing=tuple(k for k in committed if k not in row), new=tuple(k for k in row if k not in committed),
+        wall_s=wall_s, rtol=float(rtol),
+    )
+
+
+def reproduce(ids: Sequence[str], *, reference: Path = DEFAULT_REFERENCE, rtol: float = DEFAULT_RTOL,
+              progress: Any = None) -> list[RowComparison]:
+    """Re-run the committed rows ``ids`` of ``reference`` and compare each (in the order given)."""
+    from .closedloop import run_closed
+
+    specs, rows = load_reference(reference)
+    unknown = [i for i in ids if i not in specs]
+    if unknown:
+        raise ReproduceError(f"id: {unknown[0]!r} is not a closed-loop row of {reference}")
+    out = []
+    for rid in ids:
+        t0 = time.perf_counter()
+        row, _, _ = run_closed(dict(specs[rid], history=False))
+        result = compare_row(rows[rid], row, rtol=rtol, wall_s=time.perf_counter() - t0)
+        out.append(result)
+        if progress is not None:
+            progress(result)
+    return out
+
+
+def summarise(results: Sequence[RowComparison]) -> dict[str, Any]:
+    """Counts per verdict and, per continuous column, the largest relative difference and its row."""
+    worst: dict[str, tuple[float, str]] = {}
+    for r in results:
+        for name, d in r.rel_diff.items():
+            if name not in worst or d > worst[name][0]:
+                worst[name] = (d, r.id)
+    discrete = sorted({name for r in results for name in r.discrete_diffs})
+    return {
+        "rows": len(results),
+        "verdicts": {v: sum(r.verdict == v for r in results) for v in ("same", "within", "differs")},
+        "max_rel_diff": {k: {"value": v, "row": i} for k, (v, i) in sorted(worst.items())},
+        "discrete_columns_differing": discrete,
+    }
+
+
+def _line(r: RowComparison) -> str:
+    worst = max(r.rel_diff.items(), key=lambda kv: kv[1], default=("-", 0.0))
+    text = f"{r.verdict:7s} {r.id}  max rel {worst[1]:.1e} ({worst[0]})  {r.wall_s:.1f} s"
+    if r.discrete_diffs:
+        text += "  " + ", ".join(f"{k}: {a!r} -> {b!r}" for k, (a, b) in sorted(r.discrete_diffs.items()))
+    if r.unjudged:
+        text += f"  (diverged: {len(r.unjudged)} columns after the divergence differ, not judged)"
+    return text
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """The command line; returns the exit status (2 for a bad argument, one stderr line)."""
+    import argparse
+
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.compare.reproduce",
+                                     description="Re-run committed sweep rows and compare them column by column.")
+    parser.add_argument("--sample", type=int, default=5, help="rows to draw (default 5)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the draw (default 0)")
+    parser.add_argument("--id", action="append", default=[], metavar="ID",
+                        help="re-run this row (repeatable; replaces the draw)")
+    parser.add_argument("--reference", type=Path, default=DEFAULT_REFERENCE, help="sweep folder")
+    parser.add_argument("--rtol", type=float, default=DEFAULT_RTOL,
+                        help=f"relative tolerance of continuous columns (default {DEFAULT_RTOL:g})")
+    parser.add_argument("--exclude-method", action="append", default=[], metavar="METHOD",
+                        help="leave this method out of the draw (repeatable)")
+    parser.add_argument("--json", action="store_true", help="print one JSON document instead of lines")
+    args = parser.parse_args(argv)
+    try:
+        specs, _ = load_reference(args.reference)
+        ids = list(args.id) or sample_ids(specs, args.sample, args.seed, exclude_methods=args.exclude_method)
+        results = reproduce(ids, reference=args.reference, rtol=args.rtol,
+                            progress=None if args.json else (lambda r: print(_line(r), flush=True)))
+    except ReproduceError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    summary = summarise(results)
+    if args.json:
+        json.dump({"reference": str(args.reference), "rtol": args.rtol, "summary": summary,
+                   "rows": [asdict(r) for r in results]}, sys.stdout, indent=1, default=str)
+        print()
+    else:
+        print(f"{summary['rows']} rows: " + ", ".join(f"{v} {k}" for k, v in summary["verdicts"].items()))
+        for name, w in summary["max_rel_diff"].items():
+            print(f"  {name:32s} max rel diff {w['value']:.2e}  ({w['row']})")
+        if summary["discrete_columns_differing"]:
+            print("  discrete columns differing: " + ", ".join(summary["discrete_columns_differing"]))
+    return 1 if summary["verdicts"]["differs"] else 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
