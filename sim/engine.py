@@ -23,6 +23,10 @@ Speed: everything but the allocator runs in the two numba-compiled functions
 of :mod:`sim.packed` on packed state.  The Python loop is ``allocator(v)`` then
 one :func:`sim.packed.advance` call per step; failure injection
 (:mod:`sim.injection`) and allocator rebuilds stay in Python.
+
+``health = "detected"`` (:mod:`sim.detection`): the injected failure reaches the plant and
+actuators only; a detector samples the simulated sensors every 0.1 s, and each detection
+rebuilds the allocator on the detector's belief at the first frame after its processing delay.
 """
 
 from __future__ import annotations
@@ -34,7 +38,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from sim.allocation import LoopAllocator, build_allocator
+from sim.allocation import LoopAllocator, build_allocator, preferred_positions
 from sim.blocks import (
     ActuatorBank,
     DelayLine,
@@ -46,6 +50,7 @@ from sim.blocks import (
     stack_lti,
     tf_to_ss,
 )
+from sim.detection import InLoopDetector, detection_record
 from sim.injection import inject_failure
 from sim.model import TF, Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle
 from sim.packed import DIVERGED, N_MISC, FloatSlot, IntSlot, Misc, Packed, advance, observe, record_columns
@@ -149,8 +154,12 @@ def simulate(
     clock = time.perf_counter
     last_before_failure = fail_step - 1 if failure is not None else -1
     step_once, diverged = advance, DIVERGED  # locals: the loop body is the per-step Python cost
-    if spec.health_mode == "detected":
-        return _simulate_detected(spec, locals())
+    # --health detected: the detector on the simulated sensors (never the failure), and the
+    # beliefs waiting for their processing delay: (step the allocator gets it, belief)
+    detector = _detector(spec, inputs) if spec.health_mode == "detected" else None
+    pending: list[tuple[int, dict[str, Any]]] = []
+    detections: list[dict[str, Any]] = []
+    x = packed.view(FloatSlot.X)
     for step in iterator:
         if status == diverged:
             n_done = step
@@ -158,96 +167,53 @@ def simulate(
         if timed:
             t0 = clock()
         if step % frame == 0:
+            if pending and step >= pending[0][0]:
+                allocator = build_allocator(vehicle, method, method_options, health=_due(pending, step),
+                                            **alloc_options)
             u_prev = positions.copy() if position_feedback else u_cmd
             u_cmd, v_achieved, call_status[step // frame] = allocator(v, u_prev, tframe)
         status = step_once(step, u_cmd, v_achieved, F, I, inputs, rec)
+        if detector is not None:
+            detector.step_model(u_cmd)
         if timed:
             times[step] = clock() - t0
         if step == last_before_failure:
             allocator = fail_now(u_cmd)
             status = observe(step + 1, F, I, inputs)
-    return _finish(spec, locals())
-
-
-def _finish(spec: LoopSpec, run: dict[str, Any], detections: list[dict[str, Any]] | None = None) -> SimResult:
-    """The run's :class:`SimResult` from the loop's variables (``run``: the loop's locals)."""
-    n_done, record_every, frame, tframe = run["n_done"], run["record_every"], run["frame"], run["tframe"]
-    if run["timed"]:
-        run["step_times"].append(run["times"][:n_done])
-    rec, cols, method, vehicle, failure, pilots = (run[k] for k in ("rec", "cols", "method", "vehicle", "failure",
-                                                                    "pilots"))
-    n_steps, call_status = run["n_steps"], run["call_status"]
+        if detector is not None and detector.due(step + 1) and step < n_steps:
+            # the sensors measure the plant's physics as it is now (plant._cur: the failed model after injection)
+            for found in detector.sample(step + 1, x, positions, plant._cur.A, plant._cur.B):
+                at = step + 1 + detector.delay_steps
+                pending.append((at, detector.health))
+                detections.append(detection_record(found, -(-at // frame) * frame * dt,
+                                                   None if failure is None else failure.time))
+    if timed:
+        step_times.append(times[:n_done])
     n = (n_done + record_every - 1) // record_every  # samples recorded before step n_done
     n_calls = (n_done + frame - 1) // frame
     result = _result(rec[:n], cols, spec.scenario, method, vehicle, failure, pilots, diverged=n_done <= n_steps)
     result.allocator_t = np.arange(n_calls) * tframe
     result.allocator_status = call_status[:n_calls].copy()
     result.settings = {**spec.record(), "pilots": [p.describe() for p in pilots]}
-    if detections is not None:
+    if detector is not None:
         result.detections = detections
     return result
 
 
-def _simulate_detected(spec: LoopSpec, run: dict[str, Any]) -> SimResult:
-    """The loop of a ``detected`` run: the allocator's health only from :class:`sim.detection.InLoopDetector`.
-
-    Same steps as :func:`simulate`'s loop, plus per step the detector's nominal actuator copy, at
-    its samples the detector on the measured response, and, ``processing_delay`` after each
-    detection, the allocator rebuilt on the detector's belief.  The injected failure reaches
-    the plant and actuators only (``fail_now`` returns the allocator unchanged).
-    """
-    from sim.allocation import preferred_positions
-    from sim.detection import InLoopDetector, detection_record
-
-    vehicle, method, method_options, alloc_options = (run[k] for k in ("vehicle", "method", "method_options",
-                                                                       "alloc_options"))
-    F, I, inputs, rec, v, positions = (run[k] for k in ("F", "I", "inputs", "rec", "v", "positions"))
-    plant, packed, frame, tframe, n_steps = run["plant"], run["packed"], run["frame"], run["tframe"], run["n_steps"]
-    fail_now, last_before_failure, call_status = run["fail_now"], run["last_before_failure"], run["call_status"]
-    timed, times, clock, status = run["timed"], run["times"], run["clock"], run["status"]
-    allocator, u_cmd, v_achieved = run["allocator"], run["u_cmd"], run["v_achieved"]
-    position_feedback = run["position_feedback"]
-    k = len(vehicle.controlled)
-    ny = vehicle.C.shape[0]
-    detector = InLoopDetector(vehicle, spec.dt, inputs[:, k:k + ny], noise_scale=spec.noise_scale,
-                              actuators=spec.actuators, preferred=preferred_positions(vehicle, spec.preferred))
-    x = packed.view(FloatSlot.X)
-    failure_time = None if spec.failure is None else spec.failure.time
-    pending: list[tuple[int, dict[str, Any]]] = []  # (step the allocator gets it, the detector's belief)
-    records: list[dict[str, Any]] = []
-    n_done = n_steps + 1
-    for step in run["iterator"]:
-        if status == DIVERGED:
-            n_done = step
-            break
-        if timed:
-            t0 = clock()
-        if pending and step >= pending[0][0] and step % frame == 0:
-            while pending and step >= pending[0][0]:
-                belief = pending.pop(0)[1]
-            allocator = build_allocator(vehicle, method, method_options, health=belief, **alloc_options)
-        if step % frame == 0:
-            u_prev = positions.copy() if position_feedback else u_cmd
-            u_cmd, v_achieved, call_status[step // frame] = allocator(v, u_prev, tframe)
-        status = advance(step, u_cmd, v_achieved, F, I, inputs, rec)
-        detector.step_model(u_cmd)
-        if step == last_before_failure:
-            allocator = fail_now(u_cmd)
-            status = observe(step + 1, F, I, inputs)
-        if detector.due(step + 1) and step + 1 <= n_steps:
-            found = detector.sample(step + 1, x, positions, plant._cur.A, plant._cur.B)
-            for d in found:
-                at = step + 1 + detector.delay_steps
-                pending.append((at, detector.health))
-                records.append(detection_record(d, _first_frame_at(at, frame) * spec.dt, failure_time))
-        if timed:
-            times[step] = clock() - t0
-    return _finish(spec, {**run, "n_done": n_done}, records)
+def _detector(spec: LoopSpec, inputs: np.ndarray) -> InLoopDetector:
+    """The in-loop detector of a ``detected`` run, on the run's own sensor noise (``inputs``' noise columns)."""
+    vehicle = spec.vehicle
+    k, ny = len(vehicle.controlled), vehicle.C.shape[0]
+    return InLoopDetector(vehicle, spec.dt, inputs[:, k:k + ny], noise_scale=spec.noise_scale,
+                          actuators=spec.actuators, preferred=preferred_positions(vehicle, spec.preferred))
 
 
-def _first_frame_at(step: int, frame: int) -> int:
-    """The first frame step at or after ``step``."""
-    return -(-step // frame) * frame
+def _due(pending: list[tuple[int, dict[str, Any]]], step: int) -> dict[str, Any]:
+    """The latest belief due by ``step``, removed with every earlier one from ``pending``."""
+    belief = pending[0][1]
+    while pending and step >= pending[0][0]:
+        belief = pending.pop(0)[1]
+    return belief
 
 
 def _inputs(spec: LoopSpec, t_grid: np.ndarray) -> np.ndarray:
