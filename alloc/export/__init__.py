@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import unicodedata
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
@@ -175,7 +176,11 @@ def _ints(a: Any) -> str:
 def _fill(text: str, fields: Mapping[str, str], prefix: str) -> str:
     for key, value in fields.items():
         text = text.replace(f"@{key}@", value)
-    return text.replace("PREFIX_", prefix + "_").replace("PFX_", prefix.upper() + "_")
+    text = text.replace("PREFIX_", prefix + "_").replace("PFX_", prefix.upper() + "_")
+    # ASCII only (names and titles reach the comments): C99's source character set, and what
+    # every embedded toolchain reads; accents are dropped ("Härkegård" -> "Harkegard")
+    plain = unicodedata.normalize("NFKD", text)
+    return plain.encode("ascii", "ignore").decode("ascii")
 
 
 # --------------------------------------------------------------------------- the bound

@@ -16,7 +16,9 @@ HEADER = r"""/*
  * Method  : @METHOD@ (seed @EQUATION@)@OPTIONS@
  * Scalar  : @REAL@
  *
- * C99, fixed sizes, no heap, no recursion, no library calls but sqrt and fabs.
+ * C99, fixed sizes, no heap, no recursion, no library calls but sqrt and fabs (and the
+ * memset/memcpy a compiler may emit for array loops).  Compile without contraction into
+ * fused multiply-adds (-std=c99 does; -ffp-contract=off says so) for the library's bits.
  *
  * int PREFIX_allocate(const PREFIX_real *v, const PREFIX_real *u_prev, PREFIX_real dt,
  *                     PREFIX_real *u);
