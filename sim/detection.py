@@ -127,7 +127,8 @@ class InLoopDetector:
         The run's measurement noise on every output, per integration step (the engine's).
     noise_scale : float
         The run's noise scale (the detector is told the scaled level, as a designer who
-        characterised the sensors would be).
+        characterised the sensors would be; at 0, noiseless sensors, it is designed for the
+        seed's level, since a chi-square threshold needs a positive one).
     actuators : bool
         Whether the run has actuator dynamics (else the nominal model is the clipped command).
     preferred : ndarray (m,)
@@ -150,7 +151,8 @@ class InLoopDetector:
         problem = alloc.Problem(self.C @ vehicle.B, vehicle.umin, vehicle.umax, up=preferred,
                                 rate_min=-vehicle.rate_max, rate_max=vehicle.rate_max, names=vehicle.effector_names)
         self.detector = FailureDetector(
-            problem, response_noise_std(vehicle, dt, self.sample_time, noise_scale), self.sample_time,
+            problem, response_noise_std(vehicle, dt, self.sample_time, noise_scale if noise_scale > 0 else 1.0),
+            self.sample_time,
             false_alarm_rate=design.false_alarm_rate, window=design.window, hop=design.hop,
             min_confidence=design.min_confidence)
         self.actuators = actuators

@@ -168,3 +168,38 @@ def test_the_sweep_has_a_detected_arm_next_to_told_and_blind():
     b, t, d = (r["score"] for r in scored[1:])
     expected = (b - d) / (b - t) if b > t else float("nan")
     assert share[0]["share"] == pytest.approx(expected, nan_ok=True)
+
+
+@pytest.mark.parametrize("case", [0, 1, *(pytest.param(c, marks=pytest.mark.slow) for c in range(2, 16))])
+def test_seeded_silent_failures_keep_the_promises(case):
+    """Seeded hostile cases: a random catalogue kind (single or double), scenario, failure time, noise
+    scale, method and frame: until the first detection reaches it the allocator flies exactly the
+    blind run; every detection is well formed and after its failure; positions stay within limits."""
+    from alloc.health import FailureKind
+    from benchmarks.compare.failures import catalogue_kinds
+
+    rng = np.random.default_rng(4200 + case)
+    scenario = str(rng.choice(["ice", "harv_latdir"]))
+    kind = str(rng.choice(catalogue_kinds()))
+    n = int(rng.integers(1, 3))
+    tf = float(np.round(rng.uniform(0.5, 2.0), 3))
+    kw = dict(method=str(rng.choice(["qp", "wls", "pinv", "cgi"])), seed=int(rng.integers(0, 2**31)),
+              noise_scale=float(rng.choice([0.0, 1.0, 2.0, 5.0])), duration=tf + 2.0,
+              frame_period=float(rng.choice([0.0005, 0.01])), failure=make_failure(scenario, f"{kind}{n}", tf))
+    run = get_scenario(scenario)
+    det, blind = run(health="detected", **kw), run(**kw)
+    dets = det.summary()["detections"]
+    names = set(det.effector_names)
+    for d in dets:
+        assert d["effector"] in names and FailureKind(d["kind"])
+        assert 0.0 <= d["confidence"] <= 1.0 and d["statistic"] >= d["threshold"]
+        assert d["applied_time"] >= d["time"] + detection.DEFAULT_DESIGN.processing_delay - 1e-9
+        assert d["delay"] is None or d["delay"] == pytest.approx(d["time"] - tf)
+    first = dets[0]["applied_time"] if dets else det.duration
+    calls = int(np.sum(det.allocator_t < first - 1e-9))
+    assert np.array_equal(det.allocator_status[:calls], blind.allocator_status[:calls])
+    rows = int(np.sum(det.t < min(first, blind.t[-1]) - 1e-9))
+    assert np.array_equal(det.effectors[:rows], blind.effectors[:rows])
+    lo, hi = blind.effector_limits[0][0], blind.effector_limits[1][0]
+    assert np.isfinite(det.effectors).all()
+    assert (det.effectors >= lo - 1e-9).all() and (det.effectors <= hi + 1e-9).all()
