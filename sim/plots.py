@@ -40,7 +40,7 @@ def settings_line(result: SimResult) -> str:
     if s:
         parts.append(f"frame {1.0 / s['frame_period']:.0f} Hz")
         parts.append("rate-aware" if s.get("rate_aware") else "rate-blind")
-        parts.append("told" if s.get("allocator_knows_failure") else "blind")
+        parts.append(s.get("health") or ("told" if s.get("allocator_knows_failure") else "blind"))
         parts.append("noise" if s.get("noise") else "no noise")
         for p in s.get("pilots", []):
             parts.append(f"pilot {p['model']} K={p['gain']:.2f} tau={p['delay']:.2f}s")
