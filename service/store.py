@@ -25,7 +25,7 @@ queue), and the response returns; the next allocation finds its rebuild in fligh
 
 Writes sent with an ``Idempotency-Key`` happen once: the key, the fingerprint of the
 request and the answer are inserted in the write's own transaction
-(:class:`~service.db.IdempotencyRow`), so a retry, through any process and after any
+(:mod:`service.idempotency`), so a retry, through any process and after any
 crash, either finds the committed answer or finds nothing committed at all.
 
 Batches are priced before they start (rows x the method's declared per-call cost, and
@@ -33,7 +33,7 @@ the size of their answer: :func:`~service.builds.check_batch_cost`), their answe
 reserved in :class:`~service.responses.AnswerBudget`, run and serialised off the event
 loop, and streamed.
 
-Allocators are cached in a :class:`AllocatorCache` bounded in entries and in bytes
+Allocators are cached in a :class:`~service.allocator_cache.AllocatorCache` bounded in entries and in bytes
 (measured by :func:`service.cost.estimate_bytes`); inline problems share a smaller byte
 budget and an allocator larger than :data:`INLINE_ENTRY_BYTES` built for an inline
 problem is used once and not kept.  Builds run on :class:`service.builds.Builder` (costly
@@ -49,18 +49,15 @@ import json
 import logging
 import os
 import signal
-import sqlite3
 import threading
 import uuid
 from collections import OrderedDict
 from collections.abc import Callable, Hashable
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import dataclass
-from datetime import datetime, timedelta
 from typing import Any
 
 import numpy as np
-from sqlalchemy import delete, func, insert, select, text, update
+from sqlalchemy import delete, func, insert, select, update
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.engine import Engine
 from sqlalchemy.orm import Session, sessionmaker
@@ -68,15 +65,18 @@ from sqlalchemy.orm import Session, sessionmaker
 import alloc
 
 from . import timing
+from .allocator_cache import INLINE_ENTRY_BYTES, AllocatorCache
 from .builds import (
     REBUILD, REQUEST, TRANSFER_BYTES, Builder, Built, Call, build, build_allocator, check_batch_cost, check_build_cost,
 )
 from .cost import answer_bytes, is_costly, is_costly_batch
-from .db import EventRow, IdempotencyRow, VehicleRow, utcnow
+from .db import EventRow, VehicleRow, utcnow
 from .errors import Conflict, NotFound, ServiceError
+from .idempotency import Answer, Idempotency, remember_answer, replay_answer
 from .responses import AnswerBudget, StreamedAnswer
-from .health import Health, apply_event, dump_health, load_health, to_problem
+from .health import apply_event, dump_health, to_problem
 from .schemas import EventIn, VehicleCreate
+from .vehicle_state import VehicleState, VersionProbe, state_from_row
 
 __all__ = ["VehicleState", "Idempotency", "Answer", "AllocatorCache", "Builder", "VehicleStore", "VersionProbe", "build_allocator",
            "check_build_cost", "options_key", "PREBUILD_LIMIT", "INLINE_ENTRY_BYTES"]  # the build API re-exported
@@ -85,8 +85,6 @@ _log = logging.getLogger("service")
 _MAX_RETRIES = 100
 #: allocators rebuilt after an event, per vehicle (the most recently used ones)
 PREBUILD_LIMIT = 4
-#: an allocator built for an inline problem larger than this is not cached
-INLINE_ENTRY_BYTES = 4 * 1024 * 1024
 #: vehicle states kept per process: a state holds two problems, at most ~70 KiB at m = 64
 #: (Wu is m x m), so at most ~70 MiB; part of the documented memory bound
 _STATE_ENTRIES = 1024
@@ -99,192 +97,6 @@ def options_key(options: dict[str, Any]) -> str:
 def _not_found(vehicle_id: str) -> NotFound:
     return NotFound(f"vehicle {vehicle_id!r} does not exist",
                     [{"loc": ["path", "vehicle_id"], "pointer": None, "reason": "unknown vehicle"}])
-
-
-class AllocatorCache:
-    """A thread-safe LRU of built allocators, bounded in entries and in bytes.
-
-    ``inline_bytes`` bounds the share of entries keyed ``("inline", ...)``.
-    """
-
-    def __init__(self, size: int, max_bytes: int, inline_bytes: int) -> None:
-        self._size, self._max_bytes, self._inline_max = size, max_bytes, inline_bytes
-        self._items: OrderedDict[Hashable, tuple[alloc.Allocator, int]] = OrderedDict()
-        self._lock = threading.Lock()
-        self.bytes = 0
-        self.inline_bytes = 0
-        self.builds = 0
-
-    def __len__(self) -> int:
-        return len(self._items)
-
-    def lookup(self, key: Hashable) -> alloc.Allocator | None:
-        with self._lock:
-            found = self._items.get(key)
-            if found is None:
-                return None
-            self._items.move_to_end(key)
-            return found[0]
-
-    @staticmethod
-    def _inline(key: Hashable) -> bool:
-        return isinstance(key, tuple) and bool(key) and key[0] == "inline"
-
-    def _pop(self, key: Hashable) -> None:
-        item = self._items.pop(key, None)
-        if item is not None:
-            self.bytes -= item[1]
-            if self._inline(key):
-                self.inline_bytes -= item[1]
-
-    def keep_limit(self, key: Hashable) -> int:
-        """The largest allocator (bytes) this cache keeps under ``key``."""
-        if isinstance(key, tuple) and key and key[0] == "private":
-            return 0
-        if self._inline(key):
-            return min(INLINE_ENTRY_BYTES, self._inline_max, self._max_bytes // 4)
-        return self._max_bytes // 4
-
-    def put(self, key: Hashable, allocator: alloc.Allocator, nbytes: int) -> bool:
-        """Cache ``allocator`` (``nbytes`` held); ``False`` when it is too large to keep."""
-        inline = self._inline(key)
-        with self._lock:
-            self.builds += 1
-            if nbytes > self.keep_limit(key):
-                return False
-            self._pop(key)
-            self._items[key] = (allocator, nbytes)
-            self.bytes += nbytes
-            if inline:
-                self.inline_bytes += nbytes
-            while len(self._items) > self._size or self.bytes > self._max_bytes:
-                self._pop(next(iter(self._items)))
-            while self.inline_bytes > self._inline_max:
-                self._pop(next(k for k in self._items if self._inline(k)))
-            return True
-
-    def keys_where(self, predicate: Callable[[Hashable], bool]) -> list[Hashable]:
-        """Matching keys, least recently used first."""
-        with self._lock:
-            return [k for k in self._items if predicate(k)]
-
-    def drop(self, keys: list[Hashable]) -> None:
-        with self._lock:
-            for k in keys:
-                self._pop(k)
-
-
-class VersionProbe:
-    """``health_version`` of a vehicle from the database's committed state (``None``: absent).
-
-    SQLite: one dedicated autocommit connection (each ``SELECT`` its own read
-    transaction, so it sees every commit made before it, by any process); PostgreSQL and
-    others: a pooled connection, autocommit.
-    """
-
-    _SQL = "SELECT health_version FROM vehicles WHERE id = ?"
-
-    def __init__(self, engine: Engine) -> None:
-        self._engine = engine
-        self._lock = threading.Lock()
-        self._sqlite_path = (engine.url.database if engine.dialect.name == "sqlite"
-                             and engine.url.database not in (None, "", ":memory:") else None)
-        self._sqlite: sqlite3.Connection | None = None
-
-    def version(self, vehicle_id: str) -> int | None:
-        if self._sqlite_path is not None:
-            with self._lock:
-                if self._sqlite is None:
-                    self._sqlite = sqlite3.connect(self._sqlite_path, isolation_level=None, check_same_thread=False)
-                    self._sqlite.execute("PRAGMA busy_timeout=5000")
-                row = self._sqlite.execute(self._SQL, (vehicle_id,)).fetchone()
-            return None if row is None else int(row[0])
-        with self._engine.connect() as conn:
-            value = conn.execute(text("SELECT health_version FROM vehicles WHERE id = :id"),
-                                 {"id": vehicle_id}).scalar()
-        return None if value is None else int(value)
-
-    def close(self) -> None:
-        with self._lock:
-            if self._sqlite is not None:
-                self._sqlite.close()
-                self._sqlite = None
-
-
-@dataclass(frozen=True, slots=True)
-class VehicleState:
-    id: str
-    name: str | None
-    created_at: datetime
-    nominal: alloc.Problem
-    health: Health
-    version: int
-    problem: alloc.Problem  # the effective problem at this health
-
-
-def _problem_from_dict(d: dict[str, Any]) -> alloc.Problem:
-    return alloc.Problem(
-        d["B"], d["umin"], d["umax"], up=d["up"], Wu=d["Wu"], Wv=d["Wv"],
-        rate_min=[-np.inf if r is None else r for r in d["rate_min"]],
-        rate_max=[np.inf if r is None else r for r in d["rate_max"]],
-        names=d["names"], axes=d["axes"],
-    )
-
-
-def _state(row: VehicleRow, nominal: alloc.Problem | None = None) -> VehicleState:
-    nominal = nominal or _problem_from_dict(row.problem)
-    health = load_health(row.health)
-    return VehicleState(row.id, row.name, row.created_at, nominal, health, row.health_version,
-                        to_problem(nominal, health))
-
-
-@dataclass(frozen=True, slots=True)
-class Idempotency:
-    """A write's ``Idempotency-Key`` (per ``scope``: its method and path) and the fingerprint
-    of its body (SHA-256 over the scope and the validated body)."""
-
-    scope: str
-    key: str
-    fingerprint: str
-
-
-@dataclass(frozen=True, slots=True)
-class Answer:
-    """A write's answer as sent: its status and JSON body; ``state`` is the new vehicle state
-    when the write happened now (``None``: the answer was replayed for a retried key)."""
-
-    status: int
-    body: bytes
-    state: VehicleState | None
-
-    @property
-    def replayed(self) -> bool:
-        return self.state is None
-
-
-def _replay(session: Session, once: Idempotency | None) -> Answer | None:
-    """The stored answer to ``once``'s key, or ``None`` (409 when the key came with another body)."""
-    if once is None:
-        return None
-    row = session.get(IdempotencyRow, (once.scope, once.key))
-    if row is None:
-        return None
-    if row.fingerprint != once.fingerprint:
-        raise Conflict(f"Idempotency-Key {once.key!r} was used for a different request to {once.scope}; "
-                       f"a retry must repeat the request unchanged, a new request needs a new key",
-                       [{"loc": ["header", "Idempotency-Key"], "pointer": None,
-                         "reason": "key reused with a different body"}])
-    return Answer(row.status, row.body.encode(), None)
-
-
-def _remember_answer(session: Session, once: Idempotency | None, status: int, body: bytes, ttl_s: float) -> None:
-    """Store the answer in the write's own transaction (and drop keys older than ``ttl_s``)."""
-    if once is None:
-        return
-    now = utcnow()
-    session.execute(delete(IdempotencyRow).where(IdempotencyRow.created_at < now - timedelta(seconds=ttl_s)))
-    session.add(IdempotencyRow(scope=once.scope, key=once.key, fingerprint=once.fingerprint, status=status,
-                               body=body.decode(), created_at=now))
 
 
 #: the tables themselves: Core statements on them skip the ORM's per-statement bookkeeping
@@ -395,14 +207,14 @@ class VehicleStore:
         for _ in range(_MAX_RETRIES):
             row = VehicleRow(id=str(uuid.uuid4()), name=body.name, problem=nominal.to_dict(), health={},
                              health_version=0, created_at=utcnow())
-            state = _state(row, nominal)
+            state = state_from_row(row, nominal)
             try:
                 with self._sessions.begin() as session:
-                    if (replayed := _replay(session, once)) is not None:
+                    if (replayed := replay_answer(session, once)) is not None:
                         return replayed
                     session.add(row)
                     answer = Answer(201, render(state), state)
-                    _remember_answer(session, once, answer.status, answer.body, self.idempotency_ttl_s)
+                    remember_answer(session, once, answer.status, answer.body, self.idempotency_ttl_s)
             except IntegrityError:
                 if once is None:
                     raise
@@ -428,7 +240,7 @@ class VehicleStore:
             if row is None:
                 self._forget(vehicle_id)
                 raise _not_found(vehicle_id)
-            fresh = _state(row)
+            fresh = state_from_row(row)
         self._remember(fresh)
         return fresh
 
@@ -473,7 +285,7 @@ class VehicleStore:
         """
         for _ in range(_MAX_RETRIES):
             with self._sessions() as session:
-                if (replayed := _replay(session, once)) is not None:
+                if (replayed := replay_answer(session, once)) is not None:
                     return replayed
                 # Core statements on the session's connection: the ORM's identity map and
                 # unit of work doubled the transaction's CPU time (measured at load 10: ORM
@@ -487,7 +299,7 @@ class VehicleStore:
                 with self._states_lock:
                     old = self._states.get(vehicle_id)
                 if old is None or old.version != version:  # another process wrote: load the row
-                    old = _state(db.execute(select(_VEHICLES).where(_VEHICLES.c.id == vehicle_id)).one())
+                    old = state_from_row(db.execute(select(_VEHICLES).where(_VEHICLES.c.id == vehicle_id)).one())
                 name, health, params = apply_event(old.nominal, old.health, event)
                 updated = db.execute(
                     update(_VEHICLES)
@@ -506,7 +318,7 @@ class VehicleStore:
                 new = VehicleState(old.id, old.name, old.created_at, old.nominal, health, version,
                                    to_problem(old.nominal, health))
                 answer = Answer(201, render(ev, new, old.version), new)
-                _remember_answer(session, once, answer.status, answer.body, self.idempotency_ttl_s)
+                remember_answer(session, once, answer.status, answer.body, self.idempotency_ttl_s)
                 try:
                     session.commit()
                 except IntegrityError:

@@ -1,0 +1,85 @@
+"""A vehicle as this process holds it (its nominal problem, health and effective problem at
+one ``health_version``) and the probe that reads the committed version (see :mod:`service.store`)."""
+
+from __future__ import annotations
+
+import sqlite3
+import threading
+from dataclasses import dataclass
+from datetime import datetime
+from typing import Any
+
+import numpy as np
+from sqlalchemy import text
+from sqlalchemy.engine import Engine
+
+import alloc
+
+from .db import VehicleRow
+from .health import Health, load_health, to_problem
+
+__all__ = ["VehicleState", "VersionProbe", "problem_from_dict", "state_from_row"]
+
+
+@dataclass(frozen=True, slots=True)
+class VehicleState:
+    id: str
+    name: str | None
+    created_at: datetime
+    nominal: alloc.Problem
+    health: Health
+    version: int
+    problem: alloc.Problem  # the effective problem at this health
+
+
+def problem_from_dict(d: dict[str, Any]) -> alloc.Problem:
+    return alloc.Problem(
+        d["B"], d["umin"], d["umax"], up=d["up"], Wu=d["Wu"], Wv=d["Wv"],
+        rate_min=[-np.inf if r is None else r for r in d["rate_min"]],
+        rate_max=[np.inf if r is None else r for r in d["rate_max"]],
+        names=d["names"], axes=d["axes"],
+    )
+
+
+def state_from_row(row: VehicleRow, nominal: alloc.Problem | None = None) -> VehicleState:
+    nominal = nominal or problem_from_dict(row.problem)
+    health = load_health(row.health)
+    return VehicleState(row.id, row.name, row.created_at, nominal, health, row.health_version,
+                        to_problem(nominal, health))
+
+
+class VersionProbe:
+    """``health_version`` of a vehicle from the database's committed state (``None``: absent).
+
+    SQLite: one dedicated autocommit connection (each ``SELECT`` its own read
+    transaction, so it sees every commit made before it, by any process); PostgreSQL and
+    others: a pooled connection, autocommit.
+    """
+
+    _SQL = "SELECT health_version FROM vehicles WHERE id = ?"
+
+    def __init__(self, engine: Engine) -> None:
+        self._engine = engine
+        self._lock = threading.Lock()
+        self._sqlite_path = (engine.url.database if engine.dialect.name == "sqlite"
+                             and engine.url.database not in (None, "", ":memory:") else None)
+        self._sqlite: sqlite3.Connection | None = None
+
+    def version(self, vehicle_id: str) -> int | None:
+        if self._sqlite_path is not None:
+            with self._lock:
+                if self._sqlite is None:
+                    self._sqlite = sqlite3.connect(self._sqlite_path, isolation_level=None, check_same_thread=False)
+                    self._sqlite.execute("PRAGMA busy_timeout=5000")
+                row = self._sqlite.execute(self._SQL, (vehicle_id,)).fetchone()
+            return None if row is None else int(row[0])
+        with self._engine.connect() as conn:
+            value = conn.execute(text("SELECT health_version FROM vehicles WHERE id = :id"),
+                                 {"id": vehicle_id}).scalar()
+        return None if value is None else int(value)
+
+    def close(self) -> None:
+        with self._lock:
+            if self._sqlite is not None:
+                self._sqlite.close()
+                self._sqlite = None
