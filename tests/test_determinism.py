@@ -261,3 +261,32 @@ def test_a_round_tripped_allocator_compiles_nothing():
             after = _kernel_signatures()
             grown = {k: (before.get(k, 0), n) for k, n in after.items() if n > before.get(k, 0)}
             assert not grown, f"{method} on {p!r}: a round-tripped allocator compiled {grown}"
+
+
+#: hostile seeds whose calls compiled a kernel the warm-up had not: dynamic's own solve
+#: after its fast path could not finish (50002140); da's LP on a rank-deficient B (50000021)
+#: and its facet polish (50000077, 50000385)
+COMPILED_IN_A_CALL = (50002140, 50000021, 50000077, 50000385)
+
+
+def test_no_call_compiles_after_the_warm_up():
+    """After :func:`alloc._jit_cache.warm` (what an install runs), the hostile suite's calls --
+    the seeds above and 300 seeded cases of every method, input form and class -- compile no
+    new version of any kernel (a compile is seconds inside a call)."""
+    import os
+    import sys
+    import warnings
+
+    sys.path.insert(0, os.path.dirname(__file__))
+    import hostile
+    from alloc._jit_cache import warm
+
+    warm()
+    before = _kernel_signatures()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for seed in (*COMPILED_IN_A_CALL, *range(61_000_000, 61_000_300)):
+            hostile.check(hostile.case(seed))
+            after = _kernel_signatures()
+            grown = {k: (before.get(k, 0), n) for k, n in after.items() if n > before.get(k, 0)}
+            assert not grown, f"hostile seed {seed}: a call compiled {grown}"
