@@ -988,6 +988,25 @@ def _run_chunk(seeds: list[int], report: dict[str, Any], shrink_failures: bool, 
         dog.close()
 
 
+def markdown_rows(report: dict[str, Any], note: str = "") -> str:
+    """The docs' hostile-run table rows for a ``--json`` report: the run (cases, seeds, breaks,
+    rate) and its calls and fallbacks by method, generated rather than typed."""
+    seeds = report.get("seeds") or [None, None]
+    fails = report["fail"]
+    kinds = Counter(f["fail"][0].split(":")[0] for f in fails)
+    breaks = f"{len(fails)}" + (" (" + ", ".join(f"{n} {k}" for k, n in kinds.most_common()) + ")" if fails else "")
+    rate = report["cases"] / report["seconds"] if report.get("seconds") else 0.0
+    stopped = " (stopped at its time limit)" if report.get("stopped_at_deadline") else ""
+    run = (f"| {report['cases']:,}{stopped} | {seeds[0]:,}-{seeds[0] + report['cases'] - 1:,} | {breaks} | "
+           f"{report.get('seconds', 0):,.0f} s ({rate:.1f} cases/s){note} |")
+    lines = [run, "", "| method | calls | exact | unattainable | fallback |", "|---|---:|---:|---:|---:|"]
+    for name, cnt in sorted(report["by_method"].items()):
+        total = sum(cnt.values())
+        lines.append(f"| `{name}` | {total:,} | {cnt.get('exact', 0):,} | {cnt.get('unattainable', 0):,} | "
+                     f"{cnt.get('fallback', 0):,} |")
+    return "\n".join(lines)
+
+
 def main() -> None:  # pragma: no cover - command line
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cases", type=int, default=100_000)
@@ -995,7 +1014,12 @@ def main() -> None:  # pragma: no cover - command line
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--json", help="write the report here")
     ap.add_argument("--minutes", type=float, help="stop taking new cases after this long (report what ran)")
+    ap.add_argument("--table", metavar="JSON", help="print the docs' table rows for a --json report and exit")
     a = ap.parse_args()
+    if a.table:
+        with open(a.table) as fh:
+            print(markdown_rows(json.load(fh)))
+        return
     t0 = time.time()
     global DEADLINE
     DEADLINE = None if a.minutes is None else t0 + 60 * a.minutes
@@ -1015,7 +1039,8 @@ def main() -> None:  # pragma: no cover - command line
             print(f"fallback {m}: {n} x {msg}")
     if a.json:
         with open(a.json, "w") as fh:
-            json.dump({**rep, "refused": dict(rep["refused"]), "classes": dict(rep["classes"]),
+            json.dump({**rep, "seeds": [a.seed, a.seed + a.cases - 1], "refused": dict(rep["refused"]),
+                       "classes": dict(rep["classes"]),
                        "by_method": calls, "fallback_reasons": {m: dict(c) for m, c in rep["fallback_reasons"].items()}},
                       fh, indent=1, default=str)
 
