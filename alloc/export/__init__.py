@@ -164,9 +164,9 @@ class _Real:
     def consts(self) -> dict[str, str]:
         if self.double:
             return {"FABS": "fabs", "SQRT": "sqrt", "REAL_MAX": "DBL_MAX", "VMAX": repr(MAX_MAGNITUDE),
-                    "RTOL": repr(EXACT_RTOL), "EPS": repr(float(np.finfo(float).eps))}
+                    "RTOL": repr(EXACT_RTOL)}
         return {"FABS": "fabsf", "SQRT": "sqrtf", "REAL_MAX": "FLT_MAX", "VMAX": f"{FLOAT_VMAX!r}f",
-                "RTOL": f"{FLOAT_EXACT_RTOL!r}f", "EPS": "FLT_EPSILON"}
+                "RTOL": f"{FLOAT_EXACT_RTOL!r}f"}
 
 
 def _ints(a: Any) -> str:
