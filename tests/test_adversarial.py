@@ -127,10 +127,10 @@ _COMPLEX_B = {"seed": -1, "method": "pinv", "options": {}, "calls": [{"v": [0.5]
 def test_contract_check_catches_an_accepted_complex_value(monkeypatch):
     import warnings
 
-    import alloc.problem
+    import alloc.domain
 
     assert hostile.check(_COMPLEX_B)["fail"] == [] and hostile.check(_COMPLEX_B)["refused"] == "problem"
-    monkeypatch.setattr(alloc.problem, "_not_real", lambda value: None)  # the old boundary
+    monkeypatch.setattr(alloc.domain, "_not_real", lambda value: None)  # the old boundary
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # numpy's ComplexWarning as it drops the imaginary part
         assert hostile.check(_COMPLEX_B)["fail"] == ["accepted a complex array value in B"]
