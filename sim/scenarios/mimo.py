@@ -26,7 +26,7 @@ from sim.result import SimResult
 from sim.scenarios.registry import Scenario, register_scenario
 from sim.settings import LoopSpec, RunSettings
 
-__all__ = ["MimoScenario", "run_mimo", "mimo_scenario"]
+__all__ = ["MimoScenario", "run_mimo", "mimo_spec", "mimo_scenario"]
 
 
 @dataclass(frozen=True)
@@ -106,6 +106,17 @@ def run_mimo(
     TypeError
         An option that is neither a setting nor one of the scenario's.
     """
+    spec, flown = mimo_spec(scenario, **options)
+    result = simulate(spec, progress=progress, step_times=step_times)
+    result.settings = {**flown.record(), "pilots": result.settings["pilots"]}
+    return result
+
+
+def mimo_spec(scenario: MimoScenario, **options: Any) -> tuple[LoopSpec, RunSettings]:
+    """The :class:`sim.settings.LoopSpec` :func:`run_mimo` flies for these options, and the settings as flown.
+
+    Raises as :func:`run_mimo` does (before anything is built).
+    """
     settings, extra = RunSettings.split(options)
     unknown = set(extra) - set(scenario.design_options) - set(scenario.input_options)
     if unknown:
@@ -136,9 +147,7 @@ def run_mimo(
         commands=scenario.commands(np.arange(n) * flown.dt), pilots=(stick,), failure=fail, method=method,
         duration=duration, output_bound=scenario.output_bound, **flown.loop_settings(),
     )
-    result = simulate(spec, progress=progress, step_times=step_times)
-    result.settings = {**flown.record(), "pilots": result.settings["pilots"]}
-    return result
+    return spec, flown
 
 
 def _signature() -> inspect.Signature:
