@@ -283,7 +283,7 @@ def test_settings_pooled_and_verdicts_per_setting(tmp_path: Path) -> None:
 
 
 def test_da_family_written_once_when_all_four_agree() -> None:
-    from benchmarks.compare.report import _short
+    from benchmarks.compare.summaries import _short
 
     four = [f"{m} told" for m in ("da", "da_bisect", "da_facet", "da_table")]
     assert _short([*four, "qp told"]) == "da* told, qp told"

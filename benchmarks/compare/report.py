@@ -27,7 +27,12 @@ Open-loop / closed-loop agreement
 Every figure ``X.png`` is written with ``X.csv``, the exact numbers it draws, taken from the
 same summaries as the table printed next to it; time histories are drawn from the runs stored
 in ``histories/`` by the sweep (never re-simulated).
+
+The numbers are computed in :mod:`benchmarks.compare.summaries`, the figures drawn in
+:mod:`benchmarks.compare.figures` and the cells formatted by :mod:`benchmarks.compare.tables`;
+this module lays out the sections of ``report.md``.
 """
+
 
 from __future__ import annotations
 
@@ -35,7 +40,6 @@ import csv
 import json
 import math
 import time
-from collections import defaultdict
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -43,371 +47,26 @@ from typing import Any
 import numpy as np
 from scipy.stats import rankdata
 
-from .runner import history_path, read_table, table_of
-from .stats import bootstrap_median, paired_ratio, rank_with_ties, spearman
+from .figures import HISTORY_DECIMATE, _method_order, _plot_coverage, _plot_forest, _plot_heatmap, _plot_history
+from .figures import _subplots  # noqa: F401  (tests/test_plot_backend.py draws through it from here)
+from .runner import history_path
+from .summaries import (ALL_SETTINGS, RANDOM, _channels, _groups, _mode, _open_pivot, _typed, cell_summaries,
+                        closed_scores, coverage_agreement, detected_share, load_rows, pooled_rows, told_blind,
+                        verdict_stability, verdicts_by_setting)
 from .sweep import STATIC, Spec
+from .tables import Row, _ci, _fmt, _pct, _slug, _table, _write_csv, parse_markdown_table
 from .timing import TIMINGS_CSV
 
+#: the summaries and the table parser are re-exported: a reader of the report finds them here
 __all__ = ["make_report", "load_rows", "closed_scores", "cell_summaries", "told_blind", "detected_share", "coverage_agreement",
-           "parse_markdown_table", "pooled_rows", "verdicts_by_setting", "verdict_stability", "ALL_SETTINGS"]
+           "parse_markdown_table", "pooled_rows", "verdicts_by_setting", "verdict_stability", "ALL_SETTINGS",
+           "HISTORY_DECIMATE"]
 
-Row = dict[str, Any]
-DPI = 80
-RANDOM = "random suite"
 TITLES = {"ice": "ICE", "harv_latdir": "F-18/HARV lat-dir"}
-COVERAGE_PROBLEM = {"ice": "ice", "harv_latdir": "harv_latdir"}
+
+
 #: fewer noise seeds than this per cell: the report says its intervals are indicative only
 FEW_SEEDS = 10
-
-
-# ----------------------------------------------------------------------------- loading
-def _typed(value: str) -> Any:
-    if value == "":
-        return None
-    if value in ("True", "False"):
-        return value == "True"
-    try:
-        return float(value)
-    except ValueError:
-        return value
-
-
-def load_rows(out: Path, specs: Sequence[Spec]) -> dict[str, list[Row]]:
-    """Typed rows of this sweep's specs, per table (rows of other sweeps in ``out`` ignored)."""
-    wanted = {s["id"] for s in specs}
-    tables: dict[str, list[Row]] = {}
-    for name in sorted({table_of(s) for s in specs}):
-        rows = [{k: _typed(v) for k, v in r.items()} for r in read_table(out / f"{name}.csv")]
-        for r in rows:
-            r["id"] = str(r["id"])
-            if "setting" in r:
-                r["setting"] = str(r["setting"])
-        tables[name] = [r for r in rows if r["id"] in wanted]
-    return tables
-
-
-# ----------------------------------------------------------------------------- helpers
-def _fmt(x: Any, digits: int = 3) -> str:
-    if x is None:
-        return "-"
-    if isinstance(x, bool):
-        return "yes" if x else "no"
-    if isinstance(x, (float, np.floating)):
-        x = float(x)
-        if math.isinf(x):
-            return "inf"
-        if math.isnan(x):
-            return "-"
-        if x == 0:
-            return "0"
-        return f"{x:.{digits}g}"
-    return str(x)
-
-
-def _ci(est: float, lo: float, hi: float) -> str:
-    if math.isnan(est):
-        return "-"
-    return f"{_fmt(est)} [{_fmt(lo)}, {_fmt(hi)}]"
-
-
-def _pct(x: float | None) -> str:
-    return "-" if x is None or math.isnan(x) else f"{100 * x:.1f} %"
-
-
-def _table(headers: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
-    lines = ["| " + " | ".join(headers) + " |", "|" + "|".join("---" for _ in headers) + "|"]
-    lines += ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
-    return "\n".join(lines)
-
-
-def parse_markdown_table(text: str, first_header: str) -> list[dict[str, str]]:
-    """Rows of the first Markdown table in ``text`` whose first header cell is ``first_header``."""
-    lines = text.splitlines()
-    for i, line in enumerate(lines):
-        cells = [c.strip() for c in line.strip().strip("|").split("|")]
-        if line.startswith("|") and cells[0] == first_header:
-            out = []
-            for body in lines[i + 2:]:
-                if not body.startswith("|"):
-                    break
-                out.append(dict(zip(cells, (c.strip() for c in body.strip().strip("|").split("|")))))
-            return out
-    raise KeyError(f"no table with first header {first_header!r}")
-
-
-def _write_csv(path: Path, rows: Sequence[Row]) -> None:
-    with path.open("w", newline="") as fh:
-        w = csv.DictWriter(fh, list(rows[0]) if rows else [], lineterminator="\n")
-        w.writeheader()
-        w.writerows(rows)
-
-
-def _channels(rows: Sequence[Row]) -> list[str]:
-    return [k[: -len("_rms_after")] for k in rows[0] if k.endswith("_rms_after")] if rows else []
-
-
-def _mode(row: Row) -> str:
-    if "mode" in row:  # a summary
-        return row["mode"]
-    if row.get("health"):  # the arm (rows written before the detected arm have none)
-        return row["health"]
-    return "told" if row["told"] else "blind"
-
-
-def _median(values: Sequence[Any]) -> float:
-    vals = [float(v) for v in values if v is not None and not (isinstance(v, float) and math.isnan(v))]
-    return float(np.median(vals)) if vals else math.nan
-
-
-def _slug(text: str) -> str:
-    return "".join(c if c.isalnum() or c in "-_." else "_" for c in text)
-
-
-# ----------------------------------------------------------------------------- closed loop
-def closed_scores(rows: Sequence[Row]) -> list[Row]:
-    """Add ``score`` (see module docstring) to each closed-loop row; returns the rows."""
-    channels = _channels(rows)
-    ref = {(r["scenario"], r["setting"], r["failure"], r["seed"]): r for r in rows if r["method"] == STATIC}
-    for r in rows:
-        base = ref.get((r["scenario"], r["setting"], r["failure"], r["seed"]))
-        if r["diverged"]:
-            r["score"] = math.inf
-        elif base is None or base["diverged"]:
-            r["score"] = math.nan
-        else:
-            r["score"] = float(np.mean([r[f"{c}_rms_after"] / base[f"{c}_rms_after"] for c in channels]))
-    return list(rows)
-
-
-def _groups(rows: Sequence[Row], keys: Sequence[str]) -> dict[tuple, list[Row]]:
-    out: dict[tuple, list[Row]] = defaultdict(list)
-    for r in rows:
-        out[tuple(_mode(r) if k == "mode" else r[k] for k in keys)].append(r)
-    return out
-
-
-def cell_summaries(rows: Sequence[Row]) -> list[Row]:
-    """One summary per (scenario, setting, failure, method, mode) of scored rows, with ``rank``
-    within its (scenario, setting, failure)."""
-    channels = _channels(rows)
-    cells = []
-    for (scenario, setting, failure, method, mode), grp in _groups(
-            rows, ("scenario", "setting", "failure", "method", "mode")).items():
-        est, lo, hi = bootstrap_median([r["score"] for r in grp])
-        cell: Row = {"scenario": scenario, "setting": setting, "failure": failure, "method": method, "mode": mode,
-                     "runs": len(grp), "diverged": sum(bool(r["diverged"]) for r in grp),
-                     "unscored": sum(math.isnan(r["score"]) for r in grp),
-                     "score": est, "score_lo": lo, "score_hi": hi,
-                     "recover_s": _median([r.get("recover_s") for r in grp]),
-                     "effort_after": _median([r.get("effort_after") for r in grp]),
-                     "unattainable_after": _median([r.get("unattainable_after") for r in grp]),
-                     "fallback_after": _median([r.get("fallback_after") for r in grp]),
-                     "saturation_s": _median([r.get("time_in_position_saturation") for r in grp])}
-        for c in channels:
-            cell[f"{c}_rms_before"] = _median([r[f"{c}_rms_before"] for r in grp])
-            cell[f"{c}_rms_after"] = _median([r[f"{c}_rms_after"] for r in grp if not r["diverged"]])
-        cells.append(cell)
-    for _, grp in _groups(cells, ("scenario", "setting", "failure")).items():
-        ranks = rank_with_ties({(c["method"], c["mode"]): (c["score"], c["score_lo"], c["score_hi"]) for c in grp})
-        for c in grp:
-            c["rank"] = ranks[(c["method"], c["mode"])]
-    cells.sort(key=lambda c: (c["scenario"], c["setting"], c["failure"], c["rank"],
-                              math.inf if math.isnan(c["score"]) else c["score"], c["method"], c["mode"]))
-    return cells
-
-
-def detected_share(rows: Sequence[Row], resamples: int = 2000, seed: int = 0) -> list[Row]:
-    """The oracle's benefit that survives detection, per (scenario, setting, failure, method):
-    ``(median blind - median detected) / (median blind - median told)`` of the scores over the seeds
-    all three arms ran, with a 95 % bootstrap interval resampling those seeds (NaN where told is no
-    better than blind, or a score is not finite)."""
-    rng = np.random.default_rng(seed)
-
-    def share(b: np.ndarray, t: np.ndarray, d: np.ndarray) -> float:
-        gain = np.median(b) - np.median(t)
-        return float((np.median(b) - np.median(d)) / gain) if np.isfinite(gain) and gain > 0 else math.nan
-
-    out = []
-    for (scenario, setting, failure, method), grp in _groups(rows, ("scenario", "setting", "failure", "method")).items():
-        arms = {a: {int(r["seed"]): float(r["score"]) for r in grp if _mode(r) == a} for a in ("blind", "told", "detected")}
-        seeds = sorted(set(arms["blind"]) & set(arms["told"]) & set(arms["detected"]))
-        if not seeds:
-            continue
-        b, t, d = (np.array([arms[a][s] for s in seeds]) for a in ("blind", "told", "detected"))
-        est = share(b, t, d) if np.isfinite(np.concatenate([b, t, d])).all() else math.nan
-        boots = []
-        for _ in range(resamples if not math.isnan(est) else 0):
-            i = rng.integers(len(seeds), size=len(seeds))
-            boots.append(share(b[i], t[i], d[i]))
-        boots_arr = np.array([x for x in boots if not math.isnan(x)])
-        lo, hi = (np.percentile(boots_arr, [2.5, 97.5]) if boots_arr.size else (math.nan, math.nan))
-        out.append({"scenario": scenario, "setting": setting, "failure": failure, "method": method,
-                    "seeds": len(seeds), "share": est, "share_lo": float(lo), "share_hi": float(hi)})
-    out.sort(key=lambda r: (r["scenario"], r["setting"], r["failure"], r["method"]))
-    return out
-
-
-def told_blind(rows: Sequence[Row]) -> list[Row]:
-    """Paired told/blind ratio per (scenario, setting, failure, method) (see module docstring)."""
-    out = []
-    for (scenario, setting, failure, method), grp in _groups(rows, ("scenario", "setting", "failure", "method")).items():
-        told = {int(r["seed"]): r["score"] for r in grp if _mode(r) == "told"}
-        blind = {int(r["seed"]): r["score"] for r in grp if _mode(r) == "blind"}
-        seeds = sorted(set(told) & set(blind))
-        if not seeds:
-            continue
-        est, lo, hi = paired_ratio([told[s] for s in seeds], [blind[s] for s in seeds])
-        verdict = ("helps" if hi < 1 else "hurts" if lo > 1 else "undecided") if not math.isnan(est) else "no score"
-        out.append({"scenario": scenario, "setting": setting, "failure": failure, "method": method, "pairs": len(seeds),
-                    "ratio": est, "ratio_lo": lo, "ratio_hi": hi, "verdict": verdict})
-    out.sort(key=lambda r: (r["scenario"], r["setting"], r["failure"], r["method"]))
-    return out
-
-
-def coverage_agreement(cells: Sequence[Row], open_rows: Sequence[Row]) -> list[Row]:
-    """Spearman rho between coverage on the scenario's problem and the median closed-loop score,
-    per (scenario, setting, failure, mode), over the registry methods present in both."""
-    out = []
-    for (scenario, setting, failure, mode), grp in _groups(cells, ("scenario", "setting", "failure", "mode")).items():
-        problem = COVERAGE_PROBLEM.get(scenario)
-        cov = {r["method"]: float(r["coverage"]) for r in open_rows if r["problem"] == problem}
-        methods = sorted(c["method"] for c in grp if c["method"] in cov)
-        score = {c["method"]: c["score"] for c in grp}
-        rho, p, n = spearman([cov[m] for m in methods], [score[m] for m in methods])
-        out.append({"scenario": scenario, "setting": setting, "failure": failure, "mode": mode, "methods": n,
-                    "rho": rho, "p": p})
-    out.sort(key=lambda r: (r["scenario"], r["setting"], r["failure"], r["mode"]))
-    return out
-
-
-# ----------------------------------------------------------------------------- plots
-def _subplots(*grid: int, **kwargs: Any) -> tuple[Any, Any]:
-    """A bare :class:`matplotlib.figure.Figure` and its axes (``Figure.subplots`` arguments).
-
-    No pyplot: no backend is chosen here, and ``savefig`` renders a PNG through Agg
-    with or without a display.
-    """
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=kwargs.pop("figsize"))
-    return fig, fig.subplots(*grid, **kwargs)
-
-
-def heatmap_data(cells: Sequence[Row]) -> list[Row]:
-    """What the heat map draws: median score per method, mode and failure."""
-    return [{"method": c["method"], "mode": c["mode"], "failure": c["failure"], "score": c["score"],
-             "score_lo": c["score_lo"], "score_hi": c["score_hi"]} for c in cells]
-
-
-def _method_order(cells: Sequence[Row]) -> list[str]:
-    methods = sorted({c["method"] for c in cells})
-    return [STATIC] + [m for m in methods if m != STATIC] if STATIC in methods else methods
-
-
-def _plot_heatmap(cells: Sequence[Row], failures: Sequence[str], out: Path, name: str, title: str) -> str:
-    from matplotlib.colors import LogNorm
-
-    data = heatmap_data(cells)
-    _write_csv(out / f"{name}.csv", data)
-    methods = _method_order(cells)
-    value = {(d["method"], d["mode"], d["failure"]): d["score"] for d in data}
-    fig, axes = _subplots(1, 2, figsize=(2.0 + 0.75 * len(failures) * 2, 1.2 + 0.32 * len(methods)), sharey=True)
-    norm = LogNorm(vmin=0.25, vmax=4.0)
-    for ax, mode in zip(axes, ("blind", "told")):
-        grid = np.array([[value.get((m, mode, f), math.nan) for f in failures] for m in methods])
-        shown = np.where(np.isinf(grid), 4.0, grid)
-        img = ax.imshow(np.clip(shown, 0.25, 4.0), cmap="RdYlGn_r", norm=norm, aspect="auto")
-        for i in range(len(methods)):
-            for j in range(len(failures)):
-                ax.text(j, i, "div" if np.isinf(grid[i, j]) else _fmt(grid[i, j], 2), ha="center", va="center",
-                        fontsize=6)
-        ax.set_xticks(range(len(failures)), failures, rotation=45, ha="right", fontsize=7)
-        ax.set_yticks(range(len(methods)), methods, fontsize=7)
-        ax.set_title(f"allocator {mode}", fontsize=8)
-    fig.colorbar(img, ax=axes, shrink=0.8).set_label("median score: post-failure RMS / static's\n(log scale; div: diverged)",
-                                                     fontsize=7)
-    fig.suptitle(title, fontsize=9, y=1.0 + 0.3 / (1.2 + 0.32 * len(methods)))
-    fig.savefig(out / f"{name}.png", dpi=DPI, bbox_inches="tight")
-    return f"{name}.png"
-
-
-def _plot_forest(ratios: Sequence[Row], failures: Sequence[str], out: Path, name: str, title: str) -> str:
-    data = [{k: r[k] for k in ("failure", "method", "pairs", "ratio", "ratio_lo", "ratio_hi")} for r in ratios]
-    _write_csv(out / f"{name}.csv", data)
-    methods = sorted({r["method"] for r in ratios})
-    cols = min(4, len(failures))
-    nrows = math.ceil(len(failures) / cols)
-    fig, axes = _subplots(nrows, cols, figsize=(3.0 * cols, 1.0 + nrows * (0.5 + 0.2 * len(methods))),
-                             sharey=True, squeeze=False)
-    lookup = {(r["failure"], r["method"]): r for r in ratios}
-    for k, ax in enumerate(axes.flat):
-        if k >= len(failures):
-            ax.axis("off")
-            continue
-        f = failures[k]
-        for i, m in enumerate(methods):
-            r = lookup.get((f, m))
-            if r is None or math.isnan(r["ratio"]):
-                continue
-            est, lo, hi = (min(max(x, 1 / 16), 16) for x in (r["ratio"], r["ratio_lo"], r["ratio_hi"]))
-            colour = "tab:green" if r["ratio_hi"] < 1 else "tab:red" if r["ratio_lo"] > 1 else "0.4"
-            ax.plot([lo, hi], [i, i], color=colour, lw=1.2)
-            ax.plot([est], [i], "o", color=colour, ms=3)
-        ax.axvline(1.0, color="k", lw=0.6)
-        ax.set_xscale("log")
-        ax.set_xlim(1 / 16, 16)
-        ax.set_title(f, fontsize=8)
-        ax.set_yticks(range(len(methods)), methods, fontsize=6)
-        ax.tick_params(axis="x", labelsize=6)
-        ax.grid(axis="x", alpha=0.3)
-    fig.suptitle(title + "\ntold / blind median score, 95 % paired bootstrap (< 1: telling helps; clipped to 1/16..16)",
-                 fontsize=8)
-    fig.tight_layout(rect=(0, 0, 1, 1 - 0.45 / fig.get_figheight()))
-    fig.savefig(out / f"{name}.png", dpi=DPI)
-    return f"{name}.png"
-
-
-HISTORY_DECIMATE = 4
-
-
-def history_data(out: Path, row_ids: Sequence[str], labels: Sequence[str]) -> tuple[list[Row], list[str]]:
-    """What a time-history figure draws: every ``HISTORY_DECIMATE``-th stored sample of each run
-    (columns ``t`` and ``<label>:<channel>:reference|output``), and the channels."""
-    runs = [np.load(history_path(out, i)) for i in row_ids]
-    channels = [str(c) for c in runs[0]["channels"]]
-    n = min(len(r["t"]) for r in runs)
-    rows: list[Row] = []
-    for k in range(0, n, HISTORY_DECIMATE):
-        row: Row = {"t": float(runs[0]["t"][k])}
-        for label, run in zip(labels, runs):
-            for j, c in enumerate(channels):
-                row[f"{label}:{c}:reference"] = float(run["reference"][k, j])
-                row[f"{label}:{c}:output"] = float(run["output"][k, j])
-        rows.append(row)
-    return rows, channels
-
-
-def _plot_history(out: Path, picked: Sequence[Row], name: str, title: str) -> str:
-    labels = [f"{r['method']} ({_mode(r)})" for r in picked]
-    data, channels = history_data(out, [r["id"] for r in picked], labels)
-    _write_csv(out / f"{name}.csv", data)
-    t = np.array([d["t"] for d in data])
-    t_fail = float(picked[0]["failure_time"])
-    fig, axes = _subplots(len(channels), 1, figsize=(8, 1.9 * len(channels)), sharex=True, squeeze=False)
-    colours = ("k", "tab:red", "tab:blue", "tab:green")
-    for ax, c in zip(axes[:, 0], channels):
-        for label, colour in zip(labels, colours):
-            ax.plot(t, [d[f"{label}:{c}:reference"] for d in data], color=colour, lw=0.6, ls="--")
-            ax.plot(t, [d[f"{label}:{c}:output"] for d in data], color=colour, lw=0.9, label=f"{label}")
-        ax.axvline(t_fail, color="0.3", lw=0.8, ls=":", label="failure")
-        ax.set_ylabel(c, fontsize=8)
-        ax.grid(alpha=0.3)
-    axes[0, 0].legend(fontsize=7, loc="upper left", ncols=len(labels) + 1)
-    axes[-1, 0].set_xlabel("t (s); solid: output, dashed: reference", fontsize=8)
-    fig.suptitle(title, fontsize=9)
-    fig.tight_layout()
-    fig.savefig(out / f"{name}.png", dpi=DPI)
-    return f"{name}.png"
 
 
 # ----------------------------------------------------------------------------- closed-loop sections
@@ -549,71 +208,6 @@ def _closed_section(out: Path, scenario: str, setting: str, rows: list[Row], cel
 
 
 # ----------------------------------------------------------------------------- across settings
-#: the ``setting`` of rows pooled over every simulator setting of a scenario
-ALL_SETTINGS = "all settings"
-
-
-def pooled_rows(rows: Sequence[Row]) -> list[Row]:
-    """Copies of scored closed-loop rows with the simulator settings pooled (``setting`` =
-    :data:`ALL_SETTINGS`); ``seed`` renumbered per (setting, seed), so told/blind pairs stay
-    within one setting and one noise seed.  Scores are those of :func:`closed_scores`, each
-    relative to ``static`` in its own setting."""
-    ids: dict[tuple[str, int], int] = {}
-    out = []
-    for r in rows:
-        c = dict(r)
-        c["setting"] = ALL_SETTINGS
-        c["seed"] = ids.setdefault((r["setting"], int(r["seed"])), len(ids) + 1)
-        out.append(c)
-    return out
-
-
-def verdicts_by_setting(cells: Sequence[Row], failures: Sequence[str]) -> list[Row]:
-    """Rank-1 methods (ties included, ``static`` left out) per failure and simulator setting."""
-    settings = sorted({c["setting"] for c in cells})
-    out = []
-    for f in failures:
-        row: Row = {"failure": f}
-        for st in settings:
-            top = sorted(f"{c['method']} {c['mode']}" for c in cells
-                         if c["failure"] == f and c["setting"] == st and c["rank"] == 1 and c["method"] != STATIC)
-            row[st] = ", ".join(top) or "static only"
-        out.append(row)
-    return out
-
-
-#: the direct-allocation family: one allocation by four backends (identical closed-loop rows in
-#: the sweeps); shown as ``da*`` when all four share a verdict
-DA_FAMILY = ("da", "da_bisect", "da_facet", "da_table")
-
-
-def _short(entries: Sequence[str]) -> str:
-    """``method mode`` entries, with the four ``da*`` backends of one mode written once as ``da*``."""
-    items = sorted(set(entries))
-    for mode in ("blind", "told"):
-        family = [f"{m} {mode}" for m in DA_FAMILY]
-        if all(f in items for f in family):
-            items = [i for i in items if i not in family] + [f"da* {mode}"]
-    return ", ".join(sorted(items))
-
-
-def verdict_stability(cells: Sequence[Row], failures: Sequence[str]) -> list[Row]:
-    """Per failure: the entries (method and allocator mode, ``static`` left out) at rank 1 in
-    every simulator setting, and those at rank 1 in only some, with the count of settings."""
-    settings = sorted({c["setting"] for c in cells})
-    out = []
-    for f in failures:
-        count: dict[str, int] = defaultdict(int)
-        for c in cells:
-            if c["failure"] == f and c["rank"] == 1 and c["method"] != STATIC:
-                count[f"{c['method']} {c['mode']}"] += 1
-        always = [e for e, n in count.items() if n == len(settings)]
-        some = sorted(((e, n) for e, n in count.items() if n < len(settings)), key=lambda en: (-en[1], en[0]))
-        out.append({"failure": f, "settings": len(settings), "always": _short(always) or "-",
-                    "sometimes": "; ".join(f"{e} ({n})" for e, n in some) or "-"})
-    return out
-
-
 def _across_section(out: Path, scenario: str, rows: list[Row], cells_by_setting: list[Row]) -> tuple[str, list[Row],
                                                                                                     list[Row]]:
     """The scenario's runs pooled over its simulator settings: heat map, ranking, told/blind,
@@ -672,23 +266,10 @@ _OPEN_METRICS: list[tuple[str, str, bool, Callable[[float], str]]] = [
 ]
 
 
-def _problem_group(problem: str) -> str:
-    return RANDOM if problem.startswith("random") else problem
-
-
 def _ranks(values: Sequence[float], *, higher_is_better: bool = False) -> np.ndarray:
     """Ranks (1 = best, ties share the lowest) of values rounded to the 3 significant digits shown."""
     shown = np.array([float(f"{v:.3g}") if math.isfinite(v) else v for v in values])
     return rankdata(-shown if higher_is_better else shown, method="min")
-
-
-def _open_pivot(rows: Sequence[Row], column: str) -> tuple[list[str], dict[str, dict[str, float]]]:
-    """``method -> group -> value`` (the random suite averaged)."""
-    acc: dict[str, dict[str, list[float]]] = defaultdict(lambda: defaultdict(list))
-    for r in rows:
-        acc[r["method"]][_problem_group(r["problem"])].append(float(r[column]))
-    groups = [g for g in ("ice", "harv_latdir", RANDOM) if any(g in v for v in acc.values())]
-    return groups, {m: {g: float(np.mean(v)) for g, v in d.items()} for m, d in acc.items()}
 
 
 def _open_section(rows: list[Row], spec: Spec) -> str:
@@ -712,25 +293,6 @@ def _open_section(rows: list[Row], spec: Spec) -> str:
                 for i in order]
         lines += [f"### {title}", "", _table(["mean rank", "method"] + [titles[g] for g in groups], body), ""]
     return "\n".join(lines)
-
-
-def _plot_coverage(rows: Sequence[Row], out: Path) -> str:
-    groups, pivot = _open_pivot(rows, "coverage")
-    methods = sorted(pivot)
-    _write_csv(out / "coverage.csv", [{"method": m, **{g: pivot[m].get(g, math.nan) for g in groups}}
-                                      for m in methods])
-    fig, ax = _subplots(figsize=(9, 3.4))
-    width = 0.8 / len(groups)
-    for j, g in enumerate(groups):
-        vals = 100 * np.array([pivot[m].get(g, math.nan) for m in methods])
-        ax.bar(np.arange(len(methods)) + (j - (len(groups) - 1) / 2) * width, vals, width, label=g)
-    ax.set_xticks(range(len(methods)), methods, rotation=30, ha="right", fontsize=8)
-    ax.set_ylabel("AMS coverage (%)", fontsize=8)
-    ax.legend(fontsize=7, ncols=len(groups))
-    ax.grid(axis="y", alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(out / "coverage.png", dpi=DPI)
-    return "coverage.png"
 
 
 def _latency_section(out: Path, meta: dict[str, Any]) -> str:
