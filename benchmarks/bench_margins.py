@@ -38,6 +38,7 @@ import numpy as np  # noqa: E402
 
 import alloc  # noqa: E402
 from sim.allocation import STATIC  # noqa: E402
+from sim.packed import FloatSlot  # noqa: E402
 from sim.linearise import FrameLoop, after_failure, linearise, margins, operating_point  # noqa: E402
 from sim.scenarios import harv_latdir, ice  # noqa: E402
 from sim.scenarios.mimo import MimoScenario, mimo_spec  # noqa: E402
@@ -93,7 +94,7 @@ def table(args: argparse.Namespace) -> None:
         for scenario in args.scenarios:
             for T in args.frame_periods:
                 for method in args.methods or methods():
-                    for case in ("nominal", "failed"):
+                    for case in args.cases:
                         if (scenario, method, T, case) in done:
                             continue
                         t0 = time.process_time()
@@ -170,6 +171,31 @@ def flight_points(loop: FrameLoop, duration: float, every: float, failure_time: 
     return out
 
 
+def explain(args: argparse.Namespace) -> None:
+    """Linearise along one recorded flight (scenario inputs, noise off): rho, left-out effectors, margins."""
+    scen, failure = SCENARIOS[args.scenario]
+    spec, flown = mimo_spec(scen, method=args.method, frame_period=args.frame_period, noise=False,
+                            allocator_knows_failure=True, duration=args.duration,
+                            failure=failure if args.failed else None, pilot_gain=args.pilot_gain)
+    loop = FrameLoop(spec)
+    points = flight_points(loop, args.duration, args.every, flown.failure_time if args.failed else None)
+    print(f"| {args.scenario} {args.method} T = {args.frame_period * 1e3:g} ms | t (s) | rho | sigma_min(I+L) | "
+          "pilot PM (deg) | left out | rate-limited |")
+    print("|---|---|---|---|---|---|---|")
+    for t, X, failed in points:
+        if X is None:
+            print(f"| | {t:.2f} | diverged | | | | |")
+            continue
+        current = FrameLoop(spec, failed=True) if failed else loop
+        lin = linearise(current, X)
+        mg = margins(lin, n_frequencies=args.frequencies)
+        rate = current.part(X, "rate")
+        limited = int(np.sum(np.abs(np.abs(rate) - current.P[FloatSlot.RMAX]) < 1e-9))
+        left = int(np.sum(np.all(np.abs(lin.J_v) < 1e-9, axis=1)))
+        print(f"| | {t:.2f} | {mg.spectral_radius:.4f} | {mg.sigma_min:.3f} | {_fmt(mg.pilot_phase_margin_deg, 1)} | "
+              f"{left} | {limited} |", flush=True)
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -178,14 +204,24 @@ def main(argv: list[str] | None = None) -> None:
     t.add_argument("--scenarios", nargs="+", default=list(SCENARIOS))
     t.add_argument("--frame-periods", nargs="+", type=float, default=list(FRAME_PERIODS))
     t.add_argument("--methods", nargs="+")
+    t.add_argument("--cases", nargs="+", default=["nominal", "failed"], choices=["nominal", "failed"])
     t.add_argument("--settle", type=float, default=0.0)
     t.add_argument("--after", type=float, default=1.0, help="failed: seconds after the failure struck the trim")
     t.add_argument("--frequencies", type=int, default=500, help="frequency grid, log-spaced to Nyquist")
     r = sub.add_parser("report")
     r.add_argument("--csv", default="benchmarks/reference/margins.csv")
     r.add_argument("--markdown", action="store_true")
+    e = sub.add_parser("explain")
+    e.add_argument("--scenario", default="ice", choices=list(SCENARIOS))
+    e.add_argument("--method", default="daisy")
+    e.add_argument("--frame-period", type=float, default=0.0005)
+    e.add_argument("--duration", type=float, default=40.0)
+    e.add_argument("--every", type=float, default=2.5)
+    e.add_argument("--failed", action="store_true")
+    e.add_argument("--pilot-gain", type=float, default=None)
+    e.add_argument("--frequencies", type=int, default=100)
     args = parser.parse_args(argv)
-    {"table": table, "report": report}[args.command](args)
+    {"table": table, "report": report, "explain": explain}[args.command](args)
 
 
 if __name__ == "__main__":
