@@ -19,7 +19,9 @@ So the promise (see benchmarks/compare/reproduce.py):
   unattainable and fallback fractions) bit for bit;
 * continuous columns (tracking RMS and peaks, effort) within ``DEFAULT_RTOL`` = 1e-9 relative;
 * a diverged row up to its divergence; a HARV lat-dir 100 Hz row on ``diverged`` and before its
-  failure (``SENSITIVE_RTOL`` = 1e-5), its post-failure columns reported, not judged.
+  failure (``SENSITIVE_RTOL`` = 1e-5), its post-failure columns reported, not judged;
+* with a control run under another OpenBLAS kernel, the columns that perturbation moves are
+  reported, not judged (the slow sample: 1 of 24 plain rows).
 """
 
 from __future__ import annotations
@@ -204,14 +206,17 @@ needs_coretype = pytest.mark.skipif(platform.machine() != "x86_64" or not _dynam
 @pytest.mark.slow
 @needs_coretype
 def test_a_seeded_sample_of_committed_rows_reproduces() -> None:
-    """40 rows drawn with seed 1, each also under OpenBLAS's Prescott kernel (about 5 minutes here)."""
-    specs, _ = rp.load_reference()
+    """40 rows drawn with seed 1, each also under OpenBLAS's Prescott kernel (about 4 minutes here)."""
+    specs, rows = rp.load_reference()
     results = rp.reproduce(rp.sample_ids(specs, 40, 1), control="Prescott")
     bad = [(r.id, r.discrete_diffs, max(r.rel_diff.values(), default=0.0)) for r in results if r.verdict == "differs"]
     assert bad == []
     assert all(r.missing == () for r in results)
-    # the perturbation excuses only a minority: most rows are judged on every column
-    assert sum(not r.unjudged for r in results) >= 30
+    # this draw: 8 diverged rows, 8 of the 100 Hz HARV setting, 24 others; the kernel swap
+    # excuses columns of at most 2 of those 24 (measured: 1), every other row is judged whole
+    plain = [r for r in results if rows[r.id]["diverged"] == "False" and not rp.is_sensitive(rows[r.id])]
+    assert len(plain) == 24
+    assert sum(bool(r.unjudged) for r in plain) <= 2
 
 
 @pytest.mark.slow
