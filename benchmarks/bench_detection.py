@@ -200,8 +200,8 @@ def report_delays(rows: list[dict[str, Any]]) -> str:
 
 
 def report_false(rows: list[dict[str, Any]]) -> str:
-    header = ["scenario", "noise", "step (ms)", "runs", "simulated hours", "false alarms", "per 10 h",
-              "goal (< 1 per 10 h)"]
+    header = ["scenario", "noise", "step (ms)", "runs", "diverged", "simulated hours", "false alarms",
+              "flights with one", "per 10 h", "goal (< 1 per 10 h)"]
     out = []
     for scenario in SCENARIOS:
         for scale, dt in sorted({(r["noise_scale"], r.get("dt", 0.0005)) for r in rows}):
@@ -213,7 +213,8 @@ def report_false(rows: list[dict[str, Any]]) -> str:
             n = sum(false_alarms(r) for r in sel)
             rate = 10.0 * n / hours
             verdict = "met" if rate < FALSE_PER_10H_GOAL else "NOT met"
-            out.append([scenario, f"x{scale:g}", f"{1e3 * dt:g}", str(len(sel)), f"{hours:.2f}", str(n), f"{rate:.2f}",
+            out.append([scenario, f"x{scale:g}", f"{1e3 * dt:g}", str(len(sel)), str(sum(r["diverged"] for r in sel)),
+                        f"{hours:.2f}", str(n), str(sum(false_alarms(r) > 0 for r in sel)), f"{rate:.2f}",
                         verdict if scale == 1.0 else ""])
     return _table(header, out)
 
