@@ -1,0 +1,129 @@
+"""Every verdict-driving choice of the closed-loop comparison, in one machine-readable list.
+
+A verdict-driving choice can change whether a run stays bounded or which method does better.
+:func:`verdict_choices` lists each with its value, its source (a seed section or ``"ours"``:
+the project's own choice, with no source in the seed) and where it is set.  The run settings
+flagged verdict-driving (:class:`sim.settings.Setting` ``verdict``) are read from
+:class:`sim.settings.RunSettings` itself, never re-listed; the others are read from the
+constants that set them.  :func:`render_markdown` writes ``docs/verdict-choices.md`` (a test
+checks the committed page against it).
+"""
+
+from __future__ import annotations
+
+from dataclasses import MISSING, dataclass, fields
+
+import numpy as np
+
+from alloc import vehicles
+from sim import pilot
+from sim.blocks import band_limited_noise
+from sim.scenarios import harv_latdir, ice
+from sim.settings import SETTING, RunSettings
+
+__all__ = ["Choice", "verdict_choices", "render_markdown"]
+
+
+@dataclass(frozen=True)
+class Choice:
+    """One verdict-driving choice: its name, value as text, source (seed section or ``"ours"``) and where it is set."""
+
+    name: str
+    value: str
+    source: str
+    where: str
+    note: str = ""
+
+
+#: Sources of the run settings' defaults; a setting not named here is ours.
+_SETTING_SOURCES = {
+    "dt": "seed section 4.5 (fixed step 0.5 ms)",
+    "noise": "seed sections 4.6, 4.7 (noise gains)",
+    "noise_scale": "seed sections 4.6, 4.7 (1 = the seed's gains)",
+    "actuators": "seed section 4.7 (actuator models)",
+    "frame_period": "seed section 4.5 (single-rate 2 kHz loop)",
+    "rate_aware": "seed Eq 1.28",
+    "u_prev_source": "seed Eq 1.28 (u_prev: the previous command)",
+    "controller": "seed section 4.3 (observer-based SMC with hedging)",
+    "method": "seed sections 4.6, 4.7 (pinv for ICE, ganging for the HARV)",
+    "failure": "seed sections 4.6, 4.7",
+    "failure_time": "seed sections 4.6, 4.7",
+    "duration": "seed sections 4.6, 4.7",
+}
+
+
+def _text(value: object) -> str:
+    if isinstance(value, np.ndarray):
+        return ", ".join(f"{x:g}" for x in value)
+    if isinstance(value, float):
+        return f"{value:g}"
+    return str(value)
+
+
+def _settings() -> list[Choice]:
+    out = []
+    for f in fields(RunSettings):
+        spec = f.metadata[SETTING]
+        if not spec.verdict:
+            continue
+        default = None if f.default is MISSING else f.default
+        value = spec.none_means if default is None and spec.none_means else _text(default)
+        out.append(Choice(name=f"setting {f.name}", value=value, source=_SETTING_SOURCES.get(f.name, "ours"),
+                          where=f"sim/settings.py RunSettings.{f.name} ({spec.flag})", note=spec.help))
+    return out
+
+
+def verdict_choices() -> list[Choice]:
+    """Every verdict-driving choice, settings first (module docstring)."""
+    daisy = vehicles.method_options("ice", "daisy", None)["groups"]
+    return [
+        *_settings(),
+        Choice("pilot model", "stand-in: gain times delayed error", "ours", "sim/pilot.py PILOT_MODELS",
+               "the seed's pilot is Hess's structural model (its refs 138, 144, 145); not implemented"),
+        Choice("stand-in pilot gain", _text(pilot.STANDIN_GAIN), "ours", "sim/pilot.py STANDIN_GAIN"),
+        Choice("stand-in pilot delay", f"{pilot.STANDIN_DELAY:g} s", "ours", "sim/pilot.py STANDIN_DELAY"),
+        Choice("crossover pilot delay", f"{pilot.CROSSOVER_DELAY:g} s", "ours (no source)",
+               "sim/pilot.py CROSSOVER_DELAY"),
+        Choice("crossover pilot neuromuscular lag", f"{pilot.CROSSOVER_NEUROMUSCULAR:g} s", "ours (no source)",
+               "sim/pilot.py CROSSOVER_NEUROMUSCULAR"),
+        Choice("crossover pilot phase margin", f"{pilot.CROSSOVER_PHASE_MARGIN:g} deg", "ours",
+               "sim/pilot.py CROSSOVER_PHASE_MARGIN"),
+        Choice("ICE alpha pilot", "none: the alpha sum-of-sines goes straight into the reference model",
+               "ours (the seed closes a pilot loop on alpha, Figs 4-85, 4-86)", "sim/scenarios/ice.py _commands"),
+        Choice("Fig 4-81 bank-angle steps", ", ".join(f"{lv:g} deg at {t:g} s" for t, lv in
+                                                     zip(harv_latdir.STEP_TIMES, harv_latdir.STEP_LEVELS,
+                                                         strict=True)),
+               "ours (the seed's figure shows filtered steps; sizes and times are not printed)",
+               "sim/scenarios/harv_latdir.py STEP_TIMES, STEP_LEVELS"),
+        Choice("daisy groups (ICE)", " | ".join(", ".join(g) for g in daisy), "ours",
+               "alloc/vehicles ice [methods.daisy] groups"),
+        Choice("divergence bound ICE", f"|alpha| {ice.OUTPUT_BOUND[0]:g} deg, |p_s| {ice.OUTPUT_BOUND[1]:g} deg/s, "
+               f"|beta| {ice.OUTPUT_BOUND[2]:g} deg", "ours", "sim/scenarios/ice.py OUTPUT_BOUND"),
+        Choice("divergence bound HARV lat-dir", f"|beta| {harv_latdir.OUTPUT_BOUND[0]:g} deg, "
+               f"|p_s| {harv_latdir.OUTPUT_BOUND[1]:g} deg/s", "ours", "sim/scenarios/harv_latdir.py OUTPUT_BOUND"),
+        Choice("noise model", "band-limited white noise (power 0.1, 10 ms hold) through 100/(s^2 + 20 s + 100) "
+               "times the output gains", "seed sections 4.6, 4.7 (Simulink block and gains)",
+               f"sim/blocks.py {band_limited_noise.__name__}"),
+        Choice("noise gains ICE", _text(ice.vehicle().noise_gains[:1]) + " on every output", "seed section 4.7",
+               "sim/scenarios/ice.py vehicle"),
+        Choice("noise gains HARV lat-dir", _text(harv_latdir.vehicle().noise_gains), "seed section 4.6",
+               "sim/scenarios/harv_latdir.py vehicle"),
+    ]
+
+
+def render_markdown() -> str:
+    """``docs/verdict-choices.md``: the choices as one table."""
+    lines = [
+        "# Every verdict-driving choice",
+        "",
+        "Generated by `sim.choices.render_markdown()` (a test checks this page against it). "
+        "\"ours\" marks a choice the project made with no source in the seed. The sensitivity "
+        "of each verdict to each choice is not yet swept here.",
+        "",
+        "| choice | value | source | where it is set | note |",
+        "|---|---|---|---|---|",
+    ]
+    for c in verdict_choices():
+        cells = [c.name, c.value, c.source, c.where, c.note]
+        lines.append("| " + " | ".join(x.replace("|", "\\|") for x in cells) + " |")
+    return "\n".join(lines) + "\n"
