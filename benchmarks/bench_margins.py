@@ -1,10 +1,10 @@
 """Stability margins per allocator: ICE and HARV lat-dir, every method, three frame rates, nominal and failed.
 
 Each case linearises the closed loop (:mod:`sim.linearise`) at its operating point: the
-state the loop reaches after ``--settle`` seconds with no pilot or direct input from the
-engine's start (nominal), or from the injected failure (failed: the scenario's failure, the
-allocator told of it).  Noise is off.  Per case: the closed loop's spectral radius at the
-frame period (< 1: locally stable), the worst loop-at-a-time gain margin (nearest 0 dB) and
+trim, the loop's equilibrium with no input (:func:`sim.linearise.operating_point`; nominal),
+or the recorded state ``--after`` seconds after the scenario's failure struck the trim, the
+allocator told of it (failed: :func:`sim.linearise.after_failure`).  Noise is off.  Per case:
+the closed loop's spectral radius at the frame period (< 1: locally stable), the worst loop-at-a-time gain margin (nearest 0 dB) and
 phase margin over the actuator channels, the worst SISO disk margin, the MIMO return
 difference's smallest singular value and unstructured disk margin at the actuator inputs,
 the pilot loop's margins, and how many effectors the allocator's local map leaves out (zero
@@ -15,7 +15,8 @@ rows of ``du/dv``: saturated or outside the active set).
 
     python -m benchmarks.bench_margins table --csv benchmarks/reference/margins.csv
     python -m benchmarks.bench_margins report --csv benchmarks/reference/margins.csv --markdown
-    python -m benchmarks.bench_margins explain --markdown
+    python -m benchmarks.bench_margins explain --scenario ice --method daisy --frame-period 0.0005 --every 4
+    python -m benchmarks.bench_margins explain --scenario harv_latdir --method qp --frame-period 0.01 --every 2 --failed
 """
 
 from __future__ import annotations
