@@ -263,10 +263,10 @@ def test_a_round_tripped_allocator_compiles_nothing():
             assert not grown, f"{method} on {p!r}: a round-tripped allocator compiled {grown}"
 
 
-#: hostile seeds whose calls compiled a kernel the warm-up had not: dynamic's own solve
-#: after its fast path could not finish (50002140); da's LP on a rank-deficient B (50000021)
-#: and its facet polish (50000077, 50000385)
-COMPILED_IN_A_CALL = (50002140, 50000021, 50000077, 50000385)
+#: hostile seeds whose calls compiled a kernel the warm-up had not: the active set's own
+#: solve after the fast path could not finish (dynamic 50002140, qp by priorities 50087490);
+#: da's LP on a rank-deficient B (50000021) and its facet polish (50000077, 50000385)
+COMPILED_IN_A_CALL = (50002140, 50087490, 50000021, 50000077, 50000385)
 
 
 def test_no_call_compiles_after_the_warm_up():
