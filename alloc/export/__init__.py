@@ -384,7 +384,12 @@ def _active_set_fields(instances: list[Any], problem: Problem, real: _Real, fiel
     (:func:`alloc._active_set.pack`), so the C runs on exactly the library's data.  One
     instance for ``qp`` and ``wls``; ``dynamic`` has two (without and with ``u_prev``), which
     share every level row and differ in the preference weight, cold start and target."""
-    from .. import _active_set as aset
+    from types import SimpleNamespace
+
+    from .. import _active_set, _lsq_factor
+    # the packed state's layout and the level iteration are in _active_set, the free sets'
+    # factorisation (and its tolerances) in _lsq_factor: the generator reads both by one name
+    aset = SimpleNamespace(**{**vars(_lsq_factor), **vars(_active_set)})
 
     mats, vecs, ivecs = instances[0]._state[:3]
     head = ivecs[aset._HEAD]
@@ -451,7 +456,7 @@ def _instances(instances: list[Any], aset: Any, keys: list[tuple[int, int]], rea
             parts.append(f"static const real KU_{i}[M][M] = {real.array(mats[aset._KU, :m, :m], 'Ku')};")
         if table:
             parts.append("/* the factorisations of every free set of every level, computed by the generator with\n"
-                         "   the library's own code (alloc._active_set._factor): row [key][free-set bits] */")
+                         "   the library's own code (alloc._lsq_factor._factor): row [key][free-set bits] */")
             parts.append(_tables(mats, ivecs, aset, keys, real, ml, suffix=f"_{i}"))
         kv, ku = (f"KV_{i}", f"KU_{i}") if dyn else ("NULL", "NULL")
         tabs = "".join(f", TAB_{name}_{i}" for name in _TABLE_NAMES) if table else ""
@@ -488,7 +493,7 @@ def _table_keys(ivecs: np.ndarray, aset: Any) -> list[tuple[int, int]]:
 def _float_cut(blocks: tuple[np.ndarray, ...], A: np.ndarray, r0: int, r1: int, F: np.ndarray,
                rtol: float) -> None:
     """Drop, in a table made in double for a float kernel, the singular values a float
-    factorisation would drop (below ``rtol`` of the scale, as :func:`alloc._active_set._jacobi`
+    factorisation would drop (below ``rtol`` of the scale, as :func:`alloc._lsq_factor._jacobi`
     does at double's round-off): kept, they would divide float noise by a tiny number."""
     L, _, _, sc, Ya, _, sa = blocks
     if len(sc) and sc.max() > 0.0:

@@ -293,9 +293,9 @@ int PREFIX_allocate(const real *v, const real *u_prev, real dt, real *u)
 """
 
 # qp, wls (and their priorities): the lexicographic least-squares active set of
-# alloc/_active_set.py (_jacobi, _factor, _level, _start, _run, _call_into), without its
-# factorisation cache (the cache changes the cost, never the answer) and without warm starts
-# (off in the library: WARM_START).
+# alloc/_active_set.py (_level, _start, _run, _call_into) with the factorisation of
+# alloc/_lsq_factor.py (_jacobi, _factor), without the factorisation cache (the cache changes
+# the cost, never the answer); the library has no warm start, so neither has the kernel.
 ACTIVE_SET = r"""
 /* levels: rows STARTS[l]..STARTS[l+1] of A = T B[PERM] (T: the upper square roots of the
    level blocks of Wv), weight GAM[l]; FINAL adds min (u-up)'Wu(u-up) with every row held */
