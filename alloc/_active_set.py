@@ -52,7 +52,7 @@ from ._active_set_layout import (CACHE_ENTRIES, CACHE_FLOATS, _A, _B, _BV, _CONS
                                  _FINAL, _FREE, _G, _GAM, _H, _HEAD, _HI, _K, _KU, _KV, _LAM, _LO, _M, _MAXIT, _MISC,
                                  _N, _NCW, _NEXT_SLOT, _NLEV, _NLW, _P0, _PERM, _PINNED, _R, _RMAX, _RMIN, _SCALE,
                                  _STARTS, _T, _TABLE, _TABU, _TMP, _U, _UMAX, _UMIN, _UP, _UPC, _WU, _Y)
-# _FACTORED: read by benchmarks/bench_alloc.py and tests/test_bench_alloc.py from here
+# _FACTORED: read by benchmarks/bench_alloc.py and tests/benchmarks/test_bench_alloc.py from here
 from ._lsq_factor import SIGMA_RTOL, _factors, _lsolve, _ltsolve, _slot_offsets
 
 __all__ = ["pack", "lexico_call", "lexico_solve", "lexico_batch_finished", "SIGMA_RTOL", "MU_EPS"]

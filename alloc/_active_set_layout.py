@@ -18,7 +18,7 @@
 # it, every call of ``_level`` and every cache lookup took and dropped an atomic reference
 # on each array argument, a quarter of the solver's time in a perf profile (NRT_incref /
 # NRT_decref).  Without it: 11-22 % less per allocation on ICE and the hexacopter, answers
-# bit for bit the same (benchmarks/bench_alloc.py; tests/test_fastcall.py).  The caller
+# bit for bit the same (benchmarks/bench_alloc.py; tests/alloc/test_fastcall.py).  The caller
 # (``lexico_call``, ``lexico_batch_finished``) owns the arrays for the whole call.
 
 #: int header fields (``ivecs[0]``)

@@ -236,7 +236,7 @@ def facet_polish(B, ustar, d, u0, lo, hi, a):  # pragma: no cover - compiled
 #
 # Each replaces a Python loop of small numpy calls (clip, fancy indexing, B u, a dict
 # lookup per iteration) with one compiled call.  The arithmetic is the same as the numpy
-# code it replaces (tests/test_kernels_cascade.py compares the two on random problems).
+# code it replaces (tests/alloc/test_kernels_cascade.py compares the two on random problems).
 
 
 @njit(cache=True, nogil=True)

@@ -429,7 +429,7 @@ class _Qpsolvers:
 #: Iteration bounds per solve, the only bound on a backend's work (no wall-clock limit: the
 #: same call must give the same answer on an idle and on a busy machine).  Measured on 791
 #: solves of ``qp`` and ``wls`` on ICE and seeded 3 x 8 and 6 x 16 problems of every kind in
-#: :data:`alloc.testing.KINDS` (tests/test_backend_determinism.py checks the load independence):
+#: :data:`alloc.testing.KINDS` (tests/alloc/test_backend_determinism.py checks the load independence):
 #:
 #: - ``daqp``: an active-set solver needs about one iteration per constraint that enters or
 #:   leaves the working set (tens at m <= 64); 2,000 stops only a cycling solve.

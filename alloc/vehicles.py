@@ -34,11 +34,11 @@ vehicle's ``[methods.<name>]`` tables; :func:`method_options` merges them under 
 caller's options, the one rule every tool applies.
 
 The seed's aircraft are also transcribed here in Python (:func:`ice`, :func:`harv_latdir`,
-:data:`SEED`): tests/test_vehicles.py checks the bundled files against them bit for bit.
+:data:`SEED`): tests/alloc/test_vehicles.py checks the bundled files against them bit for bit.
 
 Transcribed from the seed (OCR'd: decimal points restored where the scan lost them, e.g.
 ``-0009123567`` -> ``-0.009123567``) and checked by reproducing the seed's printed
-control distribution of Eq 4.24 with the project's own ``pinv`` (tests/test_vehicles.py).
+control distribution of Eq 4.24 with the project's own ``pinv`` (tests/alloc/test_vehicles.py).
 Units: degrees and degrees per second for effectors; the rows of ``B`` are state
 derivatives per degree of deflection.
 """
@@ -185,7 +185,7 @@ HARV_LATDIR_DAISY_GROUPS = (("diff_tail", "aileron", "rudder"), ("roll_tv", "yaw
 
 # --------------------------------------------------------------------------- the seed, transcribed
 #: the seed's aircraft as transcribed above, by catalogue name: the bundled files must
-#: yield these problems and daisy groups bit for bit (tests/test_vehicles.py)
+#: yield these problems and daisy groups bit for bit (tests/alloc/test_vehicles.py)
 SEED: dict[str, tuple[Callable[[], Problem], tuple[tuple[str, ...], ...]]] = {
     "ice": (ice, ICE_DAISY_GROUPS),
     "ice-design": (lambda: ice(design=True), ICE_DAISY_GROUPS),

@@ -469,7 +469,7 @@ def attack_table(path: str, run: bool, markdown: str | None = None) -> None:
     root = Path(__file__).resolve().parent.parent
     load_before = os.getloadavg()
     if run:
-        subprocess.run([sys.executable, "-m", "pytest", "tests/test_service_attacks.py", "-q", "-p", "no:cacheprovider"],
+        subprocess.run([sys.executable, "-m", "pytest", "tests/service/test_service_attacks.py", "-q", "-p", "no:cacheprovider"],
                        cwd=root, env={**os.environ, "ALLOC_ATTACK_REPORT": str(Path(path).resolve())}, check=False)
     text = render_attack_table(json.loads(Path(path).read_text()), load_before if run else None)
     print(text)
@@ -487,7 +487,7 @@ def render_attack_table(report: dict[str, Any], load_before: tuple[float, float,
              f"{report['cpus']} CPUs shared with other jobs; the suite ran at niceness {report.get('nice', '?')} "
              f"(other jobs at their own); load average (1 / 5 / 15 min) "
              + (f"{fmt(load_before)} before, " if load_before else "") + f"{fmt(report['loadavg'])} at the end.",
-             f"Targets on a quiet machine (issue 23): {targets or 'see tests/test_service_attacks.py'}.", "",
+             f"Targets on a quiet machine (issue 23): {targets or 'see tests/service/test_service_attacks.py'}.", "",
              "| attack | event p50 / p99 ms | next allocation p50 / p99 ms | /v1/health p50 / p99 ms | rounds "
              "| targets met | memory growth / bound MiB | load (1 min) |",
              "|---|---|---|---|---|---|---|---|"]
@@ -520,7 +520,7 @@ def main() -> None:
     parser.add_argument("--flood-only", type=int, default=0, metavar="RUNS",
                         help="only the option flood: RUNS runs, each on a fresh vehicle, each next to a no-flood floor")
     parser.add_argument("--attack-suite", metavar="REPORT.json", default=None,
-                        help="run the standing attack suite (tests/test_service_attacks.py) writing its figures "
+                        help="run the standing attack suite (tests/service/test_service_attacks.py) writing its figures "
                              "to REPORT.json, then print them as a markdown table")
     parser.add_argument("--attack-table", metavar="REPORT.json", default=None,
                         help="print the markdown table of an attack-suite report already written")

@@ -8,7 +8,7 @@ entry's daisy groups as ``[methods.daisy]``, the actuator dynamics of the simula
 tables (``sim/scenarios/ice.py`` Table 4-5, ``sim/scenarios/harv_latdir.py`` Table 4-3) and
 the linear models of those scenarios.  Two examples that are not the seed's aircraft:
 ``tailless`` (3 x 8: ICE's eight surfaces) and ``hexa-x`` (rotor geometry, hover model).
-tests/test_vehicle_file.py checks that the committed files are what this script writes.
+tests/alloc/test_vehicle_file.py checks that the committed files are what this script writes.
 """
 
 from __future__ import annotations

@@ -10,7 +10,7 @@ source.  One entry point per kernel::
 
 returning the status (0 exact, 1 unattainable, 2 fallback).  The ``double`` build transcribes
 the library's compiled code in the same order of operations: it returns the library's
-answers bit for bit and the same statuses (tests/test_export.py checks it); the ``float``
+answers bit for bit and the same statuses (tests/alloc/export/test_export.py checks it); the ``float``
 build agrees to :data:`FLOAT_TOLERANCE` (see there) and clamps its output to its bounds exactly.
 
 Methods: ``pinv``, ``pinv_clip``, ``ganging`` (``u = clip(c + P v)``), ``pinv_scale`` (the
@@ -58,7 +58,7 @@ FLOAT_VMAX = 1e30
 #: ``float`` builds agree with the library within ``FLOAT_TOLERANCE * max(1, limit span)`` on the
 #: commands: every call of the closed forms, 99 % of ``qp`` calls (demands on the attainable set's
 #: boundary can differ more: rounding to float changes what is attainable); ``wls`` where
-#: ``gamma^2`` is above float's resolution (``gamma >= 1e-2``).  Measured in tests/test_export.py.
+#: ``gamma^2`` is above float's resolution (``gamma >= 1e-2``).  Measured in tests/alloc/export/test_export.py.
 FLOAT_TOLERANCE = 1e-5
 #: ``float`` active set: singular values below this fraction of the largest are round-off
 #: (about 80 float ulps, as the library's 1e-12 is about 4,500 double ulps)

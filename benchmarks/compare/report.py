@@ -48,7 +48,7 @@ import numpy as np
 from scipy.stats import rankdata
 
 from .figures import HISTORY_DECIMATE, _method_order, _plot_coverage, _plot_forest, _plot_heatmap, _plot_history
-from .figures import _subplots  # noqa: F401  (tests/test_plot_backend.py draws through it from here)
+from .figures import _subplots  # noqa: F401  (tests/sim/test_plot_backend.py draws through it from here)
 from .runner import history_path
 from .summaries import (ALL_SETTINGS, RANDOM, _channels, _groups, _mode, _open_pivot, _typed, cell_summaries,
                         closed_scores, coverage_agreement, detected_share, load_rows, pooled_rows, told_blind,

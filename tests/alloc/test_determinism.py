@@ -277,7 +277,7 @@ def test_no_call_compiles_after_the_warm_up():
     import sys
     import warnings
 
-    sys.path.insert(0, os.path.dirname(__file__))
+    sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     import hostile
     from alloc._jit_cache import warm
 

@@ -233,7 +233,7 @@ def test_another_blas_kernel_moves_a_row_as_much_as_another_machine() -> None:
               "json.dump(run_closed(dict(specs[sys.argv[1]], history=False))[0], sys.stdout, default=str)")
     env = dict(os.environ, OPENBLAS_CORETYPE="Prescott")
     out = subprocess.run([sys.executable, "-c", script, rid], env=env, capture_output=True, text=True, check=True,
-                         cwd=Path(__file__).resolve().parents[1], timeout=600).stdout
+                         cwd=Path(__file__).resolve().parents[2], timeout=600).stdout
     other = json.loads(out)
     swap = rp.compare_row({k: rp._text(v) for k, v in here.items()}, other)
     assert swap.discrete_diffs == {} and swap.verdict == "within"

@@ -17,7 +17,7 @@ import alloc
 from alloc.methods.facet_search import FACET_LIMIT, FACET_SECONDS, facet_build_seconds
 from alloc.registry import CHEAP_BUILD_SECONDS, get_method
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _problem(k: int, m: int, seed: int = 1) -> alloc.Problem:

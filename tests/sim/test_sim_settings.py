@@ -26,7 +26,7 @@ from sim.scenarios import get_scenario
 from sim.scenarios.mimo import run_mimo
 from sim.settings import LoopSettings, LoopSpec, RunSettings, SettingError, setting_of, value_types
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 runner = CliRunner()
 FIELDS = fields(RunSettings)
 

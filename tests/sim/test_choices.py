@@ -8,7 +8,7 @@ from pathlib import Path
 from sim.choices import render_markdown, verdict_choices
 from sim.settings import SETTING, RunSettings
 
-PAGE = Path(__file__).resolve().parents[1] / "docs" / "verdict-choices.md"
+PAGE = Path(__file__).resolve().parents[2] / "docs" / "verdict-choices.md"
 
 
 def test_every_verdict_setting_is_listed_and_only_those():

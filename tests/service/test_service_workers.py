@@ -41,7 +41,7 @@ def test_ready_is_separate_from_health(tmp_path):
     assert r.status_code == 503 and r.headers["content-type"].startswith("application/problem+json")
 
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 #: ``(a|aa)+b`` against n a's: the regex engine backtracks in C without releasing the GIL
 _GIL_PATTERN = re.compile(r"(a|aa)+b")
 

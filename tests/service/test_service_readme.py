@@ -14,7 +14,7 @@ import pytest
 
 from service.process import ServiceProcess
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _story(page: str, heading: str) -> str:

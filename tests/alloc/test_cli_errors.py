@@ -22,7 +22,7 @@ from typer.testing import CliRunner
 
 from alloc.cli import app
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 runner = CliRunner()
 SEED = 20261201
 BIG_INT = "1" + "0" * 400  # beyond float64 (issue 22: -o gamma=10**400 exited 0)

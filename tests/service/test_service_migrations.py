@@ -24,7 +24,7 @@ from sqlalchemy.engine import Engine
 
 from service.db import SchemaError, make_engine, schema_revision
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 HEAD = "0003"
 _OLD_SCHEMA = [  # the create_all releases' tables (revision 0001)
     """CREATE TABLE vehicles (id VARCHAR(36) NOT NULL PRIMARY KEY, name VARCHAR(64), problem JSON NOT NULL,

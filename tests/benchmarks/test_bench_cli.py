@@ -14,7 +14,7 @@ from typer.testing import CliRunner
 
 from alloc.cli import app
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 def _git(cwd: Path, *args: str) -> str:

@@ -29,7 +29,7 @@ import pytest
 
 from alloc import _jit_cache
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 TINY = textwrap.dedent('''
     from numba import njit
 
