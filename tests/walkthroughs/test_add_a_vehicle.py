@@ -23,28 +23,10 @@ runner = CliRunner()
 MASS, INERTIA = 1.2, (0.011, 0.011, 0.021)  # kg, kg m^2: this walk-through's quad, nobody's airframe
 ARM = 0.18  # m
 
-HEADER = """format = "alloc-vehicle/1"
-name = "walk-quad"
-description = "walk-through quad X, 1.2 kg"
-
-[[axes]]
-name = "roll"
-unit = "N m"
-
-[[axes]]
-name = "pitch"
-unit = "N m"
-
-[[axes]]
-name = "yaw"
-unit = "N m"
-
-[[axes]]
-name = "thrust"
-unit = "N"
-wrench = "fz"
-trim = {trim!r}
-"""
+AXES = (("roll", "N m"), ("pitch", "N m"), ("yaw", "N m"), ("thrust", "N"))
+HEADER = ('format = "alloc-vehicle/1"\nname = "walk-quad"\ndescription = "walk-through quad X, 1.2 kg"\n'
+          + "".join(f'\n[[axes]]\nname = "{a}"\nunit = "{u}"\n' for a, u in AXES)
+          + 'wrench = "fz"\ntrim = {trim!r}\n')  # the thrust axis: body z force, hover at -m g
 ROTOR = """
 [[effectors]]
 name = "m{i}"
