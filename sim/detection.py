@@ -22,13 +22,15 @@ Signals (per detector sample, every :attr:`DetectionDesign.sample_time`)
       rates, dynamics) driven by the allocator's commands.
     * no position sensors (the seed's vehicles list none among their measured outputs).
 
-Noise level told to the detector
-    the standard deviation of the differenced noise at the sample period, measured once on
-    an hour of the noise model (seeded, fixed; 36,000 samples, about 0.4 % standard error).
-    At the default 0.1 s the differenced noise is nearly white (lag-1 autocorrelation 0.13,
-    lags 2-4 between -0.23 and -0.11; at 0.02 s it is 0.77, 0.47, 0.26), which is what the
-    detector's chi-square thresholds assume; faster sampling would correlate it and break the
-    stated false-alarm rate.
+Noise level and correlation told to the detector
+    the standard deviation and the autocorrelation (lags 1 to ``CORRELATION_LAGS`` samples) of
+    the differenced noise at the sample period, measured once on an hour of the noise model
+    (seeded, fixed; 36,000 samples: about 0.4 % standard error on the std, 0.005 on each
+    lag).  At the default 0.1 s the differenced noise is not white -- lag 1 +0.13, lags 2-4
+    -0.24, -0.19, -0.11 -- and a chi-square threshold that assumed it white alarms several
+    times its design rate at the small design probabilities used (the slope term of the
+    stage-1 test picks up the noise's own trend across the window); the detector whitens its
+    window with the measured correlation instead (:mod:`alloc.estimation.detection`).
 
 Delay
     a detection decided at ``t`` reaches the allocator at the first frame at or after
@@ -49,7 +51,8 @@ from alloc.estimation import Detection, FailureDetector
 from sim.blocks import actuator_heun_step, band_limited_noise
 from sim.model import Vehicle
 
-__all__ = ["DetectionDesign", "InLoopDetector", "response_outputs", "response_noise_std", "DEFAULT_DESIGN"]
+__all__ = ["DetectionDesign", "InLoopDetector", "response_outputs", "response_noise_std", "response_noise_correlation",
+           "DEFAULT_DESIGN"]
 
 
 @dataclass(frozen=True)
@@ -59,7 +62,8 @@ class DetectionDesign:
     Attributes
     ----------
     sample_time : float
-        Seconds between detector samples (0.1 s: the differenced seed noise is white there).
+        Seconds between detector samples (0.1 s; the differenced seed noise is correlated over
+        a few samples there, which the detector is told).
     window : float
         Seconds of data in each stage-1 test (0.4 s: four samples, the detector's minimum).
     hop : int
@@ -96,14 +100,29 @@ def response_outputs(vehicle: Vehicle) -> tuple[int, ...]:
     return tuple(out)
 
 
+#: lags (detector samples) of the measured noise autocorrelation told to the detector
+CORRELATION_LAGS = 10
+
+
 @cache
-def _differenced_noise_std(dt: float, sample_time: float) -> float:
-    """Std of ``(n(t) - n(t - Ts)) / Ts`` of the seed's noise model at unit gain (one seeded hour)."""
+def _differenced_noise(dt: float, sample_time: float) -> tuple[float, tuple[float, ...]]:
+    """Std and autocorrelation (lags 1 to :data:`CORRELATION_LAGS`) of ``(n(t) - n(t - Ts)) / Ts``
+    of the seed's noise model at unit gain, sampled every ``Ts`` (one seeded hour)."""
     every = int(round(sample_time / dt))
     n = int(round(3600.0 / dt)) + every
     noise = band_limited_noise(n, dt, np.ones(1), np.random.default_rng(20261202))[:, 0]
     d = (noise[every::every] - noise[: -every : every][: noise[every::every].size]) / sample_time
-    return float(d.std())
+    c = d - d.mean()
+    var = float(c @ c)
+    # the biased estimator (divided by the full length): its Toeplitz matrix is positive definite
+    rho = tuple(float(c[lag:] @ c[:-lag]) / var for lag in range(1, CORRELATION_LAGS + 1))
+    return float(d.std()), rho
+
+
+def response_noise_correlation(dt: float, sample_time: float) -> tuple[float, ...]:
+    """Autocorrelation of every response output's differenced noise at lags 1, 2, ... samples
+    (the same filter on every output: the gains scale it, the shape is shared)."""
+    return _differenced_noise(dt, sample_time)[1]
 
 
 def response_noise_std(vehicle: Vehicle, dt: float, sample_time: float, noise_scale: float = 1.0) -> np.ndarray:
@@ -111,7 +130,7 @@ def response_noise_std(vehicle: Vehicle, dt: float, sample_time: float, noise_sc
     gains = np.zeros(vehicle.C.shape[0])
     gains[np.asarray(vehicle.measured)] = vehicle.noise_gains
     rows = list(response_outputs(vehicle))
-    return _differenced_noise_std(dt, sample_time) * gains[rows] * noise_scale
+    return _differenced_noise(dt, sample_time)[0] * gains[rows] * noise_scale
 
 
 class InLoopDetector:
@@ -154,7 +173,8 @@ class InLoopDetector:
             problem, response_noise_std(vehicle, dt, self.sample_time, noise_scale if noise_scale > 0 else 1.0),
             self.sample_time,
             false_alarm_rate=design.false_alarm_rate, window=design.window, hop=design.hop,
-            min_confidence=design.min_confidence)
+            min_confidence=design.min_confidence,
+            noise_correlation=response_noise_correlation(dt, self.sample_time))
         self.actuators = actuators
         m = len(vehicle.actuators)
         spec = vehicle.actuators

@@ -15,9 +15,16 @@ and ``q_t = d_t / sigma_p`` for the kinds that move the surface (all but effecti
 Detection (stage 1).  Over the last ``window`` samples, for each healthy effector, the
 generalised likelihood ratio of "``d_t = theta_1 + theta_2 u_t``" (which contains every
 kind's first-order signature: a jam ``p - u``, a loss of effectiveness ``(f - 1) u``) against
-"no failure".  Under no failure, with white Gaussian noise of the stated level, twice the
-log ratio is exactly chi-square with ``d = rank`` degrees of freedom (``d <= 2``, ``<= 4`` with
-a position sensor).  The threshold is
+"no failure".  Under no failure, with Gaussian noise of the stated level and
+autocorrelation, twice the log ratio is exactly chi-square with ``d = rank`` degrees of
+freedom (``d <= 2``, ``<= 4`` with a position sensor).  The noise of a measured response is
+rarely white: a rate differenced from a filtered sensor signal is correlated over a few
+samples, and a statistic that assumed it white would have heavier tails than chi-square
+(the slope term picks up the noise's own trend across the window).  Given the noise's
+autocorrelation (``noise_correlation``, lags in samples, the same for every response axis)
+the test is the generalised least-squares one: the window's residuals and regressors are
+whitened by the inverse Cholesky factor of its Toeplitz correlation matrix first, so the
+statistic is chi-square again.  The threshold is
 
     gamma = chi2.isf(alpha, d_max),   alpha = F * hop_seconds / 3600 / m_tested
 
@@ -52,11 +59,12 @@ import math
 from typing import Any
 
 import numpy as np
+from scipy.linalg import LinAlgError, cholesky, solve_triangular, toeplitz
 from scipy.stats import chi2
 
 from ..exceptions import OptionError
 from ..health import EffectorHealth, FailureEvent, FailureKind, apply_event, health_from_dict, health_to_dict
-from ..problem import Problem, as_real
+from ..problem import Problem, as_float_array, as_real, check_magnitude
 from ._checks import (
     SampleError,
     StateError,
@@ -82,7 +90,7 @@ class FailureDetector(Isolation):
     problem : Problem
         The nominal vehicle: ``B``, limits, rate limits, names.
     noise_std : float or array (k,)
-        Standard deviation of the white measurement noise of each response axis.
+        Standard deviation of the measurement noise of each response axis.
     sample_time : float
         Seconds between samples.
     false_alarm_rate : float
@@ -96,11 +104,16 @@ class FailureDetector(Isolation):
         Position sensor noise; ``None``: no position sensors.
     min_confidence : float
         Posterior needed to report (effector and kind).
+    noise_correlation : sequence of float, optional
+        Autocorrelation of each response axis's noise at lags 1, 2, ... samples (lags beyond
+        the sequence are zero; only those shorter than the window are used); ``None``: white.
+        OptionError when not a correlation (outside (-1, 1), or the window's correlation
+        matrix not positive definite).
     """
 
     def __init__(self, problem: Problem, noise_std: Any, sample_time: float, *, false_alarm_rate: float = 0.1,
                  window: float = 0.25, hop: int | None = None, position_noise_std: Any = None,
-                 min_confidence: float = 0.95) -> None:
+                 min_confidence: float = 0.95, noise_correlation: Any = None) -> None:
         if not isinstance(problem, Problem):
             raise OptionError(f"problem: expected an alloc.Problem, got {type(problem).__name__}")
         self.problem = problem
@@ -123,6 +136,9 @@ class FailureDetector(Isolation):
                              if self.has_position else np.full(m, np.inf))
         self.min_confidence = setting_real("min_confidence", min_confidence, 0.0, 1.0, lo_open=True, hi_open=True)
         self.L = 2 * self.N
+        self.noise_correlation = (None if noise_correlation is None
+                                  else _correlation_setting(noise_correlation))
+        self._whiten = None if self.noise_correlation is None else _whitener(self.noise_correlation, self.N)
         self._Bn = np.array(problem.B, dtype=float) / self.noise_std[:, None]  # the columns' directions
         self._design()
         self.health: dict[str, EffectorHealth] = {}
@@ -250,13 +266,12 @@ class FailureDetector(Isolation):
         """Stage-1 statistics of the tested effectors over the last ``n`` samples."""
         tested = self.tested
         U, R, Q, _, _ = self._window(n)
-        Uc = U[:, tested] - U[:, tested].mean(axis=0)
         Bw = self._Bn[:, tested]
         c = np.einsum("ij,ij->j", Bw, Bw)
         S = R @ Bw  # (n, t): b~_j . r~
-        stat = _linear_glr(S, Uc, c)
-        if self.has_position:
-            stat = stat + _linear_glr(Q[:, tested], Uc, np.ones(len(tested)))
+        stat = _linear_glr(S, U[:, tested], c, self._whiten)
+        if self.has_position:  # position sensors: their own (white) noise
+            stat = stat + _linear_glr(Q[:, tested], U[:, tested], np.ones(len(tested)))
         return tested, stat
 
     def _test(self, t: float) -> list[Detection]:
@@ -301,7 +316,9 @@ class FailureDetector(Isolation):
             "kind": "detector", "noise_std": self.noise_std.tolist(), "sample_time": self.dt,
             "false_alarm_rate": self.false_alarm_rate, "window": self.window_seconds, "hop": self.hop,
             "position_noise_std": self.position_std.tolist() if self.has_position else None,
-            "min_confidence": self.min_confidence, "health": health_to_dict(self.health),
+            "min_confidence": self.min_confidence,
+            "noise_correlation": None if self.noise_correlation is None else self.noise_correlation.tolist(),
+            "health": health_to_dict(self.health),
             "samples": self.samples, "last_time": None if math.isinf(self.last_time) else self.last_time,
             "alarm_count": self.alarm_count, "unisolated_count": self.unisolated_count,
             "since_test": self._since_test, "pending": self._pending, "rate_state": self._rate_state.tolist(),
@@ -320,7 +337,8 @@ class FailureDetector(Isolation):
         try:
             det = cls(problem, d["noise_std"], d["sample_time"], false_alarm_rate=d["false_alarm_rate"],
                       window=d["window"], hop=d["hop"], position_noise_std=d["position_noise_std"],
-                      min_confidence=d["min_confidence"])
+                      min_confidence=d["min_confidence"],
+                      noise_correlation=d.get("noise_correlation"))  # absent from states stored before it
             det.health = health_from_dict(d["health"])
             for name in det.health:
                 problem.index(name)
@@ -368,19 +386,54 @@ def _detection_from_dict(d: Any) -> Detection:
         raise StateError(f"detections: {exc}") from None
 
 
-def _linear_glr(S: np.ndarray, Uc: np.ndarray, c: np.ndarray) -> np.ndarray:
-    """Twice the log GLR of ``s_t = c (theta_1 + theta_2 u_t) + N(0, c)`` per column.
+def _correlation_setting(value: Any) -> np.ndarray:
+    """``noise_correlation`` as a 1-D array of finite lags in (-1, 1), or OptionError naming it."""
+    arr = as_float_array("noise_correlation", value, OptionError)
+    if arr.ndim != 1 or arr.size == 0 or arr.size > 100_000:
+        raise OptionError(f"noise_correlation: expected a sequence of 1 to 100000 lags, got shape {arr.shape}")
+    check_magnitude("noise_correlation", arr, OptionError)
+    if not (np.abs(arr) < 1.0).all():
+        i = int(np.argmax(~(np.abs(arr) < 1.0)))
+        raise OptionError(f"noise_correlation: lag {i + 1} = {arr[i]:g} is not inside (-1, 1)")
+    return arr.copy()
 
-    With ``x_t = [1, u_t - mean u]`` (orthogonal columns): ``(sum s)^2 / (n c) +
-    (sum s u)^2 / (c sum u^2)``; a column whose ``u`` does not vary contributes only the first
-    term (rank 1: no information on the second parameter, none invented).
+
+def _whitener(rho: np.ndarray, n: int) -> np.ndarray:
+    """``W`` (n, n) with ``W Sigma W^T = I``, ``Sigma`` the window's Toeplitz correlation matrix."""
+    lags = np.zeros(n)
+    lags[0] = 1.0
+    use = min(n - 1, rho.size)
+    lags[1:1 + use] = rho[:use]
+    try:
+        factor = cholesky(toeplitz(lags), lower=True)
+    except LinAlgError:
+        raise OptionError(f"noise_correlation: not positive definite over the {n}-sample window "
+                          "(not the autocorrelation of any noise)") from None
+    return solve_triangular(factor, np.eye(n), lower=True)
+
+
+def _linear_glr(S: np.ndarray, U: np.ndarray, c: np.ndarray, whiten: np.ndarray | None = None) -> np.ndarray:
+    """Twice the log GLR of ``s_t = c (theta_1 + theta_2 u_t) + e`` per column, ``e ~ N(0, c Sigma)``.
+
+    Generalised least squares: ``s``, the constant regressor ``x_1`` and ``u`` are whitened
+    first (``W``, ``W Sigma W^T = I``; none: white), ``u``'s part along ``x_1`` removed (``u_c``,
+    orthogonal columns), then ``(x_1 . s)^2 / (c x_1 . x_1) + (u_c . s)^2 / (c u_c . u_c)``,
+    chi-square with the rank's degrees of freedom under ``theta = 0``.  Unwhitened this is
+    ``(sum s)^2 / (n c) + (sum s (u - mean u))^2 / (c sum (u - mean u)^2)``.  A column whose
+    ``u`` does not vary contributes only the first term (rank 1: no information on the second
+    parameter, none invented).
     """
     n = S.shape[0]
+    x1 = np.ones(n)
+    if whiten is not None:
+        S, U, x1 = whiten @ S, whiten @ U, whiten @ x1
+    x11 = float(x1 @ x1)
+    Uc = U - np.outer(x1, (x1 @ U) / x11)
     cc = np.where(c > 0, c, np.inf)
-    s0 = S.sum(axis=0)
+    s0 = x1 @ S
     s1 = np.einsum("ij,ij->j", S, Uc)
     uu = np.einsum("ij,ij->j", Uc, Uc)
     scale = np.maximum(np.abs(Uc).max(axis=0, initial=0.0), 1e-300)
     varies = uu > (1e-12 * scale) ** 2 * n
     term2 = np.where(varies, s1 * s1 / (cc * np.where(varies, uu, 1.0)), 0.0)
-    return s0 * s0 / (n * cc) + term2
+    return s0 * s0 / (x11 * cc) + term2
