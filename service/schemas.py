@@ -15,7 +15,7 @@ from datetime import datetime
 from typing import Annotated, Any, Literal, Union
 
 import numpy as np
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, StrictInt, model_validator
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, PrivateAttr, StrictInt, model_validator
 
 import alloc
 from alloc.health import PARAMETERS, FailureKind, KindSpec, Range
@@ -251,6 +251,18 @@ class VehicleCreate(ProblemIn):
                               "rate_max": [100.0, 100.0, None]})
 
     name: Label | None = None
+    #: the vehicle document this suite was read from (service.vehicle_document), kept with it
+    _document: dict[str, Any] | None = PrivateAttr(default=None)
+
+    def keep_document(self, document: dict[str, Any]) -> None:
+        self._document = document
+
+    def stored_problem(self, nominal: alloc.Problem) -> dict[str, Any]:
+        """What the store keeps: ``nominal.to_dict()``, and the vehicle document as ``"document"`` if any."""
+        stored = nominal.to_dict()
+        if self._document is not None:
+            stored["document"] = self._document
+        return stored
 
 
 class EffectorHealthOut(BaseModel):

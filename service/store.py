@@ -205,7 +205,7 @@ class VehicleStore:
         """
         nominal = body.to_problem()
         for _ in range(_MAX_RETRIES):
-            row = VehicleRow(id=str(uuid.uuid4()), name=body.name, problem=nominal.to_dict(), health={},
+            row = VehicleRow(id=str(uuid.uuid4()), name=body.name, problem=body.stored_problem(nominal), health={},
                              health_version=0, created_at=utcnow())
             state = state_from_row(row, nominal)
             try:
@@ -243,6 +243,14 @@ class VehicleStore:
             fresh = state_from_row(row)
         self._remember(fresh)
         return fresh
+
+    def document(self, vehicle_id: str) -> dict[str, Any] | None:
+        """The vehicle document the vehicle was created from (``None``: created from a suite)."""
+        with self._sessions() as session:
+            row = session.get(VehicleRow, vehicle_id)
+            if row is None:
+                raise _not_found(vehicle_id)
+            return row.problem.get("document")
 
     def list(self, limit: int, offset: int) -> tuple[list[VehicleRow], int]:
         with self._sessions() as session:

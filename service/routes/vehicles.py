@@ -21,10 +21,12 @@ from ..health import health_out
 from ..schemas import (
     NOT_FOUND, PROBLEM_RESPONSES, UNAUTHORIZED,
     AllocationOut, AmsOut, AmsVehicleRequest, BatchOut, EventIn, EventList, EventOut, EventRecorded,
-    HealthOut, ProblemOut, VehicleAllocateRequest, VehicleBatchRequest, VehicleCreate, VehicleList,
+    HealthOut, ProblemOut, VehicleAllocateRequest, VehicleBatchRequest, VehicleList,
     VehicleOut, VehicleSummary,
 )
 from ..builds import Call
+from ..vehicle_document import (TOML_MEDIA_TYPE, VehicleBody, VehicleDocumentIn, document_of,
+                                require_vehicle_media_type, toml_text, vehicle_create)
 from ..store import Answer, VehicleState
 
 router = APIRouter(prefix="/v1/vehicles", tags=["vehicles"], responses={**PROBLEM_RESPONSES, **NOT_FOUND},
@@ -49,12 +51,18 @@ def _event_out(e: EventRow) -> EventOut:
                     recorded_at=e.recorded_at)
 
 
-@router.post("", response_model=VehicleOut, status_code=status.HTTP_201_CREATED, dependencies=WriteAccess,
-             responses=UNAUTHORIZED, summary="Create a vehicle (its nominal effector suite)")
-def create_vehicle(body: VehicleCreate, store: StoreDep, request: Request,
+@router.post("", response_model=VehicleOut, status_code=status.HTTP_201_CREATED,
+             dependencies=[*WriteAccess, Depends(require_vehicle_media_type)],
+             responses={**UNAUTHORIZED, 415: {"description": "neither JSON nor a TOML vehicle file"}},
+             summary="Create a vehicle (an effector suite, or a vehicle document: JSON or TOML)",
+             openapi_extra={"requestBody": {"content": {TOML_MEDIA_TYPE: {"schema": {
+                 "type": "string", "description": "a vehicle file (alloc-vehicle/1), as alloc.load_vehicle reads it"}}}}})
+def create_vehicle(body: VehicleBody, store: StoreDep, request: Request,
                    idempotency_key: IdempotencyKey = None) -> Response:
-    answer = store.create_once(body, idempotency(request, idempotency_key, body),
-                               lambda state: _vehicle_out(state).model_dump_json().encode())
+    suite = vehicle_create(body)[0] if isinstance(body, VehicleDocumentIn) else body
+    # the fingerprint is the body as sent (suite or document), once it is known to be valid
+    once = idempotency(request, idempotency_key, body)
+    answer = store.create_once(suite, once, lambda state: _vehicle_out(state).model_dump_json().encode())
     location = f"/v1/vehicles/{json.loads(answer.body)['id']}"
     return _answer(answer, Location=location)
 
@@ -78,6 +86,19 @@ def list_vehicles(store: StoreDep, limit: Annotated[int, Query(ge=1, le=1000)] =
 @router.get("/{vehicle_id}", response_model=VehicleOut, summary="Read a vehicle")
 def get_vehicle(vehicle_id: VehicleId, store: StoreDep) -> VehicleOut:
     return _vehicle_out(store.get(vehicle_id))
+
+
+@router.get("/{vehicle_id}/document", summary="The vehicle document (JSON, or TOML for Accept: application/toml)",
+            responses={200: {"content": {"application/json": {"schema": {"type": "object"}},
+                                         TOML_MEDIA_TYPE: {"schema": {"type": "string"}}},
+                             "description": "the document the vehicle was created from (format alloc-vehicle/1); "
+                                            "for a vehicle created from an effector suite, the suite's document"}})
+def get_document(vehicle_id: VehicleId, store: StoreDep, request: Request) -> Response:
+    state = store.get(vehicle_id)
+    document = document_of(store.document(vehicle_id), state.nominal, state.name)
+    if TOML_MEDIA_TYPE in request.headers.get("accept", ""):
+        return Response(toml_text(document), media_type=TOML_MEDIA_TYPE)
+    return Response(json.dumps(document, allow_nan=False), media_type="application/json")
 
 
 @router.delete("/{vehicle_id}", status_code=status.HTTP_204_NO_CONTENT, dependencies=WriteAccess,

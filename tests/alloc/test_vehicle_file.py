@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import copy
 import json
 import math
 import random
@@ -18,6 +17,8 @@ from alloc.vehicle_file import (
     DATA_DIR, FORMAT, SCHEMA_PATH, Dynamics, LinearModel, load_vehicle, rotor_wrench, to_toml, vehicle_from_dict,
     vehicle_names,
 )
+
+from vehicle_documents import mutate
 
 PROBLEM_FIELDS = ("B", "umin", "umax", "up", "Wu", "Wv", "rate_min", "rate_max")
 
@@ -252,40 +253,6 @@ def test_load_vehicle_file_errors(tmp_path):
 
 
 # --------------------------------------------------------------------------- hostile documents
-_JUNK = [None, True, False, "x", "", "\x00", "\ud800", -1, 0, 1, -1.0, 1e60, 10**400, math.inf, -math.inf, math.nan,
-         [], {}, [1.0, 2.0], [[1.0]], {"a": 1}, [None], ["m1"], -0.0, 2**63]
-
-
-def _paths(node, prefix=()):
-    yield prefix
-    if isinstance(node, dict):
-        for k, v in node.items():
-            yield from _paths(v, (*prefix, k))
-    elif isinstance(node, list):
-        for i, v in enumerate(node):
-            yield from _paths(v, (*prefix, i))
-
-
-def _mutate(doc: dict, rng: random.Random) -> dict:
-    doc = copy.deepcopy(doc)
-    for _ in range(rng.randint(1, 3)):
-        paths = [p for p in _paths(doc) if p]
-        path = rng.choice(paths)
-        parent = doc
-        for key in path[:-1]:
-            parent = parent[key]
-        op = rng.random()
-        if op < 0.6:
-            parent[path[-1]] = copy.deepcopy(rng.choice(_JUNK))
-        elif op < 0.8 and isinstance(parent, dict):
-            del parent[path[-1]]
-        elif isinstance(parent, dict):
-            parent[rng.choice(["zz", "name", "B", "rotor", "effectiveness", "weight"])] = copy.deepcopy(rng.choice(_JUNK))
-        else:
-            parent.append(copy.deepcopy(rng.choice(_JUNK)))
-    return doc
-
-
 def test_seeded_malformed_documents_raise_problem_error_naming_a_path():
     jsonschema_rs = pytest.importorskip("jsonschema_rs")
     validator = jsonschema_rs.validator_for(json.loads(SCHEMA_PATH.read_text()))
@@ -293,7 +260,7 @@ def test_seeded_malformed_documents_raise_problem_error_naming_a_path():
     bases = [hexa_doc(), load_vehicle("harv").to_dict()]
     outcomes = {"rejected": 0, "accepted": 0}
     for trial in range(400):
-        doc = _mutate(bases[trial % 2], rng)
+        doc = mutate(bases[trial % 2], rng)
         try:
             v = vehicle_from_dict(doc)
         except ProblemError as exc:
