@@ -136,9 +136,11 @@ class SimResult:
     def _dt(self) -> float:
         return float(self.t[1] - self.t[0]) if self.t.size > 1 else 0.0
 
-    def _time_in_saturation(self, x: np.ndarray | None, limits: tuple[np.ndarray, np.ndarray] | None) -> float:
-        if x is None or limits is None or x.size == 0:
-            return 0.0
+    def _saturated(self, x: np.ndarray | None, limits: tuple[np.ndarray, np.ndarray] | None) -> np.ndarray | None:
+        if x is None or limits is None:
+            return None
+        if x.size == 0:
+            return np.zeros(x.shape[0], dtype=bool)
         lo, hi = (np.asarray(a, dtype=float) for a in limits)
         span = np.where(np.isfinite(hi - lo), hi - lo, np.inf)
         tol = SATURATION_TOLERANCE * span
@@ -147,18 +149,31 @@ class SimResult:
         sat = ((x <= lo + tol) & (lo != 0.0)) | ((x >= hi - tol) & (hi != 0.0))
         # A jammed effector (lo == hi) is not "saturated" in any useful sense.
         sat &= span > 0
-        return float(np.count_nonzero(np.any(sat, axis=1)) * self._dt())
+        return np.any(sat, axis=1)
+
+    def saturated_samples(self, kind: str) -> np.ndarray | None:
+        """Per recorded sample, whether any effector sits at a position (``kind="position"``) or rate
+        (``"rate"``) limit, shape (N,); None when the run recorded no effectors or limits."""
+        if kind == "position":
+            return self._saturated(self.effectors, self.effector_limits)
+        if kind == "rate":
+            return self._saturated(self.effector_rates, self.rate_limits)
+        raise ValueError(f"kind: {kind!r}; expected 'position' or 'rate'")
+
+    def _time_in_saturation(self, kind: str) -> float:
+        sat = self.saturated_samples(kind)
+        return 0.0 if sat is None else float(np.count_nonzero(sat) * self._dt())
 
     @property
     def time_in_position_saturation(self) -> float:
         """Seconds during which any effector sits at a position limit (a limit at zero, the
         rest position of a one-sided effector, does not count)."""
-        return self._time_in_saturation(self.effectors, self.effector_limits)
+        return self._time_in_saturation("position")
 
     @property
     def time_in_rate_saturation(self) -> float:
         """Seconds during which any effector moves at its rate limit."""
-        return self._time_in_saturation(self.effector_rates, self.rate_limits)
+        return self._time_in_saturation("rate")
 
     def status_fraction(self, status: Status | str) -> float | None:
         """Fraction of allocator calls that returned ``status`` (None: no calls recorded).
@@ -170,7 +185,11 @@ class SimResult:
         return float(np.mean(self.allocator_status == STATUS_NAMES.index(Status(status).value)))
 
     def summary(self) -> dict[str, Any]:
-        """JSON-serialisable metrics (see module docstring for definitions)."""
+        """JSON-serialisable metrics (see module docstring for definitions); ``verdict``: the run
+        judged by its scenario's engineering criteria (:mod:`sim.criteria`; None without a table)."""
+        from sim.criteria import verdict_of  # sim.criteria reads the scenarios, which import this module
+
+        verdict = verdict_of(self)
         err = self.error
         if self.failure_time is None:
             before = np.ones(self.t.shape, dtype=bool)
@@ -201,6 +220,7 @@ class SimResult:
             "fallback_fraction": self.status_fraction(Status.FALLBACK),
             "unattainable_fraction": self.status_fraction(Status.UNATTAINABLE),
             "settings": self.settings,
+            "verdict": None if verdict is None else verdict.to_json(),
             **({} if self.detections is None else {"detections": self.detections}),
         }
 

@@ -29,7 +29,8 @@ import typer
 
 from alloc.cli import VEHICLE_HELP, OneLineErrors, finite, load_vehicle_option, read_json_file
 
-from .sweep import Spec, check_simulator_support, detected_sweep, full_sweep, quick_sweep, smoke_sweep
+from .sweep import (Spec, check_simulator_support, detected_sweep, full_sweep, quick_sweep, seed_length_sweep,
+                    smoke_sweep)
 
 app = typer.Typer(cls=OneLineErrors, no_args_is_help=True,
                   help="Allocator comparison: open loop and closed loop, on all local cores or a Dask cluster.")
@@ -130,6 +131,15 @@ def detected(scheduler: str | None = _SCHEDULER, out: Path | None = _OUT, worker
              seeds: int = typer.Option(3, "--seeds", min=1, max=1000, help="noise seeds per cell")) -> None:
     """The detected arm beside told and blind: ICE single jam and hard-over, qp and wls, 10 s, 100 Hz frame."""
     _run("detected", detected_sweep(seeds), scheduler, out, workers, resume, timing, timing_calls)
+
+
+@app.command("seed-length")
+def seed_length(scheduler: str | None = _SCHEDULER, out: Path | None = _OUT, workers: int | None = _WORKERS,
+                resume: bool = _RESUME, timing: bool = _TIMING, timing_calls: int = _TIMING_CALLS,
+                seeds: int = typer.Option(3, "--seeds", min=2, max=1000, help="noise seeds per cell")) -> None:
+    """The seed's run lengths (ICE 40 s, HARV lat-dir 50 s) with the engineering criteria: every method,
+    the scenarios' own failures and a single jam, blind and told, crossover pilot, seed frame rate."""
+    _run("seed-length", seed_length_sweep(seeds), scheduler, out, workers, resume, timing, timing_calls)
 
 
 @app.command()

@@ -22,6 +22,12 @@ of it (``allocator_knows_failure``) or learning of it from the in-loop detector 
 * ``fallback_after`` -- fraction of allocator calls with status ``fallback``, when the simulator
   reports it (``fallback_fraction`` in the summary); empty otherwise.
 * ``time_in_position_saturation``, ``time_in_rate_saturation`` (s).
+* ``verdict_pass``, ``verdict_broken`` -- the run judged by its scenario's engineering criteria
+  (:mod:`sim.criteria`): passed or not, and the broken criteria's names joined by ``;`` (empty
+  when it passed); the criteria's metrics not already among the columns above follow under their
+  own names (``<channel>_excursion_before|after``, ``position_saturation_before|after``,
+  ``rate_saturation_before|after`` as fractions of the phase, ``back_in_band_s``).  A scenario
+  with no criteria table leaves ``verdict_pass`` empty.
 
 Runs with ``spec["history"]`` also return their time history (written by the runner to
 ``histories/``) so the report draws time histories from stored runs, never re-simulating.
@@ -42,7 +48,7 @@ from .failures import is_catalogue, make_failure
 from .openloop import method_options
 from .sweep import STATIC, Spec, setting_tag
 
-__all__ = ["simulate_spec", "run_closed", "METRICS", "RECOVERY_FACTOR", "recovery_time", "history_of"]
+__all__ = ["simulate_spec", "run_closed", "METRICS", "RECOVERY_FACTOR", "recovery_time", "history_of", "verdict_columns"]
 
 #: per-channel columns, named ``<channel>_<metric>``
 METRICS = ("rms_before", "rms_after", "max_before", "max_after")
@@ -103,6 +109,17 @@ def recovery_time(t: np.ndarray, err: np.ndarray, failure_time: float, rms_befor
     return float((last_bad + 1) * RECOVERY_WINDOW_S)
 
 
+def verdict_columns(verdict: dict[str, Any] | None, row: dict[str, Any]) -> dict[str, Any]:
+    """A summary's ``verdict`` as row columns (module docstring); metrics already in ``row`` are not repeated."""
+    if verdict is None:
+        return {"verdict_pass": None, "verdict_broken": None}
+    out: dict[str, Any] = {"verdict_pass": verdict["pass"], "verdict_broken": ";".join(verdict["broken"])}
+    for name, value in verdict["metrics"].items():
+        if name not in row:
+            out[name] = math.inf if value == "inf" else value
+    return out
+
+
 def history_of(spec: Spec, res: SimResult) -> dict[str, np.ndarray]:
     """The arrays kept for a stored run (float32 signals; names as string arrays)."""
     return {
@@ -155,5 +172,6 @@ def run_closed(spec: Spec) -> tuple[dict[str, Any], dict[str, Any], dict[str, np
     row["fallback_after"] = summary.get("fallback_fraction")
     row["time_in_position_saturation"] = summary["time_in_position_saturation"]
     row["time_in_rate_saturation"] = summary["time_in_rate_saturation"]
+    row.update(verdict_columns(summary["verdict"], row))
     timing = {"id": spec["id"], "wall_s": wall, "simulated_per_wall_s": summary["duration"] / wall}
     return row, timing, history_of(spec, res) if spec.get("history") else None

@@ -33,7 +33,7 @@ from .failures import catalogue_names, is_catalogue
 __all__ = [
     "Spec", "STATIC", "ARMS", "FRAME_PERIOD", "PILOT_SETTINGS", "open_spec", "closed_spec", "closed_grid",
     "setting_tag", "detected_sweep", "quick_sweep", "full_sweep", "tiny_sweep", "smoke_sweep", "check_simulator_support", "SCENARIO_TIMES",
-    "FULL_TIMES", "FULL_PILOTS",
+    "FULL_TIMES", "FULL_PILOTS", "seed_length_sweep", "SEED_LENGTH_FAILURES", "SAME_AS_DA",
 ]
 
 Spec = dict[str, Any]
@@ -170,6 +170,31 @@ def quick_sweep() -> list[Spec]:
     specs = closed_grid("ice", ["seed", "jam1"], all_methods(), [1, 2, 3], settings=[PILOT_SETTINGS[0]],
                         duration=20.0, failure_time=10.0, history_failures=["seed"])
     specs += _open_sweep(problems, alloc.methods(), samples=2000, demands=200, steps=300)
+    return specs
+
+
+#: failures of the seed-length sweep: each scenario's own and the catalogue's single jam
+SEED_LENGTH_FAILURES = {"ice": ("seed", "jam1"), "harv_latdir": ("failure1", "failure2", "jam1")}
+#: direct-allocation backends the seed-length sweep leaves out: the full sweep's rows of the four
+#: (``da``, ``da_bisect``, ``da_facet``, ``da_table``) are identical in every column (all 1,320 ICE
+#: runs each), so ``da`` stands for them
+SAME_AS_DA = ("da_bisect", "da_facet", "da_table")
+
+
+def seed_length_sweep(seeds: int = 3) -> list[Spec]:
+    """The comparison at the seed's run lengths (:data:`SCENARIO_TIMES`: ICE 40 s, failure at
+    20 s; HARV lat-dir 50 s, failure at 25 s, ``failure2`` too), judged by the engineering
+    criteria (:mod:`sim.criteria`, in every row): every method (``da`` for its three identical
+    backends, :data:`SAME_AS_DA`) and ``static``, blind and told; :data:`SEED_LENGTH_FAILURES`;
+    the crossover-model pilot at the seed's frame rate; ``seeds`` noise seeds.  Sized for 2
+    shared cores (345 runs, about 20 CPU minutes at 3 seeds); no open loop."""
+    seed_list = list(range(1, seeds + 1))
+    methods = [m for m in all_methods() if m not in SAME_AS_DA]
+    specs: list[Spec] = []
+    for scenario, (duration, t_fail) in SCENARIO_TIMES.items():
+        failures = SEED_LENGTH_FAILURES[scenario]
+        specs += closed_grid(scenario, failures, methods, seed_list, settings=[PILOT_SETTINGS[3]],
+                             duration=duration, failure_time=t_fail, history_failures=[failures[0]])
     return specs
 
 

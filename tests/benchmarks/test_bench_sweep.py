@@ -124,3 +124,40 @@ def test_recovery_time() -> None:
     err[-1, 0] = 50.0  # the lone end sample t = 10 belongs to the last full window [9, 10] (RMS about 5)
     assert recovery_time(t, err, 4.0, before) == float("inf")
     assert np.isnan(recovery_time(t, err, 0.0, np.array([np.nan, 0.1])))  # no pre-failure interval
+
+
+def test_seed_length_sweep_axes() -> None:
+    """The seed's run lengths (ICE 40 s, failure at 20 s; HARV lat-dir 50 s, failure at 25 s), crossover pilot."""
+    from benchmarks.compare.sweep import SAME_AS_DA, SEED_LENGTH_FAILURES, seed_length_sweep
+
+    specs = seed_length_sweep(3)
+    assert len({s["id"] for s in specs}) == len(specs) == (2 * 11 + 1) * 3 * (2 + 3)  # 11 methods x 2 arms + static
+    assert {(s["scenario"], s["duration"], s["failure_time"]) for s in specs} == {("ice", 40.0, 20.0),
+                                                                               ("harv_latdir", 50.0, 25.0)}
+    assert {s["failure"] for s in specs if s["scenario"] == "harv_latdir"} == set(SEED_LENGTH_FAILURES["harv_latdir"])
+    assert {setting_tag(s["sim"]) for s in specs} == {"pilot=crossover"}
+    assert not {s["method"] for s in specs} & set(SAME_AS_DA)
+    check_simulator_support(specs)
+
+
+def test_a_short_sweep_row_carries_the_verdict() -> None:
+    """A 3 s ICE run (failure at 0.5 s) judged by sim.criteria: the row's verdict columns are the
+    summary's verdict, and a broken criterion's metric exceeds its limit."""
+    from benchmarks.compare.closedloop import run_closed, verdict_columns
+    from sim.criteria import criteria_for
+
+    spec = closed_spec("ice", "seed", STATIC, told=False, seed=1, duration=3.0, failure_time=0.5,
+                       sim={"pilot_gain": 1.0})
+    row, _, _ = run_closed(spec)
+    limits = criteria_for("ice").limits()
+    broken = [b for b in row["verdict_broken"].split(";") if b]
+    assert row["verdict_pass"] is (not broken)
+    for name in broken:
+        assert row[name] > limits[name], name
+    for name in ("betaw_excursion_after", "position_saturation_after", "rate_saturation_before", "back_in_band_s"):
+        assert name in row and row[name] is not None
+    # a metric already among the columns is not repeated; an infinite one comes back as inf
+    cols = verdict_columns({"pass": False, "broken": ["ps_rms_after", "back_in_band_s"],
+                            "metrics": {"ps_rms_after": 9.0, "back_in_band_s": "inf"}}, {"ps_rms_after": 9.0})
+    assert cols == {"verdict_pass": False, "verdict_broken": "ps_rms_after;back_in_band_s", "back_in_band_s": float("inf")}
+    assert verdict_columns(None, {}) == {"verdict_pass": None, "verdict_broken": None}
