@@ -24,6 +24,14 @@ Open-loop / closed-loop agreement
     better), per failure and told/blind; a *negative* rho means more coverage, lower error
     (the seed's claim, section 1.3.4.9: coverage predicts closed-loop rank).
 
+Engineering verdict (rows that carry one)
+    Each run judged by its scenario's pass/fail criteria (:mod:`sim.criteria`: tracking-error
+    RMS and peak per channel, sideslip excursion, effector position- and rate-saturation share,
+    time back inside the nominal band, divergence; nominal limits before the failure, failed-state
+    limits after).  Per cell: the runs that met every criterion, and the criteria broken (runs).
+    The fate of ``static``, every score's denominator, is given beside each score: how many of
+    its runs diverged and when, and which criteria they broke.
+
 Every figure ``X.png`` is written with ``X.csv``, the exact numbers it draws, taken from the
 same summaries as the table printed next to it; time histories are drawn from the runs stored
 in ``histories/`` by the sweep (never re-simulated).
@@ -50,9 +58,9 @@ from scipy.stats import rankdata
 from .figures import HISTORY_DECIMATE, _method_order, _plot_coverage, _plot_forest, _plot_heatmap, _plot_history
 from .figures import _subplots  # noqa: F401  (tests/sim/test_plot_backend.py draws through it from here)
 from .runner import history_path
-from .summaries import (ALL_SETTINGS, RANDOM, _channels, _groups, _mode, _open_pivot, _typed, cell_summaries,
-                        closed_scores, coverage_agreement, detected_share, load_rows, pooled_rows, told_blind,
-                        verdict_stability, verdicts_by_setting)
+from .summaries import (ALL_SETTINGS, RANDOM, _channels, _groups, _mode, _open_pivot, _typed, baseline_fate,
+                        cell_summaries, closed_scores, coverage_agreement, detected_share, has_verdicts, load_rows,
+                        pooled_rows, told_blind, verdict_stability, verdicts_by_setting)
 from .sweep import STATIC, Spec
 from .tables import Row, _ci, _fmt, _pct, _slug, _table, _write_csv, parse_markdown_table
 from .timing import TIMINGS_CSV
@@ -111,14 +119,46 @@ def _heatmap_table(cells: Sequence[Row], failures: Sequence[str]) -> str:
 
 
 def _ranking_table(cells: Sequence[Row], channels: Sequence[str]) -> str:
+    verdicts = bool(cells) and "passed" in cells[0]
     headers = ["rank", "method", "allocator", "median score [95 % CI]", "runs", "diverged", "unscored",
                *[f"{c} RMS after" for c in channels], "recover (s)", "effort", "unattainable", "fallback",
-               "pos. sat. (s)"]
+               "pos. sat. (s)", *(["criteria met (runs)", "broken (runs)"] if verdicts else [])]
     body = [[c["rank"], c["method"], c["mode"], _ci(c["score"], c["score_lo"], c["score_hi"]), c["runs"],
              c["diverged"], c["unscored"], *[_fmt(c[f"{ch}_rms_after"]) for ch in channels], _fmt(c["recover_s"]),
              _fmt(c["effort_after"]), _fmt(c["unattainable_after"]), _fmt(c["fallback_after"]),
-             _fmt(c["saturation_s"])] for c in cells]
+             _fmt(c["saturation_s"]), *([f"{c['passed']} of {c['runs']}", c["broken"]] if verdicts else [])]
+            for c in cells]
     return _table(headers, body)
+
+
+def _fate_line(fate: Row) -> str:
+    """One sentence: what happened to ``static`` in one failure's runs."""
+    text = (f"Baseline `{STATIC}` (every score's denominator): diverged in {fate['diverged']} of {fate['runs']} runs"
+            + (f" (at t = {fate['diverged_at']} s; failure at {fate['failure_time']:g} s, runs of "
+               f"{fate['duration']:g} s)" if fate["diverged"] else ""))
+    if "passed" in fate:
+        text += f"; met every engineering criterion in {fate['passed']} of {fate['runs']} (broken: {fate['broken']})"
+    return text + "."
+
+
+def _fate_table(fates: Sequence[Row]) -> str:
+    verdicts = bool(fates) and "passed" in fates[0]
+    return _table(["failure", "runs", "diverged", "diverged at t (s)", *(["criteria met", "broken (runs)"]
+                                                                         if verdicts else [])],
+                  [[f"`{f['failure']}`", f["runs"], f["diverged"], f["diverged_at"],
+                    *([f["passed"], f["broken"]] if verdicts else [])] for f in fates])
+
+
+def _criteria_table(cells: Sequence[Row], failures: Sequence[str]) -> str:
+    """Method x failure: runs that met every engineering criterion, of the cell's runs."""
+    look = {(c["method"], c["mode"], c["failure"]): c for c in cells}
+    body = []
+    for m in _method_order(cells):
+        for mode in ("blind", "told"):
+            if any((m, mode, f) in look for f in failures):
+                body.append([m, mode] + [f"{look[(m, mode, f)]['passed']} of {look[(m, mode, f)]['runs']}"
+                                         if (m, mode, f) in look else "-" for f in failures])
+    return _table(["method", "allocator", *failures], body)
 
 
 def _ratio_table(ratios: Sequence[Row], failures: Sequence[str]) -> str:
@@ -170,9 +210,18 @@ def _closed_section(out: Path, scenario: str, setting: str, rows: list[Row], cel
     lines += [f"![heat map: median score per method and failure]({png})", "",
               "Median score [95 % bootstrap CI] per method and failure (the heat map's numbers; "
               f"`{png[:-4]}.csv`):", "", _heatmap_table(cells, failures), ""]
+    fates = {f["failure"]: f for f in baseline_fate(rows)}
+    if fates:
+        _write_csv(out / f"baseline_{tag}.csv", list(fates.values()))
+        lines += [f"The baseline's own fate (`{STATIC}`, blind; `baseline_{tag}.csv`):", "",
+                  _fate_table([fates[f] for f in failures if f in fates]), ""]
+    if has_verdicts(rows):
+        lines += ["Runs that met every engineering criterion (`sim.criteria`), per method and failure:", "",
+                  _criteria_table(cells, failures), ""]
     for f in failures:
         fc = [c for c in cells if c["failure"] == f]
-        lines += [f"#### `{f}`: {_failure_description(scenario, f)}", "", _ranking_table(fc, channels), ""]
+        lines += [f"#### `{f}`: {_failure_description(scenario, f)}", "",
+                  *([_fate_line(fates[f]), ""] if f in fates else []), _ranking_table(fc, channels), ""]
     if ratios:
         png = _plot_forest(ratios, failures, out, f"forest_{tag}", title)
         figures.append(png)
@@ -365,6 +414,27 @@ def _headline(cells: Sequence[Row], ratios: Sequence[Row], agreement: Sequence[R
     return out
 
 
+def _fate_headline(fates: Sequence[Row], cells: Sequence[Row]) -> list[str]:
+    """Per scenario and setting: what happened to ``static``, and which entries met every criterion in every run."""
+    out = []
+    for (scenario, setting), grp in _groups(fates, ("scenario", "setting")).items():
+        runs = sum(f["runs"] for f in grp)
+        per = "; ".join(f"`{f['failure']}` {f['diverged']} of {f['runs']}"
+                        + (f" at t = {f['diverged_at']} s" if f["diverged"] else "") for f in grp)
+        line = (f"- **Baseline `{STATIC}`, {TITLES.get(scenario, scenario)}, `{setting}`** (runs of "
+                f"{grp[0]['duration']:g} s, failure at {grp[0]['failure_time']:g} s): diverged in "
+                f"{sum(f['diverged'] for f in grp)} of {runs} runs ({per})")
+        if "passed" in grp[0]:
+            line += f"; met every engineering criterion in {sum(f['passed'] for f in grp)} of {runs}"
+            good = [c for c in cells if (c["scenario"], c["setting"]) == (scenario, setting) and "passed" in c]
+            for f in grp:
+                every = sorted(f"{c['method']} {c['mode']}" for c in good
+                               if c["failure"] == f["failure"] and c["passed"] == c["runs"])
+                line += f".  `{f['failure']}`, every run met every criterion: {', '.join(every) or 'none'}"
+        out.append(line + ".")
+    return out
+
+
 def make_report(out: Path | str, specs: Sequence[Spec], meta: dict[str, Any] | None = None) -> Path:
     """Write ``report.md``, its figures and their CSVs into ``out`` from the CSVs of ``specs``."""
     t0 = time.perf_counter()
@@ -378,11 +448,13 @@ def make_report(out: Path | str, specs: Sequence[Spec], meta: dict[str, Any] | N
     all_agree: list[Row] = []
     pooled_cells: list[Row] = []
     pooled_ratios: list[Row] = []
+    all_fates: list[Row] = []
     for name in sorted(t for t in tables if t.startswith("closed_")):
         rows = closed_scores(tables[name])
         if not rows:
             continue
         cells = cell_summaries(rows)
+        all_fates += baseline_fate(rows)
         ratios = told_blind(rows)
         agree = coverage_agreement(cells, open_rows) if open_rows else []
         all_cells += cells
@@ -408,7 +480,7 @@ def make_report(out: Path | str, specs: Sequence[Spec], meta: dict[str, Any] | N
                 [a for a in agree if (a["scenario"], a["setting"]) == key])
             body.append(section)
     parts = ["## Headline", "", *_headline(pooled_cells, pooled_ratios, []), *_headline(all_cells, all_ratios, all_agree),
-             ""]
+             *_fate_headline(all_fates, all_cells), ""]
     if body:
         doc = __doc__ or ""
         parts += ["## Closed loop", "", "Definitions:", "",

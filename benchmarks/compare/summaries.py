@@ -1,7 +1,8 @@
 """The numbers of the comparison report, from a sweep folder's rows (definitions: the
 docstring of :mod:`benchmarks.compare.report`): closed-loop scores, per-cell medians with
 bootstrap intervals and ranks, told/blind and detected ratios, open-loop / closed-loop rank
-agreement, and the verdicts across simulator settings."""
+agreement, the verdicts across simulator settings, and the engineering verdicts (:mod:`sim.criteria`)
+with the baseline's own fate."""
 
 from __future__ import annotations
 
@@ -19,7 +20,8 @@ from .sweep import STATIC, Spec
 from .tables import Row
 
 __all__ = ["load_rows", "closed_scores", "cell_summaries", "told_blind", "detected_share", "coverage_agreement",
-           "pooled_rows", "verdicts_by_setting", "verdict_stability", "ALL_SETTINGS", "DA_FAMILY", "RANDOM"]
+           "pooled_rows", "verdicts_by_setting", "verdict_stability", "ALL_SETTINGS", "DA_FAMILY", "RANDOM",
+           "has_verdicts", "broken_counts", "baseline_fate"]
 
 RANDOM = "random suite"
 
@@ -91,9 +93,60 @@ def _groups(rows: Sequence[Row], keys: Sequence[str]) -> dict[tuple, list[Row]]:
     return out
 
 
+def has_verdicts(rows: Sequence[Row]) -> bool:
+    """Whether the rows carry engineering verdicts (rows written before :mod:`sim.criteria` do not)."""
+    return any(r.get("verdict_pass") is not None for r in rows)
+
+
+def _broken(row: Row) -> list[str]:
+    text = row.get("verdict_broken")
+    return [] if not text else str(text).split(";")
+
+
+def broken_counts(rows: Sequence[Row], top: int = 4) -> str:
+    """The criteria the rows broke, most often first: ``name (runs)``, the ``top`` most frequent
+    and how many more; ``-`` when none broke."""
+    count: dict[str, int] = defaultdict(int)
+    for r in rows:
+        for name in _broken(r):
+            count[name] += 1
+    ordered = sorted(count.items(), key=lambda kv: (-kv[1], kv[0]))
+    text = ", ".join(f"{k} ({n})" for k, n in ordered[:top])
+    return (text + (f", {len(ordered) - top} more" if len(ordered) > top else "")) or "-"
+
+
+def _verdict_fields(grp: Sequence[Row]) -> Row:
+    if not has_verdicts(grp):
+        return {}
+    diverged_at = [float(r["simulated"]) for r in grp if r["diverged"]]
+    return {"passed": sum(r.get("verdict_pass") is True for r in grp), "broken": broken_counts(grp),
+            "diverged_at": _median(diverged_at)}
+
+
+def baseline_fate(rows: Sequence[Row]) -> list[Row]:
+    """The fate of ``static`` (every score's denominator) per (scenario, setting, failure): runs,
+    how many diverged and when (s, sorted), and, when the rows carry verdicts, how many passed
+    the engineering criteria and which they broke."""
+    out = []
+    for (scenario, setting, failure), grp in _groups([r for r in rows if r["method"] == STATIC],
+                                                     ("scenario", "setting", "failure")).items():
+        times = sorted(float(r["simulated"]) for r in grp if r["diverged"])
+        fate: Row = {"scenario": scenario, "setting": setting, "failure": failure, "runs": len(grp),
+                     "failure_time": float(grp[0]["failure_time"]), "duration": float(grp[0]["duration"]),
+                     "diverged": len(times), "diverged_at": ", ".join(f"{t:.1f}" for t in times) or "-"}
+        if has_verdicts(grp):
+            fate["passed"] = sum(r.get("verdict_pass") is True for r in grp)
+            fate["broken"] = broken_counts(grp, top=6)
+        out.append(fate)
+    out.sort(key=lambda r: (r["scenario"], r["setting"], r["failure"]))
+    return out
+
+
 def cell_summaries(rows: Sequence[Row]) -> list[Row]:
     """One summary per (scenario, setting, failure, method, mode) of scored rows, with ``rank``
-    within its (scenario, setting, failure)."""
+    within its (scenario, setting, failure); rows with engineering verdicts add ``passed`` (runs
+    that met every criterion), ``broken`` (:func:`broken_counts`) and ``diverged_at`` (median
+    time of divergence, s)."""
     channels = _channels(rows)
     cells = []
     for (scenario, setting, failure, method, mode), grp in _groups(
@@ -107,7 +160,8 @@ def cell_summaries(rows: Sequence[Row]) -> list[Row]:
                      "effort_after": _median([r.get("effort_after") for r in grp]),
                      "unattainable_after": _median([r.get("unattainable_after") for r in grp]),
                      "fallback_after": _median([r.get("fallback_after") for r in grp]),
-                     "saturation_s": _median([r.get("time_in_position_saturation") for r in grp])}
+                     "saturation_s": _median([r.get("time_in_position_saturation") for r in grp]),
+                     **_verdict_fields(grp)}
         for c in channels:
             cell[f"{c}_rms_before"] = _median([r[f"{c}_rms_before"] for r in grp])
             cell[f"{c}_rms_after"] = _median([r[f"{c}_rms_after"] for r in grp if not r["diverged"]])

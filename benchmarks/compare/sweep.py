@@ -187,7 +187,7 @@ def seed_length_sweep(seeds: int = 3) -> list[Spec]:
     criteria (:mod:`sim.criteria`, in every row): every method (``da`` for its three identical
     backends, :data:`SAME_AS_DA`) and ``static``, blind and told; :data:`SEED_LENGTH_FAILURES`;
     the crossover-model pilot at the seed's frame rate; ``seeds`` noise seeds.  Sized for 2
-    shared cores (345 runs, about 20 CPU minutes at 3 seeds); no open loop."""
+    shared cores (345 runs, about 20 CPU minutes at 3 seeds); no open loop.  Ordered seed by seed."""
     seed_list = list(range(1, seeds + 1))
     methods = [m for m in all_methods() if m not in SAME_AS_DA]
     specs: list[Spec] = []
@@ -195,7 +195,8 @@ def seed_length_sweep(seeds: int = 3) -> list[Spec]:
         failures = SEED_LENGTH_FAILURES[scenario]
         specs += closed_grid(scenario, failures, methods, seed_list, settings=[PILOT_SETTINGS[3]],
                              duration=duration, failure_time=t_fail, history_failures=[failures[0]])
-    return specs
+    # seed by seed (a stable sort): a sweep stopped early holds whole seeds of every cell
+    return sorted(specs, key=lambda spec: spec["seed"])
 
 
 def full_sweep(*, seeds: int = 10, frame_rates: Sequence[float | None] = (None, 100.0),
