@@ -26,6 +26,18 @@ Two rules set the :class:`sim.loop.Pilot` parameters:
 
 ``pilot_gain`` / ``pilot_delay`` given explicitly override the rule's values
 (used by the robustness maps to sweep around them).
+
+Sources of the numbers: the crossover model's *form* (``Y_p Y_c ~ w_c e^{-tau_e s} / s``
+around crossover; no lead or lag for a ``K/s`` element, a lag for a ``K`` element) is McRuer &
+Krendel (AGARD-AG-188, 1974) and McRuer & Jex (IEEE Trans. HFE-8(3), 1967).  Its *numbers*
+here -- ``tau = 0.1 s``, ``T_N = 0.1 s``, the 45 deg phase margin, the stand-in's gain 2 and
+delay 0.2 s, the alpha pilot's lag -- are ours: they are not McRuer's regressions of
+``tau_e`` and ``w_c`` on the controlled element and the input bandwidth, and the seed's own
+pilot (Hess's structural model, its refs 138, 144, 145; Figs 4-6, 4-41, 4-86 are images) is
+not implemented.  So that no verdict rests on one stand-in gain unseen,
+:func:`crossover_point` gives any pilot's crossover frequency and phase margin on its
+controlled element, and the sensitivity sweep (``benchmarks/bench_sensitivity.py``) reports
+its verdicts against them.
 """
 
 from __future__ import annotations
@@ -37,7 +49,7 @@ import numpy as np
 from scipy import optimize
 
 __all__ = ["PILOT_MODELS", "CROSSOVER_DELAY", "CROSSOVER_NEUROMUSCULAR", "CROSSOVER_PHASE_MARGIN",
-           "crossover_gain", "pilot_parameters"]
+           "crossover_gain", "crossover_point", "pilot_parameters"]
 
 PILOT_MODELS = ("standin", "crossover")
 #: stand-in values (project's original pilot)
@@ -48,34 +60,62 @@ CROSSOVER_NEUROMUSCULAR = 0.1
 CROSSOVER_PHASE_MARGIN = 45.0
 
 
-def _loop_phase(w: float, num: Sequence[float], den: Sequence[float], delay: float, tn: float) -> float:
-    """Unwrapped phase (rad) of ``Y_c(jw) e^{-jw delay} / (jw tn + 1)``."""
-    # Y_c has an integrator: its phase lies in (-pi/2 - n pi/2, -pi/2]; unwrap from low frequency.
+def _loop_phase(w: float, num: Sequence[float], den: Sequence[float], delay: float, tn: float,
+                lag: float = 0.0) -> float:
+    """Unwrapped phase (rad) of ``Y_c(jw) e^{-jw delay} / ((jw tn + 1)(jw lag + 1))``."""
+    # Y_c may have an integrator: its phase lies in (-pi/2 - n pi/2, -pi/2]; unwrap from low frequency.
     ws = np.geomspace(1e-3, w, 400)
     ph = np.unwrap(np.angle(np.polyval(num, 1j * ws) / np.polyval(den, 1j * ws)))[-1]
-    return float(ph - w * delay - np.arctan(w * tn))
+    return float(ph - w * delay - np.arctan(w * tn) - np.arctan(w * lag))
+
+
+def _shaped_magnitude(w: Any, num: Sequence[float], den: Sequence[float], tn: float, lag: float) -> Any:
+    """``|Y_c(jw) / ((jw tn + 1)(jw lag + 1))|`` at a frequency or an array of them."""
+    s = 1j * np.asarray(w, dtype=float)
+    return np.abs(np.polyval(num, s) / np.polyval(den, s) / ((s * tn + 1.0) * (s * lag + 1.0)))
 
 
 def crossover_gain(
     num: Sequence[float], den: Sequence[float], *, delay: float = CROSSOVER_DELAY,
     neuromuscular: float = CROSSOVER_NEUROMUSCULAR, phase_margin: float = CROSSOVER_PHASE_MARGIN,
+    lag: float = 0.0,
 ) -> tuple[float, float]:
     """Pilot gain ``K_p`` and crossover frequency ``w_c`` (rad/s) for a phase margin on ``Y_c = num/den``.
 
-    Solves ``arg(Y_c(j w_c) e^{-j w_c delay} / (j w_c T_N + 1)) = -180 deg + phase_margin``
-    and sets ``K_p = 1 / |Y_c(j w_c) / (j w_c T_N + 1)|``.
+    Solves ``arg(Y_c(j w_c) e^{-j w_c delay} / ((j w_c T_N + 1)(j w_c T_I + 1))) = -180 deg + phase_margin``
+    and sets ``K_p = 1 / |Y_c(j w_c) / ((j w_c T_N + 1)(j w_c T_I + 1))|`` (``T_I`` = ``lag``).
     """
     target = np.radians(phase_margin - 180.0)
-    f = lambda w: _loop_phase(w, num, den, delay, neuromuscular) - target  # noqa: E731
+    f = lambda w: _loop_phase(w, num, den, delay, neuromuscular, lag) - target  # noqa: E731
     w_hi = 1e-2
     while f(w_hi) > 0.0:
         w_hi *= 1.5
         if w_hi > 1e3:
             raise ValueError("Y_c: no crossover frequency reaches the phase margin")
     wc = float(optimize.brentq(f, 1e-3, w_hi, xtol=1e-10))
-    s = 1j * wc
-    mag = abs(np.polyval(num, s) / np.polyval(den, s) / (s * neuromuscular + 1.0))
-    return 1.0 / mag, wc
+    return 1.0 / float(_shaped_magnitude(wc, num, den, neuromuscular, lag)), wc
+
+
+def crossover_point(
+    num: Sequence[float], den: Sequence[float], *, gain: float, delay: float, neuromuscular: float = 0.0,
+    lag: float = 0.0,
+) -> tuple[float, float]:
+    """Crossover frequency ``w_c`` (rad/s) and phase margin (deg) of a pilot on ``Y_c = num/den``.
+
+    The pilot-vehicle loop is ``gain e^{-delay s} Y_c / ((T_N s + 1)(T_I s + 1))``; ``w_c`` is
+    the highest frequency where its magnitude is 1, the phase margin ``180 deg + arg`` there.
+    ``(nan, nan)`` when the magnitude never reaches 1 (between 1e-3 and 1e3 rad/s).
+    """
+    if not (np.isfinite(gain) and gain > 0.0):
+        raise ValueError(f"gain: {gain!r}; expected a positive finite number")
+    ws = np.geomspace(1e-3, 1e3, 4000)
+    above = gain * _shaped_magnitude(ws, num, den, neuromuscular, lag) >= 1.0
+    if not above.any() or above[-1]:
+        return float("nan"), float("nan")
+    i = int(np.flatnonzero(above)[-1])
+    g = lambda w: float(np.log(gain * _shaped_magnitude(w, num, den, neuromuscular, lag)))  # noqa: E731
+    wc = float(optimize.brentq(g, ws[i], ws[i + 1], xtol=1e-12))
+    return wc, float(np.degrees(_loop_phase(wc, num, den, delay, neuromuscular, lag)) + 180.0)
 
 
 def pilot_parameters(

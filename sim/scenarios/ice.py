@@ -10,9 +10,13 @@ Eq 4.24; the actuator natural frequencies sqrt(40*100) = 63 and
 sqrt(37.168*41.3) = 39 rad/s are the ones quoted in the failure list.
 
 Substitutions (ours, not the seed's): the pilot models of Fig 4-86 are images
-not recoverable from the scan.  The alpha sum-of-sines is fed straight into
-the alpha reference model; the roll channel uses a crossover-model pilot
-``p_c = 2.0 (phi_c - phi)`` delayed 0.2 s (see :class:`sim.model.Pilot`).
+not recoverable from the scan.  The roll channel is flown by the run's pilot
+model (:mod:`sim.pilot`; the stand-in ``p_c = 2.0 (phi_c - phi)`` delayed 0.2 s
+by default).  The seed's Fig 4-85 also closes a pilot loop on angle of attack
+("a pilot closes an outer loop to control the angle of attack and Euler roll
+angle", section 4.7); by default the alpha sum-of-sines is fed straight into the
+alpha reference model instead, and ``alpha_pilot=True`` closes that loop with
+:func:`alpha_loop_pilot` (a crossover-model pilot with a lag: its numbers are ours).
 """
 
 from __future__ import annotations
@@ -25,12 +29,13 @@ from alloc.vehicles import ICE_B_FULL, ICE_BK_SEED, ICE_EFFECTORS
 
 from sim.blocks import ActuatorFailure, ActuatorSpec, HedgeTerm, sum_of_sines
 from sim.model import Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle
+from sim.pilot import CROSSOVER_DELAY, CROSSOVER_NEUROMUSCULAR, crossover_gain
 from sim.scenarios.mimo import MimoScenario, mimo_scenario, run_mimo
 from sim.result import SimResult
 
 __all__ = [
     "A", "B", "C", "D", "B_DESIGN", "SEED_BK", "WU", "EFFECTORS", "OUTPUTS",
-    "vehicle", "allocation_problem", "failure", "smc_design", "loop_shaped_design", "run",
+    "vehicle", "allocation_problem", "failure", "smc_design", "loop_shaped_design", "alpha_loop_pilot", "run",
 ]
 
 STATES = ("u", "w", "qb", "theta", "v", "pb", "rb", "phi")
@@ -228,27 +233,51 @@ def _commands(t: np.ndarray) -> np.ndarray:
     return commands
 
 
-def _roll_pilot(params: dict[str, Any]) -> Pilot:
+# What the alpha pilot flies, stick to alpha: the alpha reference model (seed Eq 4.22), a
+# K-like element (unit gain to 10 rad/s), for which the crossover model calls for a lag.
+ALPHA_PILOT_ELEMENT = REFERENCES[0]
+#: The alpha pilot's lag T_I (s), ours: long beside 1 / w_c, so that Y_p Y_c ~ w_c e^{-tau s} / s
+#: around crossover (the crossover model's form for a K element).
+ALPHA_PILOT_LAG = 5.0
+
+
+def alpha_loop_pilot() -> Pilot:
+    """The pilot of the alpha loop (seed Fig 4-85, option ``alpha_pilot``): the sum-of-sines (xi = 5) as
+    alpha command, the crossover rule of :mod:`sim.pilot` (its delay, neuromuscular lag and 45 deg phase
+    margin) with the lag :data:`ALPHA_PILOT_LAG` on :data:`ALPHA_PILOT_ELEMENT`."""
+    gain, _ = crossover_gain(*ALPHA_PILOT_ELEMENT, lag=ALPHA_PILOT_LAG)
+    row = np.zeros(len(OUTPUTS))
+    row[OUTPUTS.index("alphaw")] = 1.0
+    return Pilot(channel=0, row=row, name="alpha", gain=gain, delay=CROSSOVER_DELAY, lag=ALPHA_PILOT_LAG,
+                 neuromuscular=CROSSOVER_NEUROMUSCULAR, model="crossover",
+                 attitude_command=lambda tt: sum_of_sines(tt, 5.0))
+
+
+def _pilots(params: dict[str, Any], alpha_pilot: bool = False) -> Pilot | tuple[Pilot, Pilot]:
     row = np.zeros(len(OUTPUTS))
     row[OUTPUTS.index("phi")] = 1.0
-    return Pilot(
+    roll = Pilot(
         channel=1, row=row, name="phi", **params,
         attitude_command=lambda tt: sum_of_sines(tt, 10.0, phase_step=np.pi / 4),  # xi = 10, i*pi/4
     )
+    if not isinstance(alpha_pilot, (bool, np.bool_)):
+        raise TypeError(f"alpha_pilot: {alpha_pilot!r}; expected True or False")
+    return (roll, alpha_loop_pilot()) if alpha_pilot else roll
 
 
 SCENARIO = MimoScenario(
     name="ice", vehicle=vehicle, references=REFERENCES, smc_design=smc_design,
     loop_shaped_design=loop_shaped_design, failure=lambda name, time: _failure_by_name(name, time),
-    pilot=_roll_pilot, pilot_element=PILOT_ELEMENT, commands=_commands, output_bound=OUTPUT_BOUND,
-    default_duration=40.0, default_method="pinv", catalogue_vehicle="ice",
+    pilot=_pilots, pilot_element=PILOT_ELEMENT, commands=_commands, output_bound=OUTPUT_BOUND,
+    default_duration=40.0, default_method="pinv", catalogue_vehicle="ice", input_options=("alpha_pilot",),
 )
 
 
 @mimo_scenario(SCENARIO, failures=FAILURES,
                description="ICE 6-DOF, 11 effectors, observer-based SMC with hedging, alpha/ps/beta tracking (seed 4.7)")
 def run(**options: Any) -> SimResult:
-    """Run the ICE scenario: :func:`sim.scenarios.mimo.run_mimo` options, plus ``observer`` and ``hedge``.
+    """Run the ICE scenario: :func:`sim.scenarios.mimo.run_mimo` options, plus ``observer``, ``hedge``
+    and ``alpha_pilot`` (close the seed's Fig 4-85 alpha pilot loop; default False, see the module docstring).
 
     ``controller`` is ``"smc"`` (Eq 4.27 with Table 4-6 observers/hedges,
     switchable off with ``observer``/``hedge``) or ``"loopshape"`` (Eq 4.28).

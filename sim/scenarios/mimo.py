@@ -48,7 +48,8 @@ class MimoScenario:
     failure : callable
         ``(name, time or None) -> Failure``; ``time`` None means the seed's failure time.
     pilot : callable
-        ``(pilot parameters, **input_options) -> Pilot`` for the scenario's pilot channel.
+        ``(pilot parameters, **input_options) -> Pilot`` for the scenario's pilot channel, or a
+        tuple of pilots (the first the one the parameters set; e.g. the ICE alpha pilot option).
     pilot_element : (num, den)
         What the pilot flies, stick to attitude (sets the crossover pilot, :mod:`sim.pilot`).
     commands : callable
@@ -138,13 +139,14 @@ def mimo_spec(scenario: MimoScenario, **options: Any) -> tuple[LoopSpec, RunSett
     flown = replace(settings, method=method, method_options=method_options, duration=duration,
                     failure_time=None if fail is None else fail.time)
     n = int(round(duration / flown.dt)) + 1
-    stick = scenario.pilot(
+    sticks = scenario.pilot(
         pilot_parameters(flown.pilot, scenario.pilot_element, gain=flown.pilot_gain, delay=flown.pilot_delay),
         **{k: v for k, v in extra.items() if k in scenario.input_options},
     )
     spec = LoopSpec(
         scenario=scenario.name, vehicle=scenario.vehicle(), references=scenario.references, controller=design,
-        commands=scenario.commands(np.arange(n) * flown.dt), pilots=(stick,), failure=fail, method=method,
+        commands=scenario.commands(np.arange(n) * flown.dt),
+        pilots=sticks if isinstance(sticks, tuple) else (sticks,), failure=fail, method=method,
         duration=duration, output_bound=scenario.output_bound, **flown.loop_settings(),
     )
     return spec, flown

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from sim.pilot import CROSSOVER_NEUROMUSCULAR, crossover_gain, pilot_parameters
+from sim.pilot import CROSSOVER_DELAY, CROSSOVER_NEUROMUSCULAR, crossover_gain, crossover_point, pilot_parameters
 from sim.scenarios import harv_latdir, harv_lon, ice
 
 
@@ -42,3 +42,44 @@ def test_crossover_pilot_flies_and_is_recorded():
     assert p["model"] == "crossover" and p["neuromuscular"] == CROSSOVER_NEUROMUSCULAR
     assert p["gain"] == pytest.approx(pilot_parameters("crossover", ice.PILOT_ELEMENT)["gain"])
     assert not r.diverged and np.any(r.command[:, 1] != 0.0)
+
+
+@pytest.mark.parametrize("module", [ice, harv_lon, harv_latdir])
+@pytest.mark.parametrize("margin", [30.0, 45.0, 60.0])
+def test_crossover_point_inverts_the_crossover_rule(module, margin):
+    k, wc = crossover_gain(*module.PILOT_ELEMENT, phase_margin=margin)
+    w, pm = crossover_point(*module.PILOT_ELEMENT, gain=k, delay=CROSSOVER_DELAY, neuromuscular=CROSSOVER_NEUROMUSCULAR)
+    assert (w, pm) == pytest.approx((wc, margin), rel=1e-6)
+
+
+def test_crossover_point_of_the_standin_checked_with_scipy():
+    """Independent check: |L(j w_c)| = 1 and the phase margin from scipy.signal's frequency response."""
+    num, den = harv_latdir.PILOT_ELEMENT
+    wc, pm = crossover_point(num, den, gain=2.0, delay=0.2)
+    _, h = signal.freqresp(signal.TransferFunction(np.polymul([2.0], num), den), [wc])
+    assert abs(h[0]) == pytest.approx(1.0, rel=1e-9)
+    assert pm == pytest.approx(180.0 + np.degrees(np.angle(h[0]) - wc * 0.2), abs=1e-6)
+    assert 1.5 < wc < 2.5 and 20.0 < pm < 35.0  # the stand-in flies HARV lat-dir at a 27 deg margin
+
+
+@pytest.mark.parametrize("gain", [0.0, -1.0, float("nan"), float("inf")])
+def test_crossover_point_rejects_a_bad_gain(gain):
+    with pytest.raises(ValueError, match="gain"):
+        crossover_point(*ice.PILOT_ELEMENT, gain=gain, delay=0.1)
+
+
+def test_alpha_pilot_closes_the_seed_s_alpha_loop_and_is_off_by_default():
+    k, _ = crossover_gain(*ice.ALPHA_PILOT_ELEMENT, lag=ice.ALPHA_PILOT_LAG)
+    wc, pm = crossover_point(*ice.ALPHA_PILOT_ELEMENT, gain=k, delay=CROSSOVER_DELAY,
+                             neuromuscular=CROSSOVER_NEUROMUSCULAR, lag=ice.ALPHA_PILOT_LAG)
+    assert pm == pytest.approx(45.0, abs=1e-6) and 1.0 < wc < 5.0
+    off = ice.run(method="pinv", duration=0.5, noise=False)
+    assert [p["name"] for p in off.settings["pilots"]] == ["phi"]
+    same = ice.run(method="pinv", duration=0.5, noise=False, alpha_pilot=False)
+    assert np.array_equal(off.output, same.output)
+    on = ice.run(method="pinv", duration=0.5, noise=False, alpha_pilot=True)
+    alpha = on.settings["pilots"][1]
+    assert (alpha["name"], alpha["lag"], alpha["gain"]) == ("alpha", ice.ALPHA_PILOT_LAG, pytest.approx(k))
+    assert not np.array_equal(on.command[:, 0], off.command[:, 0])  # the pilot, not the sum of sines, commands alpha
+    with pytest.raises(TypeError, match="alpha_pilot"):
+        ice.run(method="pinv", duration=0.1, alpha_pilot="yes")
