@@ -40,7 +40,7 @@ import numpy as np
 from ..exceptions import AllocError, OptionError, UnknownMethodError
 from ..problem import MAX_MAGNITUDE, Problem
 from ..result import EXACT_RTOL
-from . import templates
+from . import templates, templates_active_set, templates_closed_form
 
 __all__ = ["export_c", "ExportedKernel", "ExportError", "EXPORTABLE", "PRECISIONS", "GENERATOR_VERSION",
            "FLOAT_TOLERANCE", "FLOAT_EXACT_RTOL", "FLOAT_VMAX", "iteration_bound"]
@@ -329,13 +329,13 @@ def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "d
     if method in ("pinv", "pinv_clip", "ganging"):
         map_c, map_p = impl.fused
         fields.update(MAP_C=real.array(map_c, "c"), MAP_P=real.array(map_p, "P"))
-        body = templates.AFFINE
+        body = templates_closed_form.AFFINE
     elif method == "pinv_scale":
         fields.update(MAP_P=real.array(impl._P, "P"))
-        body = templates.SCALED
+        body = templates_closed_form.SCALED
     elif method == "cgi":
         fields.update(TAB_P=_cascade_table(impl, problem, real, table))
-        body = templates.CASCADE
+        body = templates_closed_form.CASCADE
     else:
         lexico = [impl._static, impl._dynamic] if method == "dynamic" else [impl._impl]
         body, levels, maxit = _active_set_fields(lexico, problem, real, fields, maxit, table)
@@ -348,7 +348,7 @@ def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "d
 
 def _cascade_table(impl: Any, problem: Problem, real: _Real, table: bool | None) -> str:
     """Every free set's weighted pseudo-inverse, computed as the library's ``cgi`` computes it
-    (so the kernel returns its bits): the C table of :data:`templates.CASCADE`."""
+    (so the kernel returns its bits): the C table of :data:`templates_closed_form.CASCADE`."""
     from .._kernels import free_set_pinv
     from .._linalg import ABS_FLOOR
 
@@ -433,7 +433,7 @@ def _active_set_fields(instances: list[Any], problem: Problem, real: _Real, fiel
     fields["LIMITS_QUAL"] = ""
     fields["MAXIT_DEFINE"] = (f"/* iteration cap per level and per call (see the bound above) */\n"
                               f"#define PFX_MAXIT {cap}\n#define PFX_MAXIT_TOTAL {levels * cap}\n")
-    return templates.ACTIVE_SET, levels, cap
+    return templates_active_set.ACTIVE_SET, levels, cap
 
 
 _TABLE_NAMES = ("L", "YC", "VC", "SC", "YA", "VA", "SA")

@@ -1,0 +1,42 @@
+"""The generated C is pinned: the same input gives the same source, byte for byte, until
+``alloc.export.GENERATOR_VERSION`` changes.
+
+A refactoring of the generator or its templates (alloc/export/templates*.py) must leave these
+hashes alone; a change of the generated code on purpose bumps ``GENERATOR_VERSION`` and
+records the new hashes here.  The library's version string, which the header names, is
+masked so that a release does not move them.  No compiler needed: this hashes text.
+"""
+
+from __future__ import annotations
+
+import hashlib
+
+import pytest
+
+import alloc
+import alloc.vehicles
+from alloc.export import GENERATOR_VERSION, export_c
+
+#: sha256 (first 16 hex digits) of header + source, per (vehicle, method, precision, table)
+GOLDEN = {
+    "1": {
+        ("ice", "qp", "double", None): "c1fdf9fa583b56ce",
+        ("ice", "wls", "float", None): "a2f7c17feb137669",
+        ("ice", "pinv_scale", "float", None): "0292445753a34322",
+        ("hexa-x", "qp", "double", None): "b4f372ab5f37b9f7",
+        ("hexa-x", "dynamic", "float", False): "7bb3e68914a86276",
+        ("hexa-x", "cgi", "double", None): "97bffc082176ece8",
+        ("hexa-x", "ganging", "double", None): "40a0ddfbf67afb8d",
+    },
+}
+
+
+def digest(vehicle: str, method: str, precision: str, table: bool | None) -> str:
+    kernel = export_c(alloc.vehicles.problem(vehicle), method, precision=precision, table=table)
+    text = (kernel.header + kernel.source).replace(alloc.__version__, "@VERSION@")
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+@pytest.mark.parametrize("case", sorted(GOLDEN[GENERATOR_VERSION], key=str), ids=lambda c: "-".join(map(str, c)))
+def test_generated_source_is_pinned_for_this_generator_version(case):
+    assert digest(*case) == GOLDEN[GENERATOR_VERSION][case]
