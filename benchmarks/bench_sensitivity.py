@@ -22,10 +22,12 @@ the failure, over the whole run when nominal) among the four.
 
     python -m benchmarks.bench_sensitivity run --out benchmarks/reference/sensitivity-2026-12-02
     python -m benchmarks.bench_sensitivity report --out benchmarks/reference/sensitivity-2026-12-02
+    python -m benchmarks.bench_sensitivity page --out benchmarks/reference/sensitivity-2026-12-02
 
 ``run`` appends to ``runs.csv`` (``runs-I.csv`` with ``--shard I/N``, for N workers) and skips
 the runs already recorded (resumable); ``--only`` limits it to named factors.  ``report`` writes
-``flips.csv`` and ``report.md`` from every ``runs*.csv``.
+``flips.csv`` and ``report.md`` from every ``runs*.csv``; ``page`` rewrites
+``docs/verdict-choices.md`` with the flips column from ``flips.csv``.
 """
 
 from __future__ import annotations
@@ -296,6 +298,49 @@ def read_flips(path: Path) -> list[dict[str, str]]:
         return list(csv.DictReader(fh))
 
 
+#: the factors that change the pilot (the report gives their loops' crossover frequency and phase margin)
+PILOT_FACTORS = ("default", "stand-in pilot gain", "stand-in pilot delay", "stand-in pilot neuromuscular lag",
+                 "setting pilot", "crossover pilot phase margin")
+
+
+def pilot_loop(variant: Variant, scenario: str) -> tuple[float, float]:
+    """Crossover frequency (rad/s) and phase margin (deg) of the roll pilot's loop a variant flies."""
+    scen, _, own = SCENARIOS[scenario]
+    options = {**own, **variant.options, **({} if variant.per_scenario is None else variant.per_scenario(scenario))}
+    spec, _ = mimo_spec(scen, method="static", duration=0.01, **options)
+    if variant.edit is not None:
+        spec = variant.edit(spec)
+    p = spec.pilots[0]
+    return pilot.crossover_point(*scen.pilot_element, gain=p.gain, delay=p.delay, neuromuscular=p.neuromuscular,
+                                 lag=p.lag)
+
+
+def _pilot_table(rows: list[dict[str, str]]) -> list[str]:
+    lines = ["## Verdicts against the pilot loop's crossover frequency and phase margin", "",
+             "The roll pilot's loop on the scenario's controlled element (`sim.pilot.crossover_point`: "
+             "pilot gain, delay and lags times the reference model and the attitude integration); "
+             "bounded runs of the four methods at 2000 Hz.", "",
+             "| pilot | scenario | crossover (rad/s) | phase margin (deg) | bounded, failed | bounded, nominal |",
+             "|---|---|---|---|---|---|"]
+    variants = {(v.factor, v.level): v for v in factors()}
+    entries = []
+    for (factor, level), v in variants.items():
+        if factor not in PILOT_FACTORS:
+            continue
+        for scenario in v.scenarios:
+            mine = [r for r in rows if (r["factor"], r["level"], r["base"], r["scenario"]) ==
+                    (factor, level, "2000 Hz", scenario)]
+            if not mine:
+                continue
+            wc, pm = pilot_loop(v, scenario)
+            counts = [f"{sum(r['diverged'] != 'True' for r in mine if r['case'] == c)} of "
+                      f"{sum(r['case'] == c for r in mine)}" for c in ("failed", "nominal")]
+            entries.append((scenario, wc, f"{factor} = {level}", pm, counts))
+    for scenario, wc, name, pm, counts in sorted(entries):
+        lines.append(f"| {name} | {scenario} | {wc:.2f} | {pm:.0f} | {counts[0]} | {counts[1]} |")
+    return lines
+
+
 def render_report(rows: list[dict[str, str]], flip_rows: list[dict[str, Any]]) -> str:
     seconds = sum(float(r["seconds"]) for r in rows)
     lines = ["# One-factor sensitivity of the closed-loop verdicts", "",
@@ -318,7 +363,21 @@ def render_report(rows: list[dict[str, str]], flip_rows: list[dict[str, Any]]) -
     for r in flip_rows:
         cells = [str(r[k]) for k in ("factor", "level", "base", "runs", "flips", "flipped", "best_flips")]
         lines.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
+    lines += ["", *_pilot_table(rows)]
     return "\n".join(lines) + "\n"
+
+
+#: the committed sweep the choices page quotes
+REFERENCE = Path(__file__).resolve().parent / "reference" / "sensitivity-2026-12-02"
+CHOICES_PAGE = Path(__file__).resolve().parents[1] / "docs" / "verdict-choices.md"
+
+
+def choices_page(reference: Path = REFERENCE) -> str:
+    """``docs/verdict-choices.md`` with the flips column of the committed sweep."""
+    from sim.choices import render_markdown
+
+    sweep = reference.relative_to(CHOICES_PAGE.parents[1]).as_posix()
+    return render_markdown(flips_by_choice(read_flips(reference / "flips.csv")), sweep=sweep)
 
 
 def report(out: Path) -> None:
@@ -334,7 +393,7 @@ def report(out: Path) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="bench_sensitivity", description=__doc__.split("\n")[0])
-    parser.add_argument("command", choices=("run", "report", "plan"))
+    parser.add_argument("command", choices=("run", "report", "plan", "page"))
     parser.add_argument("--out", type=Path, required=True)
     parser.add_argument("--only", nargs="*", default=None, help="factor names (the choices table's rows)")
     parser.add_argument("--shard", default="0/1", help="i/n: fly every n-th missing run from the i-th")
@@ -343,6 +402,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "plan":
         runs = plan(args.only)
         print(f"{len(runs)} runs")
+        return 0
+    if args.command == "page":
+        CHOICES_PAGE.write_text(choices_page(args.out.resolve()))
+        print(f"wrote {CHOICES_PAGE}")
         return 0
     if args.command == "run":
         run(args.out, args.only, (shard[0], shard[1]))

@@ -5,6 +5,11 @@ from __future__ import annotations
 from dataclasses import fields
 from pathlib import Path
 
+import numpy as np
+import pytest
+
+from benchmarks import bench_sensitivity
+
 from sim.choices import render_markdown, verdict_choices
 from sim.settings import SETTING, RunSettings
 
@@ -36,4 +41,47 @@ def test_the_project_s_own_choices_are_marked_ours():
 
 
 def test_docs_page_is_generated():
-    assert PAGE.read_text() == render_markdown(), "regenerate: python -c 'from sim.choices import render_markdown; ...'"
+    assert PAGE.read_text() == render_markdown()
+
+
+def test_every_swept_factor_is_a_row_of_the_choices_table():
+    names = {c.name for c in verdict_choices()}
+    swept = {v.factor for v in bench_sensitivity.factors()} - {"default"}
+    assert swept <= names, swept - names
+
+
+def test_flips_column_without_a_sweep_is_absent():
+    page = render_markdown()
+    assert "| flips |" not in page and "| flips |" in render_markdown({"setting preferred": "0 of 16"})
+
+
+def _row(factor, level, scenario, case, method, diverged, rms, base="2000 Hz"):
+    return {"factor": factor, "level": level, "base": base, "scenario": scenario, "case": case, "method": method,
+            "diverged": str(diverged), "t_end": "12.5" if diverged else "40.0", "rms_ps": f"{rms:g}"}
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_flips_counts_each_changed_verdict_against_the_default(seed):
+    """Seeded random verdicts: the flip count equals a direct count, and the best method is the least ps RMS."""
+    rng = np.random.default_rng(seed)
+    methods = bench_sensitivity.METHODS
+    keys = [(s, c, m) for s in ("ice", "harv_latdir") for c in ("failed", "nominal") for m in methods]
+    base = {k: (bool(rng.random() < 0.4), float(rng.uniform(0.1, 9.0))) for k in keys}
+    moved = {k: (d if rng.random() < 0.7 else not d, float(rng.uniform(0.1, 9.0))) for k, (d, _) in base.items()}
+    rows = [_row("default", "default", *k, *v) for k, v in base.items()]
+    rows += [_row("setting preferred", "zero", *k, *v) for k, v in moved.items()]
+    (out,) = bench_sensitivity.flips(rows)
+    assert out["runs"] == len(keys)
+    assert out["flips"] == sum(base[k][0] != moved[k][0] for k in keys)
+    for s, c in {(s, c) for s, c, _ in keys}:
+        def best(table):
+            bounded = [(table[(s, c, m)][1], m) for m in methods if not table[(s, c, m)][0]]
+            return min(bounded)[1] if bounded else "none"
+        changed = best(base) != best(moved)
+        assert (f"{s} {c}: {best(base)} -> {best(moved)}" in out["best_flips"]) == changed
+
+
+def test_flips_by_choice_sums_the_levels():
+    rows = [{"factor": "x", "level": "a", "base": "2000 Hz", "runs": "16", "flips": "2", "best_flips": ""},
+            {"factor": "x", "level": "b", "base": "100 Hz", "runs": "16", "flips": "0", "best_flips": "ice failed"}]
+    assert bench_sensitivity.flips_by_choice(rows) == {"x": "2 of 32 verdicts flip (a: 2, b at 100 Hz: 0 + best)"}
