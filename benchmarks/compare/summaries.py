@@ -133,7 +133,7 @@ def baseline_fate(rows: Sequence[Row]) -> list[Row]:
         times = sorted(float(r["simulated"]) for r in grp if r["diverged"])
         fate: Row = {"scenario": scenario, "setting": setting, "failure": failure, "runs": len(grp),
                      "failure_time": float(grp[0]["failure_time"]), "duration": float(grp[0]["duration"]),
-                     "diverged": len(times), "diverged_at": ", ".join(f"{t:.1f}" for t in times) or "-"}
+                     "diverged": len(times), "diverged_at": ", ".join(f"{t:.2f}" for t in times) or "-"}
         if has_verdicts(grp):
             fate["passed"] = sum(r.get("verdict_pass") is True for r in grp)
             fate["broken"] = broken_counts(grp, top=6)

@@ -288,3 +288,39 @@ def test_da_family_written_once_when_all_four_agree() -> None:
     four = [f"{m} told" for m in ("da", "da_bisect", "da_facet", "da_table")]
     assert _short([*four, "qp told"]) == "da* told, qp told"
     assert _short([*four[:3], "qp told"]) == "da told, da_bisect told, da_facet told, qp told"  # not all four
+
+
+def test_baseline_fate_and_engineering_verdicts_beside_the_scores(tmp_path: Path, sweep: list[dict]) -> None:
+    """Rows with verdicts: static diverges in 2 of 10 seed-failure runs (at 1.5 and 1.25 s) and breaks
+    ps_rms_after in all; told qp breaks back_in_band_s in 3 of its 10; the others pass."""
+    from benchmarks.compare.summaries import baseline_fate, broken_counts
+
+    rows = list(csv.DictReader((tmp_path / "closed_ice.csv").open()))
+    for r in rows:
+        broken = []
+        if r["method"] == STATIC:
+            broken = ["ps_rms_after"]
+            if r["failure"] == "seed" and r["seed"] in ("1", "2"):
+                r["diverged"], r["simulated"] = "True", {"1": "1.5", "2": "1.25"}[r["seed"]]
+                broken = ["diverged", "ps_rms_after"]
+        elif r["method"] == "qp" and r["told"] == "True" and int(r["seed"]) <= 3:
+            broken = ["back_in_band_s"]
+        r["verdict_pass"], r["verdict_broken"] = str(not broken), ";".join(broken)
+    _write(tmp_path / "closed_ice.csv", rows)
+    scored, _ = _loaded(tmp_path, sweep)
+    fates = {f["failure"]: f for f in baseline_fate(scored)}
+    assert (fates["seed"]["runs"], fates["seed"]["diverged"], fates["seed"]["diverged_at"]) == (10, 2, "1.25, 1.50")
+    assert fates["seed"]["passed"] == 0 and fates["seed"]["broken"] == "ps_rms_after (10), diverged (2)"
+    assert fates["jam1"]["diverged"] == 0 and fates["jam1"]["diverged_at"] == "-"
+    cells = {(c["failure"], c["method"], c["mode"]): c for c in cell_summaries(scored)}
+    assert cells[("seed", "qp", "told")]["passed"] == 7 and cells[("seed", "qp", "told")]["broken"] == "back_in_band_s (3)"
+    assert cells[("seed", STATIC, "blind")]["diverged_at"] == pytest.approx(1.375)
+    assert broken_counts([]) == "-"
+    text = make_report(tmp_path, sweep, {"sweep": "test"}).read_text()
+    assert ("Baseline `static` (every score's denominator): diverged in 2 of 10 runs (at t = 1.25, 1.50 s; failure at "
+            "1 s, runs of 2 s); met every engineering criterion in 0 of 10 (broken: ps_rms_after (10), diverged (2)).") in text
+    met = {(r["method"], r["allocator"]): r for r in parse_markdown_table(text.split("Runs that met every")[1], "method")}
+    assert met[("qp", "told")]["seed"] == "7 of 10" and met[(STATIC, "blind")]["jam1"] == "0 of 10"
+    saved = {r["failure"]: r for r in _csv(tmp_path / "baseline_ice_pilot_gain_1.csv")}
+    assert saved["seed"]["diverged_at"] == "1.25, 1.50" and saved["jam1"]["passed"] == "0"
+    assert "met every engineering criterion in 0 of 20" in text  # the headline
