@@ -26,6 +26,15 @@ not queue here at all.  The gate is closed as soon as the request's headers are 
 (:class:`service.server.GuardedHttpToolsProtocol`), before the loop runs any request task
 queued ahead of it; without that protocol (an in-process test client) the middleware closes
 it when the request reaches the application.
+
+Large bodies (:mod:`service.bodies`) wait, besides, for the light requests: a parse holds
+the loop and the GIL for its whole document, so one that starts while an allocation awaits
+its build on a thread delays both the build and the allocation's resumption, and parses
+starting one after another added up (the validation-error flood's allocations).  A light
+request (:func:`is_light`) holds a :class:`LightTicket` from its head's arrival (the
+protocol opens it) to its answer's start; a parse's turn comes only when none is open, at
+the second refill after it asked at the earliest (the loop reads its sockets in between),
+or after :data:`MAX_WAIT_S` however many there are.
 """
 
 from __future__ import annotations
@@ -35,12 +44,14 @@ import hmac
 import time
 from collections import deque
 from collections.abc import Iterable
+from typing import Any
 
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from . import timing
 
-__all__ = ["PriorityGate", "PriorityMiddleware", "MAX_WAIT_S", "SCOPE_KEY", "GATE_STATE_KEY"]
+__all__ = ["PriorityGate", "PriorityMiddleware", "LightTicket", "MAX_WAIT_S", "SCOPE_KEY", "LIGHT_KEY",
+           "GATE_STATE_KEY"]
 
 #: requests other than writes let into the application per event-loop iteration: between
 #: two reads of the sockets the loop runs at most this many of them (a flood request costs
@@ -51,9 +62,24 @@ TURNS = 2
 MAX_WAIT_S = 0.5
 #: scope key set by the protocol: ``True`` when the gate was closed for this request
 SCOPE_KEY = "alloc.priority"
+#: scope key of a light request's :class:`LightTicket` (set by the protocol, else the middleware)
+LIGHT_KEY = "alloc.light"
 #: key of the gate in the lifespan state (where the protocol finds it)
 GATE_STATE_KEY = "alloc.gate"
+#: a body larger than this is parsed in a turn of its own (service.bodies): a "heavy" request
+HEAVY_BODY_BYTES = 64 * 1024
 _VEHICLES = "/v1/vehicles"
+
+
+def is_light(headers: Iterable[tuple[bytes, bytes]]) -> bool:
+    """Whether a request's head declares a body of at most :data:`HEAVY_BODY_BYTES` (or none);
+    a chunked body's size is unknown until it has arrived: not light."""
+    for name, value in headers:
+        if name == b"content-length":
+            return value.isdigit() and int(value) <= HEAVY_BODY_BYTES
+        if name == b"transfer-encoding":
+            return False
+    return True
 
 
 def _is_write(method: str, path: str) -> bool:
@@ -65,17 +91,41 @@ def _is_write(method: str, path: str) -> bool:
     return method == "POST" and (path in (_VEHICLES, _VEHICLES + "/") or path.endswith("/events"))
 
 
+class LightTicket:
+    """A light request (no large body to parse) from its head's arrival to its answer's start:
+    while any is open, no large body's parse starts (:meth:`PriorityGate.wait` ``heavy``)."""
+
+    __slots__ = ("_gate",)
+
+    def __init__(self, gate: PriorityGate) -> None:
+        self._gate: PriorityGate | None = gate
+        gate.light += 1
+
+    def done(self) -> None:
+        """The request started its answer, failed or was dropped (idempotent)."""
+        gate, self._gate = self._gate, None
+        if gate is not None:
+            gate.light -= 1
+            if gate.light == 0 and gate._heavy:
+                gate._schedule_refill()
+
+
 class PriorityGate:
     """Counts priority requests in flight; lets the others in a few per loop iteration, and
-    none while a priority request is in flight (for at most :data:`MAX_WAIT_S`)."""
+    none while a priority request is in flight (for at most :data:`MAX_WAIT_S`).  A large
+    body's parse (``heavy``) waits, besides, until no light request is open
+    (:class:`LightTicket`), for at most :data:`MAX_WAIT_S`."""
 
     def __init__(self, api_key: str | None) -> None:
         self._key = api_key.encode() if api_key else None
         self.active = 0
+        self.light = 0  # open light requests (LightTicket)
         self.waited = 0  # requests that found the gate closed (tests, benchmarks)
         self._closed_at = 0.0
         self._turns = TURNS
         self._queue: deque[asyncio.Future[None]] = deque()
+        #: large bodies waiting to be parsed: [since, turn, seen by a refill]
+        self._heavy: deque[list[Any]] = deque()
         self._refill_pending = False
 
     def claims(self, method: str, path: str, headers: Iterable[tuple[bytes, bytes]]) -> bool:
@@ -99,21 +149,33 @@ class PriorityGate:
 
     def leave(self) -> None:
         self.active = max(0, self.active - 1)
-        if self.active == 0 and self._queue:
+        if self.active == 0 and (self._queue or self._heavy):
             self._schedule_refill()
 
     def _closed(self) -> bool:
         return self.active > 0 and time.monotonic() - self._closed_at < MAX_WAIT_S
 
-    async def wait(self) -> None:
+    async def wait(self, heavy: bool = False) -> None:
         """Return when it is this request's turn: no priority request in flight (or it has
-        been for :data:`MAX_WAIT_S`), and fewer than :data:`TURNS` let in this iteration."""
+        been for :data:`MAX_WAIT_S`), and fewer than :data:`TURNS` let in this iteration.
+
+        ``heavy`` (a large body about to be parsed: :mod:`service.bodies`) waits, besides,
+        for a loop iteration with no light request open nor waiting, or :data:`MAX_WAIT_S`.
+        Always at least one iteration: a light request whose bytes arrived while the previous
+        parse held the loop has its head read then, and goes first."""
+        loop = asyncio.get_running_loop()
+        turn = loop.create_future()
+        if heavy:
+            self._heavy.append([time.monotonic(), turn, False])
+            loop.call_later(MAX_WAIT_S + 0.001, self._schedule_refill)
+            self._schedule_refill()
+            await turn
+            return
         if not self._closed() and self._turns > 0 and not self._queue:
             self._turns -= 1
             self._schedule_refill()
             return
         self.waited += self.active > 0
-        turn = asyncio.get_running_loop().create_future()
         self._queue.append(turn)
         self._schedule_refill()
         await turn
@@ -125,7 +187,8 @@ class PriorityGate:
 
     def _refill(self) -> None:
         """Next loop iteration (after the loop has read its sockets): :data:`TURNS` more, unless
-        a priority request is in flight (its ``leave`` or its deadline refills then)."""
+        a priority request is in flight (its ``leave`` or its deadline refills then); a heavy
+        turn when no light request is open, or the oldest has waited :data:`MAX_WAIT_S`."""
         self._refill_pending = False
         if self._closed():
             return
@@ -135,7 +198,17 @@ class PriorityGate:
             if not turn.done():  # a request cancelled while waiting gives its turn away
                 turn.set_result(None)
                 self._turns -= 1
-        if self._queue or self._turns < TURNS:
+        while self._heavy and self._heavy[0][1].done():
+            self._heavy.popleft()
+        if self._heavy and self._turns and not self._queue:
+            since, turn, seen = self._heavy[0]
+            if seen and (self.light == 0 or time.monotonic() - since >= MAX_WAIT_S):
+                self._heavy.popleft()
+                turn.set_result(None)
+                self._turns -= 1
+        for entry in self._heavy:
+            entry[2] = True  # released at the next refill at the earliest: the loop reads its sockets first
+        if self._queue or self._turns < TURNS or (self._heavy and self.light == 0):
             self._schedule_refill()
 
 
@@ -157,9 +230,25 @@ class PriorityMiddleware:
             if priority:
                 gate.enter()
         if not priority:
-            await gate.wait()
-            timing.mark("gate")
-            await self.app(scope, receive, send)
+            ticket = scope.get(LIGHT_KEY)
+            if ticket is None and is_light(scope.get("headers", ())):
+                ticket = scope[LIGHT_KEY] = LightTicket(gate)  # type: ignore[literal-required]
+            if ticket is None:
+                await gate.wait()
+                timing.mark("gate")
+                await self.app(scope, receive, send)
+                return
+
+            async def send_then_close(message: Message) -> None:
+                if message["type"] == "http.response.start":
+                    ticket.done()  # its answer is computed: large bodies may be parsed again
+                await send(message)
+            try:
+                await gate.wait()
+                timing.mark("gate")
+                await self.app(scope, receive, send_then_close)
+            finally:
+                ticket.done()
             return
         left = False
 

@@ -41,7 +41,7 @@ from uvicorn.protocols.http.httptools_impl import HttpToolsProtocol
 
 from .config import Settings
 from .errors import PROBLEM_JSON
-from .priority import GATE_STATE_KEY, SCOPE_KEY
+from .priority import GATE_STATE_KEY, LIGHT_KEY, SCOPE_KEY, LightTicket, is_light
 
 __all__ = ["GuardedHttpToolsProtocol", "problem_bytes", "limits"]
 
@@ -96,6 +96,7 @@ class GuardedHttpToolsProtocol(HttpToolsProtocol):
         self._address: str | None = None
         self._running = False  # between a request's last byte and its answer's
         self._served = False  # a request of this connection has been answered
+        self._ticket: LightTicket | None = None  # the current request's, when it is light
 
     # ----------------------------------------------------------- deadlines
     def _arm(self) -> None:
@@ -166,6 +167,7 @@ class GuardedHttpToolsProtocol(HttpToolsProtocol):
 
     def connection_lost(self, exc: Exception | None) -> None:
         self._disarm()
+        self._close_ticket()  # a request dropped before its answer started
         if self._write_timer is not None:
             self._write_timer.cancel()
             self._write_timer = None
@@ -229,6 +231,16 @@ class GuardedHttpToolsProtocol(HttpToolsProtocol):
             self.scope[SCOPE_KEY] = priority  # type: ignore[literal-required]
             if priority:
                 gate.enter()
+            elif is_light(self.headers):
+                # open from now, before its task runs: a large body's parse about to start
+                # yields to it (service.priority.LightTicket)
+                self._close_ticket()
+                self._ticket = self.scope[LIGHT_KEY] = LightTicket(gate)  # type: ignore[literal-required]
+
+    def _close_ticket(self) -> None:
+        if self._ticket is not None:
+            self._ticket.done()
+            self._ticket = None
 
     def on_message_complete(self) -> None:
         self._receiving = False
@@ -241,6 +253,7 @@ class GuardedHttpToolsProtocol(HttpToolsProtocol):
 
     def on_response_complete(self) -> None:
         self._running, self._served = False, True
+        self._close_ticket()
         super().on_response_complete()
         if not self.transport.is_closing():
             self._idle[self] = None  # idle between requests
