@@ -30,7 +30,8 @@ from sqlalchemy.engine import Engine, make_url
 from sqlalchemy.pool import NullPool
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, sessionmaker
 
-__all__ = ["Base", "VehicleRow", "EventRow", "IdempotencyRow", "make_engine", "make_sessionmaker", "migrate", "schema_revision",
+__all__ = ["Base", "VehicleRow", "EventRow", "IdempotencyRow", "TelemetryRow", "ProposalRow", "make_engine",
+           "make_sessionmaker", "migrate", "schema_revision",
            "SchemaError", "utcnow"]
 
 MIGRATIONS = Path(__file__).resolve().parent / "migrations"
@@ -99,6 +100,44 @@ class IdempotencyRow(Base):
     status: Mapped[int] = mapped_column(Integer)
     body: Mapped[str] = mapped_column(Text)
     created_at: Mapped[datetime] = mapped_column(default=utcnow, index=True)
+
+
+class TelemetryRow(Base):
+    """A vehicle's telemetry policy, detector settings and detector state (:mod:`service.telemetry`)."""
+
+    __tablename__ = "telemetry_states"
+
+    vehicle_id: Mapped[str] = mapped_column(ForeignKey("vehicles.id", ondelete="CASCADE"), primary_key=True)
+    policy: Mapped[str] = mapped_column(String(16))
+    #: the detector's settings (validated), service.telemetry.DetectorSettings
+    config: Mapped[dict[str, Any]]
+    #: alloc.estimation.FailureDetector.to_dict(); null before the first batch
+    state: Mapped[dict[str, Any] | None]
+    #: optimistic-concurrency token of the row (every write adds 1)
+    revision: Mapped[int] = mapped_column(Integer)
+    #: the vehicle's health_version the detector's belief was last aligned with (-1: realign)
+    synced_version: Mapped[int] = mapped_column(Integer)
+    updated_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+
+class ProposalRow(Base):
+    """A detection proposed as a health event (policy ``confirm``), until accepted or rejected."""
+
+    __tablename__ = "telemetry_proposals"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
+    vehicle_id: Mapped[str] = mapped_column(ForeignKey("vehicles.id", ondelete="CASCADE"), index=True)
+    status: Mapped[str] = mapped_column(String(16))
+    effector: Mapped[str] = mapped_column(String(64))
+    kind: Mapped[str] = mapped_column(String(16))
+    params: Mapped[dict[str, Any]]
+    detection: Mapped[dict[str, Any]]
+    #: the vehicle's health_version when proposed
+    health_version: Mapped[int] = mapped_column(Integer)
+    #: the event an accepted proposal became
+    event_seq: Mapped[int | None] = mapped_column(Integer)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+    decided_at: Mapped[datetime | None]
 
 
 def _sqlite_pragmas(dbapi_connection: Any, connection_record: Any) -> None:
@@ -185,7 +224,8 @@ def schema_revision(conn: Any) -> str | None:
     """The revision the tables match, read from the tables themselves (``None``: no schema).
 
     Each revision leaves a mark: 0001 the ``vehicles`` and ``events`` tables, 0002 the
-    unique ``(vehicle_id, seq)`` constraint, 0003 the ``idempotency_keys`` table.  A new
+    unique ``(vehicle_id, seq)`` constraint, 0003 the ``idempotency_keys`` table, 0004 the
+    ``telemetry_states`` table.  A new
     revision adds its mark here.
     """
     inspector = inspect(conn)
@@ -197,6 +237,8 @@ def schema_revision(conn: Any) -> str | None:
         return None
     if "events" not in tables:
         raise SchemaError("the database has 'vehicles' but no 'events' table: damaged; restore it from a backup")
+    if "telemetry_states" in tables:
+        return "0004"
     if "idempotency_keys" in tables:
         return "0003"
     uniques = {u["name"] for u in inspector.get_unique_constraints("events")}

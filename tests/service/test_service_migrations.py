@@ -25,7 +25,7 @@ from sqlalchemy.engine import Engine
 from service.db import SchemaError, make_engine, schema_revision
 
 ROOT = Path(__file__).resolve().parents[2]
-HEAD = "0003"
+HEAD = "0004"
 _OLD_SCHEMA = [  # the create_all releases' tables (revision 0001)
     """CREATE TABLE vehicles (id VARCHAR(36) NOT NULL PRIMARY KEY, name VARCHAR(64), problem JSON NOT NULL,
        health JSON NOT NULL, health_version INTEGER NOT NULL, created_at DATETIME NOT NULL)""",

@@ -1,0 +1,229 @@
+"""Telemetry: a stored vehicle's detector fed with batches of samples (no HTTP, no database).
+
+A batch is ``n`` samples of the applied commands ``u`` (m), the measured response ``y``
+(k: moments or state derivatives, the vehicle's ``B`` rows) and, when the vehicle's detector
+is configured with position sensors, the measured positions (m), each at a time ``t`` in
+seconds.  :func:`run_batch` replays it through :class:`alloc.estimation.FailureDetector`
+(the library's GLR detection and isolation, thresholds from a design false-alarm rate) on
+the detector state stored for the vehicle, and returns the new state and the detections.
+It is a pure function of (nominal problem, belief, settings, stored state, samples): the
+store (:mod:`service.telemetry_store`) commits its result or nothing.
+
+The detector's *belief* is the health it predicts the response with.  It is the vehicle's
+committed health plus the detections proposed and not yet decided (:func:`belief`): when the
+vehicle's ``health_version`` moved since the state was last aligned (an event posted, a
+proposal accepted or rejected) the detector is realigned to it (:func:`realign`: its belief
+replaced, its buffers emptied, since their residuals were computed against the old model;
+counters, times and detections kept).
+
+Bounds.  The state holds ``2 N`` samples of ``3 m + k + 1`` numbers (``N`` the window in
+samples, at most :data:`MAX_WINDOW_SAMPLES`) and at most
+:data:`alloc.estimation.detection.MAX_KEPT` detections: at m = 64, k = 6 at most 12,736
+numbers.  A batch holds at most :data:`MAX_SAMPLES` samples and is priced before it runs
+(:func:`batch_seconds`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from enum import StrEnum
+from typing import Any
+
+import numpy as np
+
+import alloc
+from alloc.estimation import Detection, FailureDetector, SampleError
+from alloc.health import FailureEvent, FailureKind, Health, apply_event, health_from_dict, health_to_dict
+
+__all__ = ["Policy", "DetectorSettings", "Samples", "BatchOutcome", "run_batch", "belief", "realign",
+           "batch_seconds", "detection_out", "MAX_SAMPLES", "MAX_WINDOW_SAMPLES", "SAMPLE_SECONDS"]
+
+#: samples in one batch (HTTP request or WebSocket message), at most
+MAX_SAMPLES = 1000
+#: the detector's window in samples, at most: it fixes the state's size and the cost of a test
+MAX_WINDOW_SAMPLES = 32
+#: declared worst-case seconds per sample per effector per window sample of the detector's
+#: isolation (stage 2, run at every test while an alarm is pending), measured by
+#: ``python -m benchmarks.bench_telemetry --worst`` on the project's 2-core machine with a
+#: stream that alarms at every test and never isolates (the most expensive input), times 2
+ISOLATION_SECONDS = 2.0e-6
+#: declared seconds per sample of the detector's update and stage-1 test (same benchmark, times 2)
+SAMPLE_SECONDS = 1.0e-4
+
+
+class Policy(StrEnum):
+    """What a vehicle's detections become."""
+
+    #: applied at once as health events, exactly as if a client had posted them
+    AUTO = "auto"
+    #: recorded as proposals a client accepts (then applied as events) or rejects
+    CONFIRM = "confirm"
+
+
+@dataclass(frozen=True)
+class DetectorSettings:
+    """A vehicle's :class:`~alloc.estimation.FailureDetector` settings (its free parameters,
+    each the library's, validated against the vehicle by :meth:`detector`)."""
+
+    sample_time: float
+    noise_std: list[float]
+    window: float = 0.25
+    hop: int | None = None
+    false_alarm_rate: float = 0.1
+    position_noise_std: list[float] | None = None
+    min_confidence: float = 0.95
+
+    def record(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_record(cls, data: dict[str, Any]) -> DetectorSettings:
+        return cls(**data)
+
+    def window_samples(self) -> int:
+        """``N``, the detector's window in samples (the library's rule: at least 4)."""
+        return max(4, int(round(self.window / self.sample_time)))
+
+    def detector(self, nominal: alloc.Problem) -> FailureDetector:
+        """A fresh detector for the vehicle's nominal problem."""
+        return FailureDetector(nominal, self.noise_std, self.sample_time, false_alarm_rate=self.false_alarm_rate,
+                               window=self.window, hop=self.hop, position_noise_std=self.position_noise_std,
+                               min_confidence=self.min_confidence)
+
+
+@dataclass(frozen=True)
+class Samples:
+    """One batch, validated: ``t`` (n,), ``u`` (n, m), ``y`` (n, k), ``position`` (n, m) or None."""
+
+    t: np.ndarray
+    u: np.ndarray
+    y: np.ndarray
+    position: np.ndarray | None
+
+    def __len__(self) -> int:
+        return int(self.t.size)
+
+
+@dataclass(frozen=True)
+class BatchOutcome:
+    """What a batch did: the detector's new state and the detections it completed."""
+
+    state: dict[str, Any]
+    detections: list[Detection]
+    belief: Health
+    samples: int
+    last_time: float | None
+
+
+def batch_seconds(settings: DetectorSettings, m: int, n: int) -> float:
+    """Declared worst-case seconds of ``n`` samples: each sample's update and test, plus an
+    isolation (``O(m N)`` after the per-sample share) at every test (every ``hop`` samples)."""
+    N = settings.window_samples()
+    hop = settings.hop or max(1, N // 4)
+    return n * (SAMPLE_SECONDS + ISOLATION_SECONDS * m * 2 * N * 2 * N / hop)
+
+
+def samples_from(nominal: alloc.Problem, settings: DetectorSettings, t: Any, u: Any, y: Any,
+                 position: Any) -> Samples:
+    """The batch's arrays, shapes and times checked; :class:`~alloc.estimation.SampleError`
+    naming the field (``t``, ``u``, ``y``, ``position``) and the first bad sample."""
+    t_arr = np.asarray(t, dtype=float)
+    n = t_arr.size
+    if t_arr.shape != (n,) or n == 0:
+        raise SampleError(f"t: expected a non-empty list of times, got shape {t_arr.shape}", field="t")
+    if n > MAX_SAMPLES:
+        raise SampleError(f"t: {n} samples; a batch holds at most {MAX_SAMPLES}", field="t")
+    arrays = {"u": (u, nominal.m), "y": (y, nominal.k)}
+    if position is not None or settings.position_noise_std is not None:
+        if position is None:
+            raise SampleError("position: this vehicle's detector has position sensors; every sample needs "
+                              "their readings", field="position")
+        if settings.position_noise_std is None:
+            raise SampleError("position: this vehicle's detector has no position sensors "
+                              "(position_noise_std = null)", field="position")
+        arrays["position"] = (position, nominal.m)
+    out: dict[str, np.ndarray] = {}
+    for name, (value, width) in arrays.items():
+        rows = value if isinstance(value, list) else []
+        if len(rows) != n:
+            raise SampleError(f"{name}: {len(rows)} rows for {n} times", field=name)
+        for i, row in enumerate(rows):
+            if len(row) != width:
+                raise SampleError(f"{name}/{i}: {len(row)} values, expected {width}", field=f"{name}/{i}")
+        out[name] = np.asarray(rows, dtype=float).reshape(n, width)
+    steps = np.diff(t_arr)
+    if (steps <= 0).any():
+        i = int(np.argmax(steps <= 0)) + 1
+        raise SampleError(f"t/{i}: {t_arr[i]:g} s is not after the previous sample's {t_arr[i - 1]:g} s",
+                          field=f"t/{i}")
+    return Samples(t_arr, out["u"], out["y"], out.get("position"))
+
+
+def belief(nominal: alloc.Problem, health: Health, proposed: list[FailureEvent]) -> Health:
+    """The vehicle's committed ``health`` with the ``proposed`` events (oldest first) applied as
+    the detector applies its own findings: each replaces what was known of its effector."""
+    for event in proposed:
+        _, health = apply_event(nominal, health, FailureEvent(event.effector, FailureKind.REPAIR))
+        _, health = apply_event(nominal, health, event)
+    return health
+
+
+def realign(state: dict[str, Any], health: Health) -> dict[str, Any]:
+    """The stored detector ``state`` with its belief replaced by ``health`` and its buffers
+    emptied (their residuals were against the old belief); counters and times kept."""
+    out = dict(state)
+    out["health"] = health_to_dict(health)
+    out["buffer"] = {"U": [], "K": [], "R": [], "Q": [], "T": []}
+    out["pending"] = None
+    out["since_test"] = 0
+    return out
+
+
+def run_batch(nominal: alloc.Problem, settings: DetectorSettings, state: dict[str, Any] | None,
+              align_to: Health | None, samples: Samples) -> BatchOutcome:
+    """Replay ``samples`` through the vehicle's detector (``state``, or a fresh one), first
+    realigned to ``align_to`` when given; the stored state is never modified.
+
+    Raises :class:`~alloc.estimation.SampleError` naming ``t/0`` when the batch starts at or
+    before the last sample already processed (out of order or repeated).
+    """
+    if state is None:
+        state = settings.detector(nominal).to_dict()
+    if align_to is not None:
+        state = realign(state, align_to)
+    detector = FailureDetector.from_dict(nominal, state)
+    if samples.t[0] <= detector.last_time:
+        raise SampleError(f"t/0: {samples.t[0]:g} s is not after the last sample already received "
+                          f"({detector.last_time:g} s): out of order or repeated", field="t/0")
+    found: list[Detection] = []
+    position = samples.position
+    for i in range(len(samples)):
+        found += detector.update(samples.u[i], samples.y[i], None if position is None else position[i],
+                                 time=float(samples.t[i]))
+    last = detector.last_time
+    return BatchOutcome(detector.to_dict(), found, dict(detector.health), detector.samples,
+                        None if math.isinf(last) else last)
+
+
+def detection_out(d: Detection) -> dict[str, Any]:
+    """A detection as the service answers it: the effector, kind and parameters of its event,
+    the decision time, the confidence and the evidence of both stages."""
+    record = d.to_dict()
+    event = record.pop("event")
+    return {
+        "effector": event.pop("effector"), "kind": event.pop("kind"), "params": event,
+        "time": d.time, "onset": d.onset, "confidence": d.confidence,
+        "evidence": {"statistic": d.statistic, "threshold": d.threshold, "samples": d.samples,
+                     "effector_confidence": d.effector_confidence, "kind_confidence": d.kind_confidence,
+                     "parameter": d.parameter, "parameter_std": d.parameter_std},
+    }
+
+
+def event_of(detection: dict[str, Any]) -> FailureEvent:
+    """The :class:`~alloc.health.FailureEvent` of a detection as :func:`detection_out` gives it."""
+    return FailureEvent(detection["effector"], FailureKind(detection["kind"]), **detection["params"])
+
+
+def load_belief_health(data: dict[str, Any] | None) -> Health:
+    return health_from_dict(data)

@@ -1,0 +1,158 @@
+"""Request and response bodies of the telemetry endpoints (:mod:`service.routes.telemetry`).
+
+Sizes are capped in the schema: a batch holds at most :data:`service.telemetry.MAX_SAMPLES`
+samples, each row at most ``m <= 64`` commands and ``k <= 6`` responses; every number is
+finite and at most 1e9 in magnitude; a batch of bad rows is refused at its first bad row.
+"""
+
+from __future__ import annotations
+
+from datetime import datetime
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, Field, StrictInt
+
+import alloc
+
+from .config import MAX_AXES, MAX_EFFECTORS, MAX_MAGNITUDE
+from .errors import InvalidRequest, field_error
+from .schemas import AxisVector, EffectorVector, EventOut, Finite, HealthOut, _In
+from .telemetry import MAX_SAMPLES, MAX_WINDOW_SAMPLES, DetectorSettings
+
+__all__ = ["TelemetryConfigIn", "TelemetryBatchIn", "TelemetryOut", "TelemetryResult", "DetectionOut",
+           "ProposalOut", "ProposalList", "ProposalDecided"]
+
+Positive = Annotated[float, Field(strict=True, gt=0, le=MAX_MAGNITUDE, allow_inf_nan=False)]
+Seconds = Annotated[float, Field(strict=True, gt=0, le=3600, allow_inf_nan=False)]
+
+
+class TelemetryConfigIn(_In):
+    """``PUT /v1/vehicles/{id}/telemetry``: the vehicle's policy and its detector's settings
+    (:class:`alloc.estimation.FailureDetector`'s parameters; defaults the library's)."""
+
+    policy: Literal["auto", "confirm"] = Field(default="confirm", description=(
+        "auto: detections become health events at once; confirm: they are proposed "
+        "(GET .../proposals) for a client to accept or reject"))
+    sample_time: Seconds = Field(description="seconds between samples (the detector's thresholds assume it)")
+    noise_std: Positive | Annotated[list[Positive], Field(min_length=1, max_length=MAX_AXES)] = Field(
+        description="std of the white noise on each response axis (a number: every axis)")
+    window: Seconds = Field(default=0.25, description=f"seconds per stage-1 test; at most {MAX_WINDOW_SAMPLES} "
+                                                      f"samples (and at least 4)")
+    hop: Annotated[StrictInt, Field(ge=1, le=MAX_WINDOW_SAMPLES)] | None = Field(
+        default=None, description="samples between tests (default a quarter window)")
+    false_alarm_rate: Annotated[float, Field(strict=True, gt=0, le=3.6e9, allow_inf_nan=False)] = Field(
+        default=0.1, description="design false alarms per hour")
+    position_noise_std: Positive | Annotated[list[Positive], Field(min_length=1, max_length=MAX_EFFECTORS)] | None = \
+        Field(default=None, description="position sensor noise (null: no position sensors)")
+    min_confidence: Annotated[float, Field(strict=True, gt=0, lt=1, allow_inf_nan=False)] = Field(
+        default=0.95, description="posterior needed to report (effector and kind)")
+
+    def to_settings(self, nominal: alloc.Problem) -> DetectorSettings:
+        """The validated settings for the vehicle (422 naming the field otherwise)."""
+        noise = _vector("noise_std", self.noise_std, nominal.k)
+        position = None if self.position_noise_std is None else _vector("position_noise_std",
+                                                                        self.position_noise_std, nominal.m)
+        settings = DetectorSettings(sample_time=self.sample_time, noise_std=noise, window=self.window, hop=self.hop,
+                                    false_alarm_rate=self.false_alarm_rate, position_noise_std=position,
+                                    min_confidence=self.min_confidence)
+        n = settings.window_samples()
+        if n > MAX_WINDOW_SAMPLES:
+            reason = (f"{self.window:g} s at {self.sample_time:g} s per sample is {n} samples; at most "
+                      f"{MAX_WINDOW_SAMPLES} (the detector's state and cost grow with it)")
+            raise InvalidRequest(f"window: {reason}", [field_error("window", reason)])
+        if self.hop is not None and self.hop > n:
+            reason = f"{self.hop} samples between tests, more than the window's {n}"
+            raise InvalidRequest(f"hop: {reason}", [field_error("hop", reason)])
+        return settings
+
+
+def _vector(name: str, value: float | list[float], n: int) -> list[float]:
+    if isinstance(value, list):
+        if len(value) != n:
+            reason = f"{len(value)} values, expected {n} (or one number)"
+            raise InvalidRequest(f"{name}: {reason}", [field_error(name, reason)])
+        return [float(x) for x in value]
+    return [float(value)] * n
+
+
+class TelemetryBatchIn(_In):
+    """``POST /v1/vehicles/{id}/telemetry`` (and one WebSocket message): ``n`` samples, in time order,
+    each after the last one already received."""
+
+    t: Annotated[list[Finite], Field(min_length=1, max_length=MAX_SAMPLES, fail_fast=True,
+                                     description="sample times, s, strictly increasing")]
+    u: Annotated[list[EffectorVector], Field(min_length=1, max_length=MAX_SAMPLES, fail_fast=True,
+                                             description="applied commands, n x m")]
+    y: Annotated[list[AxisVector], Field(min_length=1, max_length=MAX_SAMPLES, fail_fast=True,
+                                         description="measured responses (the rows of B: moments or state "
+                                                     "derivatives), n x k")]
+    position: Annotated[list[EffectorVector], Field(min_length=1, max_length=MAX_SAMPLES, fail_fast=True)] | None = \
+        Field(default=None, description="measured positions, n x m (with position sensors only)")
+
+
+class TelemetryOut(BaseModel):
+    vehicle_id: str
+    policy: Literal["auto", "confirm"]
+    settings: dict[str, Any] = Field(description="the detector's settings, vectors expanded")
+    revision: int = Field(description="writes to this vehicle's telemetry state so far")
+    samples: int
+    last_time: float | None
+    alarms: int = Field(description="stage-1 alarms so far (isolated or not)")
+    unisolated_alarms: int = Field(description="alarms dropped without a decision (ambiguous)")
+    health_version: int
+    pending_proposals: int
+
+
+class DetectionOut(BaseModel):
+    effector: str
+    kind: str
+    params: dict[str, float]
+    time: float = Field(description="s, the sample time the detection was decided at")
+    onset: float = Field(description="s, the estimated start of the failure")
+    confidence: float
+    evidence: dict[str, float | int | None] = Field(
+        description="statistic and threshold of the stage-1 test (chi-square under no failure), samples fitted, "
+                    "effector and kind confidences, the estimated parameter and its std")
+    applied: bool = Field(description="true: recorded as a health event (policy auto)")
+    event_seq: int | None = Field(description="the event it became (the health_version after it)")
+    proposal_id: int | None = Field(description="policy confirm: the proposal to accept or reject")
+
+
+class TelemetryResult(BaseModel):
+    vehicle_id: str
+    accepted: int = Field(description="samples of this batch processed (all of them)")
+    samples: int = Field(description="samples processed for this vehicle so far")
+    last_time: float | None
+    policy: Literal["auto", "confirm"]
+    detections: list[DetectionOut]
+    health_version: int = Field(description="the vehicle's health version after this batch")
+
+
+class ProposalOut(BaseModel):
+    id: int
+    status: Literal["pending", "accepted", "rejected"]
+    effector: str
+    kind: str
+    params: dict[str, float]
+    detection: dict[str, Any]
+    health_version: int = Field(description="the vehicle's health version when proposed")
+    event_seq: int | None
+    created_at: datetime
+    decided_at: datetime | None
+
+
+class ProposalList(BaseModel):
+    vehicle_id: str
+    items: list[ProposalOut]
+
+
+class ProposalDecided(BaseModel):
+    proposal: ProposalOut
+    event: EventOut | None = Field(description="the event an accepted proposal became")
+    health: HealthOut
+
+
+def as_arrays(body: TelemetryBatchIn) -> dict[str, Any]:
+    """The batch's fields for :func:`service.telemetry.samples_from`."""
+    return {"t": body.t, "u": body.u, "y": body.y, "position": body.position}
+
