@@ -14,7 +14,7 @@ the pilot here is a stand-in (:mod:`sim.pilot`), so that error would judge the p
 5.3 deg before the failure, 1.7 x the nominal fraction below, while its channels meet theirs.)
 Each run is split at the failure as in :mod:`sim.result`: ``before`` is judged against the
 nominal limits (MIL-F-8785C Level 1), ``after`` against the failed-state limits (Level 2,
-which MIL-F-8785C 3.1.10 allows after a failure).  With no failure the whole run is
+which MIL-F-8785C 3.1.10 accepts in failure states that are not extremely improbable; recalled).  With no failure the whole run is
 ``before``.  Criteria (the names in ``broken``):
 
 * ``<axis>_rms_<phase>``, ``<axis>_max_<phase>`` -- RMS and peak ``|error|`` (the same numbers
@@ -48,7 +48,7 @@ __all__ = [
     "Limit", "AxisLimits", "ScenarioCriteria", "Verdict", "CRITERIA", "criteria_for", "evaluate", "verdict_of",
     "back_in_band_time", "free_parameters", "PHASES", "RECOVERY_HOLD_S", "RECOVERY_MAX_S",
     "NOMINAL_RMS_FRACTION", "FAILED_RMS_FRACTION", "NOMINAL_PEAK_FRACTION", "FAILED_PEAK_FRACTION",
-    "SATURATION_MAX_FRACTION", "SIDESLIP_RMS_DEG",
+    "SATURATION_MAX_FRACTION", "SIDESLIP_RMS_DEG", "render_markdown",
 ]
 
 PHASES = ("before", "after")
@@ -101,6 +101,8 @@ class AxisLimits:
     rms: tuple[Limit, Limit] | None = None
     peak: tuple[Limit, Limit] | None = None
     excursion: tuple[Limit, Limit] | None = None
+    #: what a limit given as a fraction is a fraction of (empty: absolute limits)
+    basis: str = ""
 
     def band(self) -> float:
         """The nominal peak limit (of the error, or of the output for an excursion axis): the recovery band."""
@@ -178,13 +180,15 @@ def _rms(x: np.ndarray) -> float:
 def _demand_limits(signal: str, demand: np.ndarray, what: str) -> AxisLimits:
     """RMS and peak error limits as fractions of a demand's RMS and peak (over the seed's run)."""
     rms, peak = _rms(demand), float(np.max(np.abs(demand)))
-    why = f"ours: {{f:g}} x the {{stat}} of {what} ({{value:.3g}}) over the seed's run"
+    rms_why = (f"ours: NOMINAL_RMS_FRACTION {NOMINAL_RMS_FRACTION:g} / FAILED_RMS_FRACTION {FAILED_RMS_FRACTION:g} "
+               "x the demand's RMS")
+    peak_why = (f"ours: NOMINAL_PEAK_FRACTION {NOMINAL_PEAK_FRACTION:g} / FAILED_PEAK_FRACTION "
+                f"{FAILED_PEAK_FRACTION:g} x the demand's peak")
     return AxisLimits(
         signal,
-        rms=(Limit(NOMINAL_RMS_FRACTION * rms, why.format(f=NOMINAL_RMS_FRACTION, stat="RMS", value=rms)),
-             Limit(FAILED_RMS_FRACTION * rms, why.format(f=FAILED_RMS_FRACTION, stat="RMS", value=rms))),
-        peak=(Limit(NOMINAL_PEAK_FRACTION * peak, why.format(f=NOMINAL_PEAK_FRACTION, stat="peak", value=peak)),
-              Limit(FAILED_PEAK_FRACTION * peak, why.format(f=FAILED_PEAK_FRACTION, stat="peak", value=peak))),
+        rms=(Limit(NOMINAL_RMS_FRACTION * rms, rms_why), Limit(FAILED_RMS_FRACTION * rms, rms_why)),
+        peak=(Limit(NOMINAL_PEAK_FRACTION * peak, peak_why), Limit(FAILED_PEAK_FRACTION * peak, peak_why)),
+        basis=f"{what}: RMS {rms:.3g}, peak {peak:.3g} over the seed's run",
     )
 
 
@@ -339,3 +343,33 @@ def free_parameters() -> list[tuple[str, str, str]]:
         ("criteria SATURATION_MAX_FRACTION", f"{SATURATION_MAX_FRACTION:g}",
          "largest share of a phase with any effector on a position or rate stop"),
     ]
+
+
+_UNITS = {"alphaw": "deg", "betaw": "deg", "beta": "deg", "ps": "deg/s"}
+
+
+def render_markdown(scenarios: tuple[str, ...] = tuple(CRITERIA)) -> str:
+    """The criteria tables as Markdown (``docs/comparison.md`` holds this text; a test checks it)."""
+    def row(*cells: str) -> str:
+        return "| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |"
+
+    lines = [row("scenario", "criterion", "before the failure", "after the failure", "source"), "|---|---|---|---|---|"]
+    for name in scenarios:
+        table = criteria_for(name)
+        if table is None:
+            raise ValueError(f"scenario {name!r}: no criteria table; tables exist for {sorted(CRITERIA)}")
+        for axis in table.axes:
+            unit = _UNITS.get(axis.signal, "")
+            for kind, pair in (("error RMS", axis.rms), ("peak error", axis.peak), ("excursion, peak |output|", axis.excursion)):
+                if pair is not None:
+                    source = " / ".join(dict.fromkeys(limit.source for limit in pair))
+                    lines.append(row(name, f"`{axis.signal}` {kind} ({unit})", f"{pair[0].value:.3g}", f"{pair[1].value:.3g}",
+                                     source + (f"; the demand: {axis.basis}" if axis.basis and kind != "excursion, peak |output|" else "")))
+        share = table.saturation_max
+        for kind in ("position", "rate"):
+            lines.append(row(name, f"share of the phase with any effector at a {kind} limit", f"{share.value:g}",
+                             f"{share.value:g}", share.source))
+        lines.append(row(name, f"back inside every nominal peak band and held {table.recovery_hold.value:g} s "
+                         "(s after the failure)", "-", f"{table.recovery_max.value:g}",
+                         f"{table.recovery_max.source}; hold: {table.recovery_hold.source}"))
+    return "\n".join(lines) + "\n"

@@ -201,3 +201,12 @@ def test_every_free_parameter_is_listed() -> None:
     assert {"criteria RECOVERY_HOLD_S", "criteria SATURATION_MAX_FRACTION", "criteria NOMINAL_RMS_FRACTION"} <= names
     sources = criteria_for("ice").sources()
     assert all(s.startswith("ours") or s.startswith("MIL-F-8785C") for s in sources.values())
+
+
+def test_the_comparison_page_holds_the_criteria_tables() -> None:
+    from pathlib import Path
+
+    from sim.criteria import render_markdown
+
+    page = Path(__file__).resolve().parents[2] / "docs" / "comparison.md"
+    assert render_markdown() in page.read_text()
