@@ -14,8 +14,8 @@ the pilot here is a stand-in (:mod:`sim.pilot`), so that error would judge the p
 5.3 deg before the failure, 1.7 x the nominal fraction below, while its channels meet theirs.)
 Each run is split at the failure as in :mod:`sim.result`: ``before`` is judged against the
 nominal limits (MIL-F-8785C Level 1), ``after`` against the failed-state limits (Level 2,
-which MIL-F-8785C 3.1.10 accepts in failure states that are not extremely improbable; recalled).  With no failure the whole run is
-``before``.  Criteria (the names in ``broken``):
+which MIL-F-8785C 3.1.10 accepts in failure states that are not extremely improbable;
+recalled).  With no failure the whole run is ``before``.  Criteria (the names in ``broken``):
 
 * ``<axis>_rms_<phase>``, ``<axis>_max_<phase>`` -- RMS and peak ``|error|`` (the same numbers
   as :meth:`sim.result.SimResult.summary`'s channels).
