@@ -83,12 +83,14 @@ DISCRETE = frozenset({
     "id", "scenario", "setting", "failure", "method", "told", "health", "seed", "duration", "failure_time",
     "noise", "diverged", "simulated", "recover_s", "unattainable_after", "fallback_after",
     "time_in_position_saturation", "time_in_rate_saturation",
+    "verdict_pass", "verdict_broken", "back_in_band_s",  # the engineering verdict (sim.criteria)
 })
 
 
 #: columns computed over the stretch after the failure (diverging, when the run diverged)
 _AFTER = frozenset({"simulated", "recover_s", "effort_after", "unattainable_after", "fallback_after",
-                    "time_in_position_saturation", "time_in_rate_saturation"})
+                    "time_in_position_saturation", "time_in_rate_saturation",
+                    "verdict_pass", "verdict_broken", "back_in_band_s"})
 
 
 class ReproduceError(AllocError, ValueError):
