@@ -60,7 +60,6 @@ from typing import Any
 
 import numpy as np
 from scipy.linalg import LinAlgError, cholesky, solve_triangular, toeplitz
-from scipy.stats import chi2
 
 from ..exceptions import OptionError
 from ..health import EffectorHealth, FailureEvent, FailureKind, apply_event, health_from_dict, health_to_dict
@@ -171,6 +170,7 @@ class FailureDetector(Isolation):
         self._tested = np.flatnonzero(self.problem.umax > self.problem.umin)
         m_tested = max(1, len(self._tested))
         alpha = self.false_alarm_rate * self.hop * self.dt / 3600.0 / m_tested
+        from scipy.stats import chi2  # here: importing scipy.stats costs 1.2-1.5 s, every service start paid it
         self._gamma = float(chi2.isf(min(alpha, 0.5), self.dof))
 
     # ------------------------------------------------------------------ model

@@ -41,7 +41,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.signal import lfilter
 
 from ..exceptions import OptionError
 from ._checks import (
@@ -240,6 +239,7 @@ class FrequencyDomainEstimator:
         # high-pass output h = x - lp, lp_0 = x_0, lp_j = (1-a) lp_(j-1) + a x_j (the bank's
         # filter, with lp_0 = x_0 + a (x_0 - x_0)); r F = r - r L with L the low-pass map
         a = self._a
+        from scipy.signal import lfilter  # here: scipy.signal is 0.2 s of every service start
         rev = lfilter([1.0], [1.0, -(1.0 - a)], rows[:, ::-1], axis=1)[:, ::-1]  # h_i = sum_{j>=i} r_j (1-a)^(j-i)
         rL = a * rev
         rL[:, 0] = rev[:, 0]  # sample 0: lp_0 = x_0, carried as (1-a)^j x_0
