@@ -3,7 +3,7 @@
 Usage::
 
     python -m benchmarks.bench_export [--calls 5000] [--passes 5] [--markdown out.md] [--json out.json]
-                                      [--no-rust] [--quick]
+                                      [--no-rust] [--no-daqp] [--quick]
 
 For each problem (ICE 3 x 11, the hexa-x hexacopter 4 x 6, the 6 x 12 tilt-rotor hexacopter of
 bench_alloc) and each demand sequence (random: half attainable, half 2.5x past the attainable
@@ -17,7 +17,12 @@ by default; "cold" resets it each call).  Also reported: each kernel's code size
 text + data) and stack (``-fstack-usage``: the sum of every function's frame, an upper bound
 of the deepest call chain since nothing recurses), and the agreement of every kernel with the
 library (through ctypes, not timed): bitwise-equal calls, max |u - u_library| and status
-mismatches.  ``--markdown`` writes the tables of docs/export.md with the machine's state.
+mismatches.  DAQP's C (the sources of the ``daqp`` package, :data:`DAQP_VERSION`, fetched with
+``pip download`` from the package index and compiled here with ``-O2``;
+``benchmarks/native/daqp_driver.c``) runs on the same demands and limits on the ``wls``
+problem at the library's default gamma, set up once, ``f`` updated each call, "cold" (every
+bound's state reset, as the generated kernels start) and "warm" (its working set kept).
+``--markdown`` writes the tables of docs/export.md with the machine's state.
 """
 
 from __future__ import annotations
@@ -31,6 +36,7 @@ import re
 import shutil
 import subprocess
 import sys
+import tarfile
 import tempfile
 import time
 from pathlib import Path
@@ -40,12 +46,16 @@ import numpy as np
 import alloc
 import alloc.vehicles
 from alloc.export import ExportError, export_c
+from alloc.registry import get_method
 
 from .bench_alloc import hexacopter, random_sequence, sines_sequence
 
 HERE = Path(__file__).resolve().parent
 DRIVER = HERE / "native" / "driver.c"
 RUST = HERE / "native" / "wls_alloc_bench"
+DAQP_DRIVER = HERE / "native" / "daqp_driver.c"
+#: the DAQP release whose C sources are timed (its sdist on the package index)
+DAQP_VERSION = "0.11.0"
 CFLAGS = ["-std=c99", "-O2", "-Wall", "-Wextra", "-Werror", "-pedantic"]
 STATUS = {"exact": 0, "unattainable": 1, "fallback": 2}
 #: (label, method, precision, options)
@@ -112,6 +122,31 @@ def build_rust(folder: Path) -> Path | None:
     return target / "release" / "wls_alloc_bench"
 
 
+def build_daqp(folder: Path) -> Path | None:
+    """DAQP's C compiled with the native driver; None (with the reason printed) if it cannot be.
+
+    The sdist is fetched with pip (its own cache keeps it after the first run) and only its
+    ``csrc`` tree is compiled: no Python, no CMake."""
+    src = folder / "daqp-src"
+    run = subprocess.run([sys.executable, "-m", "pip", "download", "--quiet", "--no-deps", "--no-binary", "daqp",
+                          f"daqp=={DAQP_VERSION}", "-d", str(src)], capture_output=True, text=True)
+    sdists = sorted(src.glob(f"daqp-{DAQP_VERSION}.tar.gz"))
+    if run.returncode != 0 or not sdists:
+        print(f"daqp: skipped (pip download failed: {run.stderr.strip().splitlines()[-1:]})")
+        return None
+    with tarfile.open(sdists[0]) as tar:
+        tar.extractall(src, filter="data")
+    csrc = src / f"daqp-{DAQP_VERSION}" / "csrc"
+    exe = folder / "daqp_driver"
+    cmd = [_cc(), "-std=c99", "-O2", f"-I{csrc / 'include'}", str(DAQP_DRIVER), *map(str, sorted(csrc.glob("src/*.c"))),
+           "-o", str(exe), "-lm"]
+    build = subprocess.run(cmd, capture_output=True, text=True)
+    if build.returncode != 0:
+        print(f"daqp: skipped (compilation failed: {build.stderr.strip().splitlines()[-1:]})")
+        return None
+    return exe
+
+
 def rust_problem(p: alloc.Problem, path: Path) -> None:
     wv = np.sqrt(np.diagonal(p.Wv))  # the crate squares its weights
     wu = np.sqrt(np.diagonal(p.Wu))
@@ -164,6 +199,7 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--passes", type=int, default=5, help="passes over the demands (each call timed)")
     ap.add_argument("--agree", type=int, default=1000, help="demands checked against the library")
     ap.add_argument("--no-rust", action="store_true", help="skip wls-alloc")
+    ap.add_argument("--no-daqp", action="store_true", help="skip DAQP's C")
     ap.add_argument("--quick", action="store_true", help="1,000 calls, 2 passes, 200 checked")
     ap.add_argument("--json", help="write the results here")
     ap.add_argument("--markdown", help="write docs/export.md's tables here")
@@ -174,6 +210,9 @@ def main(argv: list[str] | None = None) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         rust = None if args.no_rust else build_rust(folder)
+        daqp = None if args.no_daqp else build_daqp(folder)
+        gamma = get_method("wls").options["gamma"].default
+        out["daqp"] = None if daqp is None else {"version": DAQP_VERSION, "gamma": gamma}
         for pname, p in problems().items():
             seqs = {"random": random_sequence(p, args.calls, seed=1), "sines": sines_sequence(p, args.calls, seed=1)}
             files = {}
@@ -198,9 +237,17 @@ def main(argv: list[str] | None = None) -> dict:
                     out["rows"].append({"problem": pname, "sequence": sname, "kernel": label, "table": table,
                                         **sizes, **res})
                     _print_row(out["rows"][-1])
+            prob = folder / f"{pname.split()[0]}_problem.bin"
+            rust_problem(p, prob)
+            if daqp is not None:
+                for sname, path in files.items():
+                    for mode in ("cold", "warm"):
+                        res = run_json([str(daqp), str(prob), str(path), str(args.calls), str(args.passes), mode,
+                                        repr(gamma)])
+                        out["rows"].append({"problem": pname, "sequence": sname, "kernel": f"daqp {mode}",
+                                            "table": False, "code_bytes": None, "stack_bytes": None, **res})
+                        _print_row(out["rows"][-1])
             if rust is not None:
-                prob = folder / f"{pname.split()[0]}_problem.bin"
-                rust_problem(p, prob)
                 for sname, path in files.items():
                     for mode in ("warm", "cold"):
                         res = run_json([str(rust), str(prob), str(path), str(args.calls), str(args.passes), mode])
@@ -230,12 +277,31 @@ def _ratio(out: dict, problem: str, sequence: str, kernel: str, ref: str = "wls-
     return rows[kernel]["median_ns"] / rows[ref]["median_ns"]
 
 
+#: (kernel, reference) pairs of the comparison table: the generated kernels over each peer's median
+VERSUS = (("qp", "daqp cold"), ("wls", "daqp cold"), ("qp", "daqp warm"), ("wls", "daqp warm"))
+
+
+def _worst_over_median(out: dict, problem: str, sequence: str, kernel: str) -> float | None:
+    rows = [r for r in out["rows"] if (r["problem"], r["sequence"], r["kernel"]) == (problem, sequence, kernel)]
+    return rows[0]["worst_demand_ns"] / rows[0]["median_ns"] if rows else None
+
+
+def _cell(x: float | None) -> str:
+    return "" if x is None else f"{x:.2f}x"
+
+
 def _print_summary(out: dict) -> None:
     print("\nmedian / wls-alloc (warm) median, same run:")
     for problem in problems():
         for sequence in ("random", "sines"):
             parts = [f"{k} {_ratio(out, problem, sequence, k):.2f}x" for k in ("qp", "wls", "qp float", "wls float")
                      if _ratio(out, problem, sequence, k) is not None]
+            print(f"  {problem:<16} {sequence:<7} " + ", ".join(parts))
+    print("\nmedian / DAQP's C median (wls problem), same run; worst demand / median:")
+    for problem in problems():
+        for sequence in ("random", "sines"):
+            parts = [f"{k}/{ref} {_cell(_ratio(out, problem, sequence, k, ref))}" for k, ref in VERSUS]
+            parts += [f"{k} worst {_cell(_worst_over_median(out, problem, sequence, k))}" for k in ("qp", "wls")]
             print(f"  {problem:<16} {sequence:<7} " + ", ".join(parts))
     print("\nagreement with the library (random demands):")
     for a in out["agreement"]:
@@ -267,6 +333,17 @@ def markdown(out: dict) -> str:
             cells = [_ratio(out, problem, sequence, k) for k in ("qp", "wls", "qp float", "wls float")]
             lines.append(f"| {problem} | {sequence} | " + " | ".join("" if c is None else f"{c:.2f}x" for c in cells)
                          + " |")
+    if out.get("daqp"):
+        d = out["daqp"]
+        lines += ["", f"Median over DAQP {d['version']}'s C median (the wls problem at gamma = {d['gamma']:g}) in the "
+                  "same run, and each kernel's worst demand over its own median:", "",
+                  "| problem | demands | " + " | ".join(f"{k} / {ref}" for k, ref in VERSUS)
+                  + " | qp worst / median | wls worst / median |", "|---|---|" + "---|" * (len(VERSUS) + 2)]
+        for problem in dict.fromkeys(r["problem"] for r in out["rows"]):
+            for sequence in ("random", "sines"):
+                cells = [_ratio(out, problem, sequence, k, ref) for k, ref in VERSUS]
+                cells += [_worst_over_median(out, problem, sequence, k) for k in ("qp", "wls")]
+                lines.append(f"| {problem} | {sequence} | " + " | ".join(map(_cell, cells)) + " |")
     lines += ["", "Agreement with the library on the random demands (through ctypes; u in the problem's units):", "",
               "| problem | kernel | calls | bitwise equal | p99 abs(u - u_library) | max | calls above 1e-4 "
               "| status mismatches |",

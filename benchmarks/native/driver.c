@@ -10,11 +10,7 @@
  * demand's fastest pass: a preempted call does not count), the timer's own floor (an empty timed
  * region), the iterations (median, max) and a checksum of the commands.
  */
-#define _POSIX_C_SOURCE 199309L
-#include <stdio.h>
-#include <stdlib.h>
-#include <string.h>
-#include <time.h>
+#include "timing.h" /* first: it defines _POSIX_C_SOURCE */
 #include KERNEL_HEADER
 
 #define CAT2(a, b) a##b
@@ -23,38 +19,11 @@
 #define ITERATIONS CAT(PREFIX, _iterations)
 typedef CAT(PREFIX, _real) real;
 
-static double now_ns(void)
-{
-    struct timespec t;
-    clock_gettime(CLOCK_MONOTONIC, &t);
-    return (double)t.tv_sec * 1e9 + (double)t.tv_nsec;
-}
-
-static int cmp(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
-}
-
-static int cmpi(const void *a, const void *b) { return *(const int *)a - *(const int *)b; }
-
-static double *load(const char *path, size_t count)
-{
-    FILE *f = fopen(path, "rb");
-    double *x = malloc(count * sizeof(double));
-    if (!f || !x || fread(x, sizeof(double), count, f) != count) {
-        fprintf(stderr, "driver: cannot read %zu doubles from %s\n", count, path);
-        exit(2);
-    }
-    fclose(f);
-    return x;
-}
-
 int main(int argc, char **argv)
 {
     size_t n, passes, i, p, j, total, counts[3] = {0, 0, 0};
     int k = CAT(CAT(PREFIX_UPPER, _), K), m = CAT(CAT(PREFIX_UPPER, _), M);
-    double *V, *U = NULL, *t, *floor_t, dt = 0, check = 0, worst = 0;
+    double *V, *U = NULL, *t, *floor_t, dt = 0, check = 0;
     real *v, *uprev = NULL, u[CAT(CAT(PREFIX_UPPER, _), M)];
     int *its;
     if (argc < 4) {
@@ -63,9 +32,9 @@ int main(int argc, char **argv)
     }
     n = (size_t)atol(argv[2]);
     passes = (size_t)atol(argv[3]);
-    V = load(argv[1], n * (size_t)k);
+    V = load_doubles(argv[1], n * (size_t)k);
     if (argc >= 6) {
-        U = load(argv[4], n * (size_t)m);
+        U = load_doubles(argv[4], n * (size_t)m);
         dt = atof(argv[5]);
     }
     v = malloc(n * (size_t)k * sizeof(real));
@@ -95,22 +64,6 @@ int main(int argc, char **argv)
             }
         }
     }
-    for (i = 0; i < n; ++i) {
-        double best = t[i];
-        for (p = 1; p < passes; ++p) {
-            if (t[p * n + i] < best) best = t[p * n + i];
-        }
-        if (best > worst) worst = best;
-    }
-    qsort(t, total, sizeof(double), cmp);
-    qsort(floor_t, total, sizeof(double), cmp);
-    qsort(its, n, sizeof(int), cmpi);
-    printf("{\"calls\": %zu, \"median_ns\": %.1f, \"p99_ns\": %.1f, \"max_ns\": %.1f, \"worst_demand_ns\": %.1f, "
-           "\"floor_median_ns\": %.1f, \"floor_p99_ns\": %.1f, \"iterations_median\": %d, "
-           "\"iterations_max\": %d, \"exact\": %zu, \"unattainable\": %zu, \"fallback\": %zu, "
-           "\"checksum\": %.17g}\n",
-           total, t[total / 2], t[(size_t)(0.99 * (double)(total - 1))], t[total - 1], worst, floor_t[total / 2],
-           floor_t[(size_t)(0.99 * (double)(total - 1))], its[n / 2], its[n - 1], counts[0], counts[1],
-           counts[2], check);
+    report(t, floor_t, its, n, passes, counts, check);
     return 0;
 }
