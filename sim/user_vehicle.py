@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, fields, replace
 from typing import Any
 
 import numpy as np
@@ -41,6 +41,7 @@ from sim.autodesign import AutoDesign, auto_design, design_options, weighted_pin
 from sim.blocks import DEFAULT_DT, SUM_OF_SINES_TABLE_4_2, ActuatorFailure, ActuatorSpec, sum_of_sines
 from sim.loop import Failure, LoopSpec, Vehicle, simulate
 from sim.result import SimResult
+from sim.settings import RunSettings
 
 __all__ = ["FlightModel", "VehicleScenario", "flight_model", "vehicle_failure", "fly", "DEFAULT_DURATION",
            "DEFAULT_FAILURE_TIME", "FAILURE_SYNTAX"]
@@ -79,7 +80,8 @@ class FlightModel:
         return vehicle_failure(self, name, time)
 
 
-def _actuator(e: Any, index: int, lo: float, hi: float, static_bandwidth: float) -> ActuatorSpec:
+def actuator_of(e: Any, index: int, lo: float, hi: float, static_bandwidth: float) -> ActuatorSpec:
+    """The simulator's actuator of file effector ``e`` (``effectors[index]``) between ``lo`` and ``hi``."""
     rate = math.inf if e.rate_max is None else float(e.rate_max)
     if e.rate_min is not None and -e.rate_min != rate:
         raise ProblemError(f"effectors[{index}].rate_min: the simulator's actuators have a symmetric rate limit; "
@@ -153,7 +155,7 @@ def flight_model(source: Any, *, design: Mapping[str, Any] | None = None,
     lo = np.array([e.min for e in fv.effectors]) - u0
     hi = np.array([e.max for e in fv.effectors]) - u0
     static_bw = design_options(design)["static_bandwidth"]
-    actuators = tuple(_actuator(e, i, lo[i], hi[i], static_bw) for i, e in enumerate(fv.effectors))
+    actuators = tuple(actuator_of(e, i, lo[i], hi[i], static_bw) for i, e in enumerate(fv.effectors))
     controlled = tuple(model.outputs.index(c) for c in model.controlled)
     measured = tuple(range(len(model.outputs)))
     B_axes = np.array(fv.B, dtype=float)
@@ -189,9 +191,7 @@ def flight_model(source: Any, *, design: Mapping[str, Any] | None = None,
     ad.report["trim"] = {"u0": u0.tolist(), "axes": fv.trim.tolist(),
                          "rule": "default method's allocation of the axes' trim; the loop flies u - u0"}
     ad.report["actuators"] = [{"name": a.name, "order": a.order, "wn": a.wn, "rate": a.rate} for a in actuators]
-    units = {"channels": {model.outputs[c]: "" for c in controlled},
-             "effectors": {e.name: e.unit for e in fv.effectors},
-             "axes": {a.name: a.unit for a in fv.axes}}
+    units = file_units(fv)
     return FlightModel(source=fv, vehicle=vehicle, trim_u=u0, design=ad, command_scale=xi,
                        output_bound=OUTPUT_BOUND_FACTOR * command_peak, units=units)
 
@@ -264,54 +264,101 @@ def vehicle_failure(fm: FlightModel, name: str, time: float) -> Failure:
     return Failure(name=name, time=float(time), description=f"{name} at t = {time:g} s", actuators=tuple(failures))
 
 
-def fly(
-    source: Any, *, method: str | None = None, failure: str | Failure | None = None,
-    failure_time: float | None = None, duration: float | None = None, allocator_knows_failure: bool = False,
-    controller: str = "smc", design: Mapping[str, Any] | None = None, method_options: dict | None = None,
-    seed: int = 0, dt: float = DEFAULT_DT, noise: bool = True, record_every: int = 10, progress: bool = False,
-    **run_options: Any,
-) -> SimResult:
-    """Fly a vehicle file's model with the auto-designed controller (or its baseline) and any allocator.
+def fly(source: Any, settings: RunSettings | None = None, *, design: Mapping[str, Any] | None = None,
+        progress: bool = False, **options: Any) -> SimResult:
+    """Fly a vehicle file: its own loop (``[simulation]``) or its model with the auto-designed controller.
 
-    ``run_options`` are :class:`sim.loop.LoopSpec` fields (``frame_period``, ``rate_aware``,
-    ``u_prev_source``, ``preferred``, ``rate_horizon``, ``rate_window``, ``anti_windup``,
-    ``boundary_layer``, ``actuators``).  Positions and limits in the result are in the
-    file's units (trim added back); ``result.settings`` carries ``design`` (the section 4.3
-    report), ``units`` and ``trim_u``.
+    ``settings`` are the run's :class:`sim.settings.RunSettings`; keyword ``options`` that name a
+    setting override them one by one (``fly("hexa-x", method="qp", failure="float:motor1")``).
+    A file with a ``[simulation]`` section flies it through :func:`sim.scenarios.mimo.run_mimo`
+    (:func:`sim.file_scenario.file_scenario`), the runner of the seed's scenarios, taking that
+    section's design and input options as well (``observer``, ``hedge``, ``cross_hedge``,
+    ``phi_command``); ``design`` is refused (there is nothing to auto-design).  Any other file
+    with a ``[model]`` is designed by :func:`sim.autodesign.auto_design` (``design`` overrides
+    its choices) and flown without a pilot: the pilot settings are refused.  Defaults: the
+    default method, :data:`DEFAULT_DURATION` s, a failure named by :data:`FAILURE_SYNTAX` at
+    :data:`DEFAULT_FAILURE_TIME` s.
+
+    Positions and limits in the result are in the file's units (trim added back);
+    ``result.settings`` records the settings as flown, ``units`` (the file's) and, auto-designed,
+    ``design`` (the section 4.3 report), ``controller`` and ``trim_u``.
+
+    Raises
+    ------
+    SettingError
+        a setting out of its type or range; TypeError an option that is no setting of this run.
     """
     from alloc import vehicles
+
+    fv = vehicles.get_vehicle(source)
+    given, extra = RunSettings.split(options)
+    flown = given if settings is None else replace(settings, **{k: options[k] for k in options if k not in extra})
+    if settings is not None and not isinstance(settings, RunSettings):
+        raise TypeError(f"settings: expected sim.settings.RunSettings, got {type(settings).__name__}")
+    if fv.simulation is not None:
+        if design:
+            raise TypeError(f"design: vehicle {fv.name!r} flies its own [simulation] design; nothing to auto-design")
+        from sim.file_scenario import file_scenario
+        from sim.scenarios.mimo import run_mimo
+
+        scenario = file_scenario(fv, static_bandwidth=design_options(None)["static_bandwidth"])
+        result = run_mimo(scenario, progress=progress, **_fields(flown), **extra)
+        result.settings["units"] = file_units(fv)
+        return result
+    if extra:
+        raise TypeError(f"{sorted(extra)[0]}: not a run setting (sim.settings.RunSettings) of a vehicle file's "
+                        "auto-designed loop")
+    pilot_given = [n for n in ("pilot_gain", "pilot_delay") if getattr(flown, n) is not None]
+    if flown.pilot != "standin" or pilot_given:
+        raise TypeError(f"{(pilot_given or ['pilot'])[0]}: a vehicle file's auto-designed run has no pilot model "
+                        "(direct commands into the reference models)")
+    return _fly_designed(fv, flown, design=design, progress=progress)
+
+
+def _fields(settings: RunSettings) -> dict[str, Any]:
+    return {f.name: getattr(settings, f.name) for f in fields(RunSettings)}
+
+
+def file_units(fv: Any) -> dict[str, Any]:
+    """The file's units, as plots and tables label a run (``result.settings["units"]``)."""
+    model = fv.model
+    out_units = dict(zip(model.outputs, model.units, strict=True)) if model is not None and model.units else {}
+    channels = {} if model is None else {c: out_units.get(c, "") for c in model.controlled}
+    return {"channels": channels, "outputs": out_units, "effectors": {e.name: e.unit for e in fv.effectors},
+            "axes": {a.name: a.unit for a in fv.axes}}
+
+
+def _fly_designed(fv: Any, settings: RunSettings, *, design: Mapping[str, Any] | None, progress: bool) -> SimResult:
+    from alloc import vehicles
     from alloc.registry import DEFAULT_METHOD
+    from sim.allocation import STATIC
 
     # designed at the seed's 0.5 ms frame, as the seed's scenarios were: the loop's boundary-layer
     # rule (sim.loop.boundary_layer_at) adapts eps to a slower frame_period, once
-    fm = flight_model(source, design=design)
-    method = DEFAULT_METHOD if method is None else method
-    from sim.allocation import STATIC
-
+    fm = flight_model(fv, design=design)
+    method = DEFAULT_METHOD if settings.method is None else settings.method
+    method_options = settings.method_options
     if method != STATIC:
         method_options = vehicles.method_options(fm.source, method, method_options)
-    duration = DEFAULT_DURATION if duration is None else float(duration)
+    duration = DEFAULT_DURATION if settings.duration is None else float(settings.duration)
+    failure = settings.failure
     if isinstance(failure, str):
-        failure = fm.failure(failure, DEFAULT_FAILURE_TIME if failure_time is None else failure_time)
-    if controller == "smc":
-        law: Any = fm.design.smc
-    elif controller == "loopshape":
-        law = fm.design.baseline
-    else:
-        raise ProblemError(f"controller: {controller!r}; expected 'smc' or 'loopshape'", field="controller")
-    n = int(round(duration / dt)) + 1
+        failure = fm.failure(failure, DEFAULT_FAILURE_TIME if settings.failure_time is None else settings.failure_time)
+    if settings.controller not in ("smc", "loopshape"):
+        raise ProblemError(f"controller: {settings.controller!r}; expected 'smc' or 'loopshape'", field="controller")
+    law: Any = fm.design.smc if settings.controller == "smc" else fm.design.baseline
+    flown = replace(settings, method=method, method_options=method_options, duration=duration,
+                    failure_time=None if failure is None else failure.time)
+    n = int(round(duration / flown.dt)) + 1
     spec = LoopSpec(
         scenario=fm.vehicle.name, vehicle=fm.vehicle, references=fm.design.references, controller=law,
-        commands=fm.commands(np.arange(n) * dt), pilots=(), failure=failure, method=method,
-        method_options=method_options, allocator_knows_failure=allocator_knows_failure, duration=duration, dt=dt,
-        seed=seed, noise=noise, output_bound=fm.output_bound, record_every=record_every, **run_options,
+        commands=fm.commands(np.arange(n) * flown.dt), pilots=(), failure=failure, method=method,
+        duration=duration, output_bound=fm.output_bound, **flown.loop_settings(),
     )
     result = simulate(spec, progress=progress)
     _to_file_units(result, fm.trim_u)
-    result.settings["controller"] = controller
-    result.settings["design"] = fm.design.report
-    result.settings["units"] = fm.units
-    result.settings["trim_u"] = fm.trim_u.tolist()
+    result.settings = {**result.settings, **flown.record(), "controller": settings.controller,
+                       "design": fm.design.report, "units": fm.units, "trim_u": fm.trim_u.tolist()}
     return result
 
 
@@ -328,10 +375,11 @@ def _to_file_units(result: SimResult, u0: np.ndarray) -> None:
 class VehicleScenario:
     """A vehicle file as a scenario of :func:`sim.scenarios.get_scenario`'s shape (``alloc sim --vehicle FILE``).
 
-    ``failures`` lists a rotor loss (``float``) and a jam at the failure instant for every
-    effector, as examples; any name of :data:`FAILURE_SYNTAX` is accepted
-    (:meth:`accepts_failure`).  Calling it flies :func:`fly`; the pilot options of the seed's
-    scenarios are refused (a vehicle file names no pilot).
+    A file with a ``[simulation]`` section is its scenario: its failures by name, its default
+    duration and method, its pilot.  Any other file: ``failures`` lists a rotor loss
+    (``float``) and a jam at the failure instant for every effector, as examples; any name of
+    :data:`FAILURE_SYNTAX` is accepted (:meth:`accepts_failure`), and the pilot settings are
+    refused (a vehicle file's model names no pilot).  Calling it flies :func:`fly`.
     """
 
     accepts_failure_objects = True
@@ -344,27 +392,32 @@ class VehicleScenario:
         if self.vehicle.model is None:
             raise ProblemError(f"model: vehicle {self.vehicle.name!r} has no [model] section; alloc sim needs its "
                                "linear model (states, outputs, A, B, C, D, controlled)", field="model")
-        self.name = self.vehicle.name
+        sim = self.vehicle.simulation
+        self.name = self.vehicle.name if sim is None else (sim.scenario or self.vehicle.name)
+        self.failures = {}
+        if sim is not None:
+            self.description = (f"{self.vehicle.name}: vehicle file, {len(self.vehicle.model.controlled)} channels x "
+                                f"{self.vehicle.m} effectors, its own [simulation] design")
+            self.default_duration = sim.duration
+            self.default_method = sim.method
+            for name, f in sim.failures.items():
+                self.failures[name] = f"t = {f.time:g} s: {f.description}" if f.description else f"t = {f.time:g} s"
+            return
         self.description = (f"{self.vehicle.name}: vehicle file, {self.vehicle.k} axes x {self.vehicle.m} effectors, "
                             "seed section 4.3 design (sim.autodesign)")
         self.default_duration = DEFAULT_DURATION
         self.default_method = registry.DEFAULT_METHOD
-        self.failures = {}
         for e in self.vehicle.effectors:
             self.failures[f"float:{e.name}"] = f"{e.name} floats: no control power (a rotor loss)"
             self.failures[f"jam:{e.name}@<position>"] = f"{e.name} held at <position> ({e.unit})"
 
     def accepts_failure(self, name: str) -> bool:
-        """Whether ``name`` parses as a failure of this vehicle (:data:`FAILURE_SYNTAX`)."""
+        """Whether ``name`` is a failure of this vehicle: the file's own by name, else :data:`FAILURE_SYNTAX`."""
+        if self.vehicle.simulation is not None:
+            return name in self.failures
         kinds = name.split("+")
         names = self.vehicle.effector_names
         return all(":" in k and k.partition(":")[2].partition("@")[0] in names for k in kinds)
 
-    def __call__(self, *, pilot: str | None = None, pilot_gain: float | None = None, pilot_delay: float | None = None,
-                 **options: Any) -> SimResult:
-        given = [n for n, v in (("pilot", pilot), ("pilot_gain", pilot_gain), ("pilot_delay", pilot_delay))
-                 if v is not None]
-        if given:
-            raise TypeError(f"{given[0]}: a vehicle file's run has no pilot model (direct commands into the "
-                            "reference models)")
+    def __call__(self, **options: Any) -> SimResult:
         return fly(self.vehicle, **options)

@@ -25,6 +25,7 @@ if str(ROOT) not in sys.path:
 
 from alloc import vehicles  # noqa: E402
 from alloc.vehicle_file import DATA_DIR, FORMAT, vehicle_from_dict  # noqa: E402
+from alloc.vehicle_file.fields import FORMAT_SIMULATION  # noqa: E402
 
 # ICE: seed Table 4-5 actuator poles (a, b) per effector, as sim/scenarios/ice.py reads them
 _ICE_POLES = {
@@ -63,6 +64,81 @@ def _harv_model() -> dict[str, Any]:
             "controlled": ["beta", "ps"]}
 
 
+def _tf(tf: Any) -> dict[str, Any]:
+    return {"num": _floats(tf[0]), "den": _floats(tf[1])}
+
+
+def _failure(f: Any, effectors: tuple[str, ...]) -> dict[str, Any]:
+    out: dict[str, Any] = {"time": float(f.time), "description": f.description}
+    for name in ("A", "B", "D"):
+        if getattr(f, name) is not None:
+            out[name] = _floats(getattr(f, name))
+    if f.delay is not None:
+        out["delay"] = _floats(f.delay) if np.ndim(f.delay) else float(f.delay)
+    if f.actuators:
+        out["actuators"] = [{"effector": effectors[a.index], "kind": a.kind, **a.params} for a in f.actuators]
+    return out
+
+
+def _simulation(scenario: Any, module: Any, *, commands: list, pilot: dict, failures: dict,
+                groups: dict[int, str] | None = None) -> dict[str, Any]:
+    """The scenario's loop as a ``[simulation]`` section: its vehicle, designs, failures, pilot."""
+    v = scenario.vehicle()
+    smc = scenario.smc_design()
+    channels = [v.output_names[i] for i in v.controlled]
+    hedge = []
+    for j, h in enumerate(smc.hedge_terms):
+        term = {"out": channels[h.out], "inp": channels[h.inp], "a_f": h.a_f, "a_h": h.a_h, "b_h": h.b_h,
+                "gain": h.gain}
+        if groups and j in groups:
+            term["group"] = groups[j]
+        hedge.append(term)
+    effectors = tuple(v.effector_names)
+    allocation: dict[str, Any] = {"B": _floats(v.B_alloc)}
+    if v.Wu is not None:
+        allocation["weights"] = _floats(v.Wu)
+    allocation["static"] = _floats(v.Bk_seed)
+    if not np.array_equal(v.demand_map, np.eye(len(channels))):
+        allocation["demand_map"] = _floats(v.demand_map)
+    return {
+        "scenario": scenario.name, "duration": scenario.default_duration, "method": scenario.default_method,
+        "measured": [v.output_names[i] for i in v.measured], "noise": _floats(v.noise_gains),
+        "output_bound": _floats(scenario.output_bound), "references": [_tf(r) for r in scenario.references],
+        "commands": commands, "allocation": allocation,
+        "smc": {"rho": _floats(smc.rho), "eps": _floats(smc.eps), "K0": _floats(smc.K0), "Km1": _floats(smc.Km1),
+                "observer_poles": [_floats(r) for r in smc.observer_poles], "hedge": hedge,
+                "hedge_gain": _floats(smc.hedge_gain)},
+        "loopshape": {"compensators": [_tf(c) for c in scenario.loop_shaped_design().compensators]},
+        "pilot": {**pilot, "element": _tf(scenario.pilot_element)},
+        "failures": {name: _failure(scenario.failure(name, None), effectors) for name in failures},
+    }
+
+
+def _ice_simulation() -> dict[str, Any]:
+    """sim/scenarios/ice.py as data: seed section 4.7 (alpha sum of sines xi = 5; roll pilot xi = 10, pi/4)."""
+    from sim.scenarios import ice as module
+
+    return _simulation(
+        module.SCENARIO, module, commands=[{"sines": {"xi": 5.0, "phase_step": 0.0}}, {}, {}],
+        pilot={"name": "phi", "channel": "ps", "attitude": {"phi": 1.0}, "integrate": False,
+               "commands": {"sines": {"sines": {"xi": 10.0, "phase_step": float(np.pi / 4)}}}},
+        failures=module.FAILURES)
+
+
+def _harv_simulation() -> dict[str, Any]:
+    """sim/scenarios/harv_latdir.py as data: seed section 4.6 (roll pilot xi = 6; Failure #2's filtered steps)."""
+    from sim.scenarios import harv_latdir as module
+
+    row = module.SCENARIO.pilot({}).row
+    attitude = {module.OUTPUTS[i]: float(w) for i, w in enumerate(row) if w != 0.0}
+    steps = {"times": list(module.STEP_TIMES), "levels": list(module.STEP_LEVELS), "filter": _tf(module.STEP_FILTER)}
+    return _simulation(
+        module.SCENARIO, module, commands=[{}, {}],
+        pilot={"name": "phi", "channel": "ps", "attitude": attitude, "integrate": True,
+               "commands": {"sines": {"sines": {"xi": 6.0, "phase_step": 0.0}}, "filtered_steps": {"steps": steps}}},
+        failures=module.FAILURES, groups={2: "cross", 3: "cross"})
+
+
 def document(name: str) -> dict[str, Any]:
     """The vehicle document of catalogue entry ``name``."""
     entry = vehicles.lookup(name)  # title and source: the file's own (the catalogue reads the files)
@@ -98,12 +174,18 @@ def document(name: str) -> dict[str, Any]:
             e["dynamics"] = {"wn": wn, "zeta": zeta}
         effectors.append(e)
     assert (p.Wu == np.diag(np.diag(p.Wu))).all() and (p.Wv == np.diag(np.diag(p.Wv))).all()
-    return {
+    doc = {
         "format": FORMAT, "name": name, "description": entry.title, "source": entry.source,
         "axes": axes, "effectors": effectors, "effectiveness": {"B": _floats(p.B)},
         "methods": {"daisy": {"groups": [list(g) for g in groups]}},
         "model": _ice_model() if ice else _harv_model(),
     }
+    # the seed's own loops: ice.toml flies scenario ice, harv.toml scenario harv_latdir
+    simulation = {"ice": _ice_simulation, "harv": _harv_simulation}.get(name)
+    if simulation is not None:
+        doc["format"] = FORMAT_SIMULATION
+        doc["simulation"] = simulation()
+    return doc
 
 
 # --------------------------------------------------------------------------- examples not in the seed

@@ -1,4 +1,4 @@
-"""Vehicle description files: format ``alloc-vehicle/1`` (TOML or JSON).
+"""Vehicle description files: format ``alloc-vehicle/1`` (TOML or JSON), and ``alloc-vehicle/1.1``.
 
 A vehicle file names the effectors and the axes of one aircraft and carries everything an
 allocation problem, a method's defaults and (optionally) the simulator need::
@@ -31,6 +31,10 @@ allocation problem, a method's defaults and (optionally) the simulator need::
 
     [model]                       # optional rigid-body linear model x' = A x + B u, y = C x + D u
     states = [...]; outputs = [...]; A = [...]; B = [...]; C = [...]; D = [...]
+    units = [...]                 # optional, one per output (plots and tables label them)
+
+    [simulation]                  # format 1.1 only: the vehicle's own closed-loop design
+    ...                           # (alloc.vehicle_file.simulation; the seed's ICE and HARV carry theirs)
 
 The effectiveness of an effector is given one of three ways: the whole matrix
 (``[effectiveness] B``), its column (``effectiveness = [...]``, one entry per axis: a
@@ -69,13 +73,14 @@ from pathlib import Path
 from typing import Any
 
 from ..exceptions import ProblemError
-from .fields import DATA_DIR, EFFECTOR_KINDS, FORMAT, SCHEMA_PATH, WRENCH_COMPONENTS
+from .fields import DATA_DIR, EFFECTOR_KINDS, FORMAT, FORMAT_SIMULATION, FORMATS, SCHEMA_PATH, WRENCH_COMPONENTS
 from .parts import Axis, Dynamics, Effector, LinearModel, Rotor, rotor_wrench
+from .simulation import Simulation
 from .toml_writer import to_toml
 from .vehicle import Vehicle, vehicle_from_dict, vehicle_from_problem
 
 __all__ = [
-    "FORMAT", "SCHEMA_PATH", "DATA_DIR", "EFFECTOR_KINDS", "WRENCH_COMPONENTS",
+    "FORMAT", "FORMAT_SIMULATION", "FORMATS", "SCHEMA_PATH", "Simulation", "DATA_DIR", "EFFECTOR_KINDS", "WRENCH_COMPONENTS",
     "Dynamics", "Rotor", "Effector", "Axis", "LinearModel", "Vehicle",
     "load_vehicle", "vehicle_from_dict", "vehicle_from_problem", "vehicle_names", "rotor_wrench", "to_toml",
 ]

@@ -14,6 +14,11 @@ from ..problem import MAX_MAGNITUDE, short_repr
 
 #: the format this module reads and writes (a later, incompatible format gets a new number)
 FORMAT = "alloc-vehicle/1"
+#: format 1 with the optional ``[simulation]`` section (:mod:`~alloc.vehicle_file.simulation`); a
+#: document is written in the oldest format that carries it (1 without the section)
+FORMAT_SIMULATION = "alloc-vehicle/1.1"
+#: the formats this library reads
+FORMATS = (FORMAT, FORMAT_SIMULATION)
 #: the published JSON Schema of the format
 SCHEMA_PATH = Path(__file__).parents[1] / "schemas" / "vehicle-1.schema.json"
 #: the bundled vehicle files (the seed's aircraft): ``load_vehicle("ice")`` reads ``ice.toml`` here

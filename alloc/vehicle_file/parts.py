@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from .fields import (EFFECTOR_KINDS, WRENCH_COMPONENTS, Matrix, _fail, _keys, _matrix, _names, _positive, _real,
+from .fields import (EFFECTOR_KINDS, WRENCH_COMPONENTS, Matrix, _fail, _keys, _list, _matrix, _names, _positive, _real,
                      _reals, _table, _text, _weight)
 
 
@@ -292,8 +292,10 @@ class LinearModel:
     C: Matrix
     D: Matrix
     controlled: tuple[str, ...] = ()
+    #: the outputs' units, in order (plots and tables label them); empty: not given
+    units: tuple[str, ...] = ()
 
-    FIELDS = ("states", "outputs", "A", "B", "C", "D", "controlled")
+    FIELDS = ("states", "outputs", "units", "A", "B", "C", "D", "controlled")
 
     @classmethod
     def from_dict(cls, data: Any, path: str, m: int) -> LinearModel:
@@ -314,10 +316,15 @@ class LinearModel:
             for i, name in enumerate(controlled):
                 if name not in outputs:
                     raise _fail(f"{path}.controlled[{i}]", f"unknown output {name!r}; outputs: {', '.join(outputs)}")
-        return cls(states, outputs, A, B, C, D, controlled)
+        units: tuple[str, ...] = ()
+        if "units" in t:
+            units = tuple(_text(u, f"{path}.units[{i}]") for i, u in enumerate(_list(t["units"], f"{path}.units", p)))
+        return cls(states, outputs, A, B, C, D, controlled, units)
 
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {"states": list(self.states), "outputs": list(self.outputs)}
+        if self.units:
+            out["units"] = list(self.units)
         for f in ("A", "B", "C", "D"):
             out[f] = [list(r) for r in getattr(self, f)]
         if self.controlled:

@@ -14,8 +14,9 @@ import numpy as np
 
 from ..exceptions import AllocError, ProblemError
 from ..problem import MAX_AXES, MAX_EFFECTORS, MAX_MAGNITUDE, Problem, short_repr
-from .fields import FORMAT, WRENCH_COMPONENTS, Matrix, _fail, _keys, _kind, _list, _matrix, _table, _text, _unique
+from .fields import FORMAT, FORMAT_SIMULATION, FORMATS, WRENCH_COMPONENTS, Matrix, _fail, _keys, _kind, _list, _matrix, _table, _text, _unique
 from .parts import Axis, Effector, LinearModel
+from .simulation import Simulation
 from .toml_writer import to_toml
 
 
@@ -38,8 +39,11 @@ class Vehicle:
     source: str = ""
     methods: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
     model: LinearModel | None = None
+    #: the vehicle's own closed-loop design (format 1.1), flown instead of the section 4.3 auto-design
+    simulation: Simulation | None = None
 
-    FIELDS = ("format", "name", "description", "source", "axes", "effectors", "effectiveness", "methods", "model")
+    FIELDS = ("format", "name", "description", "source", "axes", "effectors", "effectiveness", "methods", "model",
+              "simulation")
 
     @property
     def k(self) -> int:
@@ -85,7 +89,7 @@ class Vehicle:
 
     def to_dict(self) -> dict[str, Any]:
         """The document (JSON-able; ``vehicle_from_dict(v.to_dict()) == v``)."""
-        out: dict[str, Any] = {"format": FORMAT, "name": self.name}
+        out: dict[str, Any] = {"format": FORMAT if self.simulation is None else FORMAT_SIMULATION, "name": self.name}
         if self.description:
             out["description"] = self.description
         if self.source:
@@ -98,6 +102,8 @@ class Vehicle:
             out["methods"] = self.method_table()
         if self.model is not None:
             out["model"] = self.model.to_dict()
+        if self.simulation is not None:
+            out["simulation"] = self.simulation.to_dict()
         return out
 
     def method_table(self) -> dict[str, dict[str, Any]]:
@@ -122,8 +128,8 @@ def vehicle_from_dict(doc: Any) -> Vehicle:
     t = _table(doc, "vehicle")
     _keys(t, "", Vehicle.FIELDS, required=("format", "name", "axes", "effectors"))
     fmt = t["format"]
-    if fmt != FORMAT:
-        raise _fail("format", f"unsupported format {short_repr(fmt)}; this library reads {FORMAT!r}")
+    if fmt not in FORMATS:
+        raise _fail("format", f"unsupported format {short_repr(fmt)}; this library reads {', '.join(map(repr, FORMATS))}")
     name = _text(t["name"], "name", name=True)
     description = _text(t.get("description", ""), "description")
     source = _text(t.get("source", ""), "source")
@@ -145,6 +151,16 @@ def vehicle_from_dict(doc: Any) -> Vehicle:
         raise _fail(exc.field or "vehicle", str(exc)) from exc
     if "methods" in t:
         vehicle = replace(vehicle, methods=_methods(t["methods"], problem))
+    if "simulation" in t:
+        if fmt != FORMAT_SIMULATION:
+            raise _fail("simulation", f"the [simulation] section needs format = {FORMAT_SIMULATION!r}")
+        if model is None:
+            raise _fail("simulation", "the [simulation] section flies the [model]; give the model")
+        vehicle = replace(vehicle, simulation=Simulation.from_dict(
+            t["simulation"], "simulation", outputs=model.outputs, channels=model.controlled,
+            effectors=vehicle.effector_names, n=len(model.states),
+            limits=tuple((float(lo), float(hi)) for lo, hi in zip(problem.umin, problem.umax, strict=True)),
+            rate_limits=tuple((float(lo), float(hi)) for lo, hi in zip(problem.rate_min, problem.rate_max, strict=True))))
     return vehicle
 
 

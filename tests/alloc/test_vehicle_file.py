@@ -329,3 +329,59 @@ def test_hexa_example_allocates_with_its_priorities():
     achieved = p.B @ r.u
     assert achieved[3] == pytest.approx(-19.62, abs=1e-6)  # thrust (highest priority) met; yaw gave way
     assert achieved[2] < 2.0
+
+
+# --------------------------------------------------------------------------- the [simulation] section (format 1.1)
+def test_simulation_section_round_trips_and_needs_its_format():
+    for name in ("ice", "harv"):
+        v = load_vehicle(name)
+        assert v.simulation is not None and v.to_dict()["format"] == "alloc-vehicle/1.1"
+        assert vehicle_from_dict(json.loads(json.dumps(v.to_dict()))) == v
+        assert vehicle_from_dict(tomllib.loads(to_toml(v.to_dict()))) == v
+    assert load_vehicle("hexa-x").to_dict()["format"] == FORMAT  # the oldest format that carries it
+    doc = load_vehicle("ice").to_dict()
+    with pytest.raises(ProblemError, match=r"^simulation: the \[simulation\] section needs format"):
+        vehicle_from_dict({**doc, "format": FORMAT})
+    with pytest.raises(ProblemError, match=r"^simulation: the \[simulation\] section flies the \[model\]"):
+        vehicle_from_dict({k: v for k, v in doc.items() if k != "model"})
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda s: s["smc"].__setitem__("rho", [1.0, 2.0]), "simulation.smc.rho: expected 3 entries, got 2"),
+    (lambda s: s["smc"]["hedge"][1].__setitem__("inp", "q"), "simulation.smc.hedge[1].inp: unknown channel 'q'"),
+    (lambda s: s["pilot"]["attitude"].__setitem__("psi", 1.0), "simulation.pilot.attitude.psi: unknown output"),
+    (lambda s: s["failures"]["seed"]["actuators"][0].__setitem__("effector", "x"),
+     "simulation.failures.seed.actuators[0].effector: unknown effector 'x'"),
+    (lambda s: s["failures"]["seed"]["actuators"][2].__setitem__("wn", -1.0),
+     "simulation.failures.seed.actuators[2].wn:"),
+    (lambda s: s["failures"]["seed"]["actuators"][3].__setitem__("position", 99.0),
+     "simulation.failures.seed.actuators[3].position:"),
+    (lambda s: s["failures"]["seed"]["actuators"][0].__setitem__("position", 1.0),
+     "simulation.failures.seed.actuators[0].position: a 'limits' failure takes"),
+    (lambda s: s["references"][0].__setitem__("den", [0.0, 1.0]), "simulation.references[0].den: the leading"),
+    (lambda s: s["allocation"].__setitem__("static", [[1.0]]), "simulation.allocation.static: expected 11 entries"),
+    (lambda s: s.__setitem__("method", "nope"), "simulation.method: unknown"),
+])
+def test_simulation_errors_name_the_field_path(edit, message):
+    doc = load_vehicle("ice").to_dict()
+    edit(doc["simulation"])
+    with pytest.raises(ProblemError) as info:
+        vehicle_from_dict(doc)
+    assert str(info.value).startswith(message), str(info.value)
+
+
+def test_seeded_malformed_simulation_sections_raise_problem_error_naming_a_path():
+    rng = random.Random(20261203)
+    base = load_vehicle("harv").to_dict()
+    rejected = 0
+    for trial in range(150):
+        doc = {**base, "simulation": mutate(base["simulation"], rng)}
+        try:
+            v = vehicle_from_dict(doc)
+        except ProblemError as exc:
+            rejected += 1
+            assert exc.field and str(exc).startswith(exc.field + ":"), (trial, str(exc))
+            assert exc.field.startswith(("simulation", "model.controlled")), (trial, str(exc))
+            continue
+        assert vehicle_from_dict(v.to_dict()) == v, trial
+    assert rejected > 100, rejected

@@ -345,3 +345,85 @@ def test_ice_design_file_crosses_near_the_seeds_design():
     ratio = ours.report["switching"]["K_rho"] / seed_crossover
     assert np.all((0.8 <= ratio) & (ratio <= 1.25)), ratio
     assert all(num == (100.0,) and den == (1.0, 20.0, 100.0) for num, den in ours.references)  # seed Eq 4.22
+
+
+# --------------------------------------------------------------------------- the seed's files fly their scenarios
+def assert_same_run(a, b) -> None:
+    """Every array of two runs equal bit for bit (dtype too), every other field equal; the file's
+    ``units`` label is the only setting the file run adds."""
+    assert set(vars(a)) == set(vars(b))
+    for name, x in vars(a).items():
+        y = getattr(b, name)
+        if isinstance(x, np.ndarray):
+            assert x.dtype == y.dtype and np.array_equal(x, y, equal_nan=True), name
+        elif isinstance(x, tuple) and x and isinstance(x[0], np.ndarray):
+            assert all(np.array_equal(p, q, equal_nan=True) for p, q in zip(x, y, strict=True)), name
+        elif name == "settings":
+            assert {k: v for k, v in y.items() if k != "units"} == x
+        else:
+            assert repr(x) == repr(y), name
+
+
+SEED_FILE_RUNS = [
+    pytest.param("ice", dict(method="qp", failure="seed", failure_time=0.5), id="ice-seed-failure-qp"),
+    pytest.param("harv_latdir", dict(method="ganging", failure="failure1", failure_time=0.5,
+                                     allocator_knows_failure=True), id="harv-failure1-ganging-told"),
+    pytest.param("harv_latdir", dict(method="pinv", failure="failure2", failure_time=0.3, phi_command="filtered_steps",
+                                     cross_hedge=False), id="harv-failure2-steps-no-cross-hedge"),
+    pytest.param("ice", dict(method="daisy", controller="loopshape", noise=False), marks=pytest.mark.slow,
+                 id="ice-daisy-loopshape"),
+    pytest.param("ice", dict(method="static", failure="seed", failure_time=0.5, observer=False),
+                 marks=pytest.mark.slow, id="ice-static-no-observer"),
+]
+
+
+@pytest.mark.parametrize("scenario, options", SEED_FILE_RUNS)
+def test_seed_vehicle_files_fly_their_scenarios_bit_for_bit(scenario, options):
+    """ice.toml and harv.toml carry the scenario's loop ([simulation]): the same run, every array equal."""
+    from sim.scenarios import get_scenario
+
+    path = {"ice": "alloc/data/vehicles/ice.toml", "harv_latdir": "alloc/data/vehicles/harv.toml"}[scenario]
+    expected = get_scenario(scenario)(duration=1.0, **options)
+    assert_same_run(expected, fly(path, duration=1.0, **options))
+
+
+def test_seed_file_takes_run_settings_and_records_its_units():
+    from sim.settings import RunSettings
+
+    settings = RunSettings(method="qp", duration=0.2, noise=False)
+    res = fly("alloc/data/vehicles/harv.toml", settings, method="pinv")  # a keyword overrides the settings
+    assert res.method == "pinv" and res.settings["duration"] == 0.2 and res.settings["noise"] is False
+    assert res.settings["units"]["effectors"] == {n: "deg" for n in res.effector_names}
+    with pytest.raises(TypeError, match="design"):
+        fly("alloc/data/vehicles/ice.toml", settings, design={"crossover": 100.0})
+    with pytest.raises(TypeError, match="unknown option"):
+        fly("alloc/data/vehicles/ice.toml", settings, cross_hedge=False)  # ICE's hedges have no groups
+    with pytest.raises(TypeError, match="not a run setting"):
+        fly("hexa-x", settings, observer=False)
+
+
+def test_cli_seed_file_and_scenario_print_the_same_summary(tmp_path):
+    """``alloc sim --vehicle alloc/data/vehicles/ice.toml`` and ``alloc sim ice``: the same summary and CSV."""
+    common = ["--method", "qp", "--failure", "seed", "--failure-time", "0.2", "--duration", "0.4"]
+    by_name = runner.invoke(app, ["sim", "ice", *common, "--csv", str(tmp_path / "a.csv")])
+    by_file = runner.invoke(app, ["sim", "--vehicle", "alloc/data/vehicles/ice.toml", *common,
+                                  "--csv", str(tmp_path / "b.csv")])
+    assert by_name.exit_code == 0 and by_file.exit_code == 0, (by_name.output[-500:], by_file.output[-500:])
+    a, b = json.loads(by_name.stdout), json.loads(by_file.stdout)
+    b["settings"].pop("units", None)
+    assert a == b
+    assert (tmp_path / "a.csv").read_bytes() == (tmp_path / "b.csv").read_bytes()
+    bad = runner.invoke(app, ["sim", "--vehicle", "alloc/data/vehicles/ice.toml", "--failure", "float:de3"])
+    assert bad.exit_code == 2 and "unknown failure" in bad.output
+
+
+def test_comparison_row_of_the_seed_file_is_the_scenarios():
+    """One sweep row (benchmarks/compare), the scenario by name and the vehicle file: equal but for timings."""
+    from benchmarks.compare.closedloop import run_closed
+    from benchmarks.compare.sweep import closed_spec
+
+    spec = closed_spec("ice", "seed", "qp", told=True, seed=3, duration=0.6, failure_time=0.3)
+    by_name = run_closed(spec)[0]  # (row, timings, history): the timings are apart from the row
+    by_file = run_closed({**spec, "vehicle": "alloc/data/vehicles/ice.toml"})[0]
+    assert len(by_name) > 30
+    assert json.dumps(by_name, sort_keys=True) == json.dumps(by_file, sort_keys=True)  # nan == nan, floats exact

@@ -1,0 +1,159 @@
+"""A vehicle file's own closed loop (its ``[simulation]`` section) as a MIMO scenario.
+
+:mod:`alloc.vehicle_file.simulation` reads and checks the section; this module turns it into
+the simulator's objects -- a :class:`sim.scenarios.mimo.MimoScenario` -- and
+:func:`sim.scenarios.mimo.run_mimo` flies it, the runner of the seed's scenarios.  So the
+seed's ICE and F-18/HARV lat-dir, flown from ``alloc/data/vehicles/ice.toml`` and
+``harv.toml``, are the scenarios ``ice`` and ``harv_latdir`` bit for bit
+(tests/sim/test_sim_user_vehicle.py): the file carries everything the scenario has.
+
+Design options: ``observer`` and ``hedge`` (as the seed's scenarios), and
+``<group>_hedge`` for every hedge group of the file (HARV's ``cross_hedge``).  Input
+option: ``<pilot name>_command``, one of the pilot's named commands (HARV's
+``phi_command = "filtered_steps"``).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from alloc.exceptions import ProblemError
+from alloc.vehicle_file import Vehicle as FileVehicle
+from alloc.vehicle_file.simulation import Command, FailureSpec, Simulation
+from sim.blocks import ActuatorFailure, HedgeTerm, sum_of_sines
+from sim.model import Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle
+from sim.scenarios.mimo import MimoScenario
+
+__all__ = ["file_scenario", "command_signal", "filtered_steps"]
+
+
+def filtered_steps(t: np.ndarray, times: tuple[float, ...], levels: tuple[float, ...],
+                   tf: tuple[Any, Any]) -> np.ndarray:
+    """``levels`` switched on at ``times`` (zero before the first), through the filter ``tf`` (zero state)."""
+    from scipy import signal
+
+    t = np.asarray(t, dtype=float)
+    steps = np.zeros_like(t)
+    for when, level in zip(times, levels, strict=True):
+        steps[t >= when] = level
+    if t.size < 2:
+        return np.zeros_like(t)
+    _, y, _ = signal.lsim(signal.lti(*tf), steps, t)
+    return np.asarray(y, dtype=float)
+
+
+def command_signal(command: Command) -> Any:
+    """``t -> signal`` of a file's command: the seed's sum of sines (Eq 4.13) or filtered steps."""
+    if command.filter is None:
+        xi, phase_step = command.xi, command.phase_step
+        return lambda t: sum_of_sines(t, xi, phase_step=phase_step)
+    times, levels, tf = command.times, command.levels, command.filter.pair()
+    return lambda t: filtered_steps(t, times, levels, tf)
+
+
+def _array(x: Any) -> np.ndarray | None:
+    return None if x is None else np.array(x, dtype=float)
+
+
+def _failure(spec: FailureSpec, name: str, time: float | None, effectors: tuple[str, ...]) -> Failure:
+    delay = spec.delay
+    return Failure(
+        name=name, time=spec.time if time is None else float(time), description=spec.description,
+        A=_array(spec.A), B=_array(spec.B), D=_array(spec.D),
+        actuators=tuple(ActuatorFailure(effectors.index(e), kind, **dict(params)) for e, kind, params in spec.actuators),
+        delay=np.array(delay, dtype=float) if isinstance(delay, tuple) else delay,
+    )
+
+
+def file_scenario(fv: FileVehicle, *, static_bandwidth: float = 1000.0) -> MimoScenario:
+    """The :class:`MimoScenario` of a vehicle file with a ``[simulation]`` section.
+
+    ``static_bandwidth``: the first-order lag of an effector without ``dynamics``
+    (:func:`sim.user_vehicle.actuator_of`).
+    """
+    from sim.user_vehicle import actuator_of
+
+    sim: Simulation | None = fv.simulation
+    if sim is None or fv.model is None:
+        raise ProblemError(f"simulation: vehicle {fv.name!r} has no [simulation] section", field="simulation")
+    model = fv.model
+    A, B, C, D = model.arrays()
+    outputs, channels = tuple(model.outputs), tuple(model.controlled)
+    effectors = fv.effector_names
+    k = len(channels)
+    actuators = tuple(actuator_of(e, i, e.min, e.max, static_bandwidth) for i, e in enumerate(fv.effectors))
+    alloc = sim.allocation
+
+    def vehicle() -> Vehicle:
+        return Vehicle(
+            name=fv.name, A=A.copy(), B=B.copy(), C=C.copy(), D=D.copy(), output_names=outputs,
+            actuators=actuators, controlled=tuple(outputs.index(c) for c in channels),
+            measured=tuple(outputs.index(x) for x in sim.measured), noise_gains=np.array(sim.noise, dtype=float),
+            B_alloc=np.array(alloc.B, dtype=float), Bk_seed=np.array(alloc.static, dtype=float),
+            demand_map=np.eye(k) if alloc.demand_map is None else np.array(alloc.demand_map, dtype=float),
+            Wu=_array(alloc.weights), names=effectors,
+        )
+
+    smc = sim.smc
+    groups = smc.hedge_groups
+
+    def smc_design(*, observer: bool = True, hedge: bool = True, **group_on: bool) -> SMCDesign:
+        kept = tuple(HedgeTerm(channels.index(h.out), channels.index(h.inp), a_f=h.a_f, a_h=h.a_h, b_h=h.b_h,
+                               gain=h.gain)
+                     for h in smc.hedge if not h.group or group_on.get(f"{h.group}_hedge", True))
+        return SMCDesign(
+            rho=np.array(smc.rho), eps=np.array(smc.eps), K0=np.array(smc.K0), Km1=np.array(smc.Km1),
+            observer_poles=smc.observer_poles if observer else None, hedge_terms=kept if hedge else (),
+            hedge_gain=_array(smc.hedge_gain),
+        )
+
+    def loop_shaped_design() -> LoopShapedDesign:
+        if sim.loopshape is None:
+            raise ProblemError(f"simulation.loopshape: vehicle {fv.name!r} gives no loop-shaped baseline",
+                               field="simulation.loopshape")
+        return LoopShapedDesign(compensators=tuple(c.pair() for c in sim.loopshape))
+
+    def failure(name: str, time: float | None) -> Failure:
+        if name not in sim.failures:
+            raise KeyError(f"unknown {fv.name} failure {name!r}; known: {sorted(sim.failures)}")
+        return _failure(sim.failures[name], name, time, effectors)
+
+    pilot_spec = sim.pilot
+    input_options: tuple[str, ...] = ()
+    if pilot_spec is not None:
+        command_option = f"{pilot_spec.name}_command"
+        input_options = (command_option,)
+        named = dict(pilot_spec.commands)
+        row = np.zeros(len(outputs))
+        for output, weight in pilot_spec.attitude:
+            row[outputs.index(output)] = weight
+
+        def pilot(params: dict[str, Any], **choice: str) -> Pilot:
+            chosen = choice.get(command_option, pilot_spec.commands[0][0])
+            if chosen not in named:
+                raise ValueError(f"{command_option}: {chosen!r}; expected one of {', '.join(map(repr, named))}")
+            return Pilot(channel=channels.index(pilot_spec.channel), row=row.copy(), integrate=pilot_spec.integrate,
+                         name=pilot_spec.name, **params, attitude_command=command_signal(named[chosen]))
+        element = pilot_spec.element.pair()
+    else:
+        def pilot(params: dict[str, Any], **choice: str) -> Pilot:
+            raise ProblemError(f"simulation.pilot: vehicle {fv.name!r} has no pilot", field="simulation.pilot")
+        element = ([1.0], [1.0, 0.0])
+
+    signals = [(i, command_signal(c)) for i, c in enumerate(sim.commands) if c is not None]
+
+    def commands(t: np.ndarray) -> np.ndarray:
+        out = np.zeros((t.size, k))
+        for i, signal_of in signals:
+            out[:, i] = signal_of(t)
+        return out
+
+    return MimoScenario(
+        name=sim.scenario or fv.name, vehicle=vehicle, references=tuple(r.pair() for r in sim.references), smc_design=smc_design,
+        loop_shaped_design=loop_shaped_design, failure=failure, pilot=pilot, pilot_element=element,
+        commands=commands, output_bound=np.array(sim.output_bound, dtype=float), default_duration=sim.duration,
+        default_method=sim.method, design_options=("observer", "hedge", *(f"{g}_hedge" for g in groups)),
+        input_options=input_options, catalogue_vehicle=fv,  # type: ignore[arg-type]  # its [methods] defaults
+    )
