@@ -44,6 +44,12 @@ _HARV_AXES = (("beta", "beta/s", "beta-dot row (seed Eq 4.16)"), ("p", "p/s", "p
               ("r", "r/s", "r-dot row"))
 
 
+# the seed's model is in degrees (angles deg, rates deg/s, as sim.plots labels them); the speed and
+# the accelerations are left without a unit (the scan does not state them)
+_ICE_OUTPUT_UNITS = {"alphaw": "deg", "qb": "deg/s", "theta": "deg", "betaw": "deg", "ps": "deg/s", "rs": "deg/s",
+                     "phi": "deg"}
+
+
 def _floats(a: Any) -> list:
     return np.asarray(a, dtype=float).tolist()
 
@@ -51,7 +57,8 @@ def _floats(a: Any) -> list:
 def _ice_model() -> dict[str, Any]:
     from sim.scenarios import ice as scenario
 
-    return {"states": list(scenario.STATES), "outputs": list(scenario.OUTPUTS), "A": _floats(scenario.A),
+    return {"states": list(scenario.STATES), "outputs": list(scenario.OUTPUTS),
+            "units": [_ICE_OUTPUT_UNITS.get(o, "") for o in scenario.OUTPUTS], "A": _floats(scenario.A),
             "B": _floats(scenario.B), "C": _floats(scenario.C), "D": _floats(scenario.D),
             "controlled": ["alphaw", "ps", "betaw"]}
 
@@ -59,7 +66,8 @@ def _ice_model() -> dict[str, Any]:
 def _harv_model() -> dict[str, Any]:
     from sim.scenarios import harv_latdir as scenario
 
-    return {"states": ["beta", "p", "r"], "outputs": list(scenario.OUTPUTS), "A": _floats(scenario.A),
+    return {"states": ["beta", "p", "r"], "outputs": list(scenario.OUTPUTS),
+            "units": ["deg", "deg/s", "deg/s", "deg/s"], "A": _floats(scenario.A),
             "B": _floats(scenario.B), "C": _floats(scenario.C), "D": _floats(np.zeros((4, 5))),
             "controlled": ["beta", "ps"]}
 
@@ -249,7 +257,8 @@ def hexa_document() -> dict[str, Any]:
                       for i, (x, y, km) in enumerate(_HEXA_ROTORS)],
         "methods": {"cgi": {"priorities": [2, 2, 1, 3]}, "qp": {"priorities": [2, 2, 1, 3]},
                     "lp": {"priorities": [2, 2, 1, 3]}},
-        "model": {"states": states, "outputs": states, "A": _floats(A), "B": _floats(Bm), "C": _floats(np.eye(7)),
+        "model": {"states": states, "outputs": states,
+                  "units": ["rad", "rad", "rad", "rad/s", "rad/s", "rad/s", "m/s"], "A": _floats(A), "B": _floats(Bm), "C": _floats(np.eye(7)),
                   "D": _floats(np.zeros((7, 6))), "controlled": ["p", "q", "r", "w"]},
     }
 

@@ -400,6 +400,11 @@ def test_seed_file_takes_run_settings_and_records_its_units():
         fly("alloc/data/vehicles/ice.toml", settings, cross_hedge=False)  # ICE's hedges have no groups
     with pytest.raises(TypeError, match="not a run setting"):
         fly("hexa-x", settings, observer=False)
+    hexa = fly("hexa-x", settings)  # the auto-designed loop takes the same settings
+    assert hexa.method == "qp" and hexa.settings["duration"] == 0.2 and hexa.settings["noise"] is False
+    # what plots label the channels and effectors with: the file's [model] units and effector units
+    assert hexa.settings["units"]["channels"] == {"p": "rad/s", "q": "rad/s", "r": "rad/s", "w": "m/s"}
+    assert set(hexa.settings["units"]["effectors"].values()) == {"1"}
 
 
 def test_cli_seed_file_and_scenario_print_the_same_summary(tmp_path):
