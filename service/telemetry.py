@@ -34,22 +34,28 @@ import numpy as np
 
 import alloc
 from alloc.estimation import Detection, FailureDetector, SampleError
-from alloc.health import FailureEvent, FailureKind, Health, apply_event, health_from_dict, health_to_dict
+from alloc.health import FailureEvent, FailureKind, Health, apply_event, health_to_dict
 
 __all__ = ["Policy", "DetectorSettings", "Samples", "BatchOutcome", "run_batch", "belief", "realign",
-           "batch_seconds", "detection_out", "MAX_SAMPLES", "MAX_WINDOW_SAMPLES", "SAMPLE_SECONDS"]
+           "batch_seconds", "samples_from", "detection_out", "event_of", "MAX_SAMPLES", "MAX_WINDOW_SAMPLES",
+           "SAMPLE_SECONDS", "ISOLATION_SECONDS", "ISOLATION_SAMPLE_SECONDS"]
 
 #: samples in one batch (HTTP request or WebSocket message), at most
 MAX_SAMPLES = 1000
 #: the detector's window in samples, at most: it fixes the state's size and the cost of a test
 MAX_WINDOW_SAMPLES = 32
-#: declared worst-case seconds per sample per effector per window sample of the detector's
-#: isolation (stage 2, run at every test while an alarm is pending), measured by
-#: ``python -m benchmarks.bench_telemetry --worst`` on the project's 2-core machine with a
-#: stream that alarms at every test and never isolates (the most expensive input), times 2
-ISOLATION_SECONDS = 2.0e-6
-#: declared seconds per sample of the detector's update and stage-1 test (same benchmark, times 2)
-SAMPLE_SECONDS = 1.0e-4
+# The declared cost of the detector, measured by ``python -m benchmarks.bench_telemetry --worst``
+# (CPU seconds on the project's 2-core machine) on the most expensive stream found: two
+# effectors no response can tell apart, one of them jammed, so that every test alarms and no
+# isolation decides (m = 4, 11, 64; N = 4, 16, 32; hop 1 and N / 4).  Each constant is twice
+# the measured figure: per effector and test, an isolation took 1.14 ms + 34 us per buffered
+# sample (2 N of them); a sample's update and stage-1 test at most 0.29 ms.
+#: seconds of one sample's update and stage-1 test
+SAMPLE_SECONDS = 6.0e-4
+#: seconds of an isolation per tested effector, fixed part
+ISOLATION_SECONDS = 2.5e-3
+#: seconds of an isolation per tested effector and buffered sample
+ISOLATION_SAMPLE_SECONDS = 7.0e-5
 
 
 class Policy(StrEnum):
@@ -117,11 +123,12 @@ class BatchOutcome:
 
 
 def batch_seconds(settings: DetectorSettings, m: int, n: int) -> float:
-    """Declared worst-case seconds of ``n`` samples: each sample's update and test, plus an
-    isolation (``O(m N)`` after the per-sample share) at every test (every ``hop`` samples)."""
+    """Declared worst-case seconds of ``n`` samples for a vehicle of ``m`` effectors: each
+    sample's update and test, plus an isolation of every effector over the ``2 N`` buffered
+    samples at every test (every ``hop`` samples), as when an alarm never resolves."""
     N = settings.window_samples()
     hop = settings.hop or max(1, N // 4)
-    return n * (SAMPLE_SECONDS + ISOLATION_SECONDS * m * 2 * N * 2 * N / hop)
+    return n * (SAMPLE_SECONDS + m * (ISOLATION_SECONDS + ISOLATION_SAMPLE_SECONDS * 2 * N) / hop)
 
 
 def samples_from(nominal: alloc.Problem, settings: DetectorSettings, t: Any, u: Any, y: Any,
@@ -224,6 +231,3 @@ def event_of(detection: dict[str, Any]) -> FailureEvent:
     """The :class:`~alloc.health.FailureEvent` of a detection as :func:`detection_out` gives it."""
     return FailureEvent(detection["effector"], FailureKind(detection["kind"]), **detection["params"])
 
-
-def load_belief_health(data: dict[str, Any] | None) -> Health:
-    return health_from_dict(data)

@@ -19,6 +19,8 @@ import time
 
 import numpy as np
 import pytest
+
+import alloc
 from fastapi.testclient import TestClient
 
 from alloc.estimation import FailureDetector
@@ -240,12 +242,14 @@ def test_state_is_durable_across_a_restart(tmp_path):
         assert state["samples"] == 25 and state["last_time"] == t[24]
         assert post(c, vid, t[20:30], U[20:30], Y[20:30]).status_code == 422  # already received
         found = post(c, vid, t[25:], U[25:], Y[25:]).json()
-    # the same detections as one uninterrupted detector: the stored state is the whole state
-    with TestClient(create_app(Settings(data_dir=tmp_path / "b", warmup=False, api_key=KEY))) as c:
-        vid2 = small_vehicle(c)
-        post(c, vid2, t[:25], U[:25], Y[:25])
-        straight = post(c, vid2, t[25:], U[25:], Y[25:]).json()
-    assert found["detections"] == straight["detections"] and len(found["detections"]) == 1
+    # the same detections as one uninterrupted library detector: the stored state is the whole state
+    problem = alloc.Problem(SMALL["B"], SMALL["umin"], SMALL["umax"], rate_min=SMALL["rate_min"],
+                            rate_max=SMALL["rate_max"], names=SMALL["names"])
+    det = FailureDetector(problem, SMALL_SETTINGS["noise_std"], 0.1, window=0.4, hop=1)
+    straight = [d for i in range(len(t)) for d in det.update(U[i], Y[i], time=float(t[i]))]
+    assert [(d["effector"], d["kind"], d["params"], d["time"]) for d in found["detections"]] == \
+        [(d.event.effector, d.event.kind.value, {"position": d.event.position}, d.time) for d in straight]
+    assert len(straight) == 1
 
 
 def test_the_state_and_a_batch_are_bounded(client):
