@@ -153,6 +153,9 @@ def test_ice_silent_jam_is_applied_within_the_delay_and_allocations_hold_it(clie
     assert [(d["effector"], d["kind"]) for d in detections] == [("elevon_l", "jam")]
     d = detections[0]
     assert 0.0 <= d["time"] - FAILURE_TIME <= DELAY_S
+    print(f"\nICE silent jam at {FAILURE_TIME} s: decided at {d['time']:.3f} s (delay {d['time'] - FAILURE_TIME:.3f} s), "
+          f"position {d['params']['position']:.3f} +- {d['evidence']['parameter_std']:.3f}, health changed with the "
+          f"batch ending at {changed_at} s")
     # the catalogue jam holds 15 deg: the estimate within 3 of its standard deviations (and 1 deg)
     est, std = d["params"]["position"], d["evidence"]["parameter_std"]
     assert abs(est - 15.0) <= max(3 * std, 1.0) and d["confidence"] >= 0.95
@@ -483,3 +486,53 @@ def test_bad_settings_are_refused_naming_the_field(client):
                        headers={**H, "Content-Type": "application/json"})
         assert r.status_code == 422 and any(e["pointer"] == f"/{field}" for e in r.json()["errors"]), (field, r.text)
     assert client.get(f"/v1/vehicles/{vid}/telemetry").status_code == 409  # nothing was configured
+
+
+# ----------------------------------------------------------------------------- real server
+@pytest.mark.slow  # two uvicorn workers start in about 50 s on the shared machine
+def test_a_running_service_with_two_workers_learns_the_silent_jam(tmp_path, flight):
+    """``alloc serve --workers 2``: the flight's telemetry streamed in batches of 0.5 s, over HTTP
+    for one vehicle and over the WebSocket for another; the health changes within the stated
+    delay, and allocations through fresh connections (spread over both workers) hold the jam."""
+    import httpx
+    from websockets.sync.client import connect
+
+    from service.process import ServiceProcess
+
+    proc = ServiceProcess(tmp_path / "data", api_key=KEY, workers=2).start(timeout=300.0)
+    try:
+        with httpx.Client(base_url=proc.url, timeout=60.0, headers=H) as http:
+            vids = []
+            for _ in range(2):
+                vid = http.post("/v1/vehicles", json=flight["vehicle"]).json()["id"]
+                assert http.put(f"/v1/vehicles/{vid}/telemetry", json=flight["settings"]).status_code == 200
+                vids.append(vid)
+            seen: dict[str, list[dict]] = {vid: [] for vid in vids}
+            for batch in batches(flight, 5):
+                r = http.post(f"/v1/vehicles/{vids[0]}/telemetry", json=batch)
+                assert r.status_code == 200, r.text
+                seen[vids[0]].append(r.json())
+            ws_url = proc.url.replace("http://", "ws://") + f"/v1/vehicles/{vids[1]}/telemetry/ws"
+            with connect(ws_url, additional_headers=H) as ws:
+                for batch in batches(flight, 5):
+                    ws.send(json.dumps(batch))
+                    seen[vids[1]].append(json.loads(ws.recv()))
+            v = (np.array(flight["vehicle"]["B"]) @ np.full(11, 2.0)).tolist()
+            for vid in vids:
+                answers = seen[vid]
+                (d,) = [d for a in answers for d in a["detections"]]
+                assert (d["effector"], d["kind"], d["applied"]) == ("elevon_l", "jam", True)
+                assert 0.0 <= d["time"] - FAILURE_TIME <= DELAY_S
+                first = next(i for i, a in enumerate(answers) if a["health_version"] == 1)
+                assert answers[first]["last_time"] - FAILURE_TIME <= DELAY_S + 0.5
+                for _ in range(40):  # a new connection each: both workers answer
+                    with httpx.Client(base_url=proc.url, timeout=60.0) as c:
+                        a = c.post(f"/v1/vehicles/{vid}/allocate", json={"v": v, "method": "qp"}).json()
+                    assert a["health_version"] == 1 and a["u"][0] == d["params"]["position"]
+            # a restart keeps what was learnt
+            proc.stop()
+            proc.start(timeout=300.0)
+            state = http.get(f"/v1/vehicles/{vids[0]}/telemetry").json()
+            assert state["samples"] == len(flight["t"]) and state["health_version"] == 1
+    finally:
+        proc.stop()
