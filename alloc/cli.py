@@ -637,13 +637,15 @@ def export_command(
     option: list[str] = typer.Option([], "--option", "-o", help="method option key=value (as for allocate)"),
     prefix: Optional[str] = typer.Option(None, "--prefix", help="C prefix of the names and files; default "
                                          "alloc_<method>"),
+    certify: bool = typer.Option(False, "--certify", help="active set: enforce the iteration bound certified "
+                                 "by sampling the demand set (alloc.export.certify)"),
 ) -> None:
     """Write the allocator as a self-contained C99 kernel (alloc_<method>.h/.c; see docs/export.md)."""
     from .export import export_c
 
     name = default_method() if method is None else method
     kernel = export_c(load_vehicle_option(vehicle), name, precision=precision, options=parse_options(option),
-                      prefix=prefix)
+                      prefix=prefix, iteration_bound="certify" if certify else None)
     for path in kernel.write(out):
         typer.echo(str(path))
 

@@ -4,6 +4,7 @@ Usage::
 
     python -m benchmarks.bench_export [--calls 5000] [--passes 5] [--markdown out.md] [--json out.json]
                                       [--no-rust] [--no-daqp] [--quick]
+    python -m benchmarks.bench_export --certify out.md [--calls 5000]
 
 For each problem (ICE 3 x 11, the hexa-x hexacopter 4 x 6, the 6 x 12 tilt-rotor hexacopter of
 bench_alloc) and each demand sequence (random: half attainable, half 2.5x past the attainable
@@ -62,6 +63,9 @@ STATUS = {"exact": 0, "unattainable": 1, "fallback": 2}
 KERNELS = (("qp", "qp", "double", {}), ("qp float", "qp", "float", {}), ("wls", "wls", "double", {}),
            ("wls float", "wls", "float", {}), ("pinv_scale", "pinv_scale", "double", {}),
            ("dynamic", "dynamic", "double", {}), ("cgi", "cgi", "double", {}), ("pinv", "pinv", "double", {}))
+#: the qp kernel with every free set's factorisation tabulated where the default does not
+#: (beyond the 256 KiB budget: 1.1 MB of code for ICE's 2,048 free sets), up to this many effectors
+TABLE_QP_MAX_M = 11
 
 
 def problems() -> dict[str, alloc.Problem]:
@@ -203,7 +207,13 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--quick", action="store_true", help="1,000 calls, 2 passes, 200 checked")
     ap.add_argument("--json", help="write the results here")
     ap.add_argument("--markdown", help="write docs/export.md's tables here")
+    ap.add_argument("--problems", nargs="*", help="only these problems (default: all)")
+    ap.add_argument("--certify", help="only the iteration-bound certification: write its table here")
     args = ap.parse_args(argv)
+    if args.certify:
+        rows = certification_rows(args.calls)
+        Path(args.certify).write_text(certification_markdown(rows))
+        return {"certification": rows}
     if args.quick:
         args.calls, args.passes, args.agree = 1000, 2, 200
     out: dict = {"machine": machine(), "calls": args.calls, "passes": args.passes, "rows": [], "agreement": []}
@@ -214,15 +224,20 @@ def main(argv: list[str] | None = None) -> dict:
         gamma = get_method("wls").options["gamma"].default
         out["daqp"] = None if daqp is None else {"version": DAQP_VERSION, "gamma": gamma}
         for pname, p in problems().items():
+            if args.problems and pname not in args.problems:
+                continue
             seqs = {"random": random_sequence(p, args.calls, seed=1), "sines": sines_sequence(p, args.calls, seed=1)}
             files = {}
             for sname, V in seqs.items():
                 files[sname] = folder / f"{pname.split()[0]}_{sname}.bin"
                 np.ascontiguousarray(V, dtype="<f8").tofile(files[sname])
-            for label, method, precision, options in KERNELS:
+            kernels = [(*row, None) for row in KERNELS]
+            if "#define TABLE 0" in export_c(p, "qp").source and p.m <= TABLE_QP_MAX_M:
+                kernels.insert(1, ("qp table", "qp", "double", {}, True))
+            for label, method, precision, options, table in kernels:
                 prefix = f"k_{re.sub(r'[^a-z0-9]', '_', pname.lower())}_{label.replace(' ', '_')}"
                 try:
-                    kernel = export_c(p, method, precision=precision, options=options, prefix=prefix)
+                    kernel = export_c(p, method, precision=precision, options=options, prefix=prefix, table=table)
                 except ExportError as exc:  # cgi beyond the table budget: say so, time the rest
                     print(f"{pname:<16} {label:<16} not exported: {exc}")
                     out.setdefault("skipped", []).append({"problem": pname, "kernel": label, "reason": str(exc)})
@@ -262,6 +277,41 @@ def main(argv: list[str] | None = None) -> dict:
     return out
 
 
+def certification_rows(calls: int) -> list[dict]:
+    """The sampled certification (alloc.export.certify) of each active-set kernel, and the
+    counts the library needs on the benchmark's own demand sequences, which are not in the sample."""
+    rows = []
+    for pname, p in problems().items():
+        fresh = np.concatenate([random_sequence(p, calls, seed=1), sines_sequence(p, calls, seed=1)])
+        for method in ("qp", "wls", "dynamic"):
+            kernel = export_c(p, method, iteration_bound="certify")
+            cert = kernel.certificate
+            allocator = alloc.make_allocator(p, method)
+            counts = np.array([allocator(v).iterations for v in fresh])
+            rows.append({"problem": pname, "method": method, "bound": cert.bound, "demands": cert.demands,
+                         "part_max": cert.part_max, "cap_total": kernel.levels * kernel.maxit,
+                         "analytic_per_level": (p.m + 1) * 3 ** p.m, "levels": kernel.levels,
+                         "fresh_demands": len(fresh), "fresh_max": int(counts.max()),
+                         "fresh_beyond": int((counts > cert.bound).sum())})
+            r = rows[-1]
+            print(f"{pname:<16} {method:<8} certified {r['bound']:3d} on {r['demands']:,} demands {r['part_max']}; "
+                  f"benchmark demands max {r['fresh_max']} ({r['fresh_beyond']} beyond); cap {r['cap_total']}",
+                  flush=True)
+    return rows
+
+
+def certification_markdown(rows: list[dict]) -> str:
+    lines = ["| problem | method | certified bound (per call) | sample demands | max on grid / far / vertices / axes "
+             "| max on the benchmark's demands | of them beyond the bound | library cap (per call) "
+             "| analytic bound (per level) |", "|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        pm = r["part_max"]
+        lines.append(f"| {r['problem']} | {r['method']} | {r['bound']} | {r['demands']:,} | {pm['grid']} / {pm['far']} / "
+                     f"{pm['vertices']} / {pm['axes']} | {r['fresh_max']} | {r['fresh_beyond']} of "
+                     f"{r['fresh_demands']:,} | {r['cap_total']} | {r['analytic_per_level']:,} |")
+    return "\n".join(lines) + "\n"
+
+
 def _print_row(r: dict) -> None:
     floor = max(r["floor_median_ns"], 1.0)
     print(f"{r['problem']:<16} {r['sequence']:<7} {r['kernel']:<16} median {r['median_ns']:8.0f} ns "
@@ -278,7 +328,8 @@ def _ratio(out: dict, problem: str, sequence: str, kernel: str, ref: str = "wls-
 
 
 #: (kernel, reference) pairs of the comparison table: the generated kernels over each peer's median
-VERSUS = (("qp", "daqp cold"), ("wls", "daqp cold"), ("qp", "daqp warm"), ("wls", "daqp warm"))
+VERSUS = (("qp", "daqp cold"), ("qp table", "daqp cold"), ("wls", "daqp cold"), ("qp", "daqp warm"),
+          ("qp table", "daqp warm"), ("wls", "daqp warm"))
 
 
 def _worst_over_median(out: dict, problem: str, sequence: str, kernel: str) -> float | None:

@@ -17,8 +17,10 @@ Methods: ``pinv``, ``pinv_clip``, ``ganging`` (``u = clip(c + P v)``), ``pinv_sc
 increment scaled into the box), ``cgi`` (the cascaded generalized inverse over a table of every
 free set's pseudo-inverse; without priority levels) and the active-set ``wls``, ``qp`` (with ``priorities``) and
 ``dynamic`` (its two solver instances, without and with ``u_prev``), whose iteration count per
-level is capped at the library's own cap (stated and argued in the header, enforced: reaching
-it returns the safe answer with status 2).
+level is capped at the library's own cap and per call at ``iteration_bound`` (by default the
+levels' caps added; ``"certify"``: the largest count on a dense sample of the demand set,
+:mod:`alloc.export.certify`), both stated and argued in the header and enforced: reaching
+either returns the safe answer with status 2.
 
 Health at run time: the active-set kernels take reduced limits and jams through
 ``alloc_<method>_set_limits``; the closed-form kernels bake the distribution matrix of the
@@ -41,12 +43,13 @@ from ..exceptions import AllocError, OptionError, UnknownMethodError
 from ..problem import MAX_MAGNITUDE, Problem
 from ..result import EXACT_RTOL
 from . import templates, templates_active_set, templates_closed_form
+from .certify import Certificate, bound_text, certify
 
 __all__ = ["export_c", "ExportedKernel", "ExportError", "EXPORTABLE", "PRECISIONS", "GENERATOR_VERSION",
-           "FLOAT_TOLERANCE", "FLOAT_EXACT_RTOL", "FLOAT_VMAX", "iteration_bound"]
+           "FLOAT_TOLERANCE", "FLOAT_EXACT_RTOL", "FLOAT_VMAX", "Certificate"]
 
 #: bumped whenever the generated code changes for the same input
-GENERATOR_VERSION = "1"
+GENERATOR_VERSION = "2"
 #: the methods :func:`export_c` generates, in the order the docs list them
 EXPORTABLE = ("pinv", "pinv_clip", "ganging", "pinv_scale", "cgi", "wls", "qp", "dynamic")
 PRECISIONS = ("double", "float")
@@ -98,6 +101,10 @@ class ExportedKernel:
     maxit: int | None = None
     #: levels of the active set (its total cap is ``levels * maxit``)
     levels: int = 0
+    #: iterations a call with the nominal limits and no rate window may take (active set)
+    iteration_bound: int | None = None
+    #: the sampled certification behind ``iteration_bound`` (``iteration_bound="certify"``)
+    certificate: Certificate | None = None
     options: dict[str, Any] = field(default_factory=dict)
 
     def write(self, out: str | os.PathLike[str]) -> tuple[Path, Path]:
@@ -183,31 +190,6 @@ def _fill(text: str, fields: Mapping[str, str], prefix: str) -> str:
     return plain.encode("ascii", "ignore").decode("ascii")
 
 
-# --------------------------------------------------------------------------- the bound
-
-def iteration_bound(m: int, k: int, levels: int, maxit: int) -> str:
-    """The header's statement of the iteration bound of an active-set kernel and its argument."""
-    worst = (m + 1) * 3 ** m
-    return f""" *
- * Iteration bound.  Each level stops after at most PFX_MAXIT = {maxit} iterations (the
- * library's cap, 50 + 10 (m + k)); {levels} level(s), so at most PFX_MAXIT_TOTAL = {levels * maxit}
- * iterations a call, each of bounded cost (every inner loop has a fixed trip count: the
- * Jacobi SVD at most 40 sweeps over p (p - 1) / 2 column pairs), so a call's worst-case time is
- * bounded.  A level reaching the cap returns status 2 with the safe answer (the weighted
- * pseudo-inverse of Eq 1.23 clipped to the call's bounds), as the library does.
- * Why the cap is not reached: each iteration either fixes one free effector at a bound (a
- * blocking step; at most m in a row) or ends at the minimiser of the level on its working
- * set.  There the multipliers are tested and one effector with the wrong sign is freed, so the
- * level's objective strictly decreases on the next step unless the step is zero; a zero step
- * frees the same effector at most once until the iterate moves (the tabu rule).  In exact
- * arithmetic no working set (each effector free, at its lower or at its upper bound) is
- * revisited at a subspace minimiser, so a level ends within (m + 1) 3^m = {worst}
- * iterations.  That combinatorial bound is far above the cap; the cap is an enforced budget,
- * not a proof of convergence within it, and the largest count seen is measured on seeded
- * random and adversarial demands (docs/export.md).
-"""
-
-
 # --------------------------------------------------------------------------- the generator
 
 def _resolve(problem_or_vehicle: Any, method: str, options: Mapping[str, Any] | None) -> tuple[Problem, str, dict]:
@@ -238,7 +220,8 @@ def _checksum(problem: Problem) -> str:
 
 def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "double",
              options: Mapping[str, Any] | None = None, prefix: str | None = None,
-             maxit: int | None = None, table: bool | None = None) -> ExportedKernel:
+             maxit: int | None = None, table: bool | None = None,
+             iteration_bound: int | str | None = None) -> ExportedKernel:
     """Generate the C99 kernel of ``method`` on a problem or vehicle.
 
     Parameters
@@ -265,6 +248,14 @@ def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "d
         default: when the tables fit :data:`TABLE_BUDGET` bytes.  ``cgi`` always tabulates the
         pseudo-inverse of every free set: refused (ExportError naming ``table``) beyond the
         budget unless ``table=True``.
+
+    iteration_bound : int or "certify", optional
+        Active set: the iterations a call with the nominal limits and no rate window may take
+        (reaching it returns the safe answer with status 2); default ``levels * maxit``.
+        ``"certify"`` sets it to the largest count the library needs on the deterministic
+        sample of :func:`alloc.export.certify.certification_demands` (a sampled certification,
+        not a proof: see :mod:`alloc.export.certify`; ``double`` only, since the sample is run
+        in the library's double arithmetic).
 
     Returns
     -------
@@ -326,6 +317,9 @@ def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "d
     }
     impl = allocator.impl
     levels = 0
+    budget, cert = None, None
+    if iteration_bound is not None and method not in _ACTIVE_SET_METHODS:
+        raise ExportError(f"iteration_bound: {method} is closed-form (no iterations to bound)", field="iteration_bound")
     if method in ("pinv", "pinv_clip", "ganging"):
         map_c, map_p = impl.fused
         fields.update(MAP_C=real.array(map_c, "c"), MAP_P=real.array(map_p, "P"))
@@ -339,11 +333,16 @@ def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "d
     else:
         lexico = [impl._static, impl._dynamic] if method == "dynamic" else [impl._impl]
         body, levels, maxit = _active_set_fields(lexico, problem, real, fields, maxit, table)
+        budget, cert = _iteration_budget(iteration_bound, allocator, problem, precision, levels * maxit)
+        fields["BOUND"] = bound_text(m, levels, maxit, budget, cert)
+        fields["MAXIT_DEFINE"] += ("/* iterations of a call with the nominal limits and no rate window (see above) */\n"
+                                   f"#define PFX_ITERATION_BOUND {budget}\n")
     source = _fill(templates.COMMON + body, fields, prefix)
     header = _fill(templates.HEADER, fields, prefix)
     return ExportedKernel(prefix=prefix, method=method, precision=precision, header=header, source=source,
                           header_name=f"{prefix}.h", source_name=f"{prefix}.c", k=k, m=m,
-                          maxit=maxit if levels else None, levels=levels, options=shown)
+                          maxit=maxit if levels else None, levels=levels, options=shown,
+                          iteration_bound=budget if levels else None, certificate=cert if levels else None)
 
 
 def _cascade_table(impl: Any, problem: Problem, real: _Real, table: bool | None) -> str:
@@ -425,7 +424,6 @@ def _active_set_fields(instances: list[Any], problem: Problem, real: _Real, fiel
         raise ExportError(f"table: 2^{m} free sets a level is too many to tabulate", field="table")
     fields["TABLE"] = "1" if table else "0"
     fields["INSTANCES"] = _instances(instances, aset, keys, real, ml, bool(table))
-    fields["BOUND"] = iteration_bound(m, k, levels, cap)
     fields["HEALTH"] = (" *\n * Health at run time: PREFIX_set_limits(umin, umax) sets reduced limits or jams\n"
                         " * (umin[j] == umax[j]) within the nominal limits; an effectiveness change needs a new\n"
                         " * export.  The cold start and the safe answer keep the nominal Eq 1.23 matrix.\n")
@@ -434,6 +432,23 @@ def _active_set_fields(instances: list[Any], problem: Problem, real: _Real, fiel
     fields["MAXIT_DEFINE"] = (f"/* iteration cap per level and per call (see the bound above) */\n"
                               f"#define PFX_MAXIT {cap}\n#define PFX_MAXIT_TOTAL {levels * cap}\n")
     return templates_active_set.ACTIVE_SET, levels, cap
+
+
+def _iteration_budget(bound: int | str | None, allocator: Any, problem: Problem, precision: str,
+                      total: int) -> tuple[int, Certificate | None]:
+    """The per-call iteration budget of an active-set kernel, and the certification behind it."""
+    if bound is None:
+        return total, None
+    if bound == "certify":
+        if precision != "double":
+            raise ExportError("iteration_bound: the certification runs the library in double; a float kernel's "
+                              "counts can differ (give an integer)", field="iteration_bound")
+        cert = certify(allocator, problem)
+        return min(cert.bound, total), cert
+    if isinstance(bound, bool) or not isinstance(bound, (int, np.integer)) or not 1 <= bound <= total:
+        raise ExportError(f"iteration_bound: expected \"certify\" or an integer in [1, {total}], got {bound!r}",
+                          field="iteration_bound")
+    return int(bound), None
 
 
 _TABLE_NAMES = ("L", "YC", "VC", "SC", "YA", "VA", "SA")

@@ -102,9 +102,10 @@ static void ltsolve(const struct work *w, int n, real *x)
 """
 
 # one level of the lexicographic problem (alloc._active_set._level)
-_LEVEL = r"""/* one level on w->u (feasible on entry) and w->freeset: iterations, or -1 at the cap */
+_LEVEL = r"""/* one level on w->u (feasible on entry) and w->freeset, at most cap iterations: iterations,
+   or -1 at the cap */
 static int level(struct work *w, int r0, int r1, int lev, real gam, const real *up, const real *lo,
-                 const real *hi)
+                 const real *hi, int cap)
 {
     int nl = r1 - r0, nc = r0, it, i, j, q, s, c, r, last = -1;
     /* a one-level problem's final level holds level 0's rows: its factors are level 0's, and
@@ -117,7 +118,7 @@ static int level(struct work *w, int r0, int r1, int lev, real gam, const real *
     real *lam = w->lam;
     int *freeset = w->freeset, *fidx = w->fidx, *tabu = w->tabu, *pinned = w->pinned;
     for (j = 0; j < M; ++j) tabu[j] = 0;
-    for (it = 0; it < MAXIT; ++it) {
+    for (it = 0; it < cap; ++it) {
         int zero = nl > 0 && gam2 == 0, nf = 0, block = -1, worst = -1, unique = 1;
         real alpha = 1, wv = 0;
         /* residual e = b - A u; a pure least-squares level at zero residual is optimal */
@@ -307,8 +308,10 @@ static int level(struct work *w, int r0, int r1, int lev, real gam, const real *
 """
 
 # all levels from the cold start, the preference point and the entry points
-_ENTRY = r"""/* all levels for one demand into w->u: total iterations, and *ok = 0 at a level's cap */
-static int run(struct work *w, const real *v, const real *lo, const real *hi, const real *up, int *ok)
+_ENTRY = r"""/* all levels for one demand into w->u within budget iterations (and MAXIT a level): total
+   iterations, and *ok = 0 when a level reaches its cap or the budget is spent */
+static int run(struct work *w, const real *v, const real *lo, const real *hi, const real *up, int budget,
+               int *ok)
 {
     int i, j, q, l, total = 0;
     real r[K];
@@ -333,14 +336,18 @@ static int run(struct work *w, const real *v, const real *lo, const real *hi, co
     }
     *ok = 1;
     for (l = 0; l < NLEV + FINAL; ++l) {
-        int it;
+        int it, cap = budget - total < MAXIT ? budget - total : MAXIT;
+        if (cap <= 0) {
+            *ok = 0;
+            break;
+        }
         if (l < NLEV) {
-            it = level(w, STARTS[l], STARTS[l + 1], l, GAM[l], up, lo, hi);
+            it = level(w, STARTS[l], STARTS[l + 1], l, GAM[l], up, lo, hi, cap);
         } else {
-            it = level(w, N, N, l, 1, up, lo, hi);
+            it = level(w, N, N, l, 1, up, lo, hi, cap);
         }
         if (it < 0) {
-            total += MAXIT;
+            total += cap;
             *ok = 0;
             break;
         }
@@ -366,6 +373,9 @@ static int target(const struct instance *S, const real *v, const real *u_prev, r
     return good;
 }
 
+/* 1 while the limits in force are the nominal ones (PREFIX_set_limits) */
+static int limits_nominal = 1;
+
 int PREFIX_allocate(const real *v, const real *u_prev, real dt, real *u)
 {
     struct work w;
@@ -384,7 +394,9 @@ int PREFIX_allocate(const real *v, const real *u_prev, real dt, real *u)
         }
         up = upc;
     }
-    last_iterations = run(&w, v, lo, hi, up, &ok);
+    /* the certified budget covers the nominal limits without a rate window (see the header) */
+    last_iterations = run(&w, v, lo, hi, up, u_prev == NULL && limits_nominal ? PFX_ITERATION_BOUND : PFX_MAXIT_TOTAL,
+                          &ok);
     if (!ok) {
         safe_answer(v, lo, hi, u);
         return 2;
@@ -405,15 +417,18 @@ int PREFIX_set_limits(const real *umin, const real *umax)
             umin_now[j] = UMIN0[j];
             umax_now[j] = UMAX0[j];
         }
+        limits_nominal = 1;
         return 0;
     }
     if (umin == NULL || umax == NULL) return -1;
     for (j = 0; j < M; ++j) {
         if (!(UMIN0[j] <= umin[j] && umin[j] <= umax[j] && umax[j] <= UMAX0[j])) return -1;
     }
+    limits_nominal = 1;
     for (j = 0; j < M; ++j) {
         umin_now[j] = umin[j];
         umax_now[j] = umax[j];
+        if (umin[j] != UMIN0[j] || umax[j] != UMAX0[j]) limits_nominal = 0;
     }
     return 0;
 }
