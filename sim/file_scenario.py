@@ -15,6 +15,7 @@ option: ``<pilot name>_command``, one of the pilot's named commands (HARV's
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -22,11 +23,11 @@ import numpy as np
 from alloc.exceptions import ProblemError
 from alloc.vehicle_file import Vehicle as FileVehicle
 from alloc.vehicle_file.simulation import Command, FailureSpec, Simulation
-from sim.blocks import ActuatorFailure, HedgeTerm, sum_of_sines
+from sim.blocks import ActuatorFailure, ActuatorSpec, HedgeTerm, sum_of_sines
 from sim.model import Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle
 from sim.scenarios.mimo import MimoScenario
 
-__all__ = ["file_scenario", "command_signal", "filtered_steps"]
+__all__ = ["file_scenario", "actuator_of", "command_signal", "filtered_steps"]
 
 
 def filtered_steps(t: np.ndarray, times: tuple[float, ...], levels: tuple[float, ...],
@@ -53,6 +54,28 @@ def command_signal(command: Command) -> Any:
     return lambda t: filtered_steps(t, times, levels, tf)
 
 
+def actuator_of(e: Any, index: int, lo: float, hi: float, static_bandwidth: float) -> ActuatorSpec:
+    """The simulator's actuator of file effector ``e`` (``effectors[index]``) between ``lo`` and ``hi``."""
+    rate = math.inf if e.rate_max is None else float(e.rate_max)
+    if e.rate_min is not None and -e.rate_min != rate:
+        raise ProblemError(f"effectors[{index}].rate_min: the simulator's actuators have a symmetric rate limit; "
+                           f"got {e.rate_min:g} and rate_max {rate:g}", field=f"effectors[{index}].rate_min")
+    d = e.dynamics
+    if d is not None and d.delay > 0.0:
+        raise ProblemError(f"effectors[{index}].dynamics.delay: a nominal actuator delay is not modelled by the loop "
+                           "(a delay is injected only by a failure); remove it or fold it into the dynamics",
+                           field=f"effectors[{index}].dynamics.delay")
+    if d is None or (d.bandwidth is None and d.time_constant is None and d.wn is None and d.poles is None):
+        return ActuatorSpec.first_order(e.name, static_bandwidth, lo, hi, rate)
+    if d.bandwidth is not None:
+        return ActuatorSpec.first_order(e.name, d.bandwidth, lo, hi, rate)
+    if d.time_constant is not None:
+        return ActuatorSpec.first_order(e.name, 1.0 / d.time_constant, lo, hi, rate)
+    if d.wn is not None:
+        return ActuatorSpec.second_order(e.name, d.wn, d.zeta, lo, hi, rate)
+    return ActuatorSpec.two_real_poles(e.name, d.poles[0], d.poles[1], lo, hi, rate)
+
+
 def _array(x: Any) -> np.ndarray | None:
     return None if x is None else np.array(x, dtype=float)
 
@@ -71,10 +94,8 @@ def file_scenario(fv: FileVehicle, *, static_bandwidth: float = 1000.0) -> MimoS
     """The :class:`MimoScenario` of a vehicle file with a ``[simulation]`` section.
 
     ``static_bandwidth``: the first-order lag of an effector without ``dynamics``
-    (:func:`sim.user_vehicle.actuator_of`).
+    (:func:`actuator_of`).
     """
-    from sim.user_vehicle import actuator_of
-
     sim: Simulation | None = fv.simulation
     if sim is None or fv.model is None:
         raise ProblemError(f"simulation: vehicle {fv.name!r} has no [simulation] section", field="simulation")

@@ -38,7 +38,8 @@ import numpy as np
 
 from alloc.exceptions import ProblemError
 from sim.autodesign import AutoDesign, auto_design, design_options, weighted_pinv
-from sim.blocks import DEFAULT_DT, SUM_OF_SINES_TABLE_4_2, ActuatorFailure, ActuatorSpec, sum_of_sines
+from sim.file_scenario import actuator_of, file_scenario
+from sim.blocks import DEFAULT_DT, SUM_OF_SINES_TABLE_4_2, ActuatorFailure, sum_of_sines
 from sim.loop import Failure, LoopSpec, Vehicle, simulate
 from sim.result import SimResult
 from sim.settings import RunSettings
@@ -78,28 +79,6 @@ class FlightModel:
     def failure(self, name: str, time: float) -> Failure:
         """:func:`vehicle_failure` of this model."""
         return vehicle_failure(self, name, time)
-
-
-def actuator_of(e: Any, index: int, lo: float, hi: float, static_bandwidth: float) -> ActuatorSpec:
-    """The simulator's actuator of file effector ``e`` (``effectors[index]``) between ``lo`` and ``hi``."""
-    rate = math.inf if e.rate_max is None else float(e.rate_max)
-    if e.rate_min is not None and -e.rate_min != rate:
-        raise ProblemError(f"effectors[{index}].rate_min: the simulator's actuators have a symmetric rate limit; "
-                           f"got {e.rate_min:g} and rate_max {rate:g}", field=f"effectors[{index}].rate_min")
-    d = e.dynamics
-    if d is not None and d.delay > 0.0:
-        raise ProblemError(f"effectors[{index}].dynamics.delay: a nominal actuator delay is not modelled by the loop "
-                           "(a delay is injected only by a failure); remove it or fold it into the dynamics",
-                           field=f"effectors[{index}].dynamics.delay")
-    if d is None or (d.bandwidth is None and d.time_constant is None and d.wn is None and d.poles is None):
-        return ActuatorSpec.first_order(e.name, static_bandwidth, lo, hi, rate)
-    if d.bandwidth is not None:
-        return ActuatorSpec.first_order(e.name, d.bandwidth, lo, hi, rate)
-    if d.time_constant is not None:
-        return ActuatorSpec.first_order(e.name, 1.0 / d.time_constant, lo, hi, rate)
-    if d.wn is not None:
-        return ActuatorSpec.second_order(e.name, d.wn, d.zeta, lo, hi, rate)
-    return ActuatorSpec.two_real_poles(e.name, d.poles[0], d.poles[1], lo, hi, rate)
 
 
 def _trim(file_vehicle: Any) -> np.ndarray:
@@ -298,7 +277,6 @@ def fly(source: Any, settings: RunSettings | None = None, *, design: Mapping[str
     if fv.simulation is not None:
         if design:
             raise TypeError(f"design: vehicle {fv.name!r} flies its own [simulation] design; nothing to auto-design")
-        from sim.file_scenario import file_scenario
         from sim.scenarios.mimo import run_mimo
 
         scenario = file_scenario(fv, static_bandwidth=design_options(None)["static_bandwidth"])

@@ -1,0 +1,211 @@
+"""PX4 flight logs (ULog) replayed through any allocator: PX4's demands in, our commands out,
+compared with what PX4 commanded.
+
+A ULog of PX4's ``control_allocator`` (v1.13 and later) holds the demands it allocated,
+``vehicle_torque_setpoint.xyz`` and ``vehicle_thrust_setpoint.xyz`` (normalised, body axes), and
+the motor commands it sent, ``actuator_motors.control`` (0..1).  :func:`read_ulog` pairs each
+motor sample with the setpoints of the same ``timestamp_sample`` (the allocator publishes its
+output with the sample time of the demand it allocated); :func:`replay` allocates every paired
+demand with a method of the registry on the vehicle of the log's own parameters
+(:func:`alloc.importers.px4.vehicle_from_params` with PX4's normalisation, so the demands are in
+the effectiveness matrix's units) or a vehicle given, and reports the difference per motor.
+
+Needs the optional ``pyulog`` package (``pip install pyulog``).  Multicopters only
+(``actuator_motors``); control surfaces (``actuator_servos``) are not compared.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..exceptions import ProblemError
+from ..vehicle_file.fields import WRENCH_COMPONENTS
+
+__all__ = ["FlightLog", "Replay", "read_ulog", "replay"]
+
+#: the ULog topics read: the allocator's demands and its motor commands
+TOPICS = ("vehicle_torque_setpoint", "vehicle_thrust_setpoint", "actuator_motors")
+
+
+@dataclass(frozen=True)
+class FlightLog:
+    """Paired samples of a PX4 log: time (s from the log's start), demands (N x 6: roll, pitch,
+    yaw torque, then x, y, z thrust, PX4's normalised units), PX4's motor commands (N x motors)."""
+
+    t: np.ndarray
+    demand: np.ndarray
+    motors: np.ndarray
+    params: dict[str, Any]
+    software: str = ""
+
+
+@dataclass(frozen=True)
+class Replay:
+    """A log replayed with one method: our commands ``u`` beside PX4's, their difference, statuses."""
+
+    method: str
+    t: np.ndarray
+    v: np.ndarray
+    u: np.ndarray
+    px4: np.ndarray
+    status: tuple[str, ...]
+    effector_names: tuple[str, ...]
+    axes: tuple[str, ...]
+
+    @property
+    def difference(self) -> np.ndarray:
+        """``u - px4`` per sample and motor."""
+        return self.u - self.px4
+
+    def summary(self) -> dict[str, Any]:
+        """Per motor: RMS and largest |difference|; the share of samples each status took."""
+        d = self.difference
+        statuses = {s: self.status.count(s) / len(self.status) for s in sorted(set(self.status))}
+        return {"method": self.method, "samples": int(self.t.size), "effectors": list(self.effector_names),
+                "rms_difference": np.sqrt(np.mean(d ** 2, axis=0)).tolist(),
+                "max_abs_difference": np.max(np.abs(d), axis=0).tolist(), "status": statuses}
+
+    def rows(self) -> list[dict[str, Any]]:
+        """One row per sample: t, the demand by axis, our command, PX4's, the status (CSV)."""
+        out = []
+        for i in range(self.t.size):
+            row: dict[str, Any] = {"t": float(self.t[i])}
+            row |= {f"v_{a}": float(self.v[i, j]) for j, a in enumerate(self.axes)}
+            row |= {f"u_{n}": float(self.u[i, j]) for j, n in enumerate(self.effector_names)}
+            row |= {f"px4_{n}": float(self.px4[i, j]) for j, n in enumerate(self.effector_names)}
+            row["status"] = self.status[i]
+            out.append(row)
+        return out
+
+
+def _columns(data: dict[str, np.ndarray], field: str, n: int) -> np.ndarray:
+    return np.column_stack([np.asarray(data[f"{field}[{i}]"], dtype=float) for i in range(n)])
+
+
+def read_ulog(path: str | Path) -> FlightLog:
+    """The paired demands and motor commands of a ULog (ProblemError naming ``ulog`` if it lacks them)."""
+    try:
+        from pyulog import ULog
+        from pyulog.core import ULogException
+    except ImportError as exc:
+        raise ImportError("reading a ULog needs pyulog: pip install pyulog") from exc
+    try:
+        log = ULog(str(path), list(TOPICS))
+    except (ULogException, OSError, ValueError, IndexError, struct.error) as exc:
+        raise ProblemError(f"ulog: cannot read {str(path)!r} as a ULog ({exc})", field="ulog") from None
+    topics = {d.name: d.data for d in log.data_list if d.multi_id == 0}
+    missing = [t for t in TOPICS if t not in topics]
+    if missing:
+        raise ProblemError(f"ulog: {Path(path).name} has no {', '.join(missing)} (PX4 control_allocator topics, "
+                           "v1.13 and later; a multicopter log)", field="ulog")
+    torque, thrust, motors = (topics[t] for t in TOPICS)
+    if not np.array_equal(torque["timestamp_sample"], thrust["timestamp_sample"]):
+        raise ProblemError("ulog: torque and thrust setpoints are not sampled together", field="ulog")
+    setpoint_t = np.asarray(torque["timestamp_sample"])
+    motor_t = np.asarray(motors["timestamp_sample"])
+    at = np.searchsorted(setpoint_t, motor_t)
+    paired = (at < setpoint_t.size) & (setpoint_t[np.minimum(at, setpoint_t.size - 1)] == motor_t)
+    if not paired.any():
+        raise ProblemError("ulog: no motor sample has the sample time of a setpoint", field="ulog")
+    at = at[paired]
+    demand = np.column_stack([_columns(torque, "xyz", 3)[at], _columns(thrust, "xyz", 3)[at]])
+    n_motors = int(log.initial_parameters.get("CA_ROTOR_COUNT", 0)) or 1
+    px4 = _columns(motors, "control", n_motors)[paired]
+    return FlightLog(t=(motor_t[paired] - log.start_timestamp) / 1e6, demand=demand, motors=px4,
+                     params=dict(log.initial_parameters), software=str(log.msg_info_dict.get("ver_sw", "")))
+
+
+def replay(log: FlightLog, method: str = "pinv", *, vehicle: Any = None,
+           options: dict[str, Any] | None = None) -> Replay:
+    """Allocate every demand of ``log`` with ``method`` and set our commands beside PX4's.
+
+    ``vehicle``: a vehicle (name, file, :class:`~alloc.vehicle_file.Vehicle`) whose axes name
+    wrench components (``roll`` ... ``fz``) in PX4's normalised units and whose effectors are
+    the log's motors in order; default: the log's parameters through
+    :func:`~alloc.importers.px4.vehicle_from_params` (``normalize="px4"``).  The demand of an
+    axis is the log's setpoint of its component.  Every call gets ``u_prev``, our previous
+    command (the first: PX4's), and the time step, so slew limits apply.
+    """
+    import alloc
+    from alloc import vehicles
+
+    from .px4 import vehicle_from_params
+
+    fv = vehicle_from_params(log.params, name="ulog", normalize="px4") if vehicle is None else \
+        vehicles.get_vehicle(vehicle)
+    if fv.m != log.motors.shape[1]:
+        raise ProblemError(f"vehicle: {fv.m} effectors, but the log commands {log.motors.shape[1]} motors",
+                           field="vehicle")
+    rows = []
+    for i, a in enumerate(fv.axes):
+        if a.component is None:
+            raise ProblemError(f"axes[{i}].wrench: the replay needs each axis's wrench component "
+                               f"({', '.join(WRENCH_COMPONENTS)})", field=f"axes[{i}].wrench")
+        rows.append(WRENCH_COMPONENTS.index(a.component))
+    V = log.demand[:, rows]
+    allocate = alloc.make_allocator(fv.problem(), method, **vehicles.method_options(fv, method, options))
+    U = np.empty((V.shape[0], fv.m))
+    status = []
+    u_prev = log.motors[0]
+    for i in range(V.shape[0]):
+        dt = float(log.t[i] - log.t[i - 1]) if i else math.nan
+        res = allocate(V[i], u_prev=u_prev, dt=dt) if i and dt > 0 else allocate(V[i])
+        U[i] = res.u
+        status.append(str(res.status.value if hasattr(res.status, "value") else res.status))
+        u_prev = U[i]
+    return Replay(method=method, t=log.t, v=V, u=U, px4=log.motors, status=tuple(status),
+                  effector_names=fv.effector_names, axes=fv.axis_names)
+
+
+# --------------------------------------------------------------------------- command line
+def replay_command() -> Any:
+    """The typer command ``alloc replay --ulog LOG.ulg [--vehicle NAME|FILE] --method M [--csv F] [--json F]``."""
+    import json
+
+    import typer
+
+    from ..cli import VEHICLE_HELP, load_vehicle_option, output_file, parse_options
+
+    def command(
+        ulog: Path = typer.Option(..., "--ulog", help="a PX4 ULog (.ulg) with control_allocator topics"),
+        vehicle: str | None = typer.Option(None, "--vehicle", metavar="NAME|FILE",
+                                              help=f"{VEHICLE_HELP}; default: the log's own parameters (PX4 "
+                                              "normalisation)"),
+        method: str = typer.Option("pinv", "--method", help="allocation method (see `alloc methods`)"),
+        option: list[str] = typer.Option([], "--option", help="method option key=value; repeatable"),
+        csv_path: Path | None = typer.Option(None, "--csv", help="write every sample to this new file"),
+        json_path: Path | None = typer.Option(None, "--json", help="write the summary to this new file"),
+        force: bool = typer.Option(False, "--force", help="overwrite output files that exist"),
+    ) -> None:
+        """Replay a PX4 log's demands through an allocator; print how our commands differ from PX4's (JSON)."""
+        taken: dict[Path, str] = {}
+        for path, hint in ((csv_path, "--csv"), (json_path, "--json")):
+            output_file(path, force, hint, taken=taken)
+        chosen = None if vehicle is None else load_vehicle_option(vehicle)
+        try:
+            result = replay(read_ulog(ulog), method, vehicle=chosen, options=parse_options(option))
+        except ProblemError as exc:
+            raise typer.BadParameter(str(exc), param_hint=f"--{exc.field}" if exc.field in ("ulog", "vehicle")
+                                     else "--method") from None
+        summary = result.summary()
+        typer.echo(json.dumps(summary, indent=2))
+        if json_path is not None:
+            json_path.write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+        if csv_path is not None:
+            rows = result.rows()
+            lines = [",".join(rows[0])] + [",".join(str(r[k]) for k in rows[0]) for r in rows]
+            csv_path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+
+    return command
+
+
+if __name__ == "__main__":  # python -m alloc.importers.ulog --ulog LOG.ulg --method qp
+    import typer
+
+    typer.run(replay_command())
