@@ -102,6 +102,17 @@ def test_the_default_budget_is_the_library_cap_and_bad_bounds_name_the_field():
         export_c(p, "pinv", iteration_bound=5)
 
 
+def test_cli_certify_refuses_float_in_one_line(tmp_path):
+    from typer.testing import CliRunner
+
+    from alloc.cli import app
+
+    bad = CliRunner().invoke(app, ["export", "--vehicle", "hexa-x", "--method", "wls", "--certify", "--precision",
+                                   "float", "--out", str(tmp_path)])
+    assert bad.exit_code == 2 and "iteration_bound" in bad.output and len(bad.output.strip().splitlines()) == 1
+
+
+@pytest.mark.slow
 def test_cli_certify_states_the_sampled_bound(tmp_path):
     from typer.testing import CliRunner
 
@@ -111,6 +122,3 @@ def test_cli_certify_states_the_sampled_bound(tmp_path):
     result = CliRunner().invoke(app, ["export", "--vehicle", "hexa-x", "--method", "wls", "--certify", "--out", str(out)])
     assert result.exit_code == 0, result.output
     assert "certified BY SAMPLING, not proved" in (out / "alloc_wls.h").read_text()
-    bad = CliRunner().invoke(app, ["export", "--vehicle", "hexa-x", "--method", "wls", "--certify", "--precision",
-                                   "float", "--out", str(out)])
-    assert bad.exit_code == 2 and "iteration_bound" in bad.output and len(bad.output.strip().splitlines()) == 1
