@@ -350,7 +350,12 @@ def closedloop(vehicle: str = typer.Option(..., "--vehicle", metavar="NAME|FILE"
     if failure_time >= duration:
         raise typer.BadParameter(f"{failure_time:g} s is not before the end of the run ({duration:g} s)",
                                  param_hint="--failure-time")
-    vehicle_failure(flight_model(v), failure, failure_time)  # a malformed name fails here, before any run
+    if v.simulation is not None:  # the file's own loop: its failures by name (sim.file_scenario)
+        if failure not in v.simulation.failures:
+            raise typer.BadParameter(f"unknown failure {failure!r} for {v.name}; known: {sorted(v.simulation.failures)}",
+                                     param_hint="--failure")
+    else:
+        vehicle_failure(flight_model(v), failure, failure_time)  # a malformed name fails here, before any run
     names: list[str] = []
     for m in method or alloc.methods():
         if m == STATIC:  # the loop's fixed pseudo-inverse, no registry method (sim.allocation)
