@@ -369,7 +369,7 @@ SEED_FILE_RUNS = [
     pytest.param("harv_latdir", dict(method="ganging", failure="failure1", failure_time=0.5,
                                      allocator_knows_failure=True), id="harv-failure1-ganging-told"),
     pytest.param("harv_latdir", dict(method="pinv", failure="failure2", failure_time=0.3, phi_command="filtered_steps",
-                                     cross_hedge=False), id="harv-failure2-steps-no-cross-hedge"),
+                                     cross_hedge=False), marks=pytest.mark.slow, id="harv-failure2-steps-no-cross-hedge"),
     pytest.param("ice", dict(method="daisy", controller="loopshape", noise=False), marks=pytest.mark.slow,
                  id="ice-daisy-loopshape"),
     pytest.param("ice", dict(method="static", failure="seed", failure_time=0.5, observer=False),
