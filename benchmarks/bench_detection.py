@@ -5,9 +5,10 @@ written one JSON line per run to ``--out`` (so a long measurement can be stopped
 tables printed from what finished, ``--report``):
 
 ``delays``
-    per scenario, catalogue failure kind (:mod:`benchmarks.compare.failures`, single
-    effector: ICE's left elevon, HARV's aileron; ``limits`` carries the reduced rate limits)
-    and noise scale (1, 2, 5 times the seed's): ``qp``, detected, failure at a seeded random
+    per scenario, detection case (:func:`detection_cases`: the catalogue's kinds of
+    :mod:`benchmarks.compare.failures` on a single effector, ICE's left elevon, HARV's
+    aileron -- its ``limits`` carries the reduced rate limits, its loss of effectiveness leaves
+    25 % -- plus losses of 50 % and 25 % and the reduced rate limits alone) and noise scale (1, 2, 5 times the seed's): ``qp``, detected, failure at a seeded random
     time in [2, 3] s, 3 s flown after it (missed: no detection on the failed effector by then).  Per run: the first detection's delay, whether it
     named the failed effector and the kind; a run with no detection on the failed effector is
     missed; a detection before the failure or on another effector is a false alarm.
@@ -17,14 +18,18 @@ tables printed from what finished, ``--report``):
     0.005 (the simulator's coarsest step, 10 times the seed's) buys ten times the hours: the
     detector's residual is noise only at any step (the nominal actuator copy integrates as the
     plant's actuators do, the plant is exact ZOH) and its noise level is measured at that step.
+    The rate per 10 h carries an exact Poisson 95 % interval; the goal is called met only when
+    the interval lies below it.
 ``benefit``
     per scenario, kind and method (``qp``, ``wls``), seeds: the same failure flown blind,
     told and detected, failure at 3 s, 7 s flown after it.  Score ``S`` = root-sum-square over channels of the post-failure RMS
     tracking error, each divided by the blind run's pre-failure RMS of that channel (same
     seed, same pre-failure flight); the oracle's benefit that survives is
     ``(S_blind - S_detected) / (S_blind - S_told)``, from the seeds' mean scores, with a
-    bootstrap 90 % interval over seeds (2,000 resamples).  A diverged run scores inf and
-    is counted.
+    bootstrap 90 % interval over seeds (2,000 resamples), and the same of the seeds' median
+    scores (finite while fewer than half an arm's runs diverged).  A diverged run scores inf
+    and is counted.  The runs of an ``alloc bench detected`` sweep copied to
+    ``--out``/``sweep-detected/closed_*.csv`` are scored the same way (:func:`sweep_rows`).
 
 Every run flies the seed's plant, actuators and noise at the seed's 0.5 ms step with a 100 Hz
 flight-control frame (``--frame-rate``; the seed's single-rate 2 kHz loop costs three times as
@@ -41,6 +46,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import importlib
 import json
 import math
 import time
@@ -164,6 +170,137 @@ def run_false(out: Path, hours: float, flight: float, scale: float, frame_rate: 
             row = _fly(scenario, None, health="detected", method="qp", seed=1000 + s, failure_time=0.0,
                        duration=flight, noise_scale=scale, frame_period=1.0 / frame_rate, dt=dt)
             _write(out, "false", {"key": key, **row})
+
+
+def run_replay(out: Path, hours: float, scale: float, dt: float = 0.005, flight: float = 120.0) -> None:
+    """The in-loop detector, replayed: no-failure hours of the seed's noise model on recorded commands.
+
+    One ``flight``-second no-failure closed-loop run per scenario (``qp``, blind: nothing
+    can change the flight) gives the surfaces' positions at the detector's samples -- what the
+    in-loop detector's nominal actuator copy computes when nothing fails.  Fresh hours of the
+    seed's noise model (its filter, gains and ``scale``) at the step ``dt``, differenced as the
+    in-loop detector differences them, are added to ``C B u``: the residual the in-loop
+    detector sees in a no-failure flight, without the plant's cost.  The positions repeat
+    every ``flight`` seconds; the noise never does.  Two detectors on the same data: the one
+    flown (``whitened``, told the measured noise correlation) and the same told none
+    (``white``), so the cause of its false alarms is measured, not argued.
+    """
+    import sim.detection as sd
+    from sim.blocks import band_limited_noise
+
+    done = _done(out, "replay")
+    for scenario in SCENARIOS:
+        res = get_scenario(scenario)(method="qp", failure=None, duration=flight, seed=5000, health="blind",
+                                     noise_scale=scale, frame_period=0.01, dt=dt)
+        vehicle = importlib.import_module(f"sim.scenarios.{scenario}").vehicle()
+        ts = DEFAULT_DESIGN.sample_time
+        every = int(round(ts / dt))
+        pick = np.searchsorted(res.t, np.arange(1, int(res.t[-1] / ts)) * ts - 1e-9)
+        U = np.asarray(res.effectors)[pick]
+        inloop = sd.InLoopDetector(vehicle, dt, np.zeros((2, vehicle.C.shape[0])), noise_scale=scale,
+                                   actuators=True, preferred=np.zeros(len(vehicle.effector_names)))
+        made = inloop.detector
+        gains = np.zeros(vehicle.C.shape[0])
+        gains[np.asarray(vehicle.measured)] = vehicle.noise_gains
+        gains = gains[inloop.rows] * scale
+        CB = inloop.C @ vehicle.B
+        for h in range(int(math.ceil(hours))):
+            key = f"{scenario}/{scale:g}/{dt:g}/{h}"
+            if key in done:
+                continue
+            t0 = time.perf_counter()
+            rng = np.random.default_rng([7000, SCENARIOS.index(scenario), h])
+            n = int(round(3600.0 / dt)) + every
+            noise = band_limited_noise(n, dt, gains, rng)
+            diff = (noise[every::every] - noise[:-every:every][: noise[every::every].size]) / ts
+            row: dict[str, Any] = {"key": key, "scenario": scenario, "noise_scale": scale, "dt": dt, "hour": h,
+                                   "flight": flight, "flight_diverged": bool(res.diverged),
+                                   "samples": int(diff.shape[0])}
+            Uh = U[np.arange(diff.shape[0]) % U.shape[0]]
+            Yh = Uh @ CB.T + diff
+            for name, corr in (("whitened", made.noise_correlation), ("white", None)):
+                row[name] = _replay_hour(made, corr, Uh, Yh, ts)
+            row["wall"] = time.perf_counter() - t0
+            _write(out, "replay", row)
+
+
+#: chi-square tail probabilities at which the replay checks the stage-1 statistic's calibration
+CALIBRATION_TAILS = (1e-2, 1e-3, 1e-4)
+
+
+def _replay_hour(made: Any, corr: Any, U: np.ndarray, Y: np.ndarray, ts: float) -> dict[str, Any]:
+    """Stage-1 exceedances of one hour (every window at once, :meth:`FailureDetector.window_statistics`)
+    and, for each alarm, the streaming detector from a buffer's length before it to a buffer's
+    length after it (how long :meth:`FailureDetector.update` keeps an alarm pending): its
+    detections are the false alarms.  A first false detection would change a streaming
+    detector's model for the rest of the flight; here every alarm meets a healthy model, so
+    the count is of first false alarms (each would be followed, in flight, by what it causes)."""
+    def make() -> Any:
+        return type(made)(made.problem, made.noise_std, made.dt, false_alarm_rate=made.false_alarm_rate,
+                          window=made.window_seconds, hop=made.hop, min_confidence=made.min_confidence,
+                          noise_correlation=corr)
+
+    det = make()
+    W = det.window_statistics(U, Y)
+    over = np.flatnonzero((W > det.threshold()).any(axis=1)) + det.N - 1
+    # calibration: the share of (window, effector) statistics beyond chi-square's 1e-2 .. 1e-4 points
+    tail = {f"{a:g}": float((W > chi2.isf(a, det.dof)).mean()) for a in CALIBRATION_TAILS}
+    alarms, found, last = 0, [], -1
+    for e in over:
+        if e <= last:
+            continue
+        alarms += 1
+        fresh = make()
+        for s in range(max(0, e - fresh.L + 1), min(len(U), e + fresh.L + 1)):
+            got = fresh.update(U[s], Y[s], time=(s + 1) * ts)
+            if got:
+                found += got
+                break
+        last = e + fresh.L
+    return {"exceedances": int(over.size), "alarms": alarms, "tail": tail, "windows": int(W.size),
+            "detections": [{"effector": d.event.effector, "kind": d.event.kind.value, "time": d.time,
+                            "statistic": d.statistic, "threshold": d.threshold} for d in found]}
+
+
+def report_replay(rows: list[dict[str, Any]]) -> str:
+    header = ["scenario", "noise", "detector", "hours", "windows over threshold", "alarms", "detections (false)",
+              "per 10 h",
+              "95 % interval per 10 h", "goal (< 1 per 10 h)"]
+    out = []
+    for scenario in SCENARIOS:
+        for scale in sorted({r["noise_scale"] for r in rows}):
+            sel = [r for r in rows if r["scenario"] == scenario and r["noise_scale"] == scale]
+            if not sel:
+                continue
+            hours = sum(r["samples"] for r in sel) * DEFAULT_DESIGN.sample_time / 3600.0
+            for name in ("whitened", "white"):
+                n = sum(len(r[name]["detections"]) for r in sel)
+                lo, hi = (10.0 * x / hours for x in poisson_interval(n))
+                rate = 10.0 * n / hours
+                out.append([scenario, f"x{scale:g}", name + (" (flown)" if name == "whitened" else " (as before)"),
+                            f"{hours:.1f}", str(sum(r[name]["exceedances"] for r in sel)),
+                            str(sum(r[name]["alarms"] for r in sel)), str(n), f"{rate:.2f}",
+                            f"[{lo:.2f}, {hi:.2f}]", false_verdict(rate, hi) if scale == 1.0 else ""])
+    table = _table(header, out)
+    cal_rows = []
+    for scenario in SCENARIOS:
+        sel = [r for r in rows if r["scenario"] == scenario and r["noise_scale"] == 1.0 and "tail" in r["white"]]
+        for name in ("whitened", "white"):
+            if not sel:
+                continue
+            n = sum(r[name]["windows"] for r in sel)
+            cells = []
+            for a in CALIBRATION_TAILS:
+                share = sum(r[name]["tail"][f"{a:g}"] * r[name]["windows"] for r in sel) / n
+                cells.append(f"{share / a:.2f} +- {math.sqrt(a / n) / a:.2f}")
+            cal_rows.append([scenario, name, f"{n:,}", *cells])
+    if cal_rows:
+        table += ("\n\nCalibration of the stage-1 statistic (no failure, seed's noise): observed share of "
+                  "(window, effector) statistics beyond chi-square's upper point over its nominal probability "
+                  "(1 = calibrated; +- one binomial standard error, ignoring the windows' overlap).\n\n"
+                  + _table(["scenario", "detector", "statistics", *(f"beyond the {a:g} point" for a in CALIBRATION_TAILS)],
+                           cal_rows))
+    return table
 
 
 def run_benefit(out: Path, seeds: int, frame_rate: float) -> None:
@@ -369,7 +506,7 @@ def report(out: Path, markdown: bool) -> str:
              f"(measured, lags 1-5 of {DEFAULT_DESIGN.sample_time:g} s): {rho}.\n"]
     machines = _rows(out, "machine")
     if machines:
-        walls = {s: sum(r["wall"] for r in _rows(out, s)) / 3600.0 for s in ("delays", "false", "benefit")}
+        walls = {s: sum(r["wall"] for r in _rows(out, s)) / 3600.0 for s in ("delays", "false", "replay", "benefit")}
         parts.append("## Machine state\n\n" + _table(
             ["section", "started", "commit", "CPUs", "load (1, 5, 15 min)", "Python", "command"],
             [[m["section"], m["started"], m["commit"], str(m["cpus"]), ", ".join(f"{x:g}" for x in m["load"]),
@@ -378,6 +515,8 @@ def report(out: Path, markdown: bool) -> str:
             + ", ".join(f"{s} {w:.2f}" for s, w in walls.items()) + ".\n")
     for title, section, fn in (("Detection delay per kind and noise (qp, detected)", "delays", report_delays),
                                ("False alarms over no-failure flight (qp, detected)", "false", report_false),
+                               ("False alarms of the detector replayed on the noise model (no-failure commands)",
+                                "replay", report_replay),
                                ("Oracle benefit that survives detection", "benefit", report_benefit)):
         rows = _rows(out, section)
         if section == "benefit":
@@ -396,7 +535,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = ap.add_subparsers(dest="command", required=True)
     r = sub.add_parser("run")
-    r.add_argument("--section", choices=("delays", "false", "benefit"), required=True)
+    r.add_argument("--section", choices=("delays", "false", "replay", "benefit"), required=True)
     r.add_argument("--out", type=Path, required=True)
     r.add_argument("--seeds", type=int, default=10)
     r.add_argument("--noise", default="1,2,5", help="noise scales (delays)")
@@ -419,6 +558,8 @@ def main() -> None:
         print(report(args.out, args.markdown))
     elif args.section == "delays":
         run_delays(args.out, args.seeds, tuple(float(x) for x in args.noise.split(",")), args.frame_rate)
+    elif args.section == "replay":
+        run_replay(args.out, args.hours, args.noise_false, args.dt)
     elif args.section == "false":
         run_false(args.out, args.hours, args.flight, args.noise_false, args.frame_rate, args.dt, args.first_seed)
     else:

@@ -274,6 +274,33 @@ class FailureDetector(Isolation):
             stat = stat + _linear_glr(Q[:, tested], U[:, tested], np.ones(len(tested)))
         return tested, stat
 
+    def window_statistics(self, u: Any, y: Any) -> np.ndarray:
+        """Stage-1 statistics of every window of ``window`` consecutive samples, offline.
+
+        ``u`` (n, m) and ``y`` (n, k) as :meth:`update` takes them, for a detector without
+        position sensors, against its current model (the failures it knows applied as it
+        would apply them to the first sample; rate limits not tracked across samples).
+        Returns ``(n - N + 1, len(tested))``: row ``i`` the statistics after sample
+        ``i + N - 1``, those :meth:`update` compares with :meth:`threshold`.  Nothing changes.
+        """
+        if self.has_position:
+            raise OptionError("window_statistics: not for a detector with position sensors")
+        m, k, N = self.problem.m, self.problem.k, self.N
+        U = as_float_array("u", u, SampleError)
+        Y = as_float_array("y", y, SampleError)
+        if U.ndim != 2 or U.shape[1] != m or Y.shape != (U.shape[0], k) or U.shape[0] < N:
+            raise SampleError(f"u: expected (n, {m}) with y (n, {k}) and n >= {N}, got {U.shape} and {Y.shape}")
+        check_magnitude("u", U, SampleError)
+        check_magnitude("y", Y, SampleError)
+        tested = self.tested
+        B_eff, held = self._effective()
+        known = np.where(np.isnan(held), U, held)
+        R = (Y - known @ B_eff.T) / self.noise_std
+        Bw = self._Bn[:, tested]
+        S = np.lib.stride_tricks.sliding_window_view(R @ Bw, N, axis=0).swapaxes(1, 2)  # (windows, N, t)
+        Uw = np.lib.stride_tricks.sliding_window_view(known[:, tested], N, axis=0).swapaxes(1, 2)
+        return _linear_glr(S, Uw, np.einsum("ij,ij->j", Bw, Bw), self._whiten)
+
     def _test(self, t: float) -> list[Detection]:
         if len(self.tested) == 0:
             return []
@@ -423,17 +450,17 @@ def _linear_glr(S: np.ndarray, U: np.ndarray, c: np.ndarray, whiten: np.ndarray 
     ``u`` does not vary contributes only the first term (rank 1: no information on the second
     parameter, none invented).
     """
-    n = S.shape[0]
+    n = S.shape[-2]  # leading axes, if any, are windows (window_statistics)
     x1 = np.ones(n)
     if whiten is not None:
         S, U, x1 = whiten @ S, whiten @ U, whiten @ x1
     x11 = float(x1 @ x1)
-    Uc = U - np.outer(x1, (x1 @ U) / x11)
+    Uc = U - x1[:, None] * ((x1 @ U) / x11)[..., None, :]
     cc = np.where(c > 0, c, np.inf)
     s0 = x1 @ S
-    s1 = np.einsum("ij,ij->j", S, Uc)
-    uu = np.einsum("ij,ij->j", Uc, Uc)
-    scale = np.maximum(np.abs(Uc).max(axis=0, initial=0.0), 1e-300)
+    s1 = np.einsum("...ij,...ij->...j", S, Uc)
+    uu = np.einsum("...ij,...ij->...j", Uc, Uc)
+    scale = np.maximum(np.abs(Uc).max(axis=-2, initial=0.0), 1e-300)
     varies = uu > (1e-12 * scale) ** 2 * n
     term2 = np.where(varies, s1 * s1 / (cc * np.where(varies, uu, 1.0)), 0.0)
     return s0 * s0 / (x11 * cc) + term2

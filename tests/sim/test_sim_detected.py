@@ -203,3 +203,25 @@ def test_seeded_silent_failures_keep_the_promises(case):
     lo, hi = blind.effector_limits[0][0], blind.effector_limits[1][0]
     assert np.isfinite(det.effectors).all()
     assert (det.effectors >= lo - 1e-9).all() and (det.effectors <= hi + 1e-9).all()
+
+
+def test_the_detector_is_told_the_noise_correlation_it_sees():
+    """The autocorrelation told to the in-loop detector (measured once on a seeded hour of the
+    noise model) is that of an independent hour, lag by lag within 4 standard errors
+    (1 / sqrt(36,000) each), and it is not white (the reason the detector is told it)."""
+    from sim.blocks import band_limited_noise
+    from sim.scenarios.harv_latdir import vehicle as harv_vehicle
+
+    dt, ts = 0.005, 0.1
+    every = int(round(ts / dt))
+    noise = band_limited_noise(int(3600 / dt) + every, dt, np.ones(1), np.random.default_rng(99))[:, 0]
+    d = (noise[every::every] - noise[:-every:every][: noise[every::every].size]) / ts
+    d = d - d.mean()
+    independent = np.array([d[lag:] @ d[:-lag] for lag in range(1, 6)]) / (d @ d)
+    told = np.array(detection.response_noise_correlation(dt, ts)[:5])
+    assert np.abs(told - independent).max() < 4 / np.sqrt(d.size), (told, independent)
+    assert told[0] > 0.1 and told[1] < -0.2 and told[2] < -0.15  # +0.13, -0.24, -0.19
+    v = harv_vehicle()
+    inloop = detection.InLoopDetector(v, dt, np.zeros((4, v.C.shape[0])), noise_scale=2.0, actuators=True,
+                                      preferred=np.zeros(len(v.effector_names)))
+    assert inloop.detector.noise_correlation.tolist() == list(detection.response_noise_correlation(dt, ts))

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import alloc
-from alloc.estimation import FailureDetector, StateError
+from alloc.estimation import FailureDetector, SampleError, StateError
 from alloc.exceptions import OptionError
 
 DT = 0.01
@@ -113,3 +113,25 @@ def test_the_correlation_is_stored_and_old_states_load() -> None:
     state["noise_correlation"] = [2.0]
     with pytest.raises(StateError, match="noise_correlation"):
         FailureDetector.from_dict(p, state)
+
+
+@pytest.mark.parametrize("corr", [None, [0.13, -0.24, -0.19]])
+def test_window_statistics_are_the_streaming_ones(corr) -> None:
+    """Every window's stage-1 statistics at once equal those the streaming detector computes
+    sample by sample (to round-off), white or whitened; bad arrays are refused naming ``u``."""
+    rng = np.random.default_rng(1)
+    B = rng.normal(size=(3, 4))
+    p = alloc.Problem(B, -20 * np.ones(4), 20 * np.ones(4))
+    U = rng.uniform(-10, 10, (60, 4))
+    Y = U @ B.T + 0.5 * rng.normal(size=(60, 3))
+    det = FailureDetector(p, 0.5, 0.1, window=0.4, hop=1, noise_correlation=corr, false_alarm_rate=1e-9)
+    batch = det.window_statistics(U, Y)
+    streamed = []
+    for i in range(60):
+        det.update(U[i], Y[i])
+        if i >= det.N - 1:
+            streamed.append(det._stage1(det.N)[1])
+    assert batch.shape == (57, 4) and np.allclose(batch, np.array(streamed), rtol=1e-12, atol=1e-12)
+    with pytest.raises(SampleError) as info:
+        det.window_statistics(U[:, :3], Y)
+    assert info.value.field == "u"

@@ -1,0 +1,49 @@
+"""benchmarks/bench_detection.py: the cases it flies, the false-alarm interval and verdict, the
+surviving-benefit fraction and the reading of an ``alloc bench detected`` sweep."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from benchmarks import bench_detection as bd
+
+
+def test_detection_cases_are_the_catalogue_and_the_stated_variants():
+    assert bd.detection_cases()[:5] == ("jam", "hardover", "float", "effectiveness", "limits")
+    loe25 = bd.case_failure("ice", "loe25", 2.5)
+    assert [(a.index, a.kind, a.params) for a in loe25.actuators] == [(0, "effectiveness", {"fraction": 0.75})]
+    rate = bd.case_failure("harv_latdir", "rate_limits", 2.0)
+    assert [a.kind for a in rate.actuators] == ["rate_limits"] and rate.time == 2.0
+    assert bd.case_kind("loe50") == "effectiveness" and bd.case_kind("jam") == "jam"
+
+
+def test_poisson_interval_and_verdict():
+    # exact (Garwood) 95 % limits: 0 events [0, 3.689], 5 events [1.623, 11.668]
+    assert bd.poisson_interval(0) == pytest.approx((0.0, 3.6889), abs=1e-4)
+    assert bd.poisson_interval(5) == pytest.approx((1.6235, 11.6683), abs=1e-4)
+    assert bd.false_verdict(0.5, 0.9) == "met"
+    assert bd.false_verdict(0.5, 2.0).startswith("not shown")
+    assert bd.false_verdict(1.5, 3.0) == "NOT met"
+
+
+def test_surviving_fraction_mean_and_median():
+    blind, told = np.array([4.0, 6.0, 5.0]), np.array([2.0, 2.0, 2.0])
+    detected = np.array([2.5, 2.5, math.inf])
+    assert math.isnan(bd.surviving_fraction(blind, told, detected))
+    assert bd.surviving_fraction(blind, told, detected, np.median) == pytest.approx((5 - 2.5) / 3)
+    assert math.isnan(bd.surviving_fraction(told, blind, detected))  # told no better: undefined
+
+
+def test_sweep_rows_read_a_detected_sweep(tmp_path):
+    header = "scenario,setting,failure,method,health,seed,diverged,ps_rms_before,ps_rms_after\n"
+    rows = ["ice,frame_period=0.01,jam1,qp,blind,1,False,0.5,2.0", "ice,frame_period=0.01,jam1,qp,told,1,False,0.5,1.0",
+            "ice,frame_period=0.01,jam1,qp,detected,1,True,0.5,nan"]
+    path = tmp_path / "closed_ice.csv"
+    path.write_text(header + "\n".join(rows) + "\n")
+    got = bd.sweep_rows(path)
+    assert [(r["kind"], r["health"], r["seed"], r["diverged"], r["frame_period"]) for r in got] == [
+        ("jam", "blind", 1, False, 0.01), ("jam", "told", 1, False, 0.01), ("jam", "detected", 1, True, 0.01)]
+    assert bd.score(got[1], got[0]) == pytest.approx(2.0) and bd.score(got[2], got[0]) == math.inf
