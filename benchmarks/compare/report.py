@@ -392,8 +392,12 @@ def _headline(cells: Sequence[Row], ratios: Sequence[Row], agreement: Sequence[R
     for (scenario, setting), grp in _groups(cells, ("scenario", "setting")).items():
         best = []
         for f in _failure_order(sorted({c["failure"] for c in grp})):
-            top = [f"{c['method']} {c['mode']} ({_fmt(c['score'], 2)})" for c in grp
-                   if c["failure"] == f and c["rank"] == 1 and c["method"] != STATIC]
+            fc = [c for c in grp if c["failure"] == f]
+            if not any(math.isfinite(c["score"]) for c in fc):  # static diverged: nothing to rank against
+                best.append(f"`{f}`: no finite score (`{STATIC}` diverged in every seed, or every method did)")
+                continue
+            top = [f"{c['method']} {c['mode']} ({_fmt(c['score'], 2)})" for c in fc
+                   if c["rank"] == 1 and c["method"] != STATIC]
             best.append(f"`{f}`: {', '.join(top) or 'static only'}")
         out.append(f"- **{TITLES.get(scenario, scenario)}, `{setting}`, rank 1 per failure** (median score; "
                    f"ties = overlapping 95 % intervals): " + "; ".join(best) + ".")
