@@ -89,7 +89,8 @@ class DetectorSettings:
 
     def window_samples(self) -> int:
         """``N``, the detector's window in samples (the library's rule: at least 4)."""
-        return max(4, int(round(self.window / self.sample_time)))
+        ratio = self.window / self.sample_time  # inf for a sample time near zero: capped, never an int of it
+        return max(4, int(round(min(ratio, 1e12))))
 
     def detector(self, nominal: alloc.Problem) -> FailureDetector:
         """A fresh detector for the vehicle's nominal problem."""

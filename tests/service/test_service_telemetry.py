@@ -153,6 +153,7 @@ def test_ice_silent_jam_is_applied_within_the_delay_and_allocations_hold_it(clie
     assert [(d["effector"], d["kind"]) for d in detections] == [("elevon_l", "jam")]
     d = detections[0]
     assert 0.0 <= d["time"] - FAILURE_TIME <= DELAY_S
+    assert d["time"] == pytest.approx(FAILURE_TIME)  # the first sample after the jam (docs/telemetry.md)
     print(f"\nICE silent jam at {FAILURE_TIME} s: decided at {d['time']:.3f} s (delay {d['time'] - FAILURE_TIME:.3f} s), "
           f"position {d['params']['position']:.3f} +- {d['evidence']['parameter_std']:.3f}, health changed with the "
           f"batch ending at {changed_at} s")
@@ -278,6 +279,17 @@ def test_the_state_and_a_batch_are_bounded(client):
     r = post(client, vid, t2, np.zeros((MAX_SAMPLES, 4)), np.zeros((MAX_SAMPLES, 3)))
     assert r.status_code == 422 and r.json()["errors"][0]["pointer"] == "/t" and f"{fit} fit" in r.json()["detail"]
     assert client.get(f"/v1/vehicles/{vid}/telemetry").json()["samples"] == 0
+
+
+def test_declared_price_examples_of_the_docs():
+    """docs/telemetry.md's examples of what fits in one batch (ALLOC_BATCH_BUDGET_S = 2 s)."""
+    from service.telemetry import DetectorSettings
+
+    def fit(m, hop):
+        settings = DetectorSettings(sample_time=0.1, noise_std=[1.0], window=0.4, hop=hop)
+        return int(2.0 / batch_seconds(settings, m, 1))
+    assert (fit(11, 1), fit(11, 2), fit(64, 1)) == (58, 114, 10)
+    assert 2 * MAX_WINDOW_SAMPLES * (3 * 64 + 6 + 1) == 12_736
 
 
 # ----------------------------------------------------------------------------- hostile
@@ -479,6 +491,7 @@ def test_bad_settings_are_refused_naming_the_field(client):
                         ({**SMALL_SETTINGS, "noise_std": 0.0}, "noise_std"),
                         ({**SMALL_SETTINGS, "window": 100.0}, "window"),
                         ({**SMALL_SETTINGS, "hop": 5}, "hop"),
+                        ({**SMALL_SETTINGS, "sample_time": 1e-300}, "window"),  # window / sample time overflows
                         ({**SMALL_SETTINGS, "sample_time": math.inf}, "sample_time"),
                         ({**SMALL_SETTINGS, "policy": "sometimes"}, "policy"),
                         ({**SMALL_SETTINGS, "position_noise_std": [1.0] * 3}, "position_noise_std")):
