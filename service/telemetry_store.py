@@ -48,7 +48,9 @@ __all__ = ["TelemetryStore", "TelemetryRunner", "MAX_PROPOSALS"]
 
 #: proposals kept per vehicle (the newest; decided ones are dropped first)
 MAX_PROPOSALS = 64
-_MAX_RETRIES = 8
+#: runs of one write when other writers to the same vehicle keep getting there first (409 beyond):
+#: a batch's CPU is at most this many times its price
+_MAX_RETRIES = 3
 #: the tables themselves: Core statements (as service.store's) skip the ORM's bookkeeping
 _TELEMETRY, _PROPOSALS = TelemetryRow.__table__, ProposalRow.__table__
 _VEHICLES, _EVENTS = VehicleRow.__table__, EventRow.__table__
@@ -62,12 +64,18 @@ class TelemetryRunner:
         self._slots = threading.BoundedSemaphore(threads + queue)
 
     async def run(self, fn: Callable[..., Any], *args: Any) -> Any:
+        """``fn(*args)`` on a telemetry thread; 429 when the threads and the queue are taken."""
         if not self._slots.acquire(blocking=False):
             raise TooManyRequests("telemetry work is at its limit (2 running, 8 waiting); retry shortly")
         try:
-            return await asyncio.wrap_future(self._pool.submit(fn, *args))
-        finally:
+            future = self._pool.submit(fn, *args)
+        except BaseException:
             self._slots.release()
+            raise
+        # the slot is the job's, not the request's: a client that goes away does not free it
+        # while its job still runs or waits
+        future.add_done_callback(lambda _: self._slots.release())
+        return await asyncio.wrap_future(future)
 
     def close(self) -> None:
         self._pool.shutdown(wait=False, cancel_futures=True)
@@ -168,7 +176,11 @@ class TelemetryStore:
     # ---------------------------------------------------------------- batches
     def ingest(self, vehicle_id: str, make_samples: Callable[[VehicleState, DetectorSettings], Samples],
                budget: float) -> dict[str, Any]:
-        """Run one batch and commit its outcome (module docstring); the answer as a dict."""
+        """Run one batch and commit its outcome (module docstring); the answer as a dict.
+
+        The detector runs between two short sessions (no connection or snapshot held while it
+        runs); the write commits only if nobody wrote the vehicle's telemetry or health since
+        the read."""
         for _ in range(_MAX_RETRIES):
             vehicle = self.store.get(vehicle_id)
             with self._sessions() as session:
@@ -176,18 +188,19 @@ class TelemetryStore:
                 row = db.execute(select(_TELEMETRY).where(_TELEMETRY.c.vehicle_id == vehicle_id)).one_or_none()
                 if row is None:
                     raise _not_configured(vehicle_id)
-                settings = DetectorSettings.from_record(row.config)
-                samples = make_samples(vehicle, settings)
-                check_price(settings, vehicle.nominal.m, len(samples), budget)
                 pending = db.execute(select(_PROPOSALS.c.detection).where(_PROPOSALS.c.vehicle_id == vehicle_id,
                                                                           _PROPOSALS.c.status == "pending")
                                      .order_by(_PROPOSALS.c.id)).scalars().all()
-                align = None
-                if row.synced_version != vehicle.version or row.state is None:
-                    align = belief(vehicle.nominal, vehicle.health, [event_of(d) for d in pending])
-                outcome = run_batch(vehicle.nominal, settings, row.state, align, samples)
-                policy = Policy(row.policy)
-                applied = self._commit(db, vehicle, row, policy, outcome)
+            settings = DetectorSettings.from_record(row.config)
+            samples = make_samples(vehicle, settings)
+            check_price(settings, vehicle.nominal.m, len(samples), budget)
+            align = None
+            if row.synced_version != vehicle.version or row.state is None:
+                align = belief(vehicle.nominal, vehicle.health, [event_of(d) for d in pending])
+            outcome = run_batch(vehicle.nominal, settings, row.state, align, samples)
+            policy = Policy(row.policy)
+            with self._sessions() as session:
+                applied = self._commit(session.connection(), vehicle, row, policy, outcome)
                 if applied is None:
                     session.rollback()
                     continue
@@ -213,8 +226,7 @@ class TelemetryStore:
         new_state: VehicleState | None = None
         seqs: list[int] = []
         ids: list[int] = []
-        synced = row.synced_version if row.synced_version == vehicle.version and row.state is not None \
-            else vehicle.version
+        synced = vehicle.version  # the belief is aligned with this version now (run_batch realigned it)
         if policy is Policy.AUTO and outcome.detections:
             health, version = vehicle.health, vehicle.version
             rows = []
