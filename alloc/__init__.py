@@ -24,6 +24,7 @@ import sys
 import types
 from typing import TYPE_CHECKING, Any
 
+from . import _lazy
 from .exceptions import (
     AllocError,
     DemandError,
@@ -63,39 +64,20 @@ DISTRIBUTION = "alloc-toolkit"
 __version__ = "0.1.0"
 
 
-def __getattr__(name: str) -> Any:
-    module = _LAZY.get(name)
-    if module is None:
-        raise AttributeError(f"module 'alloc' has no attribute {name!r}")
-    value = getattr(importlib.import_module(f".{module}", __name__), name)
-    globals()[name] = value  # later look-ups skip this function
-    return value
+def _submodule(name: str) -> types.ModuleType:
+    module = _LAZY[name]
+    return importlib.import_module(f".{module}", __name__)
 
 
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(__all__))
+def _registry_methods() -> Any:
+    from .registry import methods
+
+    return methods
 
 
-class _Package(types.ModuleType):
-    """The ``alloc`` module object: ``alloc.methods`` stays the registry's function.
-
-    The sub-package :mod:`alloc.methods` has the same name; importing it makes the import
-    system bind it on its parent, which would hide the function.  The binding is ignored
-    here (the sub-package is always reachable as ``sys.modules["alloc.methods"]``).
-    """
-
-    @property
-    def methods(self) -> Any:
-        from .registry import methods
-
-        return methods
-
-    @methods.setter
-    def methods(self, value: Any) -> None:
-        pass
-
-
-sys.modules[__name__].__class__ = _Package
+__getattr__, __dir__ = _lazy.attach(__name__, _LAZY, __all__, _submodule)
+# the sub-package ``alloc.methods`` has the name of the registry's function ``alloc.methods()``
+_lazy.keep_function(__name__, "methods", _registry_methods)
 
 
 def _place_kernel_caches() -> None:

@@ -18,9 +18,10 @@ allocator nor ``scipy.optimize`` (``tests/test_layering.py``).
 from __future__ import annotations
 
 import importlib
-import sys
 import types
 from typing import TYPE_CHECKING, Any
+
+from .. import _lazy
 
 if TYPE_CHECKING:  # the lazily loaded names, for type checkers and IDEs
     from .coverage import CoverageResult, coverage, sample_ams
@@ -39,34 +40,15 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str) -> Any:
-    module = _LAZY.get(name)
-    if module is None:
-        raise AttributeError(f"module 'alloc.ams' has no attribute {name!r}")
-    value = getattr(importlib.import_module(f".{module}", __name__), name)
-    globals()[name] = value  # later look-ups skip this function
-    return value
+def _submodule(name: str) -> types.ModuleType:
+    module = _LAZY[name]
+    return importlib.import_module(f".{module}", __name__)
 
 
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(__all__))
+def _coverage_function() -> Any:
+    return importlib.import_module(".coverage", __name__).coverage
 
 
-class _Package(types.ModuleType):
-    """The ``alloc.ams`` module object: ``alloc.ams.coverage`` stays the function.
-
-    The submodule :mod:`alloc.ams.coverage` has the function's name; importing it makes the
-    import system bind the module on this package, which would hide the function.  That
-    binding is ignored here (the submodule is always ``sys.modules["alloc.ams.coverage"]``).
-    """
-
-    @property
-    def coverage(self) -> Any:
-        return importlib.import_module(".coverage", __name__).coverage
-
-    @coverage.setter
-    def coverage(self, value: Any) -> None:
-        pass
-
-
-sys.modules[__name__].__class__ = _Package
+__getattr__, __dir__ = _lazy.attach(__name__, _LAZY, __all__, _submodule)
+# the submodule ``alloc.ams.coverage`` has the name of the function ``alloc.ams.coverage()``
+_lazy.keep_function(__name__, "coverage", _coverage_function)
