@@ -1,7 +1,8 @@
 """The standing adversarial suite (issue 9): seeded hostile problems against the contract.
 
 The generator, the contract check, the watchdog subprocesses and the shrinker live in
-``tests/hostile.py``.  The default run covers ``DEFAULT_CASES`` seeds; the slow run
+``tests/hostile.py`` (its generator in ``tests/hostile_cases.py``, the contract check in
+``tests/hostile_checks.py``).  The default run covers ``DEFAULT_CASES`` seeds; the slow run
 (``pytest -m slow``) covers ``SLOW_CASES``, and its result is recorded in the README
 ("Adversarial suite").  A failure prints the shrunk minimal case, reproducible with
 ``hostile.check(case)`` or from its seed with ``hostile.case(seed)``.
@@ -16,6 +17,7 @@ from collections import Counter
 import pytest
 
 import hostile
+import hostile_checks
 
 DEFAULT_CASES = int(os.environ.get("ALLOC_HOSTILE_CASES", "1500"))
 SLOW_CASES = 100_000
@@ -84,7 +86,7 @@ def test_slow_call_rule_counts_cpu_not_waiting(monkeypatch):
          "fields": {"B": [[1.0, 1.0]], "umin": [-1, -1], "umax": [1, 1]}, "calls": [{"v": [0.5]}]}
     hostile.check(c)
     real = alloc.Allocator.__call__
-    monkeypatch.setattr(hostile, "CALL_LIMIT", 0.1)
+    monkeypatch.setattr(hostile_checks, "CALL_LIMIT", 0.1)
 
     def waiting(self, v, **kw):
         time.sleep(0.3)
@@ -98,9 +100,9 @@ def test_slow_call_rule_counts_cpu_not_waiting(monkeypatch):
 
     monkeypatch.setattr(alloc.Allocator, "__call__", waiting)
     assert hostile.check(c)["fail"] == []
-    monkeypatch.setattr(hostile, "CALL_WALL_LIMIT", 0.2)
+    monkeypatch.setattr(hostile_checks, "CALL_WALL_LIMIT", 0.2)
     assert any(s.startswith("slow call") for s in hostile.check(c)["fail"])
-    monkeypatch.setattr(hostile, "CALL_WALL_LIMIT", 20.0)
+    monkeypatch.setattr(hostile_checks, "CALL_WALL_LIMIT", 20.0)
     monkeypatch.setattr(alloc.Allocator, "__call__", computing)
     fails = hostile.check(c)["fail"]
     assert len(fails) == 1 and fails[0].startswith("slow call: 0.3")
