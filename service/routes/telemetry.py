@@ -18,7 +18,7 @@ import time
 from typing import Annotated, Any, Literal
 
 import pydantic_core
-from fastapi import APIRouter, Depends, Path, Query, Request, Response, WebSocket
+from fastapi import APIRouter, Depends, Path, Query, Request, WebSocket
 from fastapi.exceptions import RequestValidationError
 from pydantic import ValidationError
 from starlette.websockets import WebSocketDisconnect
@@ -28,18 +28,17 @@ import alloc
 from ..bodies import JsonRoute
 from ..deps import StoreDep, end_parse_turn, require_api_key
 from ..errors import (
-    _LIBRARY_ERRORS, InvalidRequest, NotFound, PayloadTooLarge, ServiceError, TooManyRequests, Unauthorized,
+    _LIBRARY_ERRORS, InvalidRequest, PayloadTooLarge, ServiceError, TooManyRequests, Unauthorized,
     _validation_errors, field_error, library_error_fields, problem_response,
 )
 from ..health import health_out
 from ..schemas import NOT_FOUND, PROBLEM_RESPONSES, UNAUTHORIZED, EventOut, HealthOut, ProblemOut
 from ..store import VehicleState
-from ..telemetry import Samples, samples_from
+from ..telemetry import DetectorSettings, Policy, Samples, samples_from
 from ..telemetry_schemas import (
     ProposalDecided, ProposalList, ProposalOut, TelemetryBatchIn, TelemetryConfigIn, TelemetryOut, TelemetryResult,
 )
 from ..telemetry_store import TelemetryStore
-from ..telemetry import DetectorSettings, Policy
 
 __all__ = ["router", "WS_MAX_MESSAGE_BYTES", "WS_MESSAGES_PER_S", "WS_BURST"]
 
