@@ -22,6 +22,7 @@ from typer.testing import CliRunner
 
 from alloc.cli import app
 
+ULOG = Path(__file__).resolve().parent / "data" / "px4_sitl_quad.ulg"  # tests/alloc/test_import_ulog.py
 REPO = Path(__file__).resolve().parents[2]
 runner = CliRunner()
 SEED = 20261201
@@ -319,6 +320,10 @@ def _option_cases(tmp: Path) -> list[tuple[list[str], list[str], tuple[str, ...]
         (["serve", "--api-key-file"], [str(tmp / "absent"), str(tmp)], ("--api-key-file",)),
         (["serve", "--data-dir"], [str(existing)], ("--data-dir",)),
         (["serve", "--api-key"], ["secret"], ("--api-key",)),
+        (["replay", "--ulog"], [str(tmp / "absent.ulg"), str(tmp), str(existing)], ("--ulog",)),
+        (["replay", "--ulog", str(ULOG), "--method"], ["nope"], ("method",)),
+        (["replay", "--ulog", str(ULOG), "--vehicle"], ["nope", str(tmp / "absent.toml")], ("vehicle",)),
+        (["replay", "--ulog", str(ULOG), "--csv"], [str(existing)], ("--csv",)),
     ]
 
 
@@ -329,7 +334,7 @@ def test_every_invalid_value_of_every_flag(tmp_path: Path) -> None:
             line = assert_one_line_error(invoke([*prefix, value]), *tokens)
             assert ": error: " in line, line
         seen.add(prefix[0] if prefix[0] != "ams" else " ".join(prefix[:2]))
-    assert {"allocate", "ams coverage", "ams plot", "ams summary", "sim", "bench", "serve"} <= seen
+    assert {"allocate", "ams coverage", "ams plot", "ams summary", "sim", "bench", "serve", "replay"} <= seen
     assert not (tmp_path / "new.png").exists() and not (tmp_path / "a.json").exists()  # nothing written
 
 

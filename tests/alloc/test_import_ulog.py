@@ -92,3 +92,17 @@ def test_command_prints_the_summary_and_writes_csv(tmp_path):
     assert len(lines) == 141 and lines[0].startswith("t,v_roll,v_pitch,v_yaw,v_fz,u_motor1")
     bad = CliRunner().invoke(app, ["--ulog", str(tmp_path / "r.csv")])
     assert bad.exit_code == 2
+
+
+def test_alloc_replay_is_a_registered_command(tmp_path):
+    """`alloc replay` reaches the same function through the alloc.commands entry point."""
+    from typer.testing import CliRunner
+
+    from alloc.cli import app
+
+    out = tmp_path / "replay.json"
+    res = CliRunner().invoke(app, ["replay", "--ulog", str(LOG), "--method", "pinv", "--json", str(out)])
+    assert res.exit_code == 0, res.output
+    assert json.loads(out.read_text()) == replay(read_ulog(LOG), "pinv").summary()
+    bad = CliRunner().invoke(app, ["replay", "--ulog", str(tmp_path / "absent.ulg")])
+    assert bad.exit_code == 2 and "ulog: cannot read" in bad.output
