@@ -111,6 +111,30 @@ def check_price(settings: DetectorSettings, m: int, n: int, budget: float) -> No
         raise InvalidRequest(f"t: {reason}", [field_error("t", reason)])
 
 
+def append_events(db: Any, vehicle: VehicleState, events: list[tuple[FailureEvent, str]]
+                  ) -> tuple[VehicleState, list[dict[str, Any]]] | None:
+    """Record ``events`` (each with its note) for ``vehicle`` as posted events are recorded
+    (:mod:`alloc.health` rules, ``seq`` = the new health version), in the open transaction, on
+    the condition that the vehicle's ``health_version`` is still the one read; returns the new
+    state and the event rows, or ``None`` when another writer got there first."""
+    health, version = vehicle.health, vehicle.version
+    rows = []
+    for failure, note in events:
+        applied = resolve_event(vehicle.nominal, failure)
+        name, health = apply_health_event(vehicle.nominal, health, applied)
+        version += 1
+        rows.append({"vehicle_id": vehicle.id, "seq": version, "effector": name, "kind": applied.kind.value,
+                     "params": applied.params, "note": note, "recorded_at": utcnow()})
+    done = db.execute(update(_VEHICLES).where(_VEHICLES.c.id == vehicle.id,
+                                              _VEHICLES.c.health_version == vehicle.version)
+                      .values(health=dump_health(health), health_version=version))
+    if done.rowcount != 1:
+        return None
+    db.execute(insert(_EVENTS), rows)
+    return (VehicleState(vehicle.id, vehicle.name, vehicle.created_at, vehicle.nominal, health, version,
+                         to_problem(vehicle.nominal, health)), rows)
+
+
 class TelemetryStore:
     """Telemetry writes and reads for the vehicles of ``store`` (same database)."""
 
@@ -228,27 +252,16 @@ class TelemetryStore:
         ids: list[int] = []
         synced = vehicle.version  # the belief is aligned with this version now (run_batch realigned it)
         if policy is Policy.AUTO and outcome.detections:
-            health, version = vehicle.health, vehicle.version
-            rows = []
-            for d in outcome.detections:
-                applied = resolve_event(vehicle.nominal, d.event)
-                name, health = apply_health_event(vehicle.nominal, health, applied)
-                version += 1
-                seqs.append(version)
-                rows.append({"vehicle_id": vehicle.id, "seq": version, "effector": name, "kind": applied.kind.value,
-                             "params": applied.params, "recorded_at": utcnow(),
-                             "note": f"telemetry: detected at t = {d.time:.4f} s, confidence {d.confidence:.4f}"})
-            done = db.execute(update(_VEHICLES).where(_VEHICLES.c.id == vehicle.id,
-                                                      _VEHICLES.c.health_version == vehicle.version)
-                              .values(health=dump_health(health), health_version=version))
-            if done.rowcount != 1:
+            appended = append_events(db, vehicle, [
+                (d.event, f"telemetry: detected at t = {d.time:.4f} s, confidence {d.confidence:.4f}")
+                for d in outcome.detections])
+            if appended is None:
                 return None
-            db.execute(insert(_EVENTS), rows)
-            new_state = VehicleState(vehicle.id, vehicle.name, vehicle.created_at, vehicle.nominal, health, version,
-                                     to_problem(vehicle.nominal, health))
+            new_state, rows = appended
+            seqs = [r["seq"] for r in rows]
             # the detector applies its findings as "replaces what was known"; a posted event may
             # combine with what was known instead: the next batch realigns when the two differ
-            synced = version if dump_health(outcome.belief) == dump_health(health) else -1
+            synced = new_state.version if dump_health(outcome.belief) == dump_health(new_state.health) else -1
         done = db.execute(update(_TELEMETRY).where(_TELEMETRY.c.vehicle_id == vehicle.id,
                                                    _TELEMETRY.c.revision == row.revision)
                           .values(state=outcome.state, revision=row.revision + 1, synced_version=synced,
@@ -305,22 +318,13 @@ class TelemetryStore:
                 new_state = None
                 values: dict[str, Any] = {"status": "accepted" if accept else "rejected", "decided_at": now}
                 if accept:
-                    event = resolve_event(vehicle.nominal, FailureEvent(prop.effector, prop.kind, **prop.params))
-                    name, health = apply_health_event(vehicle.nominal, vehicle.health, event)
-                    version = vehicle.version + 1
-                    done = db.execute(update(_VEHICLES).where(_VEHICLES.c.id == vehicle_id,
-                                                              _VEHICLES.c.health_version == vehicle.version)
-                                      .values(health=dump_health(health), health_version=version))
-                    if done.rowcount != 1:
+                    appended = append_events(db, vehicle, [(FailureEvent(prop.effector, prop.kind, **prop.params),
+                                                            f"telemetry proposal {pid} accepted")])
+                    if appended is None:
                         session.rollback()
                         continue
-                    event_row = {"vehicle_id": vehicle_id, "seq": version, "effector": name, "kind": event.kind.value,
-                                 "params": event.params, "recorded_at": now,
-                                 "note": f"telemetry proposal {pid} accepted"}
-                    db.execute(insert(_EVENTS).values(**event_row))
-                    values["event_seq"] = version
-                    new_state = VehicleState(vehicle.id, vehicle.name, vehicle.created_at, vehicle.nominal, health,
-                                             version, to_problem(vehicle.nominal, health))
+                    new_state, (event_row,) = appended
+                    values["event_seq"] = new_state.version
                 else:  # the detector's belief drops the proposal at its next batch
                     db.execute(update(_TELEMETRY).where(_TELEMETRY.c.vehicle_id == vehicle_id)
                                .values(synced_version=-1, revision=_TELEMETRY.c.revision + 1, updated_at=now))
