@@ -47,7 +47,8 @@ from alloc.exceptions import AllocError
 #: entry-point group through which other packages add sub-commands to ``alloc``
 COMMAND_GROUP = "alloc.commands"
 #: the library's own sub-applications, loaded like the plugins (on use)
-_BUILTIN = (EntryPoint("ams", "alloc.ams.cli:app", COMMAND_GROUP),)
+_BUILTIN = (EntryPoint("ams", "alloc.ams.cli:app", COMMAND_GROUP),
+            EntryPoint("replay", "alloc.importers.ulog_cli:app", COMMAND_GROUP))
 #: exit status of every invalid input (click's usage-error status)
 EXIT_USAGE = 2
 #: largest JSON input file read (a 32 x 512 problem is about 0.4 MB of JSON)

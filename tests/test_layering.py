@@ -523,10 +523,12 @@ def test_plugins_are_the_declared_entry_points():
     """pyproject.toml declares sim, bench, serve; the installed metadata must match it."""
     import tomllib
 
-    from alloc.cli import command_entry_points
+    from alloc.cli import _BUILTIN, command_entry_points
 
     declared = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["entry-points"]["alloc.commands"]
-    found = {name: ep.value for name, ep in command_entry_points().items() if name != "ams"}
+    builtin = {ep.name for ep in _BUILTIN}  # the library's own sub-applications (ams, replay)
+    assert builtin == {"ams", "replay"}
+    found = {name: ep.value for name, ep in command_entry_points().items() if name not in builtin}
     assert found == declared, "reinstall the project (pip install -e .): its entry points changed"
     for value in declared.values():
         module = value.split(":")[0]

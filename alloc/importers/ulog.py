@@ -94,7 +94,7 @@ def read_ulog(path: str | Path) -> FlightLog:
         from pyulog import ULog
         from pyulog.core import ULogException
     except ImportError as exc:
-        raise ImportError("reading a ULog needs pyulog: pip install pyulog") from exc
+        raise ImportError("reading a ULog needs pyulog: pip install 'alloc-toolkit[ulog]'") from exc
     try:
         log = ULog(str(path), list(TOPICS))
     except (ULogException, OSError, ValueError, IndexError, struct.error) as exc:
@@ -193,6 +193,8 @@ def replay_command() -> Any:
         except ProblemError as exc:
             raise typer.BadParameter(str(exc), param_hint=f"--{exc.field}" if exc.field in ("ulog", "vehicle")
                                      else "--method") from None
+        except ImportError as exc:  # the optional extra is absent: one line, exit 2, like every input error
+            raise typer.BadParameter(str(exc), param_hint="--ulog") from None
         summary = result.summary()
         typer.echo(json.dumps(summary, indent=2))
         if json_path is not None:
