@@ -425,7 +425,7 @@ def test_migrations_build_the_models_schema(app):
     from service.db import Base
     engine = app.state.store._sessions.kw["bind"]
     with engine.connect() as conn:
-        assert conn.execute(text("SELECT version_num FROM alembic_version")).scalar() == "0003"
+        assert conn.execute(text("SELECT version_num FROM alembic_version")).scalar() == "0004"
         diff = compare_metadata(MigrationContext.configure(conn), Base.metadata)
     assert diff == []
 
