@@ -89,6 +89,7 @@ class Variant:
     bases: tuple[str, ...] = ("2000 Hz",)
     #: run options that depend on the scenario (``scenario name -> options``)
     per_scenario: Callable[[str], Mapping[str, Any]] | None = None
+    cases: tuple[str, ...] = ("failed", "nominal")
 
 
 def _default(name: str) -> Any:
@@ -129,28 +130,36 @@ def _crossover_at(phase_margin: float) -> Callable[[str], Mapping[str, Any]]:
 def factors() -> list[Variant]:
     """Every factor level of the sweep (the defaults are the ``default`` level of each base)."""
     sampled = ("2000 Hz", "100 Hz")
+    # the lesser factors fly the failed case only (the budget: 2 shared cores)
+    failed = ("failed",)
     out = [Variant("default", "default", bases=tuple(BASES))]
     out += [Variant("stand-in pilot gain", f"{g:g}", {"pilot_gain": g}) for g in (1.0, 1.5, 3.0)]
     out += [Variant("stand-in pilot delay", f"{d:g} s", {"pilot_delay": d}) for d in (0.1, 0.3)]
-    out += [Variant("stand-in pilot neuromuscular lag", f"{tn:g} s", edit=_pilot_edit(neuromuscular=tn))
-            for tn in (0.05, 0.1)]
+    out += [Variant("stand-in pilot neuromuscular lag", f"{tn:g} s", edit=_pilot_edit(neuromuscular=tn),
+                    cases=failed) for tn in (0.05, 0.1)]
     out += [Variant("setting pilot", p, {"pilot": p}) for p in ("crossover",)]
-    out += [Variant("crossover pilot phase margin", f"{pm:g} deg", per_scenario=_crossover_at(pm))
+    out += [Variant("crossover pilot phase margin", f"{pm:g} deg", per_scenario=_crossover_at(pm), cases=failed)
             for pm in (30.0, 60.0)]
     out += [Variant("ICE alpha pilot", "on", {"alpha_pilot": True}, scenarios=("ice",))]
     out += [Variant("Fig 4-81 bank-angle steps", f"{k:g}x", edit=_scaled_steps(k), scenarios=("harv_latdir",))
             for k in (0.25, 0.5, 2.0)]
     out += [Variant("daisy groups (ICE)", name, {"method_options": {"groups": g}}, scenarios=("ice",),
                     methods=("daisy",)) for name, g in _daisy_groups().items()]
-    out += [Variant("divergence bound ICE", f"{k:g}x", edit=_bound(k), scenarios=("ice",)) for k in (0.5, 2.0)]
-    out += [Variant("divergence bound HARV lat-dir", f"{k:g}x", edit=_bound(k), scenarios=("harv_latdir",))
+    out += [Variant("divergence bound ICE", f"{k:g}x", edit=_bound(k), scenarios=("ice",), cases=failed)
             for k in (0.5, 2.0)]
-    out += [Variant("setting noise_scale", f"{k:g}", {"noise_scale": k}) for k in (0.0, 2.0, 5.0)]
-    out += [Variant("setting frame_period", "100 Hz", {"frame_period": 0.01})]
+    out += [Variant("divergence bound HARV lat-dir", f"{k:g}x", edit=_bound(k), scenarios=("harv_latdir",),
+                    cases=failed) for k in (0.5, 2.0)]
+    out += [Variant("setting noise_scale", f"{k:g}", {"noise_scale": k}, cases=failed) for k in (0.0, 5.0)]
+    # The sampled-data choices fly the failed case only as well.  At the seed's
+    # 2 kHz the boundary-layer rule and anti-windup "off" are the default by construction
+    # (sim.settings.boundary_layer_at, anti_windup_on), so those fly at 100 Hz only.
     for name, values in (("boundary_layer", BOUNDARY_LAYER_RULES), ("anti_windup", ANTI_WINDUP_RULES),
                          ("rate_horizon", RATE_HORIZONS), ("rate_window", RATE_WINDOWS),
                          ("preferred", PREFERRED_POSITIONS), ("u_prev_source", U_PREV_SOURCES)):
-        out += [Variant(f"setting {name}", v, {name: v}, bases=sampled) for v in _alternatives(name, values)]
+        for v in _alternatives(name, values):
+            seed_rate_default = name == "boundary_layer" or (name == "anti_windup" and v == "off")
+            out.append(Variant(f"setting {name}", v, {name: v}, cases=("failed",),
+                               bases=("100 Hz",) if seed_rate_default else sampled))
     return out
 
 
@@ -181,12 +190,17 @@ def plan(only: Iterable[str] | None = None) -> list[tuple[Variant, str, str, str
     """Every run of the sweep, default runs first (a daisy factor's default is its own level)."""
     wanted = None if only is None else set(only)
     runs = []
-    for v in factors():
+    # the bounds, the noise, the daisy groups and the lesser pilot levels last: a sweep cut short
+    # by its budget keeps the choices the issue names (pilot gain and delay, alpha pilot, Fig 4-81
+    # steps, the sampled-data settings)
+    late = ("stand-in pilot neuromuscular lag", "crossover pilot phase margin", "daisy groups (ICE)",
+            "divergence bound ICE", "divergence bound HARV lat-dir", "setting noise_scale")
+    for v in sorted(factors(), key=lambda v: v.factor in late):
         if wanted is not None and v.factor not in wanted and v.factor != "default":
             continue
         for base in v.bases:
             for scenario in v.scenarios:
-                for case in ("failed", "nominal"):
+                for case in v.cases:
                     runs += [(v, base, scenario, case, m) for m in v.methods]
     return runs
 
@@ -244,11 +258,18 @@ def _best(rows: Iterable[Mapping[str, str]]) -> str:
     return min(bounded)[1] if bounded else "none"
 
 
+def _frame_rate_rows(rows: list[dict[str, str]]) -> list[dict[str, str]]:
+    """The frame rate as a factor: the 100 Hz default runs, compared with the 2000 Hz ones."""
+    return [{**r, "factor": "setting frame_period", "level": "100 Hz", "base": "2000 Hz"} for r in rows
+            if r["factor"] == "default" and r["base"] == "100 Hz"]
+
+
 def flips(rows: list[dict[str, str]]) -> list[dict[str, Any]]:
     """Per factor level: runs, verdict flips against the default and best-method flips (module docstring).
 
     A daisy factor's reference is its ``the vehicle's`` level (the default runs fly no daisy).
     """
+    rows = [*rows, *_frame_rate_rows(rows)]
     by_key = {_key(r): r for r in rows}
     levels: dict[tuple[str, str, str], list[dict[str, str]]] = {}
     for r in rows:
@@ -347,9 +368,15 @@ def render_report(rows: list[dict[str, str]], flip_rows: list[dict[str, Any]]) -
              f"Written by `python -m benchmarks.bench_sensitivity report` from `runs.csv` ({len(rows)} runs, "
              f"{seconds / 60:.1f} min of CPU). Runs: ICE (seed failure at 20 s, and nominal) and HARV lat-dir "
              "with the Fig 4-81 filtered steps (Failure #2, and nominal), 40 s, methods "
-             f"{', '.join(METHODS)}, told, noise seed 0. A flip is a bounded/diverged verdict that differs "
+             f"{', '.join(METHODS)}, told, noise seed 0. The sampled-data choices (boundary layer, anti-windup, "
+             "rate horizon and window, preferred positions, u_prev) and the neuromuscular lag, crossover phase "
+             "margin, divergence bounds and noise scale fly the failed case only; the sampled-data ones fly at "
+             "2000 Hz and 100 Hz, the boundary-layer rule and anti-windup off at 100 Hz only (at 2000 Hz they "
+             "are the default by construction). The frame rate's row compares the 100 Hz defaults with the "
+             "2000 Hz ones. A flip is a bounded/diverged verdict that differs "
              "from the same run at the factor's default (same base frame rate); a best flip is a change of "
-             f"the bounded method with the least `{RANK_CHANNEL}` error RMS.", "",
+             f"the bounded method with the least `{RANK_CHANNEL}` error RMS. A factor missing below was not "
+             "flown.", "",
              "## Defaults", "", "| base | scenario | case | " + " | ".join(METHODS) + " |",
              "|---|---|---|" + "---|" * len(METHODS)]
     default = {(r["base"], r["scenario"], r["case"], r["method"]): r for r in rows if r["factor"] == "default"}

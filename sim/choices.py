@@ -145,7 +145,8 @@ def render_markdown(flips: Mapping[str, str] | None = None, sweep: str = "") -> 
         intro += (f" The flips column is the one-factor sensitivity sweep `{sweep}` "
                   "(`benchmarks/bench_sensitivity.py`; its `report.md` lists every flipped run): each choice "
                   "moved alone over the stated levels, ICE and HARV lat-dir (Fig 4-81 input), told static, "
-                  "pinv, qp and wls, failed and nominal, 40 s; a flip is a bounded/diverged verdict that "
+                  "pinv, qp and wls, failed and nominal (some factors failed only, the sampled-data settings at "
+                  "2000 and 100 Hz: see the report), 40 s; a flip is a bounded/diverged verdict that "
                   "changes against the default, \"+ best\" a change of the best bounded method.")
     lines = ["# Every verdict-driving choice", "", intro, "",
              "| choice | value | source | where it is set | note |" + (" flips |" if flips is not None else ""),

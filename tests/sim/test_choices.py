@@ -40,14 +40,21 @@ def test_the_project_s_own_choices_are_marked_ours():
     assert "20 deg at 1 s" in by_name["Fig 4-81 bank-angle steps"].value
 
 
-def test_docs_page_is_generated():
-    assert PAGE.read_text() == render_markdown()
+def test_docs_page_is_generated_from_the_committed_sweep():
+    assert PAGE.read_text() == bench_sensitivity.choices_page(), \
+        "regenerate: python -m benchmarks.bench_sensitivity page --out benchmarks/reference/sensitivity-2026-12-02"
 
 
 def test_every_swept_factor_is_a_row_of_the_choices_table():
     names = {c.name for c in verdict_choices()}
-    swept = {v.factor for v in bench_sensitivity.factors()} - {"default"}
+    swept = {v.factor for v in bench_sensitivity.factors()} - {"default"} | {"setting frame_period"}
     assert swept <= names, swept - names
+    flipped = {r["factor"] for r in bench_sensitivity.read_flips(bench_sensitivity.REFERENCE / "flips.csv")}
+    assert flipped <= swept
+    # every factor the committed sweep flew is in the page; the rest say "not swept"
+    page = PAGE.read_text()
+    for name in swept - flipped:
+        assert f"| {name} |" in page and "not swept" in page
 
 
 def test_flips_column_without_a_sweep_is_absent():
