@@ -460,7 +460,8 @@ def _linear_glr(S: np.ndarray, U: np.ndarray, c: np.ndarray, whiten: np.ndarray 
     s0 = x1 @ S
     s1 = np.einsum("...ij,...ij->...j", S, Uc)
     uu = np.einsum("...ij,...ij->...j", Uc, Uc)
-    scale = np.maximum(np.abs(Uc).max(axis=-2, initial=0.0), 1e-300)
+    # does u vary, beyond round-off of the whitening? (relative to u's own size, not u_c's)
+    scale = np.maximum(np.abs(U).max(axis=-2, initial=0.0), 1e-300)
     varies = uu > (1e-12 * scale) ** 2 * n
     term2 = np.where(varies, s1 * s1 / (cc * np.where(varies, uu, 1.0)), 0.0)
     return s0 * s0 / (x11 * cc) + term2
