@@ -263,8 +263,8 @@ def _replay_hour(made: Any, corr: Any, U: np.ndarray, Y: np.ndarray, ts: float) 
 
 
 def report_replay(rows: list[dict[str, Any]]) -> str:
-    header = ["scenario", "noise", "detector", "hours", "windows over threshold", "alarms", "detections (false)",
-              "per 10 h",
+    header = ["scenario", "noise", "recorded flight", "detector", "hours", "windows over threshold", "alarms",
+              "detections (false)", "per 10 h",
               "95 % interval per 10 h", "goal (< 1 per 10 h)"]
     out = []
     for scenario in SCENARIOS:
@@ -277,10 +277,11 @@ def report_replay(rows: list[dict[str, Any]]) -> str:
                 n = sum(len(r[name]["detections"]) for r in sel)
                 lo, hi = (10.0 * x / hours for x in poisson_interval(n))
                 rate = 10.0 * n / hours
-                out.append([scenario, f"x{scale:g}", name + (" (flown)" if name == "whitened" else " (as before)"),
+                flown = "diverged: not a valid replay" if any(r["flight_diverged"] for r in sel) else "ok"
+                out.append([scenario, f"x{scale:g}", flown, name + (" (flown)" if name == "whitened" else " (as before)"),
                             f"{hours:.1f}", str(sum(r[name]["exceedances"] for r in sel)),
                             str(sum(r[name]["alarms"] for r in sel)), str(n), f"{rate:.2f}",
-                            f"[{lo:.2f}, {hi:.2f}]", false_verdict(rate, hi) if scale == 1.0 else ""])
+                            f"[{lo:.2f}, {hi:.2f}]", false_verdict(rate, hi) if scale == 1.0 and flown == "ok" else ""])
     table = _table(header, out)
     cal_rows = []
     for scenario in SCENARIOS:
