@@ -197,7 +197,7 @@ def _closed_section(out: Path, scenario: str, setting: str, rows: list[Row], cel
     title = f"{TITLES.get(scenario, scenario)}, simulator setting `{setting}`"
     lines = [f"### {title}", "",
              f"{len(rows)} runs: {r0['duration']:g} s, failure at t = {r0['failure_time']:g} s "
-             f"(HARV `failure2`: at 0 s), noise seeds {sorted({int(r['seed']) for r in rows})}, "
+             f"(the same for every failure of the section), noise seeds {sorted({int(r['seed']) for r in rows})}, "
              f"failures {', '.join(f'`{f}`' for f in failures)}.", ""]
     n_seeds = len({int(r["seed"]) for r in rows})
     if n_seeds < FEW_SEEDS:

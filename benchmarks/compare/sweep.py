@@ -204,7 +204,7 @@ def full_sweep(*, seeds: int = 10, frame_rates: Sequence[float | None] = (None, 
                times: dict[str, tuple[float, float]] | None = None) -> list[Spec]:
     """The complete sweep: every method and ``static``; ICE and HARV lat-dir (``times``:
     duration and failure time per scenario, default :data:`FULL_TIMES`; HARV's ``failure2``
-    is at t = 0 as in the seed) with the scenario's own failures and every catalogue failure
+    too, not at t = 0 as in the seed) with the scenario's own failures and every catalogue failure
     (5 kinds, single and double); blind and told; frame rates (``None`` = the seed's rate) x
     pilot settings; ``seeds`` noise seeds.  Open loop on 10 random problems with 20,000
     coverage samples."""
