@@ -231,9 +231,11 @@ def test_fresh_root_install_serves_an_unprivileged_user_without_compiling():
 
 # ----------------------------------------------------------------- what starting costs
 #: packages a service start-up or a geometry user does not need: solver front-ends, plotting,
-#: scipy's optimizer (the exact coverage polytope), the coverage module itself
+#: scipy's optimizer (the exact coverage polytope), the coverage module itself, the detector's
+#: statistics and filters (1.4-1.7 s of CPU), the migration tool (only a database to upgrade needs it)
 NOT_AT_START = ("scipy.optimize", "cvxpy", "qpsolvers", "matplotlib", "highspy", "osqp", "clarabel",
-                "alloc.ams.coverage", "alloc.ams.plot", "sim", "benchmarks")
+                "alloc.ams.coverage", "alloc.ams.plot", "sim", "benchmarks", "scipy.stats", "scipy.signal",
+                "alembic")
 
 
 def _loaded_by(code: str) -> set[str]:
