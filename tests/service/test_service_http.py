@@ -21,7 +21,16 @@ V = [0.5, 1.0, 0.2]  # (alpha, p, beta) demand, attainable with elevon_l jammed 
 
 @pytest.fixture()
 def server(tmp_path):
+    """A server of the test's own (the test kills it)."""
     proc = ServiceProcess(tmp_path / "data", api_key=KEY).start()
+    yield proc
+    proc.stop()
+
+
+@pytest.fixture(scope="module")
+def shared_server(tmp_path_factory):
+    """One server for the tests that only read it (inline requests and errors: no stored state)."""
+    proc = ServiceProcess(tmp_path_factory.mktemp("http") / "data", api_key=KEY).start()
     yield proc
     proc.stop()
 
@@ -30,9 +39,9 @@ def _problem_body(p: alloc.Problem) -> dict:
     return p.to_dict()
 
 
-def test_inline_allocation_equals_library(server):
+def test_inline_allocation_equals_library(shared_server):
     p = ice()
-    with httpx.Client(base_url=server.url) as http:
+    with httpx.Client(base_url=shared_server.url) as http:
         for method in ("pinv", "qp"):
             r = http.post("/v1/allocate", json={**_problem_body(p), "v": V, "method": method})
             assert r.status_code == 200, r.text
@@ -119,8 +128,8 @@ def test_jam_then_allocate_survives_sigkill(server, tmp_path):
         restarted.stop()
 
 
-def test_errors_over_http(server):
-    with httpx.Client(base_url=server.url) as http:
+def test_errors_over_http(shared_server):
+    with httpx.Client(base_url=shared_server.url) as http:
         raw = b'{"B": [[1, NaN]], "umin": [-1, -1], "umax": [1, 1], "v": [1]}'
         r = http.post("/v1/allocate", content=raw, headers={"content-type": "application/json"})
         assert r.status_code == 422
