@@ -33,7 +33,6 @@ A metric with no samples (no ``after`` without a failure) is ``None`` and is not
 
 from __future__ import annotations
 
-import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -46,6 +45,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "Limit", "AxisLimits", "ScenarioCriteria", "Verdict", "CRITERIA", "criteria_for", "evaluate", "verdict_of",
+    "use_scenario", "tracking_metrics",
     "back_in_band_time", "free_parameters", "PHASES", "RECOVERY_HOLD_S", "RECOVERY_MAX_S",
     "NOMINAL_RMS_FRACTION", "FAILED_RMS_FRACTION", "NOMINAL_PEAK_FRACTION", "FAILED_PEAK_FRACTION",
     "SATURATION_MAX_FRACTION", "SIDESLIP_RMS_DEG", "render_markdown",
@@ -214,38 +214,61 @@ def _seed_run(scenario: Any) -> np.ndarray:
     return np.arange(0.0, scenario.default_duration, 0.01)
 
 
-def _ice() -> ScenarioCriteria:
-    from sim.scenarios import ice
-
-    t = _seed_run(ice.SCENARIO)
-    phi_c = ice.SCENARIO.pilot({}).attitude_command(t)
+def _ice(scenario: Any) -> ScenarioCriteria:
+    t = _seed_run(scenario)
+    phi_c = scenario.pilot({}).attitude_command(t)
     return _common("ice", (
-        _demand_limits("alphaw", ice.SCENARIO.commands(t)[:, 0], "the alpha command (deg; seed section 4.7, xi = 5)"),
+        _demand_limits("alphaw", scenario.commands(t)[:, 0], "the alpha command (deg; seed section 4.7, xi = 5)"),
         _demand_limits("ps", np.gradient(phi_c, t), "the bank-angle command's rate (deg/s; xi = 10)"),
         _sideslip("betaw"),
     ))
 
 
-def _harv_latdir() -> ScenarioCriteria:
-    from sim.scenarios import harv_latdir
-
-    t = _seed_run(harv_latdir.SCENARIO)
-    phi_c = harv_latdir.SCENARIO.pilot({}).attitude_command(t)
+def _harv_latdir(scenario: Any) -> ScenarioCriteria:
+    t = _seed_run(scenario)
+    phi_c = scenario.pilot({}).attitude_command(t)
     return _common("harv_latdir", (
         _sideslip("beta"),
         _demand_limits("ps", np.gradient(phi_c, t), "the bank-angle command's rate (deg/s; seed section 4.6, xi = 6)"),
     ))
 
 
-#: the per-scenario tables, built on first use (``SimResult.scenario`` -> its criteria)
-CRITERIA: dict[str, Callable[[], ScenarioCriteria]] = {"ice": _ice, "harv_latdir": _harv_latdir}
+#: the per-scenario tables, by scenario name: each built from the scenario's own commands and
+#: pilot, so from the scenario object the run flew (a seed scenario or a vehicle file's loop)
+CRITERIA: dict[str, Callable[[Any], ScenarioCriteria]] = {"ice": _ice, "harv_latdir": _harv_latdir}
+#: the scenario objects seen so far, by name: ``@mimo_scenario`` registers the seed's at import and
+#: ``run_mimo`` every scenario it flies, so this module never imports a scenario (they import it)
+_SCENARIOS: dict[str, Any] = {}
+_BUILT: dict[str, ScenarioCriteria] = {}
 
 
-@functools.cache
+def use_scenario(scenario: Any) -> None:
+    """Make ``scenario`` (a :class:`sim.scenarios.mimo.MimoScenario`) the one whose table is built."""
+    if _SCENARIOS.get(scenario.name) is not scenario:
+        _SCENARIOS[scenario.name] = scenario
+        _BUILT.pop(scenario.name, None)
+
+
 def criteria_for(scenario: str) -> ScenarioCriteria | None:
-    """The scenario's table, or None when it has none (its runs carry no verdict)."""
-    build = CRITERIA.get(scenario)
-    return None if build is None else build()
+    """The scenario's table, or None when it has none or its scenario was never registered
+    (import its module, or fly it with ``run_mimo``)."""
+    build, flown = CRITERIA.get(scenario), _SCENARIOS.get(scenario)
+    if build is None or flown is None:
+        return None
+    if scenario not in _BUILT:
+        _BUILT[scenario] = build(flown)
+    return _BUILT[scenario]
+
+
+def tracking_metrics(err: np.ndarray, mask: np.ndarray) -> tuple[float, float]:
+    """RMS and max-abs of ``err`` over the samples selected by ``mask``.
+
+    Returns ``(nan, nan)`` when the mask is empty.
+    """
+    sel = err[mask]
+    if sel.size == 0:
+        return math.nan, math.nan
+    return float(np.sqrt(np.mean(sel**2))), float(np.max(np.abs(sel)))
 
 
 # ----------------------------------------------------------------------------- metrics
@@ -282,8 +305,6 @@ def _masked(stat: Callable[[np.ndarray], float], x: np.ndarray, mask: np.ndarray
 
 def evaluate(result: SimResult, criteria: ScenarioCriteria) -> Verdict:
     """Judge ``result`` against ``criteria`` (module docstring)."""
-    from sim.result import tracking_metrics
-
     t = result.t
     failure = result.failure_time
     before = np.ones(t.shape, dtype=bool) if failure is None else t < failure
@@ -357,7 +378,8 @@ def render_markdown(scenarios: tuple[str, ...] = tuple(CRITERIA)) -> str:
     for name in scenarios:
         table = criteria_for(name)
         if table is None:
-            raise ValueError(f"scenario {name!r}: no criteria table; tables exist for {sorted(CRITERIA)}")
+            raise ValueError(f"scenario {name!r}: no criteria table, or its scenario is not imported (import "
+                             f"sim.scenarios.{name}); tables exist for {sorted(CRITERIA)}")
         for axis in table.axes:
             unit = _UNITS.get(axis.signal, "")
             for kind, pair in (("error RMS", axis.rms), ("peak error", axis.peak), ("excursion, peak |output|", axis.excursion)):

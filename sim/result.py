@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 
 from alloc.result import Status
+from sim.criteria import tracking_metrics, verdict_of
 
 __all__ = ["SimResult", "STATUS_NAMES", "divergence_check", "tracking_metrics"]
 
@@ -69,17 +70,6 @@ def divergence_check(y: np.ndarray, bound: np.ndarray | float, *states: np.ndarr
 
 def _none_if_nan(x: float) -> float | None:
     return None if (x is None or not math.isfinite(x)) else float(x)
-
-
-def tracking_metrics(err: np.ndarray, mask: np.ndarray) -> tuple[float, float]:
-    """RMS and max-abs of ``err`` over the samples selected by ``mask``.
-
-    Returns ``(nan, nan)`` when the mask is empty.
-    """
-    sel = err[mask]
-    if sel.size == 0:
-        return math.nan, math.nan
-    return float(np.sqrt(np.mean(sel**2))), float(np.max(np.abs(sel)))
 
 
 @dataclass
@@ -187,8 +177,6 @@ class SimResult:
     def summary(self) -> dict[str, Any]:
         """JSON-serialisable metrics (see module docstring for definitions); ``verdict``: the run
         judged by its scenario's engineering criteria (:mod:`sim.criteria`; None without a table)."""
-        from sim.criteria import verdict_of  # sim.criteria reads the scenarios, which import this module
-
         verdict = verdict_of(self)
         err = self.error
         if self.failure_time is None:

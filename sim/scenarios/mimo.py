@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from alloc import vehicles
+from sim import criteria
 from sim.allocation import STATIC
 from sim.engine import simulate
 from sim.model import TF, Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle
@@ -108,6 +109,7 @@ def run_mimo(
         An option that is neither a setting nor one of the scenario's.
     """
     spec, flown = mimo_spec(scenario, **options)
+    criteria.use_scenario(scenario)  # its runs are judged by the criteria built from this object
     result = simulate(spec, progress=progress, step_times=step_times)
     result.settings = {**flown.record(), "pilots": result.settings["pilots"]}
     return result
@@ -177,6 +179,7 @@ def mimo_scenario(
 
     def decorate(run: Callable[..., SimResult]) -> Scenario:
         run.accepts_failure_objects = True  # type: ignore[attr-defined]
+        criteria.use_scenario(scenario)  # its criteria table exists before any run (docs, sweeps)
         return register_scenario(
             scenario.name, description=description, failures=dict(failures),
             default_duration=scenario.default_duration, default_method=scenario.default_method,

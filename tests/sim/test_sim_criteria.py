@@ -14,6 +14,7 @@ from sim.criteria import (
     AxisLimits, Limit, ScenarioCriteria, back_in_band_time, criteria_for, evaluate, free_parameters, verdict_of,
 )
 from sim.result import SimResult
+from sim.scenarios import harv_latdir, ice  # noqa: F401 - their tables need their scenario objects
 
 OURS = "test table"
 
