@@ -83,3 +83,30 @@ def test_add_a_method(scratch_registry):
 
 def test_the_walkthrough_registry_is_restored():
     assert "toy_lstsq" not in alloc.methods()
+
+
+def test_add_a_method_with_its_cvxpy_row(scratch_registry, monkeypatch):
+    """Step 3 of "Add a method": one row of tests/cvxpy_references.py (its formulation written
+    out in cvxpy, a check, a tolerance), run by the same parametrisation as the built-ins."""
+    import cvxpy as cp
+    import cvxpy_references as refs
+
+    _toy_method()
+
+    def check_toy(name, p, v, rated, options):
+        u = cp.Variable(p.m)
+        cp.Problem(cp.Minimize(cp.sum_squares(u)), [p.B @ u == options["gain"] * v]).solve(**refs.SOLVER)
+        r = alloc.allocate(p, v, "toy_lstsq", **options)
+        np.testing.assert_allclose(r.u, np.clip(u.value, p.umin, p.umax), atol=1e-8, rtol=0)
+
+    rng = np.random.default_rng(7)
+    cases = [(f"toy-{i}", alloc.Problem(rng.normal(size=(2, 4)), [-1] * 4, [1] * 4), rng.normal(size=2) * 0.3, False)
+             for i in range(6)]
+    row = refs.Reference("min |u|^2 s.t. B u = gain v (Eq 1.23 with Wu = I, up = 0)", check_toy, "u 1e-8",
+                         cases, options=({"gain": 1.0}, {"gain": 0.5}))
+    monkeypatch.setitem(refs.REFERENCES, "toy_lstsq", row)
+    params = refs.params({"toy_lstsq": row})
+    assert len(params) == 12
+    for param in params:
+        method, options, name, p, v, rated = param.values
+        refs.REFERENCES[method].check(name, p, v, rated, options)
