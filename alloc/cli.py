@@ -10,8 +10,8 @@ and loads one only when it runs.  ``alloc --help`` imports no plugin and no comp
 Errors: every invalid input, whichever command meets it, ends the same way -- one line on
 stderr, ``<command>: error: <field>: <reason>``, and exit status 2 (:data:`EXIT_USAGE`).
 :class:`OneLineErrors` does that in one place, for typer's usage errors and for every
-:class:`~alloc.AllocError` a command lets through.  The input helpers (:func:`finite`,
-:func:`strict_json`, :func:`output_file`) are shared with the plugins' commands.
+:class:`~alloc.AllocError` a command lets through.  The input helpers (:mod:`alloc.cli_input`:
+:func:`finite`, :func:`strict_json`, :func:`output_file`) are shared with the plugins' commands.
 """
 
 from __future__ import annotations
@@ -21,12 +21,10 @@ import importlib.machinery
 import importlib.util
 import json
 import math
-import os
 import re
 import statistics
 import sys
 import time
-from collections.abc import Callable
 from functools import cache
 from importlib.metadata import EntryPoint, PackageNotFoundError, entry_points, version
 from pathlib import Path
@@ -42,6 +40,7 @@ except ImportError:  # pragma: no cover - older typer on the click package
 
 import alloc
 from alloc import DISTRIBUTION
+from alloc.cli_input import MAX_JSON_BYTES, finite, json_float, output_file, read_json_file, strict_json
 from alloc.exceptions import AllocError
 
 #: entry-point group through which other packages add sub-commands to ``alloc``
@@ -51,8 +50,6 @@ _BUILTIN = (EntryPoint("ams", "alloc.ams.cli:app", COMMAND_GROUP),
             EntryPoint("replay", "alloc.importers.ulog_cli:app", COMMAND_GROUP))
 #: exit status of every invalid input (click's usage-error status)
 EXIT_USAGE = 2
-#: largest JSON input file read (a 32 x 512 problem is about 0.4 MB of JSON)
-MAX_JSON_BYTES = 64 * 1024 * 1024
 
 
 # ------------------------------------------------------------------ one-line errors
@@ -122,120 +119,6 @@ def _rich_help(ctx: typer.Context) -> bool:
     from typer.core import HAS_RICH
 
     return bool(HAS_RICH) and getattr(ctx.command, "rich_markup_mode", None) is not None
-
-
-# ------------------------------------------------------------------ input helpers
-def finite(low: float | None = None, high: float | None = None, *, low_open: bool = False,
-           high_open: bool = False, unit: str = "") -> Callable[[str], float]:
-    """A typer ``parser`` for a finite real number in ``[low, high]`` (open ends on request).
-
-    Click's own ``FloatRange`` lets ``nan`` and ``inf`` through; this one does not.  It raises
-    ``BadParameter`` (a ``ValueError`` would reach the user as "Value error, ...").
-    """
-    def parse(text: str) -> float:
-        if isinstance(text, float):  # a default, already parsed
-            return text
-        try:
-            value = float(text)
-        except (TypeError, ValueError):
-            raise typer.BadParameter(f"expected a number, got {text!r}") from None
-        if not math.isfinite(value):
-            raise typer.BadParameter(f"must be a finite number, got {text!r}")
-        below = low is not None and (value <= low if low_open else value < low)
-        above = high is not None and (value >= high if high_open else value > high)
-        if below or above:
-            lo = "" if low is None else f"{'>' if low_open else '>='} {low:g}"
-            hi = "" if high is None else f"{'<' if high_open else '<='} {high:g}"
-            raise typer.BadParameter(f"must be {' and '.join(filter(None, [lo, hi]))}{unit}, got {text}")
-        return value
-
-    return parse
-
-
-def _no_duplicate_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    for key, value in pairs:
-        if key in out:
-            raise ValueError(f"duplicate key {key!r}")
-        out[key] = value
-    return out
-
-
-def _json_int(text: str) -> int:
-    value = int(text)
-    try:
-        float(value)
-    except OverflowError:
-        raise ValueError(f"integer with {len(text.lstrip('-'))} digits is beyond float64") from None
-    return value
-
-
-def _json_float(text: str) -> float:
-    value = float(text)
-    if not math.isfinite(value):
-        raise ValueError(f"number {text} is beyond float64")
-    return value
-
-
-def _json_constant(name: str) -> NoReturn:
-    raise ValueError(f"{name} is not a JSON number (JSON has no NaN or infinity)")
-
-
-def strict_json(text: str) -> Any:
-    """Parse standard JSON: no ``NaN``/``Infinity``, no numbers beyond float64, no duplicate keys.
-
-    Raises ``ValueError`` (a ``json.JSONDecodeError`` with its position where the syntax is
-    wrong) naming the reason; nesting deeper than the parser can follow is one too.
-    """
-    try:
-        return json.loads(text, object_pairs_hook=_no_duplicate_keys, parse_int=_json_int,
-                          parse_float=_json_float, parse_constant=_json_constant)
-    except RecursionError:
-        raise ValueError("nested too deeply") from None
-
-
-def read_json_file(path: Path, param_hint: str) -> Any:
-    """The JSON value in ``path`` (UTF-8, at most :data:`MAX_JSON_BYTES`), or a ``BadParameter``."""
-    def bad(reason: str) -> NoReturn:
-        raise typer.BadParameter(f"{path}: {reason}", param_hint=param_hint)
-
-    try:
-        with open(path, "rb") as fh:
-            raw = fh.read(MAX_JSON_BYTES + 1)
-    except OSError as exc:
-        bad(f"cannot read: {exc.strerror or exc}")
-    if len(raw) > MAX_JSON_BYTES:
-        bad(f"larger than {MAX_JSON_BYTES // 2**20} MiB")
-    try:
-        text = raw.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        bad(f"not UTF-8 text (byte {exc.start})")
-    try:
-        return strict_json(text)
-    except ValueError as exc:
-        bad(f"not valid JSON: {exc}")
-
-
-def output_file(path: Path | None, force: bool, param_hint: str, *, taken: dict[Path, str] | None = None) -> None:
-    """Refuse an output path before any work is done: an existing file (unless ``force``), a
-    directory, a folder that does not exist or cannot be written, or a path given twice."""
-    if path is None:
-        return
-    if path.is_dir():
-        raise typer.BadParameter(f"{path} is a directory; give a file name", param_hint=param_hint)
-    if path.exists() and not force:
-        raise typer.BadParameter(f"{path} exists; choose another name or pass --force to overwrite it",
-                                 param_hint=param_hint)
-    parent = path.parent if str(path.parent) else Path(".")
-    if not parent.is_dir():
-        raise typer.BadParameter(f"folder {parent} does not exist", param_hint=param_hint)
-    if not os.access(parent, os.W_OK):
-        raise typer.BadParameter(f"folder {parent} is not writable", param_hint=param_hint)
-    if taken is not None:
-        key = path.resolve()
-        if key in taken:
-            raise typer.BadParameter(f"{path} is also the {taken[key]} output", param_hint=param_hint)
-        taken[key] = param_hint
 
 
 # ------------------------------------------------------------------ plugins
@@ -458,7 +341,7 @@ def _problem_from_file(path: Path) -> tuple[alloc.Problem, dict[str, Any]]:
 
 def _floats(text: str, what: str) -> list[float]:
     try:
-        values = [_json_float(x) for x in text.replace(";", ",").split(",") if x.strip()]
+        values = [json_float(x) for x in text.replace(";", ",").split(",") if x.strip()]
     except ValueError:
         raise typer.BadParameter(f"expected comma-separated finite numbers, got {text!r}", param_hint=what) from None
     if not values:
