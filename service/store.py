@@ -324,7 +324,7 @@ class VehicleStore:
                                                    kind=ev.kind, params=ev.params, note=ev.note,
                                                    recorded_at=ev.recorded_at))
                 new = VehicleState(old.id, old.name, old.created_at, old.nominal, health, version,
-                                   to_problem(old.nominal, health))
+                                   to_problem(old.nominal, health), old.defaults)
                 answer = Answer(201, render(ev, new, old.version), new)
                 remember_answer(session, once, answer.status, answer.body, self.idempotency_ttl_s)
                 try:

@@ -132,7 +132,7 @@ def append_events(db: Any, vehicle: VehicleState, events: list[tuple[FailureEven
         return None
     db.execute(insert(_EVENTS), rows)
     return (VehicleState(vehicle.id, vehicle.name, vehicle.created_at, vehicle.nominal, health, version,
-                         to_problem(vehicle.nominal, health)), rows)
+                         to_problem(vehicle.nominal, health), vehicle.defaults), rows)
 
 
 class TelemetryStore:

@@ -18,7 +18,7 @@ import alloc
 from .db import VehicleRow
 from .health import Health, load_health, to_problem
 
-__all__ = ["VehicleState", "VersionProbe", "problem_from_dict", "state_from_row"]
+__all__ = ["VehicleState", "VersionProbe", "method_defaults", "problem_from_dict", "state_from_row"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -30,6 +30,9 @@ class VehicleState:
     health: Health
     version: int
     problem: alloc.Problem  # the effective problem at this health
+    # method -> options: the vehicle document's [methods.<method>] defaults (daisy groups, gang
+    # matrix, priorities), applied under a request's own options as `alloc allocate --vehicle` does
+    defaults: dict[str, dict[str, Any]]
 
 
 def problem_from_dict(d: dict[str, Any]) -> alloc.Problem:
@@ -41,11 +44,22 @@ def problem_from_dict(d: dict[str, Any]) -> alloc.Problem:
     )
 
 
+def method_defaults(document: dict[str, Any] | None) -> dict[str, dict[str, Any]]:
+    """The per-method defaults of a stored vehicle document (read by the library's reader: the
+    document was validated by it when the vehicle was created); ``{}`` for an effector suite."""
+    if document is None:
+        return {}
+    from alloc.vehicle_file.vehicle import vehicle_from_dict
+
+    vehicle = vehicle_from_dict(document)
+    return {method: vehicle.method_options(method) for method in vehicle.methods}
+
+
 def state_from_row(row: VehicleRow, nominal: alloc.Problem | None = None) -> VehicleState:
     nominal = nominal or problem_from_dict(row.problem)
     health = load_health(row.health)
     return VehicleState(row.id, row.name, row.created_at, nominal, health, row.health_version,
-                        to_problem(nominal, health))
+                        to_problem(nominal, health), method_defaults(row.problem.get("document")))
 
 
 class VersionProbe:

@@ -142,7 +142,8 @@ def get_health(vehicle_id: VehicleId, store: StoreDep) -> HealthOut:
 async def allocate(vehicle_id: VehicleId, body: VehicleAllocateRequest, store: StoreDep, request: Request) -> Response:
     end_parse_turn(request)
     state = store.get(vehicle_id)
-    result = await store.vehicle_allocate(state, body.method, body.options, Call(body.v, body.u_prev, body.dt))
+    options = {**state.defaults.get(body.method, {}), **body.options}
+    result = await store.vehicle_allocate(state, body.method, options, Call(body.v, body.u_prev, body.dt))
     return allocation_response(result, vehicle_id=state.id, health_version=state.version)
 
 
@@ -150,7 +151,9 @@ async def allocate(vehicle_id: VehicleId, body: VehicleAllocateRequest, store: S
              summary="Allocate many demands at the vehicle's current health")
 async def allocate_batch(vehicle_id: VehicleId, body: VehicleBatchRequest, store: StoreDep, request: Request) -> Response:
     end_parse_turn(request)
-    return await store.vehicle_batch(store.get(vehicle_id), body.method, body.options, body.V)
+    state = store.get(vehicle_id)
+    return await store.vehicle_batch(state, body.method, {**state.defaults.get(body.method, {}), **body.options},
+                                     body.V)
 
 
 @router.post("/{vehicle_id}/ams", response_model=AmsOut, summary="AMS summary at the vehicle's current health")

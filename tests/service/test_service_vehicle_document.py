@@ -166,3 +166,41 @@ def test_openapi_lists_both_forms_and_toml(client):
     assert "application/toml" in content and "application/json" in content
     assert "415" in op["responses"]
     assert "/v1/vehicles/{vehicle_id}/document" in client.get("/openapi.json").json()["paths"]
+
+
+@pytest.mark.parametrize("name,method,v", [
+    ("hexa-x", "qp", [3.0, -3.0, 1.0, -19.62]),        # [methods.qp] priorities; unattainable
+    ("hexa-x", "cgi", [3.0, -3.0, 1.0, -19.62]),       # [methods.cgi] priorities
+    ("tailless", "daisy", [2.0, 5.0, 0.5]),            # [methods.daisy] groups
+])
+def test_a_documents_method_defaults_reach_its_allocations(client, name, method, v):
+    """An allocation for a vehicle created from a document uses the document's [methods.<m>]
+    defaults under the request's own options, bit for bit as the library with the same options;
+    a vehicle created from the bare suite has none."""
+    import numpy as np
+
+    import alloc
+
+    vehicle = load_vehicle(name)
+    vid = created(client.post("/v1/vehicles", content=(DATA_DIR / f"{name}.toml").read_bytes(), headers=TOML))["id"]
+    defaults = vehicle.method_options(method)
+    assert defaults, f"{name} declares [methods.{method}]"
+    got = client.post(f"/v1/vehicles/{vid}/allocate", json={"v": v, "method": method})
+    assert got.status_code == 200, got.text[:300]
+    want = alloc.allocate(vehicle.problem(), v, method, **defaults)
+    assert got.json()["u"] == want.u.tolist() and got.json()["status"] == want.status.value
+    batch = client.post(f"/v1/vehicles/{vid}/allocate/batch", json={"V": [v, v], "method": method})
+    assert batch.status_code == 200 and batch.json()["u"][1] == want.u.tolist()
+
+    # the request's own option wins over the document's, key by key
+    key, value = next(iter(defaults.items()))
+    if key == "priorities":
+        mine = {"priorities": [1] * vehicle.k}
+        got = client.post(f"/v1/vehicles/{vid}/allocate", json={"v": v, "method": method, "options": mine})
+        assert got.json()["u"] == alloc.allocate(vehicle.problem(), v, method, **{**defaults, **mine}).u.tolist()
+
+    suite = created(client.post("/v1/vehicles", json={**vehicle.problem().to_dict(), "name": name}))["id"]
+    bare = client.post(f"/v1/vehicles/{suite}/allocate", json={"v": v, "method": method})
+    plain = alloc.allocate(vehicle.problem(), v, method)  # the library without the document's options
+    assert bare.status_code == 200 and bare.json()["u"] == plain.u.tolist()
+    assert not np.array_equal(plain.u, want.u), "the case must tell the defaults apart"
