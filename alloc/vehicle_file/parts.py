@@ -351,8 +351,9 @@ class LinearModel:
         return control.ss(A, B, C, D, **kw)
 
     @classmethod
-    def from_statespace(cls, sys: Any, controlled: Sequence[str] = ()) -> LinearModel:
-        """The model of a python-control ``StateSpace`` (its state and output names kept)."""
+    def from_statespace(cls, sys: Any, controlled: Sequence[str] = (), units: Sequence[str] = ()) -> LinearModel:
+        """The model of a python-control ``StateSpace`` (its state and output names kept; a
+        ``StateSpace`` has no units, so the outputs' ``units`` are given here if wanted)."""
         doc = {
             "states": list(getattr(sys, "state_labels", [f"x{i}" for i in range(sys.nstates)])),
             "outputs": list(getattr(sys, "output_labels", [f"y{i}" for i in range(sys.noutputs)])),
@@ -361,4 +362,6 @@ class LinearModel:
         }
         if controlled:
             doc["controlled"] = list(controlled)
+        if units:
+            doc["units"] = list(units)
         return cls.from_dict(doc, "model", int(np.asarray(sys.B).shape[1]))

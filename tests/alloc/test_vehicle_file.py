@@ -158,8 +158,9 @@ def test_python_control_interop():
     model = load_vehicle("harv").model
     sys = model.to_statespace(inputs=load_vehicle("harv").effector_names)
     assert list(sys.output_labels) == list(model.outputs)
-    back = LinearModel.from_statespace(sys, controlled=model.controlled)
+    back = LinearModel.from_statespace(sys, controlled=model.controlled, units=model.units)
     assert back == model
+    assert LinearModel.from_statespace(sys, controlled=model.controlled).units == ()
     assert control is not None
 
 

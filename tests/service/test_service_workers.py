@@ -89,7 +89,7 @@ def test_starting_workers_are_not_health_checked_until_ready():
     """Workers whose start-up holds the GIL longer than the health check's 1 s: uvicorn's own
     supervisor kills them again and again; ours waits for them (0 restarts, both ready)."""
     n = _gil_hold_length(3.0)
-    env = {**os.environ, "GIL_HOLD_N": str(n), "PYTHONPATH": f"{ROOT / 'tests'}:{ROOT}"}
+    env = {**os.environ, "GIL_HOLD_N": str(n), "PYTHONPATH": f"{Path(__file__).resolve().parent}:{ROOT}"}
     logs = {}
     for which in ("uvicorn", "ours"):
         proc = subprocess.run([sys.executable, "-c", _SUPERVISE, which, "15"], cwd=ROOT, env=env,
