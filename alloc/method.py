@@ -100,7 +100,7 @@ class Method(ABC):
         """Facet generator subsets the build enumerates, C(m_free, k-1); 0 if none.
 
         The facet-search methods price their build with it (:meth:`build_cost`; the one
-        facet limit is :data:`alloc.methods.facet_search.FACET_LIMIT`).
+        facet limit is :data:`alloc.facet_cost.FACET_LIMIT`).
         """
         if not cls.needs_ams:
             return 0

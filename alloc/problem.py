@@ -16,7 +16,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ._kernels import rate_window
 from .domain import (  # noqa: F401 - re-exported: the problem's checks, imported from here by many
     MAX_AXES,
     MAX_EFFECTORS,
@@ -83,6 +82,17 @@ def _as_weight(name: str, value: ArrayLike | None, n: int) -> FloatArray:
         raise ProblemError(f"{name}: weight matrix's largest eigenvalue {lam[-1]:g} is above {MAX_MAGNITUDE:g} "
                            "(outside the valid domain)")
     return arr
+
+
+def _rate_window(*args: Any) -> tuple[np.ndarray, np.ndarray]:
+    # The compiled kernel is imported at the first rate-limited call, not with this module:
+    # importing numba costs 0.2-0.3 s of CPU, which every ``import alloc`` (and the service's
+    # start) would pay before anything is allocated.  The first call rebinds the name, so
+    # later calls reach the kernel directly.
+    global _rate_window
+    from ._kernels import rate_window
+    _rate_window = rate_window
+    return rate_window(*args)
 
 
 class Problem:
@@ -349,7 +359,7 @@ class Problem:
             return self.umin, self.umax
         if u_prev is None or dt is None:
             raise DemandError("u_prev/dt: rate limits need both u_prev and dt (or neither)")
-        return rate_window(self.umin, self.umax, self.rate_min, self.rate_max,
+        return _rate_window(self.umin, self.umax, self.rate_min, self.rate_max,
                            self.check_u_prev(u_prev), self.check_dt(dt))
 
     @staticmethod

@@ -232,13 +232,14 @@ def _get(port: int, path: str, timeout: float = 1.0) -> tuple[int, dict[str, Any
 
 
 def service_ready(python: Path, scratch: Path, timeout: float = 300.0,
-                  pythonpath: Path | None = None) -> dict[str, float]:
+                  pythonpath: Path | None = None, data: Path | None = None) -> dict[str, float]:
     """One start of ``python -m service.main``: seconds (wall) and the server process's CPU
     seconds to its first 200 on ``/v1/health`` (``ready``); the latency of a first ``da``
     request sent right then (``first_request_s``); and the seconds and CPU until ``/v1/ready``
-    says every method's kernels are loaded (``warm``).  ``pythonpath``: a checkout to run."""
+    says every method's kernels are loaded (``warm``).  ``pythonpath``: a checkout to run;
+    ``data``: the data directory (default: a new one, so the start creates the database)."""
     port = _free_port()
-    data = Path(tempfile.mkdtemp(dir=scratch))
+    data = Path(tempfile.mkdtemp(dir=scratch)) if data is None else data
     env = {k: v for k, v in os.environ.items() if not k.startswith("ALLOC_")}
     if pythonpath is not None:
         env["PYTHONPATH"] = str(pythonpath)
@@ -290,17 +291,20 @@ def service_ready(python: Path, scratch: Path, timeout: float = 300.0,
         errors.close()
 
 
-def print_service_ready(ready: list[dict[str, float]]) -> None:
-    def cell(key: str) -> str:
-        x = [r[key] for r in ready]
+def print_service_ready(ready: list[dict[str, float]], restart: list[dict[str, float]] | None = None) -> None:
+    """The table: a row for starts on a new database (``ready``) and, given, on an existing one."""
+    def cell(rows: list[dict[str, float]], key: str) -> str:
+        x = [r[key] for r in rows]
         return f"{np.median(x):.2f} ({min(x):.2f}-{max(x):.2f})"
 
-    print(f"\nService start-up (`python -m service.main`), {len(ready)} starts; medians (range)")
-    print("| ready: first 200 on /v1/health, wall s | ready, server CPU s | first `da` request then, s "
+    print(f"\nService start-up (`python -m service.main`), {len(ready)} starts each; medians (range)")
+    print("| database | ready: first 200 on /v1/health, wall s | ready, server CPU s | first `da` request then, s "
           "| all kernels warm (/v1/ready warmed), wall s | warm, server CPU s |")
-    print("|---|---|---|---|---|")
-    print(f"| {cell('ready_wall')} | {cell('ready_cpu')} | {cell('first_request_s')} | {cell('warm_wall')} "
-          f"| {cell('warm_cpu')} |")
+    print("|---|---|---|---|---|---|")
+    for name, rows in (("new", ready), ("existing (restart)", restart or [])):
+        if rows:
+            print(f"| {name} | {cell(rows, 'ready_wall')} | {cell(rows, 'ready_cpu')} | "
+                  f"{cell(rows, 'first_request_s')} | {cell(rows, 'warm_wall')} | {cell(rows, 'warm_cpu')} |")
 
 
 def service_report(args: argparse.Namespace) -> None:
@@ -308,11 +312,17 @@ def service_report(args: argparse.Namespace) -> None:
     scratch = Path(tempfile.mkdtemp(prefix="bench-startup-"))
     try:
         print(f"machine before: {machine_state()}")
-        ready = [service_ready(Path(sys.executable), scratch, pythonpath=args.root.resolve())
-                 for _ in range(args.repeat)]
+        root = args.root.resolve()
+        existing = Path(tempfile.mkdtemp(dir=scratch))
+        service_ready(Path(sys.executable), scratch, pythonpath=root, data=existing)  # creates its database
+        ready: list[dict[str, float]] = []
+        restart: list[dict[str, float]] = []
+        for _ in range(args.repeat):  # interleaved, so a change in the machine's load hits both rows
+            ready.append(service_ready(Path(sys.executable), scratch, pythonpath=root))
+            restart.append(service_ready(Path(sys.executable), scratch, pythonpath=root, data=existing))
         print(f"machine after: {machine_state()}")
-        print(f"service from {args.root.resolve()}")
-        print_service_ready(ready)
+        print(f"service from {root}")
+        print_service_ready(ready, restart)
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
 

@@ -23,7 +23,6 @@ from numpy.typing import NDArray
 
 import alloc
 from alloc.ams import AttainableSet, zonotope_volume
-from alloc.methods.direct import DirectAllocation
 
 from .cost import build_seconds
 from .errors import InvalidRequest, field_error
@@ -70,6 +69,8 @@ def summarize(problem: alloc.Problem, directions: list[list[float]] | None, budg
             volume, note = zonotope_volume(problem.B, problem.umin, problem.umax), "alloc.ams.zonotope_volume"
             if not np.isfinite(volume):
                 volume, note = None, "not computed: the determinants overflow for this problem's scale"
+        from alloc.methods.direct import DirectAllocation  # here: the methods load numba (0.3 s of start-up)
+
         lp = DirectAllocation(problem, backend="highs")
         found = []
         for d in ds:

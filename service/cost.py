@@ -8,7 +8,7 @@ measured numbers with the methods: :mod:`alloc.methods.facet_search`), and a pre
 ``ALLOC_BUILD_BUDGET_S`` is refused with 422 naming the predicted cost.
 
 The policy is the service's own: the default budget is the declared cost of a facet
-enumeration at the library's facet limit (:data:`alloc.methods.facet_search.FACET_LIMIT`,
+enumeration at the library's facet limit (:data:`alloc.facet_cost.FACET_LIMIT`,
 20,000 subsets -> 3.0 s), so the service admits every build the library's own
 ``backend="auto"`` would choose, and nothing larger.  Per-call option caps live in
 :mod:`service.config`.
@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 import alloc
-from alloc.methods.facet_search import FACET_LIMIT, FACET_SECONDS, facet_build_seconds
+from alloc.facet_cost import FACET_LIMIT, FACET_SECONDS, facet_build_seconds
 from alloc.registry import CHEAP_BUILD_SECONDS, get_method
 
 __all__ = ["FACET_SECONDS", "DEFAULT_BUILD_BUDGET_S", "build_seconds", "call_seconds", "batch_seconds",

@@ -25,14 +25,39 @@ Bad settings raise :class:`~alloc.exceptions.OptionError` (a TypeError), bad sam
 
 from __future__ import annotations
 
+import importlib
+import types
+from typing import TYPE_CHECKING
+
+from .. import _lazy
 from ._checks import SampleError, StateError
-from .detection import Detection, FailureDetector
-from .excitation import NullSpaceExcitation, RandomWeightAllocator, regressor_condition
-from .frequency import FrequencyDomainEstimator, FrequencyEstimate
-from .rls import EffectivenessRLS, RecursiveLeastSquares
+
+if TYPE_CHECKING:
+    from .detection import Detection, FailureDetector
+    from .excitation import NullSpaceExcitation, RandomWeightAllocator, regressor_condition
+    from .frequency import FrequencyDomainEstimator, FrequencyEstimate
+    from .rls import EffectivenessRLS, RecursiveLeastSquares
 
 __all__ = [
     "RecursiveLeastSquares", "EffectivenessRLS", "FrequencyDomainEstimator", "FrequencyEstimate",
     "FailureDetector", "Detection", "NullSpaceExcitation", "RandomWeightAllocator", "regressor_condition",
     "SampleError", "StateError",
 ]
+
+# Loaded on first access (alloc/_lazy.py): the excitation module needs the allocators and
+# their compiled kernels (numba, 0.2-0.3 s of CPU), which a caller that only detects, such
+# as the service at start, should not pay for.
+_LAZY = {
+    "Detection": "detection", "FailureDetector": "detection",
+    "NullSpaceExcitation": "excitation", "RandomWeightAllocator": "excitation", "regressor_condition": "excitation",
+    "FrequencyDomainEstimator": "frequency", "FrequencyEstimate": "frequency",
+    "EffectivenessRLS": "rls", "RecursiveLeastSquares": "rls",
+}
+
+
+def _submodule(name: str) -> types.ModuleType:
+    module = _LAZY[name]
+    return importlib.import_module(f".{module}", __name__)
+
+
+__getattr__, __dir__ = _lazy.attach(__name__, _LAZY, __all__, _submodule)

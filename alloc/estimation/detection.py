@@ -59,7 +59,6 @@ import math
 from typing import Any
 
 import numpy as np
-from scipy.linalg import LinAlgError, cholesky, solve_triangular, toeplitz
 
 from ..exceptions import OptionError
 from ..health import EffectorHealth, FailureEvent, FailureKind, apply_event, health_from_dict, health_to_dict
@@ -427,6 +426,9 @@ def _correlation_setting(value: Any) -> np.ndarray:
 
 def _whitener(rho: np.ndarray, n: int) -> np.ndarray:
     """``W`` (n, n) with ``W Sigma W^T = I``, ``Sigma`` the window's Toeplitz correlation matrix."""
+    # here, not at import: scipy.linalg is 0.2 s of the service's start, and few detectors whiten
+    from scipy.linalg import LinAlgError, cholesky, solve_triangular, toeplitz
+
     lags = np.zeros(n)
     lags[0] = 1.0
     use = min(n - 1, rho.size)

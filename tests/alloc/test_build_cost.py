@@ -92,4 +92,4 @@ def test_one_definition_of_the_facet_limit():
                 if re.match(r"\s*FACET_LIMIT\s*=", line) or (
                         re.search(r"\b(20_?000|2e4)\b", line) and re.search(r"facet|\bnf\b", line, re.I)):
                     hits.add(f"{path.relative_to(ROOT)}: {line.strip()}")
-    assert hits == {"alloc/methods/facet_search.py: FACET_LIMIT = 20_000"}, hits
+    assert hits == {"alloc/facet_cost.py: FACET_LIMIT = 20_000"}, hits
