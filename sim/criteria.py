@@ -21,7 +21,12 @@ recalled).  With no failure the whole run is ``before``.  Criteria (the names in
   as :meth:`sim.result.SimResult.summary`'s channels).
 * ``<axis>_excursion_<phase>`` -- peak ``|output|`` of a regulated axis (sideslip, reference 0).
 * ``position_saturation_<phase>``, ``rate_saturation_<phase>`` -- fraction of the phase's samples
-  in which any effector sits at a position (rate) limit (:meth:`SimResult.saturated_samples`).
+  in which any effector sits at a position (rate) limit (:meth:`SimResult.saturated_samples`),
+  leaving out, from the failure time on, every effector the *injected* failure takes out of
+  command (:data:`OUT_OF_COMMAND`: jammed, hard-over, floating; :func:`failed_effectors`).  Such
+  an effector sits where the failure put it, on a stop for a hard-over, whatever the allocator
+  does, so counting it would break the criterion by construction.  What the allocator believes
+  plays no part: the failure comes from the run's scenario (:func:`known_failed_effectors`).
 * ``back_in_band_s`` -- seconds from the failure until every axis's ``|error|`` (``|output|``
   for an excursion axis) is inside its nominal peak limit and stays there for
   :data:`RECOVERY_HOLD_S`; ``inf`` when that never happens within the run.  Not judged
@@ -36,16 +41,21 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from alloc.health import Effect
+
 if TYPE_CHECKING:
+    from sim.model import Failure
     from sim.result import SimResult
 
 __all__ = [
     "Limit", "AxisLimits", "ScenarioCriteria", "Verdict", "CRITERIA", "criteria_for", "evaluate", "verdict_of",
-    "use_scenario", "tracking_metrics",
+    "use_scenario", "tracking_metrics", "failed_effectors", "known_failed_effectors", "OUT_OF_COMMAND",
+    "SATURATION_RULE",
     "back_in_band_time", "free_parameters", "PHASES", "RECOVERY_HOLD_S", "RECOVERY_MAX_S",
     "NOMINAL_RMS_FRACTION", "FAILED_RMS_FRACTION", "NOMINAL_PEAK_FRACTION", "FAILED_PEAK_FRACTION",
     "SATURATION_MAX_FRACTION", "SIDESLIP_RMS_DEG", "render_markdown",
@@ -80,6 +90,12 @@ RECOVERY_MAX_S = 5.0
 #: Category II PIO trigger).  The seed's own HARV Failure #1 (Fig 4-70: three effectors in
 #: "almost constant rate saturation", called Level II) would break the rate limit.
 SATURATION_MAX_FRACTION = 0.5
+#: the effects of a failure that take an effector out of command: it holds, runs to a stop or
+#: trails whatever it is commanded (alloc.health Effect), so its stops say nothing of the allocator
+OUT_OF_COMMAND = frozenset({Effect.HOLD, Effect.RUN_TO_STOP, Effect.TRAIL})
+#: the saturation shares' rule as the criteria table states it
+SATURATION_RULE = ("from the failure time on, effectors the injected failure jams, drives hard-over or lets float "
+                   "are left out (the simulation's failure, not the allocator's belief)")
 
 
 @dataclass(frozen=True)
@@ -206,7 +222,7 @@ def _common(scenario: str, axes: tuple[AxisLimits, ...]) -> ScenarioCriteria:
         scenario, axes,
         recovery_hold=Limit(RECOVERY_HOLD_S, "ours (RECOVERY_HOLD_S)"),
         recovery_max=Limit(RECOVERY_MAX_S, "ours (RECOVERY_MAX_S)"),
-        saturation_max=Limit(SATURATION_MAX_FRACTION, "ours (SATURATION_MAX_FRACTION)"),
+        saturation_max=Limit(SATURATION_MAX_FRACTION, f"ours (SATURATION_MAX_FRACTION); {SATURATION_RULE}"),
     )
 
 
@@ -291,6 +307,51 @@ def back_in_band_time(t: np.ndarray, inside: np.ndarray, failure_time: float, ho
     return float(start_t[first] - failure_time)
 
 
+def failed_effectors(failure: Failure | None) -> tuple[int, ...]:
+    """Indices of the effectors ``failure`` takes out of command (:data:`OUT_OF_COMMAND`), in
+    order; a ``repair`` of an effector in the same failure puts it back in command."""
+    out: dict[int, None] = {}
+    for f in () if failure is None else failure.actuators:
+        effects = set(f.spec.effects)
+        if Effect.REPAIR in effects:
+            out.pop(f.index, None)
+        elif effects & OUT_OF_COMMAND:
+            out[f.index] = None
+    return tuple(out)
+
+
+def known_failed_effectors(result: SimResult) -> tuple[int, ...]:
+    """:func:`failed_effectors` of the failure ``result`` flew, rebuilt from its scenario by name.
+
+    Empty without a failure, or when the run's scenario is not registered or does not know the
+    failure's name (a :class:`sim.model.Failure` handed straight to the runner): then every
+    effector counts, as it would without the rule.
+    """
+    scenario = _SCENARIOS.get(result.scenario)
+    if result.failure is None or scenario is None:
+        return ()
+    try:
+        failure = scenario.failure(result.failure, result.failure_time)
+    except (KeyError, ValueError):
+        return ()
+    return failed_effectors(failure)
+
+
+def _saturation(result: SimResult, kind: str, excluded: tuple[int, ...]) -> np.ndarray | None:
+    """Per sample, whether any effector but ``excluded`` sits at a ``kind`` limit (None: not recorded)."""
+    if not excluded or result.effectors is None:
+        return result.saturated_samples(kind)
+    keep = np.setdiff1d(np.arange(result.effectors.shape[1]), excluded)
+
+    def columns(pair: tuple[np.ndarray, np.ndarray] | None) -> tuple[np.ndarray, np.ndarray] | None:
+        return None if pair is None else tuple(np.asarray(a)[..., keep] for a in pair)  # type: ignore[return-value]
+
+    rates = None if result.effector_rates is None else result.effector_rates[:, keep]
+    kept = replace(result, effectors=result.effectors[:, keep], effector_rates=rates,
+                   effector_limits=columns(result.effector_limits), rate_limits=columns(result.rate_limits))
+    return kept.saturated_samples(kind)
+
+
 def _signals(result: SimResult, axis: AxisLimits) -> tuple[np.ndarray, np.ndarray] | None:
     """(error, output) of an axis, or None when the run does not have that channel."""
     if axis.signal not in result.channels:
@@ -303,8 +364,14 @@ def _masked(stat: Callable[[np.ndarray], float], x: np.ndarray, mask: np.ndarray
     return stat(x[mask]) if np.any(mask) else None
 
 
-def evaluate(result: SimResult, criteria: ScenarioCriteria) -> Verdict:
-    """Judge ``result`` against ``criteria`` (module docstring)."""
+def evaluate(result: SimResult, criteria: ScenarioCriteria, *,
+             failed: tuple[int, ...] | None = None) -> Verdict:
+    """Judge ``result`` against ``criteria`` (module docstring).
+
+    ``failed``: the effectors left out of the saturation shares from the failure time on;
+    None: :func:`known_failed_effectors` of the run.
+    """
+    excluded = known_failed_effectors(result) if failed is None else tuple(int(i) for i in failed)
     t = result.t
     failure = result.failure_time
     before = np.ones(t.shape, dtype=bool) if failure is None else t < failure
@@ -326,8 +393,10 @@ def evaluate(result: SimResult, criteria: ScenarioCriteria) -> Verdict:
                 metrics[f"{axis.signal}_excursion_{phase}"] = tracking_metrics(out, mask)[1] if np.any(mask) else None
         inside &= np.abs(err if axis.peak is not None else out) <= axis.band()
     for kind in ("position", "rate"):
-        sat = result.saturated_samples(kind)
+        # before the failure every effector counts; after it, only those still in command
+        sats = {"before": result.saturated_samples(kind), "after": _saturation(result, kind, excluded)}
         for phase, mask in masks.items():
+            sat = sats[phase]
             metrics[f"{kind}_saturation_{phase}"] = (None if sat is None else
                                                      _masked(lambda x: float(np.mean(x)), sat, mask))
     # nothing to recover to before a failure at the start; a stretch shorter than the hold cannot show it

@@ -5,6 +5,7 @@ hostile trajectories against an independent re-computation of every verdict."""
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 import math
 
 import numpy as np
@@ -211,3 +212,59 @@ def test_the_comparison_page_holds_the_criteria_tables() -> None:
 
     page = Path(__file__).resolve().parents[2] / "docs" / "comparison.md"
     assert render_markdown() in page.read_text()
+
+
+# ----------------------------------------------------------------------------- failed effectors
+def _two_effector_run(pos: np.ndarray, rate: np.ndarray) -> SimResult:
+    """A quiet run with two effectors (limits +-1, rates +-1) and a failure at 5 s."""
+    zeros = np.zeros((T.size, 2))
+    return SimResult(
+        "synthetic", "pinv", "f", T, ["q", "b"], zeros, zeros, zeros, effectors=pos, effector_rates=rate,
+        effector_limits=(np.array([-1.0, -1.0]), np.array([1.0, 1.0])),
+        rate_limits=(np.array([-1.0, -1.0]), np.array([1.0, 1.0])), failure_time=FAILURE_T,
+    )
+
+
+def test_the_failed_effector_leaves_the_saturation_share_after_its_failure() -> None:
+    """Seeded jams: effector 0 runs to its stop at the failure and stays (a hard-over), effector 1
+    is healthy and on a stop for a random share of each phase.  With the rule (``failed=(0,)``) the
+    after-share is effector 1's alone; without it (``failed=()``) every after-sample counts."""
+    rng = np.random.default_rng(27)
+    after = T >= FAILURE_T
+    for _ in range(50):
+        healthy = np.where(rng.random(T.size) < rng.uniform(0.0, 0.6), rng.choice([-1.0, 1.0]), 0.3)
+        jammed = np.where(after, 1.0, rng.uniform(-0.9, 0.9, T.size))
+        rate = np.column_stack([np.where(after & (T < FAILURE_T + 0.5), 1.0, 0.0), np.zeros(T.size)])
+        run = _two_effector_run(np.column_stack([jammed, healthy]), rate)
+        with_rule, without = evaluate(run, TABLE, failed=(0,)), evaluate(run, TABLE, failed=())
+        own = float(np.mean(np.abs(healthy[after]) >= 1.0))
+        assert with_rule.metrics["position_saturation_after"] == pytest.approx(own)
+        assert without.metrics["position_saturation_after"] == 1.0
+        assert with_rule.metrics["rate_saturation_after"] == 0.0
+        assert without.metrics["rate_saturation_after"] == pytest.approx(0.1)  # 5 of 50 samples running
+        # before the failure the rule changes nothing
+        for kind in ("position", "rate"):
+            assert with_rule.metrics[f"{kind}_saturation_before"] == without.metrics[f"{kind}_saturation_before"]
+        assert ("position_saturation_after" in without.broken) and (
+            ("position_saturation_after" in with_rule.broken) == (own > 0.5))
+
+
+def test_failed_effectors_are_the_ones_out_of_command() -> None:
+    from sim.actuator_failure import ActuatorFailure
+    from sim.criteria import failed_effectors, known_failed_effectors
+    from sim.model import Failure
+
+    failure = Failure("f", 1.0, "test", actuators=(
+        ActuatorFailure(0, "jam", position=0.5), ActuatorFailure(1, "hardover"), ActuatorFailure(2, "float"),
+        ActuatorFailure(3, "limits", lo=-0.5, hi=0.5), ActuatorFailure(4, "effectiveness", fraction=0.5),
+        ActuatorFailure(5, "jam", position=0.0), ActuatorFailure(5, "repair"),
+    ))
+    assert failed_effectors(failure) == (0, 1, 2)
+    assert failed_effectors(None) == ()
+    # the seed's ICE failure jams the left LEF (seed section 4.7); HARV lat-dir Failure #2 jams nothing
+    ice_run = SimResult("ice", "pinv", "seed", T, [], np.zeros((T.size, 0)), np.zeros((T.size, 0)),
+                        np.zeros((T.size, 0)), failure_time=20.0)
+    assert known_failed_effectors(ice_run) == (ice.EFFECTORS.index("de2"),)
+    assert known_failed_effectors(replace(ice_run, scenario="harv_latdir", failure="failure2")) == ()
+    assert known_failed_effectors(replace(ice_run, failure="not a failure")) == ()
+    assert "injected failure jams" in criteria_for("ice").sources()["position_saturation_after"]
