@@ -195,7 +195,7 @@ def _factors(mats, ivecs, bankL, bank, r0, r1, lev, diag, nf, m):  # pragma: no 
     ``L = bankL[s]``, the rest :func:`_slot` of ``bank[s]``): looked up, else computed (and
     kept while the cache has room; past that, computed into the scratch slot 0).  Cached and
     recomputed factors are bitwise equal, so the cache never changes an answer, only its cost.  The hash table (rows ``_TABLE:`` of ``ivecs``)
-    is open addressing as in :func:`alloc._kernels._probe`.
+    is open addressing as in :func:`alloc._inverse_kernels._probe`.
     """
     words = ivecs[_HEAD, _WORDS]
     for w in range(words):

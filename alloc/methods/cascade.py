@@ -9,7 +9,8 @@ from typing import Any
 
 import numpy as np
 
-from .._kernels import _FREE_BITS, cascade, daisy_chain, free_set_insert, free_set_pinv, matvec
+from .._inverse_kernels import cascade, daisy_chain, free_set_insert
+from .._kernels import _FREE_BITS, free_set_pinv, matvec
 from .._linalg import ABS_FLOOR, RCOND, check_rcond, max_scale, priority_groups, sqrt_factor, weighted_pinv
 from ..exceptions import OptionError, ProblemError
 from ..options import groups as groups_option
@@ -126,7 +127,7 @@ class CascadedGeneralizedInverse(Method):
         self._cache: dict[bytes, FloatArray] = {}
         self._level_cache: dict[tuple[int, bytes], FloatArray] = {}
         self._level_bytes = 0
-        # the compiled cascade's cache: free set -> slot of ``_bank`` (see _kernels.cascade),
+        # the compiled cascade's cache: free set -> slot of ``_bank`` (see _inverse_kernels.cascade),
         # bounded in bytes; when full it is emptied and refilled (answers never depend on it)
         m, k = problem.m, problem.k
         self._cache_slots = int(min(self._CACHE_LIMIT, max(16, CGI_CACHE_BYTES // (8 * max(m * k, 1)))))
@@ -183,7 +184,7 @@ class CascadedGeneralizedInverse(Method):
             self._bank_pinv(free)
 
     def _solve_reference(self, v, lo, hi, u_prev):
-        """The cascade in numpy (what :func:`alloc._kernels.cascade` computes, compiled)."""
+        """The cascade in numpy (what :func:`alloc._inverse_kernels.cascade` computes, compiled)."""
         if self.groups is not None and len(self.groups) > 1:
             return self._solve_by_level(v, lo, hi)
         p = self.problem
@@ -328,7 +329,7 @@ class DaisyChain(Method):
         return daisy_chain(p.B, p.up, v, lo, hi, self._idx, self._start, self._Pcat)
 
     def _solve_reference(self, v, lo, hi, u_prev):
-        """The chain in numpy (what :func:`alloc._kernels.daisy_chain` computes, compiled)."""
+        """The chain in numpy (what :func:`alloc._inverse_kernels.daisy_chain` computes, compiled)."""
         p = self.problem
         u = np.minimum(np.maximum(p.up, lo), hi)
         r = v - p.B @ u

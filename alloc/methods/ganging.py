@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._kernels import affine, affine_clip_batch
+from .._inverse_kernels import affine, affine_clip_batch
 from ..exceptions import ProblemError
 from ..options import matrix
 from ..problem import Problem, as_float_array, check_magnitude

@@ -25,7 +25,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._kernels import affine, affine_clip_batch, fused_scaled, increment, scaled_increment, scaled_increment_batch
+from .._inverse_kernels import (affine, affine_clip_batch, fused_scaled, increment, scaled_increment,
+                                scaled_increment_batch)
 from .._linalg import RCOND, check_rcond, max_scale, weighted_pinv
 from ..exceptions import OptionError, SolverError
 from ..options import flag, real
@@ -119,7 +120,7 @@ class PinvScale(_PinvBase):
         return scaled_increment(self._P, self._B, self._bias(u_prev), v, lo, hi), 0
 
     def _solve_reference(self, v, lo, hi, u_prev):
-        """The scaling in numpy (what :func:`alloc._kernels.scaled_increment` computes, compiled)."""
+        """The scaling in numpy (what :func:`alloc._inverse_kernels.scaled_increment` computes, compiled)."""
         base = self._base(lo, hi, u_prev)
         du = self.P @ (v - self.problem.B @ base)
         return base + max_scale(base, du, lo, hi) * du, 0
