@@ -1,6 +1,23 @@
 """C99 templates of the closed-form kernels (:mod:`alloc.export`): ``pinv``, ``pinv_clip``,
 ``ganging``, ``pinv_scale`` and ``cgi``; filled as :mod:`.templates` describes."""
 
+
+def _clipped_preference(also: str = "") -> str:
+    """C statements that open a kernel working from ``base``: the call's bounds ``lo``, ``hi``
+    (code 2 with the held answer when ``v``, ``u_prev`` or ``dt`` is invalid), then
+    ``base[j]``, the preferred position ``UP[j]`` clipped onto them as ``y``; ``also`` holds
+    further statements of that loop over ``j``."""
+    return ("    last_iterations = 0;\n"
+            "    if (bounds(v, u_prev, dt, lo, hi, u)) return 2;\n"
+            "    for (j = 0; j < M; ++j) {\n"
+            "        real y = UP[j];\n"
+            "        if (y < lo[j]) y = lo[j];\n"
+            "        if (y > hi[j]) y = hi[j];\n"
+            "        base[j] = y;\n"
+            + also +
+            "    }\n")
+
+
 # pinv, pinv_clip, ganging: u = clip(c + P v) (alloc._kernels.fused_affine and, with rate
 # limits, Method.solve + finish_owned: the same arithmetic).
 AFFINE = r"""
@@ -27,8 +44,8 @@ int PREFIX_allocate(const real *v, const real *u_prev, real dt, real *u)
 }
 """
 
-# pinv_scale (alloc._kernels.fused_scaled / scaled_increment): the increment from the clipped
-# preferred position scaled by one factor into the box.
+# pinv_scale (alloc._inverse_kernels.fused_scaled / scaled_increment): the increment from
+# the clipped preferred position scaled by one factor into the box.
 SCALED = r"""
 static const real MAP_P[M][K] = @MAP_P@;
 
@@ -36,15 +53,7 @@ int PREFIX_allocate(const real *v, const real *u_prev, real dt, real *u)
 {
     real lo[M], hi[M], base[M], r[K], du[M], s = 1;
     int i, j, code;
-    last_iterations = 0;
-    if (bounds(v, u_prev, dt, lo, hi, u)) return 2;
-    for (j = 0; j < M; ++j) {
-        real y = UP[j];
-        if (y < lo[j]) y = lo[j];
-        if (y > hi[j]) y = hi[j];
-        base[j] = y;
-    }
-    for (i = 0; i < K; ++i) {
+""" + _clipped_preference() + r"""    for (i = 0; i < K; ++i) {
         real acc = 0;
         for (j = 0; j < M; ++j) acc += BM[i][j] * base[j];
         r[i] = v[i] - acc;
@@ -74,8 +83,8 @@ int PREFIX_allocate(const real *v, const real *u_prev, real dt, real *u)
 }
 """
 
-# cgi (alloc._kernels.cascade): the cascaded generalized inverse of section 1.3.4.6 over the
-# pseudo-inverses of every free set, precomputed by the library's own code.
+# cgi (alloc._inverse_kernels.cascade): the cascaded generalized inverse of section 1.3.4.6
+# over the pseudo-inverses of every free set, precomputed by the library's own code.
 CASCADE = r"""
 /* the weighted pseudo-inverse of every free set (row: the free-set bits; rows q < nf of the
    nf x K inverse, K values each), as the library computes it */
@@ -85,17 +94,8 @@ int PREFIX_allocate(const real *v, const real *u_prev, real dt, real *u)
 {
     real lo[M], hi[M], base[M], r[K], uF[M];
     int F[M], freeset[M], i, j, q, it, nf, code;
-    last_iterations = 0;
-    if (bounds(v, u_prev, dt, lo, hi, u)) return 2;
-    for (j = 0; j < M; ++j) {
-        real y = UP[j];
-        if (y < lo[j]) y = lo[j];
-        if (y > hi[j]) y = hi[j];
-        base[j] = y;
-        u[j] = y;
-        freeset[j] = lo[j] < hi[j];
-    }
-    for (it = 1; it < M + 2; ++it) {
+""" + _clipped_preference("        u[j] = y;\n"
+                          "        freeset[j] = lo[j] < hi[j];\n") + r"""    for (it = 1; it < M + 2; ++it) {
         unsigned long bits = 0;
         const real *P;
         int hit = 0;
