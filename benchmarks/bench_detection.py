@@ -304,13 +304,16 @@ def report_replay(rows: list[dict[str, Any]]) -> str:
     return table
 
 
-def run_benefit(out: Path, seeds: int, frame_rate: float) -> None:
+def run_benefit(out: Path, seeds: int, frame_rate: float, first_seed: int = 0,
+                arms: tuple[str, ...] = ARMS) -> None:
+    """Seed by seed (an interrupted run leaves whole seeds); ``arms`` a subset, so the arms that
+    do not depend on the detector (blind, told) can be flown apart from the one that does."""
     done = _done(out, "benefit")
-    for s in range(seeds):
+    for s in range(first_seed, first_seed + seeds):
         for scenario in SCENARIOS:
             for kind in catalogue_kinds():
                 for method in METHODS:
-                    for arm in ARMS:
+                    for arm in arms:
                         key = f"{scenario}/{kind}/{method}/{arm}/{frame_rate:g}/{s}"
                         if key in done or key.replace(f"/{frame_rate:g}/", "/") in done and frame_rate == 100:
                             continue
@@ -543,7 +546,9 @@ def main() -> None:
     r.add_argument("--hours", type=float, default=5.0, help="simulated hours per scenario (false)")
     r.add_argument("--flight", type=float, default=300.0, help="seconds per no-failure run (false)")
     r.add_argument("--noise-false", type=float, default=1.0)
-    r.add_argument("--first-seed", type=int, default=0, help="first noise seed index (false; parallel processes)")
+    r.add_argument("--first-seed", type=int, default=0,
+                   help="first noise seed index (false, benefit; parallel processes)")
+    r.add_argument("--arms", default=",".join(ARMS), help="arms flown (benefit)")
     r.add_argument("--dt", type=float, default=0.0005, help="integration step of the false section (s)")
     r.add_argument("--frame-rate", type=float, default=100.0,
                    help="flight-control frame rate (Hz); 0: the seed's single-rate 2 kHz loop")
@@ -564,7 +569,10 @@ def main() -> None:
     elif args.section == "false":
         run_false(args.out, args.hours, args.flight, args.noise_false, args.frame_rate, args.dt, args.first_seed)
     else:
-        run_benefit(args.out, args.seeds, args.frame_rate)
+        arms = tuple(args.arms.split(","))
+        if not set(arms) <= set(ARMS):
+            ap.error(f"--arms: {args.arms!r}; expected a comma-separated subset of {','.join(ARMS)}")
+        run_benefit(args.out, args.seeds, args.frame_rate, args.first_seed, arms)
 
 
 if __name__ == "__main__":
