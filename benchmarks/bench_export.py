@@ -66,6 +66,8 @@ KERNELS = (("qp", "qp", "double", {}), ("qp float", "qp", "float", {}), ("wls", 
 #: the qp kernel with every free set's factorisation tabulated where the default does not
 #: (beyond the 256 KiB budget: 1.1 MB of code for ICE's 2,048 free sets), up to this many effectors
 TABLE_QP_MAX_M = 11
+#: where the default qp factorises at run time, also the qp kernel without its factorisation
+#: cache ("qp no cache", cache=0): every factorisation computed, the cost of a cache miss
 
 
 def problems() -> dict[str, alloc.Problem]:
@@ -82,7 +84,8 @@ def compile_driver(kernel, folder: Path) -> tuple[Path, dict]:
                     f"-DPREFIX_UPPER={upper}", str(DRIVER), str(c), "-o", str(exe), "-lm"], check=True)
     obj = folder / f"{kernel.prefix}.o"
     subprocess.run([_cc(), *CFLAGS, "-fstack-usage", "-c", str(c), "-o", str(obj)], check=True, cwd=folder)
-    return exe, {"code_bytes": _code_size(obj), "stack_bytes": _stack(obj.with_suffix(".su"))}
+    code, static = _sizes(obj)
+    return exe, {"code_bytes": code, "static_bytes": static, "stack_bytes": _stack(obj.with_suffix(".su"))}
 
 
 def _cc() -> str:
@@ -92,12 +95,14 @@ def _cc() -> str:
     return cc
 
 
-def _code_size(obj: Path) -> int | None:
+def _sizes(obj: Path) -> tuple[int | None, int | None]:
+    """Code bytes (``size`` text + data) and static RAM bytes (data + bss: the limits in force,
+    the factorisation cache) of an object."""
     if shutil.which("size") is None:
-        return None
+        return None, None
     out = subprocess.run(["size", str(obj)], capture_output=True, text=True, check=True).stdout.splitlines()
     text, data, bss = (int(x) for x in out[1].split()[:3])
-    return text + data
+    return text + data, data + bss
 
 
 def _stack(su: Path) -> int | None:
@@ -231,13 +236,15 @@ def main(argv: list[str] | None = None) -> dict:
             for sname, V in seqs.items():
                 files[sname] = folder / f"{pname.split()[0]}_{sname}.bin"
                 np.ascontiguousarray(V, dtype="<f8").tofile(files[sname])
-            kernels = [(*row, None) for row in KERNELS]
-            if "#define TABLE 0" in export_c(p, "qp").source and p.m <= TABLE_QP_MAX_M:
-                kernels.insert(1, ("qp table", "qp", "double", {}, True))
-            for label, method, precision, options, table in kernels:
+            kernels: list[tuple[str, str, str, dict, dict]] = [(*row, {}) for row in KERNELS]
+            if "#define TABLE 0" in export_c(p, "qp").source:
+                kernels.insert(1, ("qp no cache", "qp", "double", {}, {"cache": 0}))
+                if p.m <= TABLE_QP_MAX_M:
+                    kernels.insert(1, ("qp table", "qp", "double", {}, {"table": True}))
+            for label, method, precision, options, form in kernels:
                 prefix = f"k_{re.sub(r'[^a-z0-9]', '_', pname.lower())}_{label.replace(' ', '_')}"
                 try:
-                    kernel = export_c(p, method, precision=precision, options=options, prefix=prefix, table=table)
+                    kernel = export_c(p, method, precision=precision, options=options, prefix=prefix, **form)
                 except ExportError as exc:  # cgi beyond the table budget: say so, time the rest
                     print(f"{pname:<16} {label:<16} not exported: {exc}")
                     out.setdefault("skipped", []).append({"problem": pname, "kernel": label, "reason": str(exc)})
@@ -260,14 +267,16 @@ def main(argv: list[str] | None = None) -> dict:
                         res = run_json([str(daqp), str(prob), str(path), str(args.calls), str(args.passes), mode,
                                         repr(gamma)])
                         out["rows"].append({"problem": pname, "sequence": sname, "kernel": f"daqp {mode}",
-                                            "table": False, "code_bytes": None, "stack_bytes": None, **res})
+                                            "table": False, "code_bytes": None, "static_bytes": None, "stack_bytes": None,
+                                            **res})
                         _print_row(out["rows"][-1])
             if rust is not None:
                 for sname, path in files.items():
                     for mode in ("warm", "cold"):
                         res = run_json([str(rust), str(prob), str(path), str(args.calls), str(args.passes), mode])
                         out["rows"].append({"problem": pname, "sequence": sname, "kernel": f"wls-alloc {mode}",
-                                            "table": False, "code_bytes": None, "stack_bytes": None, **res})
+                                            "table": False, "code_bytes": None, "static_bytes": None, "stack_bytes": None,
+                                            **res})
                         _print_row(out["rows"][-1])
     _print_summary(out)
     if args.json:
@@ -328,8 +337,8 @@ def _ratio(out: dict, problem: str, sequence: str, kernel: str, ref: str = "wls-
 
 
 #: (kernel, reference) pairs of the comparison table: the generated kernels over each peer's median
-VERSUS = (("qp", "daqp cold"), ("qp table", "daqp cold"), ("wls", "daqp cold"), ("qp", "daqp warm"),
-          ("qp table", "daqp warm"), ("wls", "daqp warm"))
+VERSUS = (("qp", "daqp cold"), ("qp no cache", "daqp cold"), ("qp table", "daqp cold"), ("wls", "daqp cold"),
+          ("qp", "daqp warm"), ("qp no cache", "daqp warm"), ("qp table", "daqp warm"), ("wls", "daqp warm"))
 
 
 def _worst_over_median(out: dict, problem: str, sequence: str, kernel: str) -> float | None:
@@ -366,8 +375,8 @@ def markdown(out: dict) -> str:
              f"{m['load_1min']:.1f} at the start, {m['cc']}, {m['rustc']}; {out['calls']:,} demands a sequence, "
              f"{out['passes']} passes, every call timed on its own by the native driver (no Python).", "",
              "| problem | demands | kernel | median ns | p99 ns | worst demand ns | max ns | x floor | x wls-alloc "
-             "| iterations median / max | code bytes | stack bytes |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "| iterations median / max | code bytes | static RAM bytes | stack bytes |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in out["rows"]:
         ratio = _ratio(out, r["problem"], r["sequence"], r["kernel"])
         lines.append(
@@ -376,6 +385,7 @@ def markdown(out: dict) -> str:
             f"| {r['median_ns'] / max(r['floor_median_ns'], 1.0):.1f} "
             f"| {'' if ratio is None else f'{ratio:.2f}'} | {r['iterations_median']} / {r['iterations_max']} "
             f"| {r['code_bytes'] if r['code_bytes'] is not None else ''} "
+            f"| {r.get('static_bytes') if r.get('static_bytes') is not None else ''} "
             f"| {r['stack_bytes'] if r['stack_bytes'] is not None else ''} |")
     lines += ["", "Median over wls-alloc's (warm) median in the same run:", "",
               "| problem | demands | qp | wls | qp float | wls float |", "|---|---|---|---|---|---|"]

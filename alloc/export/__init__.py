@@ -49,7 +49,7 @@ __all__ = ["export_c", "ExportedKernel", "ExportError", "EXPORTABLE", "PRECISION
            "FLOAT_TOLERANCE", "FLOAT_EXACT_RTOL", "FLOAT_VMAX", "Certificate"]
 
 #: bumped whenever the generated code changes for the same input
-GENERATOR_VERSION = "2"
+GENERATOR_VERSION = "3"
 #: the methods :func:`export_c` generates, in the order the docs list them
 EXPORTABLE = ("pinv", "pinv_clip", "ganging", "pinv_scale", "cgi", "wls", "qp", "dynamic")
 PRECISIONS = ("double", "float")
@@ -74,6 +74,11 @@ FLOAT_MU_EPS = 8 * 2.0 ** -23
 #: bytes of factorisation tables an active-set kernel precomputes by default (``table=None``):
 #: every free set of every level (2^m rows a level); beyond it the kernel factorises at run time
 TABLE_BUDGET = 256 * 1024
+#: bytes of static storage an active-set kernel without tables keeps for its cache of the free
+#: sets' factorisations met last (``cache=None``): the library's cache in a fixed size, no
+#: heap.  16 KiB is under a tenth of an STM32F4's 192 KB of RAM; ICE qp keeps 26 free sets in
+#: its 612-byte slots (the 4 x 6 hexacopter's kernels are tabulated and keep none)
+CACHE_BUDGET = 16 * 1024
 
 _ACTIVE_SET_METHODS = ("wls", "qp", "dynamic")
 
@@ -221,7 +226,7 @@ def _checksum(problem: Problem) -> str:
 def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "double",
              options: Mapping[str, Any] | None = None, prefix: str | None = None,
              maxit: int | None = None, table: bool | None = None,
-             iteration_bound: int | str | None = None) -> ExportedKernel:
+             iteration_bound: int | str | None = None, cache: int | None = None) -> ExportedKernel:
     """Generate the C99 kernel of ``method`` on a problem or vehicle.
 
     Parameters
@@ -256,6 +261,11 @@ def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "d
         sample of :func:`alloc.export.certify.certification_demands` (a sampled certification,
         not a proof: see :mod:`alloc.export.certify`; ``double`` only, since the sample is run
         in the library's double arithmetic).
+    cache : int, optional
+        Active set without tables: slots of the static, direct-mapped cache of the free sets'
+        factorisations met last (0: none; a cached factorisation has the bits of a fresh one,
+        so the cache changes the time, never the answer); default as many as fit
+        :data:`CACHE_BUDGET` bytes, at most one per free set.
 
     Returns
     -------
@@ -318,8 +328,10 @@ def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "d
     impl = allocator.impl
     levels = 0
     budget, cert = None, None
-    if iteration_bound is not None and method not in _ACTIVE_SET_METHODS:
-        raise ExportError(f"iteration_bound: {method} is closed-form (no iterations to bound)", field="iteration_bound")
+    for name, given in (("iteration_bound", iteration_bound), ("cache", cache)):
+        if given is not None and method not in _ACTIVE_SET_METHODS:
+            raise ExportError(f"{name}: {method} is closed-form (no iterations to bound or factorisations to cache)",
+                              field=name)
     if method in ("pinv", "pinv_clip", "ganging"):
         map_c, map_p = impl.fused
         fields.update(MAP_C=real.array(map_c, "c"), MAP_P=real.array(map_p, "P"))
@@ -332,7 +344,7 @@ def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "d
         body = templates_closed_form.CASCADE
     else:
         lexico = [impl._static, impl._dynamic] if method == "dynamic" else [impl._impl]
-        body, levels, maxit = _active_set_fields(lexico, problem, real, fields, maxit, table)
+        body, levels, maxit = _active_set_fields(lexico, problem, real, fields, maxit, table, cache)
         budget, cert = _iteration_budget(iteration_bound, allocator, problem, precision, levels * maxit)
         fields["BOUND"] = bound_text(m, levels, maxit, budget, cert)
         fields["MAXIT_DEFINE"] += ("/* iterations of a call with the nominal limits and no rate window (see above) */\n"
@@ -378,7 +390,7 @@ def _cascade_table(impl: Any, problem: Problem, real: _Real, table: bool | None)
 
 
 def _active_set_fields(instances: list[Any], problem: Problem, real: _Real, fields: dict[str, str],
-                       maxit: int | None, table: bool | None) -> tuple[str, int, int]:
+                       maxit: int | None, table: bool | None, cache: int | None) -> tuple[str, int, int]:
     """The active set's constants, read from the library's packed solver states
     (:func:`alloc._active_set.pack`), so the C runs on exactly the library's data.  One
     instance for ``qp`` and ``wls``; ``dynamic`` has two (without and with ``u_prev``), which
@@ -423,6 +435,8 @@ def _active_set_fields(instances: list[Any], problem: Problem, real: _Real, fiel
     if table and m > 20:
         raise ExportError(f"table: 2^{m} free sets a level is too many to tabulate", field="table")
     fields["TABLE"] = "1" if table else "0"
+    fields["CACHE"] = str(_cache_slots(cache, bool(table), entry * (8 if real.double else 4) + 4 * (4 + m),
+                                       len(instances) * len(keys) << min(m, 30)))
     fields["INSTANCES"] = _instances(instances, aset, keys, real, ml, bool(table))
     fields["HEALTH"] = (" *\n * Health at run time: PREFIX_set_limits(umin, umax) sets reduced limits or jams\n"
                         " * (umin[j] == umax[j]) within the nominal limits; an effectiveness change needs a new\n"
@@ -432,6 +446,20 @@ def _active_set_fields(instances: list[Any], problem: Problem, real: _Real, fiel
     fields["MAXIT_DEFINE"] = (f"/* iteration cap per level and per call (see the bound above) */\n"
                               f"#define PFX_MAXIT {cap}\n#define PFX_MAXIT_TOTAL {levels * cap}\n")
     return templates_active_set.ACTIVE_SET, levels, cap
+
+
+def _cache_slots(cache: int | None, table: bool, slot_bytes: int, free_sets: int) -> int:
+    """Slots of the factorisation cache: ``cache``, or as many as :data:`CACHE_BUDGET` holds
+    (at most one per free set); none beside a table."""
+    if cache is not None and (isinstance(cache, bool) or not isinstance(cache, (int, np.integer))
+                              or not 0 <= cache <= 1 << 16):
+        raise ExportError(f"cache: expected an integer in [0, 65536], got {cache!r}", field="cache")
+    if table:
+        if cache:
+            raise ExportError("cache: a kernel with tables looks every factorisation up (give cache=None or 0)",
+                              field="cache")
+        return 0
+    return int(min(CACHE_BUDGET // slot_bytes, free_sets)) if cache is None else int(cache)
 
 
 def _iteration_budget(bound: int | str | None, allocator: Any, problem: Problem, precision: str,

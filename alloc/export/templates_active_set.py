@@ -16,6 +16,10 @@ _DATA = r"""
 #define ML @ML@
 /* 1: the factorisation of every free set is a constant table (looked up, never computed) */
 #define TABLE @TABLE@
+/* without the table: slots of the static cache of the free sets' factorisations met last
+   (0: none); a factorisation depends on the instance, the level and the free set alone, so a
+   cached one has the bits of a fresh one: the cache changes the time, never the answer */
+#define CACHE @CACHE@
 /* singular values below SIGMA_RTOL of the largest are round-off; the Jacobi SVD's unit
    round-off; multipliers are tested against MU_EPS times the round-off of their computation */
 #define SIGMA_RTOL @SIGMA_RTOL@
@@ -58,15 +62,22 @@ struct instance {
 
 @INSTANCES@
 
+#if !TABLE
+/* the factorisation of one free set: L L' = Wu[F, F] (a diagonal L as a column), Yc/Vc/sc the
+   SVD of the held rows, Ya/Va/sa that of the level's rows, projected */
+struct factors {
+    real L[M * ML], Yc[M * NCW], Vc[NCW * NCW], sc[NCW], Ya[M * NLW], Va[NLW * NLW], sa[NLW];
+};
+#endif
+
 struct work {
     const struct instance *S;
     real u[M], e[N], bv[N], tmp[M], h[M], y[M], g[M], scale[M], lam[N];
     int freeset[M], fidx[M], tabu[M], pinned[M];
-    /* the factorisation of the current free set: L L' = Wu[F, F] (a diagonal L as a column),
-       Yc/Vc/sc the SVD of the held rows, Ya/Va/sa that of the level's rows, projected */
+    /* the factorisation of the current free set (a table row, a cache slot or own) */
     const real *L, *Yc, *Vc, *sc, *Ya, *Va, *sa;
-#if !TABLE
-    real Lw[M * ML], Ycw[M * NCW], Vcw[NCW * NCW], scw[NCW], Yaw[M * NLW], Vaw[NLW * NLW], saw[NLW];
+#if !TABLE && !CACHE
+    struct factors own;
 #endif
 };
 
@@ -139,7 +150,7 @@ static int level(struct work *w, int r0, int r1, int lev, real gam, const real *
 #if TABLE
         lookup(w, share ? 0 : lev);
 #else
-        factor(w, share ? 0 : r0, share ? r0 : r1, nf);
+        factorise(w, share ? 0 : lev, share ? 0 : r0, share ? r0 : r1, nf);
 #endif
         Yc = share ? w->Ya : w->Yc;
         Vc = share ? w->Va : w->Vc;
@@ -436,6 +447,7 @@ int PREFIX_set_limits(const real *umin, const real *umax)
 
 # qp, wls (and their priorities): the lexicographic least-squares active set of
 # alloc/_active_set.py (_level, _start, _run, _call_into) with the factorisation of
-# alloc/_lsq_factor.py (_jacobi, _factor), without the factorisation cache (the cache changes
-# the cost, never the answer); the library has no warm start, so neither has the kernel.
+# alloc/_lsq_factor.py (_jacobi, _factor), with a fixed-size static cache of factorisations
+# in the library's place (both change the cost, never the answer); the library has no warm
+# start, so neither has the kernel.
 ACTIVE_SET = _DATA + FACTOR + _LEVEL + _ENTRY

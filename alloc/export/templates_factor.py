@@ -96,19 +96,25 @@ static void lsolve_col(const struct work *w, int n, real *X, int ld, int c)
     }
 }
 
-/* factorise the free set fidx[:nf] of the level with rows A[r0:r1] (equalities A[:r0]) */
-static void factor(struct work *w, int r0, int r1, int nf)
+/* the current factorisation is f */
+static void use(struct work *w, const struct factors *f)
+{
+    w->L = f->L;
+    w->Yc = f->Yc;
+    w->Vc = f->Vc;
+    w->sc = f->sc;
+    w->Ya = f->Ya;
+    w->Va = f->Va;
+    w->sa = f->sa;
+}
+
+/* factorise the free set fidx[:nf] of the level with rows A[r0:r1] (equalities A[:r0]) into f */
+static void factor(struct work *w, int r0, int r1, int nf, struct factors *f)
 {
     int nl = r1 - r0, nc = r0, q, s, t, c, i, twice;
     const int *F = w->fidx;
-    real ref = 0, *L = w->Lw, *Yc = w->Ycw, *Vc = w->Vcw, *sc = w->scw, *Ya = w->Yaw, *Va = w->Vaw;
-    w->L = w->Lw;
-    w->Yc = w->Ycw;
-    w->Vc = w->Vcw;
-    w->sc = w->scw;
-    w->Ya = w->Yaw;
-    w->Va = w->Vaw;
-    w->sa = w->saw;
+    real ref = 0, *L = f->L, *Yc = f->Yc, *Vc = f->Vc, *sc = f->sc, *Ya = f->Ya, *Va = f->Va;
+    use(w, f);
     for (q = 0; q < nf; ++q) {
         if (w->S->diag) {
             L[q * ML] = SQRT(w->S->wu[F[q]][F[q]]);
@@ -143,8 +149,46 @@ static void factor(struct work *w, int r0, int r1, int nf)
             }
         }
     }
-    if (nl > 0) jacobi(Ya, NLW, nf, nl, Va, w->saw, ref);
+    if (nl > 0) jacobi(Ya, NLW, nf, nl, Va, f->sa, ref);
 }
+
+#if CACHE
+/* direct-mapped: slot hash(instance, key, free set) % CACHE, overwritten on a miss */
+struct slot {
+    int used, inst, key, nf;
+    int fidx[M];
+    struct factors f;
+};
+static struct slot cache[CACHE];
+
+/* the factorisation of the free set fidx[:nf] under level key `key`, from the cache or fresh */
+static void factorise(struct work *w, int key, int r0, int r1, int nf)
+{
+    int inst = (int)(w->S - INSTANCES), q, same;
+    unsigned long h = (unsigned long)(key * NINST + inst);
+    struct slot *s;
+    for (q = 0; q < nf; ++q) h = (h * 31UL + (unsigned long)w->fidx[q] + 1UL) & 0xffffffffUL;
+    s = &cache[((h * 2654435761UL) & 0xffffffffUL) % CACHE];
+    same = s->used && s->inst == inst && s->key == key && s->nf == nf;
+    for (q = 0; same && q < nf; ++q) same = s->fidx[q] == w->fidx[q];
+    if (same) {
+        use(w, &s->f);
+        return;
+    }
+    factor(w, r0, r1, nf, &s->f);
+    s->used = 1;
+    s->inst = inst;
+    s->key = key;
+    s->nf = nf;
+    for (q = 0; q < nf; ++q) s->fidx[q] = w->fidx[q];
+}
+#else
+static void factorise(struct work *w, int key, int r0, int r1, int nf)
+{
+    (void)key;
+    factor(w, r0, r1, nf, &w->own);
+}
+#endif
 #endif
 
 """

@@ -229,6 +229,40 @@ def test_double_rate_limited_trajectory_on_ice(build):
             u_prev = u
 
 
+def test_factorisation_cache_changes_the_time_never_the_answer(build):
+    """The run-time kernels' static cache of factorisations (direct-mapped, overwritten on a
+    miss): with 3 slots (qp) and 1 (dynamic: its two instances collide), ICE qp and dynamic
+    return the library's bits, statuses and iterations on random demands, a rate-limited
+    trajectory and across a set_limits jam (a factorisation does not depend on the limits); the
+    default-sized cache is in every other run-time kernel of this module."""
+    p = alloc.vehicles.problem("ice")
+    rng = np.random.default_rng(11)
+    V = random_demands(rng, p, 120)
+    jammed = p.with_jam(4, 0.05)
+    for method in ("qp", "dynamic"):
+        allocator, allocator_jam = alloc.make_allocator(p, method), alloc.make_allocator(jammed, method)
+        for cache in (3,) if method == "qp" else (1,):
+            kern = build(export_c(p, method, cache=cache, prefix=f"cache{cache}_{method}"))
+            assert f"#define CACHE {cache}\n" in kern.kernel.source
+            assert _agree_double(kern, allocator, V, rate_steps=60, dt=5e-4, rng=rng) == 180
+            assert kern.set_limits(jammed.umin, jammed.umax) == 0
+            for v in V[:40]:
+                r = allocator_jam(v)
+                u, status, _ = kern(v)
+                assert status == STATUS[r.status.value] and u[4] == 0.05
+                np.testing.assert_allclose(u, r.u, rtol=0, atol=1e-9)  # as test_set_limits_jams_at_run_time
+            assert kern.set_limits(None, None) == 0
+            _agree_double(kern, allocator, V[:40])
+    with pytest.raises(ExportError, match="cache: expected an integer"):
+        export_c(p, "qp", cache=-1)
+    with pytest.raises(ExportError, match="cache: a kernel with tables"):
+        export_c(p, "qp", table=True, cache=4)
+    with pytest.raises(ExportError, match="cache: pinv is closed-form"):
+        export_c(p, "pinv", cache=4)
+    assert "#define CACHE 26\n" in export_c(p, "qp").source  # ICE: 16 KiB of 612-byte slots
+    assert "#define CACHE 0\n" in export_c("hexa-x", "qp").source  # tabulated: nothing to cache
+
+
 # ------------------------------------------------------------------------ the iteration bound
 
 @pytest.mark.parametrize("method", ["wls", "qp"])
