@@ -6,7 +6,10 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from sim.pilot import CROSSOVER_DELAY, CROSSOVER_NEUROMUSCULAR, crossover_gain, crossover_point, pilot_parameters
+from sim.pilot import (
+    CROSSOVER_DELAY, CROSSOVER_NEUROMUSCULAR, CROSSOVER_WC_DELAY, CROSSOVER_WC_FREQUENCY, crossover_gain, crossover_point,
+    forcing_bandwidth, gain_for_crossover, pilot_parameters,
+)
 from sim.scenarios import harv_latdir, harv_lon, ice
 
 
@@ -83,3 +86,57 @@ def test_alpha_pilot_closes_the_seed_s_alpha_loop_and_is_off_by_default():
     assert not np.array_equal(on.command[:, 0], off.command[:, 0])  # the pilot, not the sum of sines, commands alpha
     with pytest.raises(TypeError, match="alpha_pilot"):
         ice.run(method="pinv", duration=0.1, alpha_pilot="yes")
+
+
+# ----------------------------------------------------------------------------- crossover_wc
+@pytest.mark.parametrize("module", [ice, harv_lon, harv_latdir])
+@pytest.mark.parametrize("wc", [0.5, 1.0, 2.0, 3.0])
+def test_gain_for_crossover_puts_the_crossover_there_checked_with_scipy(module, wc):
+    """Independent check: scipy.signal's |K_p Y_c(j w_c)| = 1, and crossover_point reads w_c back."""
+    num, den = module.PILOT_ELEMENT
+    k = gain_for_crossover(num, den, wc)
+    _, h = signal.freqresp(signal.TransferFunction(np.polymul([k], num), den), [wc])
+    assert abs(h[0]) == pytest.approx(1.0, rel=1e-9)
+    w, pm = crossover_point(num, den, gain=k, delay=0.2)
+    assert w == pytest.approx(wc, rel=1e-9)
+    assert pm == pytest.approx(180.0 + np.degrees(np.angle(h[0]) - wc * 0.2), abs=1e-6)
+
+
+def test_gain_for_crossover_on_seeded_k_over_s_elements():
+    """Y_c = K / (s (T s + 1)) has |Y_c(j w)| = K / (w sqrt(1 + (w T)^2)): the gain is its inverse."""
+    rng = np.random.default_rng(27)
+    for _ in range(40):
+        k_c, t_c, wc = rng.uniform(0.1, 50.0), rng.uniform(0.0, 0.5), rng.uniform(0.1, 10.0)
+        expected = wc * np.sqrt(1.0 + (wc * t_c) ** 2) / k_c
+        assert gain_for_crossover([k_c], [t_c, 1.0, 0.0], wc) == pytest.approx(expected, rel=1e-12)
+
+
+@pytest.mark.parametrize("wc", [0.0, -1.0, float("nan"), float("inf")])
+def test_gain_for_crossover_rejects_a_bad_frequency(wc):
+    with pytest.raises(ValueError, match="crossover"):
+        gain_for_crossover(*ice.PILOT_ELEMENT, wc)
+
+
+def test_crossover_wc_rule_states_its_crossover_and_flies():
+    for module in (ice, harv_latdir):
+        p = pilot_parameters("crossover_wc", module.PILOT_ELEMENT)
+        assert (p["delay"], p["model"]) == (CROSSOVER_WC_DELAY, "crossover_wc")
+        wc, _ = crossover_point(*module.PILOT_ELEMENT, gain=p["gain"], delay=p["delay"])
+        assert wc == pytest.approx(CROSSOVER_WC_FREQUENCY, rel=1e-9)
+    assert pilot_parameters("crossover_wc", ice.PILOT_ELEMENT, delay=0.3)["delay"] == 0.3
+    r = ice.run(method="static", duration=1.0, noise=False, pilot="crossover_wc")
+    (flown,) = r.settings["pilots"]
+    assert flown["model"] == "crossover_wc" and flown["neuromuscular"] == 0.0
+    assert not r.diverged and np.any(r.command[:, 1] != 0.0)
+
+
+def test_forcing_bandwidth_of_the_seed_s_sum_of_sines():
+    # seed Table 4-2: amplitudes 1, 1, 1 to 0.898 rad/s, 0.5 at 1.396 rad/s, then 0.2, 0.2, 0.08
+    assert forcing_bandwidth() == 1.39626
+    assert forcing_bandwidth(fraction=1.0) == 0.89760
+    assert forcing_bandwidth(fraction=0.2) == 4.19970
+    assert forcing_bandwidth([(3.0, 2.0), (-6.0, 1.0)]) == 2.0  # |amplitude|, not its sign
+    with pytest.raises(ValueError, match="fraction"):
+        forcing_bandwidth(fraction=0.0)
+    with pytest.raises(ValueError, match="table"):
+        forcing_bandwidth([])
