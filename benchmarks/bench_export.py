@@ -237,6 +237,9 @@ def main(argv: list[str] | None = None) -> dict:
                 files[sname] = folder / f"{pname.split()[0]}_{sname}.bin"
                 np.ascontiguousarray(V, dtype="<f8").tofile(files[sname])
             kernels: list[tuple[str, str, str, dict, dict]] = [(*row, {}) for row in KERNELS]
+            if pname == "hexa-x 4x6":  # cgi with the vehicle's priority levels
+                levels = alloc.vehicles.method_options("hexa-x", "cgi")
+                kernels += [("cgi levels", "cgi", "double", levels, {}), ("cgi levels float", "cgi", "float", levels, {})]
             if "#define TABLE 0" in export_c(p, "qp").source:
                 kernels.insert(1, ("qp no cache", "qp", "double", {}, {"cache": 0}))
                 if p.m <= TABLE_QP_MAX_M:

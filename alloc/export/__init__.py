@@ -42,7 +42,7 @@ import numpy as np
 from ..exceptions import AllocError, OptionError, UnknownMethodError
 from ..problem import MAX_MAGNITUDE, Problem
 from ..result import EXACT_RTOL
-from . import templates, templates_active_set, templates_closed_form
+from . import templates, templates_active_set, templates_cascade, templates_closed_form
 from .certify import Certificate, bound_text, certify
 
 __all__ = ["export_c", "ExportedKernel", "ExportError", "EXPORTABLE", "PRECISIONS", "GENERATOR_VERSION",
@@ -71,6 +71,12 @@ FLOAT_SIGMA_RTOL = 1e-5
 #: its optimum on 8 % of random demands (multipliers of a few 1e-5 read as zero); 8 ulps:
 #: 0.3 %, and no cycling to the cap on the random suite, ICE or either hexacopter.
 FLOAT_MU_EPS = 8 * 2.0 ** -23
+#: ``cgi`` by level: the library's tolerances of a level met (its residual relative to
+#: ``max(1, |v|)``) and of an effector saturated (the room left, as a fraction of the step)
+CGI_RTOL = 1e-12
+#: ``float`` builds: the same at float's round-off (1e-12 is below it: a level whose residual
+#: float cannot bring under it takes steps the library does not)
+FLOAT_CGI_RTOL = 1e-5
 #: bytes of factorisation tables an active-set kernel precomputes by default (``table=None``):
 #: every free set of every level (2^m rows a level); beyond it the kernel factorises at run time
 TABLE_BUDGET = 256 * 1024
@@ -339,6 +345,9 @@ def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "d
     elif method == "pinv_scale":
         fields.update(MAP_P=real.array(impl._P, "P"))
         body = templates_closed_form.SCALED
+    elif method == "cgi" and impl.groups is not None and len(impl.groups) > 1:
+        fields.update(_cascade_level_fields(impl, problem, real, table))
+        body = templates_cascade.CASCADE_LEVELS
     elif method == "cgi":
         fields.update(TAB_P=_cascade_table(impl, problem, real, table))
         body = templates_closed_form.CASCADE
@@ -364,17 +373,7 @@ def _cascade_table(impl: Any, problem: Problem, real: _Real, table: bool | None)
     from .._linalg import ABS_FLOOR
 
     k, m = problem.k, problem.m
-    if impl.groups is not None and len(impl.groups) > 1:
-        raise OptionError("priorities: cgi with priority levels is not exported (use qp with priorities)",
-                          field="priorities")
-    size = (1 << m) * m * k * (8 if real.double else 4)
-    if table is False:
-        raise ExportError("table: cgi has no run-time form (its kernel reads every free set's pseudo-inverse "
-                          "from a table); give table=None or True", field="table")
-    if (table is None and size > TABLE_BUDGET) or m > 20:
-        raise ExportError(f"table: cgi needs the pseudo-inverse of every free set, {size:,} bytes for {m} effectors "
-                          f"(over the {TABLE_BUDGET:,}-byte budget; table=True takes it up to 20 effectors)",
-                          field="table")
+    _check_cascade_table(m, k, real, table)
     rows = []
     for bits in range(1 << m):
         free = np.array([bool(bits >> j & 1) for j in range(m)])
@@ -387,6 +386,51 @@ def _cascade_table(impl: Any, problem: Problem, real: _Real, table: bool | None)
             P[:Pf.shape[0]] = Pf
         rows.append(real.array(P.ravel(), "P"))
     return "{\n    " + ",\n    ".join(rows) + "\n}"
+
+
+def _check_cascade_table(m: int, k: int, real: _Real, table: bool | None) -> None:
+    """``cgi`` reads every free set's pseudo-inverse (``2^m x m x k`` values, by level or
+    not) from a table: refused beyond :data:`TABLE_BUDGET` unless ``table=True``."""
+    size = (1 << min(m, 40)) * m * k * (8 if real.double else 4)
+    if table is False:
+        raise ExportError("table: cgi has no run-time form (its kernel reads every free set's pseudo-inverse "
+                          "from a table); give table=None or True", field="table")
+    if (table is None and size > TABLE_BUDGET) or m > 20:
+        raise ExportError(f"table: cgi needs the pseudo-inverse of every free set, {size:,} bytes for {m} effectors "
+                          f"(over the {TABLE_BUDGET:,}-byte budget; table=True takes it up to 20 effectors)",
+                          field="table")
+
+
+def _cascade_level_fields(impl: Any, problem: Problem, real: _Real, table: bool | None) -> dict[str, str]:
+    """``cgi`` with priority levels: each level's axes and its table of the prioritised
+    pseudo-inverse of every free set, from the library's own ``_level_pinv`` (the columns of the
+    level's own axes), so the kernel returns the library's bits."""
+    k, m = problem.k, problem.m
+    _check_cascade_table(m, k, real, table)
+    starts, tables, names = [0], [], []
+    done = np.zeros(0, dtype=np.intp)
+    for li, level in enumerate(impl.groups):
+        rows = np.concatenate([done, level])
+        sub = [np.arange(done.size), np.arange(done.size, rows.size)]
+        Wv = problem.Wv[np.ix_(rows, rows)]
+        per_set = []
+        for bits in range(1 << m):
+            free = np.array([bool(bits >> j & 1) for j in range(m)])
+            P = np.zeros((m, level.size))
+            if free.any():
+                F = np.flatnonzero(free)
+                P[:F.size] = impl._level_pinv(li, free, rows, F, Wv, sub)[:, done.size:]
+            per_set.append(real.array(P.ravel(), f"P{li}"))
+        names.append(f"TAB_{li}")
+        tables.append(f"static const real TAB_{li}[1 << M][M * {level.size}] = {{\n    " + ",\n    ".join(per_set)
+                      + "\n};")
+        starts.append(starts[-1] + level.size)
+        done = rows
+    tables.append(f"static const real *const TAB[NL] = {{{', '.join(f'&{n}[0][0]' for n in names)}}};")
+    return {"NL": str(len(impl.groups)), "LEVEL_START": _ints(starts),
+            "LEVEL_AXES": _ints(np.concatenate(impl.groups)),
+            "CGI_RTOL": real.literal(CGI_RTOL if real.double else FLOAT_CGI_RTOL, "rtol"),
+            "CGI_REACH": real.literal(CGI_RTOL if real.double else FLOAT_CGI_RTOL, "reach"), "TABLES": "\n".join(tables)}
 
 
 def _active_set_fields(instances: list[Any], problem: Problem, real: _Real, fields: dict[str, str],

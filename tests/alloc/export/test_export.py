@@ -471,8 +471,8 @@ def test_export_errors_name_the_field():
         export_c(p, "cgi", table=False)
     with pytest.raises(ExportError, match="table: cgi needs"):
         export_c(alloc.vehicles.problem("ice"), "cgi")  # 2,048 free sets x 3 x 11: beyond the budget
-    with pytest.raises(alloc.OptionError, match="priorities"):
-        export_c("hexa-x", "cgi")  # the vehicle's cgi priority levels
+    with pytest.raises(alloc.AllocError, match="priorities"):
+        export_c("hexa-x", "cgi", options={"priorities": [1, 2]})  # 2 levels for 4 axes
     with pytest.raises(ExportError, match="prefix"):
         export_c(p, "qp", prefix="not a name")
     huge = alloc.Problem([[1e45, 1.0]], [-1, -1], [1, 1])
