@@ -9,10 +9,11 @@ Measured under the 16-client option flood of ``benchmarks/bench_service.py`` on 
 before the application saw the request (``dispatch``) and up to 205 ms between the commit
 returning and the coroutine resuming (``resume``); with the gate, p50 of both 0.1-2.8 ms.
 
-So a *priority* request (a write: create or delete a vehicle, record an event; carrying
-the right API key, or any write when no key is configured) closes a gate for the time it
-is in flight; every other request waits at the gate before it reads its body or costs
-anything.  When no write is in flight the others enter :data:`TURNS` per loop iteration,
+So a *priority* request (a write of :data:`PRIORITY_ROUTES` with a light body: create or
+delete a vehicle, record an event, post a telemetry batch, accept or reject a proposal;
+carrying the right API key, or any such write when no key is configured; and each light
+message of an authenticated telemetry WebSocket) closes a gate for the time it is in
+flight; every other request waits at the gate before it reads its body or costs anything.  When no write is in flight the others enter :data:`TURNS` per loop iteration,
 so the loop reads its sockets (and a write's headers) between every few of them.
 
 What is bounded, and by how much: the gate stays closed for at most :data:`MAX_WAIT_S` at
@@ -41,6 +42,7 @@ from __future__ import annotations
 
 import asyncio
 import hmac
+import re
 import time
 from collections import deque
 from collections.abc import Iterable
@@ -68,7 +70,32 @@ LIGHT_KEY = "alloc.light"
 GATE_STATE_KEY = "alloc.gate"
 #: a body larger than this is parsed in a turn of its own (service.bodies): a "heavy" request
 HEAVY_BODY_BYTES = 64 * 1024
-_VEHICLES = "/v1/vehicles"
+#: The priority routes (FastAPI path formats; a ``{...}`` is one path segment): the writes that
+#: publish or decide a failure, or add or remove a vehicle.  A telemetry batch that turns
+#: into a detection is how a *silent* failure is published (policy ``auto``), and accepting
+#: a proposal how a detection becomes an event (``confirm``), so they are priority like an
+#: event; rejecting one is the same bodyless transaction.  Setting a vehicle's telemetry
+#: (``PUT .../telemetry``) publishes nothing and waits like a read.
+PRIORITY_ROUTES: frozenset[tuple[str, str]] = frozenset({
+    ("POST", "/v1/vehicles"),
+    ("DELETE", "/v1/vehicles/{vehicle_id}"),
+    ("POST", "/v1/vehicles/{vehicle_id}/events"),
+    ("POST", "/v1/vehicles/{vehicle_id}/telemetry"),
+    ("POST", "/v1/vehicles/{vehicle_id}/proposals/{pid}/accept"),
+    ("POST", "/v1/vehicles/{vehicle_id}/proposals/{pid}/reject"),
+})
+#: the WebSocket whose messages are priority, each from its receipt to its answer
+#: (:class:`PriorityMiddleware`): one telemetry batch per message
+PRIORITY_STREAMS: frozenset[str] = frozenset({"/v1/vehicles/{vehicle_id}/telemetry/ws"})
+
+
+def _route_pattern(path_format: str) -> re.Pattern[str]:
+    return re.compile(re.sub(r"\\\{\w+\\\}", "[^/]+", re.escape(path_format)))
+
+
+_ROUTES: dict[str, list[re.Pattern[str]]] = {
+    method: [_route_pattern(f) for m, f in sorted(PRIORITY_ROUTES) if m == method] for method, _ in PRIORITY_ROUTES}
+_STREAMS = [_route_pattern(f) for f in sorted(PRIORITY_STREAMS)]
 
 
 def is_light(headers: Iterable[tuple[bytes, bytes]]) -> bool:
@@ -82,13 +109,35 @@ def is_light(headers: Iterable[tuple[bytes, bytes]]) -> bool:
     return True
 
 
-def _is_write(method: str, path: str) -> bool:
-    """The write endpoints of :mod:`service.routes.vehicles` (those behind the API key)."""
-    if not path.startswith(_VEHICLES):
-        return False
-    if method == "DELETE":
-        return True
-    return method == "POST" and (path in (_VEHICLES, _VEHICLES + "/") or path.endswith("/events"))
+def _is_write(method: str, path: str, headers: Iterable[tuple[bytes, bytes]]) -> bool:
+    """A request to one of :data:`PRIORITY_ROUTES` declaring a light body (:func:`is_light`).
+
+    Why light only: a priority request skips the line at the gate, skips the parse turn of
+    :mod:`service.bodies` and draws on ``ALLOC_WRITER_BODY_BYTES``, and while it is in flight
+    nobody else starts.  Its parse holds the loop for the whole body (a 1.3 MB batch body:
+    21-35 ms), so with bodies up to ``ALLOC_MAX_BODY_BYTES`` (4 MiB) a key holder posting
+    them back to back would hold the loop, not just the gate.  A light body costs at most
+    about 1-2 ms to parse, and bounds the work behind it: a telemetry batch of at most
+    64 KiB is about 180 samples at m = 11, k = 6 (18 s of a 10 Hz stream), its detector
+    work priced before it runs (``ALLOC_BATCH_BUDGET_S``) and done on the telemetry threads.
+    Every other priority route's body is far smaller (an event: about 100 bytes; the largest
+    catalogue vehicle: 1.7 kB).  A heavier or chunked batch (a backfill) is still accepted,
+    as an ordinary large body: in its parse turn, from the shared budget."""
+    patterns = _ROUTES.get(method)
+    return patterns is not None and any(p.fullmatch(path) for p in patterns) and is_light(headers)
+
+
+def _is_stream(path: str) -> bool:
+    return any(p.fullmatch(path) for p in _STREAMS)
+
+
+def _light_message(message: Message) -> bool:
+    """A WebSocket message of at most :data:`HEAVY_BODY_BYTES` (a text's length is its size in
+    bytes when it is ASCII, which CPython knows without a scan; JSON numbers are ASCII)."""
+    text = message.get("text")
+    if text is not None:
+        return len(text) <= HEAVY_BODY_BYTES and text.isascii()
+    return len(message.get("bytes") or b"") <= HEAVY_BODY_BYTES
 
 
 class LightTicket:
@@ -129,14 +178,21 @@ class PriorityGate:
         self._refill_pending = False
 
     def claims(self, method: str, path: str, headers: Iterable[tuple[bytes, bytes]]) -> bool:
-        """``True`` for a write (create, delete, record an event) with the right API key, or
-        with none when no key is configured (allocations and AMS queries are reads)."""
-        if not _is_write(method, path):
-            return False
+        """``True`` for a priority write (:data:`PRIORITY_ROUTES`, a light body: :func:`_is_write`)
+        with the right API key, or with none when no key is configured (allocations and AMS
+        queries are reads)."""
+        return _is_write(method, path, headers) and self._key_matches(headers)
+
+    def claims_stream(self, path: str, headers: Iterable[tuple[bytes, bytes]]) -> bool:
+        """``True`` for a WebSocket of :data:`PRIORITY_STREAMS` opened with the right API key (or
+        any when no key is configured): its light messages are priority (:class:`PriorityMiddleware`)."""
+        return _is_stream(path) and self._key_matches(headers)
+
+    def _key_matches(self, headers: Iterable[tuple[bytes, bytes]]) -> bool:
         if self._key is None:
             return True
         for name, value in headers:
-            if name == b"x-api-key":
+            if name == b"x-api-key":  # the first one, as the routes' key check reads it
                 return hmac.compare_digest(value, self._key)
         return False
 
@@ -219,6 +275,9 @@ class PriorityMiddleware:
         self.app, self.gate = app, gate
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] == "websocket" and self.gate.claims_stream(scope["path"], scope.get("headers", ())):
+            await self._stream(scope, receive, send)
+            return
         if scope["type"] != "http":
             await self.app(scope, receive, send)
             return
@@ -264,5 +323,40 @@ class PriorityMiddleware:
                 leave()  # answered: background work after the response holds nobody back
         try:
             await self.app(scope, receive, send_then_leave)
+        finally:
+            leave()
+
+    async def _stream(self, scope: Scope, receive: Receive, send: Send) -> None:
+        """A priority WebSocket: each light message (at most :data:`HEAVY_BODY_BYTES`) holds the
+        gate from the route's receipt of it to the route's next send (its answer: the route
+        answers every message, in order).  Its frames were read by the protocol already; what
+        the gate spares it is the line behind other requests at each of its steps (its parse,
+        and its resumption when its batch returns from a telemetry thread).  A heavier
+        message (up to the route's 1 MiB) does not hold the gate."""
+        gate = self.gate
+        holding = False
+
+        def leave() -> None:
+            nonlocal holding
+            if holding:
+                holding = False
+                gate.leave()
+
+        async def receive_then_enter() -> Message:
+            nonlocal holding
+            leave()
+            message = await receive()
+            if message["type"] == "websocket.receive" and _light_message(message):
+                holding = True
+                gate.enter()
+            return message
+
+        async def send_then_leave(message: Message) -> None:
+            try:
+                await send(message)
+            finally:
+                leave()
+        try:
+            await self.app(scope, receive_then_enter, send_then_leave)
         finally:
             leave()
