@@ -19,10 +19,11 @@ so the loop reads its sockets (and a write's headers) between every few of them.
 What is bounded, and by how much: the gate stays closed for at most :data:`MAX_WAIT_S` at
 a time (writes overlapping for longer no longer hold the others back).  A request's whole
 wait is that plus its place in the line that formed behind the gate: ``TURNS`` of the
-waiting requests enter per loop iteration, each costing about 0.6 ms, so with ``Q``
-requests ahead of it a request waits up to ``MAX_WAIT_S + Q x 0.6 ms``; at most
-``ALLOC_MAX_CONNECTIONS`` (512) requests can be in line, so up to about 0.8 s
-(measured 0.65-0.92 s under the flood of ``benchmarks/bench_service.py``).  Writes do
+waiting requests enter per loop iteration, each costing ``c`` (about 0.6 ms on a quiet
+machine, more on a loaded one), so with ``Q`` requests ahead of it a request waits up to
+``MAX_WAIT_S + Q c``; at most ``ALLOC_MAX_CONNECTIONS`` (512) requests can be in line, so
+up to about 0.8 s at 0.6 ms each (measured 0.65-0.92 s under the flood of
+``benchmarks/bench_service.py`` on the shared machine: ``c`` up to about 0.8 ms there).  Writes do
 not queue here at all.  The gate is closed as soon as the request's headers are parsed
 (:class:`service.server.GuardedHttpToolsProtocol`), before the loop runs any request task
 queued ahead of it; without that protocol (an in-process test client) the middleware closes
@@ -328,7 +329,7 @@ class PriorityMiddleware:
 
     async def _stream(self, scope: Scope, receive: Receive, send: Send) -> None:
         """A priority WebSocket: each light message (at most :data:`HEAVY_BODY_BYTES`) holds the
-        gate from the route's receipt of it to the route's next send (its answer: the route
+        gate from the route's receipt of it to the route's next send of its answer (the route
         answers every message, in order).  Its frames were read by the protocol already; what
         the gate spares it is the line behind other requests at each of its steps (its parse,
         and its resumption when its batch returns from a telemetry thread).  A heavier
@@ -351,12 +352,12 @@ class PriorityMiddleware:
                 gate.enter()
             return message
 
-        async def send_then_leave(message: Message) -> None:
-            try:
-                await send(message)
-            finally:
-                leave()
+        async def leave_then_send(message: Message) -> None:
+            # answered once the route sends: a client that does not read its answers (the send
+            # waits for the socket) holds nobody back, however long the transport keeps it
+            leave()
+            await send(message)
         try:
-            await self.app(scope, receive_then_enter, send_then_leave)
+            await self.app(scope, receive_then_enter, leave_then_send)
         finally:
             leave()

@@ -213,11 +213,14 @@ def test_a_light_batch_is_what_a_stream_posts():
 
 # --------------------------------------------------------------- the WebSocket's hold
 def _run_stream(messages: list[dict[str, Any]], headers: list[tuple[bytes, bytes]],
-                fail_at: int | None = None) -> tuple[list[int], PriorityGate]:
+                fail_at: int | None = None, stalled: bool = False) -> tuple[list[int], PriorityGate]:
     """A stub WebSocket route behind the middleware: for each message it receives, the number of
-    priority requests in flight while it handles it; ``fail_at``: the route raises there."""
+    priority requests in flight while it handles it, and while its answer is being sent;
+    ``fail_at``: the route raises there; ``stalled``: the client reads no answer (a send
+    never completes; the connection is dropped after the last message's)."""
     gate = PriorityGate(KEY)
     seen: list[int] = []
+    sending: list[int] = []
 
     async def route(scope: Any, receive: Any, send: Any) -> None:
         assert (await receive())["type"] == "websocket.connect"
@@ -239,13 +242,17 @@ def _run_stream(messages: list[dict[str, Any]], headers: list[tuple[bytes, bytes
             return inbox.pop(0)
 
         async def send(message: dict[str, Any]) -> None:
-            return None
+            if message["type"] == "websocket.send":
+                sending.append(gate.active)
+                if stalled:
+                    await asyncio.wait_for(asyncio.Event().wait(), 0.05)  # dropped: the send fails
         scope = {"type": "websocket", "path": "/v1/vehicles/v/telemetry/ws", "headers": headers}
         try:
             await PriorityMiddleware(route, gate)(scope, receive, send)
-        except RuntimeError:
+        except (RuntimeError, asyncio.TimeoutError):
             pass  # the failure propagates as it would to the server
     asyncio.run(scenario())
+    assert sending == [0] * len(sending)  # an answer being sent holds nobody back
     return seen, gate
 
 
@@ -261,6 +268,8 @@ def test_a_streams_light_messages_hold_the_gate_until_answered():
     assert seen == [0, 0] and gate.active == 0
     seen, gate = _run_stream([light, light, light], key, fail_at=1)  # the route fails mid-message
     assert seen == [1, 1] and gate.active == 0
+    seen, gate = _run_stream([light, light], key, stalled=True)  # the client reads nothing
+    assert seen == [1] and gate.active == 0
 
 
 def test_a_real_stream_leaves_the_gate_open(tmp_path):
