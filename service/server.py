@@ -166,6 +166,18 @@ class GuardedHttpToolsProtocol(HttpToolsProtocol):
             excess -= 1
 
     def connection_lost(self, exc: Exception | None) -> None:
+        self._release()
+        super().connection_lost(exc)
+
+    def handle_websocket_upgrade(self) -> None:
+        # The connection passes to uvicorn's WebSocket protocol, whose close this protocol never
+        # hears of: release what it holds now (a WebSocket is then counted by uvicorn's
+        # connection limit, not per client), or every WebSocket ever opened would keep one of
+        # its client's ALLOC_MAX_CONNECTIONS_PER_CLIENT slots.
+        self._release()
+        super().handle_websocket_upgrade()
+
+    def _release(self) -> None:
         self._disarm()
         self._close_ticket()  # a request dropped before its answer started
         if self._write_timer is not None:
@@ -178,7 +190,6 @@ class GuardedHttpToolsProtocol(HttpToolsProtocol):
             if self._per_client[self._address] <= 0:
                 del self._per_client[self._address]
             self._address = None
-        super().connection_lost(exc)
 
     # --------------------------------------------------------- the request
     def data_received(self, data: bytes) -> None:

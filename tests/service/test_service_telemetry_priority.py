@@ -396,3 +396,32 @@ def test_a_silent_jam_in_a_telemetry_batch_is_held_during_a_validation_flood(ser
     for kind, target in (("batch", TARGETS_MS["event"]), ("allocation", TARGETS_MS["allocation"])):
         bound = max(target * s, FLOOR_FACTOR * p99(floor[kind])) + allowance
         assert p99(figures[kind]) < bound, (kind, figures[kind], bound)
+
+
+def test_websockets_do_not_keep_their_clients_connection_slots(tmp_path):
+    """A WebSocket leaves the HTTP protocol at its upgrade: its per-client slot is released then,
+    or a ground station reconnecting its stream ALLOC_MAX_CONNECTIONS_PER_CLIENT times would
+    have every later connection (its events included) refused with 503."""
+    from websockets.exceptions import InvalidStatus
+    from websockets.sync.client import connect
+
+    limit = 4
+    proc = ServiceProcess(tmp_path, api_key=KEY, env={"ALLOC_MAX_CONNECTIONS_PER_CLIENT": str(limit),
+                                                      "ALLOC_WARMUP": "false"}).start(timeout=300.0)
+    try:
+        with httpx.Client(base_url=proc.url, timeout=30.0) as c:
+            vid = c.post("/v1/vehicles", json=SMALL, headers=H).json()["id"]
+        url = proc.url.replace("http://", "ws://") + f"/v1/vehicles/{vid}/telemetry/ws"
+        for _ in range(2 * limit):  # accepted streams, and refused ones, each on a new connection
+            with connect(url, additional_headers=H, open_timeout=30.0):
+                pass
+            with pytest.raises(InvalidStatus) as refused:
+                connect(url, additional_headers={"X-API-Key": "wrong"}, open_timeout=30.0)
+            assert refused.value.response.status_code == 401
+        for k in range(limit + 1):  # fresh connections: each needs a slot
+            with httpx.Client(base_url=proc.url, timeout=30.0) as c:
+                r = c.post(f"/v1/vehicles/{vid}/events", json={"effector": "a", "kind": "jam", "position": float(k)},
+                           headers=H)
+            assert r.status_code == 201, r.text
+    finally:
+        proc.stop()
