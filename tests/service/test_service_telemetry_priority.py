@@ -398,6 +398,7 @@ def test_a_silent_jam_in_a_telemetry_batch_is_held_during_a_validation_flood(ser
         assert p99(figures[kind]) < bound, (kind, figures[kind], bound)
 
 
+@pytest.mark.slow  # a server of its own: 5-12 s
 def test_websockets_do_not_keep_their_clients_connection_slots(tmp_path):
     """A WebSocket leaves the HTTP protocol at its upgrade: its per-client slot is released then,
     or a ground station reconnecting its stream ALLOC_MAX_CONNECTIONS_PER_CLIENT times would
