@@ -152,9 +152,11 @@ def all_methods() -> list[str]:
 
 def detected_sweep(seeds: int = 3) -> list[Spec]:
     """The three arms side by side, small: ICE's single jam and hard-over, ``qp`` and ``wls``,
-    blind, told and detected, ``seeds`` noise seeds, 10 s with the failure at 5 s, 100 Hz frame."""
+    blind, told and detected, ``seeds`` noise seeds, 10 s with the failure at 5 s, 100 Hz frame;
+    and ``static`` blind on the same seeds, the baseline every closed-loop score is relative to
+    (without it no run is scored and the report's ``detected_share`` is NaN)."""
     return [spec for failure in ("jam1", "hardover1") for spec in
-            closed_grid("ice", [failure], ["qp", "wls"], list(range(1, seeds + 1)),
+            closed_grid("ice", [failure], [STATIC, "qp", "wls"], list(range(1, seeds + 1)),
                         settings=[{FRAME_PERIOD: 0.01}], duration=10.0, failure_time=5.0, arms=ARMS)]
 
 

@@ -47,3 +47,28 @@ def test_sweep_rows_read_a_detected_sweep(tmp_path):
     assert [(r["kind"], r["health"], r["seed"], r["diverged"], r["frame_period"]) for r in got] == [
         ("jam", "blind", 1, False, 0.01), ("jam", "told", 1, False, 0.01), ("jam", "detected", 1, True, 0.01)]
     assert bd.score(got[1], got[0]) == pytest.approx(2.0) and bd.score(got[2], got[0]) == math.inf
+
+
+def test_the_detected_sweep_flies_its_static_baseline_and_scores_a_finite_share():
+    """Every (failure, seed) of ``alloc bench detected`` has the ``static`` blind run its scores are
+    relative to, so the report's ``detected_share`` is a number; flown on a shortened single jam."""
+    from benchmarks.compare.closedloop import run_closed
+    from benchmarks.compare.summaries import closed_scores, detected_share
+    from benchmarks.compare.sweep import STATIC, detected_sweep
+
+    specs = detected_sweep(2)
+    assert len(specs) == 2 * 2 * (1 + 2 * 3)  # failures x seeds x (static + two methods' three arms)
+    for failure in ("jam1", "hardover1"):
+        for seed in (1, 2):
+            cell = [s for s in specs if s["failure"] == failure and s["seed"] == seed]
+            assert [(s["method"], s["health"]) for s in cell if s["method"] == STATIC] == [(STATIC, "blind")]
+            assert len({(s["duration"], s["failure_time"], str(s["sim"])) for s in cell}) == 1
+    tiny = [{**s, "duration": 3.0, "failure_time": 1.0} for s in detected_sweep(1)
+            if s["failure"] == "jam1" and s["method"] in (STATIC, "qp")]
+    rows = closed_scores([run_closed(s)[0] for s in tiny])
+    assert all(math.isfinite(r["score"]) for r in rows)
+    (share,) = detected_share(rows, resamples=50)
+    by = {r["health"]: r["score"] for r in rows if r["method"] == "qp"}
+    assert by["blind"] > by["told"]  # told helps on this jam, so the share is defined
+    assert share["share"] == pytest.approx((by["blind"] - by["detected"]) / (by["blind"] - by["told"]))
+    assert math.isfinite(share["share"]) and share["seeds"] == 1
