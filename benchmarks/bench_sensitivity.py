@@ -22,12 +22,17 @@ the failure, over the whole run when nominal) among the four.
 
     python -m benchmarks.bench_sensitivity run --out benchmarks/reference/sensitivity-2026-12-02
     python -m benchmarks.bench_sensitivity report --out benchmarks/reference/sensitivity-2026-12-02
-    python -m benchmarks.bench_sensitivity page --out benchmarks/reference/sensitivity-2026-12-02
+    python -m benchmarks.bench_sensitivity run --out benchmarks/reference/sensitivity-2026-12-02b --only \
+        "setting pilot" "stand-in pilot gain" "stand-in pilot delay" "stand-in pilot neuromuscular lag" \
+        "crossover pilot phase margin" "crossover_wc pilot crossover frequency" "crossover_wc pilot effective delay"
+    python -m benchmarks.bench_sensitivity page --out benchmarks/reference/sensitivity-2026-12-02b
 
 ``run`` appends to ``runs.csv`` (``runs-I.csv`` with ``--shard I/N``, for N workers) and skips
 the runs already recorded (resumable); ``--only`` limits it to named factors.  ``report`` writes
 ``flips.csv`` and ``report.md`` from every ``runs*.csv``; ``page`` rewrites
-``docs/verdict-choices.md`` with the flips column from ``flips.csv``.
+``docs/verdict-choices.md`` with the flips column from the committed sweep's ``flips.csv``, the pilot
+rows' from the pilot re-run named by ``--out`` (``sensitivity-2026-12-02b``: the pilot factors
+alone, with the ``crossover_wc`` rule), and that re-run's pilot table.
 """
 
 from __future__ import annotations
@@ -127,6 +132,14 @@ def _crossover_at(phase_margin: float) -> Callable[[str], Mapping[str, Any]]:
     return options
 
 
+def _crossover_wc_at(crossover: float) -> Callable[[str], Mapping[str, Any]]:
+    """The crossover_wc pilot with the gain that puts its loop's crossover at ``crossover`` (rad/s; sim.pilot)."""
+    def options(scenario: str) -> Mapping[str, Any]:
+        element = SCENARIOS[scenario][0].pilot_element
+        return {"pilot": "crossover_wc", "pilot_gain": pilot.gain_for_crossover(*element, crossover)}
+    return options
+
+
 def factors() -> list[Variant]:
     """Every factor level of the sweep (the defaults are the ``default`` level of each base)."""
     sampled = ("2000 Hz", "100 Hz")
@@ -137,7 +150,11 @@ def factors() -> list[Variant]:
     out += [Variant("stand-in pilot delay", f"{d:g} s", {"pilot_delay": d}) for d in (0.1, 0.3)]
     out += [Variant("stand-in pilot neuromuscular lag", f"{tn:g} s", edit=_pilot_edit(neuromuscular=tn),
                     cases=failed) for tn in (0.05, 0.1)]
-    out += [Variant("setting pilot", p, {"pilot": p}) for p in ("crossover",)]
+    out += [Variant("setting pilot", p, {"pilot": p}) for p in ("crossover", "crossover_wc")]
+    out += [Variant("crossover_wc pilot crossover frequency", f"{wc:g} rad/s", per_scenario=_crossover_wc_at(wc))
+            for wc in (1.0, 1.5, 2.5, 3.0)]
+    out += [Variant("crossover_wc pilot effective delay", f"{d:g} s", {"pilot": "crossover_wc", "pilot_delay": d})
+            for d in (0.1, 0.3, 0.4)]
     out += [Variant("crossover pilot phase margin", f"{pm:g} deg", per_scenario=_crossover_at(pm), cases=failed)
             for pm in (30.0, 60.0)]
     out += [Variant("ICE alpha pilot", "on", {"alpha_pilot": True}, scenarios=("ice",))]
@@ -321,7 +338,8 @@ def read_flips(path: Path) -> list[dict[str, str]]:
 
 #: the factors that change the pilot (the report gives their loops' crossover frequency and phase margin)
 PILOT_FACTORS = ("default", "stand-in pilot gain", "stand-in pilot delay", "stand-in pilot neuromuscular lag",
-                 "setting pilot", "crossover pilot phase margin")
+                 "setting pilot", "crossover pilot phase margin", "crossover_wc pilot crossover frequency",
+                 "crossover_wc pilot effective delay")
 
 
 def pilot_loop(variant: Variant, scenario: str) -> tuple[float, float]:
@@ -337,13 +355,23 @@ def pilot_loop(variant: Variant, scenario: str) -> tuple[float, float]:
 
 
 def _pilot_table(rows: list[dict[str, str]]) -> list[str]:
+    """Per pilot level and scenario: its loop's crossover frequency, w_c / w_i and phase margin, the bounded
+    runs, and the verdict flips against the default (2000 Hz)."""
     lines = ["## Verdicts against the pilot loop's crossover frequency and phase margin", "",
              "The roll pilot's loop on the scenario's controlled element (`sim.pilot.crossover_point`: "
              "pilot gain, delay and lags times the reference model and the attitude integration); "
-             "bounded runs of the four methods at 2000 Hz.", "",
-             "| pilot | scenario | crossover (rad/s) | phase margin (deg) | bounded, failed | bounded, nominal |",
-             "|---|---|---|---|---|---|"]
+             f"w_i = {pilot.forcing_bandwidth():.3g} rad/s, the seed's Table 4-2 sum of sines "
+             "(`sim.pilot.forcing_bandwidth`; HARV lat-dir flies the Fig 4-81 filtered steps here, which have "
+             "no w_i: its ratio is to the sines it flies otherwise); bounded runs of the four methods at "
+             "2000 Hz; flips: bounded/diverged verdicts that differ from the default pilot's (the stand-in), "
+             "same scenario, case and method.", "",
+             "| pilot | scenario | crossover (rad/s) | w_c / w_i | phase margin (deg) | bounded, failed "
+             "| bounded, nominal | flips |",
+             "|---|---|---|---|---|---|---|---|"]
     variants = {(v.factor, v.level): v for v in factors()}
+    default = {(r["scenario"], r["case"], r["method"]): r["diverged"] for r in rows
+               if (r["factor"], r["base"]) == ("default", "2000 Hz")}
+    w_i = pilot.forcing_bandwidth()
     entries = []
     for (factor, level), v in variants.items():
         if factor not in PILOT_FACTORS:
@@ -356,10 +384,22 @@ def _pilot_table(rows: list[dict[str, str]]) -> list[str]:
             wc, pm = pilot_loop(v, scenario)
             counts = [f"{sum(r['diverged'] != 'True' for r in mine if r['case'] == c)} of "
                       f"{sum(r['case'] == c for r in mine)}" for c in ("failed", "nominal")]
-            entries.append((scenario, wc, f"{factor} = {level}", pm, counts))
-    for scenario, wc, name, pm, counts in sorted(entries):
-        lines.append(f"| {name} | {scenario} | {wc:.2f} | {pm:.0f} | {counts[0]} | {counts[1]} |")
+            compared = [r for r in mine if (scenario, r["case"], r["method"]) in default]
+            flipped = sum(default[(scenario, r["case"], r["method"])] != r["diverged"] for r in compared)
+            entries.append((scenario, wc, f"{factor} = {level}", pm, counts, f"{flipped} of {len(compared)}"))
+    for scenario, wc, name, pm, counts, flipped in sorted(entries):
+        lines.append(f"| {name} | {scenario} | {wc:.2f} | {wc / w_i:.2f} | {pm:.0f} | {counts[0]} | {counts[1]} "
+                     f"| {flipped} |")
     return lines
+
+
+def pilot_section(reference: Path) -> str:
+    """The pilot table of the sweep in ``reference`` as Markdown, headed by where it comes from."""
+    rel = reference.relative_to(CHOICES_PAGE.parents[1]).as_posix()
+    table = _pilot_table(all_runs(reference))
+    table[2] = (f"Generated by `benchmarks.bench_sensitivity.pilot_section()` from the pilot factors of the sweep "
+                f"`{rel}` (`runs*.csv`). " + table[2])
+    return "\n".join(table) + "\n"
 
 
 def render_report(rows: list[dict[str, str]], flip_rows: list[dict[str, Any]]) -> str:
@@ -396,15 +436,24 @@ def render_report(rows: list[dict[str, str]], flip_rows: list[dict[str, Any]]) -
 
 #: the committed sweep the choices page quotes
 REFERENCE = Path(__file__).resolve().parent / "reference" / "sensitivity-2026-12-02"
+#: the committed re-run of the pilot factors (with the crossover_wc rule); its flips replace the pilot rows'
+REFERENCE_PILOT = Path(__file__).resolve().parent / "reference" / "sensitivity-2026-12-02b"
 CHOICES_PAGE = Path(__file__).resolve().parents[1] / "docs" / "verdict-choices.md"
 
 
-def choices_page(reference: Path = REFERENCE) -> str:
-    """``docs/verdict-choices.md`` with the flips column of the committed sweep."""
+def choices_page(reference: Path = REFERENCE, pilots: Path | None = REFERENCE_PILOT) -> str:
+    """``docs/verdict-choices.md`` with the flips column of the committed sweep; with ``pilots``, the pilot
+    factors' flips from that re-run instead, and its pilot table (:func:`pilot_section`) after the choices."""
     from sim.choices import render_markdown
 
-    sweep = reference.relative_to(CHOICES_PAGE.parents[1]).as_posix()
-    return render_markdown(flips_by_choice(read_flips(reference / "flips.csv")), sweep=sweep)
+    root = CHOICES_PAGE.parents[1]
+    sweep = reference.relative_to(root).as_posix()
+    flips = flips_by_choice(read_flips(reference / "flips.csv"))
+    if pilots is None:
+        return render_markdown(flips, sweep=sweep)
+    flips.update({k: v for k, v in flips_by_choice(read_flips(pilots / "flips.csv")).items() if k in PILOT_FACTORS})
+    sweep += f"` and, for the pilot rows, `{pilots.relative_to(root).as_posix()}"
+    return render_markdown(flips, sweep=sweep) + "\n" + pilot_section(pilots)
 
 
 def report(out: Path) -> None:
@@ -431,7 +480,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{len(runs)} runs")
         return 0
     if args.command == "page":
-        CHOICES_PAGE.write_text(choices_page(args.out.resolve()))
+        CHOICES_PAGE.write_text(choices_page(REFERENCE, args.out.resolve()))
         print(f"wrote {CHOICES_PAGE}")
         return 0
     if args.command == "run":

@@ -83,6 +83,16 @@ def _standin_loops() -> str:
     return "; ".join(parts)
 
 
+def _crossover_wc_loops() -> str:
+    """The crossover_wc pilot's phase margin on each scenario's controlled element at its defaults."""
+    parts = []
+    for name, module in (("ICE", ice), ("HARV lat-dir", harv_latdir)):
+        p = pilot.pilot_parameters("crossover_wc", module.PILOT_ELEMENT)
+        _, pm = pilot.crossover_point(*module.PILOT_ELEMENT, gain=p["gain"], delay=p["delay"])
+        parts.append(f"{name}: gain {p['gain']:.3g}, phase margin {pm:.0f} deg")
+    return "; ".join(parts)
+
+
 def _ice_noise_gains() -> str:
     gains = dict(zip(ice.OUTPUTS, ice.vehicle().noise_gains, strict=True))
     values = sorted(set(gains.values()), key=lambda g: -sum(v == g for v in gains.values()))
@@ -97,7 +107,9 @@ def verdict_choices() -> list[Choice]:
         *_settings(),
         Choice("pilot model", "stand-in: gain times delayed error", "ours", "sim/pilot.py PILOT_MODELS",
                "the seed's pilot is Hess's structural model (its refs 138, 144, 145); not implemented. The "
-               "crossover rule's form is McRuer & Krendel 1974, its numbers are ours (sim/pilot.py)"),
+               "crossover and crossover_wc rules' forms are McRuer & Krendel 1974, their numbers are ours: "
+               "McRuer & Jex 1967's regressions of tau_e and w_c on w_i could not be verified here, so none is "
+               "used (sim/pilot.py)"),
         Choice("stand-in pilot gain", _text(pilot.STANDIN_GAIN), "ours", "sim/pilot.py STANDIN_GAIN",
                _standin_loops()),
         Choice("stand-in pilot delay", f"{pilot.STANDIN_DELAY:g} s", "ours", "sim/pilot.py STANDIN_DELAY"),
@@ -108,6 +120,17 @@ def verdict_choices() -> list[Choice]:
                "sim/pilot.py CROSSOVER_NEUROMUSCULAR"),
         Choice("crossover pilot phase margin", f"{pilot.CROSSOVER_PHASE_MARGIN:g} deg", "ours",
                "sim/pilot.py CROSSOVER_PHASE_MARGIN"),
+        Choice("crossover_wc pilot crossover frequency", f"{pilot.CROSSOVER_WC_FREQUENCY:g} rad/s", "ours",
+               "sim/pilot.py CROSSOVER_WC_FREQUENCY",
+               f"about the stand-in's; w_c / w_i = {pilot.CROSSOVER_WC_FREQUENCY / pilot.forcing_bandwidth():.2f}. "
+               + _crossover_wc_loops()),
+        Choice("crossover_wc pilot effective delay", f"{pilot.CROSSOVER_WC_DELAY:g} s", "ours",
+               "sim/pilot.py CROSSOVER_WC_DELAY", "transport delay and neuromuscular lag in one (crossover model)"),
+        Choice("forcing-function bandwidth w_i", f"{pilot.forcing_bandwidth():.3g} rad/s",
+               "ours (rule: the highest seed Table 4-2 frequency with at least "
+               f"{pilot.FORCING_AMPLITUDE_FRACTION:g} x the largest amplitude)",
+               "sim/pilot.py forcing_bandwidth", "every sum-of-sines input (xi scales amplitudes only); the Fig "
+               "4-81 filtered steps have none; informs w_c / w_i only, sets no pilot parameter"),
         Choice("ICE alpha pilot", "off: the alpha sum-of-sines goes straight into the reference model "
                "(alpha_pilot=True closes the loop)",
                "ours (the seed closes a pilot loop on alpha, Figs 4-85, 4-86)", "sim/scenarios/ice.py _pilots",

@@ -42,7 +42,7 @@ def test_the_project_s_own_choices_are_marked_ours():
 
 def test_docs_page_is_generated_from_the_committed_sweep():
     assert PAGE.read_text() == bench_sensitivity.choices_page(), \
-        "regenerate: python -m benchmarks.bench_sensitivity page --out benchmarks/reference/sensitivity-2026-12-02"
+        "regenerate: python -m benchmarks.bench_sensitivity page --out benchmarks/reference/sensitivity-2026-12-02b"
 
 
 def test_every_swept_factor_is_a_row_of_the_choices_table():
@@ -92,3 +92,25 @@ def test_flips_by_choice_sums_the_levels():
     rows = [{"factor": "x", "level": "a", "base": "2000 Hz", "runs": "16", "flips": "2", "best_flips": ""},
             {"factor": "x", "level": "b", "base": "100 Hz", "runs": "16", "flips": "0", "best_flips": "ice failed"}]
     assert bench_sensitivity.flips_by_choice(rows) == {"x": "2 of 32 verdicts flip (a: 2, b at 100 Hz: 0 + best)"}
+
+
+def test_the_pilot_table_reads_each_crossover_wc_level_back_and_counts_its_flips():
+    """The committed pilot re-run: a crossover_wc level's row shows the crossover it states, and its flips
+    are the verdicts that differ from the default's, counted here from runs*.csv directly."""
+    rows = bench_sensitivity.all_runs(bench_sensitivity.REFERENCE_PILOT)
+    section = bench_sensitivity.pilot_section(bench_sensitivity.REFERENCE_PILOT)
+    assert section in PAGE.read_text()
+    default = {(r["scenario"], r["case"], r["method"]): r["diverged"] for r in rows
+               if (r["factor"], r["base"]) == ("default", "2000 Hz")}
+    levels = [v for v in bench_sensitivity.factors() if v.factor == "crossover_wc pilot crossover frequency"]
+    assert levels
+    for v in levels:
+        wc = float(v.level.removesuffix(" rad/s"))
+        for scenario in v.scenarios:
+            mine = [r for r in rows if (r["factor"], r["level"], r["scenario"]) == (v.factor, v.level, scenario)]
+            assert len(mine) == 8, (v.level, scenario)  # failed and nominal, four methods
+            flips = sum(default[(scenario, r["case"], r["method"])] != r["diverged"] for r in mine)
+            line = next(x for x in section.splitlines() if x.startswith(f"| {v.factor} = {v.level} | {scenario} |"))
+            cells = [c.strip() for c in line.strip("|").split("|")]
+            assert float(cells[2]) == pytest.approx(wc, abs=5e-3)
+            assert cells[-1] == f"{flips} of 8"
