@@ -13,11 +13,16 @@ So a *priority* request (a write of :data:`PRIORITY_ROUTES` with a light body: c
 delete a vehicle, record an event, post a telemetry batch, accept or reject a proposal;
 carrying the right API key, or any such write when no key is configured; and each light
 message of an authenticated telemetry WebSocket) closes a gate for the time it is in
-flight; every other request waits at the gate before it reads its body or costs anything.  When no write is in flight the others enter :data:`TURNS` per loop iteration,
-so the loop reads its sockets (and a write's headers) between every few of them.
+flight; every other request waits at the gate before it reads its body or costs anything.
+When no write is in flight the others enter :data:`TURNS` per loop iteration, so the loop
+reads its sockets (and a write's headers) between every few of them.
 
 What is bounded, and by how much: the gate stays closed for at most :data:`MAX_WAIT_S` at
-a time (writes overlapping for longer no longer hold the others back).  A request's whole
+a time (writes overlapping for longer no longer hold the others back), and for at most
+:data:`CLOSED_SHARE` of any period beyond that: closing spends a budget that refills at that
+rate, up to ``MAX_WAIT_S`` (a sparse writer always finds it full; key holders posting writes
+back to back, telemetry batches of hundreds of ms each, cannot keep the others out for longer
+than half the time).  A request's whole
 wait is that plus its place in the line that formed behind the gate: ``TURNS`` of the
 waiting requests enter per loop iteration, each costing ``c`` (about 0.6 ms on a quiet
 machine, more on a loaded one), so with ``Q`` requests ahead of it a request waits up to
@@ -46,15 +51,15 @@ import hmac
 import re
 import time
 from collections import deque
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from typing import Any
 
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from . import timing
 
-__all__ = ["PriorityGate", "PriorityMiddleware", "LightTicket", "MAX_WAIT_S", "SCOPE_KEY", "LIGHT_KEY",
-           "GATE_STATE_KEY"]
+__all__ = ["PriorityGate", "PriorityMiddleware", "LightTicket", "MAX_WAIT_S", "CLOSED_SHARE", "SCOPE_KEY",
+           "LIGHT_KEY", "GATE_STATE_KEY", "PRIORITY_ROUTES", "PRIORITY_STREAMS"]
 
 #: requests other than writes let into the application per event-loop iteration: between
 #: two reads of the sockets the loop runs at most this many of them (a flood request costs
@@ -63,6 +68,9 @@ TURNS = 2
 #: the longest the gate stays closed at a time (a bound, not a schedule: writes take ms); a
 #: request's whole wait adds its place in the line behind the gate (module docstring)
 MAX_WAIT_S = 0.5
+#: the largest share of time the gate can be closed over a long period, whatever the writers
+#: do (a design choice, not a measurement: the others keep at least half the loop's time)
+CLOSED_SHARE = 0.5
 #: scope key set by the protocol: ``True`` when the gate was closed for this request
 SCOPE_KEY = "alloc.priority"
 #: scope key of a light request's :class:`LightTicket` (set by the protocol, else the middleware)
@@ -162,16 +170,20 @@ class LightTicket:
 
 class PriorityGate:
     """Counts priority requests in flight; lets the others in a few per loop iteration, and
-    none while a priority request is in flight (for at most :data:`MAX_WAIT_S`).  A large
+    none while a priority request is in flight (for at most :data:`MAX_WAIT_S` at a time and
+    :data:`CLOSED_SHARE` of the time; ``clock``: seconds, monotonic).  A large
     body's parse (``heavy``) waits, besides, until no light request is open
     (:class:`LightTicket`), for at most :data:`MAX_WAIT_S`."""
 
-    def __init__(self, api_key: str | None) -> None:
+    def __init__(self, api_key: str | None, clock: Callable[[], float] = time.monotonic) -> None:
         self._key = api_key.encode() if api_key else None
         self.active = 0
         self.light = 0  # open light requests (LightTicket)
         self.waited = 0  # requests that found the gate closed (tests, benchmarks)
+        self._clock = clock
         self._closed_at = 0.0
+        self._closes_for = 0.0  # how long the current closure may last
+        self._budget, self._budget_at = MAX_WAIT_S, clock()  # seconds of closure available (CLOSED_SHARE)
         self._turns = TURNS
         self._queue: deque[asyncio.Future[None]] = deque()
         #: large bodies waiting to be parsed: [since, turn, seen by a refill]
@@ -200,17 +212,27 @@ class PriorityGate:
     def enter(self) -> None:
         """A priority request arrived (called on the event loop)."""
         if self.active == 0:
-            self._closed_at = time.monotonic()
-            asyncio.get_running_loop().call_later(MAX_WAIT_S, self._schedule_refill)
+            now = self._clock()
+            self._refill_budget(now)
+            self._closed_at, self._closes_for = now, min(MAX_WAIT_S, self._budget)
+            asyncio.get_running_loop().call_later(self._closes_for, self._schedule_refill)
         self.active += 1
 
     def leave(self) -> None:
         self.active = max(0, self.active - 1)
-        if self.active == 0 and (self._queue or self._heavy):
-            self._schedule_refill()
+        if self.active == 0:
+            now = self._clock()
+            self._refill_budget(now)
+            self._budget = max(0.0, self._budget - min(now - self._closed_at, self._closes_for))
+            if self._queue or self._heavy:
+                self._schedule_refill()
+
+    def _refill_budget(self, now: float) -> None:
+        self._budget = min(MAX_WAIT_S, self._budget + (now - self._budget_at) * CLOSED_SHARE)
+        self._budget_at = now
 
     def _closed(self) -> bool:
-        return self.active > 0 and time.monotonic() - self._closed_at < MAX_WAIT_S
+        return self.active > 0 and self._clock() - self._closed_at < self._closes_for
 
     async def wait(self, heavy: bool = False) -> None:
         """Return when it is this request's turn: no priority request in flight (or it has
@@ -223,7 +245,7 @@ class PriorityGate:
         loop = asyncio.get_running_loop()
         turn = loop.create_future()
         if heavy:
-            self._heavy.append([time.monotonic(), turn, False])
+            self._heavy.append([self._clock(), turn, False])
             loop.call_later(MAX_WAIT_S + 0.001, self._schedule_refill)
             self._schedule_refill()
             await turn
@@ -259,7 +281,7 @@ class PriorityGate:
             self._heavy.popleft()
         if self._heavy and self._turns and not self._queue:
             since, turn, seen = self._heavy[0]
-            if seen and (self.light == 0 or time.monotonic() - since >= MAX_WAIT_S):
+            if seen and (self.light == 0 or self._clock() - since >= MAX_WAIT_S):
                 self._heavy.popleft()
                 turn.set_result(None)
                 self._turns -= 1

@@ -163,3 +163,40 @@ def test_whole_wait_is_the_gate_bound_plus_the_line_ahead():
     stretch = max(2.0, os.getloadavg()[0] / (os.cpu_count() or 1))
     assert MAX_WAIT_S * 0.9 <= min(waits) and max(waits) <= MAX_WAIT_S + stretch * q * cost + 0.3, (min(waits),
                                                                                                    max(waits))
+
+
+def test_writers_back_to_back_close_the_gate_at_most_its_share_of_the_time():
+    """Key holders posting writes back to back (telemetry batches of 100 ms each) keep the others
+    out for at most CLOSED_SHARE of the time, plus one MAX_WAIT_S; a sparse writer's every write
+    closes the gate for all of its duration.  Simulated time (the gate's clock), 1 ms steps."""
+    from service.priority import CLOSED_SHARE
+
+    now = [0.0]
+    gate = PriorityGate(None, clock=lambda: now[0])
+
+    def write(seconds: float) -> int:
+        """One write in flight for ``seconds``: the milliseconds the gate was closed meanwhile."""
+        gate.enter()
+        closed = 0
+        for _ in range(round(seconds * 1000)):
+            closed += gate._closed()
+            now[0] += 0.001
+        gate.leave()
+        return closed
+
+    async def scenario() -> tuple[float, list[int]]:
+        closed = 0
+        start = now[0]
+        while now[0] - start < 10.0:
+            closed += write(0.1)
+            now[0] += 0.001  # the next batch arrives at once
+        busy = closed / 1000 / (now[0] - start)
+        now[0] += 1.0  # the writers stop: the budget refills
+        sparse = []
+        for _ in range(5):
+            sparse.append(write(0.02))
+            now[0] += 1.0
+        return busy, sparse
+    busy, sparse = asyncio.run(scenario())
+    assert CLOSED_SHARE - 0.05 <= busy <= CLOSED_SHARE + MAX_WAIT_S / 10.0, busy
+    assert sparse == [20] * 5
