@@ -54,7 +54,8 @@ if TYPE_CHECKING:
 
 __all__ = [
     "Limit", "AxisLimits", "ScenarioCriteria", "Verdict", "CRITERIA", "criteria_for", "evaluate", "verdict_of",
-    "use_scenario", "tracking_metrics", "failed_effectors", "known_failed_effectors", "OUT_OF_COMMAND",
+    "use_scenario", "tracking_metrics", "failed_effectors", "known_failed_effectors", "register_failure_source",
+    "OUT_OF_COMMAND",
     "SATURATION_RULE",
     "back_in_band_time", "free_parameters", "PHASES", "RECOVERY_HOLD_S", "RECOVERY_MAX_S",
     "NOMINAL_RMS_FRACTION", "FAILED_RMS_FRACTION", "NOMINAL_PEAK_FRACTION", "FAILED_PEAK_FRACTION",
@@ -320,21 +321,37 @@ def failed_effectors(failure: Failure | None) -> tuple[int, ...]:
     return tuple(out)
 
 
-def known_failed_effectors(result: SimResult) -> tuple[int, ...]:
-    """:func:`failed_effectors` of the failure ``result`` flew, rebuilt from its scenario by name.
+#: further places a run's failure is rebuilt from by name: ``(scenario, name, time) -> Failure | None``
+#: (the comparison sweep's catalogue registers its own, so this module never imports the benchmarks)
+_FAILURE_SOURCES: list[Callable[[str, str, float | None], Failure | None]] = []
 
-    Empty without a failure, or when the run's scenario is not registered or does not know the
-    failure's name (a :class:`sim.model.Failure` handed straight to the runner): then every
-    effector counts, as it would without the rule.
+
+def register_failure_source(source: Callable[[str, str, float | None], Failure | None]) -> None:
+    """Let :func:`known_failed_effectors` find failures by name in ``source`` (None: not one of its)."""
+    if source not in _FAILURE_SOURCES:
+        _FAILURE_SOURCES.append(source)
+
+
+def known_failed_effectors(result: SimResult) -> tuple[int, ...]:
+    """:func:`failed_effectors` of the failure ``result`` flew, rebuilt by name from its scenario or a
+    registered source (:func:`register_failure_source`).
+
+    Empty without a failure, or when neither knows the failure's name (a :class:`sim.model.Failure`
+    handed straight to the runner from elsewhere): then every effector counts, as without the rule.
     """
+    if result.failure is None:
+        return ()
     scenario = _SCENARIOS.get(result.scenario)
-    if result.failure is None or scenario is None:
-        return ()
-    try:
-        failure = scenario.failure(result.failure, result.failure_time)
-    except (KeyError, ValueError):
-        return ()
-    return failed_effectors(failure)
+    if scenario is not None:
+        try:
+            return failed_effectors(scenario.failure(result.failure, result.failure_time))
+        except (KeyError, ValueError):
+            pass  # not one of the scenario's own: a registered source may know it
+    for source in _FAILURE_SOURCES:
+        failure = source(result.scenario, result.failure, result.failure_time)
+        if failure is not None:
+            return failed_effectors(failure)
+    return ()
 
 
 def _saturation(result: SimResult, kind: str, excluded: tuple[int, ...]) -> np.ndarray | None:

@@ -48,6 +48,7 @@ from typing import Any
 import numpy as np
 
 from alloc.health import Effect, FailureKind
+from sim import criteria as _criteria
 
 __all__ = ["KINDS", "FAILED_EFFECTORS", "SEVERITY", "RIDES_WITH", "catalogue_kinds", "catalogue_names",
            "canonical_name", "is_catalogue", "make_failure"]
@@ -178,3 +179,13 @@ def failure_effectors(scenario: str, name: str) -> np.ndarray:
 # fails at import, not in the middle of a sweep.
 if missing := set(Effect) - set(SEVERITY) - {Effect.REPAIR, Effect.BANDWIDTH, Effect.DELAY}:
     raise ImportError(f"benchmarks.compare.failures: no catalogue severity for {sorted(e.name for e in missing)}")
+
+
+def _criteria_source(scenario: str, name: str, time: float | None) -> Any:
+    """A catalogue failure by name, for the criteria's saturation shares (None: not a catalogue one)."""
+    return make_failure(scenario, name, time or 0.0) if is_catalogue(name) and scenario in FAILED_EFFECTORS else None
+
+
+# The criteria leave a failure's out-of-command effectors out of the saturation shares; sim never
+# imports the benchmarks, so the catalogue tells it its failures.
+_criteria.register_failure_source(_criteria_source)

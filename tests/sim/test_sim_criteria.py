@@ -268,3 +268,14 @@ def test_failed_effectors_are_the_ones_out_of_command() -> None:
     assert known_failed_effectors(replace(ice_run, scenario="harv_latdir", failure="failure2")) == ()
     assert known_failed_effectors(replace(ice_run, failure="not a failure")) == ()
     assert "injected failure jams" in criteria_for("ice").sources()["position_saturation_after"]
+
+
+def test_a_catalogue_hardover_is_found_by_its_name():
+    """The comparison sweep's catalogue registers its failures: a hard-over there is out of command."""
+    from benchmarks.compare import failures as catalogue
+    from sim.criteria import known_failed_effectors
+
+    run = SimResult("ice", "pinv", "hardover2", T, [], np.zeros((T.size, 0)), np.zeros((T.size, 0)),
+                    np.zeros((T.size, 0)), failure_time=5.0)
+    assert known_failed_effectors(run) == tuple(catalogue.FAILED_EFFECTORS["ice"][:2])
+    assert known_failed_effectors(replace(run, failure="effectiveness1")) == ()  # still commanded
