@@ -106,7 +106,11 @@ def test_gate_holds_others_only_while_a_priority_request_is_in_flight():
     assert asyncio.run(scenario()) == ["write done"] + [f"other {i}" for i in range(5)]  # in arrival order
     assert gate.waited == 5 and gate.active == 0 and MAX_WAIT_S <= 1.0
 
-    async def stuck_write() -> float:  # a priority request that never ends holds nobody past MAX_WAIT_S
+    # a priority request that never ends holds nobody past MAX_WAIT_S (a fresh gate: its closure
+    # budget full, whatever the write above spent of it on a loaded machine)
+    gate = PriorityGate("k")
+
+    async def stuck_write() -> float:
         gate.enter()
         t0 = time.monotonic()
         await asyncio.wait_for(gate.wait(), 5.0)
