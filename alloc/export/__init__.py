@@ -414,12 +414,16 @@ def _active_set_fields(instances: list[Any], problem: Problem, real: _Real, fiel
     if table and m > 20:
         raise ExportError(f"table: 2^{m} free sets a level is too many to tabulate", field="table")
     fields["TABLE"] = "1" if table else "0"
-    fields["CACHE"] = str(_cache_slots(cache, bool(table), entry * (8 if real.double else 4) + 4 * (4 + m),
-                                       len(instances) * len(keys) << min(m, 30)))
+    slot_bytes = entry * (8 if real.double else 4) + 4 * (4 + m)
+    slots = _cache_slots(cache, bool(table), slot_bytes, len(instances) * len(keys) << min(m, 30))
+    fields["CACHE"] = str(slots)
+    cached = (f" *\n * Cache: the factorisations of the last free sets met, in static storage ({slots} slots of\n"
+              f" * about {slot_bytes} bytes); a factorisation depends on the free set alone, so the cache\n"
+              " * changes the time of a call, never its answer.\n") if slots else ""
     fields["INSTANCES"] = _instances(instances, aset, keys, real, ml, bool(table))
     fields["HEALTH"] = (" *\n * Health at run time: PREFIX_set_limits(umin, umax) sets reduced limits or jams\n"
                         " * (umin[j] == umax[j]) within the nominal limits; an effectiveness change needs a new\n"
-                        " * export.  The cold start and the safe answer keep the nominal Eq 1.23 matrix.\n")
+                        " * export.  The cold start and the safe answer keep the nominal Eq 1.23 matrix.\n" + cached)
     fields["HEALTH_DECL"] = templates.HEALTH_DECL
     fields["LIMITS_QUAL"] = ""
     fields["MAXIT_DEFINE"] = (f"/* iteration cap per level and per call (see the bound above) */\n"
