@@ -22,17 +22,16 @@ a time (writes overlapping for longer no longer hold the others back), and for a
 :data:`CLOSED_SHARE` of any period beyond that: closing spends a budget that refills at that
 rate, up to ``MAX_WAIT_S`` (a sparse writer always finds it full; key holders posting writes
 back to back, telemetry batches of hundreds of ms each, cannot keep the others out for longer
-than half the time).  A request's whole
-wait is that plus its place in the line that formed behind the gate: ``TURNS`` of the
-waiting requests enter per loop iteration, each costing ``c`` (about 0.6 ms on a quiet
-machine, more on a loaded one), so with ``Q`` requests ahead of it a request waits up to
-``MAX_WAIT_S + Q c``; at most ``ALLOC_MAX_CONNECTIONS`` (512) requests can be in line, so
-up to about 0.8 s at 0.6 ms each (measured 0.65-0.92 s under the flood of
-``benchmarks/bench_service.py`` on the shared machine: ``c`` up to about 0.8 ms there).  Writes do
-not queue here at all.  The gate is closed as soon as the request's headers are parsed
-(:class:`service.server.GuardedHttpToolsProtocol`), before the loop runs any request task
-queued ahead of it; without that protocol (an in-process test client) the middleware closes
-it when the request reaches the application.
+than half the time).  A request's whole wait is that plus its place in the line that formed
+behind the gate: ``TURNS`` of the waiting requests enter per loop iteration, each costing
+``c`` (about 0.6 ms on a quiet machine, more on a loaded one), so with ``Q`` requests ahead
+of it a request waits up to ``MAX_WAIT_S + Q c``; at most ``ALLOC_MAX_CONNECTIONS`` (512)
+requests can be in line, so up to about 0.8 s at 0.6 ms each (measured 0.65-0.92 s under the
+flood of ``benchmarks/bench_service.py`` on the shared machine: ``c`` up to about 0.8 ms
+there).  Writes do not queue here at all.  The gate is closed as soon as the request's
+headers are parsed (:class:`service.server.GuardedHttpToolsProtocol`), before the loop runs
+any request task queued ahead of it; without that protocol (an in-process test client) the
+middleware closes it when the request reaches the application.
 
 Large bodies (:mod:`service.bodies`) wait, besides, for the light requests: a parse holds
 the loop and the GIL for its whole document, so one that starts while an allocation awaits
