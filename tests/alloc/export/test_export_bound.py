@@ -68,6 +68,25 @@ def test_generated_code_reaches_the_bound_and_one_less_gives_the_safe_answer(bui
     assert short(v)[1:] == (2, bound - 1)
 
 
+def test_the_cached_run_time_form_reaches_the_same_bound(build, certified):
+    """Factorising at run time with its factorisation cache (table=False), the kernel counts the
+    library's iterations too: the worst sampled demand takes exactly the bound, with the cache
+    cold and then warm, and one iteration less gives the safe answer."""
+    p, kernel, allocator = certified
+    bound, v = kernel.iteration_bound, kernel.certificate.worst_demand
+    r = allocator(v)
+    at = build(export_c(p, "wls", table=False, iteration_bound=bound, prefix="rt_cert_wls"))
+    assert "#define TABLE 0\n" in at.kernel.source and "#define CACHE 0\n" not in at.kernel.source
+    for _ in range(2):
+        u, status, it = at(v)
+        assert (status, it) == (STATUS[r.status.value], bound)
+        np.testing.assert_array_equal(u, r.u)
+    short = build(export_c(p, "wls", table=False, iteration_bound=bound - 1, prefix="rt_short_wls"))
+    u, status, it = short(v)
+    assert (status, it) == (2, bound - 1)
+    np.testing.assert_array_equal(u, _safe(allocator, p, v))
+
+
 def test_fresh_demands_are_within_the_bound_or_say_so(build, certified):
     """Seeded demands outside the sample (the shared random generator, attainable and not):
     each either is the library's answer within the bound, or needed more and is the safe
