@@ -9,11 +9,13 @@ each restart; uvicorn logs ``Child process [pid] died`` for one it replaced.
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing
 import os
 import re
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -81,22 +83,58 @@ config = uvicorn.Config("test_service_workers:gil_holding_app", host="127.0.0.1"
 sockets = [config.bind_socket()]
 supervisor = ReadinessSupervisor(config, sockets, 60.0) if sys.argv[1] == "ours" else Multiprocess(config, sockets)
 threading.Timer(float(sys.argv[2]), supervisor.should_exit.set).start()
+# the test says when it has seen enough (a line on stdin); the timer is the cap
+threading.Thread(target=lambda: (sys.stdin.readline(), supervisor.should_exit.set()), daemon=True).start()
 supervisor.run()
 """
+#: the supervised run's cap, and how long "ours" is watched after both workers are ready
+#: (three health-check periods: a kill after readiness would show in it)
+_CAP_S, _AFTER_READY_S = 15.0, 3.0
+_KILL = re.compile(r"died|starting a new one")
+
+
+def _supervise(which: str, env: dict) -> str:
+    """Run the supervisor ``which`` until it has answered the question (or the cap); its log.
+
+    uvicorn's: until its first kill.  Ours: until both workers are up, then ``_AFTER_READY_S``.
+    """
+    proc = subprocess.Popen([sys.executable, "-c", _SUPERVISE, which, str(_CAP_S)], cwd=ROOT, env=env,
+                            stdin=subprocess.PIPE, stderr=subprocess.PIPE, text=True, errors="replace")
+    lines: list[str] = []
+    reader = threading.Thread(target=lambda: lines.extend(iter(proc.stderr.readline, "")), daemon=True)
+    reader.start()
+    ready_at = None
+    try:
+        while proc.poll() is None:
+            log = "".join(lines)
+            if which == "uvicorn" and _KILL.search(log):
+                break
+            if which == "ours" and ready_at is None and log.count("Application startup complete") >= 2:
+                ready_at = time.monotonic()
+            if ready_at is not None and time.monotonic() - ready_at >= _AFTER_READY_S:
+                break
+            time.sleep(0.1)
+        with contextlib.suppress(BrokenPipeError):  # it may have reached its cap meanwhile
+            proc.stdin.write("stop\n")
+            proc.stdin.close()
+        proc.wait(timeout=180)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    reader.join(timeout=30)
+    return "".join(lines)
 
 
 def test_starting_workers_are_not_health_checked_until_ready():
     """Workers whose start-up holds the GIL longer than the health check's 1 s: uvicorn's own
-    supervisor kills them again and again; ours waits for them (0 restarts, both ready)."""
+    supervisor kills them (watched until the first kill); ours waits for them (0 restarts, both
+    ready, and none in the ``_AFTER_READY_S`` after)."""
     n = _gil_hold_length(3.0)
     env = {**os.environ, "GIL_HOLD_N": str(n), "PYTHONPATH": f"{Path(__file__).resolve().parent}:{ROOT}"}
-    logs = {}
-    for which in ("uvicorn", "ours"):
-        proc = subprocess.run([sys.executable, "-c", _SUPERVISE, which, "15"], cwd=ROOT, env=env,
-                              capture_output=True, timeout=180)
-        logs[which] = proc.stderr.decode(errors="replace")
+    logs = {which: _supervise(which, env) for which in ("uvicorn", "ours")}
     started = {k: log.count("Application startup complete") for k, log in logs.items()}
-    kills = {k: len(re.findall(r"died|starting a new one", log)) for k, log in logs.items()}
+    kills = {k: len(_KILL.findall(log)) for k, log in logs.items()}
     print(f"\nGIL held {n} a's at start-up: uvicorn's supervisor {kills['uvicorn']} kills, "
           f"{started['uvicorn']} started; ours {kills['ours']} kills, {started['ours']} started")
     assert kills["ours"] == 0 and started["ours"] == 2, logs["ours"][-3000:]
