@@ -24,7 +24,7 @@ from .db import make_engine, make_sessionmaker
 from .docs import install_docs
 from .bodies import GC_THRESHOLDS, BodyBudget, BodySizeLimit
 from .errors import PROBLEM_JSON, install_handlers
-from .routes import allocation, ams, methods, system, vehicles
+from .routes import allocation, ams, methods, system, telemetry, vehicles
 from .priority import GATE_STATE_KEY, PriorityGate, PriorityMiddleware
 from .server import GuardedHttpToolsProtocol
 from .store import VehicleStore
@@ -146,6 +146,11 @@ def uvicorn_options(settings: Settings) -> dict[str, Any]:
         "limit_concurrency": settings.max_connections,  # connections + tasks per process; 503 beyond
         "backlog": 2 * settings.max_connections,
         "timeout_graceful_shutdown": 10,
+        # A WebSocket message is assembled whole before the route sees it: without this bound a
+        # client could make the process hold and parse 16 MiB (uvicorn's default) per message,
+        # where the route accepts at most 1 MiB.  The margin keeps the route's own named error
+        # for messages just over its limit; a larger one is closed with 1009 (message too big).
+        "ws_max_size": telemetry.WS_MAX_MESSAGE_BYTES + (64 << 10),
     }
 
 

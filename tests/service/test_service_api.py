@@ -491,3 +491,18 @@ def test_ragged_or_misshaped_batches_are_422_on_V(client):
     for V in ([[0.0], [0.0, 0.0]], [[0.0, 0.0]], [[0.0, 0.0, 0.0, 0.0]]):
         assert_problem(client.post(f"/v1/vehicles/{vid}/allocate/batch", json={"V": V}), 422, "/V", "V")
         assert_problem(client.post("/v1/allocate/batch", json={**SIMPLE, "V": [[0.0, 1.0]] + V}), 422, "/V", "V")
+
+
+def test_websocket_messages_are_bounded_by_the_server_near_the_routes_limit():
+    """uvicorn assembles a WebSocket message whole before the route sees it; the server's bound
+    sits just above the route's (whose named error then covers the margin), far below uvicorn's
+    16 MiB default."""
+    import uvicorn
+
+    from service.config import Settings
+    from service.main import uvicorn_options
+    from service.routes.telemetry import WS_MAX_MESSAGE_BYTES
+
+    options = uvicorn_options(Settings())
+    assert WS_MAX_MESSAGE_BYTES < options["ws_max_size"] <= WS_MAX_MESSAGE_BYTES + (64 << 10)
+    assert uvicorn.Config("service.main:app", **options).ws_max_size == options["ws_max_size"]
