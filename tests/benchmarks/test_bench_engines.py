@@ -13,7 +13,7 @@ import pytest
 
 from benchmarks.compare.report import HISTORY_DECIMATE, make_report, parse_markdown_table
 from benchmarks.compare.runner import history_path, run_sweep
-from benchmarks.compare.sweep import smoke_sweep, tiny_sweep
+from benchmarks.compare.sweep import tiny_sweep
 
 RESULT_TABLES = ("open.csv", "closed_ice.csv")
 
@@ -35,15 +35,12 @@ def _histories(out: Path) -> dict[str, dict[str, np.ndarray]]:
     return {p.name: dict(np.load(p)) for p in sorted((out / "histories").glob("*.npz"))}
 
 
-# 10-25 s (cluster start-up, three runs, graceful teardown, the local reference): part of the default run
-def test_dask_cluster_by_address_gives_byte_identical_csvs(tmp_path: Path) -> None:
+# cluster start-up, the tiny sweep's runs, graceful teardown; the local reference is the module's
+def test_dask_cluster_by_address_gives_byte_identical_csvs(tmp_path: Path, specs: list[dict], local_dir: Path) -> None:
     """``dask scheduler`` and two ``dask worker`` processes on loopback (torn down however the test ends)."""
     pytest.importorskip("distributed")
     from benchmarks.compare.cluster import loopback_cluster
 
-    specs = smoke_sweep()
-    local_dir = tmp_path / "local"
-    run_sweep(specs, local_dir, workers=2, progress=False)
     with loopback_cluster(2, timeout_s=120, log_dir=tmp_path) as address:
         assert address.startswith("tcp://127.0.0.1:")
         outcome = run_sweep(specs, tmp_path / "dask", scheduler=address, progress=False)
