@@ -299,8 +299,8 @@ class RunSettings(LoopSettings):
     controller: str = _setting("smc", "the seed's observer-based SMC with hedging, or its loop-shaped baseline "
                                "(the pendulum scenario takes 'smc' or 'lqr')", choices=CONTROLLERS,
                                flag="--controller")
-    pilot: str = _setting("standin", "pilot model (sim.pilot): the stand-in gain and delay, or McRuer's crossover "
-                          "rule", choices=PILOT_MODELS, flag="--pilot")
+    pilot: str = _setting("standin", "pilot model (sim.pilot): the stand-in gain and delay, McRuer's crossover "
+                          "rule at a 45 deg phase margin, or crossover_wc (crossover at a stated frequency)", choices=PILOT_MODELS, flag="--pilot")
     pilot_gain: float | None = _setting(None, "the pilot's gain, over the model's", low=0.0, flag="--pilot-gain",
                                         none_means="the pilot model's")
     pilot_delay: float | None = _setting(None, "the pilot's time delay, over the model's", unit="s", low=0.0,
