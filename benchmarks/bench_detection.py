@@ -28,7 +28,10 @@ tables printed from what finished, ``--report``):
     ``(S_blind - S_detected) / (S_blind - S_told)``, from the seeds' mean scores, with a
     bootstrap 90 % interval over seeds (2,000 resamples), and the same of the seeds' median
     scores (finite while fewer than half an arm's runs diverged).  A diverged run scores inf
-    and is counted.  The runs of an ``alloc bench detected`` sweep copied to
+    and is counted.  ``--frame-rate 0`` flies the seed's single-rate 2 kHz loop (with the 100 Hz
+    frame HARV lat-dir's failure runs diverge often in every arm, told included);
+    ``--failure-time`` off the detector's 0.1 s samples (3.05) flies an onset between two of
+    them.  The runs of an ``alloc bench detected`` sweep copied to
     ``--out``/``sweep-detected/closed_*.csv`` are scored the same way (:func:`sweep_rows`).
 
 Every run flies the seed's plant, actuators and noise at the seed's 0.5 ms step with a 100 Hz
@@ -305,19 +308,22 @@ def report_replay(rows: list[dict[str, Any]]) -> str:
 
 
 def run_benefit(out: Path, seeds: int, frame_rate: float, first_seed: int = 0,
-                arms: tuple[str, ...] = ARMS) -> None:
-    """Seed by seed (an interrupted run leaves whole seeds); ``arms`` a subset, so the arms that
-    do not depend on the detector (blind, told) can be flown apart from the one that does."""
+                arms: tuple[str, ...] = ARMS, kinds: tuple[str, ...] | None = None,
+                failure_time: float = 3.0, scenarios: tuple[str, ...] = SCENARIOS) -> None:
+    """Seed by seed (an interrupted run leaves whole seeds); ``arms``, ``kinds``, ``scenarios`` subsets, so the
+    arms that do not depend on the detector (blind, told) can be flown apart from the one that
+    does; ``failure_time`` off the detector's 0.1 s samples (e.g. 3.05) flies the onset between
+    two of them (write those runs to their own ``--out``: the report does not tell them apart)."""
     done = _done(out, "benefit")
     for s in range(first_seed, first_seed + seeds):
-        for scenario in SCENARIOS:
-            for kind in catalogue_kinds():
+        for scenario in scenarios:
+            for kind in kinds or catalogue_kinds():
                 for method in METHODS:
                     for arm in arms:
                         key = f"{scenario}/{kind}/{method}/{arm}/{frame_rate:g}/{s}"
                         if key in done or key.replace(f"/{frame_rate:g}/", "/") in done and frame_rate == 100:
                             continue
-                        row = _fly(scenario, kind, health=arm, method=method, seed=200 + s, failure_time=3.0,
+                        row = _fly(scenario, kind, health=arm, method=method, seed=200 + s, failure_time=failure_time,
                                    duration=10.0, frame_period=1.0 / frame_rate if frame_rate else None)
                         _write(out, "benefit", {"key": key, **row})
 
@@ -435,7 +441,8 @@ def surviving_fraction(blind: np.ndarray, told: np.ndarray, detected: np.ndarray
     """``(c blind - c detected) / (c blind - c told)``, ``c`` the mean (or the median: finite while
     fewer than half the runs of an arm diverged); nan when told does not help or it is not finite."""
     b, t, d = centre(blind), centre(told), centre(detected)
-    gain = b - t
+    with np.errstate(invalid="ignore"):  # inf - inf (both arms diverged): nan, undefined below
+        gain = b - t
     if not np.isfinite(gain) or gain <= 0 or not np.isfinite(d):
         return math.nan
     return float((b - d) / gain)
@@ -549,6 +556,9 @@ def main() -> None:
     r.add_argument("--first-seed", type=int, default=0,
                    help="first noise seed index (false, benefit; parallel processes)")
     r.add_argument("--arms", default=",".join(ARMS), help="arms flown (benefit)")
+    r.add_argument("--kinds", default=None, help="catalogue kinds flown (benefit; default all)")
+    r.add_argument("--failure-time", type=float, default=3.0, help="failure time (s, benefit)")
+    r.add_argument("--scenarios", default=",".join(SCENARIOS), help="scenarios flown (benefit)")
     r.add_argument("--dt", type=float, default=0.0005, help="integration step of the false section (s)")
     r.add_argument("--frame-rate", type=float, default=100.0,
                    help="flight-control frame rate (Hz); 0: the seed's single-rate 2 kHz loop")
@@ -572,7 +582,14 @@ def main() -> None:
         arms = tuple(args.arms.split(","))
         if not set(arms) <= set(ARMS):
             ap.error(f"--arms: {args.arms!r}; expected a comma-separated subset of {','.join(ARMS)}")
-        run_benefit(args.out, args.seeds, args.frame_rate, args.first_seed, arms)
+        kinds = None if args.kinds is None else tuple(args.kinds.split(","))
+        if kinds is not None and not set(kinds) <= set(catalogue_kinds()):
+            ap.error(f"--kinds: {args.kinds!r}; expected a comma-separated subset of {','.join(catalogue_kinds())}")
+        scenarios = tuple(args.scenarios.split(","))
+        if not set(scenarios) <= set(SCENARIOS):
+            ap.error(f"--scenarios: {args.scenarios!r}; expected a comma-separated subset of {','.join(SCENARIOS)}")
+        run_benefit(args.out, args.seeds, args.frame_rate, args.first_seed, arms, kinds, args.failure_time,
+                    scenarios)
 
 
 if __name__ == "__main__":
