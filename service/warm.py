@@ -89,7 +89,7 @@ def start_background_warm_up(stop: threading.Event, then: Callable[[], None] | N
     # The thread imports numba and the methods while the server binds its socket.  A codec
     # looked up while another thread holds the import lock can fail (CPython bpo-29288): the
     # server's getaddrinfo then raised "LookupError: unknown encoding: idna" and the process
-    # exited, in 1 of about 20 starts.  Using the codec once here caches it before the race.
+    # exited, in 1 of about 40 starts.  Using the codec once here caches it before the race.
     "localhost".encode("idna")
     thread = threading.Thread(target=run, name="alloc-warm-up", daemon=True)
     thread.start()
