@@ -75,6 +75,14 @@ def _as_weight(name: str, value: ArrayLike | None, n: int) -> FloatArray:
     # entries 1e50 at n = 512: 5e52), so both ends of the spectrum are bounded; the
     # condition number is then at most MAX_MAGNITUDE / MIN_WEIGHT.
     lam = np.linalg.eigvalsh((arr + arr.T) / 2.0)
+    # A full matrix whose computed smallest eigenvalue is within n eps lam_max of zero cannot be
+    # shown positive definite: round-off of that size decides whether Cholesky succeeds (a
+    # rank-deficient W'W passes on one LAPACK build and fails on another).  A diagonal matrix
+    # has exact eigenvalues and keeps the absolute floor alone.
+    diagonal = np.count_nonzero(arr - np.diag(np.diag(arr))) == 0
+    if not diagonal and lam[0] <= n * np.finfo(float).eps * lam[-1]:
+        raise ProblemError(f"{name}: weight matrix is not positive definite within round-off (eigenvalues "
+                           f"[{lam[0]:.3g}, {lam[-1]:.3g}], ratio below {n} x machine epsilon)")
     if lam[0] < MIN_WEIGHT:
         raise ProblemError(f"{name}: weight matrix's smallest eigenvalue {lam[0]:g} is below {MIN_WEIGHT:g} "
                            "(not positive definite within the valid domain)")

@@ -204,6 +204,46 @@ def test_dynamic_weights_are_range_checked_by_their_own_names(problem, field, va
     assert "Wu" not in str(info.value)
 
 
+def _rank_deficient(rng: np.random.Generator, n: int) -> np.ndarray:
+    """A random n x n matrix of rank below n, scaled over 40 decades: exactly singular, but its
+    computed singular values and eigenvalues are round-off, not zero."""
+    r = int(rng.integers(0, n))
+    F = rng.standard_normal((n, r)) @ rng.standard_normal((r, n)) if r else np.zeros((n, n))
+    if rng.random() < 0.5:  # duplicated rows and columns, the shape of a copy-paste error
+        F = rng.standard_normal((n, n))
+        j = rng.integers(0, n, size=2)
+        F[j[0]] = F[j[1]] if j[0] != j[1] else 0.0
+    return F * 10.0 ** rng.uniform(-20, 20)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_rank_deficient_weight_matrices_are_refused_whatever_the_round_off(seed):
+    """Issue 22 class: with numpy 2.4.6 the zero singular value of a rank-2 W1 came out as
+    3e-17, above the absolute floor, and the singular W1 built an allocator.  A full matrix must
+    be numerically nonsingular (smallest over largest above n eps) for W1, W2, Wu and Wv."""
+    rng = np.random.default_rng(seed)
+    for _ in range(40):
+        F = _rank_deficient(rng, 3)
+        if not np.abs(F).max() > 0:
+            continue
+        for field in ("W1", "W2"):
+            with pytest.raises(alloc.OptionError, match=f"^{field}: ") as info:
+                alloc.make_allocator(alloc.Problem(B, LO, HI), "dynamic", **{field: F})
+            assert info.value.field == field
+        Q = F.T @ F  # positive semidefinite, singular
+        with pytest.raises(alloc.ProblemError, match="^Wu: weight matrix is not positive definite") as info:
+            alloc.Problem(B, LO, HI, Wu=Q)
+        assert info.value.field == "Wu"
+        G = _rank_deficient(rng, 2)
+        if np.abs(G).max() > 0:
+            with pytest.raises(alloc.ProblemError, match="^Wv: weight matrix is not positive definite"):
+                alloc.Problem(B, LO, HI, Wv=G.T @ G)
+    # the relative test leaves well-conditioned full matrices and exact diagonals alone
+    R = np.linalg.qr(rng.standard_normal((3, 3)))[0]
+    alloc.make_allocator(alloc.Problem(B, LO, HI, Wu=R @ np.diag([1e-6, 1.0, 1e6]) @ R.T), "dynamic", W1=R)
+    alloc.Problem(B, LO, HI, Wu=np.diag([1e-40, 1.0, 1e40]))
+
+
 def test_dynamic_weights_at_the_ends_of_their_range_allocate_without_fallback(problem):
     from alloc.methods.dynamic import W_MAX, W_MIN
 
