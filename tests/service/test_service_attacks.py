@@ -20,12 +20,15 @@ and slowloris with reconnects from other loopback addresses.
 from __future__ import annotations
 
 import asyncio
+import gc
 import json
 import multiprocessing
 import os
 import selectors
+import shutil
 import socket
 import subprocess
+import tempfile
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -42,7 +45,12 @@ KEY = "attack-key"
 H = {"X-API-Key": KEY}
 MiB = 1024 * 1024
 ANSWER_BUDGET = 48 * MiB
-WRITE_TIMEOUT_S = 6.0
+WRITE_TIMEOUT_S = 10.0
+#: rounds per probe.  A p99 of n samples ignores the largest one only when n >= 101 (numpy's
+#: linear interpolation puts it at index 0.99 (n - 1)); at 40 rounds it was 0.61 of the maximum,
+#: so one fsync outlier of the disk (an idle SQLite commit loop here: p50 0.6 ms, max 85 ms in
+#: 300) decided the verdict
+ROUNDS = 120
 TARGETS_MS = {"event": 50.0, "allocation": 100.0, "health": 100.0}
 #: an attack may slow the reconfiguration path by at most this factor over the same run's floor
 FLOOR_FACTOR = 3.0
@@ -68,14 +76,26 @@ SLOWEST: dict[str, tuple[float, str]] = {}  # of the last probe: where the slowe
 def server(tmp_path_factory):
     env = {"ALLOC_REQUEST_TIMEOUT_S": "3", "ALLOC_WRITE_TIMEOUT_S": str(WRITE_TIMEOUT_S),
            "ALLOC_ANSWER_BYTES_IN_FLIGHT": str(ANSWER_BUDGET)}
-    proc = ServiceProcess(tmp_path_factory.mktemp("attacks"), api_key=KEY, env=env).start(timeout=300.0)
+    data = tmp_path_factory.mktemp("attacks")
+    # The database on tmpfs: this machine's disk stalls an fsync'd SQLite commit now and then
+    # (35-273 ms, 14 times in three runs of this module; no attack here writes to the disk), and
+    # two such stalls in a probe's 120 events decide its p99.  What is measured is then what
+    # the attacks do to the service; durability on a disk is tested by the kill -9 tests.
+    shm = tempfile.mkdtemp(prefix="alloc-attacks-", dir="/dev/shm") if os.access("/dev/shm", os.W_OK) else None
+    url = f"sqlite:///{shm}/alloc.sqlite3" if shm else None
+    if shm is None:
+        print("\nattack suite: /dev/shm is not writable; the database is on the disk, whose fsync stalls count")
+    proc = ServiceProcess(data, api_key=KEY, env=env, database_url=url).start(timeout=300.0)
     yield proc
     proc.stop()
+    if shm:
+        shutil.rmtree(shm, ignore_errors=True)
     if path := os.environ.get("ALLOC_ATTACK_REPORT"):
         commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
                                 cwd=os.path.dirname(__file__)).stdout.strip() or "?"
         with open(path, "w") as fh:
-            json.dump({"loadavg": os.getloadavg(), "cpus": os.cpu_count(), "nice": os.nice(0),
+            json.dump({"database": "tmpfs" if shm else "disk", "loadavg": os.getloadavg(), "cpus": os.cpu_count(),
+                       "nice": os.nice(0),
                        "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "commit": commit,
                        "targets_ms": TARGETS_MS, "attacks": REPORT}, fh, indent=1)
 
@@ -120,14 +140,19 @@ def connected(server) -> httpx.Client:
     return c
 
 
-def probe(server, vid: str, seconds: float, rounds_max: int = 40,
+def probe(server, vid: str, seconds: float, rounds_max: int = ROUNDS,
           client: httpx.Client | None = None) -> dict[str, list[float]]:
-    """Event, the first allocation after it, health: ms each, for ``seconds`` (at most ``rounds_max`` rounds)."""
+    """Event, the first allocation after it, health: ms each, for ``seconds`` (at most ``rounds_max`` rounds).
+
+    The collector of this process is off meanwhile: its full collections (50-73 ms in a
+    pytest process holding the suite) would count as the service's latency."""
     out: dict[str, list[float]] = {"event": [], "allocation": [], "health": []}
     timings: dict[str, tuple[float, str]] = {}  # the slowest of each kind and its Server-Timing
     deadline = time.monotonic() + seconds
     c = client or httpx.Client(base_url=server.url, timeout=30.0).__enter__()
     RSS["peak"] = rss_now(server)
+    gc.collect()
+    gc.disable()
     try:
         k = 0
         while time.monotonic() < deadline and k < rounds_max:
@@ -152,8 +177,9 @@ def probe(server, vid: str, seconds: float, rounds_max: int = 40,
                     timings[kind] = (ms, reply.headers.get("server-timing", ""))
             k += 1
             RSS["peak"] = max(RSS["peak"], rss_now(server))
-            time.sleep(0.05)
+            time.sleep(0.01)
     finally:
+        gc.enable()
         c.close()
     SLOWEST.update(timings)
     return out
@@ -215,7 +241,7 @@ def attack(fn: Callable[[Any], list], clients: int) -> Iterator[list]:
 
 def test_floor(server, vehicle):
     server.build_processes(timeout=300.0)  # warm-up done, build processes up: part of start-up RSS
-    figures = probe(server, vehicle, 4.0, rounds_max=30)
+    figures = probe(server, vehicle, 4.0)
     for kind, values in figures.items():
         assert p99(values) < FLOOR_LIMIT_MS, (kind, p99(values))
         FLOOR[kind] = p99(values)
