@@ -522,14 +522,36 @@ def export_command(
     prefix: Optional[str] = typer.Option(None, "--prefix", help="C prefix of the names and files; default "
                                          "alloc_<method>"),
     certify: bool = typer.Option(False, "--certify", help="active set: enforce the iteration bound certified "
-                                 "by sampling the demand set (alloc.export.certify)"),
+                                 "by sampling the demand set (alloc.export.certify); the same as "
+                                 "--iteration-bound certify"),
+    iteration_bound: Optional[str] = typer.Option(None, "--iteration-bound", metavar="N|certify",
+                                                  help="active set: iterations a call may take before it returns "
+                                                  "the safe answer (status 2); default the levels' caps added"),
+    maxit: Optional[int] = typer.Option(None, "--maxit", help="active set: iteration cap per level; default the "
+                                        "library's 50 + 10 (m + k)"),
+    table: Optional[bool] = typer.Option(None, "--table/--no-table", help="active set: precompute every free "
+                                         "set's factorisation (--table) or factorise at run time (--no-table); "
+                                         "default: tables when they fit 256 KiB"),
+    cache: Optional[int] = typer.Option(None, "--cache", metavar="SLOTS", help="active set without tables: slots "
+                                        "of the static cache of recent factorisations (0: none); default as many "
+                                        "as fit 16 KiB"),
 ) -> None:
     """Write the allocator as a self-contained C99 kernel (alloc_<method>.h/.c; see docs/export.md)."""
-    from .export import export_c
+    from .export import ExportError, export_c
 
     name = default_method() if method is None else method
+    if certify and iteration_bound not in (None, "certify"):
+        raise ExportError(f"iteration_bound: --certify and --iteration-bound {iteration_bound} disagree; give one",
+                          field="iteration_bound")
+    bound: int | str | None = "certify" if certify else iteration_bound
+    if isinstance(bound, str) and bound != "certify":
+        try:
+            bound = int(bound)
+        except ValueError:
+            raise ExportError(f"iteration_bound: expected a positive integer or \"certify\", got {bound!r}",
+                              field="iteration_bound") from None
     kernel = export_c(load_vehicle_option(vehicle), name, precision=precision, options=parse_options(option),
-                      prefix=prefix, iteration_bound="certify" if certify else None)
+                      prefix=prefix, iteration_bound=bound, maxit=maxit, table=table, cache=cache)
     for path in kernel.write(out):
         typer.echo(str(path))
 

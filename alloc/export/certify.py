@@ -124,11 +124,14 @@ def certify(allocator, problem: Problem) -> Certificate:
                        parts={name: len(V) for name, V in parts.items()}, worst_demand=worst, part_max=part_max)
 
 
-def bound_text(m: int, levels: int, maxit: int, budget: int, cert: Certificate | None) -> str:
-    """The header's statement of the iteration bound of an active-set kernel and its argument."""
+def bound_text(m: int, levels: int, maxit: int, budget: int, cert: Certificate | None,
+               cap_given: bool = False) -> str:
+    """The header's statement of the iteration bound of an active-set kernel and its argument
+    (``cap_given``: ``maxit`` was chosen at export, not the library's cap)."""
     worst = analytic_bound(m)
     if cert is None:
-        enforced = (f" * PFX_ITERATION_BOUND = {budget}: the per-call budget, here levels x cap (not certified:\n"
+        given = "here levels x cap" if budget == levels * maxit else "given at export"
+        enforced = (f" * PFX_ITERATION_BOUND = {budget}: the per-call budget, {given} (not certified:\n"
                     " * export with iteration_bound=\"certify\" for a sampled certification).\n")
     elif budget == cert.bound:
         parts = ", ".join(f"{n} {cert.parts[n]} (max {cert.part_max[n]})" for n in cert.parts)
@@ -140,9 +143,10 @@ def bound_text(m: int, levels: int, maxit: int, budget: int, cert: Certificate |
                     " * status 2 with the safe answer.\n")
     else:
         enforced = f" * PFX_ITERATION_BOUND = {budget}: the per-call budget given at export.\n"
+    origin = "set at\n * export" if cap_given else "the\n * library's cap, 50 + 10 (m + k)"
     return f""" *
- * Iteration bound.  Each level stops after at most PFX_MAXIT = {maxit} iterations (the
- * library's cap, 50 + 10 (m + k)); {levels} level(s), so at most PFX_MAXIT_TOTAL = {levels * maxit}
+ * Iteration bound.  Each level stops after at most PFX_MAXIT = {maxit} iterations ({origin}); \
+{levels} level(s), so at most PFX_MAXIT_TOTAL = {levels * maxit}
  * iterations a call with a rate window or reduced limits, each of bounded cost (every inner loop
  * has a fixed trip count: the Jacobi SVD at most 40 sweeps over p (p - 1) / 2 column pairs).
 {enforced} * Reaching either returns status 2 with the safe answer (the weighted pseudo-inverse of

@@ -141,7 +141,8 @@ def test_double_is_the_library_bit_for_bit_on_the_random_suite(build, method):
     for i, (p, rng) in enumerate(_suite(100 + EXPORTABLE.index(method))):
         opts = {"priorities": [int(x) for x in rng.integers(1, 3, size=p.k)]} if method == "qp" and i % 2 else {}
         # both forms of the active set: constant tables on even problems, run-time factorisation on odd
-        table = None if method == "cgi" else i % 2 == 0  # cgi has only the table form
+        # (cgi has only the table form, the closed forms none)
+        table = i % 2 == 0 if method in ("wls", "qp", "dynamic") else None
         kern = build(export_c(p, method, options=opts, prefix=f"s{i}_{method}", table=table))
         calls += _agree_double(kern, alloc.make_allocator(p, method, **opts), random_demands(rng, p, 40),
                                rate_steps=20, rng=rng)
@@ -479,6 +480,43 @@ def test_export_errors_name_the_field():
     with pytest.raises(ExportError, match="B"):
         export_c(huge, "pinv", precision="float")
     assert FLOAT_EXACT_RTOL > 1e-6
+
+
+def test_cli_export_passes_every_generator_setting(tmp_path):
+    """``alloc export`` exposes what :func:`export_c` takes (issue 28: the cache size and the
+    table choice were reachable from Python only)."""
+    from alloc.cli import app
+
+    out = tmp_path / "k"
+    result = CliRunner().invoke(app, ["export", "--vehicle", "hexa-x", "--method", "wls", "--no-table", "--cache", "2",
+                                      "--maxit", "40", "--iteration-bound", "33", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    header, source = (out / "alloc_wls.h").read_text(), (out / "alloc_wls.c").read_text()
+    assert "(2 slots of" in header and "#define ALLOC_WLS_MAXIT 40" in header
+    assert "ALLOC_WLS_MAXIT = 40 iterations (set at\n * export)" in header
+    assert "ALLOC_WLS_ITERATION_BOUND = 33: the per-call budget, given at export" in header
+    direct = export_c("hexa-x", "wls", table=False, cache=2, maxit=40, iteration_bound=33)
+    assert (direct.header, direct.source) == (header, source)
+
+
+@pytest.mark.parametrize("args, field", [
+    (["--method", "wls", "--iteration-bound", "many"], "iteration_bound"),
+    (["--method", "wls", "--iteration-bound", "0"], "iteration_bound"),
+    (["--method", "wls", "--certify", "--iteration-bound", "5"], "iteration_bound"),
+    (["--method", "wls", "--table", "--cache", "3"], "cache"),
+    (["--method", "wls", "--no-table", "--cache", "-1"], "cache"),
+    (["--method", "wls", "--maxit", "0"], "maxit"),
+    (["--method", "pinv", "--maxit", "10"], "maxit"),
+    (["--method", "pinv_scale", "--table"], "table"),
+    (["--method", "ganging", "--cache", "1"], "cache"),
+])
+def test_cli_export_refuses_settings_in_one_line_naming_the_field(tmp_path, args, field):
+    from alloc.cli import app
+
+    bad = CliRunner().invoke(app, ["export", "--vehicle", "hexa-x", *args, "--out", str(tmp_path / "k")])
+    assert bad.exit_code == 2, bad.output
+    assert len(bad.output.strip().splitlines()) == 1 and f"error: {field}: " in bad.output, bad.output
+    assert not (tmp_path / "k").exists()
 
 
 def test_cli_export_writes_the_pair(tmp_path):
