@@ -216,16 +216,37 @@ def test_a_detected_hardover_is_the_told_one_delivered_late(case, monkeypatch):
     assert np.array_equal(det.allocator_status, late.allocator_status)
 
 
-@pytest.mark.xfail(strict=True, reason="alloc.estimation.isolation: a run to the stop starts only at a "
-                   "detector sample, so a hard-over that starts between samples is first a one-sample jam")
 def test_a_hardover_between_detector_samples_is_first_isolated_as_a_hardover():
     """ICE hard-over at 1.28 s (between the 0.1 s samples; the surface runs at 150 deg/s): the first
-    isolation should name the hard-over, not a jam at the surface's position in passing (here a jam
-    at 10.4 deg fitted on one sample, which the allocator then holds while the surface is at 30)."""
+    isolation names the hard-over, not a jam at the surface's position in passing (before the
+    run's onset could fall between samples: a jam at 11.8 deg fitted on one sample, which the
+    allocator then held while the surface was at 30)."""
     run = get_scenario("ice")(method="qp", seed=7, duration=1.9, frame_period=0.01, health="detected",
                               failure=make_failure("ice", "hardover1", 1.28))
     first = run.summary()["detections"][0]
     assert (first["effector"], first["kind"]) == ("elevon_l", "hardover")
+
+
+@pytest.mark.parametrize("case", [0, 1, *(pytest.param(c, marks=pytest.mark.slow) for c in range(2, 12))])
+def test_hardovers_at_any_phase_of_the_detector_sample_are_first_isolated_as_hardovers(case):
+    """The class of the test above: a hard-over of either ICE elevon, to either stop, at a random
+    time within a sample period, method and noise seed; the first detection names that effector
+    and a hard-over to that stop."""
+    rng = np.random.default_rng(2700 + case)
+    tf = float(np.round(1.0 + 0.1 * rng.integers(0, 5) + rng.uniform(0.0, 0.1), 3))
+    failure = make_failure("ice", "hardover1", tf)  # elevon_l to its upper stop
+    if rng.random() < 0.5:  # to the lower stop
+        from dataclasses import replace
+
+        from alloc.vehicles import get_vehicle
+        from sim.blocks import ActuatorFailure
+
+        lo = float(get_vehicle("ice").problem().umin[0])
+        failure = replace(failure, actuators=(ActuatorFailure(0, "hardover", position=lo),))
+    run = get_scenario("ice")(method=str(rng.choice(["qp", "wls"])), seed=int(rng.integers(0, 2**31)),
+                              duration=tf + 0.8, frame_period=0.01, health="detected", failure=failure)
+    first = run.summary()["detections"][0]
+    assert (first["effector"], first["kind"]) == ("elevon_l", "hardover"), (tf, first)
 
 
 @pytest.mark.parametrize("case", [0, 1, *(pytest.param(c, marks=pytest.mark.slow) for c in range(2, 16))])
