@@ -33,6 +33,11 @@ def attack_table(path: str, run: bool, markdown: str | None = None) -> None:
         Path(markdown).write_text(text)
 
 
+#: what the report's ``database`` says of the event times (reports before it had the disk)
+_DATABASE = {"tmpfs": " The service's SQLite file is on tmpfs: the event times leave out the disk's fsync.",
+             "disk": " The service's SQLite file is on the disk: the event times include its fsync."}
+
+
 def render_attack_table(report: dict[str, Any], load_before: tuple[float, float, float] | None = None) -> str:
     """The markdown of an attack-suite report: one row per attack class, its load next to it."""
     def fmt(load: list[float] | tuple[float, ...]) -> str:
@@ -43,7 +48,8 @@ def render_attack_table(report: dict[str, Any], load_before: tuple[float, float,
              f"{report['cpus']} CPUs shared with other jobs; the suite ran at niceness {report.get('nice', '?')} "
              f"(other jobs at their own); load average (1 / 5 / 15 min) "
              + (f"{fmt(load_before)} before, " if load_before else "") + f"{fmt(report['loadavg'])} at the end.",
-             f"Targets on a quiet machine (issue 23): {targets or 'see tests/service/test_service_attacks.py'}.", "",
+             f"Targets on a quiet machine (issue 23): {targets or 'see tests/service/test_service_attacks.py'}."
+             + _DATABASE.get(report.get("database", ""), ""), "",
              "| attack | event p50 / p99 ms | next allocation p50 / p99 ms | /v1/health p50 / p99 ms | rounds "
              "| targets met | memory growth / bound MiB | load (1 min) |",
              "|---|---|---|---|---|---|---|---|"]

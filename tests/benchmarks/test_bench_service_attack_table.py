@@ -16,7 +16,7 @@ from benchmarks import bench_service
 from benchmarks.service_attack_table import render_attack_table
 
 REFERENCE = Path(__file__).resolve().parents[2] / "benchmarks" / "reference"
-REPORT = REFERENCE / "service_attacks-2026-12-02-idle.json"
+REPORT = REFERENCE / "service_attacks-2026-12-02-tmpfs.json"
 TABLE = REFERENCE / "service_attacks.md"
 CLASSES = ("event", "allocation", "health")
 
@@ -38,7 +38,8 @@ def test_the_attack_table_command_prints_and_writes_the_table(tmp_path, monkeypa
     expected = render_attack_table(json.loads(REPORT.read_text()))
     assert out.read_text() == expected
     assert capsys.readouterr().out == expected + "\n"
-    assert "| no attack (floor) | 14 / 24 | 5 / 11 | 3 / 10 | 30 | yes | -4 / 464 | 1.5 |" in expected
+    assert "| no attack (floor) | 5 / 9 | 2 / 7 | 1 / 4 | 120 | yes | 0 / 464 | 0.7 |" in expected
+    assert "on tmpfs: the event times leave out the disk" in expected
 
 
 def random_report(rng: np.random.Generator) -> dict:
