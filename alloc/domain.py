@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 
 from .exceptions import ProblemError
 
-__all__ = ["MAX_MAGNITUDE", "MIN_WEIGHT", "MAX_AXES", "MAX_EFFECTORS", "as_float_array", "as_real", "short_repr",
+__all__ = ["MAX_MAGNITUDE", "MIN_WEIGHT", "MAX_AXES", "MAX_EFFECTORS", "as_float_array", "as_real", "short_repr", "singular_within_round_off",
            "check_magnitude"]
 
 FloatArray = NDArray[np.float64]
@@ -158,3 +158,15 @@ def check_magnitude(name: str, arr: FloatArray, error: type[Exception] = Problem
         what = "NaN" if np.isnan(x) else ("non-finite" if not np.isfinite(x) else f"|{x:g}| > {MAX_MAGNITUDE:g}")
         where = idx if len(idx) > 1 else (idx[0] if idx else "")
         raise error(f"{name}: {what} value at index {where} (valid domain: finite, |x| <= {MAX_MAGNITUDE:g})")
+
+
+def singular_within_round_off(matrix: FloatArray, smallest: float, largest: float) -> bool:
+    """Whether a square ``matrix`` whose computed smallest and largest singular values (or
+    eigenvalues) are ``smallest`` and ``largest`` cannot be shown nonsingular: a full matrix
+    whose ``smallest`` is within ``n eps largest`` of zero (the size of the round-off of a
+    backward-stable SVD or eigensolver: a rank-deficient ``W`` came out at 3e-17 instead of 0
+    with one LAPACK build).  A diagonal matrix has exact values: never."""
+    n = matrix.shape[0]
+    if np.count_nonzero(matrix - np.diag(np.diag(matrix))) == 0:
+        return False
+    return bool(smallest <= n * np.finfo(float).eps * largest)

@@ -25,6 +25,7 @@ from .domain import (  # noqa: F401 - re-exported: the problem's checks, importe
     as_real,
     check_magnitude,
     short_repr,
+    singular_within_round_off,
 )
 from .exceptions import DemandError, ProblemError
 
@@ -75,12 +76,7 @@ def _as_weight(name: str, value: ArrayLike | None, n: int) -> FloatArray:
     # entries 1e50 at n = 512: 5e52), so both ends of the spectrum are bounded; the
     # condition number is then at most MAX_MAGNITUDE / MIN_WEIGHT.
     lam = np.linalg.eigvalsh((arr + arr.T) / 2.0)
-    # A full matrix whose computed smallest eigenvalue is within n eps lam_max of zero cannot be
-    # shown positive definite: round-off of that size decides whether Cholesky succeeds (a
-    # rank-deficient W'W passes on one LAPACK build and fails on another).  A diagonal matrix
-    # has exact eigenvalues and keeps the absolute floor alone.
-    diagonal = np.count_nonzero(arr - np.diag(np.diag(arr))) == 0
-    if not diagonal and lam[0] <= n * np.finfo(float).eps * lam[-1]:
+    if singular_within_round_off(arr, float(lam[0]), float(lam[-1])):
         raise ProblemError(f"{name}: weight matrix is not positive definite within round-off (eigenvalues "
                            f"[{lam[0]:.3g}, {lam[-1]:.3g}], ratio below {n} x machine epsilon)")
     if lam[0] < MIN_WEIGHT:

@@ -285,15 +285,16 @@ class Isolation:
         after = t[None, :] - start[:, None]  # samples since the onset, negative before it
         inside = after >= 0
         length = (N - start).astype(float)
+        moved = np.maximum(after, 0)  # whole sample periods since the onset sample
         for stop, rate in ((hi0, float(p.rate_max[j])), (lo0, float(-p.rate_min[j]))):
             if not (math.isfinite(rate) and rate > 0) or N < 2:
                 continue
             u0 = u[start][:, None]
-            toward = np.sign(stop - u0)
+            step = np.sign(stop - u0) * rate * self.dt  # one sample period of the run
+            lo_run, hi_run = np.minimum(stop, u0), np.maximum(stop, u0)
             best: tuple[float, float, int, int] | None = None  # (score, llr, onset row, n_params)
             for phi in _ONSET_FRACTIONS:
-                pos = np.clip(u0 + toward * rate * self.dt * (np.maximum(after, 0) + phi), np.minimum(stop, u0),
-                              np.maximum(stop, u0))
+                pos = np.clip(u0 + step * (moved + phi), lo_run, hi_run)
                 d = np.where(inside, pos - u[None, :], 0.0)
                 llr = (wc * (a_comb[None, :] * d - 0.5 * d * d)).sum(axis=1) - np.cumsum(base[::-1])[::-1]
                 k = int(phi > 0)

@@ -31,6 +31,7 @@ import numpy as np
 
 from .._linalg import sqrt_factor
 from ..exceptions import OptionError, ProblemError
+from ..domain import singular_within_round_off
 from ..problem import MAX_MAGNITUDE, MIN_WEIGHT, Problem, as_float_array, check_magnitude
 from ..options import weight
 from ..method import FloatArray, Method, register
@@ -42,7 +43,6 @@ from .quadratic import LexicoLS
 #: ``Wd = W1'W1 + W2'W2`` (the stages' preference weights) then have eigenvalues within the
 #: valid domain ``[MIN_WEIGHT, MAX_MAGNITUDE]`` with a factor 10 to spare for round-off.
 W_MIN = math.sqrt(10.0 * MIN_WEIGHT)
-EPS = float(np.finfo(float).eps)
 W_MAX = math.sqrt(MAX_MAGNITUDE / 20.0)
 
 
@@ -66,12 +66,7 @@ def _weight(value: object, m: int, field: str) -> FloatArray:
         sv, out = arr, np.diag(arr)
     elif arr.shape == (m, m):
         sv, out = np.linalg.svd(arr, compute_uv=False), arr
-        # A computed singular value below m eps sigma_max is round-off of a zero one (the SVD is
-        # backward stable to that size): such a matrix cannot be shown nonsingular, and the
-        # absolute floor W_MIN alone let a rank-deficient W through whenever LAPACK returned
-        # 3e-17 instead of 0.
-        full = np.count_nonzero(arr - np.diag(np.diag(arr))) > 0
-        if full and sv.min() <= m * EPS * sv.max():
+        if singular_within_round_off(arr, float(sv.min()), float(sv.max())):
             raise OptionError(f"{field}: matrix is singular within round-off (singular values "
                               f"[{sv.min():.3g}, {sv.max():.3g}], ratio below {m} x machine epsilon)")
     else:
