@@ -122,6 +122,13 @@ RATE_HORIZONS = ("actuator", "frame")
 #: When the Eq 1.28 rate box is given to the method (see :func:`build_allocator`).
 RATE_WINDOWS = ("binding", "always")
 
+#: Hz: the band of the in-loop null-space excitation (``excitation`` > 0; seed 1.3.2.5).
+#: Chosen from the detector's time scales, not from a verdict: its lowest tone turns
+#: through 0.4 of a period in the detector's 0.4 s window (sim.detection.DEFAULT_DESIGN), its
+#: highest stays below the 5 Hz Nyquist rate of the detector's 0.1 s samples and the ICE
+#: actuators' 4.5 Hz corner (a 35 ms lag).
+EXCITATION_BAND = (1.0, 4.0)
+
 
 @njit(cache=True)
 def _inside_rate_window(u: np.ndarray, u_prev: np.ndarray, limits: np.ndarray, dt: float, base: np.ndarray) -> bool:
@@ -164,6 +171,9 @@ def build_allocator(
     frame_period: float | None = None,
     rate_horizon: str = "actuator",
     rate_window: str = "binding",
+    excitation: float = 0.0,
+    excitation_seed: int = 0,
+    first_call: int = 0,
 ) -> LoopAllocator:
     """Allocator callable for the loop.
 
@@ -201,10 +211,19 @@ def build_allocator(
     ``"always"`` the allocator gets a memory of ``u_prev`` and the command
     drifts in the null space of ``B`` (ICE ``cgi``: pitch flap 14 deg from its
     preferred position against 4 rate-blind, at every frame rate).
+
+    ``excitation`` (effector units, peak per effector; 0: none) adds the library's null-space
+    multisine (:class:`alloc.estimation.NullSpaceExcitation`, band :data:`EXCITATION_BAND`,
+    seeded by ``excitation_seed``) to every answer, within the position limits and the rate
+    box the answer was held to, ``B e = 0`` for the allocation problem as the allocator knows
+    it: commands an estimator can tell apart (seed 1.3.2.5) at the same moments.  Its
+    signal is a function of the call's index, so a rebuilt allocator (a health change)
+    continues it when given ``first_call``, the index of its first call.
     """
     if method == STATIC:
-        if options:
-            raise TypeError(f"method {STATIC!r} takes no options, got {sorted(options)}")
+        if options or excitation:
+            raise TypeError(f"method {STATIC!r} takes no options and no excitation, got "
+                            f"{sorted(options) + (['excitation'] if excitation else [])}")
         # v = demand_map u_c, so u = B_k u_c = B_k demand_map^-1 v.
         Bk = vehicle.Bk_seed @ np.linalg.inv(vehicle.demand_map)
         B = vehicle.B_alloc
@@ -249,6 +268,35 @@ def build_allocator(
             res = solve(v, u_prev=base, dt=dt)  # seed Eq 1.28, where it binds
         return res.u, res.v_achieved, code[res.status]
 
-    if not rate_aware:
-        return registry
-    return registry_rate_binding if rate_window == "binding" else registry_rate_aware
+    chosen = registry if not rate_aware else registry_rate_binding if rate_window == "binding" else registry_rate_aware
+    if not excitation:
+        return chosen
+    return _excited(chosen, solve, problem, frame_period, excitation, excitation_seed, first_call, rate_aware, code)
+
+
+def _excited(chosen: LoopAllocator, solve: Any, problem: Any, frame_period: float | None, amplitude: float,
+             seed: int, first_call: int, rate_aware: bool, code: Mapping[Any, int]) -> LoopAllocator:
+    """``chosen`` with the null-space excitation of call ``first_call + n`` added to its n-th
+    answer, held to the bounds that answer was held to (Eq 1.28 whenever the loop is
+    rate-aware: the box of ``u_prev`` clipped into the limits)."""
+    from alloc.estimation import NullSpaceExcitation
+    from alloc.result import Result
+
+    period = frame_period if frame_period is not None else 5e-4
+    wrapper = NullSpaceExcitation(solve, period, amplitude=amplitude, band=EXCITATION_BAND, seed=seed)
+    lo, hi = problem.umin, problem.umax
+    status_of = {c: s for s, c in code.items()}
+    calls = [first_call]
+
+    def excited(v: np.ndarray, u_prev: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray, int]:
+        u, v_achieved, status = chosen(v, u_prev, dt)
+        answer = Result(u, v, v_achieved, status_of[status], "loop")
+        n = calls[0]
+        calls[0] += 1
+        if rate_aware:
+            out = wrapper.excite(answer, n, np.minimum(np.maximum(u_prev, lo), hi), dt)  # seed Eq 1.28
+        else:
+            out = wrapper.excite(answer, n)
+        return out.u, out.v_achieved, code[out.status]
+
+    return excited

@@ -111,7 +111,8 @@ def simulate(
     bank = ActuatorBank(vehicle.actuators, dt)
     delay = DelayLine(m, dt, 0.0)
     alloc_options = dict(rate_aware=spec.rate_aware, preferred=spec.preferred, frame_period=tframe,
-                         rate_horizon=spec.rate_horizon, rate_window=spec.rate_window)
+                         rate_horizon=spec.rate_horizon, rate_window=spec.rate_window,
+                         excitation=spec.excitation, excitation_seed=spec.seed)
     method_options = spec.method_options or {}
     allocator: LoopAllocator = build_allocator(vehicle, method, method_options, **alloc_options)
     position_feedback = spec.u_prev_source == "position"
@@ -140,7 +141,9 @@ def simulate(
         if spec.actuators:
             packed.view(FloatSlot.UACT)[:] = bank.pos  # a jammed surface is at its jam position at once
         if spec.health_mode == "told":
-            return build_allocator(vehicle, method, method_options, failure=injected, **alloc_options)
+            # its first call is the next frame's (the excitation's signal goes on)
+            return build_allocator(vehicle, method, method_options, failure=injected,
+                                   first_call=-(-fail_step // frame), **alloc_options)
         return allocator  # blind and detected: the failure itself tells the allocator nothing
 
     if fail_step == 0:
@@ -169,7 +172,7 @@ def simulate(
         if step % frame == 0:
             if pending and step >= pending[0][0]:
                 allocator = build_allocator(vehicle, method, method_options, health=_due(pending, step),
-                                            **alloc_options)
+                                            first_call=step // frame, **alloc_options)
             u_prev = positions.copy() if position_feedback else u_cmd
             u_cmd, v_achieved, call_status[step // frame] = allocator(v, u_prev, tframe)
         status = step_once(step, u_cmd, v_achieved, F, I, inputs, rec)

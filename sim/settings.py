@@ -35,7 +35,7 @@ from sim.pilot import PILOT_MODELS
 
 __all__ = ["Setting", "SettingError", "SettingTypeError", "LoopSettings", "RunSettings", "LoopSpec",
            "setting_of", "value_types", "check_setting", "U_PREV_SOURCES", "BOUNDARY_LAYER_RULES", "ANTI_WINDUP_RULES",
-           "CONTROLLERS", "HEALTH_MODES", "MAX_NOISE_SCALE", "SEED_FRAME_PERIOD", "MAX_DURATION", "MAX_PILOT_DELAY", "MAX_DT", "MAX_RECORD_EVERY",
+           "CONTROLLERS", "HEALTH_MODES", "MAX_EXCITATION", "MAX_NOISE_SCALE", "SEED_FRAME_PERIOD", "MAX_DURATION", "MAX_PILOT_DELAY", "MAX_DT", "MAX_RECORD_EVERY",
            "anti_windup_on", "boundary_layer_at"]
 
 #: ``u_prev`` the allocator may be told (see :class:`LoopSettings`).
@@ -45,6 +45,8 @@ U_PREV_SOURCES = ("command", "position")
 HEALTH_MODES = ("blind", "told", "detected")
 #: Largest sensor-noise scale (50 times the seed's).
 MAX_NOISE_SCALE = 50.0
+#: deg: the largest null-space excitation a run may add (a tenth of a 180 deg range would already be flight-visible)
+MAX_EXCITATION = 20.0
 #: Rules for the SMC boundary layer at a frame period ``T`` (see :func:`boundary_layer_at`).
 BOUNDARY_LAYER_RULES = ("frame", "fixed")
 #: Rules for the SMC's integral term when the allocator falls short (see :func:`anti_windup_on`).
@@ -194,6 +196,10 @@ class LoopSettings:
         None, "period T of the flight-control computer (pilot sampling, controller, allocator), a multiple of dt",
         unit="s", low=0.0, low_open=True, flag="--frame-rate", per_second=True,
         none_means="dt (2000 Hz, the seed's single-rate loop)")
+    excitation: float = _setting(0.0, "null-space excitation added to every command (seed 1.3.2.5): each "
+                                 "effector's multisine peak, B e = 0, within position and rate limits "
+                                 "(sim.allocation.EXCITATION_BAND); 0: none", unit="deg", low=0.0,
+                                 high=MAX_EXCITATION, flag="--excitation")
     rate_aware: bool = _setting(True, "the allocator gets u_prev and dt = T (seed Eq 1.28)",
                                 flag="--rate-aware/--rate-blind")
     rate_window: str = _setting("binding", "when the allocator is given the Eq 1.28 box: only where its answer "

@@ -171,11 +171,17 @@ class NullSpaceExcitation:
 
     def __call__(self, v: Any, u_prev: Any = None, dt: Any = None) -> Result:
         """The allocator's answer with the excitation added (see the module docstring)."""
-        r = self.allocator(v, u_prev=u_prev, dt=dt)
-        p = self.problem
-        lo, hi = p.effective_bounds(u_prev, dt) if (u_prev is not None or dt is not None) else (p.umin, p.umax)
         n = self.calls
         self.calls += 1
+        return self.excite(self.allocator(v, u_prev=u_prev, dt=dt), n, u_prev, dt)
+
+    def excite(self, r: Result, n: int, u_prev: Any = None, dt: Any = None) -> Result:
+        """``r`` (an answer of this problem for the same ``u_prev``, ``dt``) with call ``n``'s
+        excitation added: for a loop that counts its own calls, or that rebuilds the wrapped
+        allocator (a health change) and must keep the signal's phase.  The multisine is a
+        function of ``n`` alone; the PRBS advances with the calls made."""
+        p = self.problem
+        lo, hi = p.effective_bounds(u_prev, dt) if (u_prev is not None or dt is not None) else (p.umin, p.umax)
         if self.signal == "prbs" and n % self._clock == 0:
             flip = self._rng.random(p.m) < 0.5
             self._prbs[flip] *= -1.0
