@@ -103,16 +103,16 @@ def case_failure(scenario: str, case: str, time: float) -> Any:
 
 def _fly(scenario: str, case: str | None, *, health: str, method: str, seed: int, failure_time: float,
          duration: float, noise_scale: float = 1.0, frame_period: float | None = None,
-         dt: float = 0.0005) -> dict[str, Any]:
+         dt: float = 0.0005, excitation: float = 0.0) -> dict[str, Any]:
     run = get_scenario(scenario)
     failure = None if case is None else case_failure(scenario, case, failure_time)
     t0 = time.perf_counter()
     res = run(method=method, failure=failure, duration=duration, seed=seed, health=health,
-              noise_scale=noise_scale, frame_period=frame_period, dt=dt)
+              noise_scale=noise_scale, frame_period=frame_period, dt=dt, excitation=excitation)
     s = res.summary()
     return {"scenario": scenario, "case": case, "kind": None if case is None else case_kind(case), "health": health,
             "method": method, "seed": seed, "failure_time": None if case is None else failure_time, "duration": duration, "noise_scale": noise_scale,
-            "frame_period": frame_period, "dt": dt, "diverged": s["diverged"], "simulated": s["duration"],
+            "frame_period": frame_period, "dt": dt, "excitation": excitation, "diverged": s["diverged"], "simulated": s["duration"],
             "channels": s["channels"], "detections": s.get("detections", []),
             "failed": [res.effector_names[i] for i in failure_effectors(scenario, "jam1")] if case else [],
             "wall": time.perf_counter() - t0}
@@ -144,7 +144,7 @@ def _done(out: Path, section: str) -> set[str]:
     return {json.loads(line)["key"] for line in path.read_text().splitlines() if line.strip()}
 
 
-def run_delays(out: Path, seeds: int, scales: tuple[float, ...], frame_rate: float) -> None:
+def run_delays(out: Path, seeds: int, scales: tuple[float, ...], frame_rate: float, excitation: float = 0.0) -> None:
     done = _done(out, "delays")
     for s in range(seeds):
         for scale in scales:
@@ -156,7 +156,7 @@ def run_delays(out: Path, seeds: int, scales: tuple[float, ...], frame_rate: flo
                     rng = np.random.default_rng([s, SCENARIOS.index(scenario), detection_cases().index(case)])
                     tf = float(np.round(rng.uniform(2.0, 3.0), 2))
                     row = _fly(scenario, case, health="detected", method="qp", seed=100 + s, failure_time=tf,
-                               duration=tf + 3.0, noise_scale=scale,
+                               duration=tf + 3.0, noise_scale=scale, excitation=excitation,
                                frame_period=1.0 / frame_rate if frame_rate else None)
                     _write(out, "delays", {"key": key, **row})
 
@@ -309,7 +309,7 @@ def report_replay(rows: list[dict[str, Any]]) -> str:
 
 def run_benefit(out: Path, seeds: int, frame_rate: float, first_seed: int = 0,
                 arms: tuple[str, ...] = ARMS, kinds: tuple[str, ...] | None = None,
-                failure_time: float = 3.0, scenarios: tuple[str, ...] = SCENARIOS) -> None:
+                failure_time: float = 3.0, scenarios: tuple[str, ...] = SCENARIOS, excitation: float = 0.0) -> None:
     """Seed by seed (an interrupted run leaves whole seeds); ``arms``, ``kinds``, ``scenarios`` subsets, so the
     arms that do not depend on the detector (blind, told) can be flown apart from the one that
     does; ``failure_time`` off the detector's 0.1 s samples (e.g. 3.05) flies the onset between
@@ -324,7 +324,8 @@ def run_benefit(out: Path, seeds: int, frame_rate: float, first_seed: int = 0,
                         if key in done or key.replace(f"/{frame_rate:g}/", "/") in done and frame_rate == 100:
                             continue
                         row = _fly(scenario, kind, health=arm, method=method, seed=200 + s, failure_time=failure_time,
-                                   duration=10.0, frame_period=1.0 / frame_rate if frame_rate else None)
+                                   duration=10.0, frame_period=1.0 / frame_rate if frame_rate else None,
+                                   excitation=excitation)
                         _write(out, "benefit", {"key": key, **row})
 
 
@@ -535,9 +536,12 @@ def report(out: Path, markdown: bool) -> str:
         groups = ([[r for r in rows if r["frame_period"] == f] for f in sorted({r["frame_period"] for r in rows},
                                                                                 key=lambda f: f or 0.0)]
                   if section == "benefit" else [rows])
-        for sel in groups:
-            if sel:
-                parts.append(f"## {title}\n\n{fn(sel)}\n")
+        for group in groups:
+            for amp in sorted({r.get("excitation", 0.0) for r in group}):
+                sel = [r for r in group if r.get("excitation", 0.0) == amp]
+                if sel:
+                    with_ = f", with null-space excitation {amp:g} deg" if amp else ""
+                    parts.append(f"## {title}{with_}\n\n{fn(sel)}\n")
     text = "\n".join(parts)
     return text if markdown else text.replace("## ", "")
 
@@ -560,6 +564,9 @@ def main() -> None:
     r.add_argument("--failure-time", type=float, default=3.0, help="failure time (s, benefit)")
     r.add_argument("--scenarios", default=",".join(SCENARIOS), help="scenarios flown (benefit)")
     r.add_argument("--dt", type=float, default=0.0005, help="integration step of the false section (s)")
+    r.add_argument("--excitation", type=float, default=0.0,
+                   help="null-space excitation in every arm (deg, each effector's peak; delays, benefit; "
+                        "sim --excitation; write to its own --out)")
     r.add_argument("--frame-rate", type=float, default=100.0,
                    help="flight-control frame rate (Hz); 0: the seed's single-rate 2 kHz loop")
     p = sub.add_parser("report")
@@ -573,7 +580,8 @@ def main() -> None:
     if args.command == "report":
         print(report(args.out, args.markdown))
     elif args.section == "delays":
-        run_delays(args.out, args.seeds, tuple(float(x) for x in args.noise.split(",")), args.frame_rate)
+        run_delays(args.out, args.seeds, tuple(float(x) for x in args.noise.split(",")), args.frame_rate,
+                   args.excitation)
     elif args.section == "replay":
         run_replay(args.out, args.hours, args.noise_false, args.dt)
     elif args.section == "false":
@@ -589,7 +597,7 @@ def main() -> None:
         if not set(scenarios) <= set(SCENARIOS):
             ap.error(f"--scenarios: {args.scenarios!r}; expected a comma-separated subset of {','.join(SCENARIOS)}")
         run_benefit(args.out, args.seeds, args.frame_rate, args.first_seed, arms, kinds, args.failure_time,
-                    scenarios)
+                    scenarios, args.excitation)
 
 
 if __name__ == "__main__":

@@ -72,3 +72,21 @@ def test_the_detected_sweep_flies_its_static_baseline_and_scores_a_finite_share(
     assert by["blind"] > by["told"]  # told helps on this jam, so the share is defined
     assert share["share"] == pytest.approx((by["blind"] - by["detected"]) / (by["blind"] - by["told"]))
     assert math.isfinite(share["share"]) and share["seeds"] == 1
+
+
+def test_the_report_keeps_excited_runs_apart(tmp_path):
+    """Rows flown with ``--excitation`` get their own table, never pooled with the plain ones."""
+    import json
+
+    def row(seed, excitation, delay):
+        det = {"effector": "elevon_l", "kind": "jam", "time": 3.0 + delay, "delay": delay}
+        return {"key": f"ice/jam/1/{seed}/{excitation}", "scenario": "ice", "case": "jam", "kind": "jam",
+                "noise_scale": 1.0, "failed": ["elevon_l"], "detections": [det], "excitation": excitation,
+                "wall": 1.0}
+
+    rows = [row(0, 0.0, 0.1), row(1, 0.0, 0.1), row(0, 2.0, 0.9), row(1, 2.0, 0.9)]
+    (tmp_path / "delays.jsonl").write_text("\n".join(json.dumps(r) for r in rows) + "\n")
+    text = bd.report(tmp_path, markdown=True)
+    plain, excited = text.split("with null-space excitation 2 deg")
+    assert "| ice | jam | x1 | 2 | 2 | 2 | 2 | 0 | 0 | 0.10 | 0.10 |" in plain
+    assert "| ice | jam | x1 | 2 | 2 | 2 | 2 | 0 | 0 | 0.90 | 0.90 |" in excited
