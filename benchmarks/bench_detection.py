@@ -144,6 +144,12 @@ def _done(out: Path, section: str) -> set[str]:
     return {json.loads(line)["key"] for line in path.read_text().splitlines() if line.strip()}
 
 
+def delay_failure_time(s: int, scenario: str, case: str) -> float:
+    """The ``delays`` section's failure time of seed index ``s``: seeded, uniform in [2, 3] s, 10 ms grid."""
+    rng = np.random.default_rng([s, SCENARIOS.index(scenario), detection_cases().index(case)])
+    return float(np.round(rng.uniform(2.0, 3.0), 2))
+
+
 def run_delays(out: Path, seeds: int, scales: tuple[float, ...], frame_rate: float, excitation: float = 0.0) -> None:
     done = _done(out, "delays")
     for s in range(seeds):
@@ -153,8 +159,7 @@ def run_delays(out: Path, seeds: int, scales: tuple[float, ...], frame_rate: flo
                     key = f"{scenario}/{case}/{scale:g}/{s}"
                     if key in done:
                         continue
-                    rng = np.random.default_rng([s, SCENARIOS.index(scenario), detection_cases().index(case)])
-                    tf = float(np.round(rng.uniform(2.0, 3.0), 2))
+                    tf = delay_failure_time(s, scenario, case)
                     row = _fly(scenario, case, health="detected", method="qp", seed=100 + s, failure_time=tf,
                                duration=tf + 3.0, noise_scale=scale, excitation=excitation,
                                frame_period=1.0 / frame_rate if frame_rate else None)
@@ -518,14 +523,19 @@ def report(out: Path, markdown: bool) -> str:
              f"(measured, lags 1-5 of {DEFAULT_DESIGN.sample_time:g} s): {rho}.\n"]
     machines = _rows(out, "machine")
     if machines:
-        walls = {s: sum(r["wall"] for r in _rows(out, s)) / 3600.0 for s in ("delays", "false", "replay", "benefit")}
+        walls = {s: sum(r.get("wall", 0.0) for r in _rows(out, s)) / 3600.0
+                 for s in ("delays", "false", "replay", "benefit", "evidence")}
         parts.append("## Machine state\n\n" + _table(
             ["section", "started", "commit", "CPUs", "load (1, 5, 15 min)", "Python", "command"],
             [[m["section"], m["started"], m["commit"], str(m["cpus"]), ", ".join(f"{x:g}" for x in m["load"]),
               m["python"], "`" + " ".join(m["argv"]) + "`"] for m in machines])
             + "\n\nRun wall time (hours, summed over runs, processes in parallel): "
             + ", ".join(f"{s} {w:.2f}" for s, w in walls.items()) + ".\n")
+    from benchmarks.detection_evidence import report_evidence
+
     for title, section, fn in (("Detection delay per kind and noise (qp, detected)", "delays", report_delays),
+                               ("What a late detection waited on: the evidence at the goal's deadline", "evidence",
+                                report_evidence),
                                ("False alarms over no-failure flight (qp, detected)", "false", report_false),
                                ("False alarms of the detector replayed on the noise model (no-failure commands)",
                                 "replay", report_replay),
@@ -550,7 +560,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = ap.add_subparsers(dest="command", required=True)
     r = sub.add_parser("run")
-    r.add_argument("--section", choices=("delays", "false", "replay", "benefit"), required=True)
+    r.add_argument("--section", choices=("delays", "false", "replay", "benefit", "evidence"), required=True)
     r.add_argument("--out", type=Path, required=True)
     r.add_argument("--seeds", type=int, default=10)
     r.add_argument("--noise", default="1,2,5", help="noise scales (delays)")
@@ -582,6 +592,11 @@ def main() -> None:
     elif args.section == "delays":
         run_delays(args.out, args.seeds, tuple(float(x) for x in args.noise.split(",")), args.frame_rate,
                    args.excitation)
+    elif args.section == "evidence":
+        from benchmarks.detection_evidence import run_evidence
+
+        run_evidence(args.out, args.seeds, tuple(float(x) for x in args.noise.split(",")), args.frame_rate,
+                     args.excitation)
     elif args.section == "replay":
         run_replay(args.out, args.hours, args.noise_false, args.dt)
     elif args.section == "false":

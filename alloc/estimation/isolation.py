@@ -117,7 +117,10 @@ class Isolation:
         score = 0.5 * stat.max(axis=1) - 0.5 * self.dof * np.log(n[:, 0])
         return int(np.argmax(score)) + 1
 
-    def _isolate(self, pending: dict[str, Any], gamma: float) -> Detection | None:
+    def _weigh(self) -> tuple[list[tuple[int, _Fit]], np.ndarray, int, np.ndarray, int] | None:
+        """Every hypothesis's fit on the buffer, its posterior (equal priors, less the BIC
+        penalty) and the best's index, with the buffer's times and length; ``None`` when
+        nothing can be fitted."""
         tested = self.tested
         n_all = self._count
         U, R, Q, T, K = self._window(n_all)
@@ -130,8 +133,27 @@ class Isolation:
         scores = np.array([f.llr - 0.5 * f.n_params * math.log(f.samples) for _, f in fits])
         from scipy.special import logsumexp  # here: scipy.special is 0.3 s of the service's start
 
-        post = np.exp(scores - logsumexp(scores))
         ib = int(np.argmax(scores))  # ties: the first listed (the simpler kind, see _fits)
+        return fits, np.exp(scores - logsumexp(scores)), ib, T, n_all
+
+    def evidence(self) -> list[tuple[str, str, float]]:
+        """``(effector, kind, posterior)`` of every hypothesis the isolation weighs on the data
+        now (summed over its fits, largest first): what a pending alarm waits on.  For
+        diagnostics; nothing changes.  The isolation weighs them only after a stage-1 alarm."""
+        weighed = self._weigh()
+        if weighed is None:
+            return []
+        mass: dict[tuple[str, str], float] = {}
+        for (j, f), pw in zip(weighed[0], weighed[1]):
+            key = (self.problem.names[j], f.kind.value)
+            mass[key] = mass.get(key, 0.0) + float(pw)
+        return sorted(((e, k, p) for (e, k), p in mass.items()), key=lambda x: -x[2])
+
+    def _isolate(self, pending: dict[str, Any], gamma: float) -> Detection | None:
+        weighed = self._weigh()
+        if weighed is None:
+            return None
+        fits, post, ib, T, n_all = weighed
         jbest, fit = fits[ib]
         eff_conf = float(sum(pw for (j, _), pw in zip(fits, post) if j == jbest))
         # the kind's confidence: the posterior of this effector's hypotheses that tell an

@@ -90,3 +90,23 @@ def test_the_report_keeps_excited_runs_apart(tmp_path):
     plain, excited = text.split("with null-space excitation 2 deg")
     assert "| ice | jam | x1 | 2 | 2 | 2 | 2 | 0 | 0 | 0.10 | 0.10 |" in plain
     assert "| ice | jam | x1 | 2 | 2 | 2 | 2 | 0 | 0 | 0.90 | 0.90 |" in excited
+
+
+def test_the_evidence_trace_reads_the_detector_and_changes_nothing():
+    """A traced ``delays`` run detects what the untraced one does; its evidence sums to one and
+    names the failed effector's jam once the jam is detected."""
+    from benchmarks import detection_evidence as de
+
+    traced = de.fly_traced("ice", "jam", 1.0, 0)
+    tf = bd.delay_failure_time(0, "ice", "jam")
+    plain = bd._fly("ice", "jam", health="detected", method="qp", seed=100, failure_time=tf, duration=tf + 3.0,
+                    frame_period=0.01)
+    assert traced["detections"] == plain["detections"] and traced["detections"]
+    alarmed = [p for p in traced["trace"] if p["alarmed"]]
+    assert alarmed and all(p["t"] >= -0.05 for p in alarmed)  # no alarm before the jam
+    decided = traced["detections"][0]["time"] - tf
+    last = [p for p in alarmed if p["t"] <= decided + 1e-9][-1]
+    top = last["evidence"][0]
+    assert (top[0], top[1]) == ("elevon_l", "jam") and top[2] >= 0.95
+    assert sum(p for _, _, p in last["evidence"]) <= 1.0 + 1e-9
+    assert de.at_deadline(traced)["delay"] == traced["detections"][0]["delay"]
