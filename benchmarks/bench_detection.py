@@ -103,16 +103,18 @@ def case_failure(scenario: str, case: str, time: float) -> Any:
 
 def _fly(scenario: str, case: str | None, *, health: str, method: str, seed: int, failure_time: float,
          duration: float, noise_scale: float = 1.0, frame_period: float | None = None,
-         dt: float = 0.0005, excitation: float = 0.0) -> dict[str, Any]:
+         dt: float = 0.0005, excitation: float = 0.0, long_window: float | None = None) -> dict[str, Any]:
     run = get_scenario(scenario)
     failure = None if case is None else case_failure(scenario, case, failure_time)
     t0 = time.perf_counter()
     res = run(method=method, failure=failure, duration=duration, seed=seed, health=health,
-              noise_scale=noise_scale, frame_period=frame_period, dt=dt, excitation=excitation)
+              noise_scale=noise_scale, frame_period=frame_period, dt=dt, excitation=excitation,
+              detector_long_window=long_window)
     s = res.summary()
     return {"scenario": scenario, "case": case, "kind": None if case is None else case_kind(case), "health": health,
             "method": method, "seed": seed, "failure_time": None if case is None else failure_time, "duration": duration, "noise_scale": noise_scale,
-            "frame_period": frame_period, "dt": dt, "excitation": excitation, "diverged": s["diverged"], "simulated": s["duration"],
+            "frame_period": frame_period, "dt": dt, "excitation": excitation, "detector_long_window": long_window,
+            "diverged": s["diverged"], "simulated": s["duration"],
             "channels": s["channels"], "detections": s.get("detections", []),
             "failed": [res.effector_names[i] for i in failure_effectors(scenario, "jam1")] if case else [],
             "wall": time.perf_counter() - t0}
@@ -150,7 +152,8 @@ def delay_failure_time(s: int, scenario: str, case: str) -> float:
     return float(np.round(rng.uniform(2.0, 3.0), 2))
 
 
-def run_delays(out: Path, seeds: int, scales: tuple[float, ...], frame_rate: float, excitation: float = 0.0) -> None:
+def run_delays(out: Path, seeds: int, scales: tuple[float, ...], frame_rate: float, excitation: float = 0.0,
+               long_window: float | None = None) -> None:
     done = _done(out, "delays")
     for s in range(seeds):
         for scale in scales:
@@ -161,13 +164,13 @@ def run_delays(out: Path, seeds: int, scales: tuple[float, ...], frame_rate: flo
                         continue
                     tf = delay_failure_time(s, scenario, case)
                     row = _fly(scenario, case, health="detected", method="qp", seed=100 + s, failure_time=tf,
-                               duration=tf + 3.0, noise_scale=scale, excitation=excitation,
+                               duration=tf + 3.0, noise_scale=scale, excitation=excitation, long_window=long_window,
                                frame_period=1.0 / frame_rate if frame_rate else None)
                     _write(out, "delays", {"key": key, **row})
 
 
 def run_false(out: Path, hours: float, flight: float, scale: float, frame_rate: float, dt: float,
-              first_seed: int = 0) -> None:
+              first_seed: int = 0, long_window: float | None = None) -> None:
     done = _done(out, "false")
     n = int(math.ceil(hours * 3600.0 / flight))
     for s in range(first_seed, first_seed + n):  # the scenarios in turn, so a stopped measurement has both
@@ -176,11 +179,13 @@ def run_false(out: Path, hours: float, flight: float, scale: float, frame_rate: 
             if key in done:
                 continue
             row = _fly(scenario, None, health="detected", method="qp", seed=1000 + s, failure_time=0.0,
-                       duration=flight, noise_scale=scale, frame_period=1.0 / frame_rate, dt=dt)
+                       duration=flight, noise_scale=scale, frame_period=1.0 / frame_rate, dt=dt,
+                       long_window=long_window)
             _write(out, "false", {"key": key, **row})
 
 
-def run_replay(out: Path, hours: float, scale: float, dt: float = 0.005, flight: float = 120.0) -> None:
+def run_replay(out: Path, hours: float, scale: float, dt: float = 0.005, flight: float = 120.0,
+               long_window: float | None = None) -> None:
     """The in-loop detector, replayed: no-failure hours of the seed's noise model on recorded commands.
 
     One ``flight``-second no-failure closed-loop run per scenario (``qp``, blind: nothing
@@ -206,7 +211,8 @@ def run_replay(out: Path, hours: float, scale: float, dt: float = 0.005, flight:
         pick = np.searchsorted(res.t, np.arange(1, int(res.t[-1] / ts)) * ts - 1e-9)
         U = np.asarray(res.effectors)[pick]
         inloop = sd.InLoopDetector(vehicle, dt, np.zeros((2, vehicle.C.shape[0])), noise_scale=scale,
-                                   actuators=True, preferred=np.zeros(len(vehicle.effector_names)))
+                                   actuators=True, preferred=np.zeros(len(vehicle.effector_names)),
+                                   design=dataclasses.replace(DEFAULT_DESIGN, long_window=long_window))
         made = inloop.detector
         gains = np.zeros(vehicle.C.shape[0])
         gains[np.asarray(vehicle.measured)] = vehicle.noise_gains
@@ -222,6 +228,7 @@ def run_replay(out: Path, hours: float, scale: float, dt: float = 0.005, flight:
             noise = band_limited_noise(n, dt, gains, rng)
             diff = (noise[every::every] - noise[:-every:every][: noise[every::every].size]) / ts
             row: dict[str, Any] = {"key": key, "scenario": scenario, "noise_scale": scale, "dt": dt, "hour": h,
+                                   "detector_long_window": long_window,
                                    "flight": flight, "flight_diverged": bool(res.diverged),
                                    "samples": int(diff.shape[0])}
             Uh = U[np.arange(diff.shape[0]) % U.shape[0]]
@@ -246,11 +253,14 @@ def _replay_hour(made: Any, corr: Any, U: np.ndarray, Y: np.ndarray, ts: float) 
     def make() -> Any:
         return type(made)(made.problem, made.noise_std, made.dt, false_alarm_rate=made.false_alarm_rate,
                           window=made.window_seconds, hop=made.hop, min_confidence=made.min_confidence,
-                          noise_correlation=corr)
+                          noise_correlation=corr, long_window=made.long_window_seconds)
 
     det = make()
     W = det.window_statistics(U, Y)
     over = np.flatnonzero((W > det.threshold()).any(axis=1)) + det.N - 1
+    if det.N_long:  # the long window's exceedances too (the streaming test tries it where the short one is quiet)
+        over = np.union1d(over, np.flatnonzero((det.window_statistics(U, Y, long=True) > det.threshold())
+                                               .any(axis=1)) + det.N_long - 1)
     # calibration: the share of (window, effector) statistics beyond chi-square's 1e-2 .. 1e-4 points
     tail = {f"{a:g}": float((W > chi2.isf(a, det.dof)).mean()) for a in CALIBRATION_TAILS}
     alarms, found, last = 0, [], -1
@@ -314,7 +324,8 @@ def report_replay(rows: list[dict[str, Any]]) -> str:
 
 def run_benefit(out: Path, seeds: int, frame_rate: float, first_seed: int = 0,
                 arms: tuple[str, ...] = ARMS, kinds: tuple[str, ...] | None = None,
-                failure_time: float = 3.0, scenarios: tuple[str, ...] = SCENARIOS, excitation: float = 0.0) -> None:
+                failure_time: float = 3.0, scenarios: tuple[str, ...] = SCENARIOS, excitation: float = 0.0,
+                long_window: float | None = None) -> None:
     """Seed by seed (an interrupted run leaves whole seeds); ``arms``, ``kinds``, ``scenarios`` subsets, so the
     arms that do not depend on the detector (blind, told) can be flown apart from the one that
     does; ``failure_time`` off the detector's 0.1 s samples (e.g. 3.05) flies the onset between
@@ -330,7 +341,7 @@ def run_benefit(out: Path, seeds: int, frame_rate: float, first_seed: int = 0,
                             continue
                         row = _fly(scenario, kind, health=arm, method=method, seed=200 + s, failure_time=failure_time,
                                    duration=10.0, frame_period=1.0 / frame_rate if frame_rate else None,
-                                   excitation=excitation)
+                                   excitation=excitation, long_window=long_window)
                         _write(out, "benefit", {"key": key, **row})
 
 
@@ -516,8 +527,13 @@ def report_benefit(rows: list[dict[str, Any]], resamples: int = 2000) -> str:
     return _table(header, out)
 
 
+def _variant(row: dict[str, Any]) -> tuple[float, float]:
+    """How a run's loop differed from the default: (excitation deg, second detector window s; 0: none)."""
+    return float(row.get("excitation") or 0.0), float(row.get("detector_long_window") or 0.0)
+
+
 def report(out: Path, markdown: bool) -> str:
-    design = ", ".join(f"{k} {v:g}" for k, v in DEFAULT_DESIGN.record().items())
+    design = ", ".join(f"{k} {'none' if v is None else format(v, 'g')}" for k, v in DEFAULT_DESIGN.record().items())
     rho = ", ".join(f"{x:+.3f}" for x in response_noise_correlation(0.0005, DEFAULT_DESIGN.sample_time)[:5])
     parts = [f"Detector design (sim.detection.DEFAULT_DESIGN): {design}; noise autocorrelation told to it "
              f"(measured, lags 1-5 of {DEFAULT_DESIGN.sample_time:g} s): {rho}.\n"]
@@ -547,11 +563,12 @@ def report(out: Path, markdown: bool) -> str:
                                                                                 key=lambda f: f or 0.0)]
                   if section == "benefit" else [rows])
         for group in groups:
-            for amp in sorted({r.get("excitation", 0.0) for r in group}):
-                sel = [r for r in group if r.get("excitation", 0.0) == amp]
-                if sel:
-                    with_ = f", with null-space excitation {amp:g} deg" if amp else ""
-                    parts.append(f"## {title}{with_}\n\n{fn(sel)}\n")
+            for variant in sorted({_variant(r) for r in group}):
+                sel = [r for r in group if _variant(r) == variant]
+                amp, long = variant
+                with_ = (f", with null-space excitation {amp:g} deg" if amp else "") + (
+                    f", with a second {long:g} s detector window" if long else "")
+                parts.append(f"## {title}{with_}\n\n{fn(sel)}\n")
     text = "\n".join(parts)
     return text if markdown else text.replace("## ", "")
 
@@ -577,6 +594,9 @@ def main() -> None:
     r.add_argument("--excitation", type=float, default=0.0,
                    help="null-space excitation in every arm (deg, each effector's peak; delays, benefit; "
                         "sim --excitation; write to its own --out)")
+    r.add_argument("--detector-long-window", type=float, default=None,
+                   help="the detector's second stage-1 window (s; every section; sim --detector-long-window; "
+                        "write to its own --out)")
     r.add_argument("--frame-rate", type=float, default=100.0,
                    help="flight-control frame rate (Hz); 0: the seed's single-rate 2 kHz loop")
     p = sub.add_parser("report")
@@ -591,16 +611,17 @@ def main() -> None:
         print(report(args.out, args.markdown))
     elif args.section == "delays":
         run_delays(args.out, args.seeds, tuple(float(x) for x in args.noise.split(",")), args.frame_rate,
-                   args.excitation)
+                   args.excitation, args.detector_long_window)
     elif args.section == "evidence":
         from benchmarks.detection_evidence import run_evidence
 
         run_evidence(args.out, args.seeds, tuple(float(x) for x in args.noise.split(",")), args.frame_rate,
-                     args.excitation)
+                     args.excitation, args.detector_long_window)
     elif args.section == "replay":
-        run_replay(args.out, args.hours, args.noise_false, args.dt)
+        run_replay(args.out, args.hours, args.noise_false, args.dt, long_window=args.detector_long_window)
     elif args.section == "false":
-        run_false(args.out, args.hours, args.flight, args.noise_false, args.frame_rate, args.dt, args.first_seed)
+        run_false(args.out, args.hours, args.flight, args.noise_false, args.frame_rate, args.dt, args.first_seed,
+                  args.detector_long_window)
     else:
         arms = tuple(args.arms.split(","))
         if not set(arms) <= set(ARMS):
@@ -612,7 +633,7 @@ def main() -> None:
         if not set(scenarios) <= set(SCENARIOS):
             ap.error(f"--scenarios: {args.scenarios!r}; expected a comma-separated subset of {','.join(SCENARIOS)}")
         run_benefit(args.out, args.seeds, args.frame_rate, args.first_seed, arms, kinds, args.failure_time,
-                    scenarios, args.excitation)
+                    scenarios, args.excitation, args.detector_long_window)
 
 
 if __name__ == "__main__":

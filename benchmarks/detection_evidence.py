@@ -19,6 +19,7 @@ run's (checked in ``tests/benchmarks/test_bench_detection.py``).
 
 from __future__ import annotations
 
+import math
 import time
 from typing import Any
 
@@ -26,6 +27,7 @@ import numpy as np
 
 import sim.engine as engine
 from benchmarks import bench_detection as bd
+from sim.detection import DEFAULT_DESIGN
 from sim.scenarios import get_scenario
 
 #: the goal's deadline after the onset, per kind (s): issue 26's
@@ -33,15 +35,17 @@ DEADLINE = {"jam": bd.JAM_P95_GOAL, "hardover": bd.JAM_P95_GOAL, "effectiveness"
 
 
 def fly_traced(scenario: str, case: str, scale: float, s: int, frame_rate: float = 100.0,
-               excitation: float = 0.0) -> dict[str, Any]:
+               excitation: float = 0.0, long_window: float | None = None) -> dict[str, Any]:
     """The ``delays`` run of seed index ``s``, with its detector's evidence after every sample."""
     tf = bd.delay_failure_time(s, scenario, case)
     trace: list[dict[str, Any]] = []
+    made_detector: list[Any] = []
     made = engine._detector
 
     def traced_detector(spec: Any, inputs: np.ndarray) -> Any:
         inloop = made(spec, inputs)
         det, sample = inloop.detector, inloop.sample
+        made_detector.append(det)
         isolate = det._isolate
         weighed: list[Any] = []
 
@@ -52,11 +56,18 @@ def fly_traced(scenario: str, case: str, scale: float, s: int, frame_rate: float
             weighed.append([[e, k, round(p, 6)] for i, (e, k, p) in enumerate(ev) if i < 3 or e == failed])
             return isolate(pending, gamma)
 
-        def traced_sample(step: int, *args: Any) -> Any:
+        def traced_sample(step: int, x: np.ndarray, surfaces: np.ndarray, A_now: np.ndarray,
+                          B_now: np.ndarray) -> Any:
+            # the failure's signature as the detector sees it: the noise-free response less the
+            # nominal model's prediction (before the sample advances anything)
+            signature = (inloop.C @ ((A_now - inloop.A) @ x + B_now @ surfaces) - det.problem.B @ inloop.pos) \
+                / det.noise_std
             weighed.clear()
-            found = sample(step, *args)
-            trace.append({"t": step * spec.dt - tf, "alarmed": bool(weighed),
-                          "evidence": weighed[0] if weighed else []})
+            found = sample(step, x, surfaces, A_now, B_now)
+            t = step * spec.dt - tf
+            if t >= -0.5:  # the trace keeps the half second before the onset and what follows
+                trace.append({"t": round(t, 6), "alarmed": bool(weighed), "evidence": weighed[0] if weighed else [],
+                              "signature": [round(v, 9) for v in signature]})
             return found
 
         det._isolate, inloop.sample = traced_isolate, traced_sample
@@ -67,15 +78,15 @@ def fly_traced(scenario: str, case: str, scale: float, s: int, frame_rate: float
     try:
         res = get_scenario(scenario)(method="qp", failure=bd.case_failure(scenario, case, tf), duration=tf + 3.0,
                                      seed=100 + s, health="detected", noise_scale=scale,
-                                     frame_period=1.0 / frame_rate if frame_rate else None, excitation=excitation)
+                                     frame_period=1.0 / frame_rate if frame_rate else None, excitation=excitation,
+                                     detector_long_window=long_window)
     finally:
         engine._detector = made
     failed = res.effector_names[bd.failure_effectors(scenario, "jam1")[0]]
-    for point in trace:
-        point["t"] = round(point["t"], 6)
     return {"key": f"{scenario}/{case}/{scale:g}/{s}", "scenario": scenario, "case": case, "kind": bd.case_kind(case),
             "noise_scale": scale, "seed": 100 + s, "failure_time": tf, "failed": failed,
-            "excitation": excitation, "detections": res.summary().get("detections", []), "trace": trace,
+            "excitation": excitation, "detector_long_window": long_window, "detections": res.summary().get("detections", []), "trace": trace,
+            "noise_correlation": list(made_detector[0].noise_correlation), "per_sample_alpha": per_sample_alpha(),
             "wall": time.perf_counter() - t0}
 
 
@@ -83,7 +94,8 @@ def fly_traced(scenario: str, case: str, scale: float, s: int, frame_rate: float
 TRACED_CASES = ("jam", "hardover", "effectiveness", "loe50", "loe25")
 
 
-def run_evidence(out: Any, seeds: int, scales: tuple[float, ...], frame_rate: float, excitation: float = 0.0) -> None:
+def run_evidence(out: Any, seeds: int, scales: tuple[float, ...], frame_rate: float, excitation: float = 0.0,
+                 long_window: float | None = None) -> None:
     """Every traced case of the ``delays`` section, seed by seed (resumable like it)."""
     done = bd._done(out, "evidence")
     for s in range(seeds):
@@ -92,7 +104,36 @@ def run_evidence(out: Any, seeds: int, scales: tuple[float, ...], frame_rate: fl
                 for case in TRACED_CASES:
                     key = f"{scenario}/{case}/{scale:g}/{s}"
                     if key not in done:
-                        bd._write(out, "evidence", fly_traced(scenario, case, scale, s, frame_rate, excitation))
+                        bd._write(out, "evidence", fly_traced(scenario, case, scale, s, frame_rate, excitation,
+                                                                    long_window))
+
+
+def per_sample_alpha() -> float:
+    """The design's false-alarm probability per detector sample (its rate per hour times the sample time)."""
+    return DEFAULT_DESIGN.false_alarm_rate * DEFAULT_DESIGN.sample_time / 3600.0
+
+
+def oracle_power(row: dict[str, Any], deadline: float) -> float:
+    """Detection probability at ``deadline`` of the oracle's matched filter: told the effector,
+    kind, onset and size (the exact noise-free signature of the run), whitened with the
+    noise's measured correlation, one test at the deadline at the design's per-sample
+    false-alarm probability: ``Phi(sqrt(D) - z_alpha)``, ``D`` the signature's energy.  No
+    detector that does not know the failure can do better at that false-alarm probability
+    (Neyman-Pearson), so a low value is a limit of the sensors and the noise."""
+    from scipy.linalg import cholesky, solve_triangular, toeplitz
+    from scipy.stats import norm
+
+    S = np.array([p["signature"] for p in row["trace"] if 0.0 < p["t"] <= deadline + 1e-9])
+    if S.size == 0:
+        return 0.0
+    n = S.shape[0]
+    lags = np.zeros(n)
+    lags[0] = 1.0
+    rho = np.asarray(row["noise_correlation"])[: n - 1]
+    lags[1:1 + rho.size] = rho
+    W = solve_triangular(cholesky(toeplitz(lags), lower=True), np.eye(n), lower=True)
+    energy = float(((W @ S) ** 2).sum())
+    return float(norm.cdf(math.sqrt(energy) - norm.isf(row["per_sample_alpha"])))
 
 
 def at_deadline(row: dict[str, Any]) -> dict[str, Any]:
@@ -113,7 +154,8 @@ def at_deadline(row: dict[str, Any]) -> dict[str, Any]:
 def report_evidence(rows: list[dict[str, Any]]) -> str:
     """One line per run decided after its deadline (or missed)."""
     header = ["scenario", "case", "noise", "seed", "first detection (s)", "at the deadline (s)", "stage 1",
-              "failed effector's posterior", "right kind's share", "strongest other hypothesis"]
+              "failed effector's posterior", "right kind's share", "strongest other hypothesis",
+              "oracle's detection probability"]
     out = []
     for r in rows:
         deadline = DEADLINE[r["kind"]]
@@ -125,7 +167,7 @@ def report_evidence(rows: list[dict[str, Any]]) -> str:
                     "missed" if a["delay"] is None else f"{a['delay']:.2f}", f"{deadline:g}",
                     "alarmed" if a["alarmed"] else "no alarm",
                     f"{a['effector']:.2f}" if a["alarmed"] else "-", f"{a['kind']:.2f}" if a["alarmed"] else "-",
-                    other if a["alarmed"] else "-"])
+                    other if a["alarmed"] else "-", f"{oracle_power(r, deadline):.2f}"])
     decided = len(rows) - len(out)
     return (f"{len(rows)} runs traced; {decided} decided by their deadline (not listed).\n\n"
             + bd._table(header, out))

@@ -74,6 +74,9 @@ class DetectionDesign:
         Posterior needed to report (the library's default 0.95).
     processing_delay : float
         Seconds from a detection to the allocator's rebuilt problem (20 ms).
+    long_window : float or None
+        Seconds of the detector's second stage-1 window (``None``: none, the default; see
+        :class:`alloc.estimation.FailureDetector`).
     """
 
     sample_time: float = 0.1
@@ -82,6 +85,7 @@ class DetectionDesign:
     false_alarm_rate: float = 0.1
     min_confidence: float = 0.95
     processing_delay: float = 0.02
+    long_window: float | None = None
 
     def record(self) -> dict[str, Any]:
         return asdict(self)
@@ -173,7 +177,7 @@ class InLoopDetector:
             problem, response_noise_std(vehicle, dt, self.sample_time, noise_scale if noise_scale > 0 else 1.0),
             self.sample_time,
             false_alarm_rate=design.false_alarm_rate, window=design.window, hop=design.hop,
-            min_confidence=design.min_confidence,
+            min_confidence=design.min_confidence, long_window=design.long_window,
             noise_correlation=response_noise_correlation(dt, self.sample_time))
         self.actuators = actuators
         m = len(vehicle.actuators)

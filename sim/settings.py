@@ -45,6 +45,8 @@ U_PREV_SOURCES = ("command", "position")
 HEALTH_MODES = ("blind", "told", "detected")
 #: Largest sensor-noise scale (50 times the seed's).
 MAX_NOISE_SCALE = 50.0
+#: s: the longest second detector window a run may ask for (its buffers hold twice it)
+MAX_LONG_WINDOW = 60.0
 #: deg: the largest null-space excitation a run may add (a tenth of a 180 deg range would already be flight-visible)
 MAX_EXCITATION = 20.0
 #: Rules for the SMC boundary layer at a frame period ``T`` (see :func:`boundary_layer_at`).
@@ -196,6 +198,11 @@ class LoopSettings:
         None, "period T of the flight-control computer (pilot sampling, controller, allocator), a multiple of dt",
         unit="s", low=0.0, low_open=True, flag="--frame-rate", per_second=True,
         none_means="dt (2000 Hz, the seed's single-rate loop)")
+    detector_long_window: float | None = _setting(
+        None, "a second stage-1 window of the in-loop detector (--health detected): for small, lasting "
+        "changes such as a loss of a quarter of an effector's effectiveness; it shares the false-alarm "
+        "budget (sim.detection.DetectionDesign)", unit="s", low=0.0, low_open=True, high=MAX_LONG_WINDOW,
+        flag="--detector-long-window", none_means="none (the 0.4 s window alone)")
     excitation: float = _setting(0.0, "null-space excitation added to every command (seed 1.3.2.5): each "
                                  "effector's multisine peak, B e = 0, within position and rate limits "
                                  "(sim.allocation.EXCITATION_BAND); 0: none", unit="deg", low=0.0,

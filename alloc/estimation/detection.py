@@ -49,7 +49,8 @@ its current model (the fits are scored against it), so a limit first reported as
 while the command stayed beyond it -- is reported again as limits once the surface is seen
 inside, and an imperfect estimate is refined rather than blamed on a neighbour.
 
-Memory is bounded: ring buffers of ``2 window`` samples and a list of at most
+Memory is bounded: ring buffers of ``2 window`` samples (``2 long_window`` with a second,
+long window) and a list of at most
 ``MAX_KEPT`` detections.  :meth:`FailureDetector.to_dict` gives the whole state.
 """
 
@@ -95,6 +96,12 @@ class FailureDetector(Isolation):
         Design false alarms per hour (an upper bound, see the module docstring).
     window : float
         Seconds of data in each stage-1 test.
+    long_window : float, optional
+        Seconds of a second stage-1 test at every test time, for changes too small to show
+        in ``window`` (a loss of a quarter of an effector's effectiveness: its evidence grows
+        with the samples, the threshold only with their logarithm).  The false-alarm budget
+        is shared (``alpha / 2`` each, Bonferroni), the buffers hold ``2 long_window``.
+        ``None`` (default): one window.
     hop : int, optional
         Samples between tests (default a quarter window; the window's length gives
         independent tests).
@@ -111,7 +118,8 @@ class FailureDetector(Isolation):
 
     def __init__(self, problem: Problem, noise_std: Any, sample_time: float, *, false_alarm_rate: float = 0.1,
                  window: float = 0.25, hop: int | None = None, position_noise_std: Any = None,
-                 min_confidence: float = 0.95, noise_correlation: Any = None) -> None:
+                 min_confidence: float = 0.95, noise_correlation: Any = None,
+                 long_window: float | None = None) -> None:
         if not isinstance(problem, Problem):
             raise OptionError(f"problem: expected an alloc.Problem, got {type(problem).__name__}")
         self.problem = problem
@@ -133,10 +141,18 @@ class FailureDetector(Isolation):
         self.position_std = (setting_vector("position_noise_std", position_noise_std, m, positive=True)
                              if self.has_position else np.full(m, np.inf))
         self.min_confidence = setting_real("min_confidence", min_confidence, 0.0, 1.0, lo_open=True, hi_open=True)
-        self.L = 2 * self.N
+        self.long_window_seconds = (None if long_window is None
+                                    else setting_real("long_window", long_window, 0.0, 3600.0, lo_open=True))
+        self.N_long = 0 if long_window is None else int(round(self.long_window_seconds / self.dt))
+        if long_window is not None and not self.N < self.N_long <= 100_000:
+            raise OptionError(f"long_window: {self.N_long} samples; expected more than the window's {self.N} "
+                              "and at most 100000")
+        self.L = 2 * max(self.N, self.N_long)
         self.noise_correlation = (None if noise_correlation is None
                                   else _correlation_setting(noise_correlation))
         self._whiten = None if self.noise_correlation is None else _whitener(self.noise_correlation, self.N)
+        self._whiten_long = (None if self.noise_correlation is None or not self.N_long
+                             else _whitener(self.noise_correlation, self.N_long))
         self._Bn = np.array(problem.B, dtype=float) / self.noise_std[:, None]  # the columns' directions
         self._design()
         self.health: dict[str, EffectorHealth] = {}
@@ -168,7 +184,7 @@ class FailureDetector(Isolation):
     def _design(self) -> None:
         self._tested = np.flatnonzero(self.problem.umax > self.problem.umin)
         m_tested = max(1, len(self._tested))
-        alpha = self.false_alarm_rate * self.hop * self.dt / 3600.0 / m_tested
+        alpha = self.false_alarm_rate * self.hop * self.dt / 3600.0 / m_tested / (2 if self.N_long else 1)
         from scipy.stats import chi2  # here: importing scipy.stats costs 1.2-1.5 s, every service start paid it
         self._gamma = float(chi2.isf(min(alpha, 0.5), self.dof))
 
@@ -262,19 +278,20 @@ class FailureDetector(Isolation):
         return self._U[idx], self._R[idx], self._Q[idx], self._T[idx], self._K[idx]
 
     def _stage1(self, n: int) -> tuple[np.ndarray, np.ndarray]:
-        """Stage-1 statistics of the tested effectors over the last ``n`` samples."""
+        """Stage-1 statistics of the tested effectors over the last ``n`` samples (``N`` or ``N_long``)."""
         tested = self.tested
         U, R, Q, _, _ = self._window(n)
         Bw = self._Bn[:, tested]
         c = np.einsum("ij,ij->j", Bw, Bw)
         S = R @ Bw  # (n, t): b~_j . r~
-        stat = _linear_glr(S, U[:, tested], c, self._whiten)
+        stat = _linear_glr(S, U[:, tested], c, self._whiten if n == self.N else self._whiten_long)
         if self.has_position:  # position sensors: their own (white) noise
             stat = stat + _linear_glr(Q[:, tested], U[:, tested], np.ones(len(tested)))
         return tested, stat
 
-    def window_statistics(self, u: Any, y: Any) -> np.ndarray:
-        """Stage-1 statistics of every window of ``window`` consecutive samples, offline.
+    def window_statistics(self, u: Any, y: Any, long: bool = False) -> np.ndarray:
+        """Stage-1 statistics of every window of ``window`` (``long``: ``long_window``) consecutive
+        samples, offline.
 
         ``u`` (n, m) and ``y`` (n, k) as :meth:`update` takes them, for a detector without
         position sensors, against its current model (the failures it knows applied as it
@@ -284,7 +301,9 @@ class FailureDetector(Isolation):
         """
         if self.has_position:
             raise OptionError("window_statistics: not for a detector with position sensors")
-        m, k, N = self.problem.m, self.problem.k, self.N
+        if long and not self.N_long:
+            raise OptionError("window_statistics: long=True for a detector without a long_window")
+        m, k, N = self.problem.m, self.problem.k, self.N_long if long else self.N
         U = as_float_array("u", u, SampleError)
         Y = as_float_array("y", y, SampleError)
         if U.ndim != 2 or U.shape[1] != m or Y.shape != (U.shape[0], k) or U.shape[0] < N:
@@ -298,7 +317,7 @@ class FailureDetector(Isolation):
         Bw = self._Bn[:, tested]
         S = np.lib.stride_tricks.sliding_window_view(R @ Bw, N, axis=0).swapaxes(1, 2)  # (windows, N, t)
         Uw = np.lib.stride_tricks.sliding_window_view(known[:, tested], N, axis=0).swapaxes(1, 2)
-        return _linear_glr(S, Uw, np.einsum("ij,ij->j", Bw, Bw), self._whiten)
+        return _linear_glr(S, Uw, np.einsum("ij,ij->j", Bw, Bw), self._whiten_long if long else self._whiten)
 
     def _test(self, t: float) -> list[Detection]:
         if len(self.tested) == 0:
@@ -306,6 +325,8 @@ class FailureDetector(Isolation):
         gamma = self.threshold()
         if self._pending is None:
             tested, stat = self._stage1(self.N)
+            if self.N_long and self._count >= self.N_long and not (stat > gamma).any():
+                stat = np.maximum(stat, self._stage1(self.N_long)[1])
             if not (stat > gamma).any():
                 return []
             self.alarm_count += 1
@@ -341,6 +362,7 @@ class FailureDetector(Isolation):
         return {
             "kind": "detector", "noise_std": self.noise_std.tolist(), "sample_time": self.dt,
             "false_alarm_rate": self.false_alarm_rate, "window": self.window_seconds, "hop": self.hop,
+            "long_window": self.long_window_seconds,
             "position_noise_std": self.position_std.tolist() if self.has_position else None,
             "min_confidence": self.min_confidence,
             "noise_correlation": None if self.noise_correlation is None else self.noise_correlation.tolist(),
@@ -364,7 +386,8 @@ class FailureDetector(Isolation):
             det = cls(problem, d["noise_std"], d["sample_time"], false_alarm_rate=d["false_alarm_rate"],
                       window=d["window"], hop=d["hop"], position_noise_std=d["position_noise_std"],
                       min_confidence=d["min_confidence"],
-                      noise_correlation=d.get("noise_correlation"))  # absent from states stored before it
+                      noise_correlation=d.get("noise_correlation"),  # absent from states stored before it
+                      long_window=d.get("long_window"))
             det.health = health_from_dict(d["health"])
             for name in det.health:
                 problem.index(name)
