@@ -61,7 +61,7 @@ from scipy.stats import chi2
 
 from benchmarks.compare.failures import catalogue_kinds, failure_effectors, make_failure
 from sim.actuator_failure import ActuatorFailure
-from sim.detection import DEFAULT_DESIGN, response_noise_correlation
+from sim.detection import DEFAULT_DESIGN, design_with, response_noise_correlation
 from sim.scenarios import get_scenario
 
 SCENARIOS = ("ice", "harv_latdir")
@@ -113,7 +113,8 @@ def _fly(scenario: str, case: str | None, *, health: str, method: str, seed: int
     s = res.summary()
     return {"scenario": scenario, "case": case, "kind": None if case is None else case_kind(case), "health": health,
             "method": method, "seed": seed, "failure_time": None if case is None else failure_time, "duration": duration, "noise_scale": noise_scale,
-            "frame_period": frame_period, "dt": dt, "excitation": excitation, "detector_long_window": long_window,
+            "frame_period": frame_period, "dt": dt, "excitation": excitation,
+            "detector_long_window": design_with(long_window).long_window,
             "diverged": s["diverged"], "simulated": s["duration"],
             "channels": s["channels"], "detections": s.get("detections", []),
             "failed": [res.effector_names[i] for i in failure_effectors(scenario, "jam1")] if case else [],
@@ -212,7 +213,7 @@ def run_replay(out: Path, hours: float, scale: float, dt: float = 0.005, flight:
         U = np.asarray(res.effectors)[pick]
         inloop = sd.InLoopDetector(vehicle, dt, np.zeros((2, vehicle.C.shape[0])), noise_scale=scale,
                                    actuators=True, preferred=np.zeros(len(vehicle.effector_names)),
-                                   design=dataclasses.replace(DEFAULT_DESIGN, long_window=long_window))
+                                   design=design_with(long_window))
         made = inloop.detector
         gains = np.zeros(vehicle.C.shape[0])
         gains[np.asarray(vehicle.measured)] = vehicle.noise_gains
@@ -228,7 +229,7 @@ def run_replay(out: Path, hours: float, scale: float, dt: float = 0.005, flight:
             noise = band_limited_noise(n, dt, gains, rng)
             diff = (noise[every::every] - noise[:-every:every][: noise[every::every].size]) / ts
             row: dict[str, Any] = {"key": key, "scenario": scenario, "noise_scale": scale, "dt": dt, "hour": h,
-                                   "detector_long_window": long_window,
+                                   "detector_long_window": design_with(long_window).long_window,
                                    "flight": flight, "flight_diverged": bool(res.diverged),
                                    "samples": int(diff.shape[0])}
             Uh = U[np.arange(diff.shape[0]) % U.shape[0]]
@@ -596,8 +597,8 @@ def main() -> None:
                    help="null-space excitation in every arm (deg, each effector's peak; delays, benefit; "
                         "sim --excitation; write to its own --out)")
     r.add_argument("--detector-long-window", type=float, default=None,
-                   help="the detector's second stage-1 window (s; every section; sim --detector-long-window; "
-                        "write to its own --out)")
+                   help="the detector's second stage-1 window (s; 0: none; default: the design's; every "
+                        "section; sim --detector-long-window; write to its own --out)")
     r.add_argument("--frame-rate", type=float, default=100.0,
                    help="flight-control frame rate (Hz); 0: the seed's single-rate 2 kHz loop")
     p = sub.add_parser("report")

@@ -27,7 +27,7 @@ import numpy as np
 
 import sim.engine as engine
 from benchmarks import bench_detection as bd
-from sim.detection import DEFAULT_DESIGN
+from sim.detection import DEFAULT_DESIGN, design_with
 from sim.scenarios import get_scenario
 
 #: the goal's deadline after the onset, per kind (s): issue 26's
@@ -85,7 +85,7 @@ def fly_traced(scenario: str, case: str, scale: float, s: int, frame_rate: float
     failed = res.effector_names[bd.failure_effectors(scenario, "jam1")[0]]
     return {"key": f"{scenario}/{case}/{scale:g}/{s}", "scenario": scenario, "case": case, "kind": bd.case_kind(case),
             "noise_scale": scale, "seed": 100 + s, "failure_time": tf, "failed": failed,
-            "excitation": excitation, "detector_long_window": long_window, "detections": res.summary().get("detections", []), "trace": trace,
+            "excitation": excitation, "detector_long_window": design_with(long_window).long_window, "detections": res.summary().get("detections", []), "trace": trace,
             "noise_correlation": list(made_detector[0].noise_correlation), "per_sample_alpha": per_sample_alpha(),
             "wall": time.perf_counter() - t0}
 

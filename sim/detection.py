@@ -40,7 +40,7 @@ Delay
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from functools import cache
 from typing import Any
 
@@ -75,8 +75,13 @@ class DetectionDesign:
     processing_delay : float
         Seconds from a detection to the allocator's rebuilt problem (20 ms).
     long_window : float or None
-        Seconds of the detector's second stage-1 window (``None``: none, the default; see
-        :class:`alloc.estimation.FailureDetector`).
+        Seconds of the detector's second stage-1 window (:class:`alloc.estimation.FailureDetector`;
+        ``None``: none).  1.6 s, chosen from issue 26's requirement, not from a verdict: a loss of
+        effectiveness must be reported within 2 s, and the window plus the isolation's decision
+        (typically one to four 0.1 s samples) must fit in it, so 2 s less the short window.  Its
+        evidence grows with its samples: measured, the losses of 25 % that the short window
+        alone misses at two and five times the seed's noise are the detector's to find (the
+        oracle's matched filter finds them with probability 0.96 to 1.00, see docs/detection.md).
     """
 
     sample_time: float = 0.1
@@ -85,13 +90,21 @@ class DetectionDesign:
     false_alarm_rate: float = 0.1
     min_confidence: float = 0.95
     processing_delay: float = 0.02
-    long_window: float | None = None
+    long_window: float | None = 1.6
 
     def record(self) -> dict[str, Any]:
         return asdict(self)
 
 
 DEFAULT_DESIGN = DetectionDesign()
+
+
+def design_with(long_window: float | None) -> DetectionDesign:
+    """The default design with the run setting ``detector_long_window`` applied: ``None`` keeps
+    the default's second window, ``0`` removes it, a positive value replaces it."""
+    if long_window is None:
+        return DEFAULT_DESIGN
+    return replace(DEFAULT_DESIGN, long_window=float(long_window) if long_window > 0 else None)
 
 
 def response_outputs(vehicle: Vehicle) -> tuple[int, ...]:

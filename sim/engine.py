@@ -31,7 +31,6 @@ rebuilds the allocator on the detector's belief at the first frame after its pro
 
 from __future__ import annotations
 
-import dataclasses
 import time
 from collections.abc import Sequence
 from typing import Any
@@ -51,7 +50,7 @@ from sim.blocks import (
     stack_lti,
     tf_to_ss,
 )
-from sim.detection import DEFAULT_DESIGN, InLoopDetector, detection_record
+from sim.detection import InLoopDetector, design_with, detection_record
 from sim.injection import inject_failure
 from sim.model import TF, Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle
 from sim.packed import DIVERGED, N_MISC, FloatSlot, IntSlot, Misc, Packed, advance, observe, record_columns
@@ -208,7 +207,7 @@ def _detector(spec: LoopSpec, inputs: np.ndarray) -> InLoopDetector:
     """The in-loop detector of a ``detected`` run, on the run's own sensor noise (``inputs``' noise columns)."""
     vehicle = spec.vehicle
     k, ny = len(vehicle.controlled), vehicle.C.shape[0]
-    design = dataclasses.replace(DEFAULT_DESIGN, long_window=spec.detector_long_window)
+    design = design_with(spec.detector_long_window)
     return InLoopDetector(vehicle, spec.dt, inputs[:, k:k + ny], noise_scale=spec.noise_scale,
                           actuators=spec.actuators, preferred=preferred_positions(vehicle, spec.preferred),
                           design=design)

@@ -199,10 +199,11 @@ class LoopSettings:
         unit="s", low=0.0, low_open=True, flag="--frame-rate", per_second=True,
         none_means="dt (2000 Hz, the seed's single-rate loop)")
     detector_long_window: float | None = _setting(
-        None, "a second stage-1 window of the in-loop detector (--health detected): for small, lasting "
+        None, "the in-loop detector's second stage-1 window (--health detected), for small, lasting "
         "changes such as a loss of a quarter of an effector's effectiveness; it shares the false-alarm "
-        "budget (sim.detection.DetectionDesign)", unit="s", low=0.0, low_open=True, high=MAX_LONG_WINDOW,
-        flag="--detector-long-window", none_means="none (the 0.4 s window alone)")
+        "budget (sim.detection.DetectionDesign); 0: none, the 0.4 s window alone", unit="s", low=0.0,
+        high=MAX_LONG_WINDOW, flag="--detector-long-window",
+        none_means="the design's (sim.detection.DEFAULT_DESIGN.long_window)")
     excitation: float = _setting(0.0, "null-space excitation added to every command (seed 1.3.2.5): each "
                                  "effector's multisine peak, B e = 0, within position and rate limits "
                                  "(sim.allocation.EXCITATION_BAND); 0: none", unit="deg", low=0.0,
