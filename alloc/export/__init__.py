@@ -40,8 +40,9 @@ from ..problem import Problem
 from . import templates, templates_cascade, templates_closed_form
 from .base import (_ACTIVE_SET_METHODS, EXPORTABLE, FLOAT_EXACT_RTOL, FLOAT_TOLERANCE, FLOAT_VMAX, GENERATOR_VERSION,
                    PRECISIONS, ExportedKernel, ExportError, _fill, _Real, _short, _version)
-from .certify import Certificate, bound_text
-from .tables import _active_set_fields, _cascade_level_fields, _cascade_table, _iteration_budget
+from .certify import Certificate, bound_text, simplex_bound_text
+from .tables import (_active_set_fields, _cascade_level_fields, _cascade_table, _iteration_budget, _simplex_fields,
+                     _simplex_pivots)
 
 __all__ = ["export_c", "ExportedKernel", "ExportError", "EXPORTABLE", "PRECISIONS", "GENERATOR_VERSION",
            "FLOAT_TOLERANCE", "FLOAT_EXACT_RTOL", "FLOAT_VMAX", "Certificate"]
@@ -145,6 +146,9 @@ def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "d
     if method in _ACTIVE_SET_METHODS and opts.get("backend", "active_set") != "active_set":
         raise OptionError(f"backend: only the compiled active set is exported, got {opts['backend']!r}",
                           field="backend")
+    if method == "lp" and opts.get("backend", "simplex") != "simplex":
+        raise OptionError(f"backend: lp exports the library's compiled simplex only, got {opts['backend']!r}",
+                          field="backend")
     prefix = f"alloc_{method}" if prefix is None else prefix
     if not (isinstance(prefix, str) and prefix.isidentifier() and prefix.isascii()):
         raise ExportError(f"prefix: expected a C identifier, got {prefix!r}", field="prefix")
@@ -181,7 +185,10 @@ def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "d
     levels, cap = 0, None
     budget, cert = None, None
     for name, given in (("iteration_bound", iteration_bound), ("maxit", maxit), ("cache", cache)):
-        if given is not None and method not in _ACTIVE_SET_METHODS:
+        if given is not None and method == "lp" and name != "iteration_bound":
+            raise ExportError(f"{name}: lp keeps the library's pivot cap and has no factorisations to cache "
+                              "(give iteration_bound to bound its pivots)", field=name)
+        if given is not None and method not in _ACTIVE_SET_METHODS + ("lp",):
             raise ExportError(f"{name}: {method} is closed-form (no iterations to cap or bound, or factorisations "
                               "to cache)", field=name)
     if table and method not in _ACTIVE_SET_METHODS + ("cgi",):
@@ -200,6 +207,14 @@ def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "d
     elif method == "cgi":
         fields.update(TAB_P=_cascade_table(impl, problem, real, table))
         body = templates_closed_form.CASCADE
+    elif method == "lp":
+        body, cap = _simplex_fields(impl, real, fields)
+        levels = 1  # one pivot budget a call (its stages share it, as the library's cap)
+        budget, cert = _iteration_budget(iteration_bound, allocator, problem, precision, cap - 1,
+                                         count=_simplex_pivots(impl, problem), unit="pivots")
+        fields["BOUND"] = simplex_bound_text(cap, budget, cert)
+        fields["MAXIT_DEFINE"] += ("/* pivots of a call with the nominal limits and no rate window (see above) */\n"
+                                   f"#define PFX_ITERATION_BOUND {budget}\n")
     else:
         lexico = [impl._static, impl._dynamic] if method == "dynamic" else [impl._impl]
         body, levels, cap = _active_set_fields(lexico, problem, real, fields, maxit, table, cache)

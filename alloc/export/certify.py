@@ -25,11 +25,18 @@ Two statements, of different strength, go into every active-set kernel's header:
 
 Calls with a rate window (``u_prev``) or reduced limits (``set_limits``) have bounds that are
 not in the sample; they keep the library's cap, ``PFX_MAXIT`` a level.
+
+The ``lp`` kernel (the library's simplex, :mod:`alloc._simplex`) is certified by the same
+sample and the same rule, counting the simplex's pivots (bound flips included) instead of
+active-set iterations (:func:`certify` with ``count``; :func:`simplex_bound_text`).  No
+analytic bound is claimed for it: the simplex method's worst case is exponential (Klee and
+Minty), and the library's cap ``50 (N + k)`` is what bounds a call's time.
 """
 
 from __future__ import annotations
 
 import itertools
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -62,6 +69,8 @@ class Certificate:
     worst_demand: np.ndarray
     #: the largest count per part of the sample
     part_max: dict[str, int]
+    #: what is counted: active-set ``"iterations"`` or simplex ``"pivots"``
+    unit: str = "iterations"
 
 
 def analytic_bound(m: int) -> int:
@@ -105,23 +114,32 @@ def certification_demands(problem: Problem) -> dict[str, np.ndarray]:
     return {"grid": grid, "far": far, "vertices": vertices, "axes": axes}
 
 
-def certify(allocator, problem: Problem) -> Certificate:
+def certify(allocator, problem: Problem, count: Callable[[np.ndarray], int] | None = None,
+            unit: str = "iterations") -> Certificate:
     """Run ``allocator`` (the library's active set) on :func:`certification_demands`; the
     largest count per call is the bound a kernel exported with ``iteration_bound="certify"``
-    enforces."""
+    enforces.
+
+    ``count(v)``, when given, is the count of one demand instead of ``allocator(v).iterations``
+    (``lp``: the simplex's pivots, also on a call that stops at the library's cap, which the
+    allocator reports as a fallback of 0 iterations); ``unit`` names it."""
+    if count is None:
+        def count(v: np.ndarray) -> int:
+            return int(allocator(v).iterations)
     parts = certification_demands(problem)
     best, worst = -1, np.zeros(problem.k)
     part_max: dict[str, int] = {}
     for name, V in parts.items():
         top = 0
         for v in V:
-            it = int(allocator(v).iterations)
+            it = int(count(v))
             top = max(top, it)
             if it > best:
                 best, worst = it, np.array(v, dtype=float)
         part_max[name] = top
     return Certificate(bound=max(best, 1), demands=sum(len(V) for V in parts.values()),
-                       parts={name: len(V) for name, V in parts.items()}, worst_demand=worst, part_max=part_max)
+                       parts={name: len(V) for name, V in parts.items()}, worst_demand=worst, part_max=part_max,
+                       unit=unit)
 
 
 def bound_text(m: int, levels: int, maxit: int, budget: int, cert: Certificate | None,
@@ -156,4 +174,31 @@ def bound_text(m: int, levels: int, maxit: int, budget: int, cert: Certificate |
  * its working set, where the objective has strictly decreased since the last one, so no
  * working set (each effector free, at its lower or upper bound) recurs there: a level ends
  * within (m + 1) 3^m = {worst} iterations, far above the cap (alloc/export/certify.py).
+"""
+
+
+def simplex_bound_text(maxit: int, budget: int, cert: Certificate | None) -> str:
+    """The header's statement of the pivot bound of an ``lp`` kernel and its argument."""
+    if cert is None:
+        given = "the library's cap" if budget == maxit - 1 else "given at export"
+        enforced = (f" * PFX_ITERATION_BOUND = {budget}: the per-call pivot budget, {given} (not certified:\n"
+                    " * export with iteration_bound=\"certify\" for a sampled certification).\n")
+    elif budget == cert.bound:
+        parts = ", ".join(f"{n} {cert.parts[n]} (max {cert.part_max[n]})" for n in cert.parts)
+        enforced = (f" * PFX_ITERATION_BOUND = {budget}: certified BY SAMPLING, not proved: the library's\n"
+                    f" * simplex (whose pivots this kernel reproduces) needs at most {cert.bound} pivots a call\n"
+                    f" * on {cert.demands:,} demands ({parts};\n"
+                    " * alloc.export.certify.certification_demands).  Enforced on calls with the nominal\n"
+                    " * limits and no rate window: a demand between the samples that needs more returns\n"
+                    " * status 2 with the safe answer.\n")
+    else:
+        enforced = f" * PFX_ITERATION_BOUND = {budget}: the per-call pivot budget given at export.\n"
+    return f""" *
+ * Iteration bound.  A call takes at most PFX_MAXIT - 1 = {maxit - 1} pivots (bound flips included:
+ * the library's cap 50 (N + k); it refactorises every 32 pivots and at the end of every stage,
+ * and every inner loop has a fixed trip count), or on calls with the nominal limits and no
+ * rate window at most PFX_ITERATION_BOUND: the pivot beyond it is not taken.
+{enforced} * Reaching either returns status 2 with the safe answer (the weighted pseudo-inverse of
+ * Eq 1.23 clipped to the call's bounds), as the library does at its cap.  No analytic bound
+ * is claimed: the simplex method's worst case is exponential in the size (Klee-Minty).
 """
