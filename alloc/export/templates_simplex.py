@@ -52,7 +52,7 @@ static const real D[M] = @D@;
 static const real COSTS[NSTAGE][NV] = @COSTS@;
 
 struct lp {
-    real T[K][NV], W[K][K + NV + 1], x[NV], lb[NV], ub[NV], d[NV], b[K], c[M];
+    real T[K][NV], x[NV], lb[NV], ub[NV], d[NV], b[K], c[M];
     int status[NV], frozen[NV], basis[K];
     /* pivots of the call so far, the budget of the call, and 1 once a pivot was refused */
     int spent, limit, capped;
@@ -90,37 +90,38 @@ static void reduced_costs(struct lp *s, const real *cost)
 static int refactor(struct lp *s, const real *cost)
 {
     int i, j, r, c;
+    real W[K][K + NV + 1]; /* local: the compiler then copies its rows into T with memcpy */
     for (i = 0; i < K; ++i) {
         real acc = s->b[i];
-        for (r = 0; r < K; ++r) s->W[i][r] = F[i][s->basis[r]];
+        for (r = 0; r < K; ++r) W[i][r] = F[i][s->basis[r]];
         for (j = 0; j < NV; ++j) {
-            s->W[i][K + j] = F[i][j];
+            W[i][K + j] = F[i][j];
             if (s->status[j] != BASIC && s->x[j] != 0) acc -= F[i][j] * s->x[j];
         }
-        s->W[i][K + NV] = acc;
+        W[i][K + NV] = acc;
     }
     for (c = 0; c < K; ++c) {
         int piv = c;
-        real best = ABS(s->W[c][c]);
+        real best = ABS(W[c][c]);
         for (i = c + 1; i < K; ++i) {
-            if (ABS(s->W[i][c]) > best) {
+            if (ABS(W[i][c]) > best) {
                 piv = i;
-                best = ABS(s->W[i][c]);
+                best = ABS(W[i][c]);
             }
         }
         if (!(best > SINGULAR_TOL)) return 0;
         if (piv != c) {
             for (j = 0; j < K + NV + 1; ++j) {
-                real t = s->W[c][j];
-                s->W[c][j] = s->W[piv][j];
-                s->W[piv][j] = t;
+                real t = W[c][j];
+                W[c][j] = W[piv][j];
+                W[piv][j] = t;
             }
         }
-        eliminate(&s->W[0][0], K + NV + 1, c, c);
+        eliminate(&W[0][0], K + NV + 1, c, c);
     }
+    for (r = 0; r < K; ++r) s->x[s->basis[r]] = W[r][K + NV];
     for (r = 0; r < K; ++r) {
-        s->x[s->basis[r]] = s->W[r][K + NV];
-        for (j = 0; j < NV; ++j) s->T[r][j] = s->W[r][K + j];
+        for (j = 0; j < NV; ++j) s->T[r][j] = W[r][K + j];
     }
     for (r = 0; r < K; ++r) {
         for (i = 0; i < K; ++i) s->T[i][s->basis[r]] = i == r ? 1 : 0;

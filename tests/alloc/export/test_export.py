@@ -23,7 +23,7 @@ from typer.testing import CliRunner
 import alloc
 import alloc.vehicles
 from alloc.export import EXPORTABLE, FLOAT_EXACT_RTOL, ExportError, export_c
-from alloc.testing import KINDS, random_demands, random_problem
+from alloc.testing import KINDS, diagonal_wv, random_demands, random_problem
 
 CC = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc") or shutil.which("clang")
 pytestmark = pytest.mark.skipif(CC is None, reason="no C compiler (cc, gcc or clang) on PATH: the generated "
@@ -100,12 +100,14 @@ def build(tmp_path_factory):
     return make
 
 
-def _suite(seed: int, per_kind: int = 1):
-    """The shared random suite: every kind, sizes up to 5 x 9, with weights and rate limits."""
+def _suite(seed: int, per_kind: int = 1, method: str = ""):
+    """The shared random suite: every kind, sizes up to 5 x 9, with weights and rate limits (for
+    ``lp``, which takes weight vectors, the axis weights' diagonal)."""
     rng = np.random.default_rng(seed)
     for kind in KINDS:
         for _ in range(per_kind):
-            yield random_problem(rng, int(rng.integers(1, 6)), int(rng.integers(2, 10)), kind), rng
+            p = random_problem(rng, int(rng.integers(1, 6)), int(rng.integers(2, 10)), kind)
+            yield (diagonal_wv(p) if method == "lp" else p), rng
 
 
 def _agree_double(kern: Kernel, allocator, V, rate_steps: int = 0, dt: float = 0.01, rng=None):
@@ -138,8 +140,9 @@ def _agree_double(kern: Kernel, allocator, V, rate_steps: int = 0, dt: float = 0
 @pytest.mark.parametrize("method", EXPORTABLE)
 def test_double_is_the_library_bit_for_bit_on_the_random_suite(build, method):
     calls = 0
-    for i, (p, rng) in enumerate(_suite(100 + EXPORTABLE.index(method))):
-        opts = {"priorities": [int(x) for x in rng.integers(1, 3, size=p.k)]} if method == "qp" and i % 2 else {}
+    for i, (p, rng) in enumerate(_suite(100 + EXPORTABLE.index(method), method=method)):
+        # qp and lp with priority levels on odd problems
+        opts = {"priorities": [int(x) for x in rng.integers(1, 3, size=p.k)]} if method in ("qp", "lp") and i % 2 else {}
         # both forms of the active set: constant tables on even problems, run-time factorisation on odd
         # (cgi has only the table form, the closed forms none)
         table = i % 2 == 0 if method in ("wls", "qp", "dynamic") else None
@@ -193,6 +196,9 @@ def _hostile_run(build, cases: int, start: int) -> int:
         method = EXPORTABLE[i % len(EXPORTABLE)]
         if method == "cgi" and p.m > 8:  # cgi tabulates every free set: beyond the default budget
             method = "qp"
+        if method == "lp":  # the L1 stages take weight vectors: Wv's diagonal, and qp where Wu is full
+            p = diagonal_wv(p)
+            method = "lp" if not np.count_nonzero(p.Wu - np.diag(np.diagonal(p.Wu))) else "qp"
         kern = build(export_c(p, method, prefix=f"h{seed}_{method}", table=None if method == "cgi" else False))
         with np.errstate(over="ignore", invalid="ignore"):
             extra = random_demands(np.random.default_rng(seed), p, 10)
@@ -218,7 +224,7 @@ def test_double_rate_limited_trajectory_on_ice(build):
     p = alloc.vehicles.problem("ice")
     t = np.arange(400) / 2000.0
     V = np.stack([np.sin(2 * np.pi * f * t + ph) for f, ph in ((3, 0), (5, 1), (7, 2))], axis=1) * 1.5
-    for method in ("qp", "wls", "pinv_scale"):
+    for method in ("qp", "wls", "pinv_scale", "lp"):
         kern = build(export_c(p, method, prefix=f"ice_{method}"))
         allocator = alloc.make_allocator(p, method)
         u_prev = np.array(p.up)
@@ -305,7 +311,7 @@ def test_default_cap_is_the_library_cap_and_stated_in_the_header():
 def test_float_agrees_and_is_always_within_its_bounds(build, method):
     du, dmoment = [], []
     mismatched = calls = 0
-    for i, (p, rng) in enumerate(_suite(200 + EXPORTABLE.index(method))):
+    for i, (p, rng) in enumerate(_suite(200 + EXPORTABLE.index(method), method=method)):
         kern = build(export_c(p, method, precision="float", prefix=f"f{i}_{method}"))
         allocator = alloc.make_allocator(p, method)
         lo32, hi32 = _float_limits(kern)
@@ -458,8 +464,8 @@ def test_source_is_self_contained(tmp_path):
 
 def test_export_errors_name_the_field():
     p = alloc.vehicles.problem("ice")
-    with pytest.raises(alloc.UnknownMethodError, match="method: 'lp' cannot be exported"):
-        export_c(p, "lp")
+    with pytest.raises(alloc.UnknownMethodError, match="method: 'daisy' cannot be exported to C; exportable: .*, lp"):
+        export_c(p, "daisy")
     with pytest.raises(ExportError, match="precision"):
         export_c(p, "qp", precision="half")
     with pytest.raises(alloc.OptionError, match="backend"):
@@ -528,6 +534,6 @@ def test_cli_export_writes_the_pair(tmp_path):
     assert result.exit_code == 0, result.output
     assert (out / "alloc_wls.h").is_file() and (out / "alloc_wls.c").is_file()
     assert "typedef float alloc_wls_real;" in (out / "alloc_wls.h").read_text()
-    bad = CliRunner().invoke(app, ["export", "--vehicle", "hexa-x", "--method", "lp", "--out", str(out)])
-    assert bad.exit_code == 2 and "cannot be exported" in bad.output
+    bad = CliRunner().invoke(app, ["export", "--vehicle", "hexa-x", "--method", "daisy", "--out", str(out)])
+    assert bad.exit_code == 2 and "cannot be exported" in bad.output and ", lp" in bad.output
     assert sys.modules.get("alloc.export") is not None
