@@ -40,7 +40,7 @@ from ..problem import Problem
 from . import templates, templates_cascade, templates_closed_form
 from .base import (_ACTIVE_SET_METHODS, EXPORTABLE, FLOAT_EXACT_RTOL, FLOAT_TOLERANCE, FLOAT_VMAX, GENERATOR_VERSION,
                    PRECISIONS, ExportedKernel, ExportError, _fill, _Real, _short, _version)
-from .certify import Certificate, bound_text, simplex_bound_text
+from .certify import SIMPLEX_RANDOM_DEMANDS, Certificate, bound_text, simplex_bound_text
 from .tables import (_active_set_fields, _cascade_level_fields, _cascade_table, _iteration_budget, _simplex_fields,
                      _simplex_pivots)
 
@@ -211,7 +211,8 @@ def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "d
         body, cap = _simplex_fields(impl, real, fields)
         levels = 1  # one pivot budget a call (its stages share it, as the library's cap)
         budget, cert = _iteration_budget(iteration_bound, allocator, problem, precision, cap - 1,
-                                         count=_simplex_pivots(impl, problem), unit="pivots")
+                                         count=_simplex_pivots(impl, problem), unit="pivots",
+                                         random=SIMPLEX_RANDOM_DEMANDS)
         fields["BOUND"] = simplex_bound_text(cap, budget, cert)
         fields["MAXIT_DEFINE"] += ("/* pivots of a call with the nominal limits and no rate window (see above) */\n"
                                    f"#define PFX_ITERATION_BOUND {budget}\n")
