@@ -191,7 +191,7 @@ def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "d
         if given is not None and method not in _ACTIVE_SET_METHODS + ("lp",):
             raise ExportError(f"{name}: {method} is closed-form (no iterations to cap or bound, or factorisations "
                               "to cache)", field=name)
-    if table and method not in _ACTIVE_SET_METHODS + ("cgi",):
+    if (table or (table is not None and method == "lp")) and method not in _ACTIVE_SET_METHODS + ("cgi",):
         raise ExportError(f"table: {method} has no tables to make (only cgi and the active-set methods do)",
                           field="table")
     if method in ("pinv", "pinv_clip", "ganging"):

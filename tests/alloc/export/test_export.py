@@ -46,7 +46,8 @@ STATUS = {"exact": 0, "unattainable": 1, "fallback": 2}
 #: what is attainable) differ by up to 0.13, with moments within 1.6e-3 of the library's.
 #: wls at the default gamma = 1e-4 is excluded (gamma^2 = 1e-8 is below float's resolution of
 #: the moment term: on degenerate problems u is then not determined in float, only the moment;
-#: see test_float_wls_moment)
+#: see test_float_wls_moment).  lp (the simplex at float's tolerances, alloc.export.FLOAT_SIMPLEX_TOLS):
+#: every call within it (measured max 2.2e-6, p99 7.0e-7 on 560 suite calls, statuses all equal)
 FLOAT_U_TOL = 1e-5
 
 
@@ -199,7 +200,7 @@ def _hostile_run(build, cases: int, start: int) -> int:
         if method == "lp":  # the L1 stages take weight vectors: Wv's diagonal, and qp where Wu is full
             p = diagonal_wv(p)
             method = "lp" if not np.count_nonzero(p.Wu - np.diag(np.diagonal(p.Wu))) else "qp"
-        kern = build(export_c(p, method, prefix=f"h{seed}_{method}", table=None if method == "cgi" else False))
+        kern = build(export_c(p, method, prefix=f"h{seed}_{method}", table=None if method in ("cgi", "lp") else False))
         with np.errstate(over="ignore", invalid="ignore"):
             extra = random_demands(np.random.default_rng(seed), p, 10)
         extra = extra[(np.abs(extra) <= alloc.problem.MAX_MAGNITUDE).all(axis=1)]
@@ -307,7 +308,7 @@ def test_default_cap_is_the_library_cap_and_stated_in_the_header():
 
 # ------------------------------------------------------------------------ float
 
-@pytest.mark.parametrize("method", ["pinv", "pinv_clip", "ganging", "pinv_scale", "cgi", "qp"])
+@pytest.mark.parametrize("method", ["pinv", "pinv_clip", "ganging", "pinv_scale", "cgi", "qp", "lp"])
 def test_float_agrees_and_is_always_within_its_bounds(build, method):
     du, dmoment = [], []
     mismatched = calls = 0
@@ -415,6 +416,43 @@ def test_invalid_input_gives_status_2_and_an_admissible_answer(build, precision)
         np.testing.assert_array_equal(u, good_u)  # dt invalid: u_prev held
 
 
+def test_lp_set_limits_is_the_library_simplex_on_those_limits(build):
+    """lp's limits enter only the tableau's bounds and right-hand side: after alloc_lp_set_limits
+    the kernel is the library's simplex called on those limits (LexicographicL1.solve with the
+    nominal scaling, classified by the allocator's finish) bit for bit, pivots included, and the
+    optimum of the jammed problem (Problem.with_jam, whose scaling differs) to round-off."""
+    from alloc._kernels import finish_owned
+    from alloc.result import EXACT_RTOL
+
+    p = alloc.vehicles.problem("ice")
+    kern = build(export_c(p, "lp", prefix="jam_lp"))
+    nominal = alloc.make_allocator(p, "lp")
+    jammed = p.with_jam(2, 0.1)
+    allocator = alloc.make_allocator(jammed, "lp")
+    lo, hi = np.array(p.umin), np.array(p.umax)
+    lo[2] = hi[2] = 0.1
+    hi[5] = 0.5 * p.umax[5]  # and a reduced limit
+    assert kern.set_limits(lo, hi) == 0
+    worst = 0.0
+    for v in random_demands(np.random.default_rng(5), p, 200):
+        u_lib, code, pivots = nominal.impl._lex.solve(v, lo, hi)
+        assert code == 0
+        out, status_lib = finish_owned(p.B, u_lib, lo, hi, v, EXACT_RTOL)
+        u, status, it = kern(v)
+        assert (status, it) == (status_lib, pivots) and u[2] == 0.1 and u[5] <= hi[5]
+        np.testing.assert_array_equal(u, out[:p.m])
+    assert kern.set_limits(jammed.umin, jammed.umax) == 0
+    for v in random_demands(np.random.default_rng(6), p, 200):
+        r = allocator(v)
+        u, status, _ = kern(v)
+        assert status == STATUS[r.status.value]
+        worst = max(worst, float(np.abs(u - r.u).max()))
+    assert worst <= 1e-9, worst
+    assert kern.set_limits(p.umin, np.array(p.umax) + 1.0) == -1  # beyond the nominal limits: refused
+    assert kern.set_limits(None, None) == 0
+    _agree_double(kern, nominal, random_demands(np.random.default_rng(7), p, 40))
+
+
 def test_set_limits_jams_at_run_time(build):
     """A jam through alloc_qp_set_limits gives the optimum of the jammed problem (unique: equal
     to round-off; the cold start keeps the nominal Eq 1.23 matrix, so not bit for bit)."""
@@ -470,6 +508,8 @@ def test_export_errors_name_the_field():
         export_c(p, "qp", precision="half")
     with pytest.raises(alloc.OptionError, match="backend"):
         export_c(p, "wls", options={"backend": "daqp"})
+    with pytest.raises(alloc.OptionError, match="backend: lp exports the library's compiled simplex only"):
+        export_c(p, "lp", options={"backend": "highs"})
     with pytest.raises(alloc.OptionError, match="incremental"):
         export_c(p, "pinv", options={"incremental": True})
     with pytest.raises(alloc.OptionError, match="gamma"):
@@ -515,6 +555,13 @@ def test_cli_export_passes_every_generator_setting(tmp_path):
     (["--method", "pinv", "--maxit", "10"], "maxit"),
     (["--method", "pinv_scale", "--table"], "table"),
     (["--method", "ganging", "--cache", "1"], "cache"),
+    (["--method", "lp", "--cache", "1"], "cache"),
+    (["--method", "lp", "--table"], "table"),
+    (["--method", "lp", "--no-table"], "table"),
+    (["--method", "lp", "--maxit", "10"], "maxit"),
+    (["--method", "lp", "--certify", "--precision", "float"], "iteration_bound"),
+    (["--method", "lp", "--iteration-bound", "0"], "iteration_bound"),
+    (["--method", "lp", "--option", "backend=highs"], "backend"),
 ])
 def test_cli_export_refuses_settings_in_one_line_naming_the_field(tmp_path, args, field):
     from alloc.cli import app
