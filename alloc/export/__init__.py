@@ -20,9 +20,11 @@ free set's pseudo-inverse; without priority levels) and the active-set ``wls``, 
 level is capped at the library's own cap and per call at ``iteration_bound`` (by default the
 levels' caps added; ``"certify"``: the largest count on a dense sample of the demand set,
 :mod:`alloc.export.certify`), both stated and argued in the header and enforced: reaching
-either returns the safe answer with status 2.
+either returns the safe answer with status 2.  And ``lp`` (with ``priorities``): the library's
+compiled lexicographic simplex (:mod:`alloc._simplex`), its pivots capped at the library's cap
+and per call at ``iteration_bound`` likewise (certified by counting the simplex's pivots).
 
-Health at run time: the active-set kernels take reduced limits and jams through
+Health at run time: the active-set and ``lp`` kernels take reduced limits and jams through
 ``alloc_<method>_set_limits``; the closed-form kernels bake the distribution matrix of the
 problem's health into their constants, so a jam or an effectiveness change there means
 generating again (``Problem.with_health``), as does an effectiveness change for any method.
@@ -99,7 +101,8 @@ def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "d
         C prefix of the public names and file names; default ``alloc_<method>``.
     maxit : int, optional
         Iteration cap per level of the active set; default the library's
-        ``50 + 10 (m + k)``.  Lower only to exercise the cap (tests).
+        ``50 + 10 (m + k)``.  Lower only to exercise the cap (tests).  ``lp`` keeps the library's
+        cap (refused: give ``iteration_bound``).
     table : bool, optional
         Active set: precompute the factorisation of every free set (2^m per level, the library's
         own ``_factor``, so the answers stay bit for bit) instead of factorising at run time;
@@ -110,6 +113,8 @@ def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "d
     iteration_bound : int or "certify", optional
         Active set: the iterations a call with the nominal limits and no rate window may take
         (reaching it returns the safe answer with status 2); default ``levels * maxit``.
+        ``lp``: the pivots such a call may take (the pivot beyond is not taken); default the
+        library's ``50 (N + k) - 1``.
         ``"certify"`` sets it to the largest count the library needs on the deterministic
         sample of :func:`alloc.export.certify.certification_demands` (a sampled certification,
         not a proof: see :mod:`alloc.export.certify`; ``double`` only, since the sample is run

@@ -88,11 +88,11 @@ class ExportedKernel:
     source_name: str
     k: int
     m: int
-    #: iteration cap per level (active-set methods), else None
+    #: iteration cap per level (active-set methods), the pivot cap ``50 (N + k)`` (``lp``), else None
     maxit: int | None = None
-    #: levels of the active set (its total cap is ``levels * maxit``)
+    #: levels of the active set (its total cap is ``levels * maxit``); 1 for ``lp``
     levels: int = 0
-    #: iterations a call with the nominal limits and no rate window may take (active set)
+    #: iterations (``lp``: pivots) a call with the nominal limits and no rate window may take
     iteration_bound: int | None = None
     #: the sampled certification behind ``iteration_bound`` (``iteration_bound="certify"``)
     certificate: Certificate | None = None

@@ -291,7 +291,7 @@ def _simplex_fields(impl: Any, real: _Real, fields: dict[str, str]) -> tuple[str
     fields["HEALTH_DECL"] = templates.HEALTH_DECL
     fields["LIMITS_QUAL"] = ""
     cap = int(lex.max_iter)
-    fields["MAXIT_DEFINE"] = (f"/* the library's pivot cap, 50 (N + k): a call succeeds within PFX_MAXIT - 1 pivots */\n"
+    fields["MAXIT_DEFINE"] = ("/* the library's pivot cap, 50 (N + k): a call succeeds within PFX_MAXIT - 1 pivots */\n"
                               f"#define PFX_MAXIT {cap}\n")
     return templates_simplex.SIMPLEX, cap
 

@@ -145,7 +145,8 @@ def test_double_is_the_library_bit_for_bit_on_the_random_suite(build, method):
     calls = 0
     for i, (p, rng) in enumerate(_suite(100 + EXPORTABLE.index(method), method=method)):
         # qp and lp with priority levels on odd problems
-        opts = {"priorities": [int(x) for x in rng.integers(1, 3, size=p.k)]} if method in ("qp", "lp") and i % 2 else {}
+        levels = [int(x) for x in rng.integers(1, 3, size=p.k)]
+        opts = {"priorities": levels} if method in ("qp", "lp") and i % 2 else {}
         # both forms of the active set: constant tables on even problems, run-time factorisation on odd
         # (cgi has only the table form, the closed forms none)
         table = i % 2 == 0 if method in ("wls", "qp", "dynamic") else None
@@ -601,6 +602,23 @@ def test_cli_export_refuses_settings_in_one_line_naming_the_field(tmp_path, args
     assert bad.exit_code == 2, bad.output
     assert len(bad.output.strip().splitlines()) == 1 and f"error: {field}: " in bad.output, bad.output
     assert not (tmp_path / "k").exists()
+
+
+def test_cli_export_certifies_lp_by_its_pivots(tmp_path):
+    """``alloc export --method lp --certify`` (issue 28): the vehicle's lp defaults (hexa-x: three
+    priority levels), the sampled pivot bound in the header, the pair export_c writes."""
+    from alloc.cli import app
+
+    out = tmp_path / "lp"
+    result = CliRunner().invoke(app, ["export", "--vehicle", "hexa-x", "--method", "lp", "--certify", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    header, source = (out / "alloc_lp.h").read_text(), (out / "alloc_lp.c").read_text()
+    direct = export_c("hexa-x", "lp", iteration_bound="certify")
+    assert (direct.header, direct.source) == (header, source)
+    assert direct.options == {"priorities": [2, 2, 1, 3]} and "#define NSTAGE 5\n" in source  # 3 levels + 2 stages
+    assert direct.certificate.unit == "pivots" and "pivots a call" in header and "certified BY SAMPLING" in header
+    assert f"#define ALLOC_LP_ITERATION_BOUND {direct.certificate.bound}\n" in header
+    assert "int alloc_lp_set_limits(" in header
 
 
 def test_cli_export_writes_the_pair(tmp_path):
