@@ -157,25 +157,31 @@ def certify(allocator, problem: Problem, count: Callable[[np.ndarray], int] | No
                        unit=unit)
 
 
+def _enforced_text(budget: int, cert: Certificate | None, default: str | None, what: str, counted: str) -> str:
+    """The header's lines on ``PFX_ITERATION_BOUND``: uncertified (``default`` says why it is the
+    number it is; None: given at export), or certified, ``counted`` saying by what and how much."""
+    if cert is None:
+        given = default or "given at export"
+        return (f" * PFX_ITERATION_BOUND = {budget}: the per-call {what}, {given} (not certified:\n"
+                " * export with iteration_bound=\"certify\" for a sampled certification).\n")
+    if budget == cert.bound:
+        parts = ", ".join(f"{n} {cert.parts[n]} (max {cert.part_max[n]})" for n in cert.parts)
+        return (f" * PFX_ITERATION_BOUND = {budget}: certified BY SAMPLING, not proved: the library's\n"
+                f" * {counted} on {cert.demands:,} demands ({parts};\n"
+                " * alloc.export.certify.certification_demands).  Enforced on calls with the nominal\n"
+                " * limits and no rate window: a demand between the samples that needs more returns\n"
+                " * status 2 with the safe answer.\n")
+    return f" * PFX_ITERATION_BOUND = {budget}: the per-call {what} given at export.\n"
+
+
 def bound_text(m: int, levels: int, maxit: int, budget: int, cert: Certificate | None,
                cap_given: bool = False) -> str:
     """The header's statement of the iteration bound of an active-set kernel and its argument
     (``cap_given``: ``maxit`` was chosen at export, not the library's cap)."""
     worst = analytic_bound(m)
-    if cert is None:
-        given = "here levels x cap" if budget == levels * maxit else "given at export"
-        enforced = (f" * PFX_ITERATION_BOUND = {budget}: the per-call budget, {given} (not certified:\n"
-                    " * export with iteration_bound=\"certify\" for a sampled certification).\n")
-    elif budget == cert.bound:
-        parts = ", ".join(f"{n} {cert.parts[n]} (max {cert.part_max[n]})" for n in cert.parts)
-        enforced = (f" * PFX_ITERATION_BOUND = {budget}: certified BY SAMPLING, not proved: the library's\n"
-                    f" * active set (whose counts this kernel reproduces) needs at most {cert.bound} iterations a\n"
-                    f" * call on {cert.demands:,} demands ({parts};\n"
-                    " * alloc.export.certify.certification_demands).  Enforced on calls with the nominal\n"
-                    " * limits and no rate window: a demand between the samples that needs more returns\n"
-                    " * status 2 with the safe answer.\n")
-    else:
-        enforced = f" * PFX_ITERATION_BOUND = {budget}: the per-call budget given at export.\n"
+    enforced = _enforced_text(budget, cert, "here levels x cap" if budget == levels * maxit else None, "budget",
+                              "active set (whose counts this kernel reproduces) needs at most "
+                              f"{cert.bound if cert else 0} iterations a\n * call")
     origin = "set at\n * export" if cap_given else "the\n * library's cap, 50 + 10 (m + k)"
     return f""" *
  * Iteration bound.  Each level stops after at most PFX_MAXIT = {maxit} iterations ({origin}); \
@@ -194,20 +200,9 @@ def bound_text(m: int, levels: int, maxit: int, budget: int, cert: Certificate |
 
 def simplex_bound_text(maxit: int, budget: int, cert: Certificate | None) -> str:
     """The header's statement of the pivot bound of an ``lp`` kernel and its argument."""
-    if cert is None:
-        given = "the library's cap" if budget == maxit - 1 else "given at export"
-        enforced = (f" * PFX_ITERATION_BOUND = {budget}: the per-call pivot budget, {given} (not certified:\n"
-                    " * export with iteration_bound=\"certify\" for a sampled certification).\n")
-    elif budget == cert.bound:
-        parts = ", ".join(f"{n} {cert.parts[n]} (max {cert.part_max[n]})" for n in cert.parts)
-        enforced = (f" * PFX_ITERATION_BOUND = {budget}: certified BY SAMPLING, not proved: the library's\n"
-                    f" * simplex (whose pivots this kernel reproduces) needs at most {cert.bound} pivots a call\n"
-                    f" * on {cert.demands:,} demands ({parts};\n"
-                    " * alloc.export.certify.certification_demands).  Enforced on calls with the nominal\n"
-                    " * limits and no rate window: a demand between the samples that needs more returns\n"
-                    " * status 2 with the safe answer.\n")
-    else:
-        enforced = f" * PFX_ITERATION_BOUND = {budget}: the per-call pivot budget given at export.\n"
+    enforced = _enforced_text(budget, cert, "the library's cap" if budget == maxit - 1 else None, "pivot budget",
+                              "simplex (whose pivots this kernel reproduces) needs at most "
+                              f"{cert.bound if cert else 0} pivots a call\n *")
     return f""" *
  * Iteration bound.  A call takes at most PFX_MAXIT - 1 = {maxit - 1} pivots (bound flips included:
  * the library's cap 50 (N + k); it refactorises every 32 pivots and at the end of every stage,
