@@ -435,7 +435,7 @@ def test_float_wls_moment(build):
 @pytest.mark.parametrize("precision", ["double", "float"])
 def test_invalid_input_gives_status_2_and_an_admissible_answer(build, precision):
     p = alloc.vehicles.problem("hexa-x")
-    for method in ("qp", "pinv_scale"):
+    for method in ("qp", "pinv_scale", "lp"):
         kern = build(export_c(p, method, precision=precision, prefix=f"bad_{method}_{precision}"))
         good_v, good_u = np.zeros(p.k), np.full(p.m, 0.5)
         for v in ([np.nan, 0, 0, 0], [np.inf, 0, 0, 0], [1e60 if precision == "double" else 1e31, 0, 0, 0]):
