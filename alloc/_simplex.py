@@ -50,6 +50,14 @@ DUAL_TOL = 1e-10
 PIVOT_TOL = 1e-10
 #: largest scaled right-hand side; beyond the reach of any column the sign alone matters
 B_CLAMP = 1e200
+#: ratio-test ties: steps within this relative distance of the smallest tie (largest pivot wins)
+TIE_RTOL = 1e-12
+#: a pivot whose step is at most this is degenerate (counted towards Bland's rule)
+DEGENERATE_TOL = 1e-12
+#: a refactorisation pivot at most this (the basis columns are O(1)) means a singular basis
+SINGULAR_TOL = 1e-13
+#: the final basic values may leave their bounds by this relative round-off
+FEASIBLE_RTOL = 1e-9
 
 _LOWER, _UPPER, _BASIC = 1, 2, 0
 
@@ -94,7 +102,7 @@ def _refactor(F, basis, status, x, b, cost, T, d, W):  # pragma: no cover - comp
         for i in range(c + 1, k):
             if abs(W[i, c]) > best:
                 piv, best = i, abs(W[i, c])
-        if not best > 1e-13:
+        if not best > SINGULAR_TOL:
             return False
         if piv != c:
             for j in range(k + N + 1):
@@ -174,7 +182,7 @@ def _iterate(T, basis, status, x, lb, ub, d, frozen, budget):  # pragma: no cove
                 status[q], x[q] = _LOWER, lb[q]
             degenerate = 0
             continue
-        tie = t_min + 1e-12 * (1.0 + t_min)
+        tie = t_min + TIE_RTOL * (1.0 + t_min)
         row, big = -1, 0.0
         for r in range(k):
             a = delta * T[r, q]
@@ -205,7 +213,7 @@ def _iterate(T, basis, status, x, lb, ub, d, frozen, budget):  # pragma: no cove
             T[i, q] = 0.0
         T[r, q] = 1.0
         d[q] = 0.0
-        degenerate = degenerate + 1 if t_min <= 1e-12 else 0
+        degenerate = degenerate + 1 if t_min <= DEGENERATE_TOL else 0
     return False, budget
 
 
@@ -306,7 +314,7 @@ def solve_lexicographic(F, B, rho, D, up, costs, v, lo, hi, max_iter, work, iwor
     for j in range(N):
         if not np.isfinite(x[j]):
             return NUMERICAL, pivots
-        tol = 1e-9 * (1.0 + abs(x[j]))
+        tol = FEASIBLE_RTOL * (1.0 + abs(x[j]))
         if x[j] < lb[j] - tol or x[j] > ub[j] + tol:
             return NUMERICAL, pivots
     for j in range(m):

@@ -521,12 +521,13 @@ def export_command(
     option: list[str] = typer.Option([], "--option", "-o", help="method option key=value (as for allocate)"),
     prefix: Optional[str] = typer.Option(None, "--prefix", help="C prefix of the names and files; default "
                                          "alloc_<method>"),
-    certify: bool = typer.Option(False, "--certify", help="active set: enforce the iteration bound certified "
+    certify: bool = typer.Option(False, "--certify", help="active set and lp: enforce the iteration bound certified "
                                  "by sampling the demand set (alloc.export.certify); the same as "
                                  "--iteration-bound certify"),
     iteration_bound: Optional[str] = typer.Option(None, "--iteration-bound", metavar="N|certify",
-                                                  help="active set: iterations a call may take before it returns "
-                                                  "the safe answer (status 2); default the levels' caps added"),
+                                                  help="active set and lp: iterations (lp: pivots) a call may take "
+                                                  "before it returns the safe answer (status 2); default the "
+                                                  "library's caps"),
     maxit: Optional[int] = typer.Option(None, "--maxit", help="active set: iteration cap per level; default the "
                                         "library's 50 + 10 (m + k)"),
     table: Optional[bool] = typer.Option(None, "--table/--no-table", help="active set: precompute every free "

@@ -20,9 +20,11 @@ free set's pseudo-inverse; without priority levels) and the active-set ``wls``, 
 level is capped at the library's own cap and per call at ``iteration_bound`` (by default the
 levels' caps added; ``"certify"``: the largest count on a dense sample of the demand set,
 :mod:`alloc.export.certify`), both stated and argued in the header and enforced: reaching
-either returns the safe answer with status 2.
+either returns the safe answer with status 2.  And ``lp`` (with ``priorities``): the library's
+compiled lexicographic simplex (:mod:`alloc._simplex`), its pivots capped at the library's cap
+and per call at ``iteration_bound`` likewise (certified by counting the simplex's pivots).
 
-Health at run time: the active-set kernels take reduced limits and jams through
+Health at run time: the active-set and ``lp`` kernels take reduced limits and jams through
 ``alloc_<method>_set_limits``; the closed-form kernels bake the distribution matrix of the
 problem's health into their constants, so a jam or an effectiveness change there means
 generating again (``Problem.with_health``), as does an effectiveness change for any method.
@@ -40,8 +42,9 @@ from ..problem import Problem
 from . import templates, templates_cascade, templates_closed_form
 from .base import (_ACTIVE_SET_METHODS, EXPORTABLE, FLOAT_EXACT_RTOL, FLOAT_TOLERANCE, FLOAT_VMAX, GENERATOR_VERSION,
                    PRECISIONS, ExportedKernel, ExportError, _fill, _Real, _short, _version)
-from .certify import Certificate, bound_text
-from .tables import _active_set_fields, _cascade_level_fields, _cascade_table, _iteration_budget
+from .certify import SIMPLEX_RANDOM_DEMANDS, Certificate, bound_text, simplex_bound_text
+from .tables import (_active_set_fields, _cascade_level_fields, _cascade_table, _iteration_budget, _simplex_fields,
+                     _simplex_pivots)
 
 __all__ = ["export_c", "ExportedKernel", "ExportError", "EXPORTABLE", "PRECISIONS", "GENERATOR_VERSION",
            "FLOAT_TOLERANCE", "FLOAT_EXACT_RTOL", "FLOAT_VMAX", "Certificate"]
@@ -98,7 +101,8 @@ def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "d
         C prefix of the public names and file names; default ``alloc_<method>``.
     maxit : int, optional
         Iteration cap per level of the active set; default the library's
-        ``50 + 10 (m + k)``.  Lower only to exercise the cap (tests).
+        ``50 + 10 (m + k)``.  Lower only to exercise the cap (tests).  ``lp`` keeps the library's
+        cap (refused: give ``iteration_bound``).
     table : bool, optional
         Active set: precompute the factorisation of every free set (2^m per level, the library's
         own ``_factor``, so the answers stay bit for bit) instead of factorising at run time;
@@ -109,6 +113,8 @@ def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "d
     iteration_bound : int or "certify", optional
         Active set: the iterations a call with the nominal limits and no rate window may take
         (reaching it returns the safe answer with status 2); default ``levels * maxit``.
+        ``lp``: the pivots such a call may take (the pivot beyond is not taken); default the
+        library's ``50 (N + k) - 1``.
         ``"certify"`` sets it to the largest count the library needs on the deterministic
         sample of :func:`alloc.export.certify.certification_demands` (a sampled certification,
         not a proof: see :mod:`alloc.export.certify`; ``double`` only, since the sample is run
@@ -144,6 +150,9 @@ def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "d
                           field="incremental")
     if method in _ACTIVE_SET_METHODS and opts.get("backend", "active_set") != "active_set":
         raise OptionError(f"backend: only the compiled active set is exported, got {opts['backend']!r}",
+                          field="backend")
+    if method == "lp" and opts.get("backend", "simplex") != "simplex":
+        raise OptionError(f"backend: lp exports the library's compiled simplex only, got {opts['backend']!r}",
                           field="backend")
     prefix = f"alloc_{method}" if prefix is None else prefix
     if not (isinstance(prefix, str) and prefix.isidentifier() and prefix.isascii()):
@@ -181,10 +190,13 @@ def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "d
     levels, cap = 0, None
     budget, cert = None, None
     for name, given in (("iteration_bound", iteration_bound), ("maxit", maxit), ("cache", cache)):
-        if given is not None and method not in _ACTIVE_SET_METHODS:
+        if given is not None and method == "lp" and name != "iteration_bound":
+            raise ExportError(f"{name}: lp keeps the library's pivot cap and has no factorisations to cache "
+                              "(give iteration_bound to bound its pivots)", field=name)
+        if given is not None and method not in _ACTIVE_SET_METHODS + ("lp",):
             raise ExportError(f"{name}: {method} is closed-form (no iterations to cap or bound, or factorisations "
                               "to cache)", field=name)
-    if table and method not in _ACTIVE_SET_METHODS + ("cgi",):
+    if (table or (table is not None and method == "lp")) and method not in _ACTIVE_SET_METHODS + ("cgi",):
         raise ExportError(f"table: {method} has no tables to make (only cgi and the active-set methods do)",
                           field="table")
     if method in ("pinv", "pinv_clip", "ganging"):
@@ -200,6 +212,15 @@ def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "d
     elif method == "cgi":
         fields.update(TAB_P=_cascade_table(impl, problem, real, table))
         body = templates_closed_form.CASCADE
+    elif method == "lp":
+        body, cap = _simplex_fields(impl, real, fields)
+        levels = 1  # one pivot budget a call (its stages share it, as the library's cap)
+        budget, cert = _iteration_budget(iteration_bound, allocator, problem, precision, cap - 1,
+                                         count=_simplex_pivots(impl, problem), unit="pivots",
+                                         random=SIMPLEX_RANDOM_DEMANDS)
+        fields["BOUND"] = simplex_bound_text(cap, budget, cert)
+        fields["MAXIT_DEFINE"] += ("/* pivots of a call with the nominal limits and no rate window (see above) */\n"
+                                   f"#define PFX_ITERATION_BOUND {budget}\n")
     else:
         lexico = [impl._static, impl._dynamic] if method == "dynamic" else [impl._impl]
         body, levels, cap = _active_set_fields(lexico, problem, real, fields, maxit, table, cache)

@@ -23,7 +23,7 @@ from .certify import Certificate
 #: bumped whenever the generated code changes for the same input
 GENERATOR_VERSION = "3"
 #: the methods :func:`export_c` generates, in the order the docs list them
-EXPORTABLE = ("pinv", "pinv_clip", "ganging", "pinv_scale", "cgi", "wls", "qp", "dynamic")
+EXPORTABLE = ("pinv", "pinv_clip", "ganging", "pinv_scale", "cgi", "wls", "qp", "dynamic", "lp")
 PRECISIONS = ("double", "float")
 #: ``float`` builds: the status ``exact`` tolerance (the library's 1e-6 is 8 float ulps at 1,
 #: below what a float residual with its rounding bound can certify)
@@ -58,6 +58,14 @@ TABLE_BUDGET = 256 * 1024
 #: its 612-byte slots (the 4 x 6 hexacopter's kernels are tabulated and keep none)
 CACHE_BUDGET = 16 * 1024
 
+#: ``float`` ``lp``: the simplex's tolerances (alloc._simplex's names; the double build takes the
+#: library's values) at float's round-off.  Reduced costs and pivots at 1e-5 (about 80 float ulps
+#: of the O(1) scaled tableau, as FLOAT_SIGMA_RTOL); ties, degenerate steps and singular pivots at
+#: 1e-6 (8 ulps); the final feasibility check at 1e-4 relative (the library's 1e-9 is below a
+#: float basic value's round-off); the right-hand side clamped at 1e30 (1e200 is beyond float)
+FLOAT_SIMPLEX_TOLS = {"DUAL_TOL": 1e-5, "PIVOT_TOL": 1e-5, "TIE_RTOL": 1e-6, "DEGENERATE_TOL": 1e-6,
+                      "SINGULAR_TOL": 1e-6, "FEASIBLE_RTOL": 1e-4, "B_CLAMP": 1e30}
+
 _ACTIVE_SET_METHODS = ("wls", "qp", "dynamic")
 
 
@@ -80,11 +88,11 @@ class ExportedKernel:
     source_name: str
     k: int
     m: int
-    #: iteration cap per level (active-set methods), else None
+    #: iteration cap per level (active-set methods), the pivot cap ``50 (N + k)`` (``lp``), else None
     maxit: int | None = None
-    #: levels of the active set (its total cap is ``levels * maxit``)
+    #: levels of the active set (its total cap is ``levels * maxit``); 1 for ``lp``
     levels: int = 0
-    #: iterations a call with the nominal limits and no rate window may take (active set)
+    #: iterations (``lp``: pivots) a call with the nominal limits and no rate window may take
     iteration_bound: int | None = None
     #: the sampled certification behind ``iteration_bound`` (``iteration_bound="certify"``)
     certificate: Certificate | None = None

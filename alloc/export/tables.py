@@ -9,9 +9,9 @@ from typing import Any
 import numpy as np
 
 from ..problem import Problem
-from . import templates, templates_active_set
-from .base import (CACHE_BUDGET, CGI_RTOL, FLOAT_CGI_RTOL, FLOAT_MU_EPS, FLOAT_SIGMA_RTOL, TABLE_BUDGET,
-                   ExportError, _ints, _Real)
+from . import templates, templates_active_set, templates_simplex
+from .base import (CACHE_BUDGET, CGI_RTOL, FLOAT_CGI_RTOL, FLOAT_MU_EPS, FLOAT_SIGMA_RTOL, FLOAT_SIMPLEX_TOLS,
+                   TABLE_BUDGET, ExportError, _ints, _Real)
 from .certify import Certificate, certify
 
 
@@ -160,15 +160,16 @@ def _cache_slots(cache: int | None, table: bool, slot_bytes: int, free_sets: int
 
 
 def _iteration_budget(bound: int | str | None, allocator: Any, problem: Problem, precision: str,
-                      total: int) -> tuple[int, Certificate | None]:
-    """The per-call iteration budget of an active-set kernel, and the certification behind it."""
+                      total: int, **counting: Any) -> tuple[int, Certificate | None]:
+    """The per-call iteration budget of an active-set or ``lp`` kernel, and the certification
+    behind it (``counting``: :func:`alloc.export.certify.certify`'s ``count`` and ``unit``)."""
     if bound is None:
         return total, None
     if bound == "certify":
         if precision != "double":
             raise ExportError("iteration_bound: the certification runs the library in double; a float kernel's "
                               "counts can differ (give an integer)", field="iteration_bound")
-        cert = certify(allocator, problem)
+        cert = certify(allocator, problem, **counting)
         return min(cert.bound, total), cert
     if isinstance(bound, bool) or not isinstance(bound, (int, np.integer)) or not 1 <= bound <= total:
         raise ExportError(f"iteration_bound: expected \"certify\" or an integer in [1, {total}], got {bound!r}",
@@ -263,3 +264,45 @@ def _tables(mats: np.ndarray, ivecs: np.ndarray, aset: Any, keys: list[tuple[int
             rows[name].append("{\n    " + ",\n    ".join(per_key[name]) + "\n}")
     return "\n".join(f"static const real {name}[{len(keys)}][{1 << m}][{width}] = {{\n" + ",\n".join(rows[name])
                      + "\n};" for name, width in zip(names, widths))
+
+
+def _simplex_fields(impl: Any, real: _Real, fields: dict[str, str]) -> tuple[str, int]:
+    """The ``lp`` kernel's constants, read from the library's own scaled problem
+    (:class:`alloc._simplex.LexicographicL1`: the tableau ``F``, the row scales, the half-widths
+    and the stages' normalised costs), so the C runs on exactly the library's data; and the
+    library's pivot cap ``50 (N + k)``."""
+    from .. import _simplex
+
+    lex = impl._lex
+    F, costs = lex._F, lex._costs
+    k, n = F.shape
+    if real.double:
+        tol = {name: getattr(_simplex, name) for name in FLOAT_SIMPLEX_TOLS}
+    else:
+        tol = FLOAT_SIMPLEX_TOLS
+    fields.update({key: real.literal(value, key) for key, value in tol.items()})
+    fields.update(NV=str(n), NSTAGE=str(costs.shape[0]), INF=real.literal(np.inf, "inf"),
+                  F=real.array(F, "F"), RHO=real.array(lex._rho, "rho"), D=real.array(lex._D, "D"),
+                  COSTS=real.array(costs, "costs"))
+    fields["HEALTH"] = (" *\n * Health at run time: PREFIX_set_limits(umin, umax) sets reduced limits or jams\n"
+                        " * (umin[j] == umax[j]) within the nominal limits: they enter the tableau's bounds and\n"
+                        " * right-hand side only; an effectiveness change needs a new export.  The scaling\n"
+                        " * (D, rho) and the safe answer keep the nominal problem's.\n")
+    fields["HEALTH_DECL"] = templates.HEALTH_DECL
+    fields["LIMITS_QUAL"] = ""
+    cap = int(lex.max_iter)
+    fields["MAXIT_DEFINE"] = ("/* the library's pivot cap, 50 (N + k): a call succeeds within PFX_MAXIT - 1 pivots */\n"
+                              f"#define PFX_MAXIT {cap}\n")
+    return templates_simplex.SIMPLEX, cap
+
+
+def _simplex_pivots(impl: Any, problem: Problem) -> Any:
+    """``count(v)``: the library simplex's pivots on ``v`` with the nominal limits (what the
+    allocator's call runs), also where it stops at its cap (the allocator then reports a
+    fallback of 0 iterations)."""
+    lex, lo, hi = impl._lex, problem.umin, problem.umax
+
+    def count(v: np.ndarray) -> int:
+        return lex.solve(np.ascontiguousarray(v, dtype=float), lo, hi)[2]
+
+    return count

@@ -227,3 +227,30 @@ HEALTH_DECL = r"""/* Health at run time: reduced position limits, a jam (umin[j]
    when a limit is NaN, outside the nominal ones or not ordered. */
 int PREFIX_set_limits(const PREFIX_real *umin, const PREFIX_real *umax);
 """
+
+# PREFIX_set_limits of the kernels that take limits at run time (the active set, the simplex):
+# the source defines UMIN0, UMAX0 (the nominal limits) and limits_nominal before it
+SET_LIMITS = r"""int PREFIX_set_limits(const real *umin, const real *umax)
+{
+    int j;
+    if (umin == NULL && umax == NULL) {
+        for (j = 0; j < M; ++j) {
+            umin_now[j] = UMIN0[j];
+            umax_now[j] = UMAX0[j];
+        }
+        limits_nominal = 1;
+        return 0;
+    }
+    if (umin == NULL || umax == NULL) return -1;
+    for (j = 0; j < M; ++j) {
+        if (!(UMIN0[j] <= umin[j] && umin[j] <= umax[j] && umax[j] <= UMAX0[j])) return -1;
+    }
+    limits_nominal = 1;
+    for (j = 0; j < M; ++j) {
+        umin_now[j] = umin[j];
+        umax_now[j] = umax[j];
+        if (umin[j] != UMIN0[j] || umax[j] != UMAX0[j]) limits_nominal = 0;
+    }
+    return 0;
+}
+"""

@@ -1,6 +1,7 @@
 """C99 template of the active-set kernels (:mod:`alloc.export`): ``wls``, ``qp`` (with
 ``priorities``) and ``dynamic``; filled as :mod:`.templates` describes."""
 
+from .templates import SET_LIMITS
 from .templates_factor import FACTOR
 
 # the constants, the solver instances, the work arrays and the triangular solves
@@ -420,30 +421,7 @@ int PREFIX_allocate(const real *v, const real *u_prev, real dt, real *u)
     return code;
 }
 
-int PREFIX_set_limits(const real *umin, const real *umax)
-{
-    int j;
-    if (umin == NULL && umax == NULL) {
-        for (j = 0; j < M; ++j) {
-            umin_now[j] = UMIN0[j];
-            umax_now[j] = UMAX0[j];
-        }
-        limits_nominal = 1;
-        return 0;
-    }
-    if (umin == NULL || umax == NULL) return -1;
-    for (j = 0; j < M; ++j) {
-        if (!(UMIN0[j] <= umin[j] && umin[j] <= umax[j] && umax[j] <= UMAX0[j])) return -1;
-    }
-    limits_nominal = 1;
-    for (j = 0; j < M; ++j) {
-        umin_now[j] = umin[j];
-        umax_now[j] = umax[j];
-        if (umin[j] != UMIN0[j] || umax[j] != UMAX0[j]) limits_nominal = 0;
-    }
-    return 0;
-}
-"""
+""" + SET_LIMITS
 
 # qp, wls (and their priorities): the lexicographic least-squares active set of
 # alloc/_active_set.py (_level, _start, _run, _call_into) with the factorisation of

@@ -16,16 +16,12 @@ import pytest
 
 import alloc
 from alloc._simplex import ITERATION_LIMIT, LexicographicL1, tie_break_weights
-from alloc.testing import KINDS, random_demands, random_problem
+from alloc.testing import KINDS, diagonal_wv, random_demands, random_problem
 from alloc.vehicles import ice
 
 # HiGHS through cvxpy (its own formulation of the lexicographic programme); Clarabel reports
 # "inaccurate" on the priority levels whose constraints touch the optimum exactly.
 SOLVER = dict(solver=cp.HIGHS)
-
-
-def diagonal_wv(p: alloc.Problem) -> alloc.Problem:
-    return p.replace(Wv=np.diagonal(p.Wv)) if np.count_nonzero(p.Wv - np.diag(np.diagonal(p.Wv))) else p
 
 
 def suite(n_problems: int, seed: int, priorities: bool = False):

@@ -1,8 +1,9 @@
-"""The per-call iteration bound of the active-set kernels (alloc/export/certify.py): certified by
-sampling, stated in the header, enforced by the generated code, and driven to.
+"""The per-call iteration bound of the active-set and ``lp`` kernels (alloc/export/certify.py):
+certified by sampling, stated in the header, enforced by the generated code, and driven to.
 
 One small kernel is compiled per test (the 4 x 6 hexacopter's ``wls``, its factorisations
-tabulated), unoptimised, as in tests/alloc/export/test_export.py.
+tabulated, and its ``lp``, whose count is the simplex's pivots), unoptimised, as in
+tests/alloc/export/test_export.py.
 """
 
 from __future__ import annotations
@@ -14,36 +15,50 @@ from test_export import STATUS, build  # noqa: F401 - build is the compiling fix
 import alloc
 import alloc.vehicles
 from alloc.export import ExportError, export_c
-from alloc.export.certify import analytic_bound, certification_demands
+from alloc.export.certify import SIMPLEX_RANDOM_DEMANDS, analytic_bound, certification_demands
 from alloc.testing import random_demands
 
 pytestmark = pytest.mark.usefixtures("build")
 
 
-@pytest.fixture(scope="module")
-def certified():
-    """The hexacopter's wls kernel with its certified bound, and the library beside it."""
+def _certified(method: str):
+    """The hexacopter's ``method`` kernel with its certified bound, and the library beside it."""
     p = alloc.vehicles.problem("hexa-x")
-    kernel = export_c(p, "wls", iteration_bound="certify", prefix="cert_wls")
-    return p, kernel, alloc.make_allocator(p, "wls")
+    kernel = export_c(p, method, iteration_bound="certify", prefix=f"cert_{method}")
+    return p, kernel, alloc.make_allocator(p, method)
+
+
+@pytest.fixture(scope="module", params=["wls", "lp"])
+def certified(request):
+    return _certified(request.param)
+
+
+@pytest.fixture(scope="module")
+def certified_wls():
+    return _certified("wls")
 
 
 def _safe(allocator, p, v):
-    pinv = allocator._safe._pinv
-    return np.clip(pinv.c + pinv.P @ v, p.umin, p.umax)
+    """The library's safe answer with the nominal limits (what it returns at its cap; the kernel's
+    transcription of it gives the same bits, a numpy ``c + P @ v`` may differ by an ulp)."""
+    return allocator._safe(v, p.umin, p.umax)
 
 
 def test_the_sampled_bound_is_stated_and_is_the_largest_count_of_the_sample(certified):
     p, kernel, allocator = certified
     cert = kernel.certificate
-    parts = certification_demands(p)
+    parts = certification_demands(p, SIMPLEX_RANDOM_DEMANDS if kernel.method == "lp" else 0)
     assert cert.demands == sum(len(V) for V in parts.values()) > 10_000
     # the bound is the library's count on its worst demand, and no sampled demand part exceeds it
     assert allocator(cert.worst_demand).iterations == cert.bound == kernel.iteration_bound
     assert max(cert.part_max.values()) == cert.bound
-    assert f"#define CERT_WLS_ITERATION_BOUND {cert.bound}\n" in kernel.header
+    assert f"#define {kernel.prefix.upper()}_ITERATION_BOUND {cert.bound}\n" in kernel.header
     assert "certified BY SAMPLING, not proved" in kernel.header
-    assert f"{analytic_bound(p.m)} iterations" in kernel.header and analytic_bound(6) == 5103
+    if kernel.method == "lp":  # the simplex's pivots, bound flips included; no analytic bound claimed
+        assert cert.unit == "pivots" and "No analytic bound" in kernel.header
+    else:
+        assert cert.unit == "iterations"
+        assert f"{analytic_bound(p.m)} iterations" in kernel.header and analytic_bound(6) == 5103
 
 
 def test_generated_code_reaches_the_bound_and_one_less_gives_the_safe_answer(build, certified):
@@ -54,7 +69,7 @@ def test_generated_code_reaches_the_bound_and_one_less_gives_the_safe_answer(bui
     u, status, it = at(v)
     assert (status, it) == (STATUS[r.status.value], bound)
     np.testing.assert_array_equal(u, r.u)
-    short = build(export_c(p, "wls", iteration_bound=bound - 1, prefix="short_wls"))
+    short = build(export_c(p, kernel.method, iteration_bound=bound - 1, prefix=f"short_{kernel.method}"))
     u, status, it = short(v)
     assert (status, it) == (2, bound - 1)
     np.testing.assert_array_equal(u, _safe(allocator, p, v))
@@ -68,11 +83,11 @@ def test_generated_code_reaches_the_bound_and_one_less_gives_the_safe_answer(bui
     assert short(v)[1:] == (2, bound - 1)
 
 
-def test_the_cached_run_time_form_reaches_the_same_bound(build, certified):
+def test_the_cached_run_time_form_reaches_the_same_bound(build, certified_wls):
     """Factorising at run time with its factorisation cache (table=False), the kernel counts the
     library's iterations too: the worst sampled demand takes exactly the bound, with the cache
     cold and then warm, and one iteration less gives the safe answer."""
-    p, kernel, allocator = certified
+    p, kernel, allocator = certified_wls
     bound, v = kernel.iteration_bound, kernel.certificate.worst_demand
     r = allocator(v)
     at = build(export_c(p, "wls", table=False, iteration_bound=bound, prefix="rt_cert_wls"))
@@ -105,7 +120,7 @@ def test_fresh_demands_are_within_the_bound_or_say_so(build, certified):
             beyond += 1
             assert (status, it) == (2, bound)
             np.testing.assert_array_equal(u, _safe(allocator, p, v))
-    assert beyond <= 4  # 1 % of fresh demands; measured: none
+    assert beyond <= 4  # 1 % of fresh demands; measured: none (wls and lp)
 
 
 def test_the_default_budget_is_the_library_cap_and_bad_bounds_name_the_field():

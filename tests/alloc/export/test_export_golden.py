@@ -29,6 +29,9 @@ GOLDEN = {
         ("hexa-x", "dynamic", "float", False): "7ed18a8b9976e340",
         ("hexa-x", "cgi", "double", None): "b2c5a4c879769376",
         ("hexa-x", "ganging", "double", None): "ae2d6057f49584f8",
+        # lp joined generator 3 without changing the other methods' sources
+        ("ice", "lp", "double", None): "52c9c4f3f3960e9d",
+        ("hexa-x", "lp", "float", None): "594875a74da5cd4c",
     },
 }
 
