@@ -217,7 +217,13 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--kernels", nargs="*", help="only the kernels of these labels (default: all; e.g. lp \"lp float\")")
     ap.add_argument("--certify", help="only the iteration-bound certification: write its table here")
     ap.add_argument("--methods", nargs="*", help="--certify: only these methods (default qp, wls, dynamic, lp)")
+    ap.add_argument("--summarise", nargs="+", metavar="JSON",
+                    help="only print the peer ratios over these runs' --json files (repeat_summary)")
     args = ap.parse_args(argv)
+    if args.summarise:
+        text = repeat_summary([json.loads(Path(f).read_text()) for f in args.summarise])
+        print(text, end="")
+        return {"summary": text}
     if args.certify:
         rows = certification_rows(args.calls, *([tuple(args.methods)] if args.methods else []))
         Path(args.certify).write_text(certification_markdown(rows))
@@ -337,6 +343,24 @@ def certification_markdown(rows: list[dict]) -> str:
         lines.append(f"| {r['problem']} | {r['method']} | {r['bound']}{unit} | {r['demands']:,} | {parts} "
                      f"| {r['fresh_max']} | {r['fresh_beyond']} of {r['fresh_demands']:,} | {r['cap_total']} "
                      f"| {analytic} |")
+    return "\n".join(lines) + "\n"
+
+
+def repeat_summary(runs: list[dict]) -> str:
+    """The ``VERSUS`` ratios over several runs (each a ``--json`` output): per problem, demands
+    and pair, the median over the runs, their range and how many runs had it above 1.5x (the
+    ICE goal's ratio), with each run's time and load; how much one run's ratio can be trusted."""
+    lines = ["| run | date | load (1 min) |", "|---|---|---|"]
+    lines += [f"| {i + 1} | {r['machine']['date']} | {r['machine']['load_1min']:.2f} |" for i, r in enumerate(runs)]
+    lines += ["", "| problem | demands | ratio | runs | median | min | max | runs above 1.5x |",
+              "|---|---|---|---|---|---|---|---|"]
+    for problem in problems():
+        for sequence in ("random", "sines"):
+            for kernel, ref in VERSUS:
+                got = [x for r in runs if (x := _ratio(r, problem, sequence, kernel, ref)) is not None]
+                if got:
+                    lines.append(f"| {problem} | {sequence} | {kernel} / {ref} | {len(got)} | {np.median(got):.2f}x | "
+                                 f"{min(got):.2f}x | {max(got):.2f}x | {sum(x > 1.5 for x in got)} |")
     return "\n".join(lines) + "\n"
 
 
