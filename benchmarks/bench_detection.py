@@ -48,7 +48,6 @@ tables; none is chosen per kind or per verdict.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import importlib
 import json
 import math
@@ -59,48 +58,28 @@ from typing import Any
 import numpy as np
 from scipy.stats import chi2
 
-from benchmarks.compare.failures import catalogue_kinds, failure_effectors, make_failure
-from sim.actuator_failure import ActuatorFailure
+from benchmarks.compare.failures import catalogue_kinds, failure_effectors
+from benchmarks.detection_cases import (
+    JAM_P95_GOAL,
+    LOE_GOAL,
+    SCENARIOS,
+    case_failure,
+    case_kind,
+    delay_failure_time,
+    detection_cases,
+    first_on_failed,
+)
+from benchmarks.detection_cases import done_keys as _done
+from benchmarks.detection_cases import markdown_table as _table
+from benchmarks.detection_cases import write_row as _write
 from sim.detection import DEFAULT_DESIGN, design_with, response_noise_correlation
 from sim.scenarios import get_scenario
 
-SCENARIOS = ("ice", "harv_latdir")
 NOISE_SCALES = (1.0, 2.0, 5.0)
 METHODS = ("qp", "wls")
 ARMS = ("blind", "told", "detected")
-#: goals of issue 26 (seconds)
-JAM_P95_GOAL = 0.5
-LOE_GOAL = 2.0
 FALSE_PER_10H_GOAL = 1.0
 BENEFIT_GOAL = 0.8
-#: detection cases: the catalogue's kinds (its loss of effectiveness leaves 25 %), losses of 50 %
-#: and 25 % (fractions 0.5, 0.75), and the catalogue's reduced rate limits alone
-EXTRA_CASES = {"loe50": ("effectiveness", {"fraction": 0.5}), "loe25": ("effectiveness", {"fraction": 0.75}),
-               "rate_limits": ("rate_limits", None)}
-
-
-def detection_cases() -> tuple[str, ...]:
-    return (*catalogue_kinds(), *EXTRA_CASES)
-
-
-def case_kind(case: str) -> str:
-    """The failure kind of a detection case (what a right isolation names)."""
-    return EXTRA_CASES[case][0] if case in EXTRA_CASES else case
-
-
-def case_failure(scenario: str, case: str, time: float) -> Any:
-    """The single-effector failure of ``case`` at ``time`` (the catalogue's, or a variant of it)."""
-    if case not in EXTRA_CASES:
-        return make_failure(scenario, f"{case}1", time)
-    kind, params = EXTRA_CASES[case]
-    base = make_failure(scenario, "effectiveness1" if kind == "effectiveness" else "limits1", time)
-    if params is None:  # the rider alone (the catalogue's rate limits, without its position limits)
-        acts = tuple(a for a in base.actuators if a.kind == kind)
-    else:
-        acts = tuple(ActuatorFailure(a.index, kind, **params) for a in base.actuators)
-    return dataclasses.replace(base, name=case, description=f"{case}: {acts}", actuators=acts)
-
-
 def _fly(scenario: str, case: str | None, *, health: str, method: str, seed: int, failure_time: float,
          duration: float, noise_scale: float = 1.0, frame_period: float | None = None,
          dt: float = 0.0005, excitation: float = 0.0, long_window: float | None = None) -> dict[str, Any]:
@@ -132,25 +111,6 @@ def machine_state(section: str, argv: list[str]) -> dict[str, Any]:
     return {"section": section, "started": time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()), "commit": commit,
             "cpus": os.cpu_count(), "load": [round(x, 2) for x in os.getloadavg()],
             "python": platform.python_version(), "machine": platform.machine(), "argv": argv}
-
-
-def _write(out: Path, section: str, row: dict[str, Any]) -> None:
-    out.mkdir(parents=True, exist_ok=True)
-    with open(out / f"{section}.jsonl", "a") as fh:
-        fh.write(json.dumps(row) + "\n")
-
-
-def _done(out: Path, section: str) -> set[str]:
-    path = out / f"{section}.jsonl"
-    if not path.exists():
-        return set()
-    return {json.loads(line)["key"] for line in path.read_text().splitlines() if line.strip()}
-
-
-def delay_failure_time(s: int, scenario: str, case: str) -> float:
-    """The ``delays`` section's failure time of seed index ``s``: seeded, uniform in [2, 3] s, 10 ms grid."""
-    rng = np.random.default_rng([s, SCENARIOS.index(scenario), detection_cases().index(case)])
-    return float(np.round(rng.uniform(2.0, 3.0), 2))
 
 
 def run_delays(out: Path, seeds: int, scales: tuple[float, ...], frame_rate: float, excitation: float = 0.0,
@@ -350,20 +310,6 @@ def run_benefit(out: Path, seeds: int, frame_rate: float, first_seed: int = 0,
 def _rows(out: Path, section: str) -> list[dict[str, Any]]:
     path = out / f"{section}.jsonl"
     return [json.loads(line) for line in path.read_text().splitlines() if line.strip()] if path.exists() else []
-
-
-def _table(header: list[str], rows: list[list[str]]) -> str:
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    lines += ["| " + " | ".join(r) + " |" for r in rows]
-    return "\n".join(lines)
-
-
-def first_on_failed(row: dict[str, Any]) -> dict[str, Any] | None:
-    """The first detection at or after the failure naming a failed effector."""
-    for d in row["detections"]:
-        if d["delay"] is not None and d["effector"] in row["failed"]:
-            return d
-    return None
 
 
 def last_on_failed(row: dict[str, Any]) -> dict[str, Any] | None:

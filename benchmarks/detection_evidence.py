@@ -26,18 +26,19 @@ from typing import Any
 import numpy as np
 
 import sim.engine as engine
-from benchmarks import bench_detection as bd
+from benchmarks import detection_cases as dc
+from benchmarks.compare.failures import failure_effectors
 from sim.detection import DEFAULT_DESIGN, design_with
 from sim.scenarios import get_scenario
 
 #: the goal's deadline after the onset, per kind (s): issue 26's
-DEADLINE = {"jam": bd.JAM_P95_GOAL, "hardover": bd.JAM_P95_GOAL, "effectiveness": bd.LOE_GOAL}
+DEADLINE = {"jam": dc.JAM_P95_GOAL, "hardover": dc.JAM_P95_GOAL, "effectiveness": dc.LOE_GOAL}
 
 
 def fly_traced(scenario: str, case: str, scale: float, s: int, frame_rate: float = 100.0,
                excitation: float = 0.0, long_window: float | None = None) -> dict[str, Any]:
     """The ``delays`` run of seed index ``s``, with its detector's evidence after every sample."""
-    tf = bd.delay_failure_time(s, scenario, case)
+    tf = dc.delay_failure_time(s, scenario, case)
     trace: list[dict[str, Any]] = []
     made_detector: list[Any] = []
     made = engine._detector
@@ -51,7 +52,7 @@ def fly_traced(scenario: str, case: str, scale: float, s: int, frame_rate: float
 
         def traced_isolate(pending: Any, gamma: float) -> Any:  # the evidence the decision reads
             ev = det.evidence()
-            failed = det.problem.names[bd.failure_effectors(scenario, "jam1")[0]]
+            failed = det.problem.names[failure_effectors(scenario, "jam1")[0]]
             # kept: the three strongest and every hypothesis on the failed effector (the rest is small)
             weighed.append([[e, k, round(p, 6)] for i, (e, k, p) in enumerate(ev) if i < 3 or e == failed])
             return isolate(pending, gamma)
@@ -76,14 +77,14 @@ def fly_traced(scenario: str, case: str, scale: float, s: int, frame_rate: float
     engine._detector = traced_detector
     t0 = time.perf_counter()
     try:
-        res = get_scenario(scenario)(method="qp", failure=bd.case_failure(scenario, case, tf), duration=tf + 3.0,
+        res = get_scenario(scenario)(method="qp", failure=dc.case_failure(scenario, case, tf), duration=tf + 3.0,
                                      seed=100 + s, health="detected", noise_scale=scale,
                                      frame_period=1.0 / frame_rate if frame_rate else None, excitation=excitation,
                                      detector_long_window=long_window)
     finally:
         engine._detector = made
-    failed = res.effector_names[bd.failure_effectors(scenario, "jam1")[0]]
-    return {"key": f"{scenario}/{case}/{scale:g}/{s}", "scenario": scenario, "case": case, "kind": bd.case_kind(case),
+    failed = res.effector_names[failure_effectors(scenario, "jam1")[0]]
+    return {"key": f"{scenario}/{case}/{scale:g}/{s}", "scenario": scenario, "case": case, "kind": dc.case_kind(case),
             "noise_scale": scale, "seed": 100 + s, "failure_time": tf, "failed": failed,
             "excitation": excitation, "detector_long_window": design_with(long_window).long_window, "detections": res.summary().get("detections", []), "trace": trace,
             "noise_correlation": list(made_detector[0].noise_correlation), "per_sample_alpha": per_sample_alpha(),
@@ -97,14 +98,14 @@ TRACED_CASES = ("jam", "hardover", "effectiveness", "loe50", "loe25")
 def run_evidence(out: Any, seeds: int, scales: tuple[float, ...], frame_rate: float, excitation: float = 0.0,
                  long_window: float | None = None) -> None:
     """Every traced case of the ``delays`` section, seed by seed (resumable like it)."""
-    done = bd._done(out, "evidence")
+    done = dc.done_keys(out, "evidence")
     for s in range(seeds):
         for scale in scales:
-            for scenario in bd.SCENARIOS:
+            for scenario in dc.SCENARIOS:
                 for case in TRACED_CASES:
                     key = f"{scenario}/{case}/{scale:g}/{s}"
                     if key not in done:
-                        bd._write(out, "evidence", fly_traced(scenario, case, scale, s, frame_rate, excitation,
+                        dc.write_row(out, "evidence", fly_traced(scenario, case, scale, s, frame_rate, excitation,
                                                                     long_window))
 
 
@@ -145,7 +146,7 @@ def at_deadline(row: dict[str, Any]) -> dict[str, Any]:
     on_failed = sum(p for e, _, p in ev if e == row["failed"])
     right = sum(p for e, k, p in ev if e == row["failed"] and k == row["kind"])
     others = [(e, k, p) for e, k, p in ev if not (e == row["failed"] and k == row["kind"])]
-    first = bd.first_on_failed({"detections": row["detections"], "failed": [row["failed"]]})
+    first = dc.first_on_failed({"detections": row["detections"], "failed": [row["failed"]]})
     return {"t": point["t"], "alarmed": point["alarmed"], "effector": on_failed,
             "kind": right / on_failed if on_failed > 0 else 0.0, "other": others[0] if others else None,
             "delay": None if first is None else first["delay"]}
@@ -170,4 +171,4 @@ def report_evidence(rows: list[dict[str, Any]]) -> str:
                     other if a["alarmed"] else "-", f"{oracle_power(r, deadline):.2f}"])
     decided = len(rows) - len(out)
     return (f"{len(rows)} runs traced; {decided} decided by their deadline (not listed).\n\n"
-            + bd._table(header, out))
+            + dc.markdown_table(header, out))
