@@ -282,8 +282,9 @@ def _excited(chosen: LoopAllocator, solve: Any, problem: Any, frame_period: floa
     from alloc.estimation import NullSpaceExcitation
     from alloc.result import Result
 
-    period = frame_period if frame_period is not None else 5e-4
-    wrapper = NullSpaceExcitation(solve, period, amplitude=amplitude, band=EXCITATION_BAND, seed=seed)
+    if frame_period is None:  # the signal's clock is the loop's frame; there is no default to guess
+        raise ValueError("excitation: needs frame_period (the seconds between the allocator's calls)")
+    wrapper = NullSpaceExcitation(solve, frame_period, amplitude=amplitude, band=EXCITATION_BAND, seed=seed)
     lo, hi = problem.umin, problem.umax
     status_of = {c: s for s, c in code.items()}
     calls = [first_call]

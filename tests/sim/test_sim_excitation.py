@@ -87,6 +87,8 @@ def test_the_setting_is_checked_recorded_and_refused_for_static():
         RunSettings(excitation=MAX_EXCITATION * 2)
     with pytest.raises(TypeError, match="excitation"):
         build_allocator(ice.vehicle(), "static", {}, excitation=1.0)
+    with pytest.raises(ValueError, match="frame_period"):
+        build_allocator(ice.vehicle(), "qp", {}, excitation=1.0)
     r = get_scenario("ice")(method="qp", seed=1, duration=0.5, frame_period=T, excitation=1.5)
     assert r.settings["excitation"] == 1.5 and not r.diverged
 
