@@ -81,7 +81,8 @@ def _checksum(problem: Problem) -> str:
 def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "double",
              options: Mapping[str, Any] | None = None, prefix: str | None = None,
              maxit: int | None = None, table: bool | None = None,
-             iteration_bound: int | str | None = None, cache: int | None = None) -> ExportedKernel:
+             iteration_bound: int | str | None = None, cache: int | None = None,
+             warm_start: bool = False) -> ExportedKernel:
     """Generate the C99 kernel of ``method`` on a problem or vehicle.
 
     Parameters
@@ -124,6 +125,16 @@ def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "d
         factorisations met last (0: none; a cached factorisation has the bits of a fresh one,
         so the cache changes the time, never the answer); default as many as fit
         :data:`CACHE_BUDGET` bytes, at most one per free set.
+    warm_start : bool, optional
+        Active set: keep the last answer's working set in static storage and start the next call
+        from it when the first level's objective is not larger there than at the cold start
+        (a smooth demand sequence then takes one iteration a level where the cold start takes
+        several).  The answers then agree with the library's to round-off where the optimum is
+        unique, not bit for bit, and depend on the calls before (``PREFIX_warm_reset`` forgets
+        them; ``PREFIX_set_limits`` does too).  A warm run that reaches the budget is redone
+        from the cold start under the same budget, so a call takes at most twice
+        ``iteration_bound``.  Default False: every answer a function of the call alone, as the
+        library's.
 
     Returns
     -------
@@ -196,6 +207,11 @@ def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "d
         if given is not None and method not in _ACTIVE_SET_METHODS + ("lp",):
             raise ExportError(f"{name}: {method} is closed-form (no iterations to cap or bound, or factorisations "
                               "to cache)", field=name)
+    if not isinstance(warm_start, (bool, np.bool_)):
+        raise ExportError(f"warm_start: expected True or False, got {warm_start!r}", field="warm_start")
+    if warm_start and method not in _ACTIVE_SET_METHODS:
+        raise ExportError(f"warm_start: {method} has no working set to keep (only the active-set methods "
+                          f"{', '.join(_ACTIVE_SET_METHODS)} do)", field="warm_start")
     if (table or (table is not None and method == "lp")) and method not in _ACTIVE_SET_METHODS + ("cgi",):
         raise ExportError(f"table: {method} has no tables to make (only cgi and the active-set methods do)",
                           field="table")
@@ -223,9 +239,10 @@ def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "d
                                    f"#define PFX_ITERATION_BOUND {budget}\n")
     else:
         lexico = [impl._static, impl._dynamic] if method == "dynamic" else [impl._impl]
-        body, levels, cap = _active_set_fields(lexico, problem, real, fields, maxit, table, cache)
+        body, levels, cap = _active_set_fields(lexico, problem, real, fields, maxit, table, cache, bool(warm_start))
         budget, cert = _iteration_budget(iteration_bound, allocator, problem, precision, levels * cap)
-        fields["BOUND"] = bound_text(m, levels, cap, budget, cert, cap_given=maxit is not None)
+        fields["BOUND"] = bound_text(m, levels, cap, budget, cert, cap_given=maxit is not None,
+                                     warm=bool(warm_start))
         fields["MAXIT_DEFINE"] += ("/* iterations of a call with the nominal limits and no rate window (see above) */\n"
                                    f"#define PFX_ITERATION_BOUND {budget}\n")
     source = _fill(templates.COMMON + body, fields, prefix)
@@ -233,4 +250,5 @@ def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "d
     return ExportedKernel(prefix=prefix, method=method, precision=precision, header=header, source=source,
                           header_name=f"{prefix}.h", source_name=f"{prefix}.c", k=k, m=m,
                           maxit=cap, levels=levels, options=shown,
-                          iteration_bound=budget if levels else None, certificate=cert if levels else None)
+                          iteration_bound=budget if levels else None, certificate=cert if levels else None,
+                          warm_start=bool(warm_start))

@@ -97,6 +97,8 @@ class ExportedKernel:
     #: the sampled certification behind ``iteration_bound`` (``iteration_bound="certify"``)
     certificate: Certificate | None = None
     options: dict[str, Any] = field(default_factory=dict)
+    #: the active set keeps its last working set between calls (``warm_start=True``)
+    warm_start: bool = False
 
     def write(self, out: str | os.PathLike[str]) -> tuple[Path, Path]:
         """Write the pair into folder ``out`` (created); returns the two paths."""

@@ -175,9 +175,10 @@ def _enforced_text(budget: int, cert: Certificate | None, default: str | None, w
 
 
 def bound_text(m: int, levels: int, maxit: int, budget: int, cert: Certificate | None,
-               cap_given: bool = False) -> str:
+               cap_given: bool = False, warm: bool = False) -> str:
     """The header's statement of the iteration bound of an active-set kernel and its argument
-    (``cap_given``: ``maxit`` was chosen at export, not the library's cap)."""
+    (``cap_given``: ``maxit`` was chosen at export, not the library's cap; ``warm``: the kernel
+    has the warm start, whose run the sample does not cover)."""
     worst = analytic_bound(m)
     enforced = _enforced_text(budget, cert, "here levels x cap" if budget == levels * maxit else None, "budget",
                               "active set (whose counts this kernel reproduces) needs at most "
@@ -195,6 +196,13 @@ def bound_text(m: int, levels: int, maxit: int, budget: int, cert: Certificate |
  * its working set, where the objective has strictly decreased since the last one, so no
  * working set (each effector free, at its lower or upper bound) recurs there: a level ends
  * within (m + 1) 3^m = {worst} iterations, far above the cap (alloc/export/certify.py).
+{_WARM_BOUND if warm else ""}"""
+
+
+#: the warm-start kernels' addition to :func:`bound_text`
+_WARM_BOUND = """ * Warm start: the bounds above hold for the cold start, which the sample runs.  A run from the
+ * warm start that reaches the budget is abandoned and the call redone from the cold start under
+ * the same budget: at most twice the budget a call (PREFIX_iterations counts both runs).
 """
 
 

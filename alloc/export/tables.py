@@ -83,7 +83,8 @@ def _cascade_level_fields(impl: Any, problem: Problem, real: _Real, table: bool 
 
 
 def _active_set_fields(instances: list[Any], problem: Problem, real: _Real, fields: dict[str, str],
-                       maxit: int | None, table: bool | None, cache: int | None) -> tuple[str, int, int]:
+                       maxit: int | None, table: bool | None, cache: int | None,
+                       warm: bool = False) -> tuple[str, int, int]:
     """The active set's constants, read from the library's packed solver states
     (:func:`alloc._active_set.pack`), so the C runs on exactly the library's data.  One
     instance for ``qp`` and ``wls``; ``dynamic`` has two (without and with ``u_prev``), which
@@ -138,11 +139,11 @@ def _active_set_fields(instances: list[Any], problem: Problem, real: _Real, fiel
     fields["HEALTH"] = (" *\n * Health at run time: PREFIX_set_limits(umin, umax) sets reduced limits or jams\n"
                         " * (umin[j] == umax[j]) within the nominal limits; an effectiveness change needs a new\n"
                         " * export.  The cold start and the safe answer keep the nominal Eq 1.23 matrix.\n" + cached)
-    fields["HEALTH_DECL"] = templates.HEALTH_DECL
+    fields["HEALTH_DECL"] = templates.HEALTH_DECL + (templates.WARM_DECL if warm else "")
     fields["LIMITS_QUAL"] = ""
     fields["MAXIT_DEFINE"] = (f"/* iteration cap per level and per call (see the bound above) */\n"
                               f"#define PFX_MAXIT {cap}\n#define PFX_MAXIT_TOTAL {levels * cap}\n")
-    return templates_active_set.ACTIVE_SET, levels, cap
+    return templates_active_set.ACTIVE_SET_WARM if warm else templates_active_set.ACTIVE_SET, levels, cap
 
 
 def _cache_slots(cache: int | None, table: bool, slot_bytes: int, free_sets: int) -> int:

@@ -228,6 +228,11 @@ HEALTH_DECL = r"""/* Health at run time: reduced position limits, a jam (umin[j]
 int PREFIX_set_limits(const PREFIX_real *umin, const PREFIX_real *umax);
 """
 
+WARM_DECL = r"""/* Warm start (exported with warm_start=True): forget the last answer's working set, so that
+   the next call starts cold, from the library's start (PREFIX_set_limits does so too). */
+void PREFIX_warm_reset(void);
+"""
+
 # PREFIX_set_limits of the kernels that take limits at run time (the active set, the simplex):
 # the source defines UMIN0, UMAX0 (the nominal limits) and limits_nominal before it
 SET_LIMITS = r"""int PREFIX_set_limits(const real *umin, const real *umax)

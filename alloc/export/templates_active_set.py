@@ -1,6 +1,8 @@
 """C99 template of the active-set kernels (:mod:`alloc.export`): ``wls``, ``qp`` (with
 ``priorities``) and ``dynamic``; filled as :mod:`.templates` describes."""
 
+import re
+
 from .templates import SET_LIMITS
 from .templates_factor import FACTOR
 
@@ -346,7 +348,7 @@ static int run(struct work *w, const real *v, const real *lo, const real *hi, co
         w->freeset[j] = lo[j] < x && x < hi[j];
         w->pinned[j] = 0;
     }
-    *ok = 1;
+@WARM_PICK@    *ok = 1;
     for (l = 0; l < NLEV + FINAL; ++l) {
         int it, cap = budget - total < MAXIT ? budget - total : MAXIT;
         if (cap <= 0) {
@@ -385,7 +387,9 @@ static int target(const struct instance *S, const real *v, const real *u_prev, r
     return good;
 }
 
-/* 1 while the limits in force are the nominal ones (PREFIX_set_limits) */
+"""
+
+_ALLOCATE = r"""/* 1 while the limits in force are the nominal ones (PREFIX_set_limits) */
 static int limits_nominal = 1;
 
 int PREFIX_allocate(const real *v, const real *u_prev, real dt, real *u)
@@ -421,11 +425,145 @@ int PREFIX_allocate(const real *v, const real *u_prev, real dt, real *u)
     return code;
 }
 
-""" + SET_LIMITS
+"""
+
+# The warm start of a kernel exported with warm_start=True (not in the library, whose answers
+# are functions of the call alone: see alloc/_active_set.py).  Placed before run(), which
+# calls warm_pick where the cold start is made.
+_WARM = r"""/*
+ * Warm start: each instance keeps its last answer and that answer's working set (each effector
+ * free, or held at its lower or its upper bound).  A call then starts from that working set on
+ * its own bounds (the free effectors' last values clipped, the held ones at the same side's
+ * bound) instead of the cold start when the first level's objective is not larger there; a run
+ * from it that reaches the budget is redone from the cold start.  Any start is feasible and the
+ * levels end at the same optimum, so the answer is the cold one up to round-off where the
+ * optimum is unique; it is not the library's bit for bit.
+ */
+static int warm_valid[NINST];
+static real warm_u[NINST][M];
+static signed char warm_side[NINST][M]; /* 0 free, -1 held at the lower bound, 1 at the upper */
+/* set by PREFIX_allocate: 1 lets run() take the warm start, which makes it 2 */
+static int warm_try;
+
+/* the first level's objective at x: ||A_0 x - b_0||^2 + GAM[0]^2 (x - up)' Wu (x - up) */
+static real first_objective(const struct work *w, const real *x, const real *up)
+{
+    int i, j, s, r1 = NLEV > 0 ? STARTS[1] : 0;
+    real gam = NLEV > 0 ? GAM[0] : 1, acc = 0, q = 0;
+    for (i = 0; i < r1; ++i) {
+        real e = w->bv[i];
+        for (j = 0; j < M; ++j) e -= A[i][j] * x[j];
+        acc += e * e;
+    }
+    if (gam != 0) {
+        for (j = 0; j < M; ++j) {
+            real d = 0;
+            if (w->S->diag) {
+                d = w->S->wu[j][j] * (x[j] - up[j]);
+            } else {
+                for (s = 0; s < M; ++s) d += w->S->wu[j][s] * (x[s] - up[s]);
+            }
+            q += (x[j] - up[j]) * d;
+        }
+        acc += gam * gam * q;
+    }
+    return acc;
+}
+
+/* w->u, w->freeset: the warm start in place of the cold start when it is kept and not worse;
+   1 when taken */
+static int warm_pick(struct work *w, const real *lo, const real *hi, const real *up)
+{
+    int inst = (int)(w->S - INSTANCES), j;
+    real x[M];
+    if (!warm_valid[inst]) return 0;
+    for (j = 0; j < M; ++j) {
+        int side = warm_side[inst][j];
+        x[j] = side < 0 ? lo[j] : side > 0 ? hi[j] : rmin(rmax(warm_u[inst][j], lo[j]), hi[j]);
+    }
+    if (first_objective(w, x, up) > first_objective(w, w->u, up)) return 0;
+    for (j = 0; j < M; ++j) {
+        w->u[j] = x[j];
+        w->freeset[j] = lo[j] < x[j] && x[j] < hi[j];
+    }
+    return 1;
+}
+
+/* keep the answer of a finished run as the instance's warm start */
+static void warm_keep(const struct work *w, const real *hi)
+{
+    int inst = (int)(w->S - INSTANCES), j;
+    for (j = 0; j < M; ++j) {
+        warm_u[inst][j] = w->u[j];
+        warm_side[inst][j] = (signed char)(w->freeset[j] ? 0 : w->u[j] >= hi[j] ? 1 : -1);
+    }
+    warm_valid[inst] = 1;
+}
+
+void PREFIX_warm_reset(void)
+{
+    int i;
+    for (i = 0; i < NINST; ++i) warm_valid[i] = 0;
+}
+
+"""
+
+_PICK = "    if (warm_try && warm_pick(w, lo, hi, up)) warm_try = 2; /* the warm start is taken */\n"
+
+_ALLOCATE_WARM = r"""/* 1 while the limits in force are the nominal ones (PREFIX_set_limits) */
+static int limits_nominal = 1;
+
+int PREFIX_allocate(const real *v, const real *u_prev, real dt, real *u)
+{
+    struct work w;
+    real lo[M], hi[M], upc[M];
+    const real *up;
+    int j, ok, code, budget;
+    last_iterations = 0;
+    if (bounds(v, u_prev, dt, lo, hi, u)) return 2;
+    /* dynamic: the instance with u_prev when there is a rate window */
+    w.S = &INSTANCES[NINST > 1 && u_prev != NULL ? 1 : 0];
+    up = w.S->upt;
+    if (w.S->kv != NULL) {
+        if (!target(w.S, v, u_prev, upc)) {
+            safe_answer(v, lo, hi, u);
+            return 2;
+        }
+        up = upc;
+    }
+    /* the certified budget covers the nominal limits without a rate window, from the cold start
+       (see the header); a warm run that reaches it is redone cold under the same budget */
+    budget = u_prev == NULL && limits_nominal ? PFX_ITERATION_BOUND : PFX_MAXIT_TOTAL;
+    warm_try = 1;
+    ok = 0;
+    last_iterations = run(&w, v, lo, hi, up, budget, &ok);
+    if (!ok && warm_try == 2) {
+        warm_try = 0;
+        last_iterations += run(&w, v, lo, hi, up, budget, &ok);
+    }
+    if (!ok) {
+        warm_valid[w.S - INSTANCES] = 0;
+        safe_answer(v, lo, hi, u);
+        return 2;
+    }
+    warm_keep(&w, hi);
+    for (j = 0; j < M; ++j) u[j] = w.u[j];
+    code = finish(u, lo, hi, v);
+    if (code == 2) {
+        warm_valid[w.S - INSTANCES] = 0;
+        safe_answer(v, lo, hi, u);
+    }
+    return code;
+}
+
+"""
 
 # qp, wls (and their priorities): the lexicographic least-squares active set of
 # alloc/_active_set.py (_level, _start, _run, _call_into) with the factorisation of
 # alloc/_lsq_factor.py (_jacobi, _factor), with a fixed-size static cache of factorisations
-# in the library's place (both change the cost, never the answer); the library has no warm
-# start, so neither has the kernel.
-ACTIVE_SET = _DATA + FACTOR + _LEVEL + _ENTRY
+# in the library's place (both change the cost, never the answer).  The library has no warm
+# start, so the default kernel has none either; ACTIVE_SET_WARM adds one (export_c's
+# warm_start), whose answers agree with the library's to round-off instead of bit for bit.
+ACTIVE_SET = _DATA + FACTOR + _LEVEL + _ENTRY.replace("@WARM_PICK@", "") + _ALLOCATE + SET_LIMITS
+ACTIVE_SET_WARM = (_DATA + FACTOR + _LEVEL + _WARM + _ENTRY.replace("@WARM_PICK@", _PICK) + _ALLOCATE_WARM
+                   + re.sub(r"( +)limits_nominal = 1;\n", r"\1PREFIX_warm_reset();\n\1limits_nominal = 1;\n", SET_LIMITS))
