@@ -536,6 +536,10 @@ def export_command(
     cache: Optional[int] = typer.Option(None, "--cache", metavar="SLOTS", help="active set without tables: slots "
                                         "of the static cache of recent factorisations (0: none); default as many "
                                         "as fit 16 KiB"),
+    warm_start: bool = typer.Option(False, "--warm-start", help="active set: start each call from the last "
+                                    "answer's working set (fewer iterations on smooth demands; answers then "
+                                    "agree with the library's to round-off, not bit for bit, and depend on the "
+                                    "calls before: see docs/export.md)"),
 ) -> None:
     """Write the allocator as a self-contained C99 kernel (alloc_<method>.h/.c; see docs/export.md)."""
     from .export import ExportError, export_c
@@ -552,7 +556,8 @@ def export_command(
             raise ExportError(f"iteration_bound: expected a positive integer or \"certify\", got {bound!r}",
                               field="iteration_bound") from None
     kernel = export_c(load_vehicle_option(vehicle), name, precision=precision, options=parse_options(option),
-                      prefix=prefix, iteration_bound=bound, maxit=maxit, table=table, cache=cache)
+                      prefix=prefix, iteration_bound=bound, maxit=maxit, table=table, cache=cache,
+                      warm_start=warm_start)
     for path in kernel.write(out):
         typer.echo(str(path))
 

@@ -57,6 +57,13 @@ TABLE_BUDGET = 256 * 1024
 #: heap.  16 KiB is under a tenth of an STM32F4's 192 KB of RAM; ICE qp keeps 26 free sets in
 #: its 612-byte slots (the 4 x 6 hexacopter's kernels are tabulated and keep none)
 CACHE_BUDGET = 16 * 1024
+#: the warm start (``warm_start=True``) is refused beyond this condition number of a level's
+#: weighted effectiveness (its singular values above the round-off cut) or of the preference
+#: weight: there the optimum is determined only to round-off times it, and a warm start ends
+#: elsewhere within that (measured on the adversarial suite: answers apart by up to 0.85 of the
+#: limit span and attainable demands called unattainable at 1e9 and beyond, none apart by
+#: more than 1e-12 below 1e6)
+WARM_COND_MAX = 1e6
 
 #: ``float`` ``lp``: the simplex's tolerances (alloc._simplex's names; the double build takes the
 #: library's values) at float's round-off.  Reduced costs and pivots at 1e-5 (about 80 float ulps

@@ -11,7 +11,7 @@ import numpy as np
 from ..problem import Problem
 from . import templates, templates_active_set, templates_simplex
 from .base import (CACHE_BUDGET, CGI_RTOL, FLOAT_CGI_RTOL, FLOAT_MU_EPS, FLOAT_SIGMA_RTOL, FLOAT_SIMPLEX_TOLS,
-                   TABLE_BUDGET, ExportError, _ints, _Real)
+                   TABLE_BUDGET, WARM_COND_MAX, ExportError, _ints, _Real)
 from .certify import Certificate, certify
 
 
@@ -111,6 +111,8 @@ def _active_set_fields(instances: list[Any], problem: Problem, real: _Real, fiel
         tiny = {"SIGMA_RTOL": FLOAT_SIGMA_RTOL, "JACOBI_EPS": eps, "JACOBI_TOL_FLOOR": 4.0 * eps, "JACOBI_SMALL": 1e-12,
                 "SIGMA_TINY": 1e-35, "CHOL_TINY": 1e-37, "MU_EPS": FLOAT_MU_EPS}
     fields.update({key: real.literal(value, key) for key, value in tiny.items()})
+    if warm:
+        _warm_conditioning(instances, aset, n, m)
     diags = [int(lex._state[2][aset._HEAD, aset._DIAG]) for lex in instances]
     ml = 1 if all(diags) else m  # a diagonal L is stored in column 0 of its row
     fields.update(
@@ -138,12 +140,44 @@ def _active_set_fields(instances: list[Any], problem: Problem, real: _Real, fiel
     fields["INSTANCES"] = _instances(instances, aset, keys, real, ml, bool(table))
     fields["HEALTH"] = (" *\n * Health at run time: PREFIX_set_limits(umin, umax) sets reduced limits or jams\n"
                         " * (umin[j] == umax[j]) within the nominal limits; an effectiveness change needs a new\n"
-                        " * export.  The cold start and the safe answer keep the nominal Eq 1.23 matrix.\n" + cached)
+                        " * export.  The cold start and the safe answer keep the nominal Eq 1.23 matrix.\n" + cached
+                        + (_WARM_TEXT if warm else ""))
     fields["HEALTH_DECL"] = templates.HEALTH_DECL + (templates.WARM_DECL if warm else "")
     fields["LIMITS_QUAL"] = ""
     fields["MAXIT_DEFINE"] = (f"/* iteration cap per level and per call (see the bound above) */\n"
                               f"#define PFX_MAXIT {cap}\n#define PFX_MAXIT_TOTAL {levels * cap}\n")
     return templates_active_set.ACTIVE_SET_WARM if warm else templates_active_set.ACTIVE_SET, levels, cap
+
+
+def _warm_conditioning(instances: list[Any], aset: Any, n: int, m: int) -> None:
+    """Refuse the warm start where the optimum is not determined beyond round-off
+    (:data:`WARM_COND_MAX`): the weighted effectiveness A (its singular values above
+    ``SIGMA_RTOL`` of the largest, the cut the factorisation makes) and each instance's Wu."""
+    for lex in instances:
+        mats = lex._state[0]
+        s = np.linalg.svd(mats[aset._A, :n, :m], compute_uv=False)
+        s = s[s > aset.SIGMA_RTOL * s[0]] if s.size and s[0] > 0 else s[:0]
+        w = np.linalg.eigvalsh(mats[aset._WU, :m, :m])
+        for what, c in (("weighted effectiveness Wv^(1/2) B", s[0] / s[-1] if s.size else 1.0),
+                        ("preference weight Wu", w[-1] / w[0] if w[0] > 0 else np.inf)):
+            if not c <= WARM_COND_MAX:
+                raise ExportError(f"warm_start: the problem's {what} has condition number {c:.2g}, above "
+                                  f"{WARM_COND_MAX:g}: its optimum is determined only to round-off times that, "
+                                  "so a warm start would end elsewhere; export without warm_start",
+                                  field="warm_start")
+
+
+#: the header paragraph of a kernel exported with warm_start=True
+_WARM_TEXT = """ *
+ * Warm start (exported with warm_start=True): the kernel also keeps, in static storage, the
+ * last answer and its working set, and starts the next call from them where the first level's
+ * objective is not larger there than at the cold start.  An answer then depends on the calls
+ * before it: it agrees with the library's (which has no warm start) to round-off where the
+ * optimum is strictly determined, and where the optimality test cannot tell working sets
+ * apart (a flat optimum) it may be another point the library's test accepts.
+ * PREFIX_warm_reset() forgets the warm start, as PREFIX_set_limits does; the next call is
+ * then the library's, bit for bit.
+"""
 
 
 def _cache_slots(cache: int | None, table: bool, slot_bytes: int, free_sets: int) -> int:

@@ -594,6 +594,9 @@ def test_cli_export_passes_every_generator_setting(tmp_path):
     (["--method", "lp", "--certify", "--precision", "float"], "iteration_bound"),
     (["--method", "lp", "--iteration-bound", "0"], "iteration_bound"),
     (["--method", "lp", "--option", "backend=highs"], "backend"),
+    (["--method", "lp", "--warm-start"], "warm_start"),
+    (["--method", "pinv_scale", "--warm-start"], "warm_start"),
+    (["--method", "cgi", "--warm-start"], "warm_start"),
 ])
 def test_cli_export_refuses_settings_in_one_line_naming_the_field(tmp_path, args, field):
     from alloc.cli import app
