@@ -22,7 +22,9 @@ mismatches.  DAQP's C (the sources of the ``daqp`` package, :data:`DAQP_VERSION`
 ``pip download`` from the package index and compiled here with ``-O2``;
 ``benchmarks/native/daqp_driver.c``) runs on the same demands and limits on the ``wls``
 problem at the library's default gamma, set up once, ``f`` updated each call, "cold" (every
-bound's state reset, as the generated kernels start) and "warm" (its working set kept).
+bound's state reset, as the generated kernels start) and "warm" (its working set kept); the
+kernels "qp warm" and "wls warm" are exported with ``warm_start=True`` (the last working set
+kept, as DAQP's "warm"), and their agreement is also measured on the sines, called in order.
 ``--markdown`` writes the tables of docs/export.md with the machine's state.
 """
 
@@ -64,6 +66,10 @@ KERNELS = (("qp", "qp", "double", {}), ("qp float", "qp", "float", {}), ("wls", 
            ("wls float", "wls", "float", {}), ("pinv_scale", "pinv_scale", "double", {}),
            ("dynamic", "dynamic", "double", {}), ("cgi", "cgi", "double", {}), ("pinv", "pinv", "double", {}),
            ("lp", "lp", "double", {}), ("lp float", "lp", "float", {}))
+#: the active set with its opt-in warm start (export_c's warm_start): the last working set as
+#: the next call's start, as DAQP's "warm" and wls-alloc's default keep theirs
+WARM_KERNELS = (("qp warm", "qp", "double", {}, {"warm_start": True}),
+                ("wls warm", "wls", "double", {}, {"warm_start": True}))
 #: the qp kernel with every free set's factorisation tabulated where the default does not
 #: (beyond the 256 KiB budget: 1.1 MB of code for ICE's 2,048 free sets), up to this many effectors
 TABLE_QP_MAX_M = 11
@@ -174,6 +180,9 @@ def agreement(kernel, folder: Path, p: alloc.Problem, V: np.ndarray, options: di
     f = getattr(lib, f"{kernel.prefix}_allocate")
     f.restype = ctypes.c_int
     f.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_double if double else ctypes.c_float, ctypes.c_void_p]
+    reset = getattr(lib, f"{kernel.prefix}_warm_reset", None)
+    if reset is not None:  # a warm start from the last sequence (dlopen hands back the loaded library)
+        reset()
     allocator = alloc.make_allocator(p, kernel.method, **options)
     same = mismatched = 0
     du = []
@@ -245,7 +254,7 @@ def main(argv: list[str] | None = None) -> dict:
             for sname, V in seqs.items():
                 files[sname] = folder / f"{pname.split()[0]}_{sname}.bin"
                 np.ascontiguousarray(V, dtype="<f8").tofile(files[sname])
-            kernels: list[tuple[str, str, str, dict, dict]] = [(*row, {}) for row in KERNELS]
+            kernels: list[tuple[str, str, str, dict, dict]] = [(*row, {}) for row in KERNELS] + list(WARM_KERNELS)
             if pname == "hexa-x 4x6":  # cgi with the vehicle's priority levels
                 levels = alloc.vehicles.method_options("hexa-x", "cgi")
                 kernels += [("cgi levels", "cgi", "double", levels, {}), ("cgi levels float", "cgi", "float", levels, {})]
@@ -266,8 +275,10 @@ def main(argv: list[str] | None = None) -> dict:
                 sub = folder / prefix
                 exe, sizes = compile_driver(kernel, sub)
                 table = "#define TABLE 1" in kernel.source
-                out["agreement"].append({"problem": pname, "kernel": label, "table": table,
-                                         **agreement(kernel, sub, p, seqs["random"][:args.agree], options)})
+                # a warm start's agreement depends on the sequence: both demand sequences for it
+                for sname in ("random", "sines") if form.get("warm_start") else ("random",):
+                    out["agreement"].append({"problem": pname, "kernel": label, "table": table, "sequence": sname,
+                                             **agreement(kernel, sub, p, seqs[sname][:args.agree], options)})
                 for sname, path in files.items():
                     res = run_json([str(exe), str(path), str(args.calls), str(args.passes)])
                     out["rows"].append({"problem": pname, "sequence": sname, "kernel": label, "table": table,
@@ -381,7 +392,10 @@ def _ratio(out: dict, problem: str, sequence: str, kernel: str, ref: str = "wls-
 
 #: (kernel, reference) pairs of the comparison table: the generated kernels over each peer's median
 VERSUS = (("qp", "daqp cold"), ("qp no cache", "daqp cold"), ("qp table", "daqp cold"), ("wls", "daqp cold"),
-          ("qp", "daqp warm"), ("qp no cache", "daqp warm"), ("qp table", "daqp warm"), ("wls", "daqp warm"))
+          ("qp warm", "daqp cold"), ("qp", "daqp warm"), ("qp no cache", "daqp warm"), ("qp table", "daqp warm"),
+          ("wls", "daqp warm"), ("qp warm", "daqp warm"), ("wls warm", "daqp warm"))
+#: the kernels of the table over wls-alloc's median
+VERSUS_RUST = ("qp", "wls", "qp float", "wls float", "qp warm", "wls warm")
 
 
 def _worst_over_median(out: dict, problem: str, sequence: str, kernel: str) -> float | None:
@@ -397,7 +411,7 @@ def _print_summary(out: dict) -> None:
     print("\nmedian / wls-alloc (warm) median, same run:")
     for problem in problems():
         for sequence in ("random", "sines"):
-            parts = [f"{k} {_ratio(out, problem, sequence, k):.2f}x" for k in ("qp", "wls", "qp float", "wls float")
+            parts = [f"{k} {_ratio(out, problem, sequence, k):.2f}x" for k in VERSUS_RUST
                      if _ratio(out, problem, sequence, k) is not None]
             print(f"  {problem:<16} {sequence:<7} " + ", ".join(parts))
     print("\nmedian / DAQP's C median (wls problem), same run; worst demand / median:")
@@ -408,7 +422,7 @@ def _print_summary(out: dict) -> None:
             print(f"  {problem:<16} {sequence:<7} " + ", ".join(parts))
     print("\nagreement with the library (random demands):")
     for a in out["agreement"]:
-        print(f"  {a['problem']:<16} {a['kernel']:<11} bitwise {a['bitwise']}/{a['calls']} p99|du| {a['p99_du']:.1e} "
+        print(f"  {a['problem']:<16} {a['kernel']:<11} {a.get('sequence', 'random'):<7} bitwise {a['bitwise']}/{a['calls']} p99|du| {a['p99_du']:.1e} "
               f"max|du| {a['max_du']:.1e} (>1e-4: {a['above_1e-4']}) status mismatches {a['status_mismatches']}")
 
 
@@ -431,10 +445,10 @@ def markdown(out: dict) -> str:
             f"| {r.get('static_bytes') if r.get('static_bytes') is not None else ''} "
             f"| {r['stack_bytes'] if r['stack_bytes'] is not None else ''} |")
     lines += ["", "Median over wls-alloc's (warm) median in the same run:", "",
-              "| problem | demands | qp | wls | qp float | wls float |", "|---|---|---|---|---|---|"]
+              "| problem | demands | " + " | ".join(VERSUS_RUST) + " |", "|---|---|" + "---|" * len(VERSUS_RUST)]
     for problem in dict.fromkeys(r["problem"] for r in out["rows"]):
         for sequence in ("random", "sines"):
-            cells = [_ratio(out, problem, sequence, k) for k in ("qp", "wls", "qp float", "wls float")]
+            cells = [_ratio(out, problem, sequence, k) for k in VERSUS_RUST]
             lines.append(f"| {problem} | {sequence} | " + " | ".join("" if c is None else f"{c:.2f}x" for c in cells)
                          + " |")
     if out.get("daqp"):
@@ -448,12 +462,14 @@ def markdown(out: dict) -> str:
                 cells = [_ratio(out, problem, sequence, k, ref) for k, ref in VERSUS]
                 cells += [_worst_over_median(out, problem, sequence, k) for k in ("qp", "wls")]
                 lines.append(f"| {problem} | {sequence} | " + " | ".join(map(_cell, cells)) + " |")
-    lines += ["", "Agreement with the library on the random demands (through ctypes; u in the problem's units):", "",
-              "| problem | kernel | calls | bitwise equal | p99 abs(u - u_library) | max | calls above 1e-4 "
+    lines += ["", "Agreement with the library on the random demands, and for the warm-start kernels also on the "
+              "sines, called in order (through ctypes; u in the problem's units):", "",
+              "| problem | kernel | demands | calls | bitwise equal | p99 abs(u - u_library) | max | calls above 1e-4 "
               "| status mismatches |",
-              "|---|---|---|---|---|---|---|---|"]
+              "|---|---|---|---|---|---|---|---|---|"]
     for a in out["agreement"]:
-        lines.append(f"| {a['problem']} | {a['kernel']}{' (table)' if a['table'] else ''} | {a['calls']} | "
+        lines.append(f"| {a['problem']} | {a['kernel']}{' (table)' if a['table'] else ''} "
+                     f"| {a.get('sequence', 'random')} | {a['calls']} | "
                      f"{a['bitwise']} | {a['p99_du']:.1e} | {a['max_du']:.1e} | {a['above_1e-4']} "
                      f"| {a['status_mismatches']} |")
     for skip in out.get("skipped", []):

@@ -64,6 +64,10 @@ CACHE_BUDGET = 16 * 1024
 #: limit span and attainable demands called unattainable at 1e9 and beyond, none apart by
 #: more than 1e-12 below 1e6)
 WARM_COND_MAX = 1e6
+#: singular values below this fraction of the largest are round-off (an exactly rank-deficient
+#: effectiveness, which the factorisation cuts at 1e-12 and the warm start handles): two
+#: decades under that cut, since a column subset's largest singular value can be smaller
+WARM_ROUND_OFF = 1e-14
 
 #: ``float`` ``lp``: the simplex's tolerances (alloc._simplex's names; the double build takes the
 #: library's values) at float's round-off.  Reduced costs and pivots at 1e-5 (about 80 float ulps

@@ -11,7 +11,7 @@ import numpy as np
 from ..problem import Problem
 from . import templates, templates_active_set, templates_simplex
 from .base import (CACHE_BUDGET, CGI_RTOL, FLOAT_CGI_RTOL, FLOAT_MU_EPS, FLOAT_SIGMA_RTOL, FLOAT_SIMPLEX_TOLS,
-                   TABLE_BUDGET, WARM_COND_MAX, ExportError, _ints, _Real)
+                   TABLE_BUDGET, WARM_COND_MAX, WARM_ROUND_OFF, ExportError, _ints, _Real)
 from .certify import Certificate, certify
 
 
@@ -151,20 +151,46 @@ def _active_set_fields(instances: list[Any], problem: Problem, real: _Real, fiel
 
 def _warm_conditioning(instances: list[Any], aset: Any, n: int, m: int) -> None:
     """Refuse the warm start where the optimum is not determined beyond round-off
-    (:data:`WARM_COND_MAX`): the weighted effectiveness A (its singular values above
-    ``SIGMA_RTOL`` of the largest, the cut the factorisation makes) and each instance's Wu."""
-    for lex in instances:
-        mats = lex._state[0]
-        s = np.linalg.svd(mats[aset._A, :n, :m], compute_uv=False)
-        s = s[s > aset.SIGMA_RTOL * s[0]] if s.size and s[0] > 0 else s[:0]
-        w = np.linalg.eigvalsh(mats[aset._WU, :m, :m])
-        for what, c in (("weighted effectiveness Wv^(1/2) B", s[0] / s[-1] if s.size else 1.0),
-                        ("preference weight Wu", w[-1] / w[0] if w[0] > 0 else np.inf)):
+    (:data:`WARM_COND_MAX`): a singular value of the weighted effectiveness A, or of a pair of its
+    columns (two nearly redundant effectors: the free sets' factorisations are of column
+    subsets), between round-off (:data:`WARM_ROUND_OFF` of the largest) and 1 / WARM_COND_MAX of
+    it, that is nearly but not exactly rank-deficient; rows of A (axes with their weights)
+    scaled more than WARM_COND_MAX apart; or each instance's Wu conditioned beyond
+    WARM_COND_MAX."""
+    def gray(M: np.ndarray) -> float | None:
+        s = np.linalg.svd(M, compute_uv=False)
+        if not s.size or not s[0] > 0:
+            return None
+        bad = s[(s > WARM_ROUND_OFF * s[0]) & (s * WARM_COND_MAX < s[0])]
+        return float(s[0] / bad[-1]) if bad.size else None
+
+    A = instances[0]._state[0][aset._A, :n, :m]
+    worst = gray(A)
+    what = "weighted effectiveness Wv^(1/2) B"
+    rows = np.abs(A).max(axis=1)
+    rows = rows[rows > 0]
+    if worst is None and rows.size and rows.max() > WARM_COND_MAX * rows.min():
+        # a weak row with a large demand still moves the optimum, but a factorisation resolves
+        # it only to round-off of the strong rows (its singular vectors' entries are relative)
+        worst, what = float(rows.max() / rows.min()), "weighted effectiveness's rows (axes scaled apart)"
+    if worst is None:
+        for i in range(m):
+            for j in range(i + 1, m):
+                if (c := gray(A[:, [i, j]])) is not None:
+                    worst, what = c, f"weighted effectiveness's columns {i} and {j} (nearly parallel)"
+                    break
+            if worst is not None:
+                break
+    if worst is None:
+        for lex in instances:
+            w = np.linalg.eigvalsh(lex._state[0][aset._WU, :m, :m])
+            c = w[-1] / w[0] if w[0] > 0 else np.inf
             if not c <= WARM_COND_MAX:
-                raise ExportError(f"warm_start: the problem's {what} has condition number {c:.2g}, above "
-                                  f"{WARM_COND_MAX:g}: its optimum is determined only to round-off times that, "
-                                  "so a warm start would end elsewhere; export without warm_start",
-                                  field="warm_start")
+                worst, what = c, "preference weight Wu"
+    if worst is not None:
+        raise ExportError(f"warm_start: the problem's {what} has condition number {worst:.2g}, above "
+                          f"{WARM_COND_MAX:g}: its optimum is determined only to round-off times that, so a "
+                          "warm start would end elsewhere; export without warm_start", field="warm_start")
 
 
 #: the header paragraph of a kernel exported with warm_start=True
