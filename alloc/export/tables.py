@@ -169,10 +169,11 @@ def _warm_conditioning(instances: list[Any], aset: Any, n: int, m: int) -> None:
     what = "weighted effectiveness Wv^(1/2) B"
     rows = np.abs(A).max(axis=1)
     rows = rows[rows > 0]
-    if worst is None and rows.size and rows.max() > WARM_COND_MAX * rows.min():
+    if worst is None and rows.size and rows.max() / WARM_COND_MAX > rows.min():
         # a weak row with a large demand still moves the optimum, but a factorisation resolves
         # it only to round-off of the strong rows (its singular vectors' entries are relative)
-        worst, what = float(rows.max() / rows.min()), "weighted effectiveness's rows (axes scaled apart)"
+        with np.errstate(over="ignore"):
+            worst, what = float(rows.max() / rows.min()), "weighted effectiveness's rows (axes scaled apart)"
     if worst is None:
         for i in range(m):
             for j in range(i + 1, m):
@@ -184,7 +185,8 @@ def _warm_conditioning(instances: list[Any], aset: Any, n: int, m: int) -> None:
     if worst is None:
         for lex in instances:
             w = np.linalg.eigvalsh(lex._state[0][aset._WU, :m, :m])
-            c = w[-1] / w[0] if w[0] > 0 else np.inf
+            with np.errstate(over="ignore"):
+                c = w[-1] / w[0] if w[0] > 0 else np.inf
             if not c <= WARM_COND_MAX:
                 worst, what = c, "preference weight Wu"
     if worst is not None:
