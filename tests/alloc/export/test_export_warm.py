@@ -260,6 +260,15 @@ def test_warm_start_is_refused_where_the_optimum_is_round_off():
     with pytest.raises(ExportError, match="preference weight Wu has condition number 1e\\+07"):
         export_c(stiff, "wls", warm_start=True)
     export_c(p.replace(Wu=np.diag(np.geomspace(1.0, WARM_COND_MAX / 10, p.m))), "wls", warm_start=True)
+    # the case that took the library's own warm start out (alloc/_active_set.py): Wv's eigenvalues
+    # 7.7e29 and 3.4e13, where a long-lived allocator answered another point than a fresh one
+    import hostile
+
+    c = hostile.case(10037684)
+    weak = alloc.Problem(**{key: hostile.decode(val) for key, val in c["fields"].items()})
+    for method in METHODS:
+        with pytest.raises(ExportError, match="warm_start: .* condition number"):
+            export_c(weak, method, warm_start=True)
 
 
 def test_warm_start_errors_name_the_field():
