@@ -389,7 +389,9 @@ static int target(const struct instance *S, const real *v, const real *u_prev, r
 
 """
 
-_ALLOCATE = r"""/* 1 while the limits in force are the nominal ones (PREFIX_set_limits) */
+# the entry point up to the run, shared by the cold and the warm kernels (@DECL@: the warm
+# one's extra local)
+_ALLOCATE_HEAD = r"""/* 1 while the limits in force are the nominal ones (PREFIX_set_limits) */
 static int limits_nominal = 1;
 
 int PREFIX_allocate(const real *v, const real *u_prev, real dt, real *u)
@@ -397,7 +399,7 @@ int PREFIX_allocate(const real *v, const real *u_prev, real dt, real *u)
     struct work w;
     real lo[M], hi[M], upc[M];
     const real *up;
-    int j, ok, code;
+    int j, ok, code@DECL@;
     last_iterations = 0;
     if (bounds(v, u_prev, dt, lo, hi, u)) return 2;
     /* dynamic: the instance with u_prev when there is a rate window */
@@ -410,7 +412,9 @@ int PREFIX_allocate(const real *v, const real *u_prev, real dt, real *u)
         }
         up = upc;
     }
-    /* the certified budget covers the nominal limits without a rate window (see the header) */
+"""
+
+_ALLOCATE = _ALLOCATE_HEAD.replace("@DECL@", "") + r"""    /* the certified budget covers the nominal limits without a rate window (see the header) */
     last_iterations = run(&w, v, lo, hi, up, u_prev == NULL && limits_nominal ? PFX_ITERATION_BOUND : PFX_MAXIT_TOTAL,
                           &ok);
     if (!ok) {
@@ -510,28 +514,7 @@ void PREFIX_warm_reset(void)
 
 _PICK = "    if (warm_try && warm_pick(w, lo, hi, up)) warm_try = 2; /* the warm start is taken */\n"
 
-_ALLOCATE_WARM = r"""/* 1 while the limits in force are the nominal ones (PREFIX_set_limits) */
-static int limits_nominal = 1;
-
-int PREFIX_allocate(const real *v, const real *u_prev, real dt, real *u)
-{
-    struct work w;
-    real lo[M], hi[M], upc[M];
-    const real *up;
-    int j, ok, code, budget;
-    last_iterations = 0;
-    if (bounds(v, u_prev, dt, lo, hi, u)) return 2;
-    /* dynamic: the instance with u_prev when there is a rate window */
-    w.S = &INSTANCES[NINST > 1 && u_prev != NULL ? 1 : 0];
-    up = w.S->upt;
-    if (w.S->kv != NULL) {
-        if (!target(w.S, v, u_prev, upc)) {
-            safe_answer(v, lo, hi, u);
-            return 2;
-        }
-        up = upc;
-    }
-    /* the certified budget covers the nominal limits without a rate window, from the cold start
+_ALLOCATE_WARM = _ALLOCATE_HEAD.replace("@DECL@", ", budget") + r"""    /* the certified budget covers the nominal limits without a rate window, from the cold start
        (see the header); a warm run that reaches it is redone cold under the same budget */
     budget = u_prev == NULL && limits_nominal ? PFX_ITERATION_BOUND : PFX_MAXIT_TOTAL;
     warm_try = 1;
