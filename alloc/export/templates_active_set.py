@@ -414,7 +414,7 @@ int PREFIX_allocate(const real *v, const real *u_prev, real dt, real *u)
     }
 """
 
-_ALLOCATE = _ALLOCATE_HEAD.replace("@DECL@", "") + r"""    /* the certified budget covers the nominal limits without a rate window (see the header) */
+_COLD_RUN = r"""    /* the certified budget covers the nominal limits without a rate window (see the header) */
     last_iterations = run(&w, v, lo, hi, up, u_prev == NULL && limits_nominal ? PFX_ITERATION_BOUND : PFX_MAXIT_TOTAL,
                           &ok);
     if (!ok) {
@@ -514,7 +514,7 @@ void PREFIX_warm_reset(void)
 
 _PICK = "    if (warm_try && warm_pick(w, lo, hi, up)) warm_try = 2; /* the warm start is taken */\n"
 
-_ALLOCATE_WARM = _ALLOCATE_HEAD.replace("@DECL@", ", budget") + r"""    /* the certified budget covers the nominal limits without a rate window, from the cold start
+_WARM_RUN = r"""    /* the certified budget covers the nominal limits without a rate window, from the cold start
        (see the header); a warm run that reaches it is redone cold under the same budget */
     budget = u_prev == NULL && limits_nominal ? PFX_ITERATION_BOUND : PFX_MAXIT_TOTAL;
     warm_try = 1;
@@ -547,6 +547,8 @@ _ALLOCATE_WARM = _ALLOCATE_HEAD.replace("@DECL@", ", budget") + r"""    /* the c
 # in the library's place (both change the cost, never the answer).  The library has no warm
 # start, so the default kernel has none either; ACTIVE_SET_WARM adds one (export_c's
 # warm_start), whose answers agree with the library's to round-off instead of bit for bit.
+_ALLOCATE = _ALLOCATE_HEAD.replace("@DECL@", "") + _COLD_RUN
+_ALLOCATE_WARM = _ALLOCATE_HEAD.replace("@DECL@", ", budget") + _WARM_RUN
 ACTIVE_SET = _DATA + FACTOR + _LEVEL + _ENTRY.replace("@WARM_PICK@", "") + _ALLOCATE + SET_LIMITS
 ACTIVE_SET_WARM = (_DATA + FACTOR + _LEVEL + _WARM + _ENTRY.replace("@WARM_PICK@", _PICK) + _ALLOCATE_WARM
                    + re.sub(r"( +)limits_nominal = 1;\n", r"\1PREFIX_warm_reset();\n\1limits_nominal = 1;\n", SET_LIMITS))

@@ -94,7 +94,8 @@ def _problems():
     for name in ("ice", "hexa-x"):
         yield name, alloc.vehicles.problem(name), lambda m, name=name: alloc.vehicles.method_options(name, m)
     for i, (p, _) in enumerate(_suite(300)):
-        yield f"suite{i}", p, lambda m, i=i: {"priorities": [1 + j % 2 for j in range(p.k)]} if m == "qp" and i % 2 else {}
+        levels = {"priorities": [1 + j % 2 for j in range(p.k)]} if i % 2 else {}
+        yield f"suite{i}", p, lambda m, levels=levels: levels if m == "qp" else {}
 
 
 @pytest.mark.parametrize("method", METHODS)
@@ -256,7 +257,8 @@ def test_warm_start_is_refused_where_the_optimum_is_round_off():
     B = p.B.copy()
     B[2] = B[0] + 1e-8 * np.random.default_rng(1).normal(size=p.m)  # rows parallel to 1e-8: condition above 1e6
     near = p.replace(B=B)
-    with pytest.raises(ExportError, match="warm_start: the problem's weighted effectiveness .* condition number") as info:
+    refusal = "warm_start: the problem's weighted effectiveness .* condition number"
+    with pytest.raises(ExportError, match=refusal) as info:
         export_c(near, "qp", warm_start=True)
     assert info.value.field == "warm_start"
     export_c(near, "qp")
