@@ -328,12 +328,7 @@ def test_float_agrees_and_is_always_within_its_bounds(build, method):
             dmoment.append(float(np.abs(p.B @ u - r.v_achieved).max()) / max(1.0, float(np.abs(v).max())))
             mismatched += status != STATUS[r.status.value]
             calls += 1
-        u_prev = np.clip(rng.normal(size=p.m), p.umin, p.umax).astype(np.float32)
-        for v in random_demands(rng, p, 20):
-            u, status, _ = kern(v, u_prev, 0.01)
-            lo, hi = _float_window(kern, p, u_prev, np.float32(0.01))
-            assert np.isfinite(u).all() and (u >= lo).all() and (u <= hi).all()
-            u_prev = u
+        _float_rate_trajectory(kern, p, rng, 20)
     du = np.array(du)
     if method == "qp":
         assert np.quantile(du, 0.99) <= FLOAT_U_TOL and (du > 1e-4).mean() <= 0.01, np.sort(du)[-10:]
@@ -393,6 +388,17 @@ def _float_window(kern: Kernel, p, u_prev: np.ndarray, dt: np.float32) -> tuple[
     crossed = a > b
     a[crossed] = b[crossed] = np.minimum(np.maximum(u_prev, lo32), hi32)[crossed]
     return a, b
+
+
+def _float_rate_trajectory(kern: Kernel, p, rng, n: int, demands=random_demands, dt: float = 0.01) -> None:
+    """``n`` demands from a random admissible ``u_prev``, each step's rate window (Eq 1.28) from
+    the last answer: every float answer finite and within its float window, exactly."""
+    u_prev = np.clip(rng.normal(size=p.m), p.umin, p.umax).astype(np.float32)
+    for v in demands(rng, p, n):
+        u, _, _ = kern(v, u_prev, dt)
+        lo, hi = _float_window(kern, p, u_prev, np.float32(dt))
+        assert np.isfinite(u).all() and (u >= lo).all() and (u <= hi).all()
+        u_prev = u
 
 
 def test_float_limits_are_rounded_inward():

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_export import (FLOAT_U_TOL, _agree_double, _float_limits, _float_window, _hostile_cases,  # noqa: F401
+from test_export import (FLOAT_U_TOL, _agree_double, _float_limits, _float_rate_trajectory, _hostile_cases,  # noqa: F401
                          build)
 
 import alloc
@@ -91,12 +91,7 @@ def test_float_cgi_by_level_agrees_and_is_within_its_bounds(build):
             u, status, _ = kern(v)
             assert np.isfinite(u).all() and (u >= lo32).all() and (u <= hi32).all()
             du.append(float(np.abs(u - allocator(v).u).max()) / span)
-        u_prev = np.clip(rng.normal(size=p.m), p.umin, p.umax).astype(np.float32)
-        for v in random_demands(rng, p, 10):
-            u, status, _ = kern(v, u_prev, 0.01)
-            lo, hi = _float_window(kern, p, u_prev, np.float32(0.01))
-            assert np.isfinite(u).all() and (u >= lo).all() and (u <= hi).all()
-            u_prev = u
+        _float_rate_trajectory(kern, p, rng, 10)
     assert len(du) == 25 * len(KINDS) and max(du) <= FLOAT_U_TOL, np.sort(du)[-10:]
 
 

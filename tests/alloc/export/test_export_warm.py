@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_export import (CC, FLOAT_U_TOL, OPTIMISED, STATUS, _float_limits, _float_window, _hostile_cases, _suite,
+from test_export import (CC, FLOAT_U_TOL, OPTIMISED, STATUS, _float_limits, _float_rate_trajectory, _hostile_cases, _suite,
                          build)  # noqa: F401 - build is the compiling fixture
 
 import alloc
@@ -194,12 +194,7 @@ def test_float_warm_is_always_within_its_bounds_and_agrees(build, method):
             u, status, _ = kern(v)
             assert np.isfinite(u).all() and (u >= lo32).all() and (u <= hi32).all()
             du.append(float(np.abs(u - allocator(v).u).max()) / span)
-        u_prev = np.clip(rng.normal(size=p.m), p.umin, p.umax).astype(np.float32)
-        for v in _smooth(rng, p, 30):
-            u, status, _ = kern(v, u_prev, 0.01)
-            lo, hi = _float_window(kern, p, u_prev, np.float32(0.01))
-            assert np.isfinite(u).all() and (u >= lo).all() and (u <= hi).all()
-            u_prev = u
+        _float_rate_trajectory(kern, p, rng, 30, demands=_smooth)
     if method == "qp":
         du = np.array(du)
         assert np.quantile(du, 0.99) <= FLOAT_U_TOL and (du > 1e-4).mean() <= 0.01, np.sort(du)[-10:]
