@@ -12,6 +12,7 @@ import json
 from pathlib import Path
 from typing import Any, Optional
 
+import numpy as np
 import typer
 
 from .. import vehicles
@@ -74,15 +75,48 @@ def plot(vehicle: Optional[str] = _VEHICLE, problem: Optional[str] = _PROBLEM,
          force: bool = typer.Option(False, "--force", help="overwrite --out if it exists"),
          samples: int = typer.Option(4000, min=1, max=MAX_SAMPLES,
                                      help="Monte Carlo demands for non-affine methods"),
-         seed: int = _SEED) -> None:
-    """3-D picture of the AMS (2-D for k = 2) with the method's reached region inside (PNG)."""
+         seed: int = _SEED,
+         axes: Optional[str] = typer.Option(None, "--axes", metavar="A,B[,C]",
+                                            help="the 2 or 3 axes to draw (required for more than 3 axes, "
+                                            "e.g. roll,pitch,yaw on a multirotor)"),
+         at: Optional[list[str]] = typer.Option(None, "--at", metavar="AXIS=VALUE",
+                                                help="fix an axis that is not drawn (repeat for each): the "
+                                                "picture is the exact slice there, e.g. --at thrust=-19.6 for "
+                                                "hover; without --at it is the exact projection")) -> None:
+    """3-D picture of the AMS (2-D for k = 2) with the method's reached region inside (PNG).
+
+    A vehicle with more than three axes is drawn through --axes, as a slice (--at) or a
+    projection; the title says which."""
     from .plot import plot_ams
 
     output_file(out, force, "--out")
     v = get_vehicle(vehicle, problem)
     options = default_options(v, method)
-    plot_ams(v.problem(), method, out, samples=samples, seed=seed, name=v.description or v.name, **options)
+    plot_ams(v.problem(), method, out, samples=samples, seed=seed, name=v.description or v.name,
+             axes=_axes_option(axes), at=_at_option(at), units={a.name: a.unit for a in v.axes}, **options)
     typer.echo(f"wrote {out}")
+
+
+def _axes_option(text: str | None) -> list[str] | None:
+    return None if text is None else [a.strip() for a in text.split(",")]
+
+
+def _at_option(items: list[str] | None) -> dict[str, float] | None:
+    """``--at thrust=-19.6`` (repeated, or comma-separated) as a mapping; one line when malformed."""
+    if not items:
+        return None
+    out: dict[str, float] = {}
+    for item in (part for text in items for part in text.split(",")):
+        name, sep, value = item.partition("=")
+        try:
+            number = float(value)
+        except ValueError:
+            number = float("nan")
+        if not sep or not name.strip() or not np.isfinite(number) or name.strip() in out:
+            raise typer.BadParameter(f"{item!r}: expected AXIS=VALUE with a finite value, each axis once",
+                                     param_hint="--at")
+        out[name.strip()] = number
+    return out
 
 
 @app.command("coverage")
