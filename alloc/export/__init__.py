@@ -41,8 +41,9 @@ from ..exceptions import OptionError, UnknownMethodError
 from ..problem import Problem
 from . import templates, templates_cascade, templates_closed_form
 from .base import (_ACTIVE_SET_METHODS, EXPORTABLE, FLOAT_EXACT_RTOL, FLOAT_TOLERANCE, FLOAT_VMAX, GENERATOR_VERSION,
-                   PRECISIONS, ExportedKernel, ExportError, _fill, _Real, _short, _version)
+                   PRECISIONS, ExportedKernel, ExportError, _Real, _short, _version)
 from .certify import SIMPLEX_RANDOM_DEMANDS, Certificate, bound_text, simplex_bound_text
+from .text import c_prefix, comment_text, fill
 from .tables import (_active_set_fields, _cascade_level_fields, _cascade_table, _iteration_budget, _simplex_fields,
                      _simplex_pivots)
 
@@ -51,6 +52,9 @@ __all__ = ["export_c", "ExportedKernel", "ExportError", "EXPORTABLE", "PRECISION
 
 
 # --------------------------------------------------------------------------- the generator
+
+#: characters of the header's list of effector (or axis) names: 512 names of up to 200 each
+_NAMES_CHARS = 512 * 204
 
 def _resolve(problem_or_vehicle: Any, method: str, options: Mapping[str, Any] | None) -> tuple[Problem, str, dict]:
     if isinstance(problem_or_vehicle, Problem):
@@ -165,9 +169,7 @@ def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "d
     if method == "lp" and opts.get("backend", "simplex") != "simplex":
         raise OptionError(f"backend: lp exports the library's compiled simplex only, got {opts['backend']!r}",
                           field="backend")
-    prefix = f"alloc_{method}" if prefix is None else prefix
-    if not (isinstance(prefix, str) and prefix.isidentifier() and prefix.isascii()):
-        raise ExportError(f"prefix: expected a C identifier, got {prefix!r}", field="prefix")
+    prefix = c_prefix(f"alloc_{method}" if prefix is None else prefix)
     allocator = make_allocator(problem, method, **opts)
     if allocator.impl is None:
         raise ExportError(f"method: {method} could not be built for this problem ({allocator.build_error})",
@@ -180,14 +182,18 @@ def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "d
     safe_c, safe_p = (problem.up, np.zeros((m, k))) if safe is None else (safe.c, safe.P)
     c = real.consts
     shown = {key: value for key, value in opts.items()}
+    # user text (names, the vehicle's title, option values) enters the C as comment text only
     fields = {
-        "TITLE": f"{method} allocation kernel, {k} axes x {m} effectors, {real.ctype}",
-        "VERSION": _version(), "GENERATOR": GENERATOR_VERSION,
-        "PROBLEM": f"{title}, {k} x {m}, data sha256 {_checksum(problem)}",
-        "METHOD": f"{method}: {type(allocator.impl).summary}", "EQUATION": type(allocator.impl).equation,
-        "OPTIONS": "" if not shown else "\n * Options : " + ", ".join(f"{a}={_short(b)}" for a, b in shown.items()),
+        "TITLE": comment_text(f"{method} allocation kernel, {k} axes x {m} effectors, {real.ctype}"),
+        "VERSION": comment_text(_version()), "GENERATOR": GENERATOR_VERSION,
+        "PROBLEM": comment_text(f"{title}, {k} x {m}, data sha256 {_checksum(problem)}"),
+        "METHOD": comment_text(f"{method}: {type(allocator.impl).summary}"),
+        "EQUATION": comment_text(type(allocator.impl).equation),
+        "OPTIONS": "" if not shown else ("\n * Options : ", comment_text(", ".join(f"{a}={_short(b)}"
+                                                                               for a, b in shown.items()))),
         "REAL": real.ctype, "K": str(k), "M": str(m),
-        "AXES": ", ".join(problem.axes), "EFFECTORS": ", ".join(problem.names),
+        "AXES": comment_text(", ".join(map(comment_text, problem.axes)), _NAMES_CHARS),
+        "EFFECTORS": comment_text(", ".join(map(comment_text, problem.names)), _NAMES_CHARS),
         "VMAX": c["VMAX"], "RTOL": c["RTOL"], "FABS": c["FABS"], "SQRT": c["SQRT"], "REAL_MAX": c["REAL_MAX"],
         "HEADER_NAME": f"{prefix}.h", "SOURCE_NAME": f"{prefix}.c",
         "ROUND_GAMMA": real.literal((m + 2) * (2.220446049250313e-16 if real.double else 2.0 ** -23), "gamma"),
@@ -245,8 +251,8 @@ def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "d
                                      warm=bool(warm_start))
         fields["MAXIT_DEFINE"] += ("/* iterations of a call with the nominal limits and no rate window (see above) */\n"
                                    f"#define PFX_ITERATION_BOUND {budget}\n")
-    source = _fill(templates.COMMON + body, fields, prefix)
-    header = _fill(templates.HEADER, fields, prefix)
+    source = fill(templates.COMMON + body, fields, prefix)
+    header = fill(templates.HEADER, fields, prefix)
     return ExportedKernel(prefix=prefix, method=method, precision=precision, header=header, source=source,
                           header_name=f"{prefix}.h", source_name=f"{prefix}.c", k=k, m=m,
                           maxit=cap, levels=levels, options=shown,

@@ -8,7 +8,6 @@ A leaf of :mod:`alloc.export`: the generator (``__init__``) and the table builde
 from __future__ import annotations
 
 import os
-import unicodedata
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
@@ -182,17 +181,6 @@ class _Real:
 
 def _ints(a: Any) -> str:
     return "{" + ", ".join(str(int(x)) for x in a) + "}"
-
-
-def _fill(text: str, fields: Mapping[str, str], prefix: str) -> str:
-    for key, value in fields.items():
-        text = text.replace(f"@{key}@", value)
-    text = text.replace("PREFIX_", prefix + "_").replace("PFX_", prefix.upper() + "_")
-    # ASCII only (names and titles reach the comments): C99's source character set, and what
-    # every embedded toolchain reads; accents are dropped ("Härkegård" -> "Harkegard")
-    plain = unicodedata.normalize("NFKD", text)
-    return plain.encode("ascii", "ignore").decode("ascii")
-
 
 
 def _short(value: Any) -> str:
