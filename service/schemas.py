@@ -15,7 +15,7 @@ from datetime import datetime
 from typing import Annotated, Any, Literal, Union
 
 import numpy as np
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, PrivateAttr, StrictInt, model_validator
+from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, PrivateAttr, StrictInt, model_validator
 
 import alloc
 from alloc.health import PARAMETERS, FailureKind, KindSpec, Range
@@ -44,7 +44,24 @@ _PRINTABLE = r"^[^\x00-\x1f\x7f]*$"
 Label = Annotated[str, Field(strict=True, min_length=1, max_length=64, pattern=_PRINTABLE)]
 MethodName = Annotated[str, Field(strict=True, min_length=1, max_length=64, examples=["pinv", "qp"])]
 Options = Annotated[dict[str, Any], Field(max_length=16, description="method options, see GET /v1/methods")]
-EffectorRef = Label | Annotated[StrictInt, Field(ge=0, lt=MAX_EFFECTORS)]
+
+
+def _integral(value: Any) -> Any:
+    """A float with no fractional part as the int it is: JSON Schema's ``integer`` (the type the
+    schema states) includes ``22.0`` (issue 39: schemathesis sent it and got 422)."""
+    if isinstance(value, float) and value.is_integer():
+        return int(value)
+    return value
+
+
+def json_int(**bounds: Any) -> Any:
+    """An integer within ``bounds`` (``Field``'s ``ge``, ``le``, ...) as JSON Schema means it:
+    ``22`` or ``22.0``; never ``true``, ``"22"`` or ``22.5``.  (The bounds go before the
+    validator: after it, pydantic writes them into the schema as unknown keywords.)"""
+    return Annotated[StrictInt, Field(**bounds), BeforeValidator(_integral)]
+
+
+EffectorRef = Label | json_int(ge=0, lt=MAX_EFFECTORS)
 
 
 #: members of one JSON object in a request, at most (the largest model has 17 fields): checked

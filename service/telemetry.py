@@ -16,6 +16,28 @@ proposal accepted or rejected) the detector is realigned to it (:func:`realign`:
 replaced, its buffers emptied, since their residuals were computed against the old model;
 counters, times and detections kept).
 
+Time.  The detector's thresholds assume samples ``sample_time`` apart, so the times are checked
+against it (:func:`samples_from`, :func:`run_batch`):
+
+* inside a batch each step is at least half a ``sample_time`` (a repeat, a step back, a
+  subnormal step or a stream faster than configured is refused naming ``t/i``) and at most one
+  window (:func:`max_step`, ``N * sample_time``): a batch is one run of consecutive samples, and
+  a longer step is refused naming ``t/i`` (unit errors such as milliseconds sent as seconds land
+  here);
+* a batch whose samples fall in time already received (a kept segment, widened by half a
+  ``sample_time`` each side) is refused naming the first such ``t/i`` (repeated or out of order:
+  a retried batch is never applied twice);
+* otherwise a batch that starts within one window after the last sample continues the segment;
+  any other start (a gap longer than a window, or a time before the last sample that was never
+  received: a clock restarted, or a far-future time accepted earlier) starts a new *segment*:
+  the detector's buffers and pending alarm are emptied and it restarts on the new samples (its
+  belief, counters and detections kept), and the answer says so (``segment``).  A window longer
+  than the gap would straddle samples that do not follow one another, and a far-future time
+  can never hold the later, real, samples back.
+
+The state keeps the last :data:`KEPT_SEGMENTS` segments' first and last times (older ones are
+forgotten: a repeat of those is taken as new data) and the count of segments started.
+
 Bounds.  The state holds ``2 N`` samples of ``3 m + k + 1`` numbers (``N`` the window in
 samples, at most :data:`MAX_WINDOW_SAMPLES`) and at most
 :data:`alloc.estimation.detection.MAX_KEPT` detections: at m = 64, k = 6 at most 12,736
@@ -38,10 +60,16 @@ from alloc.health import FailureEvent, FailureKind, Health, apply_event, health_
 
 __all__ = ["Policy", "DetectorSettings", "Samples", "BatchOutcome", "run_batch", "belief", "realign",
            "batch_seconds", "samples_from", "detection_out", "event_of", "MAX_SAMPLES", "MAX_WINDOW_SAMPLES",
-           "SAMPLE_SECONDS", "ISOLATION_SECONDS", "ISOLATION_SAMPLE_SECONDS"]
+           "SAMPLE_SECONDS", "ISOLATION_SECONDS", "ISOLATION_SAMPLE_SECONDS", "MIN_STEP_FRACTION", "KEPT_SEGMENTS",
+           "max_step", "segments_of", "new_segment"]
 
 #: samples in one batch (HTTP request or WebSocket message), at most
 MAX_SAMPLES = 1000
+#: a step between samples is at least this fraction of ``sample_time`` (jitter allowed; a faster
+#: stream would break the false-alarm design, which assumes ``sample_time``)
+MIN_STEP_FRACTION = 0.5
+#: segments whose time ranges are remembered to refuse repeats (module docstring)
+KEPT_SEGMENTS = 8
 #: the detector's window in samples, at most: it fixes the state's size and the cost of a test
 MAX_WINDOW_SAMPLES = 32
 # The declared cost of the detector, measured by ``python -m benchmarks.bench_telemetry --worst``
@@ -121,6 +149,16 @@ class BatchOutcome:
     belief: Health
     samples: int
     last_time: float | None
+    #: why this batch started a new segment ("first", "gap", "unseen_time"), or None
+    segment: str | None
+    segments: int
+
+
+def max_step(settings: DetectorSettings) -> float:
+    """Seconds between two consecutive samples of one segment, at most: the detector's window
+    (``N * sample_time``).  Across a longer gap a test window would hold samples that do not
+    follow one another, so the detector restarts (a new segment)."""
+    return settings.window_samples() * settings.sample_time
 
 
 def batch_seconds(settings: DetectorSettings, m: int, n: int) -> float:
@@ -161,10 +199,20 @@ def samples_from(nominal: alloc.Problem, settings: DetectorSettings, t: Any, u: 
                 raise SampleError(f"{name}/{i}: {len(row)} values, expected {width}", field=f"{name}/{i}")
         out[name] = np.asarray(rows, dtype=float).reshape(n, width)
     steps = np.diff(t_arr)
-    if (steps <= 0).any():
-        i = int(np.argmax(steps <= 0)) + 1
-        raise SampleError(f"t/{i}: {t_arr[i]:g} s is not after the previous sample's {t_arr[i - 1]:g} s",
-                          field=f"t/{i}")
+    shortest, longest = MIN_STEP_FRACTION * settings.sample_time, max_step(settings)
+    bad = (steps < shortest) | (steps > longest)
+    if bad.any():
+        i = int(np.argmax(bad)) + 1
+        step = float(t_arr[i] - t_arr[i - 1])
+        if step < shortest:
+            reason = (f"{float(t_arr[i])!r} s is {step:.6g} s after the previous sample ({float(t_arr[i - 1])!r} s); samples are "
+                      f"sample_time = {settings.sample_time:g} s apart (at least half of it): repeated, out of "
+                      f"order or faster than configured")
+        else:
+            reason = (f"{float(t_arr[i])!r} s is {step:.6g} s after the previous sample ({float(t_arr[i - 1])!r} s), more than "
+                      f"one window ({longest:g} s): a batch is one run of consecutive samples (send the samples "
+                      f"after a gap as a batch of their own: it starts a new segment)")
+        raise SampleError(f"t/{i}: {reason}", field=f"t/{i}")
     return Samples(t_arr, out["u"], out["y"], out.get("position"))
 
 
@@ -188,30 +236,86 @@ def realign(state: dict[str, Any], health: Health) -> dict[str, Any]:
     return out
 
 
+def segments_of(state: dict[str, Any] | None) -> dict[str, Any]:
+    """The stored segments of a detector state: ``{"count": started, "kept": [[first, last], ...]}``
+    (the last :data:`KEPT_SEGMENTS`, newest last)."""
+    state = state or {}
+    found = state.get("segments")
+    if found is None and state.get("last_time") is not None:  # a state stored before segments: one, open
+        return {"count": 1, "kept": [[state["last_time"], state["last_time"]]]}
+    return {"count": 0, "kept": []} if found is None else found
+
+
+def new_segment(state: dict[str, Any]) -> dict[str, Any]:
+    """``state`` restarted for a new segment: buffers, pending alarm and last time emptied;
+    belief, counters and detections kept."""
+    out = dict(state)
+    out["buffer"] = {"U": [], "K": [], "R": [], "Q": [], "T": []}
+    out["pending"] = None
+    out["since_test"] = 0
+    out["last_time"] = None
+    return out
+
+
+def _segment_start(settings: DetectorSettings, segments: dict[str, Any], t: np.ndarray) -> str | None:
+    """Why a batch of times ``t`` starts a new segment (``None``: it continues the last one);
+    SampleError naming the first ``t/i`` that falls in time already received."""
+    half = MIN_STEP_FRACTION * settings.sample_time
+    kept = segments["kept"]
+    for first, last in kept:  # a kept range covers (first - half, last + half): a repeat or too close
+        lo, hi = first - half, last + half
+        inside = (t > lo) & (t < hi)
+        if inside.any():
+            i = int(np.argmax(inside))
+            step = "" if not i else f" (the batch started at {float(t[0])!r} s)"
+            raise SampleError(f"t/{i}: {float(t[i])!r} s falls within samples already received ({first!r} s to "
+                              f"{last!r} s, each +- half a sample_time){step}: repeated or out of order",
+                              field=f"t/{i}")
+        if t[0] <= lo and t[-1] >= hi:  # spans a received range: its first sample after it is the one named
+            i = int(np.argmax(t >= hi))
+            raise SampleError(f"t/{i}: the batch runs from {float(t[0])!r} s over samples already received "
+                              f"({first!r} s to {last!r} s): repeated or out of order", field=f"t/{i}")
+    if not kept:
+        return "first"
+    step = float(t[0]) - kept[-1][1]
+    if 0 < step <= max_step(settings):
+        return None
+    return "gap" if step > 0 else "unseen_time"
+
+
 def run_batch(nominal: alloc.Problem, settings: DetectorSettings, state: dict[str, Any] | None,
               align_to: Health | None, samples: Samples) -> BatchOutcome:
     """Replay ``samples`` through the vehicle's detector (``state``, or a fresh one), first
     realigned to ``align_to`` when given; the stored state is never modified.
 
-    Raises :class:`~alloc.estimation.SampleError` naming ``t/0`` when the batch starts at or
-    before the last sample already processed (out of order or repeated).
+    The batch's times against those already received (module docstring): SampleError naming
+    ``t/i`` for a repeat, or a new segment.
     """
     if state is None:
         state = settings.detector(nominal).to_dict()
+    segments = segments_of(state)
+    state = {key: value for key, value in state.items() if key != "segments"}
     if align_to is not None:
         state = realign(state, align_to)
+    reason = _segment_start(settings, segments, samples.t)
+    kept = [list(r) for r in segments["kept"]]
+    first, last = float(samples.t[0]), float(samples.t[-1])
+    if reason is None:
+        kept[-1][1] = last
+    else:
+        state = new_segment(state)
+        kept = [*kept, [first, last]][-KEPT_SEGMENTS:]
     detector = FailureDetector.from_dict(nominal, state)
-    if samples.t[0] <= detector.last_time:
-        raise SampleError(f"t/0: {samples.t[0]:g} s is not after the last sample already received "
-                          f"({detector.last_time:g} s): out of order or repeated", field="t/0")
     found: list[Detection] = []
     position = samples.position
     for i in range(len(samples)):
         found += detector.update(samples.u[i], samples.y[i], None if position is None else position[i],
                                  time=float(samples.t[i]))
-    last = detector.last_time
-    return BatchOutcome(detector.to_dict(), found, dict(detector.health), detector.samples,
-                        None if math.isinf(last) else last)
+    count = segments["count"] + (reason is not None)
+    out = {**detector.to_dict(), "segments": {"count": count, "kept": kept}}
+    last_time = detector.last_time
+    return BatchOutcome(out, found, dict(detector.health), detector.samples,
+                        None if math.isinf(last_time) else last_time, reason, count)
 
 
 def detection_out(d: Detection) -> dict[str, Any]:

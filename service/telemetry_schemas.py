@@ -10,13 +10,13 @@ from __future__ import annotations
 from datetime import datetime
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, Field, StrictInt
+from pydantic import BaseModel, Field, StrictBool
 
 import alloc
 
 from .config import MAX_AXES, MAX_EFFECTORS, MAX_MAGNITUDE
 from .errors import InvalidRequest, field_error
-from .schemas import AxisVector, EffectorVector, EventOut, Finite, HealthOut, _In
+from .schemas import AxisVector, EffectorVector, EventOut, Finite, HealthOut, _In, json_int
 from .telemetry import MAX_SAMPLES, MAX_WINDOW_SAMPLES, DetectorSettings
 
 __all__ = ["TelemetryConfigIn", "TelemetryBatchIn", "TelemetryOut", "TelemetryResult", "DetectionOut",
@@ -38,7 +38,7 @@ class TelemetryConfigIn(_In):
         description="std of the white noise on each response axis (a number: every axis)")
     window: Seconds = Field(default=0.25, description=f"seconds per stage-1 test; at most {MAX_WINDOW_SAMPLES} "
                                                       f"samples (and at least 4)")
-    hop: Annotated[StrictInt, Field(ge=1, le=MAX_WINDOW_SAMPLES)] | None = Field(
+    hop: json_int(ge=1, le=MAX_WINDOW_SAMPLES) | None = Field(
         default=None, description="samples between tests (default a quarter window)")
     false_alarm_rate: Annotated[float, Field(strict=True, gt=0, le=3.6e9, allow_inf_nan=False)] = Field(
         default=0.1, description="design false alarms per hour")
@@ -46,6 +46,10 @@ class TelemetryConfigIn(_In):
         Field(default=None, description="position sensor noise (null: no position sensors)")
     min_confidence: Annotated[float, Field(strict=True, gt=0, lt=1, allow_inf_nan=False)] = Field(
         default=0.95, description="posterior needed to report (effector and kind)")
+    reset: StrictBool = Field(default=False, description=(
+        "true: start a new detector even if nothing else changes (buffers, segments and counters "
+        "dropped; health and proposals kept). A PUT that changes a setting always does; one that "
+        "changes only the policy keeps the detector's state"))
 
     def to_settings(self, nominal: alloc.Problem) -> DetectorSettings:
         """The validated settings for the vehicle (422 naming the field otherwise)."""
@@ -99,6 +103,8 @@ class TelemetryOut(BaseModel):
     last_time: float | None
     alarms: int = Field(description="stage-1 alarms so far (isolated or not)")
     unisolated_alarms: int = Field(description="alarms dropped without a decision (ambiguous)")
+    segments: int = Field(description="segments started since the detector started (a gap longer than the window, "
+                                      "or time never received before the last sample, starts one)")
     health_version: int
     pending_proposals: int
 
@@ -125,6 +131,11 @@ class TelemetryResult(BaseModel):
     last_time: float | None
     policy: Literal["auto", "confirm"]
     detections: list[DetectionOut]
+    segment: Literal["first", "gap", "unseen_time"] | None = Field(description=(
+        "why this batch started a new segment (the detector restarted on it: buffers and pending alarm "
+        "emptied): its first batch, a gap longer than the window after the last sample, or a time before "
+        "it never received (a clock restarted, or a far-future time earlier); null: it continued the last"))
+    segments: int = Field(description="segments started so far")
     health_version: int = Field(description="the vehicle's health version after this batch")
 
 

@@ -8,7 +8,13 @@ Every write is one transaction, with the guarantees of a posted event (:mod:`ser
   and, under policy ``auto``, the detections as events on the condition that the vehicle's
   ``health_version`` is the one read (the event rows' ``seq`` are the new versions, as a posted
   event's); under ``confirm`` it inserts the proposals.  A writer that got there first makes
-  the batch run again on what it wrote (bounded retries, 409 beyond).  So every worker and
+  the batch run again on what it wrote (bounded retries, 409 beyond).  Batches, settings and
+  decisions of one vehicle are serialised in this process (a lock per vehicle), so only another
+  process's telemetry write can make a batch run again; an *event* committed during the run
+  only makes its detections (``auto``) run again, at most :data:`_MAX_RUNS` runs in all, after
+  which they are recorded after that event, as if posted then (the next batch realigns): an
+  event never costs a batch or a detection (issue 39: 13 of 20 batches got 409 while events
+  arrived, with a client that did not retry).  So every worker and
   replica sees one sequence of samples per vehicle, each sample processed once, and a
   detection applied is visible to every process when the answer returns; a refused batch
   (bad sample, out of order, over its price) changes nothing.
@@ -23,7 +29,8 @@ from __future__ import annotations
 
 import asyncio
 import threading
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
@@ -41,6 +48,7 @@ from .health import dump_health, to_problem
 from .store import VehicleStore
 from .telemetry import (
     BatchOutcome, DetectorSettings, Policy, Samples, batch_seconds, belief, detection_out, event_of, run_batch,
+    segments_of,
 )
 from .vehicle_state import VehicleState
 
@@ -51,6 +59,13 @@ MAX_PROPOSALS = 64
 #: runs of one write when other writers to the same vehicle keep getting there first (409 beyond):
 #: a batch's CPU is at most this many times its price
 _MAX_RETRIES = 3
+#: runs of a batch whose detections meet events committed during its run; then they are
+#: recorded after those events (no 409)
+_MAX_RUNS = 3
+#: commits of one run's outcome on top of events committed meanwhile (each a few ms: no rerun)
+_MAX_COMMITS = 100
+#: why a commit did not happen: another telemetry write (run again) or an event (health moved)
+_REVISION, _HEALTH = "revision", "health"
 #: the tables themselves: Core statements (as service.store's) skip the ORM's bookkeeping
 _TELEMETRY, _PROPOSALS = TelemetryRow.__table__, ProposalRow.__table__
 _VEHICLES, _EVENTS = VehicleRow.__table__, EventRow.__table__
@@ -142,11 +157,34 @@ class TelemetryStore:
         self.store = store
         self._sessions = sessions
         self.runner = TelemetryRunner()
+        self._locks: dict[str, list[Any]] = {}  # vehicle id -> [lock, holders and waiters]
+        self._locks_guard = threading.Lock()
+
+    @contextmanager
+    def _serialised(self, vehicle_id: str) -> Iterator[None]:
+        """This process's telemetry writes to ``vehicle_id``, one at a time (an entry lives while used)."""
+        with self._locks_guard:
+            entry = self._locks.setdefault(vehicle_id, [threading.Lock(), 0])
+            entry[1] += 1
+        try:
+            with entry[0]:
+                yield
+        finally:
+            with self._locks_guard:
+                entry[1] -= 1
+                if entry[1] == 0:
+                    del self._locks[vehicle_id]
 
     # -------------------------------------------------------------- settings
-    def configure(self, vehicle_id: str, policy: Policy, settings: DetectorSettings) -> dict[str, Any]:
-        """Set the vehicle's policy and detector settings.  New detector settings start a new
-        detector (the state is dropped); a change of policy alone keeps it."""
+    def configure(self, vehicle_id: str, policy: Policy, settings: DetectorSettings,
+                  reset: bool = False) -> dict[str, Any]:
+        """Set the vehicle's policy and detector settings.  New detector settings, or ``reset``,
+        start a new detector (the state is dropped: buffers, segments, counters); a change of
+        policy alone keeps it."""
+        with self._serialised(vehicle_id):
+            return self._configure(vehicle_id, policy, settings, reset)
+
+    def _configure(self, vehicle_id: str, policy: Policy, settings: DetectorSettings, reset: bool) -> dict[str, Any]:
         state = self.store.get(vehicle_id)
         try:
             settings.detector(state.nominal)
@@ -171,7 +209,7 @@ class TelemetryStore:
                     return self.read(vehicle_id)
                 same = row.config == record
                 values: dict[str, Any] = {"policy": policy.value, "revision": row.revision + 1, "updated_at": utcnow()}
-                if not same:
+                if reset or not same:
                     values.update(config=record, state=None, synced_version=-1)
                 done = db.execute(update(_TELEMETRY).where(_TELEMETRY.c.vehicle_id == vehicle_id,
                                                            _TELEMETRY.c.revision == row.revision).values(**values))
@@ -195,7 +233,8 @@ class TelemetryStore:
         return {"vehicle_id": vehicle_id, "policy": row.policy, "settings": row.config, "revision": row.revision,
                 "samples": det.get("samples", 0), "last_time": det.get("last_time"),
                 "alarms": det.get("alarm_count", 0), "unisolated_alarms": det.get("unisolated_count", 0),
-                "health_version": state.version, "pending_proposals": int(pending or 0)}
+                "segments": segments_of(det)["count"], "health_version": state.version,
+                "pending_proposals": int(pending or 0)}
 
     # ---------------------------------------------------------------- batches
     def ingest(self, vehicle_id: str, make_samples: Callable[[VehicleState, DetectorSettings], Samples],
@@ -203,9 +242,16 @@ class TelemetryStore:
         """Run one batch and commit its outcome (module docstring); the answer as a dict.
 
         The detector runs between two short sessions (no connection or snapshot held while it
-        runs); the write commits only if nobody wrote the vehicle's telemetry or health since
-        the read."""
-        for _ in range(_MAX_RETRIES):
+        runs); the write commits only if nobody wrote the vehicle's telemetry since the read,
+        and its events (``auto``) only on the health read, or after :data:`_MAX_RUNS` runs on
+        the health committed meanwhile."""
+        with self._serialised(vehicle_id):
+            return self._ingest(vehicle_id, make_samples, budget)
+
+    def _ingest(self, vehicle_id: str, make_samples: Callable[[VehicleState, DetectorSettings], Samples],
+                budget: float) -> dict[str, Any]:
+        revisions = runs = 0
+        while revisions < _MAX_RETRIES:
             vehicle = self.store.get(vehicle_id)
             with self._sessions() as session:
                 db = session.connection()
@@ -222,13 +268,25 @@ class TelemetryStore:
             if row.synced_version != vehicle.version or row.state is None:
                 align = belief(vehicle.nominal, vehicle.health, [event_of(d) for d in pending])
             outcome = run_batch(vehicle.nominal, settings, row.state, align, samples)
+            runs += 1
             policy = Policy(row.policy)
-            with self._sessions() as session:
-                applied = self._commit(session.connection(), vehicle, row, policy, outcome)
-                if applied is None:
-                    session.rollback()
+            target = vehicle
+            for _ in range(_MAX_COMMITS):
+                with self._sessions() as session:
+                    applied = self._commit(session.connection(), target, row, policy, outcome)
+                    if isinstance(applied, str):
+                        session.rollback()
+                    else:
+                        session.commit()
+                if applied == _HEALTH and runs >= _MAX_RUNS:  # on the health committed meanwhile
+                    target = self.store.get(vehicle_id)
                     continue
-                session.commit()
+                break
+            if applied == _REVISION:
+                revisions += 1
+                continue
+            if applied == _HEALTH:
+                continue  # run again on the new health
             new_state, events, proposal_ids = applied
             if new_state is not None:
                 self.store.prebuild(new_state)
@@ -241,12 +299,15 @@ class TelemetryStore:
                 detections.append(out)
             return {"vehicle_id": vehicle_id, "accepted": len(samples), "samples": outcome.samples,
                     "last_time": outcome.last_time, "policy": policy.value, "detections": detections,
+                    "segment": outcome.segment, "segments": outcome.segments,
                     "health_version": vehicle.version if new_state is None else new_state.version}
-        raise Conflict(f"vehicle {vehicle_id!r}: too many concurrent telemetry writes; retry")
+        raise Conflict(f"vehicle {vehicle_id!r}: too many concurrent telemetry writes from other processes; retry")
 
     def _commit(self, db: Any, vehicle: VehicleState, row: Any, policy: Policy,
-                outcome: BatchOutcome) -> tuple[VehicleState | None, list[int], list[int]] | None:
-        """Write a batch's outcome in the open transaction; ``None`` when another writer won."""
+                outcome: BatchOutcome) -> tuple[VehicleState | None, list[int], list[int]] | str:
+        """Write a batch's outcome in the open transaction; :data:`_HEALTH` when an event moved
+        the vehicle's health since ``vehicle`` was read (``auto`` detections only),
+        :data:`_REVISION` when another telemetry write won."""
         new_state: VehicleState | None = None
         seqs: list[int] = []
         ids: list[int] = []
@@ -256,7 +317,7 @@ class TelemetryStore:
                 (d.event, f"telemetry: detected at t = {d.time:.4f} s, confidence {d.confidence:.4f}")
                 for d in outcome.detections])
             if appended is None:
-                return None
+                return _HEALTH
             new_state, rows = appended
             seqs = [r["seq"] for r in rows]
             # the detector applies its findings as "replaces what was known"; a posted event may
@@ -267,7 +328,7 @@ class TelemetryStore:
                           .values(state=outcome.state, revision=row.revision + 1, synced_version=synced,
                                   updated_at=utcnow()))
         if done.rowcount != 1:
-            return None
+            return _REVISION
         if policy is Policy.CONFIRM and outcome.detections:
             for d in outcome.detections:
                 out = detection_out(d)
@@ -302,6 +363,11 @@ class TelemetryStore:
         """Accept (apply as an event, in the same transaction) or reject a pending proposal;
         returns ``(proposal, new vehicle state or None, event row values or None)``; 409 when
         it is no longer pending."""
+        with self._serialised(vehicle_id):
+            return self._decide(vehicle_id, pid, accept)
+
+    def _decide(self, vehicle_id: str, pid: int, accept: bool) -> tuple[dict[str, Any], VehicleState | None,
+                                                                          dict[str, Any] | None]:
         for _ in range(_MAX_RETRIES):
             vehicle = self.store.get(vehicle_id)
             with self._sessions() as session:

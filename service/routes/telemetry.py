@@ -6,15 +6,15 @@ vehicle's detector state in the database and turns its detections into health ev
 (policy ``auto``) or proposals (``confirm``), in one transaction (:mod:`service.telemetry_store`).
 Writes need the API key; reads are open.  The WebSocket is authenticated when it connects
 (``X-API-Key`` header), bounded in message size (:data:`WS_MAX_MESSAGE_BYTES`) and rate
-(:data:`WS_MESSAGES_PER_S`, burst :data:`WS_BURST`), and answers each message in order with
-the ``POST`` answer or a problem document (``status`` 4xx, nothing changed).
+(:data:`WS_MESSAGES_PER_S`, burst :data:`WS_BURST`, and a budget per API key over all its sockets:
+both enforced before the message is parsed, by :class:`service.streams.StreamLimits`), and answers
+each message in order with the ``POST`` answer or a problem document (``status`` 4xx, nothing
+changed).
 """
 
 from __future__ import annotations
 
-import hmac
 import json
-import time
 from typing import Annotated, Any, Literal
 
 import pydantic_core
@@ -28,12 +28,13 @@ import alloc
 from ..bodies import JsonRoute
 from ..deps import StoreDep, end_parse_turn, require_api_key
 from ..errors import (
-    _LIBRARY_ERRORS, InvalidRequest, PayloadTooLarge, ServiceError, TooManyRequests, Unauthorized,
+    _LIBRARY_ERRORS, InvalidRequest, ServiceError, Unauthorized,
     _validation_errors, field_error, library_error_fields, problem_response,
 )
 from ..health import health_out
 from ..schemas import NOT_FOUND, PROBLEM_RESPONSES, UNAUTHORIZED, EventOut, HealthOut, ProblemOut
 from ..store import VehicleState
+from ..streams import key_matches
 from ..telemetry import DetectorSettings, Policy, Samples, samples_from
 from ..telemetry_schemas import (
     ProposalDecided, ProposalList, ProposalOut, TelemetryBatchIn, TelemetryConfigIn, TelemetryOut, TelemetryResult,
@@ -42,8 +43,10 @@ from ..telemetry_store import TelemetryStore
 
 __all__ = ["router", "WS_MAX_MESSAGE_BYTES", "WS_MESSAGES_PER_S", "WS_BURST"]
 
-#: bytes of one WebSocket message, at most (a 1,000-sample batch at m = 11, k = 6 is about 350 KB)
-WS_MAX_MESSAGE_BYTES = 1024 * 1024
+#: bytes of one WebSocket message, at most: the light-body size (service.priority.HEAVY_BODY_BYTES),
+#: so that a message's parse on the event loop is bounded (0.3 ms for 64 KiB, about 180 samples at
+#: m = 11, k = 6; 2.2 ms for a 1,000-sample batch of 356 KB, which goes through POST instead)
+WS_MAX_MESSAGE_BYTES = 64 * 1024
 #: messages per second one WebSocket connection may send (sustained), and its burst
 WS_MESSAGES_PER_S = 50.0
 WS_BURST = 20
@@ -98,7 +101,7 @@ def _health(s: VehicleState) -> HealthOut:
 async def configure(vehicle_id: VehicleId, body: TelemetryConfigIn, store: StoreDep,
                     telemetry: Telemetry) -> TelemetryOut:
     settings = body.to_settings(store.get(vehicle_id).nominal)
-    out = await telemetry.runner.run(telemetry.configure, vehicle_id, Policy(body.policy), settings)
+    out = await telemetry.runner.run(telemetry.configure, vehicle_id, Policy(body.policy), settings, body.reset)
     return TelemetryOut(**out)
 
 
@@ -145,23 +148,6 @@ async def reject(vehicle_id: VehicleId, pid: ProposalId, telemetry: Telemetry) -
 
 
 # ----------------------------------------------------------------- streaming
-class _Bucket:
-    """Token bucket: ``rate`` messages per second sustained, ``burst`` at once."""
-
-    def __init__(self, rate: float, burst: int) -> None:
-        self.rate, self.burst = rate, float(burst)
-        self.tokens, self.at = float(burst), time.monotonic()
-
-    def take(self) -> bool:
-        now = time.monotonic()
-        self.tokens = min(self.burst, self.tokens + (now - self.at) * self.rate)
-        self.at = now
-        if self.tokens < 1.0:
-            return False
-        self.tokens -= 1.0
-        return True
-
-
 def _problem(exc: Exception, limit: int) -> dict[str, Any]:
     """``exc`` as the problem document the HTTP handlers of :mod:`service.errors` would send."""
     if isinstance(exc, ServiceError):
@@ -178,16 +164,13 @@ def _problem(exc: Exception, limit: int) -> dict[str, Any]:
 
 
 def _key_ok(websocket: WebSocket) -> bool:
-    expected = websocket.app.state.settings.api_key
-    if not expected:
-        return True
-    key = websocket.headers.get("x-api-key")
-    return key is not None and hmac.compare_digest(key.encode(), expected.encode())
+    return key_matches(websocket.scope.get("headers", ()), websocket.app.state.settings.api_key)
 
 
 @router.websocket("/{vehicle_id}/telemetry/ws")
 async def stream(websocket: WebSocket, vehicle_id: str) -> None:
-    """One batch per text message, answered in order (module docstring)."""
+    """One batch per text message, answered in order (module docstring).  A message reaching
+    the route is within its size and rates: :class:`service.streams.StreamLimits` answered the others."""
     app = websocket.app
     settings = app.state.settings
     refusal: ServiceError | None = None
@@ -205,7 +188,6 @@ async def stream(websocket: WebSocket, vehicle_id: str) -> None:
         return
     await websocket.accept()
     telemetry = telemetry_of(app)
-    bucket = _Bucket(WS_MESSAGES_PER_S, WS_BURST)
     limit = settings.max_validation_errors
     try:
         while True:
@@ -217,13 +199,6 @@ async def stream(websocket: WebSocket, vehicle_id: str) -> None:
                 data = (message.get("bytes") or b"").decode("utf-8", errors="replace")
             answer: dict[str, Any]
             try:
-                if len(data) > WS_MAX_MESSAGE_BYTES:
-                    raise PayloadTooLarge(f"message of {len(data):,} bytes exceeds the limit of "
-                                          f"{WS_MAX_MESSAGE_BYTES:,}", [{"loc": ["body"], "pointer": "",
-                                                                        "reason": "message too large"}])
-                if not bucket.take():
-                    raise TooManyRequests(f"more than {WS_MESSAGES_PER_S:g} messages per second (burst {WS_BURST}) "
-                                          f"on this connection; this message was not processed")
                 body = _parse(data)
                 answer = TelemetryResult(**await _ingest(telemetry, vehicle_id, body,
                                                          telemetry.store.batch_budget)).model_dump(mode="json")

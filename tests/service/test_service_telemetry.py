@@ -342,9 +342,9 @@ def hostile_payload(seed: int, t0: float):
         i = max(i, 1)
         body["t"][i] = body["t"][i - 1] - (0.0 if rng.random() < 0.5 else float(rng.uniform(0.01, 1)))
         field = f"t/{i}"
-    elif cls == 5:  # a batch starting at or before the last sample received
-        body["t"] = (np.asarray(body["t"]) - (body["t"][-1] - t0) - float(rng.uniform(0, 5))).tolist()
-        field = "t/0"
+    elif cls == 5:  # a batch reaching into time already received (the fed vehicle's 0.1-4 s): a repeat
+        body["t"] = (np.asarray(body["t"]) - (body["t"][-1] - t0) - float(rng.uniform(0, 3.5))).tolist()
+        field = "t"
     elif cls == 6:  # empty lists
         body = {"t": [], "u": [], "y": []}
         field = "t"
