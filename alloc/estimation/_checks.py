@@ -13,10 +13,14 @@ from typing import Any
 import numpy as np
 
 from ..exceptions import AllocError, OptionError
-from ..problem import MAX_MAGNITUDE, as_float_array, as_real, check_magnitude
+from ..problem import MAX_MAGNITUDE, as_float_array, as_real, check_magnitude, short_repr
 
 __all__ = ["SampleError", "StateError", "sample_vector", "setting_real", "setting_int", "setting_vector",
-           "state_array", "state_mapping"]
+           "state_array", "state_mapping", "state_count", "samples_in", "MAX_COUNT"]
+
+#: Largest stored counter (samples, alarms): integers a float holds exactly, so ``samples *
+#: sample_time`` and every ratio of counts stay exact and finite.
+MAX_COUNT = 2 ** 53
 
 
 class SampleError(AllocError, ValueError):
@@ -55,8 +59,21 @@ def setting_int(name: str, value: Any, lo: int, hi: int) -> int:
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
         raise OptionError(f"{name}: expected an integer, got {type(value).__name__}")
     if not lo <= int(value) <= hi:
-        raise OptionError(f"{name}: {int(value)} outside [{lo}, {hi}]")
+        raise OptionError(f"{name}: {short_repr(int(value))} outside [{lo}, {hi}]")
     return int(value)
+
+
+def samples_in(name: str, seconds: float, sample_time: float, cap: int) -> int:
+    """``round(seconds / sample_time)``, or OptionError naming ``name`` when above ``cap``.
+
+    The ratio is compared as a float before any integer is made: a subnormal sample time
+    gives ``inf``, which ``int`` cannot convert, and a huge count would be allocated later.
+    """
+    ratio = seconds / sample_time
+    if not ratio <= cap:  # also inf
+        raise OptionError(f"{name}: {seconds:g} s at {sample_time:g} s per sample is {ratio:.3g} samples; "
+                          f"at most {cap}")
+    return int(round(ratio))
 
 
 def setting_vector(name: str, value: Any, n: int, *, positive: bool = False) -> np.ndarray:
@@ -83,6 +100,13 @@ def state_mapping(data: Any, kind: str, keys: tuple[str, ...]) -> Mapping[str, A
     if missing:
         raise StateError(f"{missing[0]}: missing from the stored {kind} state")
     return data
+
+
+def state_count(name: str, value: Any, hi: int = MAX_COUNT) -> int:
+    """A stored non-negative integer up to ``hi`` (not a bool), or StateError naming it."""
+    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= hi:
+        raise StateError(f"{name}: expected an integer in [0, {hi}], got {short_repr(value)}")
+    return value
 
 
 def state_array(name: str, value: Any, shape: tuple[int, ...], *, allow_nan: bool = False) -> np.ndarray:

@@ -52,6 +52,14 @@ inside, and an imperfect estimate is refined rather than blamed on a neighbour.
 Memory is bounded: ring buffers of ``2 window`` samples (``2 long_window`` with a second,
 long window) and a list of at most
 ``MAX_KEPT`` detections.  :meth:`FailureDetector.to_dict` gives the whole state.
+
+Domain and cost.  Settings and samples are finite with ``|x| <= 1e50``; the whitened columns
+``B / noise_std`` must stay within that bound too (a subnormal ``noise_std`` is refused).  The
+buffers, the whitening matrices and the isolation's ``L x L`` tables (``L`` the buffer length)
+are priced from the settings before anything is allocated, at most :data:`MAX_DETECTOR_BYTES`
+(the estimate, :func:`detector_bytes`, is in bytes of the largest working set).  A sample whose
+whitened residual leaves the domain, or whose test would record a non-finite statistic, is
+refused (SampleError naming ``y``) and the state is unchanged; counters stay below ``2^53``.
 """
 
 from __future__ import annotations
@@ -61,24 +69,47 @@ from typing import Any
 
 import numpy as np
 
-from ..exceptions import OptionError
+from ..exceptions import OptionError, ProblemError
 from ..health import EffectorHealth, FailureEvent, FailureKind, apply_event, health_from_dict, health_to_dict
-from ..problem import Problem, as_float_array, as_real, check_magnitude
+from ..problem import MAX_MAGNITUDE, Problem, as_float_array, as_real, check_magnitude, short_repr
 from ._checks import (
+    MAX_COUNT,
     SampleError,
     StateError,
     sample_vector,
+    samples_in,
     setting_real,
     setting_vector,
     state_array,
+    state_count,
     state_mapping,
 )
 from .isolation import Detection, Isolation
 
-__all__ = ["FailureDetector", "Detection", "MAX_KEPT"]
+__all__ = ["FailureDetector", "Detection", "MAX_KEPT", "MAX_DETECTOR_BYTES", "detector_bytes"]
 
 #: detections kept in the state (older ones are dropped; the caller has received them)
 MAX_KEPT = 64
+#: The largest working set a detector's settings may imply (:func:`detector_bytes`): 256 MiB.
+#: The isolation's ``L x L`` tables dominate, so the buffer ``L`` is at most about 1,600
+#: samples (a window of about 800, or a long window of 800); the default designs use 32.
+MAX_DETECTOR_BYTES = 256 * 2 ** 20
+#: Samples of a window before it is priced (keeps ``round(window / sample_time)`` an exact integer)
+_MAX_WINDOW_SAMPLES = 100_000
+
+
+def detector_bytes(k: int, m: int, n: int, n_long: int, whiten: bool) -> int:
+    """Bytes of the largest working set of a detector (``k`` axes, ``m`` effectors, windows of
+    ``n`` and ``n_long`` samples): the ring buffers (``L = 2 max(n, n_long)`` samples of
+    ``3 m + k + 1`` numbers), the whitening matrices and their factorisation (``4 n^2`` numbers
+    each), and the isolation's tables on an alarm (about ``12 L^2`` numbers, measured: the
+    run-to-stop table of suffix by sample and its temporaries, the reduced-limits table of
+    ``2 L`` candidates by ``L`` samples)."""
+    L = 2 * max(n, n_long)
+    numbers = L * (3 * m + k + 1) + 12 * L * L
+    if whiten:
+        numbers += 4 * (n * n + n_long * n_long)
+    return 8 * numbers
 
 
 class FailureDetector(Isolation):
@@ -125,17 +156,21 @@ class FailureDetector(Isolation):
         self.problem = problem
         k, m = problem.k, problem.m
         self.noise_std = setting_vector("noise_std", noise_std, k, positive=True)
+        with np.errstate(over="ignore"):
+            Bn = np.array(problem.B, dtype=float) / self.noise_std[:, None]  # the columns' directions
+        if not np.abs(Bn).max(initial=0.0) <= MAX_MAGNITUDE:
+            i = int(np.argmax(~(np.abs(Bn).max(axis=1) <= MAX_MAGNITUDE)))
+            raise OptionError(f"noise_std: noise_std[{i}] = {self.noise_std[i]:g} makes the whitened B / noise_std "
+                              f"exceed {MAX_MAGNITUDE:g} (too small for this B)")
         self.dt = setting_real("sample_time", sample_time, 0.0, 3600.0, lo_open=True)
         self.false_alarm_rate = setting_real("false_alarm_rate", false_alarm_rate, 0.0, 3.6e9, lo_open=True)
         self.window_seconds = setting_real("window", window, 0.0, 3600.0, lo_open=True)
-        self.N = max(4, int(round(self.window_seconds / self.dt)))
-        if self.N > 100_000:
-            raise OptionError(f"window: {self.N} samples; at most 100000")
+        self.N = max(4, samples_in("window", self.window_seconds, self.dt, _MAX_WINDOW_SAMPLES))
         if hop is None:
             self.hop = max(1, self.N // 4)
         else:
-            if isinstance(hop, bool) or not isinstance(hop, (int, np.integer)) or not 1 <= hop <= self.N:
-                raise OptionError(f"hop: expected an integer in [1, {self.N}] (samples), got {hop!r}")
+            if isinstance(hop, (bool, np.bool_)) or not isinstance(hop, (int, np.integer)) or not 1 <= hop <= self.N:
+                raise OptionError(f"hop: expected an integer in [1, {self.N}] (samples), got {short_repr(hop)}")
             self.hop = int(hop)
         self.has_position = position_noise_std is not None
         self.position_std = (setting_vector("position_noise_std", position_noise_std, m, positive=True)
@@ -143,17 +178,23 @@ class FailureDetector(Isolation):
         self.min_confidence = setting_real("min_confidence", min_confidence, 0.0, 1.0, lo_open=True, hi_open=True)
         self.long_window_seconds = (None if long_window is None
                                     else setting_real("long_window", long_window, 0.0, 3600.0, lo_open=True))
-        self.N_long = 0 if long_window is None else int(round(self.long_window_seconds / self.dt))
-        if long_window is not None and not self.N < self.N_long <= 100_000:
+        self.N_long = (0 if long_window is None
+                       else samples_in("long_window", self.long_window_seconds, self.dt, _MAX_WINDOW_SAMPLES))
+        if long_window is not None and not self.N < self.N_long <= _MAX_WINDOW_SAMPLES:
             raise OptionError(f"long_window: {self.N_long} samples; expected more than the window's {self.N} "
-                              "and at most 100000")
+                              f"and at most {_MAX_WINDOW_SAMPLES}")
         self.L = 2 * max(self.N, self.N_long)
+        cost = detector_bytes(k, m, self.N, self.N_long, noise_correlation is not None)
+        if cost > MAX_DETECTOR_BYTES:  # priced before the buffers, whiteners or tables exist
+            field = "long_window" if self.N_long else "window"
+            raise OptionError(f"{field}: a buffer of {self.L} samples needs about {cost / 2 ** 20:.0f} MiB "
+                              f"(isolation tables {self.L} x {self.L}); at most {MAX_DETECTOR_BYTES // 2 ** 20} MiB")
         self.noise_correlation = (None if noise_correlation is None
                                   else _correlation_setting(noise_correlation))
         self._whiten = None if self.noise_correlation is None else _whitener(self.noise_correlation, self.N)
         self._whiten_long = (None if self.noise_correlation is None or not self.N_long
                              else _whitener(self.noise_correlation, self.N_long))
-        self._Bn = np.array(problem.B, dtype=float) / self.noise_std[:, None]  # the columns' directions
+        self._Bn = Bn
         self._design()
         self.health: dict[str, EffectorHealth] = {}
         self.detections: list[Detection] = []
@@ -258,20 +299,40 @@ class FailureDetector(Isolation):
         t = self.samples * self.dt if time is None else as_real("time", time, SampleError)
         if not t > self.last_time:
             raise SampleError(f"time: {t:g} is not after the previous sample's {self.last_time:g}")
-        known = self._known_positions(u)
-        r = (y - self._B_eff @ known) / self.noise_std
-        q = np.zeros(m) if pos is None else (pos - known) / self.position_std
-        i = self._head
-        self._U[i], self._K[i], self._R[i], self._Q[i], self._T[i] = u, known, r, q, t
-        self._head = (i + 1) % self.L
-        self._count = min(self._count + 1, self.L)
-        self._since_test += 1
-        self.samples += 1
-        self.last_time = t
-        if self._count < self.N or self._since_test < self.hop:
-            return []
-        self._since_test = 0
-        return self._test(t)
+        if self.samples >= MAX_COUNT:
+            raise SampleError(f"time: {self.samples} samples, the most one detector counts; start a new one")
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):  # refused below, never raised
+            rate_state = self._rate_state.copy()
+            known = self._known_positions(u)
+            r = (y - self._B_eff @ known) / self.noise_std
+            q = np.zeros(m) if pos is None else (pos - known) / self.position_std
+            if not (np.abs(r).max(initial=0.0) <= MAX_MAGNITUDE and np.abs(q).max(initial=0.0) <= MAX_MAGNITUDE):
+                self._rate_state = rate_state
+                field = "y" if not np.abs(r).max(initial=0.0) <= MAX_MAGNITUDE else "position"
+                raise SampleError(f"{field}: the whitened residual leaves the valid domain (|x| <= {MAX_MAGNITUDE:g}) "
+                                  "at this noise level; refused, the state is unchanged")
+            i = self._head
+            saved = (self._U[i].copy(), self._K[i].copy(), self._R[i].copy(), self._Q[i].copy(), self._T[i],
+                     self._head, self._count, self._since_test, self.samples, self.last_time, rate_state,
+                     None if self._pending is None else dict(self._pending), self.alarm_count,
+                     self.unisolated_count)
+            self._U[i], self._K[i], self._R[i], self._Q[i], self._T[i] = u, known, r, q, t
+            self._head = (i + 1) % self.L
+            self._count = min(self._count + 1, self.L)
+            self._since_test += 1
+            self.samples += 1
+            self.last_time = t
+            if self._count < self.N or self._since_test < self.hop:
+                return []
+            self._since_test = 0
+            try:
+                return self._test(t)
+            except _NonFinite as exc:
+                (self._U[i], self._K[i], self._R[i], self._Q[i], self._T[i], self._head, self._count,
+                 self._since_test, self.samples, self.last_time, self._rate_state, self._pending, self.alarm_count,
+                 self.unisolated_count) = saved
+                raise SampleError(f"y: the test would record a non-finite {exc} at this sample's scale; refused, "
+                                  "the state is unchanged") from None
 
     def _window(self, n: int) -> tuple[np.ndarray, ...]:
         idx = (self._head - n + np.arange(n)) % self.L
@@ -310,6 +371,13 @@ class FailureDetector(Isolation):
             raise SampleError(f"u: expected (n, {m}) with y (n, {k}) and n >= {N}, got {U.shape} and {Y.shape}")
         check_magnitude("u", U, SampleError)
         check_magnitude("y", Y, SampleError)
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            stat = self._window_statistics(U, Y, N, long)
+        if not np.isfinite(stat).all():
+            raise SampleError("y: a window's statistic is not finite at this scale (whitened residuals too large)")
+        return stat
+
+    def _window_statistics(self, U: np.ndarray, Y: np.ndarray, N: int, long: bool) -> np.ndarray:
         tested = self.tested
         B_eff, held = self._effective()
         known = np.where(np.isnan(held), U, held)
@@ -327,13 +395,22 @@ class FailureDetector(Isolation):
             tested, stat = self._stage1(self.N)
             if self.N_long and self._count >= self.N_long and not (stat > gamma).any():
                 stat = np.maximum(stat, self._stage1(self.N_long)[1])
+            if not np.isfinite(stat).all():
+                raise _NonFinite("stage-1 statistic")
             if not (stat > gamma).any():
                 return []
             self.alarm_count += 1
             self._pending = {"time": t, "statistic": float(stat.max()), "hops": 0}
         pending = self._pending
-        detection = self._isolate(pending, gamma)
+        try:
+            detection = self._isolate(pending, gamma)
+        except ProblemError as exc:  # a fitted parameter outside the domain (FailureEvent checks them)
+            raise _NonFinite(f"failure parameter ({exc})") from None
         if detection is not None:
+            numbers = (detection.time, detection.onset, detection.confidence, detection.parameter,
+                       detection.parameter_std, detection.end_position, *detection.event.params.values())
+            if not all(x is None or math.isfinite(x) for x in numbers):
+                raise _NonFinite("detection")
             self._emit(detection)
             return [detection]
         pending["hops"] += 1
@@ -388,25 +465,31 @@ class FailureDetector(Isolation):
                       min_confidence=d["min_confidence"],
                       noise_correlation=d.get("noise_correlation"),  # absent from states stored before it
                       long_window=d.get("long_window"))
+        except (OptionError, TypeError, ValueError) as exc:  # the settings: named by the constructor's message
+            raise StateError(str(exc)) from None
+        try:
             det.health = health_from_dict(d["health"])
             for name in det.health:
                 problem.index(name)
-        except (OptionError, ValueError) as exc:
-            raise StateError(f"state: {exc}") from None
+        except (TypeError, ValueError) as exc:
+            raise StateError(f"health: {exc}") from None
         for name in ("samples", "alarm_count", "unisolated_count", "since_test"):
-            if isinstance(d[name], bool) or not isinstance(d[name], int) or d[name] < 0:
-                raise StateError(f"{name}: expected a non-negative integer")
+            state_count(name, d[name])
         det.samples, det.alarm_count, det.unisolated_count = d["samples"], d["alarm_count"], d["unisolated_count"]
-        det.last_time = -math.inf if d["last_time"] is None else float(d["last_time"])
+        # a NaN last time would refuse every later sample; a time is a real number or null (none yet)
+        det.last_time = -math.inf if d["last_time"] is None else as_real("last_time", d["last_time"], StateError)
         det._restart()
         det._since_test = d["since_test"]
         buf = d["buffer"]
         if not isinstance(buf, dict):
             raise StateError("buffer: expected a mapping")
-        T = np.asarray(buf.get("T", []), dtype=float).ravel()
+        T = as_float_array("T", buf.get("T", []), StateError)
+        if T.ndim != 1 or T.size > det.L:
+            raise StateError(f"T: expected at most {det.L} stored sample times, got shape {T.shape}")
         n = T.size
-        if n > det.L:
-            raise StateError(f"buffer: {n} samples; at most {det.L}")
+        check_magnitude("T", T, StateError)
+        if n and not (np.diff(T) > 0).all() or n and not T[-1] <= det.last_time:
+            raise StateError("T: the stored sample times must increase and end at or before last_time")
         k, m = problem.k, problem.m
         det._U[:n] = state_array("U", buf.get("U", []) if n else np.zeros((0, m)), (n, m))
         det._K[:n] = state_array("K", buf.get("K", []) if n else np.zeros((0, m)), (n, m))
@@ -416,11 +499,22 @@ class FailureDetector(Isolation):
         det._head, det._count = n % det.L, n
         det._rate_state = state_array("rate_state", d["rate_state"], (m,))
         pending = d["pending"]
-        if pending is not None and not (isinstance(pending, dict) and {"time", "statistic", "hops"} <= set(pending)):
-            raise StateError("pending: expected null or a mapping with time, statistic, hops")
+        if pending is not None:
+            if not (isinstance(pending, dict) and set(pending) == {"time", "statistic", "hops"}):
+                raise StateError("pending: expected null or a mapping with time, statistic, hops")
+            pending = {"time": as_real("pending", pending["time"], StateError),
+                       "statistic": as_real("pending", pending["statistic"], StateError),
+                       "hops": state_count("pending", pending["hops"])}
         det._pending = pending
-        det.detections = [_detection_from_dict(x) for x in d["detections"]][-MAX_KEPT:]
+        if not isinstance(d["detections"], list):
+            raise StateError("detections: expected a list")
+        det.detections = [_detection_from_dict(x) for x in d["detections"][-MAX_KEPT:]]
         return det
+
+
+class _NonFinite(Exception):
+    """A test on the current sample would record a non-finite number (internal: the update
+    restores its state and refuses the sample)."""
 
 
 def _detection_from_dict(d: Any) -> Detection:
@@ -430,9 +524,18 @@ def _detection_from_dict(d: Any) -> Detection:
         ev = dict(d["event"])
         event = FailureEvent(ev.pop("effector"), ev.pop("kind"), **ev)
         rest = {k: v for k, v in d.items() if k != "event"}
+        for name, value in rest.items():  # every number recorded is finite (an unknown name: Detection's TypeError)
+            if name == "samples":
+                rest[name] = state_count("detections", value)
+            elif value is not None or name not in _OPTIONAL_NUMBERS:
+                rest[name] = as_real("detections", value, StateError)
         return Detection(event=event, **rest)
     except (TypeError, ValueError, KeyError) as exc:
         raise StateError(f"detections: {exc}") from None
+
+
+#: a stored detection's fields that may be null
+_OPTIONAL_NUMBERS = ("parameter", "parameter_std", "end_position")
 
 
 def _correlation_setting(value: Any) -> np.ndarray:

@@ -44,10 +44,11 @@ from typing import Any
 import numpy as np
 
 from ..api import Allocator, make_allocator
+from ..domain import as_float_array, check_magnitude, short_repr
 from ..exceptions import OptionError
 from ..problem import Problem
 from ..result import EXACT_RTOL, Result, Status
-from ._checks import setting_int, setting_real, setting_vector
+from ._checks import MAX_COUNT, setting_int, setting_real, setting_vector
 
 __all__ = ["NullSpaceExcitation", "RandomWeightAllocator", "regressor_condition", "SIGNALS"]
 
@@ -65,9 +66,10 @@ def regressor_condition(U: Any, scale: Any = None) -> float:
     """2-norm condition number of the regressor ``U`` (N samples x m effectors), columns
     centred and divided by ``scale`` (default: each column's own RMS);
     ``inf`` when a column never moves or columns are collinear."""
-    X = np.array(U, dtype=float)
-    if X.ndim != 2 or X.shape[0] < 2 or not np.isfinite(X).all():
-        raise OptionError(f"U: expected a finite (N >= 2, m) array, got shape {X.shape}")
+    X = as_float_array("U", U, OptionError)
+    if X.ndim != 2 or X.shape[0] < 2 or X.shape[1] < 1:
+        raise OptionError(f"U: expected a finite (N >= 2, m >= 1) array, got shape {X.shape}")
+    check_magnitude("U", X, OptionError)  # |U| <= 1e50: the squares below stay finite
     X = X - X.mean(axis=0)
     s = np.sqrt((X ** 2).mean(axis=0)) if scale is None else setting_vector("scale", scale, X.shape[1], positive=True)
     if (s <= 0).any():
@@ -101,8 +103,8 @@ class NullSpaceExcitation:
                  band: tuple[float, float] = (0.1, 1.5), seed: int = 0) -> None:
         if not isinstance(allocator, Allocator):
             raise OptionError(f"allocator: expected an alloc.Allocator, got {type(allocator).__name__}")
-        if signal not in SIGNALS:
-            raise OptionError(f"signal: expected one of {', '.join(SIGNALS)}, got {signal!r}")
+        if not isinstance(signal, str) or signal not in SIGNALS:
+            raise OptionError(f"signal: expected one of {', '.join(SIGNALS)}, got {short_repr(signal)}")
         self.allocator = allocator
         self.problem: Problem = allocator.problem
         m = self.problem.m
@@ -111,14 +113,17 @@ class NullSpaceExcitation:
         if (self.amplitude < 0).any():
             raise OptionError("amplitude: must be >= 0")
         if not (isinstance(band, (tuple, list)) and len(band) == 2):
-            raise OptionError(f"band: expected (low, high) in Hz, got {band!r}")
+            raise OptionError(f"band: expected (low, high) in Hz, got {short_repr(band)}")
         f_lo = setting_real("band", band[0], 0.0, 0.5 / self.dt, lo_open=True)
         f_hi = setting_real("band", band[1], f_lo, 0.5 / self.dt)
         self.band = (f_lo, f_hi)
         self.signal = signal
         self.seed = setting_int("seed", seed, 0, 2 ** 63 - 1)
         self._rng = np.random.default_rng(self.seed)
-        self._clock = max(1, int(round(1.0 / (2.0 * f_hi * self.dt))))
+        # calls per PRBS switch; a band far below the call rate gives a clock beyond any run (a
+        # subnormal band gave inf, which int() cannot convert): held at MAX_COUNT calls
+        per_call = 2.0 * f_hi * self.dt  # may underflow to 0
+        self._clock = max(1, int(round(1.0 / per_call)) if per_call * MAX_COUNT > 1.0 else MAX_COUNT)
         self._prbs = np.where(self._rng.random(m) < 0.5, -1.0, 1.0)
         freqs = np.linspace(f_lo, f_hi, _TONES * m)
         self._freqs = self._rng.permutation(freqs).reshape(m, _TONES)  # distinct tones per effector
@@ -180,6 +185,9 @@ class NullSpaceExcitation:
         excitation added: for a loop that counts its own calls, or that rebuilds the wrapped
         allocator (a health change) and must keep the signal's phase.  The multisine is a
         function of ``n`` alone; the PRBS advances with the calls made."""
+        if not isinstance(r, Result):
+            raise OptionError(f"r: expected an alloc.Result, got {type(r).__name__}")
+        n = setting_int("n", n, 0, MAX_COUNT)  # n dt stays exact and finite
         p = self.problem
         lo, hi = p.effective_bounds(u_prev, dt) if (u_prev is not None or dt is not None) else (p.umin, p.umax)
         if self.signal == "prbs" and n % self._clock == 0:

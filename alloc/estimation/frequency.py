@@ -24,7 +24,12 @@ The seed's own findings (section 1.3.2.2) set the design:
   apart; an estimate uses the older bank, so it rests on between ``window / 2`` and
   ``window`` seconds of data, and a change is forgotten at most ``window`` seconds later.
 
-Memory is fixed (two banks of ``f (p + k)`` complex numbers), as the seed says.
+Memory is fixed (two banks of ``f (p + k)`` complex numbers), as the seed says.  An estimate
+also forms the noise transform ``Phi``, ``2 f`` rows by the bank's samples (up to ``window /
+sample_time``), so the settings are priced before anything is allocated: at most
+:data:`MAX_BINS` frequencies (counted from ``band`` and ``spacing`` as a float, not by
+building them) and ``f`` times the window's samples at most :data:`MAX_TRANSFORM_CELLS`
+(about 64 MiB of ``Phi``); beyond, OptionError naming ``spacing`` or ``window``.
 
 Uncertainty (``response`` form).  The noise's transforms are linear in the noise samples:
 the stacked real and imaginary parts are ``dt Phi e`` with ``Phi`` the bank's cosine and
@@ -43,16 +48,25 @@ from typing import Any
 import numpy as np
 
 from ..exceptions import OptionError
+from ..domain import short_repr
 from ._checks import (
     StateError,
     sample_vector,
+    samples_in,
     setting_real,
     setting_vector,
     state_array,
+    state_count,
     state_mapping,
 )
 
-__all__ = ["FrequencyDomainEstimator", "FrequencyEstimate"]
+__all__ = ["FrequencyDomainEstimator", "FrequencyEstimate", "MAX_BINS", "MAX_TRANSFORM_CELLS"]
+
+#: Frequencies in the band at most.
+MAX_BINS = 512
+#: Frequencies times the window's samples at most: the noise transform ``Phi`` of an estimate
+#: is ``2 f`` by the window's samples (64 MiB at this cap; its filtering doubles it).
+MAX_TRANSFORM_CELLS = 2 ** 22
 
 #: relative singular-value cut: directions of Re(X* X) below it are unidentified (seed 1.3.2.5)
 RANK_RTOL = 1e-9
@@ -120,26 +134,27 @@ class FrequencyDomainEstimator:
                  spacing: float = 0.05, window: float = 20.0, form: str = "response", noise_std: Any = None,
                  highpass: bool = True) -> None:
         for name, value in (("n_outputs", n_outputs), ("n_inputs", n_inputs)):
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not 1 <= value <= 1024:
-                raise OptionError(f"{name}: expected an integer in [1, 1024], got {value!r}")
-        if form not in ("response", "derivative"):
-            raise OptionError(f"form: expected 'response' or 'derivative', got {form!r}")
+            if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or not 1 <= value <= 1024:
+                raise OptionError(f"{name}: expected an integer in [1, 1024], got {short_repr(value)}")
+        if not isinstance(form, str) or form not in ("response", "derivative"):
+            raise OptionError(f"form: expected 'response' or 'derivative', got {short_repr(form)}")
         if not isinstance(highpass, bool):
             raise OptionError(f"highpass: expected true or false, got {type(highpass).__name__}")
         self.k, self.m, self.form, self.highpass = int(n_outputs), int(n_inputs), form, highpass
         self.dt = setting_real("sample_time", sample_time, 0.0, 3600.0, lo_open=True)
         nyquist = 0.5 / self.dt
         if not (isinstance(band, (tuple, list)) and len(band) == 2):
-            raise OptionError(f"band: expected (low, high) in Hz, got {band!r}")
+            raise OptionError(f"band: expected (low, high) in Hz, got {short_repr(band)}")
         lo = setting_real("band", band[0], 0.0, nyquist, lo_open=True, hi_open=True)
         hi = setting_real("band", band[1], lo, nyquist, hi_open=True)
         self.spacing = setting_real("spacing", spacing, 0.0, max(hi - lo, 1e-12) if hi > lo else 1.0, lo_open=True)
         self.band = (lo, hi)
-        self.freqs = lo + self.spacing * np.arange(int(np.floor((hi - lo) / self.spacing + 1e-9)) + 1)
-        if self.freqs.size > 512:
-            raise OptionError(f"spacing: {self.freqs.size} bins in the band; at most 512")
+        bins = np.floor((hi - lo) / self.spacing + 1e-9) + 1  # counted before any is built: 1e-12 asked 10 TiB
+        if not bins <= MAX_BINS:
+            raise OptionError(f"spacing: {bins:.3g} bins in the band; at most {MAX_BINS}")
+        self.freqs = lo + self.spacing * np.arange(int(bins))
         self.window = setting_real("window", window, 1.0 / lo, 1e6)
-        self.window_samples = max(2, int(round(self.window / self.dt)))
+        self.window_samples = max(2, samples_in("window", self.window, self.dt, MAX_TRANSFORM_CELLS // self.freqs.size))
         self.noise_known = noise_std is not None
         self.noise_std = setting_vector("noise_std", noise_std, self.k, positive=True) if noise_std is not None \
             else np.full(self.k, np.nan)
@@ -271,8 +286,8 @@ class FrequencyDomainEstimator:
         try:
             est = cls(d["n_outputs"], d["n_inputs"], d["sample_time"], band=tuple(d["band"]), spacing=d["spacing"],
                       window=d["window"], form=d["form"], noise_std=d["noise_std"], highpass=d["highpass"])
-        except (OptionError, TypeError) as exc:
-            raise StateError(f"state: {exc}") from None
+        except (OptionError, TypeError) as exc:  # the settings: named by the constructor's message
+            raise StateError(str(exc)) from None
         banks = d["banks"]
         if not isinstance(banks, list) or len(banks) != 2:
             raise StateError("banks: expected two stored banks")
@@ -286,7 +301,5 @@ class FrequencyDomainEstimator:
             if isinstance(b["count"], bool) or not isinstance(b["count"], int) or not 0 <= b["count"] <= est.window_samples:
                 raise StateError("count: expected an integer within the window")
             bank.count = b["count"]
-        if isinstance(d["samples"], bool) or not isinstance(d["samples"], int) or d["samples"] < 0:
-            raise StateError("samples: expected a non-negative integer")
-        est.samples = d["samples"]
+        est.samples = state_count("samples", d["samples"])
         return est

@@ -279,9 +279,9 @@ class Isolation:
             th = f - 1.0
             llr = np.where(ok, c * (th * AP - 0.5 * th * th * U2) - BASE, -np.inf)
             i = best(llr, 1)
-            if np.isfinite(llr[i]):
+            if np.isfinite(llr[i]):  # c U2 may underflow to 0 (u ~ 1e-160): numpy's inf, not ZeroDivisionError
                 fits.append(_Fit(FailureKind.EFFECTIVENESS, float(llr[i]), 1, {"fraction": float(f[i])}, float(f[i]),
-                                 1.0 / math.sqrt(c * U2[i]), samples=i + 1))
+                                 float(1.0 / np.sqrt(c * U2[i])), samples=i + 1))
         fits += self._runs_to_stop(j, u, a_comb, wc, lo0, hi0, base)
         for length in sorted({n_onset, i_jam + 1, N}):
             fits += self._range_fits(j, u[N - length:], a_comb[N - length:], wc, lo0, hi0,

@@ -13,8 +13,22 @@ where ``w`` is the regressor (effector commands, optionally states and a constan
 
 Why this form is numerically robust: the matrix solved, ``R_n + alpha I``, has every
 eigenvalue in ``[alpha, alpha + max|w|^2 / (1 - lambda)]``, so its condition number is at
-most ``1 + max|w|^2 / (alpha (1 - lambda))`` whatever the data -- the penalty is what keeps it
-invertible when the data carry no information (the seed's ``u = 0`` case, section 1.3.2).
+most ``1 + max|w|^2 / (alpha (1 - lambda))`` -- the penalty is what keeps it invertible when
+the data carry no information (the seed's ``u = 0`` case, section 1.3.2).  In floating point
+that holds only while ``alpha`` is above the rounding of ``R_n``'s entries (about ``eps
+trace R_n`` per sample of memory): with ``|w| = 1e8`` and ``alpha = 1`` an unexcited direction
+of ``R_n + alpha I`` was rounded to zero.  So the penalty solved with is ``alpha_n = max(alpha,
+PENALTY_FLOOR trace R_n)`` (the stated fallback; ``alpha`` itself whenever ``trace R_n <= 1e12
+alpha``, every ordinary case), and the condition number is at most ``1 + 1e12`` whatever
+the data.  The covariance below uses the same ``alpha_n``, so it stays exact for the
+estimate computed.
+
+Domain.  Settings and samples are finite with ``|x| <= 1e50`` (:data:`alloc.domain.MAX_MAGNITUDE`),
+``penalty`` in ``[1e-50, 1e12]``; the state (``theta``, ``R``, ``q``, the covariances, the
+residual variance) is kept within the same bound -- a sample that would take any of it
+beyond is refused (SampleError naming ``w`` or ``y``, the state unchanged), so every output
+is finite and every state stored loads again.  Memory is priced before allocation: the
+state's ``8 (9 p^2 + 2 k p)`` bytes at most :data:`MAX_STATE_BYTES`.
 There is no covariance matrix to wind up: in a direction the data never excite, ``R_n`` has
 no information, the gain there is ``alpha / alpha = 1`` on the previous estimate and the
 estimate does not move (the behaviour with uninformative data, stated and tested).
@@ -39,6 +53,7 @@ from typing import Any
 
 import numpy as np
 
+from ..domain import MAX_MAGNITUDE, MIN_WEIGHT, as_float_array, check_magnitude, short_repr
 from ..exceptions import OptionError
 from ._checks import (
     SampleError,
@@ -47,10 +62,19 @@ from ._checks import (
     setting_real,
     setting_vector,
     state_array,
+    state_count,
     state_mapping,
 )
 
-__all__ = ["RecursiveLeastSquares", "EffectivenessRLS"]
+__all__ = ["RecursiveLeastSquares", "EffectivenessRLS", "PENALTY_FLOOR", "MAX_STATE_BYTES"]
+
+#: The penalty solved with is at least this fraction of ``trace R_n`` (module docstring): the
+#: matrix solved has condition number at most ``1 + 1 / PENALTY_FLOOR``.
+PENALTY_FLOOR = 1e-12
+#: The state's size, ``8 (9 p^2 + 2 k p)`` bytes (``R``, the two ``2p x 2p`` covariances,
+#: ``theta`` and ``q``), priced before it is allocated: 32 MiB, ``p`` up to about 680.  An
+#: update's temporaries are a few times the state and its time grows as ``p^3``.
+MAX_STATE_BYTES = 32 * 2 ** 20
 
 _STATE_KEYS = ("n_outputs", "n_regressors", "forgetting", "penalty", "theta", "R", "q", "S_noise", "S_prior",
                "noise_std", "prior_std", "noise_known", "samples", "residual_var")
@@ -81,12 +105,16 @@ class RecursiveLeastSquares:
     def __init__(self, n_outputs: int, n_regressors: int, *, forgetting: float = 0.995, penalty: float = 1.0,
                  theta0: Any = None, prior_std: Any = 1.0, noise_std: Any = None) -> None:
         for name, value in (("n_outputs", n_outputs), ("n_regressors", n_regressors)):
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not 1 <= value <= 4096:
-                raise OptionError(f"{name}: expected an integer in [1, 4096], got {value!r}")
+            if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or not 1 <= value <= 4096:
+                raise OptionError(f"{name}: expected an integer in [1, 4096], got {short_repr(value)}")
         k, p = int(n_outputs), int(n_regressors)
+        state_bytes = 8 * (9 * p * p + 2 * k * p)
+        if state_bytes > MAX_STATE_BYTES:
+            raise OptionError(f"n_regressors: a state of {state_bytes / 2 ** 20:.0f} MiB for {k} outputs and {p} "
+                              f"regressors; at most {MAX_STATE_BYTES // 2 ** 20} MiB")
         self.k, self.p = k, p
         self.forgetting = setting_real("forgetting", forgetting, 0.0, 1.0, lo_open=True)
-        self.penalty = setting_real("penalty", penalty, 0.0, 1e12, lo_open=True)
+        self.penalty = setting_real("penalty", penalty, MIN_WEIGHT, 1e12)
         self.prior_std = setting_vector("prior_std", prior_std, k, positive=True)
         self.noise_known = noise_std is not None
         self.noise_std = (setting_vector("noise_std", noise_std, k, positive=True) if noise_std is not None
@@ -94,10 +122,11 @@ class RecursiveLeastSquares:
         if theta0 is None:
             self.theta = np.zeros((k, p))
         else:
-            theta = np.array(theta0, dtype=float) if not isinstance(theta0, np.ndarray) else theta0.astype(float)
-            if theta.shape != (k, p) or not np.isfinite(theta).all():
+            theta = as_float_array("theta0", theta0, OptionError)
+            if theta.shape != (k, p):
                 raise OptionError(f"theta0: expected a finite ({k}, {p}) array, got shape {theta.shape}")
-            self.theta = theta.copy()
+            check_magnitude("theta0", theta, OptionError)
+            self.theta = theta
         self._reset_information()
         self.samples = 0
         self.residual_var = self.noise_std ** 2
@@ -126,15 +155,22 @@ class RecursiveLeastSquares:
         """
         w = sample_vector("w", w, self.p)
         y = sample_vector("y", y, self.k)
-        lam, alpha, p = self.forgetting, self.penalty, self.p
+        with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused below, state unchanged
+            self._update(w, y)
+
+    def _update(self, w: np.ndarray, y: np.ndarray) -> None:
+        lam, p = self.forgetting, self.p
         innovation = y - self.theta @ w
         R = lam * self.R + np.outer(w, w)
         R = 0.5 * (R + R.T)
+        _within("w", "the accumulated information R", R)  # never hand LAPACK a NaN
+        alpha = self._penalty_for(R)
         M = R + alpha * np.eye(p)
-        if not np.isfinite(M).all():  # |w| within the domain keeps R finite; never hand LAPACK a NaN
-            raise SampleError("w: the accumulated information overflows (regressor too large)")
-        # eigenvalues of M lie in [alpha, alpha + max|w|^2 / (1 - lambda)]: its inverse is well conditioned
-        G = np.linalg.inv(M)
+        # eigenvalues of M lie in [alpha, alpha + trace R] with alpha >= 1e-12 trace R: well conditioned
+        try:
+            G = np.linalg.inv(M)
+        except np.linalg.LinAlgError as exc:  # not expected with the floor; a refusal, never LAPACK's error
+            raise SampleError(f"w: the information matrix could not be inverted ({exc})") from exc
         G = 0.5 * (G + G.T)
         q = lam * self.q + np.outer(y, w)
         theta = (q + alpha * self.theta) @ G
@@ -154,12 +190,24 @@ class RecursiveLeastSquares:
         out[0, p:, p:] += np.outer(Gw, Gw)
         out[:, p:, :p] = out[:, :p, p:].transpose(0, 2, 1)
         out[:, p:, p:] = 0.5 * (out[:, p:, p:] + out[:, p:, p:].transpose(0, 2, 1))
+        residual_var = (self.residual_var if self.noise_known
+                        else lam * self.residual_var + (1.0 - lam) * innovation ** 2)
+        _within("y", "the accumulated q", q)
+        _within("y", "the estimate theta", theta)
+        _within("w", "the error covariance", out)
+        _within("y", "the residual variance", residual_var)
+        if self.samples >= _MAX_SAMPLES:
+            raise SampleError(f"w: {self.samples} samples, the most one estimator counts; reset it")
         self.R, self.q, self.theta = R, q, theta
         self.S_noise, self.S_prior = out[0], out[1]
         self.samples += 1
         if not self.noise_known:
-            self.residual_var = lam * self.residual_var + (1.0 - lam) * innovation ** 2
+            self.residual_var = residual_var
             self.noise_std = np.sqrt(np.maximum(self.residual_var, 1e-300))
+
+    def _penalty_for(self, R: np.ndarray) -> float:
+        """The penalty solved with for information ``R``: ``max(alpha, PENALTY_FLOOR trace R)``."""
+        return max(self.penalty, PENALTY_FLOOR * float(np.trace(R)))
 
     @property
     def covariance(self) -> np.ndarray:
@@ -182,9 +230,10 @@ class RecursiveLeastSquares:
         return np.linalg.eigvalsh(self.R)
 
     def condition(self) -> float:
-        """Condition number of ``R_n + alpha I`` (bounded, see the module docstring)."""
+        """Condition number of ``R_n + alpha_n I`` (bounded, see the module docstring)."""
         ev = self.information()
-        return float((ev[-1] + self.penalty) / (max(ev[0], 0.0) + self.penalty))
+        alpha = self._penalty_for(self.R)
+        return float((ev[-1] + alpha) / (max(ev[0], 0.0) + alpha))
 
     # -------------------------------------------------------------- durable state
     def to_dict(self) -> dict[str, Any]:
@@ -204,6 +253,8 @@ class RecursiveLeastSquares:
         k, p = d["n_outputs"], d["n_regressors"]
         if isinstance(k, bool) or isinstance(p, bool) or not isinstance(k, int) or not isinstance(p, int):
             raise StateError("n_outputs: the stored sizes must be integers")
+        if not 1 <= k <= 4096 or not 1 <= p <= 4096:
+            raise StateError(f"n_outputs: stored sizes {short_repr(k)} x {short_repr(p)} outside [1, 4096]")
         if not isinstance(d["noise_known"], bool):
             raise StateError("noise_known: expected true or false")
         try:
@@ -218,10 +269,21 @@ class RecursiveLeastSquares:
         est.S_prior = state_array("S_prior", d["S_prior"], (2 * p, 2 * p))
         est.noise_std = state_array("noise_std", d["noise_std"], (k,))
         est.residual_var = state_array("residual_var", d["residual_var"], (k,))
-        if isinstance(d["samples"], bool) or not isinstance(d["samples"], int) or d["samples"] < 0:
-            raise StateError("samples: expected a non-negative integer")
-        est.samples = d["samples"]
+        if not (est.noise_std > 0).all() or not (est.residual_var >= 0).all():
+            raise StateError("noise_std: the stored noise levels must be > 0 and residual_var >= 0")
+        est.samples = state_count("samples", d["samples"], _MAX_SAMPLES)
         return est
+
+
+#: Samples one estimator counts (exact in a float); the counter is informational.
+_MAX_SAMPLES = 2 ** 53
+
+
+def _within(field: str, what: str, arr: np.ndarray) -> None:
+    """SampleError naming ``field`` unless ``arr`` stays finite and within the valid domain."""
+    if not np.abs(arr).max(initial=0.0) <= MAX_MAGNITUDE:
+        raise SampleError(f"{field}: this sample would take {what} beyond the valid domain "
+                          f"(finite, |x| <= {MAX_MAGNITUDE:g}); refused, the state is unchanged")
 
 
 class EffectivenessRLS:
@@ -247,11 +309,13 @@ class EffectivenessRLS:
 
     def __init__(self, B0: Any, *, n_states: int = 0, bias: bool = False, forgetting: float = 0.995,
                  penalty: float = 1.0, prior_std: Any = 1.0, noise_std: Any = None) -> None:
-        B0 = np.array(B0, dtype=float)
-        if B0.ndim != 2 or not np.isfinite(B0).all():
+        B0 = as_float_array("B0", B0, OptionError)
+        if B0.ndim != 2 or 0 in B0.shape:
             raise OptionError(f"B0: expected a finite 2-D (k, m) array, got shape {B0.shape}")
-        if isinstance(n_states, bool) or not isinstance(n_states, (int, np.integer)) or not 0 <= n_states <= 1024:
-            raise OptionError(f"n_states: expected an integer in [0, 1024], got {n_states!r}")
+        check_magnitude("B0", B0, OptionError)
+        if isinstance(n_states, (bool, np.bool_)) or not isinstance(n_states, (int, np.integer)) \
+                or not 0 <= n_states <= 1024:
+            raise OptionError(f"n_states: expected an integer in [0, 1024], got {short_repr(n_states)}")
         if not isinstance(bias, bool):
             raise OptionError(f"bias: expected true or false, got {type(bias).__name__}")
         self.k, self.m = B0.shape
@@ -307,8 +371,8 @@ class EffectivenessRLS:
         d = state_mapping(data, "effectiveness_rls", ("m", "n_states", "bias", "rls"))
         rls = RecursiveLeastSquares.from_dict(d["rls"])
         m, n_states, bias = d["m"], d["n_states"], d["bias"]
-        if not (isinstance(m, int) and isinstance(n_states, int) and isinstance(bias, bool)) \
-                or m + n_states + int(bias) != rls.p or m < 1:
+        if not (type(m) is int and type(n_states) is int and isinstance(bias, bool)) \
+                or m + n_states + int(bias) != rls.p or m < 1 or not 0 <= n_states <= 1024:
             raise StateError("m: the stored sizes do not match the regressor length")
         est = cls.__new__(cls)
         est.k, est.m, est.n_states, est.bias, est.rls = rls.k, m, n_states, bias, rls
