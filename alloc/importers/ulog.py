@@ -16,6 +16,8 @@ Needs the optional ``pyulog`` package (``pip install pyulog``).  Multicopters on
 
 from __future__ import annotations
 
+import contextlib
+import io
 import math
 import struct
 from dataclasses import dataclass
@@ -24,7 +26,9 @@ from typing import Any
 
 import numpy as np
 
-from ..exceptions import ProblemError
+from .._files import MAX_LOG_BYTES, read_user_file
+from ..exceptions import AllocError, OptionError, ProblemError
+from ._ulog_scan import scan_ulog
 from ..vehicle_file.fields import WRENCH_COMPONENTS
 
 __all__ = ["FlightLog", "Replay", "read_ulog", "replay"]
@@ -84,41 +88,133 @@ class Replay:
         return out
 
 
-def _columns(data: dict[str, np.ndarray], field: str, n: int) -> np.ndarray:
-    return np.column_stack([np.asarray(data[f"{field}[{i}]"], dtype=float) for i in range(n)])
-
-
 def read_ulog(path: str | Path) -> FlightLog:
-    """The paired demands and motor commands of a ULog (ProblemError naming ``ulog`` if it lacks them)."""
+    """The paired demands and motor commands of the ULog at ``path``.
+
+    Bounded before pyulog parses: a regular file of at most :data:`~alloc._files.MAX_LOG_BYTES`
+    (:func:`~alloc._files.read_user_file`), whose message structure :func:`._ulog_scan.scan_ulog`
+    checked so that pyulog reads each message once (its own recovery can loop forever on one
+    flipped byte); pyulog's work is then linear in the messages, at most
+    :data:`._ulog_scan.MAX_LOG_MESSAGES`.  Every refusal is a
+    :class:`~alloc.exceptions.ProblemError` naming the field: ``ulog`` for the file and its
+    structure, ``<topic>.<field>`` for a missing or unusable field, ``CA_ROTOR_COUNT``.
+
+    Motor samples where PX4 commanded NaN (its value for a stopped motor, before arming) or whose
+    sample time no setpoint has are not paired; the paired sample times must increase.
+    """
     try:
         from pyulog import ULog
         from pyulog.core import ULogException
     except ImportError as exc:
         raise ImportError("reading a ULog needs pyulog: pip install 'alloc-toolkit[ulog]'") from exc
+    raw = read_user_file(path, field="ulog", max_bytes=MAX_LOG_BYTES)
+    name = Path(path).name
+    scan = scan_ulog(raw, name)
     try:
-        log = ULog(str(path), list(TOPICS))
-    except (ULogException, OSError, ValueError, IndexError, struct.error) as exc:
-        raise ProblemError(f"ulog: cannot read {str(path)!r} as a ULog ({exc})", field="ulog") from None
-    topics = {d.name: d.data for d in log.data_list if d.multi_id == 0}
+        with contextlib.redirect_stdout(io.StringIO()):  # pyulog prints its warnings
+            log = ULog(io.BytesIO(raw), list(TOPICS))
+    except (ULogException, ValueError, IndexError, KeyError, TypeError, OverflowError, struct.error,
+            RecursionError) as exc:
+        raise ProblemError(f"ulog: cannot read {name} as a ULog ({type(exc).__name__}: {exc})",
+                           field="ulog") from None
+    if log.file_corruption:
+        raise ProblemError(f"ulog: {name} has messages pyulog cannot parse (a damaged log)", field="ulog")
+    topics: dict[str, dict[str, np.ndarray]] = {}
+    for topic in TOPICS:
+        held = [d for d in log.data_list if d.name == topic and d.multi_id == 0]
+        expected = scan.samples(topic)
+        if len(expected) > 1:
+            raise ProblemError(f"ulog: {name} subscribes {topic} instance 0 under {len(expected)} message ids",
+                               field="ulog")
+        if held and len(next(iter(held[0].data.values()))) != sum(expected):  # pyulog stopped early
+            raise ProblemError(f"ulog: {name}: pyulog read {len(next(iter(held[0].data.values())))} of the "
+                               f"{sum(expected)} {topic} messages (a damaged log)", field="ulog")
+        if held:
+            topics[topic] = held[0].data
     missing = [t for t in TOPICS if t not in topics]
     if missing:
-        raise ProblemError(f"ulog: {Path(path).name} has no {', '.join(missing)} (PX4 control_allocator topics, "
+        raise ProblemError(f"ulog: {name} has no {', '.join(missing)} (PX4 control_allocator topics, "
                            "v1.13 and later; a multicopter log)", field="ulog")
     torque, thrust, motors = (topics[t] for t in TOPICS)
-    if not np.array_equal(torque["timestamp_sample"], thrust["timestamp_sample"]):
+    setpoint_t = _sample_times(torque, "vehicle_torque_setpoint")
+    if not np.array_equal(setpoint_t, _sample_times(thrust, "vehicle_thrust_setpoint")):
         raise ProblemError("ulog: torque and thrust setpoints are not sampled together", field="ulog")
-    setpoint_t = np.asarray(torque["timestamp_sample"])
-    motor_t = np.asarray(motors["timestamp_sample"])
+    _check_increasing(setpoint_t, "vehicle_torque_setpoint.timestamp_sample")
+    params = dict(log.initial_parameters)
+    n_motors = _rotor_count(params, motors)
+    motor_t = _sample_times(motors, "actuator_motors")
+    commands = _columns(motors, "actuator_motors", "control", n_motors)
     at = np.searchsorted(setpoint_t, motor_t)
     paired = (at < setpoint_t.size) & (setpoint_t[np.minimum(at, setpoint_t.size - 1)] == motor_t)
+    paired &= np.all(np.isfinite(commands), axis=1)
     if not paired.any():
-        raise ProblemError("ulog: no motor sample has the sample time of a setpoint", field="ulog")
+        raise ProblemError("ulog: no motor sample with finite commands has the sample time of a setpoint",
+                           field="ulog")
     at = at[paired]
-    demand = np.column_stack([_columns(torque, "xyz", 3)[at], _columns(thrust, "xyz", 3)[at]])
-    n_motors = int(log.initial_parameters.get("CA_ROTOR_COUNT", 0)) or 1
-    px4 = _columns(motors, "control", n_motors)[paired]
-    return FlightLog(t=(motor_t[paired] - log.start_timestamp) / 1e6, demand=demand, motors=px4,
-                     params=dict(log.initial_parameters), software=str(log.msg_info_dict.get("ver_sw", "")))
+    demand = np.column_stack([_columns(torque, "vehicle_torque_setpoint", "xyz", 3)[at],
+                              _columns(thrust, "vehicle_thrust_setpoint", "xyz", 3)[at]])
+    bad = np.argwhere(~np.isfinite(demand))
+    if bad.size:
+        i, j = bad[0]
+        topic = "vehicle_torque_setpoint" if j < 3 else "vehicle_thrust_setpoint"
+        raise ProblemError(f"{topic}.xyz[{j % 3}]: not finite at paired sample {i} ({demand[i, j]})",
+                           field=f"{topic}.xyz")
+    _check_increasing(motor_t[paired], "actuator_motors.timestamp_sample")
+    t = _seconds_since(motor_t[paired], log.start_timestamp)
+    _check_increasing(t, "actuator_motors.timestamp_sample")  # float64 rounds times past 2**53 us
+    return FlightLog(t=t, demand=demand, motors=commands[paired], params=params,
+                     software=str(log.msg_info_dict.get("ver_sw", "")))
+
+
+def _field(data: dict[str, np.ndarray], topic: str, name: str) -> np.ndarray:
+    if name not in data:
+        raise ProblemError(f"{topic}.{name}: missing", field=f"{topic}.{name.split('[')[0]}")
+    return np.asarray(data[name])
+
+
+def _columns(data: dict[str, np.ndarray], topic: str, name: str, n: int) -> np.ndarray:
+    return np.column_stack([_field(data, topic, f"{name}[{i}]").astype(float) for i in range(n)])
+
+
+def _sample_times(data: dict[str, np.ndarray], topic: str) -> np.ndarray:
+    """The topic's ``timestamp_sample``: integer microseconds (PX4's uint64)."""
+    t = _field(data, topic, "timestamp_sample")
+    if t.dtype.kind not in "iu":
+        raise ProblemError(f"{topic}.timestamp_sample: expected integer microseconds, got {t.dtype}",
+                           field=f"{topic}.timestamp_sample")
+    return t
+
+
+def _check_increasing(t: np.ndarray, field: str) -> None:
+    if t.size > 1:
+        bad = np.flatnonzero(~(t[1:] > t[:-1]))
+        if bad.size:
+            i = int(bad[0]) + 1
+            raise ProblemError(f"{field}: does not increase at sample {i} ({t[i - 1]} then {t[i]})", field=field)
+
+
+def _seconds_since(t: np.ndarray, start: int) -> np.ndarray:
+    """``t - start`` in seconds, for increasing integer ``t``: differences taken in integers
+    (a uint64 difference wraps, float64 rounds large times)."""
+    relative = (t - t[0]).astype(np.uint64)  # exact for increasing int64 or uint64 times
+    return relative.astype(float) / 1e6 + (int(t[0]) - int(start)) / 1e6
+
+
+def _rotor_count(params: dict[str, Any], motors: dict[str, np.ndarray]) -> int:
+    """``CA_ROTOR_COUNT``: an integer from 1 to the number of ``actuator_motors.control`` fields."""
+    held = 0
+    while f"control[{held}]" in motors:
+        held += 1
+    value = params.get("CA_ROTOR_COUNT")
+    if value is None:
+        raise ProblemError("CA_ROTOR_COUNT: missing from the log's parameters", field="CA_ROTOR_COUNT")
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+            or value != int(value) or not 1 <= value <= max(held, 1):
+        raise ProblemError(f"CA_ROTOR_COUNT: expected an integer 1..{held} (the actuator_motors.control fields "
+                           f"of the log), got {value!r}" + (f" (actuator_motors.control[{held}]: missing)"
+                                                             if isinstance(value, int) and value > held else ""),
+                           field="CA_ROTOR_COUNT")
+    return int(value)
 
 
 def replay(log: FlightLog, method: str = "pinv", *, vehicle: Any = None,
@@ -188,13 +284,24 @@ def replay_command() -> Any:
         for path, hint in ((csv_path, "--csv"), (json_path, "--json")):
             output_file(path, force, hint, taken=taken)
         chosen = None if vehicle is None else load_vehicle_option(vehicle)
-        try:
-            result = replay(read_ulog(ulog), method, vehicle=chosen, options=parse_options(option))
-        except ProblemError as exc:
-            raise typer.BadParameter(str(exc), param_hint=f"--{exc.field}" if exc.field in ("ulog", "vehicle")
-                                     else "--method") from None
+        options = parse_options(option)
+        try:  # the log and, without --vehicle, the vehicle of its parameters
+            flight = read_ulog(ulog)
+            if chosen is None:
+                from .px4 import vehicle_from_params
+
+                chosen = vehicle_from_params(flight.params, name="ulog", normalize="px4")
+        except AllocError as exc:
+            raise typer.BadParameter(str(exc), param_hint="--ulog") from None
         except ImportError as exc:  # the optional extra is absent: one line, exit 2, like every input error
             raise typer.BadParameter(str(exc), param_hint="--ulog") from None
+        try:
+            result = replay(flight, method, vehicle=chosen, options=options)
+        except AllocError as exc:
+            field = exc.field or ""
+            hint = "--vehicle" if field == "vehicle" or field.startswith("axes") else \
+                "--option" if isinstance(exc, OptionError) else "--method"
+            raise typer.BadParameter(str(exc), param_hint=hint) from None
         summary = result.summary()
         typer.echo(json.dumps(summary, indent=2))
         if json_path is not None:
