@@ -44,11 +44,12 @@ from .base import (_ACTIVE_SET_METHODS, EXPORTABLE, FLOAT_EXACT_RTOL, FLOAT_TOLE
                    PRECISIONS, ExportedKernel, ExportError, _Real, _short, _version)
 from .certify import SIMPLEX_RANDOM_DEMANDS, Certificate, bound_text, simplex_bound_text
 from .text import c_prefix, comment_text, fill
-from .tables import (_active_set_fields, _cascade_level_fields, _cascade_table, _iteration_budget, _simplex_fields,
+from .cost import ExportCost, check
+from .tables import (_active_set_fields, active_set_plan, _cascade_level_fields, _cascade_table, _iteration_budget, _simplex_fields,
                      _simplex_pivots)
 
 __all__ = ["export_c", "ExportedKernel", "ExportError", "EXPORTABLE", "PRECISIONS", "GENERATOR_VERSION",
-           "FLOAT_TOLERANCE", "FLOAT_EXACT_RTOL", "FLOAT_VMAX", "Certificate"]
+           "FLOAT_TOLERANCE", "FLOAT_EXACT_RTOL", "FLOAT_VMAX", "Certificate", "ExportCost"]
 
 
 # --------------------------------------------------------------------------- the generator
@@ -80,6 +81,35 @@ def _checksum(problem: Problem) -> str:
               problem.rate_max):
         h.update(np.ascontiguousarray(a, dtype=float).tobytes())
     return h.hexdigest()[:16]
+
+
+def _price(method: str, impl: Any, problem: Problem, real: _Real, table: bool | None,
+           iteration_bound: Any) -> ExportCost:
+    """The export's cost (:mod:`alloc.export.cost`), refused beyond its caps before the tables
+    are made."""
+    from .certify import sample_size
+
+    k, m = problem.k, problem.m
+    numbers, tables, free_sets = 2 * m * k + 6 * m, 0, 0  # B, SAFE_P; UP, limits, rates, SAFE_C
+    if method in ("pinv", "pinv_clip", "ganging"):
+        numbers += m + m * k
+    elif method == "pinv_scale":
+        numbers += m * k
+    elif method == "cgi":
+        levels = len(impl.groups) if impl.groups is not None and len(impl.groups) > 1 else 1
+        tables, free_sets = (m * k) << m, levels << m
+    elif method == "lp":
+        F, costs = impl._lex._F, impl._lex._costs
+        numbers += F.size + costs.size + F.shape[0] + F.shape[1]
+    else:
+        lexico = [impl._static, impl._dynamic] if method == "dynamic" else [impl._impl]
+        _, consts, tables, free_sets = active_set_plan(lexico, real, table)
+        numbers += consts
+    calls = 0
+    if isinstance(iteration_bound, str) and iteration_bound == "certify":
+        calls = sample_size(k, m, SIMPLEX_RANDOM_DEMANDS if method == "lp" else 0)
+    return check(ExportCost(numbers=numbers + tables, table_numbers=tables, free_sets=free_sets,
+                            certify_calls=calls, k=k, m=m, method=method))
 
 
 def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "double",
@@ -221,6 +251,7 @@ def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "d
     if (table or (table is not None and method == "lp")) and method not in _ACTIVE_SET_METHODS + ("cgi",):
         raise ExportError(f"table: {method} has no tables to make (only cgi and the active-set methods do)",
                           field="table")
+    cost = _price(method, impl, problem, real, table, iteration_bound)
     if method in ("pinv", "pinv_clip", "ganging"):
         map_c, map_p = impl.fused
         fields.update(MAP_C=real.array(map_c, "c"), MAP_P=real.array(map_p, "P"))
@@ -257,4 +288,4 @@ def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "d
                           header_name=f"{prefix}.h", source_name=f"{prefix}.c", k=k, m=m,
                           maxit=cap, levels=levels, options=shown,
                           iteration_bound=budget if levels else None, certificate=cert if levels else None,
-                          warm_start=bool(warm_start))
+                          warm_start=bool(warm_start), cost=cost)

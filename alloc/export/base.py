@@ -109,6 +109,8 @@ class ExportedKernel:
     options: dict[str, Any] = field(default_factory=dict)
     #: the active set keeps its last working set between calls (``warm_start=True``)
     warm_start: bool = False
+    #: the size and generation time and memory priced before it was made (alloc.export.cost)
+    cost: Any = None
 
     def write(self, out: str | os.PathLike[str]) -> tuple[Path, Path]:
         """Write the pair into folder ``out`` (created); returns the two paths."""

@@ -128,6 +128,16 @@ def certification_demands(problem: Problem, random: int = 0) -> dict[str, np.nda
     return parts
 
 
+def sample_size(k: int, m: int, random: int = 0) -> int:
+    """Demands in :func:`certification_demands` of a ``k x m`` problem, without making them
+    (what :mod:`alloc.export.cost` prices)."""
+    side = max(3, int(round(GRID_DEMANDS ** (1.0 / k))))
+    side += 1 - side % 2
+    shell = side ** k - (side - 2) ** k
+    return side ** k + len(FAR_RADII) * shell + len(VERTEX_SCALES) * min(1 << min(m, 62), MAX_VERTICES) \
+        + 200 * k + max(random, 0)
+
+
 def certify(allocator, problem: Problem, count: Callable[[np.ndarray], int] | None = None,
             unit: str = "iterations", random: int = 0) -> Certificate:
     """Run ``allocator`` (the library's active set) on :func:`certification_demands`; the

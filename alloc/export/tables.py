@@ -39,15 +39,16 @@ def _cascade_table(impl: Any, problem: Problem, real: _Real, table: bool | None)
 
 def _check_cascade_table(m: int, k: int, real: _Real, table: bool | None) -> None:
     """``cgi`` reads every free set's pseudo-inverse (``2^m x m x k`` values, by level or
-    not) from a table: refused beyond :data:`TABLE_BUDGET` unless ``table=True``."""
+    not) from a table: refused beyond :data:`TABLE_BUDGET` unless ``table=True`` (and then
+    beyond the size caps, which :func:`alloc.export.export_c` prices first)."""
     size = (1 << min(m, 40)) * m * k * (8 if real.double else 4)
     if table is False:
         raise ExportError("table: cgi has no run-time form (its kernel reads every free set's pseudo-inverse "
                           "from a table); give table=None or True", field="table")
-    if (table is None and size > TABLE_BUDGET) or m > 20:
+    if table is None and size > TABLE_BUDGET:
         raise ExportError(f"table: cgi needs the pseudo-inverse of every free set, {size:,} bytes for {m} effectors "
-                          f"(over the {TABLE_BUDGET:,}-byte budget; table=True takes it up to 20 effectors)",
-                          field="table")
+                          f"(over the {TABLE_BUDGET:,}-byte budget; table=True takes it up to the export's size "
+                          "caps, alloc.export.cost: 16 effectors at 3 axes, 15 at 6)", field="table")
 
 
 def _cascade_level_fields(impl: Any, problem: Problem, real: _Real, table: bool | None) -> dict[str, str]:
@@ -82,6 +83,41 @@ def _cascade_level_fields(impl: Any, problem: Problem, real: _Real, table: bool 
             "CGI_REACH": real.literal(CGI_RTOL if real.double else FLOAT_CGI_RTOL, "reach"), "TABLES": "\n".join(tables)}
 
 
+def _aset() -> Any:
+    """The packed state's layout and the level iteration (_active_set) with the free sets'
+    factorisation and its tolerances (_lsq_factor), read by one name."""
+    from types import SimpleNamespace
+
+    from .. import _active_set, _lsq_factor
+    return SimpleNamespace(**{**vars(_lsq_factor), **vars(_active_set)})
+
+
+def _table_entry(instances: list[Any], aset: Any) -> tuple[int, int]:
+    """Numbers of one free set's row of the factorisation tables, and ``ml`` (1: every
+    instance's L is diagonal, stored in column 0; else m)."""
+    head = instances[0]._state[2][aset._HEAD]
+    m, ncw, nlw = (int(head[i]) for i in (aset._M, aset._NCW, aset._NLW))
+    ml = 1 if all(int(lex._state[2][aset._HEAD, aset._DIAG]) for lex in instances) else m
+    return m * ml + m * ncw + ncw * ncw + ncw + m * nlw + nlw * nlw + nlw, ml
+
+
+def active_set_plan(instances: list[Any], real: _Real, table: bool | None) -> tuple[bool, int, int, int]:
+    """What an active-set kernel prints, before it is made: whether it tabulates (``table``, or
+    by default when the tables fit :data:`TABLE_BUDGET`), its constants' numbers, its tables'
+    numbers and the free sets it factorises for them (:mod:`alloc.export.cost` prices them)."""
+    aset = _aset()
+    head = instances[0]._state[2][aset._HEAD]
+    n, m, k, nlev = (int(head[i]) for i in (aset._N, aset._M, aset._K, aset._NLEV))
+    entry, _ = _table_entry(instances, aset)
+    rows = len(instances) * len(_table_keys(instances[0]._state[2], aset)) << m
+    tabulate = rows * entry * (8 if real.double else 4) <= TABLE_BUDGET if table is None else bool(table)
+    consts = n * m + n * n + nlev
+    for lex in instances:
+        dyn = bool(lex._state[2][aset._HEAD, aset._DYN])
+        consts += 2 * m * m + m * k + m + (m * k + m * m if dyn else 0)
+    return tabulate, consts, rows * entry if tabulate else 0, rows if tabulate else 0
+
+
 def _active_set_fields(instances: list[Any], problem: Problem, real: _Real, fields: dict[str, str],
                        maxit: int | None, table: bool | None, cache: int | None,
                        warm: bool = False) -> tuple[str, int, int]:
@@ -89,12 +125,7 @@ def _active_set_fields(instances: list[Any], problem: Problem, real: _Real, fiel
     (:func:`alloc._active_set.pack`), so the C runs on exactly the library's data.  One
     instance for ``qp`` and ``wls``; ``dynamic`` has two (without and with ``u_prev``), which
     share every level row and differ in the preference weight, cold start and target."""
-    from types import SimpleNamespace
-
-    from .. import _active_set, _lsq_factor
-    # the packed state's layout and the level iteration are in _active_set, the free sets'
-    # factorisation (and its tolerances) in _lsq_factor: the generator reads both by one name
-    aset = SimpleNamespace(**{**vars(_lsq_factor), **vars(_active_set)})
+    aset = _aset()
 
     mats, vecs, ivecs = instances[0]._state[:3]
     head = ivecs[aset._HEAD]
@@ -113,8 +144,7 @@ def _active_set_fields(instances: list[Any], problem: Problem, real: _Real, fiel
     fields.update({key: real.literal(value, key) for key, value in tiny.items()})
     if warm:
         _warm_conditioning(instances, aset, n, m)
-    diags = [int(lex._state[2][aset._HEAD, aset._DIAG]) for lex in instances]
-    ml = 1 if all(diags) else m  # a diagonal L is stored in column 0 of its row
+    entry, ml = _table_entry(instances, aset)
     fields.update(
         N=str(n), NLEV=str(nlev), FINAL=str(final), NCW=str(ncw), NLW=str(nlw), ML="1" if ml == 1 else "M",
         NINST=str(len(instances)),
@@ -124,10 +154,7 @@ def _active_set_fields(instances: list[Any], problem: Problem, real: _Real, fiel
     )
     levels = nlev + final
     keys = _table_keys(ivecs, aset)
-    entry = m * ml + m * ncw + ncw * ncw + ncw + m * nlw + nlw * nlw + nlw
-    size = len(instances) * len(keys) * (1 << m) * entry * (8 if real.double else 4)
-    if table is None:
-        table = size <= TABLE_BUDGET
+    table = active_set_plan(instances, real, table)[0]
     if table and m > 20:
         raise ExportError(f"table: 2^{m} free sets a level is too many to tabulate", field="table")
     fields["TABLE"] = "1" if table else "0"
