@@ -22,6 +22,7 @@ from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.routing import Match
 
 import alloc
 
@@ -156,6 +157,21 @@ def _validation_errors(exc: RequestValidationError, limit: int) -> tuple[list[di
     return out, len(errors)
 
 
+#: the methods a 405's ``Allow`` may list (the HTTP methods routes are declared with)
+_METHODS = ("GET", "HEAD", "POST", "PUT", "PATCH", "DELETE", "OPTIONS")
+
+
+def allowed_methods(request: Request) -> list[str]:
+    """Every method some route serves at the request's path (RFC 9110 section 15.5.6: the
+    ``Allow`` of a 405).  Starlette names only the methods of the first route whose path
+    matched, and FastAPI makes one route per method: ``PUT .../telemetry`` was answered
+    ``Allow: POST`` (issue 39).  Each method is tried against the routing table (included
+    routers are matched as the router matches them)."""
+    routes = request.app.router.routes
+    return [method for method in _METHODS
+            if any(route.matches({**request.scope, "method": method})[0] is Match.FULL for route in routes)]
+
+
 def install_handlers(app: FastAPI) -> None:
     """Register the one mapping from exceptions to problem+json responses."""
 
@@ -188,8 +204,13 @@ def install_handlers(app: FastAPI) -> None:
     async def _http(request: Request, exc: StarletteHTTPException) -> JSONResponse:
         # Routing errors raised by the framework itself (unknown path, wrong verb).
         title = {404: "Not found", 405: "Method not allowed"}.get(exc.status_code, "HTTP error")
-        return problem_response(exc.status_code, "http-error", title, str(exc.detail),
-                                headers=getattr(exc, "headers", None))
+        headers = dict(getattr(exc, "headers", None) or {})
+        detail = str(exc.detail)
+        if exc.status_code == 405:
+            allowed = allowed_methods(request)
+            headers["Allow"] = ", ".join(allowed)
+            detail = f"{request.method} is not allowed on this path; allowed: {', '.join(allowed)}"
+        return problem_response(exc.status_code, "http-error", title, detail, headers=headers or None)
 
     @app.exception_handler(Exception)
     async def _unexpected(request: Request, exc: Exception) -> JSONResponse:

@@ -25,7 +25,7 @@ from starlette.websockets import WebSocketDisconnect
 
 import alloc
 
-from ..bodies import JsonRoute
+from ..bodies import JsonRoute, refuse_duplicate_keys
 from ..deps import StoreDep, end_parse_turn, require_api_key
 from ..errors import (
     _LIBRARY_ERRORS, InvalidRequest, ServiceError, Unauthorized,
@@ -210,11 +210,15 @@ async def stream(websocket: WebSocket, vehicle_id: str) -> None:
 
 
 def _parse(data: str) -> TelemetryBatchIn:
+    """One WebSocket message as a batch: JSON (a key given twice refused naming it, as on HTTP),
+    then the schema."""
+    raw = data.encode()
     try:
-        parsed = pydantic_core.from_json(data)
+        parsed = pydantic_core.from_json(raw)
     except ValueError as exc:
         raise InvalidRequest(f"body: not JSON ({exc})", [{"loc": ["body"], "pointer": "", "reason": "not JSON"}]) \
             from None
+    refuse_duplicate_keys(raw, parsed)
     try:
         return TelemetryBatchIn.model_validate(parsed)
     except ValidationError as exc:
