@@ -35,7 +35,17 @@
 ``ALLOC_RESERVED_CONNECTIONS``      kept free for new connections: beyond ``MAX - RESERVED`` open,
                                     the oldest connection that is not running a request (still
                                     sending its head, or idle) is closed (default 64)
-``ALLOC_MAX_CONNECTIONS_PER_CLIENT`` open connections per client address (default 128)
+``ALLOC_MAX_CONNECTIONS_PER_CLIENT`` open connections per client address (default 128; behind a reverse
+                                    proxy or NAT every client shares the proxy's: docs/service.md)
+``ALLOC_RESERVED_REQUESTS``         HTTP requests in flight beyond ``ALLOC_MAX_CONNECTIONS`` admitted
+                                    only for events and the other keyed priority writes,
+                                    ``/v1/health`` and ``/v1/ready`` (default 32)
+``ALLOC_MAX_WEBSOCKETS``            open WebSockets per worker process, counted apart from HTTP's
+                                    limit; an upgrade beyond gets 503 (default 512)
+``ALLOC_WS_KEY_MESSAGES_PER_S``     telemetry messages per second one API key's WebSockets may have
+                                    processed together, per worker process; beyond, 429 unparsed,
+                                    and refusals paced at the same rate (default 200)
+``ALLOC_WS_KEY_BYTES_PER_S``        ... and their bytes per second (default 4 MiB)
 ``ALLOC_IDEMPOTENCY_TTL_S``         how long an ``Idempotency-Key`` and its answer are kept (24 h)
 ==================================  =================================================================
 
@@ -123,6 +133,10 @@ class Settings(BaseSettings):
     max_connections: int = Field(default=512, ge=16, le=65536)
     reserved_connections: int = Field(default=64, ge=1)
     max_connections_per_client: int = Field(default=128, ge=1)
+    reserved_requests: int = Field(default=32, ge=1, le=4096)
+    max_websockets: int = Field(default=512, ge=1, le=65536)
+    ws_key_messages_per_s: float = Field(default=200.0, gt=0, le=1e6)
+    ws_key_bytes_per_s: int = Field(default=4 * MiB, ge=64 * 1024)
     idempotency_ttl_s: float = Field(default=86400.0, gt=0)
 
     @field_validator("api_key")

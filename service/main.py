@@ -24,9 +24,11 @@ from .db import make_engine, make_sessionmaker
 from .docs import install_docs
 from .bodies import GC_THRESHOLDS, BodyBudget, BodySizeLimit
 from .errors import PROBLEM_JSON, install_handlers
+from .keys import NO_KEY_WARNING, KeyAtHead
 from .routes import allocation, ams, methods, system, telemetry, vehicles
 from .priority import GATE_STATE_KEY, PriorityGate, PriorityMiddleware
 from .server import GuardedHttpToolsProtocol
+from .streams import GuardedWebSocketProtocol, StreamLimits
 from .store import VehicleStore
 from .warm import start_background_warm_up, warm_up
 
@@ -83,6 +85,8 @@ class ServerTiming:
 def create_app(settings: Settings | None = None) -> FastAPI:
     """Build the application: database (migrated), store, routers, error handlers, body limit."""
     settings = settings or Settings()
+    if settings.api_key is None:
+        _log.warning(NO_KEY_WARNING)
     engine = make_engine(settings.resolved_database_url)
     gate = PriorityGate(settings.api_key)
     store = VehicleStore(engine, make_sessionmaker(engine), cache_size=settings.cache_size,
@@ -133,6 +137,11 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.add_middleware(BodySizeLimit, limit=settings.max_body_bytes, gate=gate,
                        budget=BodyBudget(settings.body_bytes_in_flight, settings.writer_body_bytes))
     app.add_middleware(PriorityMiddleware, gate=gate)  # before anything reads a body
+    # outside the gate: a WebSocket message over its limits is refused without entering it, and
+    # a keyless write without waiting at it (service.streams, service.keys)
+    app.add_middleware(StreamLimits, api_key=settings.api_key, messages_per_s=settings.ws_key_messages_per_s,
+                       bytes_per_s=settings.ws_key_bytes_per_s)
+    app.add_middleware(KeyAtHead, api_key=settings.api_key, routes_of=lambda: app)
     app.add_middleware(ServerTiming)  # outermost: includes the body limit's buffering
     return app
 
@@ -143,13 +152,16 @@ def uvicorn_options(settings: Settings) -> dict[str, Any]:
     return {
         "access_log": False,  # a log line per request costs about as much as a pseudo-inverse allocation
         "timeout_keep_alive": settings.keep_alive_s,
-        "limit_concurrency": settings.max_connections,  # connections + tasks per process; 503 beyond
+        # HTTP connections + tasks per process, 503 beyond; the WebSockets are counted apart
+        # (ALLOC_MAX_WEBSOCKETS) and events and probes have ALLOC_RESERVED_REQUESTS more (service.server)
+        "limit_concurrency": settings.max_connections,
         "backlog": 2 * settings.max_connections,
         "timeout_graceful_shutdown": 10,
         # A WebSocket message is assembled whole before the route sees it: without this bound a
-        # client could make the process hold and parse 16 MiB (uvicorn's default) per message,
-        # where the route accepts at most 1 MiB.  The margin keeps the route's own named error
-        # for messages just over its limit; a larger one is closed with 1009 (message too big).
+        # client could make the process hold 16 MiB (uvicorn's default) per message, where the
+        # stream accepts at most 64 KiB.  The margin keeps the stream's own named error (413,
+        # service.streams) for messages just over its limit; a larger frame is refused from its
+        # header, before its payload is read, and the socket closed with 1009 (message too big).
         "ws_max_size": telemetry.WS_MAX_MESSAGE_BYTES + (64 << 10),
     }
 
@@ -184,7 +196,7 @@ def serve(host: str = "127.0.0.1", port: int = 8000, data_dir: str | Path | None
     make_engine(settings.resolved_database_url).dispose()  # migrate once, before the workers start
     options = {**uvicorn_options(settings), **uvicorn_settings}
     config = uvicorn.Config("service.main:create_app", factory=True, host=host, port=port, workers=workers,
-                            http=GuardedHttpToolsProtocol, **options)
+                            http=GuardedHttpToolsProtocol, ws=GuardedWebSocketProtocol, **options)
     if workers > 1:
         # workers are health-checked once ready, restarted only when not ready in time (service.supervisor)
         ReadinessSupervisor(config, [config.bind_socket()], settings.startup_timeout_s).run()

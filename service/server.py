@@ -16,13 +16,20 @@ lives).  The protocol below adds, with the limits of :class:`service.config.Sett
   bytes (the write buffer stays above its high-water mark) for that long, the connection
   is dropped and the buffer freed;
 * an accept policy: at most ``ALLOC_MAX_CONNECTIONS_PER_CLIENT`` connections per client
-  address (``503``, closed), and room kept for newcomers: beyond
+  address (``503``, closed; a deployment risk behind a reverse proxy or NAT, where every client
+  has the proxy's address: docs/service.md), and room kept for newcomers: beyond
   ``ALLOC_MAX_CONNECTIONS - ALLOC_RESERVED_CONNECTIONS`` open connections, one connection is
   closed for each new one: the oldest that has never had a request answered (a half-sent
   request), else the oldest idle one.  Stalled connections then cannot take the capacity an
   event's connection needs: a new one finishes its request within a millisecond and is never
   the oldest, and one that keeps its connection open between events is closed only when no
-  half-sent request is left to close.
+  half-sent request is left to close;
+* capacity apart for what must always answer: uvicorn's ``limit_concurrency`` (connections and
+  tasks in flight, ``ALLOC_MAX_CONNECTIONS``; ``503`` beyond) counts HTTP only, not the open
+  WebSockets and their tasks (:class:`service.streams.GuardedWebSocketProtocol`, capped on their
+  own at ``ALLOC_MAX_WEBSOCKETS``: an upgrade beyond gets ``503``), and the requests that must
+  always answer (:func:`always_room`: events and the other priority writes with the key,
+  ``/v1/health``, ``/v1/ready``) have ``ALLOC_RESERVED_REQUESTS`` more.
 
 Framing errors (bad ``Content-Length``, garbage request line) are answered ``400``
 problem+json instead of text.
@@ -37,13 +44,20 @@ from collections import Counter, OrderedDict
 from functools import lru_cache
 from typing import Any
 
+import httptools
+from starlette.types import Receive, Scope, Send
 from uvicorn.protocols.http.httptools_impl import HttpToolsProtocol
 
 from .config import Settings
 from .errors import PROBLEM_JSON
-from .priority import GATE_STATE_KEY, LIGHT_KEY, SCOPE_KEY, LightTicket, is_light
+from .priority import GATE_STATE_KEY, LIGHT_KEY, SCOPE_KEY, LightTicket, PriorityGate, is_light
+from .streams import GuardedWebSocketProtocol
 
-__all__ = ["GuardedHttpToolsProtocol", "problem_bytes", "limits"]
+__all__ = ["GuardedHttpToolsProtocol", "GuardedWebSocketProtocol", "problem_bytes", "limits", "always_room",
+           "ALWAYS_ROOM_READS"]
+
+#: the reads that must answer whatever else is in flight (a load balancer's probes)
+ALWAYS_ROOM_READS: frozenset[tuple[str, str]] = frozenset({("GET", "/v1/health"), ("GET", "/v1/ready")})
 
 _REASONS = {400: "Bad Request", 408: "Request Timeout", 431: "Request Header Fields Too Large",
             503: "Service Unavailable"}
@@ -53,6 +67,26 @@ _REASONS = {400: "Bad Request", 408: "Request Timeout", 431: "Request Header Fie
 def limits() -> Settings:
     """This process's settings (a worker reads them from the ``ALLOC_*`` environment)."""
     return Settings()
+
+
+def always_room(gate: PriorityGate | None, method: str, path: str, headers: list[tuple[bytes, bytes]]) -> bool:
+    """Whether a request may use ``ALLOC_RESERVED_REQUESTS``: a probe of :data:`ALWAYS_ROOM_READS`,
+    or a priority write (an event, with the key: :meth:`service.priority.PriorityGate.claims`)."""
+    return (method, path) in ALWAYS_ROOM_READS or (gate is not None and gate.claims(method, path, headers))
+
+
+def _over_capacity(limit: int) -> Any:
+    body = json.dumps({"type": "urn:alloc:problem:over-capacity", "title": "Service at a capacity limit",
+                       "status": 503, "errors": [],
+                       "detail": f"{limit} HTTP requests are in flight in this worker (ALLOC_MAX_CONNECTIONS); "
+                                 f"retry shortly"}).encode()
+    headers = [(b"content-type", PROBLEM_JSON.encode()), (b"content-length", str(len(body)).encode()),
+               (b"retry-after", b"1"), (b"connection", b"close")]
+
+    async def refuse(scope: Scope, receive: Receive, send: Send) -> None:
+        await send({"type": "http.response.start", "status": 503, "headers": headers})
+        await send({"type": "http.response.body", "body": body})
+    return refuse
 
 
 def problem_bytes(status: int, slug: str, title: str, detail: str) -> bytes:
@@ -88,6 +122,11 @@ class GuardedHttpToolsProtocol(HttpToolsProtocol):
         self.max_head, self.max_headers = settings.max_header_bytes, settings.max_headers
         self.open_limit = settings.max_connections - settings.reserved_connections
         self.per_client_limit = settings.max_connections_per_client
+        # uvicorn's own check would count the open WebSockets and their tasks: this protocol's
+        # replaces it (on_headers_complete), with room kept for what must always answer
+        self.http_limit, self.limit_concurrency = self.limit_concurrency, None
+        self.reserved_requests = settings.reserved_requests
+        self.max_websockets = settings.max_websockets
         self._request_timer: asyncio.TimerHandle | None = None
         self._write_timer: asyncio.TimerHandle | None = None
         self._receiving = True
@@ -152,7 +191,7 @@ class GuardedHttpToolsProtocol(HttpToolsProtocol):
 
     def _make_room(self) -> None:
         """Beyond the open limit, close the oldest connections not running a request."""
-        excess = len(self.connections) - self.open_limit
+        excess = len(self.connections) - GuardedWebSocketProtocol.open - self.open_limit  # HTTP's only
         while excess > 0 and (self._evictable or self._idle):
             tier = self._evictable if self._evictable else self._idle
             oldest = next(iter(tier))
@@ -170,10 +209,16 @@ class GuardedHttpToolsProtocol(HttpToolsProtocol):
         super().connection_lost(exc)
 
     def handle_websocket_upgrade(self) -> None:
+        if GuardedWebSocketProtocol.open >= self.max_websockets:  # refused on the upgrade request only
+            self._close_with(problem_bytes(503, "too-many-websockets", "Too many WebSockets",
+                                           f"at most {self.max_websockets} WebSockets are open per worker "
+                                           f"process (ALLOC_MAX_WEBSOCKETS); retry later"))
+            return
         # The connection passes to uvicorn's WebSocket protocol, whose close this protocol never
         # hears of: release what it holds now (a WebSocket is then counted by uvicorn's
         # connection limit, not per client), or every WebSocket ever opened would keep one of
-        # its client's ALLOC_MAX_CONNECTIONS_PER_CLIENT slots.
+        # its client's ALLOC_MAX_CONNECTIONS_PER_CLIENT slots.  Its own count is
+        # GuardedWebSocketProtocol's.
         self._release()
         super().handle_websocket_upgrade()
 
@@ -234,9 +279,14 @@ class GuardedHttpToolsProtocol(HttpToolsProtocol):
         # A priority request (service.priority) closes the gate now, before the loop runs
         # any request task queued ahead of it; not when uvicorn answers 503 itself.
         gate = self.app_state.get(GATE_STATE_KEY)
-        limit = self.limit_concurrency
-        over = limit is not None and (len(self.connections) >= limit or len(self.tasks) >= limit)
-        super().on_headers_complete()
+        over = self._over_limit(gate)
+        app = self.app
+        if over:
+            self.app = _over_capacity(self.http_limit)  # this request's application only
+        try:
+            super().on_headers_complete()
+        finally:
+            self.app = app
         if gate is not None and not over and "path" in self.scope:
             priority = gate.claims(self.scope["method"], self.scope["path"], self.headers)
             self.scope[SCOPE_KEY] = priority  # type: ignore[literal-required]
@@ -247,6 +297,22 @@ class GuardedHttpToolsProtocol(HttpToolsProtocol):
                 # yields to it (service.priority.LightTicket)
                 self._close_ticket()
                 self._ticket = self.scope[LIGHT_KEY] = LightTicket(gate)  # type: ignore[literal-required]
+
+    def _over_limit(self, gate: PriorityGate | None) -> bool:
+        """Whether this request is over the HTTP limit: connections or tasks in flight, the
+        WebSockets' not counted, at ``ALLOC_MAX_CONNECTIONS``, or that plus
+        ``ALLOC_RESERVED_REQUESTS`` for a request of :func:`always_room`."""
+        limit = self.http_limit
+        if limit is None or self.parser.should_upgrade():  # an upgrade is the WebSocket cap's to judge
+            return False
+        busy = max(len(self.connections) - GuardedWebSocketProtocol.open,
+                   len(self.tasks) - GuardedWebSocketProtocol.running)
+        if busy < limit:
+            return False
+        path = httptools.parse_url(self.url).path.decode("ascii", errors="replace")
+        method = self.parser.get_method().decode("ascii", errors="replace")
+        room = self.reserved_requests if always_room(gate, method, path, self.headers) else 0
+        return busy >= limit + room
 
     def _close_ticket(self) -> None:
         if self._ticket is not None:

@@ -1,0 +1,367 @@
+"""Telemetry WebSockets have a capacity of their own, and a budget per API key (issue 39).
+
+The issue: 512 open telemetry WebSockets turned every HTTP request into a 503 (they counted
+against uvicorn's concurrency limit, and upgrades past it were accepted); a key holder's sockets
+sending flat out delayed an event to 1.7 s (limits per connection, refusals through the gate and
+1 MiB parses on the loop); keyless bodies were read and parsed before the key was checked; and
+without a key, start-up said nothing.  What is checked here, on a real server where it is about
+connections:
+
+* more sockets than ``ALLOC_MAX_WEBSOCKETS`` are opened: the excess is refused with 503 on the
+  upgrade, and events, ``/v1/health`` and ``/v1/ready`` still answer 2xx, within the attack
+  suite's bound against the same run's floor; at a low configured cap (fast) and, under
+  ``-m slow``, 600 sockets at the defaults;
+* one key's sockets share one budget: of many messages sent flat out on several sockets, at most
+  the budget's worth are processed, the rest answered 429 unparsed, the refusals paced;
+* a keyed write without the key is answered 401 from its head: its body is never read (a real
+  socket that sends no body; every keyed route of the application, by a seeded generator of
+  header variants, at the ASGI level with a ``receive`` that fails if called);
+* the budgets' arithmetic (:class:`service.streams.KeyBudget`) under seeded hostile arrivals:
+  never more accepted, nor refusals sent, than the rate allows over any window.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import socket
+import time
+from typing import Any
+
+import httpx
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+
+from service.config import Settings
+from service.keys import NO_KEY_WARNING, keyed_routes
+from service.main import create_app
+from service.process import ServiceProcess
+from service.streams import KeyBudget
+from test_service_attacks import FLOOR_FACTOR, TARGETS_MS, p99, slack
+from test_service_telemetry import SMALL, SMALL_SETTINGS
+
+KEY = "fleet-key"
+H = {"X-API-Key": KEY}
+
+
+# --------------------------------------------------------------- helpers
+async def _open(url: str, n: int, headers: dict[str, str]) -> tuple[list[Any], list[int]]:
+    """Open ``n`` WebSockets concurrently: the open ones, and the statuses of the refused upgrades."""
+    from websockets.asyncio.client import connect
+    from websockets.exceptions import InvalidStatus
+
+    gate = asyncio.Semaphore(8)  # upgrades in flight: under the HTTP limit (these are HTTP until upgraded)
+
+    async def one() -> Any:
+        async with gate:
+            try:
+                return await connect(url, additional_headers=headers, open_timeout=60.0, ping_interval=None,
+                                     max_queue=None)
+            except InvalidStatus as exc:
+                body = json.loads(exc.response.body)
+                assert body["type"] == "urn:alloc:problem:too-many-websockets", body
+                return exc.response.status_code
+    results = await asyncio.gather(*(one() for _ in range(n)))
+    return [r for r in results if not isinstance(r, int)], [r for r in results if isinstance(r, int)]
+
+
+async def _probe(base: str, vid: str, rounds: int) -> dict[str, list[float]]:
+    """Events (a jam and its repair, alternately), ``/v1/health`` and ``/v1/ready``, each on a kept
+    connection: their statuses must be 2xx; their latencies in ms."""
+    out: dict[str, list[float]] = {"event": [], "health": [], "ready": []}
+    async with httpx.AsyncClient(base_url=base, timeout=30.0) as c:
+        await c.get("/v1/ready")  # the connection is open before the first probe
+        for i in range(rounds):
+            body = {"effector": "a", "kind": "jam", "position": 1.0} if i % 2 == 0 else \
+                {"effector": "a", "kind": "repair"}
+            for name, call in (("event", lambda: c.post(f"/v1/vehicles/{vid}/events", json=body, headers=H)),
+                               ("health", lambda: c.get("/v1/health")), ("ready", lambda: c.get("/v1/ready"))):
+                t0 = time.perf_counter()
+                r = await call()
+                out[name].append((time.perf_counter() - t0) * 1e3)
+                assert r.status_code in (200, 201), (name, r.status_code, r.text)
+    return out
+
+
+def _bound(name: str, floor: list[float]) -> float:
+    """The attack suite's bound: the quiet-machine target scaled by the run queue per core, or
+    three times the same run's floor, whichever is larger."""
+    return max(TARGETS_MS["event" if name == "event" else "health"] * slack(), FLOOR_FACTOR * p99(floor))
+
+
+def _sockets_beyond_the_cap(tmp_path, env: dict[str, str], cap: int, opened: int, rounds: int) -> dict[str, Any]:
+    proc = ServiceProcess(tmp_path, api_key=KEY, env={"ALLOC_WARMUP": "false", **env}).start(timeout=300.0)
+    try:
+        with httpx.Client(base_url=proc.url, timeout=30.0) as c:
+            vid = c.post("/v1/vehicles", json=SMALL, headers=H).json()["id"]
+            assert c.put(f"/v1/vehicles/{vid}/telemetry", json={**SMALL_SETTINGS, "policy": "confirm"},
+                         headers=H).status_code == 200
+        url = proc.url.replace("http://", "ws://") + f"/v1/vehicles/{vid}/telemetry/ws"
+
+        async def scenario() -> dict[str, Any]:
+            floor = await _probe(proc.url, vid, rounds)
+            sockets, refused = await _open(url, opened, H)
+            try:
+                loaded = await _probe(proc.url, vid, rounds)
+                # an open socket still streams: its answer comes with the sockets all open
+                await sockets[0].send(json.dumps({"t": [0.1], "u": [[0.0] * 4], "y": [[0.0] * 3]}))
+                answer = json.loads(await asyncio.wait_for(sockets[0].recv(), 30.0))
+            finally:
+                await asyncio.gather(*(s.close() for s in sockets[:10]))
+            again, refused_again = await _open(url, 10, H)  # closed sockets give their places back
+            await asyncio.gather(*(s.close() for s in sockets[10:] + again))
+            return {"floor": floor, "loaded": loaded, "open": len(sockets), "refused": refused, "answer": answer,
+                    "reopened": len(again), "refused_again": refused_again}
+        out = asyncio.run(scenario())
+    finally:
+        proc.stop()
+    assert out["open"] == cap and out["refused"] == [503] * (opened - cap), (out["open"], out["refused"])
+    assert out["answer"]["accepted"] == 1, out["answer"]
+    assert out["reopened"] == 10 and not out["refused_again"]
+    for name in ("event", "health", "ready"):
+        assert p99(out["loaded"][name]) <= _bound(name, out["floor"][name]), \
+            (name, p99(out["loaded"][name]), p99(out["floor"][name]))
+    return out
+
+
+# ------------------------------------------------------- capacity apart
+def test_websockets_beyond_their_cap_are_refused_and_leave_http_its_room(tmp_path):
+    """48 WebSockets may be open, 64 are tried, and HTTP's limit is 32: before, the 33rd socket
+    already made every request a 503 (sockets counted as HTTP connections and tasks)."""
+    _sockets_beyond_the_cap(tmp_path, {"ALLOC_MAX_CONNECTIONS": "32", "ALLOC_RESERVED_CONNECTIONS": "4",
+                                       "ALLOC_MAX_WEBSOCKETS": "48"}, cap=48, opened=64, rounds=20)
+
+
+@pytest.mark.slow  # 600 sockets: 10-20 s on the shared machine
+def test_600_websockets_at_the_defaults_do_not_503_events_or_health(tmp_path):
+    """The issue's bar at the defaults: 600 sockets, 512 open (ALLOC_MAX_WEBSOCKETS), 88 refused;
+    events and the probes answer 2xx within the bound."""
+    assert Settings().max_websockets == 512 and Settings().max_connections == 512
+    _sockets_beyond_the_cap(tmp_path, {}, cap=512, opened=600, rounds=40)
+
+
+# ------------------------------------------------------- budget per key
+@pytest.fixture(scope="module")
+def budgeted(tmp_path_factory):
+    proc = ServiceProcess(tmp_path_factory.mktemp("fleet-budget"), api_key=KEY,
+                          env={"ALLOC_WARMUP": "false", "ALLOC_WS_KEY_MESSAGES_PER_S": "40"}).start(timeout=300.0)
+    yield proc
+    proc.stop()
+
+
+def test_one_keys_sockets_share_one_budget_and_refusals_are_paced(budgeted):
+    """4 sockets each send 30 one-sample messages flat out (within each connection's burst of 20
+    only for the first 20): across them, at most the key's 40 per second (burst 40) are processed;
+    the others are answered 429 naming the key's budget, unprocessed, and those refusals beyond
+    the burst come no faster than 40 per second."""
+    with httpx.Client(base_url=budgeted.url, timeout=30.0) as c:
+        vids = []
+        for _ in range(4):
+            vid = c.post("/v1/vehicles", json=SMALL, headers=H).json()["id"]
+            assert c.put(f"/v1/vehicles/{vid}/telemetry", json={**SMALL_SETTINGS, "policy": "confirm"},
+                         headers=H).status_code == 200
+            vids.append(vid)
+    base = budgeted.url.replace("http://", "ws://")
+    per_socket = 30
+
+    async def stream(vid: str) -> list[dict[str, Any]]:
+        from websockets.asyncio.client import connect
+
+        async with connect(f"{base}/v1/vehicles/{vid}/telemetry/ws", additional_headers=H) as ws:
+            for i in range(per_socket):
+                await ws.send(json.dumps({"t": [0.1 * (i + 1)], "u": [[0.0] * 4], "y": [[0.0] * 3]}))
+            return [json.loads(await ws.recv()) for _ in range(per_socket)]
+
+    async def scenario() -> tuple[list[list[dict[str, Any]]], float]:
+        t0 = time.perf_counter()
+        answers = await asyncio.gather(*(stream(v) for v in vids))
+        return answers, time.perf_counter() - t0
+    answers, elapsed = asyncio.run(scenario())
+    flat = [a for per in answers for a in per]
+    accepted = [a for a in flat if "status" not in a]
+    refused = [a for a in flat if a.get("status") == 429]
+    assert len(accepted) + len(refused) == len(flat) == 4 * per_socket, [a.get("status") for a in flat]
+    assert 40 <= len(accepted) <= 40 + 40 * elapsed + 1, (len(accepted), elapsed)
+    assert all("API key" in a["detail"] for a in refused), refused[0]
+    assert elapsed >= 0.9 * (len(refused) - 40) / 40, (len(refused), elapsed)  # paced beyond the burst
+    with httpx.Client(base_url=budgeted.url, timeout=30.0) as c:  # the refused ones changed nothing
+        samples = [c.get(f"/v1/vehicles/{v}/telemetry").json()["samples"] for v in vids]
+    assert samples == [sum(1 for a in per if "status" not in a) for per in answers]
+
+
+def test_a_message_over_the_size_cap_is_refused_unparsed(tmp_path, monkeypatch):
+    """413 from its length alone: the route's parser is never called for it."""
+    import service.routes.telemetry as route
+
+    parsed: list[int] = []
+    real = route._parse
+    monkeypatch.setattr(route, "_parse", lambda data: parsed.append(len(data)) or real(data))
+    app = create_app(Settings(data_dir=tmp_path, warmup=False, api_key=KEY))
+    with TestClient(app) as c:
+        vid = c.post("/v1/vehicles", json=SMALL, headers=H).json()["id"]
+        assert c.put(f"/v1/vehicles/{vid}/telemetry", json={**SMALL_SETTINGS, "policy": "confirm"},
+                     headers=H).status_code == 200
+        with c.websocket_connect(f"/v1/vehicles/{vid}/telemetry/ws", headers=H) as ws:
+            ws.send_text("[" + "1," * route.WS_MAX_MESSAGE_BYTES + "1]")
+            big = json.loads(ws.receive_text())
+            ws.send_text("\u00e9" * (route.WS_MAX_MESSAGE_BYTES // 2 + 1))  # 2 bytes each: over, by its bytes
+            wide = json.loads(ws.receive_text())
+            ws.send_text(json.dumps({"t": [0.1], "u": [[0.0] * 4], "y": [[0.0] * 3]}))
+            fine = json.loads(ws.receive_text())
+    assert big["status"] == 413 and wide["status"] == 413, (big, wide)
+    assert fine["accepted"] == 1 and len(parsed) == 1
+
+
+# ---------------------------------------------------- the key at the head
+def test_a_keyless_write_is_refused_before_its_body_is_sent(budgeted):
+    """A 3.9 MB event whose body is never sent: the 401 comes from the head alone, and the
+    connection is closed (the body would not be read)."""
+    port = int(budgeted.url.rsplit(":", 1)[1])
+    for key in (None, "wrong"):
+        with socket.create_connection(("127.0.0.1", port), timeout=10.0) as s:
+            head = (f"POST /v1/vehicles/any/events HTTP/1.1\r\nhost: x\r\ncontent-type: application/json\r\n"
+                    f"content-length: 3900000\r\n" + (f"x-api-key: {key}\r\n" if key else "") + "\r\n")
+            s.sendall(head.encode())
+            data = b""
+            while chunk := s.recv(65536):  # until the server closes
+                data += chunk
+        status_line, _, rest = data.partition(b"\r\n")
+        assert status_line == b"HTTP/1.1 401 Unauthorized", data[:200]
+        assert b"connection: close" in rest.lower()
+        assert json.loads(rest.split(b"\r\n\r\n", 1)[1])["type"] == "urn:alloc:problem:unauthorized"
+
+
+HEADER_VARIANTS = [
+    lambda rng: [],
+    lambda rng: [(b"x-api-key", b"")],
+    lambda rng: [(b"x-api-key", KEY.encode() + b"x")],
+    lambda rng: [(b"x-api-key", KEY[:-1].encode())],
+    lambda rng: [(b"x-api-key", KEY.upper().encode())],
+    lambda rng: [(b"x-api-key", b"wrong"), (b"x-api-key", KEY.encode())],  # the first one counts
+    lambda rng: [(b"authorization", f"Bearer {KEY}".encode())],
+    lambda rng: [(b"x-api-key", bytes(rng.integers(0, 256, int(rng.integers(1, 64))).tolist()))],
+]
+
+
+def _asgi_call(app: Any, method: str, path: str, headers: list[tuple[bytes, bytes]]) -> tuple[int, bool]:
+    """Call ``app`` with a request whose body may never be read: its status, and whether
+    ``receive`` was called."""
+    read: list[bool] = []
+    status: list[int] = []
+
+    async def receive() -> dict[str, Any]:
+        read.append(True)
+        return {"type": "http.disconnect"}
+
+    async def send(message: dict[str, Any]) -> None:
+        if message["type"] == "http.response.start":
+            status.append(message["status"])
+
+    scope = {"type": "http", "asgi": {"version": "3.0"}, "http_version": "1.1", "method": method, "path": path,
+             "raw_path": path.encode(), "query_string": b"", "root_path": "", "scheme": "http",
+             "headers": [(b"content-type", b"application/json"), (b"content-length", b"3900000"), *headers],
+             "client": ("127.0.0.1", 1), "server": ("127.0.0.1", 80)}
+    asyncio.run(app(scope, receive, send))
+    return status[0], bool(read)
+
+
+def _keyless_rounds(tmp_path, seeds: range) -> int:
+    app = create_app(Settings(data_dir=tmp_path, warmup=False, api_key=KEY))
+    checked = 0
+    with TestClient(app):  # lifespan: the middleware stack is built
+        from fastapi.routing import iter_route_contexts
+
+        guarded = {(m, p.pattern) for methods, p in keyed_routes(app) for m in methods}
+        keyed = [(m, r.path_format) for r in iter_route_contexts(app.routes) for m in r.methods or ()
+                 if (m, r.path_regex.pattern) in guarded]
+        assert {("POST", "/v1/vehicles/{vehicle_id}/events"), ("PUT", "/v1/vehicles/{vehicle_id}/telemetry"),
+                ("POST", "/v1/vehicles"), ("DELETE", "/v1/vehicles/{vehicle_id}")} <= set(keyed), keyed
+        for seed in seeds:
+            rng = np.random.default_rng(seed)
+            method, path_format = keyed[int(rng.integers(len(keyed)))]
+            path = path_format.replace("{vehicle_id}", "v" + str(seed)).replace("{pid}", str(seed + 1))
+            headers = HEADER_VARIANTS[int(rng.integers(len(HEADER_VARIANTS)))](rng)
+            status, read = _asgi_call(app, method, path, headers)
+            assert (status, read) == (401, False), (seed, method, path, headers, status, read)
+            checked += 1
+    return checked
+
+
+def test_keyless_writes_are_refused_at_the_head_on_every_keyed_route(tmp_path):
+    assert _keyless_rounds(tmp_path, range(200)) == 200
+
+
+@pytest.mark.slow
+def test_keyless_writes_are_refused_at_the_head_many_seeds(tmp_path):
+    assert _keyless_rounds(tmp_path, range(200, 5200)) == 5000
+
+
+def test_the_key_lets_the_request_through_and_no_key_configured_is_inert(tmp_path):
+    with TestClient(create_app(Settings(data_dir=tmp_path / "k", warmup=False, api_key=KEY))) as c:
+        assert c.post("/v1/vehicles", json=SMALL, headers=H).status_code == 201
+        assert c.get("/v1/health").status_code == 200  # reads need no key
+    with TestClient(create_app(Settings(data_dir=tmp_path / "n", warmup=False))) as c:
+        assert c.post("/v1/vehicles", json=SMALL).status_code == 201
+
+
+def test_start_up_without_a_key_warns_loudly(tmp_path, caplog):
+    with caplog.at_level(logging.WARNING, logger="service"):
+        create_app(Settings(data_dir=tmp_path / "n", warmup=False))
+    assert NO_KEY_WARNING in caplog.text and "policy 'auto'" in caplog.text
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="service"):
+        create_app(Settings(data_dir=tmp_path / "k", warmup=False, api_key=KEY))
+    assert NO_KEY_WARNING not in caplog.text
+
+
+# ---------------------------------------------------- the budgets' sums
+class _Clock:
+    def __init__(self) -> None:
+        self.now = 1000.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+def _budget_rounds(seeds: range) -> int:
+    """Seeded hostile arrivals (bursts, flat-out senders, idle gaps, sizes up to 64 KiB) at a
+    :class:`KeyBudget`: over every window, the messages it accepts stay within ``rate x window +
+    burst``, their bytes likewise, and refusals sent at their booked times likewise."""
+    checked = 0
+    for seed in seeds:
+        rng = np.random.default_rng(seed)
+        rate = float(rng.choice([1.0, 5.0, 40.0, 200.0, 1000.0]))
+        bps = float(rng.choice([65536.0, 1 << 20, 4 << 20]))
+        clock = _Clock()
+        budget = KeyBudget(rate, bps, clock)
+        accepted: list[tuple[float, int]] = []
+        refusals: list[float] = []
+        for _ in range(int(rng.integers(50, 400))):
+            clock.now += float(rng.choice([0.0, rng.exponential(1.0 / rate), rng.exponential(5.0 / rate),
+                                           rng.uniform(0, 3)], p=[0.4, 0.3, 0.2, 0.1]))
+            size = int(rng.choice([300, int(rng.integers(1, 65537)), 65536]))
+            if budget.take(size):
+                accepted.append((clock.now, size))
+            else:
+                refusals.append(clock.now + budget.refusal_delay())
+        burst = max(1.0, rate)
+        times = np.array([t for t, _ in accepted])
+        sizes = np.array([s for _, s in accepted], dtype=float)
+        for series, weights, r, b in ((times, np.ones(len(times)), rate, burst), (times, sizes, bps, bps),
+                                      (np.sort(refusals), np.ones(len(refusals)), rate, burst)):
+            for i in range(len(series)):  # every window that starts at an event
+                within = np.cumsum(weights[i:]) <= r * (series[i:] - series[i]) + b + 1e-6
+                assert within.all(), (seed, r, b, i)
+        checked += 1
+    return checked
+
+
+def test_key_budget_never_exceeds_its_rates(tmp_path):
+    assert _budget_rounds(range(150)) == 150
+
+
+@pytest.mark.slow
+def test_key_budget_never_exceeds_its_rates_many_seeds(tmp_path):
+    assert _budget_rounds(range(150, 3150)) == 3000
