@@ -31,6 +31,11 @@ FACET_LIMIT = 20_000
 #   12.1 / 6.4 s, 1,011 / 683 MiB; k=6, m=28 14.7 / 8.2-9.1 s, 1,008 / 743 MiB; k=4, m=71
 #   8.6 / 3.2-3.9 s, 991 / 603 MiB
 #
+# High rank (2026-12-05, under load; the vertex enumeration no longer runs at build and the
+# cross product is a QR beyond k = 6): k=14, m=17 0.26 s / 28 MiB (declared 0.36 s / 35 MiB;
+# before, 14.5 s and 3 GiB); k=16, m=19 0.26 s / 59 MiB (0.58 s / 72 MiB); k=20, m=23 1.1 s /
+# 205 MiB (1.3 s / 249 MiB); k=24, m=27 1.4-2.1 s / 554 MiB (3.6 s / 694 MiB).
+#
 # Every table holds a row of m (or (k-1) x m) numbers per tile, so time and memory grow
 # with S x k m.  The model: FACET_SECONDS per subset up to k m = 480, growing in proportion
 # beyond; da_bisect adds 200 us per subset at k = 3 (its edge table, a Python loop per

@@ -277,6 +277,35 @@ def test_a_facet_build_stays_within_its_declared_memory(name, m, options):
     assert peak >= 0.2 * get_method(name).build_memory(p, **options)  # the declaration is not vacuous
 
 
+@pytest.mark.parametrize(("k", "m"), [(14, 17), (16, 19),
+                                    pytest.param(20, 23, marks=pytest.mark.slow),
+                                    pytest.param(24, 27, marks=pytest.mark.slow)])
+def test_high_rank_facet_builds_keep_their_declaration(k, m):
+    """Issue 44: a 14 x 17 da_facet declared 0.36 s and 35 MiB and took 14.5 s and 3 GiB (the
+    vertex enumeration, 2^(k-1) sign rows per facet, which no facet search reads)."""
+    p = random_problem(np.random.default_rng(0), k, m, "general", weights=False)
+    cls = get_method("da_facet")
+    got = _rss_growth("da_facet", k, m, {})
+    assert not got["lp"]
+    assert got["cpu"] <= BUILD_FACTOR * cls.build_cost(p) + BUILD_SLACK, got
+    assert got["rss"] <= MEMORY_FACTOR * cls.build_memory(p) + MEMORY_SLACK, got
+
+
+def test_high_rank_facet_search_is_the_lp_answer():
+    """The facet search at k = 7..12 (the QR cross product, lazy vertices) against da's LP backend."""
+    rng = np.random.default_rng(44)
+    for k in (7, 9, 12):
+        p = random_problem(rng, k, k + 3, "general", weights=False, rates=False)
+        facet, lp = alloc.make_allocator(p, "da_facet"), alloc.make_allocator(p, "da", backend="highs")
+        V = random_demands(rng, p, 30)
+        V[::3] *= 5.0
+        for v in V:
+            a, b = facet(v), lp(v)
+            assert a.status == b.status, (k, v)
+            scale = max(1.0, float(np.abs(b.v_achieved).max()))
+            assert np.abs(a.v_achieved - b.v_achieved).max() <= 1e-7 * scale, (k, v)
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize(("name", "k", "m", "options"), [
     ("da_facet", 3, 223, {}), ("da_bisect", 3, 223, {}), ("da_facet", 6, 28, {}), ("da_facet", 4, 60, {}),
