@@ -11,7 +11,9 @@ WebSocket checks the key at its handshake (:func:`service.routes.telemetry.strea
 
 from __future__ import annotations
 
+import hmac
 import re
+from collections.abc import Iterable
 from typing import Any
 
 from fastapi.dependencies.models import Dependant
@@ -20,14 +22,23 @@ from starlette.types import ASGIApp, Receive, Scope, Send
 
 from .deps import require_api_key
 from .errors import Unauthorized, problem_response
-from .streams import key_matches
 
-__all__ = ["KeyAtHead", "keyed_routes", "NO_KEY_WARNING"]
+__all__ = ["KeyAtHead", "keyed_routes", "key_matches", "NO_KEY_WARNING"]
 
 #: logged at start-up when no key is configured (service.main)
 NO_KEY_WARNING = ("ALLOC_API_KEY is not set: every write is open to anyone who can reach this port -- creating "
                   "and deleting vehicles, recording failure events, and telemetry, which under policy 'auto' "
                   "turns a faked stream into a faked failure.  Set ALLOC_API_KEY or ALLOC_API_KEY_FILE.")
+
+
+def key_matches(headers: Iterable[tuple[bytes, bytes]], key: str | None) -> bool:
+    """Whether a request's first ``X-API-Key`` header is ``key`` (any request when ``key`` is None)."""
+    if key is None:
+        return True
+    for name, value in headers:
+        if name == b"x-api-key":
+            return hmac.compare_digest(value, key.encode())
+    return False
 
 
 def _needs_key(dependant: Dependant) -> bool:

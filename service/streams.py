@@ -32,26 +32,16 @@ behind the priority gate: 100 key-holding sockets sending flat out delayed an ev
 from __future__ import annotations
 
 import asyncio
-import hmac
 import json
 import time
-from collections.abc import Iterable
 from typing import Any, ClassVar
 
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 from uvicorn.protocols.websockets.websockets_sansio_impl import WebSocketsSansIOProtocol
 
-__all__ = ["GuardedWebSocketProtocol", "KeyBudget", "StreamLimits", "TokenBucket", "key_matches"]
+from .keys import key_matches
 
-
-def key_matches(headers: Iterable[tuple[bytes, bytes]], key: str | None) -> bool:
-    """Whether a request's first ``X-API-Key`` header is ``key`` (any request when ``key`` is None)."""
-    if key is None:
-        return True
-    for name, value in headers:
-        if name == b"x-api-key":
-            return hmac.compare_digest(value, key.encode())
-    return False
+__all__ = ["GuardedWebSocketProtocol", "KeyBudget", "StreamLimits", "TokenBucket"]
 
 
 class TokenBucket:

@@ -32,9 +32,9 @@ from ..errors import (
     _validation_errors, field_error, library_error_fields, problem_response,
 )
 from ..health import health_out
+from ..keys import key_matches
 from ..schemas import NOT_FOUND, PROBLEM_RESPONSES, UNAUTHORIZED, EventOut, HealthOut, ProblemOut
 from ..store import VehicleState
-from ..streams import key_matches
 from ..telemetry import DetectorSettings, Policy, Samples, samples_from
 from ..telemetry_schemas import (
     ProposalDecided, ProposalList, ProposalOut, TelemetryBatchIn, TelemetryConfigIn, TelemetryOut, TelemetryResult,
