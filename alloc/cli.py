@@ -555,10 +555,16 @@ def export_command(
         except ValueError:
             raise ExportError(f"iteration_bound: expected a positive integer or \"certify\", got {bound!r}",
                               field="iteration_bound") from None
+    if out.exists() and not out.is_dir():  # refused before the work, as every output path
+        raise typer.BadParameter(f"{out} is a file; give a folder for the .h/.c pair", param_hint="--out")
     kernel = export_c(load_vehicle_option(vehicle), name, precision=precision, options=parse_options(option),
                       prefix=prefix, iteration_bound=bound, maxit=maxit, table=table, cache=cache,
                       warm_start=warm_start)
-    for path in kernel.write(out):
+    try:
+        paths = kernel.write(out)
+    except OSError as exc:
+        raise typer.BadParameter(f"{out}: cannot write the kernel: {exc.strerror or exc}", param_hint="--out") from None
+    for path in paths:
         typer.echo(str(path))
 
 

@@ -55,20 +55,20 @@ def comment_text(value: Any, limit: int = MAX_COMMENT_CHARS) -> Comment:
     markers), become ``<U+XXXX>``; ``*/``, ``/*``, ``//`` and ``??`` (a trigraph's start) get a
     space between their characters, and a ``*``, ``/`` or ``?`` at either end one outside it,
     so that nothing the template puts next to the text joins it into one.  Beyond ``limit``
-    characters the text is cut, saying how many were left out.  Printable ASCII names without
+    characters (after the decomposition) the text is cut, saying so: at most ``11 limit + 30``
+    characters come out.  Printable ASCII names without
     those pairs are unchanged.
     """
-    text = str(value)
-    cut = 0
-    if len(text) > limit:
-        cut, text = len(text) - limit, text[:limit]
-    # NFKD after the cut: a decomposition can make "*" or "/" of other characters (U+FF0F)
+    text = str(value)[:4 * limit]  # bounds the normalisation's work
+    # NFKD before the escaping: a decomposition can make "*" or "/" of other characters (U+FF0F)
     text = "".join(ch for ch in unicodedata.normalize("NFKD", text) if not unicodedata.combining(ch))
+    cut = len(text) > limit or len(str(value)) > 4 * limit
+    text = text[:limit]
     text = _SPACE.sub(" ", text)
     text = "".join(ch if " " <= ch <= "~" and ch not in "\\@" else f"<U+{ord(ch):04X}>" for ch in text)
     text = _JOINS.sub(" ", text)
     if cut:
-        text += f" ... ({cut} more characters)"
+        text += f" ... (cut at {limit} characters)"
     if text[:1] in _EDGE and text:
         text = " " + text
     if text[-1:] in _EDGE and text:
@@ -83,9 +83,9 @@ def c_prefix(value: Any, field: str = "prefix") -> str:
     in a family of names reserved to the C implementation."""
     if not isinstance(value, str):
         raise ExportError(f"{field}: expected a C identifier, got {type(value).__name__}", field=field)
-    shown = comment_text(value, 40)
+    shown = ascii(value[:40])  # an error message, not C: escapes, never transliterates
     if not _IDENTIFIER.fullmatch(value):
-        raise ExportError(f"{field}: expected a C identifier ([A-Za-z_][A-Za-z0-9_]*), got {shown!r}", field=field)
+        raise ExportError(f"{field}: expected a C identifier ([A-Za-z_][A-Za-z0-9_]*), got {shown}", field=field)
     if len(value) > MAX_PREFIX_CHARS:
         raise ExportError(f"{field}: at most {MAX_PREFIX_CHARS} characters (C99's significant length of an "
                           f"external name), got {len(value)}", field=field)
