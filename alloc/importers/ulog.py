@@ -136,10 +136,14 @@ def read_ulog(path: str | Path) -> FlightLog:
         raise ProblemError(f"ulog: {name} has no {', '.join(missing)} (PX4 control_allocator topics, "
                            "v1.13 and later; a multicopter log)", field="ulog")
     torque, thrust, motors = (topics[t] for t in TOPICS)
-    setpoint_t = _sample_times(torque, "vehicle_torque_setpoint")
-    if not np.array_equal(setpoint_t, _sample_times(thrust, "vehicle_thrust_setpoint")):
-        raise ProblemError("ulog: torque and thrust setpoints are not sampled together", field="ulog")
-    _check_increasing(setpoint_t, "vehicle_torque_setpoint.timestamp_sample")
+    torque_t = _sample_times(torque, "vehicle_torque_setpoint")
+    thrust_t = _sample_times(thrust, "vehicle_thrust_setpoint")
+    _check_increasing(torque_t, "vehicle_torque_setpoint.timestamp_sample")
+    _check_increasing(thrust_t, "vehicle_thrust_setpoint.timestamp_sample")
+    # PX4 publishes both with the same sample time; a cut log may end between them
+    setpoint_t, in_torque, in_thrust = np.intersect1d(torque_t, thrust_t, assume_unique=True, return_indices=True)
+    if not setpoint_t.size:
+        raise ProblemError("ulog: torque and thrust setpoints share no sample time", field="ulog")
     params = dict(log.initial_parameters)
     n_motors = _rotor_count(params, motors)
     motor_t = _sample_times(motors, "actuator_motors")
@@ -151,8 +155,8 @@ def read_ulog(path: str | Path) -> FlightLog:
         raise ProblemError("ulog: no motor sample with finite commands has the sample time of a setpoint",
                            field="ulog")
     at = at[paired]
-    demand = np.column_stack([_columns(torque, "vehicle_torque_setpoint", "xyz", 3)[at],
-                              _columns(thrust, "vehicle_thrust_setpoint", "xyz", 3)[at]])
+    demand = np.column_stack([_columns(torque, "vehicle_torque_setpoint", "xyz", 3)[in_torque[at]],
+                              _columns(thrust, "vehicle_thrust_setpoint", "xyz", 3)[in_thrust[at]]])
     bad = np.argwhere(~np.isfinite(demand))
     if bad.size:
         i, j = bad[0]
@@ -205,11 +209,13 @@ def _rotor_count(params: dict[str, Any], motors: dict[str, np.ndarray]) -> int:
     held = 0
     while f"control[{held}]" in motors:
         held += 1
+    if not held:
+        raise ProblemError("actuator_motors.control[0]: missing", field="actuator_motors.control")
     value = params.get("CA_ROTOR_COUNT")
     if value is None:
         raise ProblemError("CA_ROTOR_COUNT: missing from the log's parameters", field="CA_ROTOR_COUNT")
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
-            or value != int(value) or not 1 <= value <= max(held, 1):
+            or value != int(value) or not 1 <= value <= held:
         raise ProblemError(f"CA_ROTOR_COUNT: expected an integer 1..{held} (the actuator_motors.control fields "
                            f"of the log), got {value!r}" + (f" (actuator_motors.control[{held}]: missing)"
                                                              if isinstance(value, int) and value > held else ""),
