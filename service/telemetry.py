@@ -32,8 +32,12 @@ against it (:func:`samples_from`, :func:`run_batch`):
   received: a clock restarted, or a far-future time accepted earlier) starts a new *segment*:
   the detector's buffers and pending alarm are emptied and it restarts on the new samples (its
   belief, counters and detections kept), and the answer says so (``segment``).  A window longer
-  than the gap would straddle samples that do not follow one another, and a far-future time
-  can never hold the later, real, samples back.
+  than the gap would straddle samples that do not follow one another.
+* a segment that starts before the last sample (``unseen_time``) forgets the time received
+  after its start: the clock went back, so what came later was either a far-future time or a
+  clock since restarted, and the real samples must be able to reach those times again.  A
+  far-future time therefore holds nothing back: the next real batch starts a segment (its
+  samples are never before the last real ones), and the far-future range is forgotten.
 
 The state keeps the last :data:`KEPT_SEGMENTS` segments' first and last times (older ones are
 forgotten: a repeat of those is taken as new data) and the count of segments started.
@@ -304,6 +308,8 @@ def run_batch(nominal: alloc.Problem, settings: DetectorSettings, state: dict[st
         kept[-1][1] = last
     else:
         state = new_segment(state)
+        if reason == "unseen_time":  # the clock went back: what was received after it is forgotten
+            kept = [r for r in kept if r[0] < first]
         kept = [*kept, [first, last]][-KEPT_SEGMENTS:]
     detector = FailureDetector.from_dict(nominal, state)
     found: list[Detection] = []
