@@ -28,8 +28,8 @@ import numpy as np
 
 from .._files import MAX_LOG_BYTES, read_user_file
 from ..exceptions import AllocError, OptionError, ProblemError
-from ._ulog_scan import scan_ulog
 from ..vehicle_file.fields import WRENCH_COMPONENTS
+from ._ulog_scan import ULogScan, scan_ulog
 
 __all__ = ["FlightLog", "Replay", "read_ulog", "replay"]
 
@@ -117,25 +117,7 @@ def read_ulog(path: str | Path) -> FlightLog:
             RecursionError) as exc:
         raise ProblemError(f"ulog: cannot read {name} as a ULog ({type(exc).__name__}: {exc})",
                            field="ulog") from None
-    if log.file_corruption:
-        raise ProblemError(f"ulog: {name} has messages pyulog cannot parse (a damaged log)", field="ulog")
-    topics: dict[str, dict[str, np.ndarray]] = {}
-    for topic in TOPICS:
-        held = [d for d in log.data_list if d.name == topic and d.multi_id == 0]
-        expected = scan.samples(topic)
-        if len(expected) > 1:
-            raise ProblemError(f"ulog: {name} subscribes {topic} instance 0 under {len(expected)} message ids",
-                               field="ulog")
-        if held and len(next(iter(held[0].data.values()))) != sum(expected):  # pyulog stopped early
-            raise ProblemError(f"ulog: {name}: pyulog read {len(next(iter(held[0].data.values())))} of the "
-                               f"{sum(expected)} {topic} messages (a damaged log)", field="ulog")
-        if held:
-            topics[topic] = held[0].data
-    missing = [t for t in TOPICS if t not in topics]
-    if missing:
-        raise ProblemError(f"ulog: {name} has no {', '.join(missing)} (PX4 control_allocator topics, "
-                           "v1.13 and later; a multicopter log)", field="ulog")
-    torque, thrust, motors = (topics[t] for t in TOPICS)
+    torque, thrust, motors = _topic_data(log, scan, name)
     torque_t = _sample_times(torque, "vehicle_torque_setpoint")
     thrust_t = _sample_times(thrust, "vehicle_thrust_setpoint")
     _check_increasing(torque_t, "vehicle_torque_setpoint.timestamp_sample")
@@ -168,6 +150,31 @@ def read_ulog(path: str | Path) -> FlightLog:
     _check_increasing(t, "actuator_motors.timestamp_sample")  # float64 rounds times past 2**53 us
     return FlightLog(t=t, demand=demand, motors=commands[paired], params=params,
                      software=str(log.msg_info_dict.get("ver_sw", "")))
+
+
+def _topic_data(log: Any, scan: ULogScan, name: str) -> list[dict[str, np.ndarray]]:
+    """The fields of each of :data:`TOPICS` (instance 0) pyulog read, all of the data messages
+    the scan counted (a ``struct.error`` silently ends pyulog's read)."""
+    if log.file_corruption:
+        raise ProblemError(f"ulog: {name} has messages pyulog cannot parse (a damaged log)", field="ulog")
+    topics: dict[str, dict[str, np.ndarray]] = {}
+    for topic in TOPICS:
+        held = [d.data for d in log.data_list if d.name == topic and d.multi_id == 0]
+        counted = scan.samples(topic)
+        if len(counted) > 1:
+            raise ProblemError(f"ulog: {name} subscribes {topic} instance 0 under {len(counted)} message ids",
+                               field="ulog")
+        if held:
+            read = len(next(iter(held[0].values())))
+            if read != sum(counted):
+                raise ProblemError(f"ulog: {name}: pyulog read {read} of the {sum(counted)} {topic} messages "
+                                   "(a damaged log)", field="ulog")
+            topics[topic] = held[0]
+    missing = [t for t in TOPICS if t not in topics]
+    if missing:
+        raise ProblemError(f"ulog: {name} has no {', '.join(missing)} (PX4 control_allocator topics, "
+                           "v1.13 and later; a multicopter log)", field="ulog")
+    return [topics[t] for t in TOPICS]
 
 
 def _field(data: dict[str, np.ndarray], topic: str, name: str) -> np.ndarray:
@@ -214,8 +221,9 @@ def _rotor_count(params: dict[str, Any], motors: dict[str, np.ndarray]) -> int:
     value = params.get("CA_ROTOR_COUNT")
     if value is None:
         raise ProblemError("CA_ROTOR_COUNT: missing from the log's parameters", field="CA_ROTOR_COUNT")
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
-            or value != int(value) or not 1 <= value <= held:
+    whole = isinstance(value, int) and not isinstance(value, bool) or \
+        isinstance(value, float) and math.isfinite(value) and value.is_integer()
+    if not whole or not 1 <= value <= held:
         raise ProblemError(f"CA_ROTOR_COUNT: expected an integer 1..{held} (the actuator_motors.control fields "
                            f"of the log), got {value!r}" + (f" (actuator_motors.control[{held}]: missing)"
                                                              if isinstance(value, int) and value > held else ""),
