@@ -57,7 +57,8 @@ Domain and cost.  Settings and samples are finite with ``|x| <= 1e50``; the whit
 ``B / noise_std`` must stay within that bound too (a subnormal ``noise_std`` is refused).  The
 buffers, the whitening matrices and the isolation's ``L x L`` tables (``L`` the buffer length)
 are priced from the settings before anything is allocated, at most :data:`MAX_DETECTOR_BYTES`
-(the estimate, :func:`detector_bytes`, is in bytes of the largest working set).  A sample whose
+(the estimate, :func:`detector_bytes`, is in bytes of the largest working set), and the
+isolation's time on an alarm, ``m L^2`` cells, at most :data:`MAX_ISOLATION_CELLS`.  A sample whose
 whitened residual leaves the domain, or whose test would record a non-finite statistic, is
 refused (SampleError naming ``y``) and the state is unchanged; counters stay below ``2^53``.
 """
@@ -86,14 +87,19 @@ from ._checks import (
 )
 from .isolation import Detection, Isolation
 
-__all__ = ["FailureDetector", "Detection", "MAX_KEPT", "MAX_DETECTOR_BYTES", "detector_bytes"]
+__all__ = ["FailureDetector", "Detection", "MAX_KEPT", "MAX_DETECTOR_BYTES", "MAX_ISOLATION_CELLS", "detector_bytes"]
 
 #: detections kept in the state (older ones are dropped; the caller has received them)
 MAX_KEPT = 64
 #: The largest working set a detector's settings may imply (:func:`detector_bytes`): 256 MiB.
-#: The isolation's ``L x L`` tables dominate, so the buffer ``L`` is at most about 1,600
-#: samples (a window of about 800, or a long window of 800); the default designs use 32.
+#: The isolation's ``L x L`` tables dominate (peak 6-10 ``L^2`` numbers measured with tracemalloc,
+#: L 200-800): the buffer ``L`` is at most about 1,600 samples -- the time cap below binds first
+#: from two effectors on.
 MAX_DETECTOR_BYTES = 256 * 2 ** 20
+#: The isolation's work on an alarm, ``m L^2`` table cells at most (``2^22``): 7-10e-7 s a cell
+#: measured (2026-12-05, m 5-40, L 100-400), so about 3 s per isolation; five effectors allow a
+#: buffer of 900 samples, 512 effectors one of 90 (the default designs: 32).
+MAX_ISOLATION_CELLS = 2 ** 22
 #: Samples of a window before it is priced (keeps ``round(window / sample_time)`` an exact integer)
 _MAX_WINDOW_SAMPLES = 100_000
 
@@ -189,6 +195,11 @@ class FailureDetector(Isolation):
             field = "long_window" if self.N_long else "window"
             raise OptionError(f"{field}: a buffer of {self.L} samples needs about {cost / 2 ** 20:.0f} MiB "
                               f"(isolation tables {self.L} x {self.L}); at most {MAX_DETECTOR_BYTES // 2 ** 20} MiB")
+        cells = m * self.L * self.L
+        if cells > MAX_ISOLATION_CELLS:
+            field = "long_window" if self.N_long else "window"
+            raise OptionError(f"{field}: an isolation over {m} effectors and a buffer of {self.L} samples is {cells:.3g} "
+                              f"table cells (seconds per alarm); at most {MAX_ISOLATION_CELLS:.3g}")
         self.noise_correlation = (None if noise_correlation is None
                                   else _correlation_setting(noise_correlation))
         self._whiten = None if self.noise_correlation is None else _whitener(self.noise_correlation, self.N)

@@ -283,6 +283,8 @@ class FrequencyDomainEstimator:
         """Inverse of :meth:`to_dict`; StateError naming the field for anything that does not fit."""
         d = state_mapping(data, "frequency", ("n_outputs", "n_inputs", "sample_time", "band", "spacing", "window",
                                               "form", "noise_std", "highpass", "samples", "banks"))
+        if not (isinstance(d["band"], list) and len(d["band"]) == 2):
+            raise StateError(f"band: expected [low, high] in Hz, got {short_repr(d['band'])}")
         try:
             est = cls(d["n_outputs"], d["n_inputs"], d["sample_time"], band=tuple(d["band"]), spacing=d["spacing"],
                       window=d["window"], form=d["form"], noise_std=d["noise_std"], highpass=d["highpass"])

@@ -18,13 +18,15 @@ the data carry no information (the seed's ``u = 0`` case, section 1.3.2).  In fl
 that holds only while ``alpha`` is above the rounding of ``R_n``'s entries (about ``eps
 trace R_n`` per sample of memory): with ``|w| = 1e8`` and ``alpha = 1`` an unexcited direction
 of ``R_n + alpha I`` was rounded to zero.  So the penalty solved with is ``alpha_n = max(alpha,
-PENALTY_FLOOR trace R_n)`` (the stated fallback; ``alpha`` itself whenever ``trace R_n <= 1e12
-alpha``, every ordinary case), and the condition number is at most ``1 + 1e12`` whatever
-the data.  The covariance below uses the same ``alpha_n``, so it stays exact for the
-estimate computed.
+PENALTY_FLOOR trace R_n)`` (the stated fallback; ``alpha`` itself whenever ``trace R_n <= 1e10
+alpha``, every ordinary case), and the condition number is at most ``1 + 1e10`` whatever
+the data: the estimate is within about ``1e10 eps`` of the exact minimiser (1.1e-5 relative
+measured at the bound, tests/alloc/estimation/test_estimation_hostile.py).  The covariance
+below uses the same ``alpha_n``, so it stays exact for the estimate computed.
 
 Domain.  Settings and samples are finite with ``|x| <= 1e50`` (:data:`alloc.domain.MAX_MAGNITUDE`),
-``penalty`` in ``[1e-50, 1e12]``; the state (``theta``, ``R``, ``q``, the covariances, the
+``penalty`` in ``[1e-50, 1e12]``, the standard deviations at most ``1e24`` (their squares
+within it); the state (``theta``, ``R``, ``q``, the covariances, the
 residual variance) is kept within the same bound -- a sample that would take any of it
 beyond is refused (SampleError naming ``w`` or ``y``, the state unchanged), so every output
 is finite and every state stored loads again.  Memory is priced before allocation: the
@@ -70,7 +72,7 @@ __all__ = ["RecursiveLeastSquares", "EffectivenessRLS", "PENALTY_FLOOR", "MAX_ST
 
 #: The penalty solved with is at least this fraction of ``trace R_n`` (module docstring): the
 #: matrix solved has condition number at most ``1 + 1 / PENALTY_FLOOR``.
-PENALTY_FLOOR = 1e-12
+PENALTY_FLOOR = 1e-10
 #: The state's size, ``8 (9 p^2 + 2 k p)`` bytes (``R``, the two ``2p x 2p`` covariances,
 #: ``theta`` and ``q``), priced before it is allocated: 32 MiB, ``p`` up to about 680.  An
 #: update's temporaries are a few times the state and its time grows as ``p^3``.
@@ -115,10 +117,9 @@ class RecursiveLeastSquares:
         self.k, self.p = k, p
         self.forgetting = setting_real("forgetting", forgetting, 0.0, 1.0, lo_open=True)
         self.penalty = setting_real("penalty", penalty, MIN_WEIGHT, 1e12)
-        self.prior_std = setting_vector("prior_std", prior_std, k, positive=True)
+        self.prior_std = _std_setting("prior_std", prior_std, k)
         self.noise_known = noise_std is not None
-        self.noise_std = (setting_vector("noise_std", noise_std, k, positive=True) if noise_std is not None
-                          else np.ones(k))
+        self.noise_std = _std_setting("noise_std", noise_std, k) if noise_std is not None else np.ones(k)
         if theta0 is None:
             self.theta = np.zeros((k, p))
         else:
@@ -144,7 +145,7 @@ class RecursiveLeastSquares:
         default the constructor's).  For use after a detected change (seed section 1.3.2.2:
         restart so the estimator can follow it)."""
         if prior_std is not None:
-            self.prior_std = setting_vector("prior_std", prior_std, self.k, positive=True)
+            self.prior_std = _std_setting("prior_std", prior_std, self.k)
         self._reset_information()
 
     def update(self, w: Any, y: Any) -> None:
@@ -166,7 +167,7 @@ class RecursiveLeastSquares:
         _within("w", "the accumulated information R", R)  # never hand LAPACK a NaN
         alpha = self._penalty_for(R)
         M = R + alpha * np.eye(p)
-        # eigenvalues of M lie in [alpha, alpha + trace R] with alpha >= 1e-12 trace R: well conditioned
+        # eigenvalues of M lie in [alpha, alpha + trace R] with alpha >= 1e-10 trace R: well conditioned
         try:
             G = np.linalg.inv(M)
         except np.linalg.LinAlgError as exc:  # not expected with the floor; a refusal, never LAPACK's error
@@ -277,6 +278,20 @@ class RecursiveLeastSquares:
 
 #: Samples one estimator counts (exact in a float); the counter is informational.
 _MAX_SAMPLES = 2 ** 53
+
+
+def _std_setting(name: str, value: Any, k: int) -> np.ndarray:
+    """A standard deviation per output, in ``(0, 1e24]``: its square, a variance the state
+    keeps, stays within the valid domain."""
+    std = setting_vector(name, value, k, positive=True)
+    if not std.max() <= _MAX_STD:
+        raise OptionError(f"{name}: {std.max():g} above {_MAX_STD:g} (its square, a variance, must stay within "
+                          f"{MAX_MAGNITUDE:g})")
+    return std
+
+
+#: the largest standard deviation: its square within the valid domain
+_MAX_STD = 1e24
 
 
 def _within(field: str, what: str, arr: np.ndarray) -> None:
