@@ -66,12 +66,11 @@ those, and :func:`load_vehicle` here, which reads any of the formats, sits above
 
 from __future__ import annotations
 
-import json
-import tomllib
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from .._files import MAX_TEXT_BYTES, MAX_TOML_BYTES, parse_json, parse_toml, read_user_text
 from ..exceptions import ProblemError
 from .fields import DATA_DIR, EFFECTOR_KINDS, FORMAT, FORMAT_SIMULATION, FORMATS, SCHEMA_PATH, WRENCH_COMPONENTS
 from .parts import Axis, Dynamics, Effector, LinearModel, Rotor, rotor_wrench
@@ -99,11 +98,19 @@ def load_vehicle(source: str | Path | Mapping[str, Any]) -> Vehicle:
     file (:func:`vehicle_names`).  PX4 parameter files go through
     :func:`alloc.importers.px4.vehicle_from_params` with its defaults.
 
+    A file is read through :func:`alloc._files.read_user_file` and parsed with its bounds:
+    regular files only (not a directory, FIFO or device, nor a symlink to one), at most
+    :data:`~alloc._files.MAX_TOML_BYTES` (128 KiB) of TOML or :data:`~alloc._files.MAX_TEXT_BYTES`
+    (1 MiB) of JSON or PX4 parameters, nested at most :data:`~alloc._files.MAX_DEPTH` (16) levels,
+    JSON without duplicate keys; the counts (axes, effectors, model states and outputs) are
+    checked on the parsed document before any per-entry work.  The slowest file at a cap found so
+    far is refused or read in under 0.5 s (``tests/alloc/test_file_readers.py``).
+
     Raises
     ------
     ProblemError
         naming the field path of the first problem (``effectors[3].rate_max: ...``), or
-        ``path`` for an unreadable or unknown file.
+        ``path`` for an unreadable, oversized, unparsable or unknown file.
     """
     if isinstance(source, Mapping):
         return vehicle_from_dict(source)
@@ -122,23 +129,9 @@ def load_vehicle(source: str | Path | Mapping[str, Any]) -> Vehicle:
         from ..importers.px4 import read_params, vehicle_from_params
 
         return vehicle_from_params(read_params(path), name=path.stem)
-    try:
-        raw = path.read_bytes()
-    except OSError as exc:
-        raise ProblemError(f"path: cannot read {str(path)!r} ({exc.strerror})", field="path") from exc
-    try:
-        text = raw.decode("utf-8")
-        if suffix == ".toml":
-            doc = tomllib.loads(text)
-        elif suffix == ".json":
-            doc = json.loads(text)
-        else:
-            raise ProblemError(f"path: unknown extension {path.suffix!r}; use .toml, .json or .params", field="path")
-    except UnicodeDecodeError as exc:
-        raise ProblemError(f"path: {path.name} is not UTF-8 text ({exc.reason} at byte {exc.start})",
-                           field="path") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ProblemError(f"path: {path.name} is not valid TOML ({exc})", field="path") from None
-    except json.JSONDecodeError as exc:
-        raise ProblemError(f"path: {path.name} is not valid JSON ({exc})", field="path") from None
-    return vehicle_from_dict(doc)
+    if suffix not in (".toml", ".json"):
+        raise ProblemError(f"path: unknown extension {path.suffix!r}; use .toml, .json or .params", field="path")
+    cap = MAX_TOML_BYTES if suffix == ".toml" else MAX_TEXT_BYTES
+    text = read_user_text(path, field="path", max_bytes=cap)
+    parse = parse_toml if suffix == ".toml" else parse_json
+    return vehicle_from_dict(parse(text, field="path", name=path.name))

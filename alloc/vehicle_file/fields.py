@@ -28,6 +28,11 @@ EFFECTOR_KINDS = ("surface", "rotor", "thrust-vector", "thruster", "other")
 #: the body-axis wrench components a rotor's geometry yields, in PX4's order (moments, then forces)
 WRENCH_COMPONENTS = ("roll", "pitch", "yaw", "fx", "fy", "fz")
 
+#: the most states, and the most outputs, of a vehicle's ``[model]``: checked on the document
+#: before any matrix is read (an unbounded output list made the default ``D``, outputs x
+#: effectors, as large as memory); the seed's models have at most 12 of each
+MAX_MODEL_SIZE = 256
+
 _NAME = re.compile(r"^[^\x00-\x1f\x7f]{1,64}$")
 
 
@@ -135,8 +140,8 @@ def _matrix(value: Any, path: str, rows: int | None, cols: int | None) -> tuple[
     return tuple(out)
 
 
-def _names(value: Any, path: str, n: int | None = None) -> tuple[str, ...]:
-    names = tuple(_text(x, f"{path}[{i}]", name=True) for i, x in enumerate(_list(value, path, n)))
+def _names(value: Any, path: str, n: int | None = None, *, high: int | None = None) -> tuple[str, ...]:
+    names = tuple(_text(x, f"{path}[{i}]", name=True) for i, x in enumerate(_list(value, path, n, high=high)))
     _unique(names, path)
     return names
 

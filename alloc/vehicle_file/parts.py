@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from .fields import (EFFECTOR_KINDS, WRENCH_COMPONENTS, Matrix, _fail, _keys, _list, _matrix, _names, _positive, _real,
+from .fields import (EFFECTOR_KINDS, MAX_MODEL_SIZE, WRENCH_COMPONENTS, Matrix, _fail, _keys, _list, _matrix, _names, _positive, _real,
                      _reals, _table, _text, _weight)
 
 
@@ -301,8 +301,8 @@ class LinearModel:
     def from_dict(cls, data: Any, path: str, m: int) -> LinearModel:
         t = _table(data, path)
         _keys(t, path, cls.FIELDS, required=("states", "outputs", "A", "B", "C"))
-        states = _names(t["states"], f"{path}.states")
-        outputs = _names(t["outputs"], f"{path}.outputs")
+        states = _names(t["states"], f"{path}.states", high=MAX_MODEL_SIZE)
+        outputs = _names(t["outputs"], f"{path}.outputs", high=MAX_MODEL_SIZE)
         n, p = len(states), len(outputs)
         if n < 1 or p < 1:
             raise _fail(f"{path}.{'states' if n < 1 else 'outputs'}", "at least one name required")

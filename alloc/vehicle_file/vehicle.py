@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from .._files import MAX_TEXT_BYTES, MAX_TOML_BYTES
 from ..exceptions import AllocError, ProblemError
 from ..problem import MAX_AXES, MAX_EFFECTORS, MAX_MAGNITUDE, Problem, short_repr
 from .fields import FORMAT, FORMAT_SIMULATION, FORMATS, WRENCH_COMPONENTS, Matrix, _fail, _keys, _kind, _list, _matrix, _table, _text, _unique
@@ -110,13 +111,26 @@ class Vehicle:
         return {name: self.method_options(name) for name in self.methods}
 
     def save(self, path: str | Path) -> Path:
-        """Write the vehicle as TOML (``.toml``) or JSON (``.json``), by the file's extension."""
+        """Write the vehicle as TOML (``.toml``) or JSON (``.json``), by the file's extension.
+
+        A text longer than :func:`~alloc.vehicle_file.load_vehicle` reads is refused before
+        writing: TOML over :data:`~alloc._files.MAX_TOML_BYTES` (128 KiB; save it as JSON), JSON
+        over :data:`~alloc._files.MAX_TEXT_BYTES` (1 MiB).
+        """
         path = Path(path)
         suffix = path.suffix.lower()
         if suffix == ".toml":
             text = to_toml(self.to_dict())
+            size = len(text.encode("utf-8"))
+            if size > MAX_TOML_BYTES:
+                raise ProblemError(f"path: the vehicle is {size} bytes of TOML, more than the {MAX_TOML_BYTES} a "
+                                   "vehicle file may hold; save it as .json", field="path")
         elif suffix == ".json":
             text = json.dumps(self.to_dict(), indent=1, allow_nan=False) + "\n"
+            size = len(text.encode("utf-8"))
+            if size > MAX_TEXT_BYTES:
+                raise ProblemError(f"path: the vehicle is {size} bytes of JSON, more than the {MAX_TEXT_BYTES} a "
+                                   "vehicle file may hold", field="path")
         else:
             raise ProblemError(f"path: unknown extension {path.suffix!r}; use .toml or .json", field="path")
         path.write_text(text, encoding="utf-8")
@@ -124,7 +138,12 @@ class Vehicle:
 
 
 def vehicle_from_dict(doc: Any) -> Vehicle:
-    """Validate a vehicle document (the parsed TOML/JSON); ProblemError naming the field path."""
+    """Validate a vehicle document (the parsed TOML/JSON); ProblemError naming the field path.
+
+    Each list's length (axes, effectors, model states and outputs) is checked before its entries
+    are read, and each field is read only as deep as the format goes, so a deep or cyclic value
+    is refused at its field; a file's nesting is bounded when it is parsed (:mod:`alloc._files`).
+    """
     t = _table(doc, "vehicle")
     _keys(t, "", Vehicle.FIELDS, required=("format", "name", "axes", "effectors"))
     fmt = t["format"]
