@@ -43,10 +43,10 @@ from . import templates, templates_cascade, templates_closed_form
 from .base import (_ACTIVE_SET_METHODS, EXPORTABLE, FLOAT_EXACT_RTOL, FLOAT_TOLERANCE, FLOAT_VMAX, GENERATOR_VERSION,
                    PRECISIONS, ExportedKernel, ExportError, _Real, _short, _version)
 from .certify import SIMPLEX_RANDOM_DEMANDS, Certificate, bound_text, simplex_bound_text
-from .text import c_prefix, comment_text, fill
 from .cost import ExportCost, check
-from .tables import (_active_set_fields, active_set_plan, _cascade_level_fields, _cascade_table, _iteration_budget, _simplex_fields,
-                     _simplex_pivots)
+from .tables import (_active_set_fields, _cascade_level_fields, _cascade_table, _iteration_budget, _simplex_fields,
+                     _simplex_pivots, active_set_plan)
+from .text import c_prefix, comment_text, fill
 
 __all__ = ["export_c", "ExportedKernel", "ExportError", "EXPORTABLE", "PRECISIONS", "GENERATOR_VERSION",
            "FLOAT_TOLERANCE", "FLOAT_EXACT_RTOL", "FLOAT_VMAX", "Certificate", "ExportCost"]
@@ -133,7 +133,11 @@ def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "d
         ``qp`` export the compiled active set (``backend="active_set"``, the default);
         ``incremental`` pseudo-inverses are not exported.
     prefix : str, optional
-        C prefix of the public names and file names; default ``alloc_<method>``.
+        C prefix of the public names and file names; default ``alloc_<method>``.  A C
+        identifier of at most 31 characters, not a keyword or a standard header's name
+        (:func:`alloc.export.text.c_prefix`).  Every other user text (names, the vehicle's
+        title, option values) reaches the C as comment text, escaped by
+        :func:`alloc.export.text.comment_text`.
     maxit : int, optional
         Iteration cap per level of the active set; default the library's
         ``50 + 10 (m + k)``.  Lower only to exercise the cap (tests).  ``lp`` keeps the library's
@@ -143,7 +147,9 @@ def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "d
         own ``_factor``, so the answers stay bit for bit) instead of factorising at run time;
         default: when the tables fit :data:`TABLE_BUDGET` bytes.  ``cgi`` always tabulates the
         pseudo-inverse of every free set: refused (ExportError naming ``table``) beyond the
-        budget unless ``table=True``.
+        budget unless ``table=True``.  Every export is priced first (:mod:`alloc.export.cost`)
+        and refused above 64 MiB of C, 60 s or 1 GiB of generation, naming ``table``,
+        ``iteration_bound`` or ``m``.
 
     iteration_bound : int or "certify", optional
         Active set: the iterations a call with the nominal limits and no rate window may take

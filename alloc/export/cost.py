@@ -29,7 +29,7 @@ from .base import ExportError
 #: largest generated source (header and C file): 64 MiB of C is about 5 million numbers, what
 #: a compiler still builds in a minute; a flight computer holds far less
 MAX_SOURCE_BYTES = 64 * 2 ** 20
-#: longest generation priced (seconds on the reference machine, a 2-core 2026 CI runner)
+#: longest generation priced (CPU seconds on the reference machine, a 2-core 2026 CI runner)
 MAX_GENERATION_SECONDS = 60.0
 #: largest peak memory of the generator priced (the tables' text and its pieces)
 MAX_GENERATION_MEMORY = 2 ** 30
@@ -94,7 +94,7 @@ class ExportCost:
 
     @property
     def seconds(self) -> float:
-        """Seconds of generation on the reference machine."""
+        """CPU seconds of generation on the reference machine."""
         return (FIXED[self.kind][0] + SECONDS_PER_BUILD * self.m ** 2 * self.k + SECONDS_PER_NUMBER * self.numbers
                 + SECONDS_PER_FREE_SET * self.free_sets + self.certify_seconds)
 
@@ -116,7 +116,8 @@ def check(cost: ExportCost) -> ExportCost:
     field = "table" if tables else "m"
     what = (f"{method}'s tables of the 2^{cost.m} free sets ({cost.table_numbers:,} numbers)" if tables
             else f"{method}'s constants for {cost.k} x {cost.m} ({cost.numbers:,} numbers)")
-    hint = (" (give table=False: the active set factorises at run time)" if tables and method in ("wls", "qp", "dynamic")
+    active_set = method in ("wls", "qp", "dynamic")
+    hint = (" (give table=False: the active set factorises at run time)" if tables and active_set
             else " (the table grows as m 2^m: fewer effectors)" if tables else "")
     certify_memory = MEMORY_PER_CERTIFY_NUMBER * cost.certify_calls * cost.k
     if cost.certify_seconds > MAX_GENERATION_SECONDS or certify_memory > MAX_GENERATION_MEMORY:

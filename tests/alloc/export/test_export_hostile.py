@@ -35,9 +35,10 @@ QUICK, LARGE = 4, 300
 
 #: pieces a hostile name is made of: what ends or opens a comment, starts a directive, splices a
 #: line, forms a trigraph, is a template marker or a prefix placeholder, or is not ASCII
-PIECES = ["*/", "/*", "//", "\n", "\r\n", "\t", "\\", "\\\n", "??/", "??=", "??(", "?", "*", "/", "@", "@M@", "@B@",
-          "@TITLE@", "@EFFECTORS@", "PREFIX_", "PFX_", "#define", "#include <stdio.h>", "#undef K", "int injected_{n} = 42;",
-          "#define alloc_qp_allocate not_the_kernel", " ", "'", '"', "%:", "<:", "é", "Härkegård", "日本語", "\u0301",
+PIECES = ["*/", "/*", "//", "\n", "\r\n", "\t", "\\", "\\\n", "??/", "??=", "??(", "?", "*", "/", "@", "@M@",
+          "@B@", "@TITLE@", "@EFFECTORS@", "PREFIX_", "PFX_", "#define", "#include <stdio.h>", "#undef K",
+          "int injected_{n} = 42;", "#define alloc_qp_allocate not_the_kernel", " ", "'", '"', "%:", "<:", "é",
+          "Härkegård", "日本語", "\u0301",
           "\uff0f\uff0a", "\ufe61/", "\u2028", "\x00", "\x1b[2J", "\x7f", "\ud800", "😀", "a", "motor", "x" * 300]
 
 
@@ -134,7 +135,8 @@ def _export_api(seed: int, tmp_path) -> None:
 def _vehicle(problem: alloc.Problem, name: str, description: str) -> dict:
     return {"format": "alloc-vehicle/1", "name": name, "description": description,
             "axes": [{"name": a} for a in problem.axes],
-            "effectors": [{"name": n, "kind": "surface", "unit": "rad", "min": -1.0, "max": 1.0} for n in problem.names],
+            "effectors": [{"name": n, "kind": "surface", "unit": "rad", "min": -1.0, "max": 1.0}
+                          for n in problem.names],
             "effectiveness": {"B": problem.B.tolist()}}
 
 
