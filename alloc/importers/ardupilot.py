@@ -34,15 +34,17 @@ from __future__ import annotations
 import csv
 import io
 import math
-import tomllib
+import numbers
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from .._files import MAX_TEXT_BYTES, MAX_TOML_BYTES, parse_toml, read_user_text
+from ..domain import MAX_EFFECTORS, MAX_MAGNITUDE, short_repr
 from ..exceptions import ProblemError
-from ..vehicle_file.fields import FORMAT
+from ..vehicle_file.fields import FORMAT, _text, _unique
 from ..vehicle_file.vehicle import Vehicle, vehicle_from_dict
 
 __all__ = ["FRAMES", "YAW_CW", "YAW_CCW", "frame_factors", "normalise_rpy_factors", "read_factor_table",
@@ -66,10 +68,9 @@ _AXES = ("roll", "pitch", "yaw", "throttle")
 
 def frame_factors(frame: str) -> np.ndarray:
     """The normalised factor table (motors x [roll, pitch, yaw, throttle]) of a built-in frame."""
-    try:
-        motors = FRAMES[frame]
-    except KeyError:
-        raise ProblemError(f"frame: unknown {frame!r}; built in: {', '.join(FRAMES)}", field="frame") from None
+    if not isinstance(frame, str) or frame not in FRAMES:
+        raise ProblemError(f"frame: unknown {short_repr(frame)}; built in: {', '.join(FRAMES)}", field="frame")
+    motors = FRAMES[frame]
     raw = np.array([[math.cos(math.radians(angle + 90)), math.cos(math.radians(angle)), yaw, 1.0]
                     for angle, yaw, _ in motors])
     return normalise_rpy_factors(raw)
@@ -77,7 +78,7 @@ def frame_factors(frame: str) -> np.ndarray:
 
 def normalise_rpy_factors(M: np.ndarray) -> np.ndarray:
     """``AP_MotorsMatrix::normalise_rpy_factors``: roll, pitch, yaw to max |factor| 0.5, throttle to max 1."""
-    M = np.array(M, dtype=float)
+    M = _factor_matrix(M)
     for c in range(3):
         peak = float(np.abs(M[:, c]).max())
         if peak != 0.0:
@@ -92,50 +93,38 @@ def read_factor_table(source: str | Path) -> tuple[list[str], np.ndarray]:
     """``(motor names, factors)`` from a CSV or TOML factor table (a path or the text).
 
     A text is TOML when it contains ``[[motors]]``, CSV otherwise.  A missing throttle
-    factor is 1 (ArduPilot's default).  Raises ProblemError naming the row and the column.
+    factor is 1 (ArduPilot's default).  A file is read through :func:`alloc._files.read_user_file`
+    and a text held to the same length: at most :data:`~alloc._files.MAX_TOML_BYTES` (128 KiB)
+    of TOML or :data:`~alloc._files.MAX_TEXT_BYTES` (1 MiB) of CSV, and at most
+    :data:`~alloc.domain.MAX_EFFECTORS` (512) motors, counted before any row is read.  Each
+    factor is a finite number within ``1e50``.  Raises ProblemError naming the row and the column.
     """
     if isinstance(source, Path) or (isinstance(source, str) and "\n" not in source
                                     and source.lower().endswith((".csv", ".toml"))):
         path = Path(source)
-        try:
-            text = path.read_text(encoding="utf-8")
-        except (OSError, UnicodeDecodeError) as exc:
-            raise ProblemError(f"path: cannot read {str(path)!r} ({exc})", field="path") from exc
         toml = path.suffix.lower() == ".toml"
+        text = read_user_text(path, field="path", max_bytes=MAX_TOML_BYTES if toml else MAX_TEXT_BYTES)
+        label = path.name
     elif isinstance(source, str):
         text = source
         toml = "[[motors]]" in text
+        cap = MAX_TOML_BYTES if toml else MAX_TEXT_BYTES
+        if len(text) > cap:
+            raise ProblemError(f"factors: the text is {len(text)} characters, more than the {cap} allowed",
+                               field="factors")
+        label = "the table"
     else:
         raise ProblemError(f"factors: expected a path or the table's text, got {type(source).__name__}",
                            field="factors")
-    rows: list[dict[str, Any]]
-    if toml:
-        try:
-            doc = tomllib.loads(text)
-        except tomllib.TOMLDecodeError as exc:
-            raise ProblemError(f"factors: not valid TOML ({exc})", field="factors") from None
-        rows = doc.get("motors") if isinstance(doc.get("motors"), list) else None  # type: ignore[assignment]
-        if not rows:
-            raise ProblemError("factors: a TOML table needs [[motors]] entries", field="factors")
-        where = "motors[{}]"
-    else:
-        reader = csv.DictReader(io.StringIO(text))
-        rows = list(reader)
-        header = [h.strip() for h in (reader.fieldnames or [])]
-        missing = [c for c in ("motor", "roll", "pitch", "yaw") if c not in header]
-        if missing:
-            raise ProblemError(f"factors: the CSV header needs columns motor, roll, pitch, yaw[, throttle]; "
-                               f"missing {', '.join(missing)}", field="factors")
-        rows = [{k.strip(): v for k, v in r.items() if k is not None} for r in rows]
-        where = "row {}"
+    rows, where = _toml_rows(text, label) if toml else _csv_rows(text)
     names, table = [], []
     for i, row in enumerate(rows, start=0 if toml else 2):
-        label = where.format(i)
+        at = where.format(i)
         if not isinstance(row, dict):
-            raise ProblemError(f"factors: {label}: expected a table", field="factors")
+            raise ProblemError(f"factors: {at}: expected a table", field="factors")
         name = row.get("name" if toml else "motor")
         if not isinstance(name, str) or not name.strip():
-            raise ProblemError(f"factors: {label}: a motor name is required", field="factors")
+            raise ProblemError(f"factors: {at}: a motor name is required", field="factors")
         values = []
         for axis in _AXES:
             raw = row.get(axis)
@@ -143,19 +132,86 @@ def read_factor_table(source: str | Path) -> tuple[list[str], np.ndarray]:
                 if axis == "throttle":
                     values.append(1.0)
                     continue
-                raise ProblemError(f"factors: {label}: {axis}: required", field="factors")
-            try:
-                if isinstance(raw, bool):
-                    raise ValueError
-                x = float(raw)
-            except (TypeError, ValueError):
-                raise ProblemError(f"factors: {label}: {axis}: {raw!r} is not a number", field="factors") from None
-            if not math.isfinite(x):
-                raise ProblemError(f"factors: {label}: {axis}: must be finite, got {raw!r}", field="factors")
-            values.append(x)
+                raise ProblemError(f"factors: {at}: {axis}: required", field="factors")
+            values.append(_factor(raw, f"factors: {at}: {axis}"))
         names.append(name.strip())
         table.append(values)
     return names, np.array(table, dtype=float)
+
+
+def _toml_rows(text: str, label: str) -> tuple[list[Any], str]:
+    doc = parse_toml(text, field="factors", name=label)
+    rows = doc.get("motors")
+    if not isinstance(rows, list) or not rows:
+        raise ProblemError("factors: a TOML table needs [[motors]] entries", field="factors")
+    if len(rows) > MAX_EFFECTORS:
+        raise ProblemError(f"factors: {len(rows)} motors, more than the {MAX_EFFECTORS} allowed", field="factors")
+    return rows, "motors[{}]"
+
+
+def _csv_rows(text: str) -> tuple[list[dict[str, Any]], str]:
+    reader = csv.reader(io.StringIO(text))
+    try:
+        header = [h.strip() for h in next(reader, [])]
+        missing = [c for c in ("motor", "roll", "pitch", "yaw") if c not in header]
+        if missing:
+            raise ProblemError(f"factors: the CSV header needs columns motor, roll, pitch, yaw[, throttle]; "
+                               f"missing {', '.join(missing)}", field="factors")
+        twice = next((h for i, h in enumerate(header) if h in header[:i]), None)
+        if twice is not None:
+            raise ProblemError(f"factors: the CSV header names column {twice[:40]!r} twice", field="factors")
+        rows = []
+        for cells in reader:
+            if len(rows) == MAX_EFFECTORS:  # counted before the row is read
+                raise ProblemError(f"factors: more than the {MAX_EFFECTORS} motors allowed", field="factors")
+            rows.append(dict(zip(header, cells)))
+    except csv.Error as exc:  # a field beyond csv.field_size_limit, a stray quote
+        raise ProblemError(f"factors: row {reader.line_num}: not valid CSV ({exc})", field="factors") from None
+    return rows, "row {}"
+
+
+def _factor(raw: Any, label: str, *, text: bool = True) -> float:
+    """One factor: a number (or, with ``text``, its text: a CSV cell), finite and within ``1e50``;
+    refused naming ``label``."""
+    try:
+        if isinstance(raw, bool) or not isinstance(raw, (str, numbers.Real) if text else numbers.Real):
+            raise TypeError
+        x = float(raw)
+    except (TypeError, ValueError):
+        raise ProblemError(f"{label}: {short_repr(raw)} is not a number", field="factors") from None
+    except OverflowError:  # an integer beyond float64
+        x = math.inf
+    if not math.isfinite(x):
+        raise ProblemError(f"{label}: must be finite, got {short_repr(raw)}", field="factors")
+    if not abs(x) <= MAX_MAGNITUDE:
+        raise ProblemError(f"{label}: |x| must be <= {MAX_MAGNITUDE:g}, got {short_repr(raw)}", field="factors")
+    return x
+
+
+def _factor_matrix(factors: Any) -> np.ndarray:
+    """The factor table as a float array (motors x 4), its size checked before its entries."""
+    shape_error = "factors: expected a table of motors x 4 (roll, pitch, yaw, throttle)"
+    if isinstance(factors, np.ndarray):
+        if factors.ndim != 2 or factors.shape[1] != 4 or factors.shape[0] < 1:
+            raise ProblemError(f"{shape_error}, got shape {factors.shape}", field="factors")
+        rows: Any = factors
+    elif isinstance(factors, (list, tuple)):
+        rows = factors
+    else:
+        raise ProblemError(f"{shape_error}, got {type(factors).__name__}", field="factors")
+    if not 1 <= len(rows) <= MAX_EFFECTORS:
+        raise ProblemError(f"factors: expected 1 to {MAX_EFFECTORS} motors, got {len(rows)}", field="factors")
+    out = np.empty((len(rows), 4))
+    for i, row in enumerate(rows):
+        if not isinstance(row, (list, tuple, np.ndarray)) or len(row) != 4:
+            got = f"{len(row)} entries" if isinstance(row, (list, tuple, np.ndarray)) else type(row).__name__
+            raise ProblemError(f"factors[{i}]: expected 4 factors (roll, pitch, yaw, throttle), got {got}",
+                               field="factors")
+        for j, x in enumerate(row):
+            if isinstance(x, np.generic):
+                x = x.item()  # a numpy scalar: its Python number (complex stays complex and is refused)
+            out[i, j] = _factor(x, f"factors[{i}][{j}] ({_AXES[j]})", text=False)
+    return out
 
 
 def vehicle_from_factors(factors: Any, names: Sequence[str] | None = None, *, name: str = "ardupilot",
@@ -165,34 +221,45 @@ def vehicle_from_factors(factors: Any, names: Sequence[str] | None = None, *, na
 
     ``normalise`` applies :func:`normalise_rpy_factors` first (ArduPilot always does).
     ``slew_up_time`` / ``slew_down_time``: ArduPilot's ``MOT_SLEW_UP_TIME`` / ``MOT_SLEW_DN_TIME``
-    (seconds for the full 0..1 range): the rate limits ``1 / time``.
+    (seconds for the full 0..1 range): the rate limits ``1 / time``.  Every argument is checked
+    before any work and refused naming it (``factors[2][1] (pitch): ...``, ``names[3]``): at most
+    512 motors, each factor a finite real number within ``1e50``.
     """
-    M = np.array(factors, dtype=float)
-    if M.ndim != 2 or M.shape[1] != 4 or M.shape[0] < 1:
-        raise ProblemError(f"factors: expected a table of motors x 4 (roll, pitch, yaw, throttle), got shape "
-                           f"{M.shape}", field="factors")
-    if not np.isfinite(M).all():
-        raise ProblemError("factors: every factor must be finite", field="factors")
+    M = _factor_matrix(factors)
     if effectiveness not in ("pinv", "transpose"):
-        raise ProblemError(f"effectiveness: expected 'pinv' or 'transpose', got {effectiveness!r}",
+        raise ProblemError(f"effectiveness: expected 'pinv' or 'transpose', got {short_repr(effectiveness)}",
                            field="effectiveness")
     m = M.shape[0]
-    names = [f"motor{i + 1}" for i in range(m)] if names is None else list(names)
-    if len(names) != m:
-        raise ProblemError(f"names: expected {m} motor names, got {len(names)}", field="names")
-    if normalise:
-        M = normalise_rpy_factors(M)
-    B = np.linalg.pinv(M) if effectiveness == "pinv" else M.T
+    if names is None:
+        names = [f"motor{i + 1}" for i in range(m)]
+    else:
+        if isinstance(names, str) or not isinstance(names, (list, tuple)):
+            raise ProblemError(f"names: expected a list of {m} motor names, got {type(names).__name__}", field="names")
+        if len(names) != m:
+            raise ProblemError(f"names: expected {m} motor names, got {len(names)}", field="names")
+        names = [_text(label, f"names[{j}]", name=True) for j, label in enumerate(names)]
+        _unique(names, "names")
+    rates = {key: _rate(t, label) for key, t, label in (("rate_max", slew_up_time, "slew_up_time"),
+                                                        ("rate_min", slew_down_time, "slew_down_time"))
+             if t is not None}
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):  # checked just below
+        if normalise:
+            M = normalise_rpy_factors(M)
+        try:
+            B = np.linalg.pinv(M) if effectiveness == "pinv" else M.T
+        except np.linalg.LinAlgError as exc:
+            raise ProblemError(f"factors: the table has no pseudo-inverse ({exc})", field="factors") from None
+    if not (np.abs(B) <= MAX_MAGNITUDE).all():
+        raise ProblemError(f"factors: pinv of the table has entries beyond {MAX_MAGNITUDE:g} (the table is nearly "
+                           "rank-deficient at this scale); effectiveness='transpose' reads it as is", field="factors")
     effectors = []
     for j, motor in enumerate(names):
         e: dict[str, Any] = {"name": motor, "kind": "rotor", "unit": "1", "min": 0.0, "max": 1.0,
                              "effectiveness": [float(x) for x in B[:, j]]}
-        for key, t in (("rate_max", slew_up_time), ("rate_min", slew_down_time)):
-            if t is not None:
-                if isinstance(t, bool) or not isinstance(t, (int, float)) or not t > 0 or not math.isfinite(t):
-                    field = "slew_up_time" if key == "rate_max" else "slew_down_time"
-                    raise ProblemError(f"{field}: must be a positive number of seconds, got {t!r}", field=field)
-                e[key] = (1.0 if key == "rate_max" else -1.0) / float(t)
+        if "rate_max" in rates:
+            e["rate_max"] = rates["rate_max"]
+        if "rate_min" in rates:
+            e["rate_min"] = -rates["rate_min"]
         effectors.append(e)
     doc = {
         "format": FORMAT, "name": name,
@@ -203,6 +270,22 @@ def vehicle_from_factors(factors: Any, names: Sequence[str] | None = None, *, na
         "effectors": effectors,
     }
     return vehicle_from_dict(doc)
+
+
+def _rate(seconds: Any, label: str) -> float:
+    """The rate limit ``1 / seconds`` of a slew time, refused naming ``label`` unless positive and finite."""
+    bad = ProblemError(f"{label}: must be a positive number of seconds, got {short_repr(seconds)}", field=label)
+    if isinstance(seconds, bool) or not isinstance(seconds, numbers.Real):
+        raise bad
+    try:
+        t = float(seconds)
+    except (OverflowError, TypeError, ValueError):
+        raise bad from None
+    if not (t > 0 and math.isfinite(t)):
+        raise bad
+    if not 1.0 / t <= MAX_MAGNITUDE:
+        raise ProblemError(f"{label}: {t:g} s gives a rate limit beyond {MAX_MAGNITUDE:g}", field=label)
+    return 1.0 / t
 
 
 def vehicle_from_frame(frame: str, **options: Any) -> Vehicle:

@@ -62,13 +62,17 @@ Normalisation (``normalize``):
 from __future__ import annotations
 
 import math
+import numbers
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from .._files import MAX_TEXT_BYTES, read_user_text
+from ..domain import MAX_MAGNITUDE
 from ..exceptions import ProblemError
+from ..domain import as_float_array, short_repr
 from ..vehicle_file.fields import FORMAT, WRENCH_COMPONENTS
 from ..vehicle_file.parts import rotor_wrench
 from ..vehicle_file.vehicle import Vehicle, vehicle_from_dict
@@ -88,6 +92,7 @@ DEFAULTS = {"PX": 0.0, "PY": 0.0, "PZ": 0.0, "AX": 0.0, "AY": 0.0, "AZ": -1.0, "
 _MAX_ROTORS = 12
 _MAX_SURFACES = 8
 _FLT_EPSILON = float(np.finfo(np.float32).eps)
+_INT32 = (-(2**31), 2**31 - 1)
 #: MAVLink MAV_PARAM_TYPE codes QGroundControl writes: 1-8 integers, 9 float32, 10 float64
 _INT_TYPES = range(1, 9)
 
@@ -100,17 +105,21 @@ def read_params(source: str | Path) -> dict[str, float | int]:
     ``#`` starts a comment.  PX4 airframe lines ``param set-default NAME value`` (and
     ``param set``) are read too, so an airframe file's parameters can be pasted.
 
+    A file is read through :func:`alloc._files.read_user_file` (a regular file of at most
+    :data:`~alloc._files.MAX_TEXT_BYTES`, 1 MiB: a full PX4 parameter dump is about 40 KB); a
+    text is held to the same length.  A value is a finite number within ``1e50`` in magnitude.
+
     Raises
     ------
     ProblemError
-        naming the line (``params: line 7: ...``).
+        naming the line (``params: line 7: ...``), or ``path`` for a file that cannot be read.
     """
     if isinstance(source, Path) or (isinstance(source, str) and "\n" not in source and source.endswith(".params")):
-        try:
-            text = Path(source).read_text(encoding="utf-8")
-        except (OSError, UnicodeDecodeError) as exc:
-            raise ProblemError(f"path: cannot read {str(source)!r} ({exc})", field="path") from exc
+        text = read_user_text(source, field="path", max_bytes=MAX_TEXT_BYTES)
     elif isinstance(source, str):
+        if len(source) > MAX_TEXT_BYTES:
+            raise ProblemError(f"params: the text is {len(source)} characters, more than the {MAX_TEXT_BYTES} "
+                               "allowed", field="params")
         text = source
     else:
         raise ProblemError(f"params: expected a path or the file's text, got {type(source).__name__}", field="params")
@@ -136,10 +145,11 @@ def read_params(source: str | Path) -> dict[str, float | int]:
             else:
                 number = float(value)
         except ValueError:
-            raise ProblemError(f"params: line {n}: {name}: {value!r} is not a number of type {kind}",
+            raise ProblemError(f"params: line {n}: {name[:60]}: {value[:40]!r} is not a number of type {kind[:20]}",
                                field="params") from None
-        if isinstance(number, float) and not math.isfinite(number):
-            raise ProblemError(f"params: line {n}: {name}: must be finite, got {value!r}", field="params")
+        if not abs(number) <= MAX_MAGNITUDE:
+            raise ProblemError(f"params: line {n}: {name[:60]}: must be finite with |x| <= {MAX_MAGNITUDE:g}, got "
+                               f"{value[:40]!r}", field="params")
         out[name] = number
     return out
 
@@ -149,17 +159,30 @@ def _looks_int(text: str) -> bool:
 
 
 def _get(params: Mapping[str, Any], name: str, default: float) -> float:
+    """Parameter ``name`` (``default`` when absent): a finite real number, ``|x| <= 1e50``."""
     value = params.get(name, default)
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(float(value)):
-        raise ProblemError(f"{name}: expected a finite number, got {value!r}", field=name)
-    return float(value)
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise ProblemError(f"{name}: expected a finite number, got {short_repr(value)}", field=name)
+    try:
+        x = float(value)
+    except (OverflowError, TypeError, ValueError):
+        x = math.inf
+    if not abs(x) <= MAX_MAGNITUDE:
+        raise ProblemError(f"{name}: expected a finite number with |x| <= {MAX_MAGNITUDE:g}, got "
+                           f"{short_repr(value)}", field=name)
+    return x
+
+
+def _integer(params: Mapping[str, Any], name: str, default: int, low: int, high: int) -> int:
+    """Parameter ``name``: a whole number in ``[low, high]`` (PX4's integer parameters are int32)."""
+    x = _get(params, name, default)
+    if not x.is_integer() or not low <= x <= high:
+        raise ProblemError(f"{name}: expected an integer {low}..{high}, got {short_repr(params.get(name))}", field=name)
+    return int(x)
 
 
 def _count(params: Mapping[str, Any], name: str, high: int) -> int:
-    x = _get(params, name, 0)
-    if not x.is_integer() or not 0 <= x <= high:
-        raise ProblemError(f"{name}: expected an integer 0..{high}, got {params.get(name)!r}", field=name)
-    return int(x)
+    return _integer(params, name, 0, 0, high)
 
 
 def vehicle_from_params(params: Mapping[str, Any], *, name: str = "px4", normalize: str = "none",
@@ -175,6 +198,9 @@ def vehicle_from_params(params: Mapping[str, Any], *, name: str = "px4", normali
     axes : {"auto", "all"}
         ``"auto"`` leaves out the axes no effector acts on; ``"all"`` keeps PX4's six.
     """
+    if not isinstance(params, Mapping):
+        raise ProblemError(f"params: expected a mapping of parameter names to numbers (read_params), got "
+                           f"{type(params).__name__}", field="params")
     if normalize not in ("none", "px4"):
         raise ProblemError(f"normalize: expected 'none' or 'px4', got {normalize!r}", field="normalize")
     if axes not in ("auto", "all"):
@@ -182,12 +208,12 @@ def vehicle_from_params(params: Mapping[str, Any], *, name: str = "px4", normali
     airframe = _get(params, "CA_AIRFRAME", 0)
     if airframe not in AIRFRAMES:
         known = ", ".join(f"{k} ({v})" for k, v in AIRFRAMES.items())
-        raise ProblemError(f"CA_AIRFRAME: {params.get('CA_AIRFRAME')!r} is not supported; supported: {known}",
+        raise ProblemError(f"CA_AIRFRAME: {short_repr(params.get('CA_AIRFRAME'))} is not supported; supported: {known}",
                            field="CA_AIRFRAME")
     airframe = int(airframe)
     n_rotors = _count(params, "CA_ROTOR_COUNT", _MAX_ROTORS)
     n_surfaces = _count(params, "CA_SV_CS_COUNT", _MAX_SURFACES) if airframe != 0 else 0
-    reversible = int(_get(params, "CA_R_REV", 0))
+    reversible = _integer(params, "CA_R_REV", 0, _INT32[0], _INT32[1])  # a bitmask
 
     columns: list[np.ndarray] = []  # 6-vectors, PX4's axis order
     matrix: list[int] = []  # which PX4 matrix each effector is in
@@ -207,7 +233,7 @@ def vehicle_from_params(params: Mapping[str, Any], *, name: str = "px4", normali
         if slew < 0:
             raise ProblemError(f"CA_R{i}_SLEW: must be >= 0, got {slew:g}", field=f"CA_R{i}_SLEW")
         if slew > 0:
-            e["rate_max"] = (1.0 - lo) / slew
+            e["rate_max"] = _rate(1.0 - lo, slew, f"CA_R{i}_SLEW")
         columns.append(rotor_wrench(position, axis, ct, km))
         if normalize == "none" and ct >= _FLT_EPSILON and math.hypot(*axis) > _FLT_EPSILON and ct > 0:
             e["rotor"] = {"position": position, "axis": axis, "ct": ct, "km": km}
@@ -215,7 +241,7 @@ def vehicle_from_params(params: Mapping[str, Any], *, name: str = "px4", normali
         effectors.append(e)
     names = {e["name"] for e in effectors}
     for i in range(n_surfaces):
-        kind = int(_get(params, f"CA_SV_CS{i}_TYPE", DEFAULTS["TYPE"]))
+        kind = _integer(params, f"CA_SV_CS{i}_TYPE", DEFAULTS["TYPE"], 0, _INT32[1])
         torque = [_get(params, f"CA_SV_CS{i}_TRQ_{a}", 0.0) for a in "RPY"]
         if kind in _NO_TORQUE_TYPES:
             torque = [0.0, 0.0, 0.0]
@@ -232,7 +258,7 @@ def vehicle_from_params(params: Mapping[str, Any], *, name: str = "px4", normali
         if slew < 0:
             raise ProblemError(f"CA_SV{i}_SLEW: must be >= 0, got {slew:g}", field=f"CA_SV{i}_SLEW")
         if slew > 0:
-            e["rate_max"] = 2.0 / slew
+            e["rate_max"] = _rate(2.0, slew, f"CA_SV{i}_SLEW")
         columns.append(np.array([*torque, 0.0, 0.0, 0.0]))
         matrix.append(0 if airframe == 1 else 1)
         effectors.append(e)
@@ -243,9 +269,19 @@ def vehicle_from_params(params: Mapping[str, Any], *, name: str = "px4", normali
     B6 = np.array(columns, dtype=float).T  # (6, m)
     if normalize == "px4":
         rpy = {0: (True,), 1: (False,), 2: (True, False)}[airframe]
-        for mat in sorted(set(matrix)):
-            cols = [j for j, mj in enumerate(matrix) if mj == mat]
-            B6[:, cols] = px4_scales(B6[:, cols], normalize_rpy=rpy[mat])[:, None] * B6[:, cols]
+        with np.errstate(over="ignore", invalid="ignore"):  # extreme geometry: checked just below
+            for mat in sorted(set(matrix)):
+                cols = [j for j, mj in enumerate(matrix) if mj == mat]
+                try:
+                    B6[:, cols] = px4_scales(B6[:, cols], normalize_rpy=rpy[mat])[:, None] * B6[:, cols]
+                except np.linalg.LinAlgError as exc:
+                    raise ProblemError(f"normalize: PX4's normalisation has no answer for these parameters ({exc})",
+                                       field="normalize") from None
+    for j in range(B6.shape[1]):  # the parameters are each within 1e50; their products may not be
+        if not np.all(np.abs(B6[:, j]) <= MAX_MAGNITUDE):
+            where = f"CA_ROTOR{j}" if j < n_rotors else f"CA_SV_CS{j - n_rotors}"
+            raise ProblemError(f"{where}: the effectiveness column of these parameters is not finite within "
+                               f"{MAX_MAGNITUDE:g}: {short_repr(B6[:, j].tolist())}", field=where)
     keep = list(range(6)) if axes == "all" else [r for r in range(6) if np.any(B6[r] != 0.0)]
     if not keep:
         raise ProblemError("CA_ROTOR_COUNT: no effector acts on any axis (all columns zero)", field="CA_ROTOR_COUNT")
@@ -256,7 +292,11 @@ def vehicle_from_params(params: Mapping[str, Any], *, name: str = "px4", normali
         if not 0.0 <= hover <= 1.0:
             raise ProblemError(f"MPC_THR_HOVER: must be in [0, 1], got {hover:g}", field="MPC_THR_HOVER")
         # every rotor at the hover command: the thrust the controllability report measures around
-        doc_axes[keep.index(5)]["trim"] = float(hover * B6[5, :n_rotors].sum())
+        trim = float(hover * B6[5, :n_rotors].sum())
+        if not abs(trim) <= MAX_MAGNITUDE:
+            raise ProblemError(f"MPC_THR_HOVER: the hover thrust {trim:g} is beyond {MAX_MAGNITUDE:g}",
+                               field="MPC_THR_HOVER")
+        doc_axes[keep.index(5)]["trim"] = trim
     for j, e in enumerate(effectors):
         if "rotor" not in e:
             e["effectiveness"] = [float(B6[r, j]) for r in keep]
@@ -268,6 +308,14 @@ def vehicle_from_params(params: Mapping[str, Any], *, name: str = "px4", normali
         "axes": doc_axes, "effectors": effectors,
     }
     return vehicle_from_dict(doc)
+
+
+def _rate(full_range: float, slew: float, name: str) -> float:
+    """The rate limit of a slew time (``range / slew``), refused naming ``name`` beyond 1e50."""
+    rate = full_range / slew
+    if not rate <= MAX_MAGNITUDE:
+        raise ProblemError(f"{name}: {slew:g} s gives a rate limit {rate:g} beyond {MAX_MAGNITUDE:g}", field=name)
+    return rate
 
 
 def _upwards(axis: list[float]) -> bool:
@@ -287,7 +335,9 @@ def px4_scales(B6: np.ndarray, *, normalize_rpy: bool) -> np.ndarray:
     with the FLT_EPSILON guards of ``normalizeControlAllocationMatrix`` folded in (an unused
     scale is 1).  The normalised effectiveness is ``s[:, None] * B6``.
     """
-    B6 = np.asarray(B6, dtype=float)
+    B6 = as_float_array("B6", B6, ProblemError)
+    if B6.ndim != 2 or B6.shape[0] != 6 or not np.isfinite(B6).all():
+        raise ProblemError(f"B6: expected a finite 6 x m matrix, got shape {B6.shape}", field="B6")
     m = B6.shape[1]
     M = np.linalg.pinv(B6)  # (m, 6)
     s = np.ones(6)
