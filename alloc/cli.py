@@ -296,14 +296,16 @@ def load_vehicle_option(source: str, param_hint: str = "--vehicle") -> Any:
     """The :class:`~alloc.vehicle_file.Vehicle` a ``--vehicle NAME|FILE`` names, or a one-line usage error.
 
     A malformed file's error names the file and the field path (``--vehicle x.toml:
-    effectors[3].rate_max: must be > 0``).
+    effectors[3].rate_max: must be > 0``); so does every refusal of the bounded readers (a
+    FIFO, a device, an oversized or too deeply nested file: :mod:`alloc._files`), and an
+    importer's (a PX4 ``.params`` file's parameter), each an :class:`~alloc.AllocError`.
     """
     from . import vehicles
 
     try:
         return vehicles.get_vehicle(source)
-    except alloc.ProblemError as exc:
-        where = "" if exc.field == "vehicle" or str(exc).startswith("path:") else f"{source}: "
+    except AllocError as exc:
+        where = "" if exc.field in ("vehicle", "path") else f"{source}: "
         raise typer.BadParameter(f"{where}{exc}", param_hint=param_hint) from None
 
 

@@ -14,6 +14,9 @@ from typing import Any, NoReturn
 
 import typer
 
+from alloc._files import read_user_file
+from alloc.exceptions import ProblemError
+
 #: largest JSON input file read (a 32 x 512 problem is about 0.4 MB of JSON)
 MAX_JSON_BYTES = 64 * 1024 * 1024
 
@@ -89,17 +92,18 @@ def strict_json(text: str) -> Any:
 
 
 def read_json_file(path: Path, param_hint: str) -> Any:
-    """The JSON value in ``path`` (UTF-8, at most :data:`MAX_JSON_BYTES`), or a ``BadParameter``."""
+    """The JSON value in ``path`` (UTF-8, at most :data:`MAX_JSON_BYTES`), or a ``BadParameter``.
+
+    Read through :func:`alloc._files.read_user_file`: a FIFO, a device or a directory is refused
+    before it is opened for a blocking read.
+    """
     def bad(reason: str) -> NoReturn:
         raise typer.BadParameter(f"{path}: {reason}", param_hint=param_hint)
 
     try:
-        with open(path, "rb") as fh:
-            raw = fh.read(MAX_JSON_BYTES + 1)
-    except OSError as exc:
-        bad(f"cannot read: {exc.strerror or exc}")
-    if len(raw) > MAX_JSON_BYTES:
-        bad(f"larger than {MAX_JSON_BYTES // 2**20} MiB")
+        raw = read_user_file(path, field=param_hint, max_bytes=MAX_JSON_BYTES)
+    except ProblemError as exc:
+        bad(str(exc).removeprefix(f"{param_hint}: "))
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:
