@@ -42,11 +42,15 @@ PIECES = ["*/", "/*", "//", "\n", "\r\n", "\t", "\\", "\\\n", "??/", "??=", "??(
           "\uff0f\uff0a", "\ufe61/", "\u2028", "\x00", "\x1b[2J", "\x7f", "\ud800", "😀", "a", "motor", "x" * 300]
 
 
-def hostile_text(rng: np.random.Generator, n: int, *, control: bool = True, limit: int | None = None) -> str:
-    """A drawn hostile string (``control=False``: without the control characters and lone
-    surrogates a vehicle file refuses in a name)."""
-    pieces = [p for p in PIECES if control or not any(ord(c) < 32 or c == "\x7f" or 0xD800 <= ord(c) < 0xE000
-                                                        for c in p)]
+def hostile_text(rng: np.random.Generator, n: int, *, control: bool = True, surrogates: bool = True,
+                 limit: int | None = None) -> str:
+    """A drawn hostile string (``control=False``: without the control characters a vehicle file
+    refuses in a name; ``surrogates=False``: without the lone surrogates it refuses in any text)."""
+    def allowed(piece: str) -> bool:
+        return ((control or not any(ord(c) < 32 or c == "\x7f" for c in piece))
+                and (surrogates or not any(0xD800 <= ord(c) < 0xE000 for c in piece)))
+
+    pieces = [p for p in PIECES if allowed(p)]
     text = "".join(pieces[int(i)] for i in rng.integers(0, len(pieces), size=int(rng.integers(1, 8))))
     text = text.replace("{n}", str(n))
     if rng.random() < 0.05:
@@ -148,11 +152,11 @@ def _export_cli(seed: int, tmp_path) -> None:
     B = rng.standard_normal((k, m))
     # a vehicle file refuses control characters in a name (1-64 characters); the description
     # takes any text
-    named = alloc.Problem(B, -np.ones(m), np.ones(m), names=_names(rng, m, seed, control=False, limit=64),
-                          axes=_names(rng, k, seed, control=False, limit=64))
+    named = alloc.Problem(B, -np.ones(m), np.ones(m), names=_names(rng, m, seed, control=False, surrogates=False, limit=64),
+                          axes=_names(rng, k, seed, control=False, surrogates=False, limit=64))
     method = ("pinv", "pinv_scale", "cgi", "qp", "lp")[seed % 5]
-    docs = {"hostile": _vehicle(named, hostile_text(rng, seed, control=False, limit=64) or "v",
-                                hostile_text(rng, seed)),
+    name = hostile_text(rng, seed, control=False, surrogates=False, limit=64) or "v"
+    docs = {"hostile": _vehicle(named, name, hostile_text(rng, seed, surrogates=False)),
             "plain": _vehicle(_plain(named), "plain", "")}
     outs = {}
     for tag, doc in docs.items():
@@ -166,6 +170,41 @@ def _export_cli(seed: int, tmp_path) -> None:
     assert (outs["hostile"] / kernel.header_name).read_text() == kernel.header
     assert (outs["hostile"] / kernel.source_name).read_text() == kernel.source
     _check(kernel, export_c(str(tmp_path / f"cli{seed}_plain.json"), method), tmp_path, f"cli{seed}")
+
+
+def _cli_refusal(tmp_path, doc: dict | None, *args: str) -> str:
+    """``alloc export`` on ``doc`` (a vehicle file; None: hexa-x) with ``args``: the one stderr
+    line of its refusal (exit 2)."""
+    from alloc.cli import app
+
+    vehicle = "hexa-x"
+    if doc is not None:
+        path = tmp_path / "refused.json"
+        path.write_text(json.dumps(doc))
+        vehicle = str(path)
+    result = CliRunner().invoke(app, ["export", "--vehicle", vehicle, *args])
+    assert result.exit_code == 2, result.output
+    lines = result.output.strip().splitlines()
+    assert len(lines) == 1, result.output
+    return lines[0]
+
+
+def test_cli_refusals_are_one_line(tmp_path):
+    rng = np.random.default_rng(3)
+    wide = alloc.Problem(rng.standard_normal((3, 20)), -np.ones(20), np.ones(20))
+    tall = alloc.Problem(rng.standard_normal((16, 20)), -np.ones(20), np.ones(20))
+    out = ["--out", str(tmp_path / "k")]
+    assert "error: prefix: " in _cli_refusal(tmp_path, None, "--prefix", "int", *out)
+    assert "error: prefix: " in _cli_refusal(tmp_path, None, "--prefix", "a*/\n#define x", *out)
+    assert "error: table: " in _cli_refusal(tmp_path, _vehicle(wide, "wide", ""), "--method", "cgi", "--table", *out)
+    assert "error: table: " in _cli_refusal(tmp_path, _vehicle(wide, "wide", ""), "--method", "qp", "--table", *out)
+    assert "error: iteration_bound: " in _cli_refusal(tmp_path, _vehicle(tall, "tall", ""), "--method", "qp",
+                                                      "--certify", *out)
+    assert "description: not valid Unicode" in _cli_refusal(tmp_path, _vehicle(wide, "w", "\ud800"), *out)
+    assert "name" in _cli_refusal(tmp_path, _vehicle(wide, "a\n#define x", ""), *out)
+    (tmp_path / "file").write_text("")
+    assert "--out" in _cli_refusal(tmp_path, None, "--out", str(tmp_path / "file"))
+    assert not (tmp_path / "k").exists()
 
 
 def test_hostile_names_through_the_api(tmp_path):
