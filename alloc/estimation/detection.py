@@ -239,6 +239,9 @@ class FailureDetector(Isolation):
         alpha = self.false_alarm_rate * self.hop * self.dt / 3600.0 / m_tested / (2 if self.N_long else 1)
         from scipy.stats import chi2  # here: importing scipy.stats costs 1.2-1.5 s, every service start paid it
         self._gamma = float(chi2.isf(min(alpha, 0.5), self.dof))
+        if not math.isfinite(self._gamma):  # alpha underflowed: a test that could never alarm
+            raise OptionError(f"false_alarm_rate: {self.false_alarm_rate:g} per hour is a per-test probability of "
+                              f"{alpha:g}, too small for any threshold")
 
     # ------------------------------------------------------------------ model
     def _effective(self) -> tuple[np.ndarray, np.ndarray]:

@@ -44,7 +44,7 @@ from typing import Any
 import numpy as np
 
 from ..api import Allocator, make_allocator
-from ..domain import as_float_array, check_magnitude, short_repr
+from ..domain import MAX_MAGNITUDE, as_float_array, check_magnitude, short_repr
 from ..exceptions import OptionError
 from ..problem import Problem
 from ..result import EXACT_RTOL, Result, Status
@@ -74,7 +74,11 @@ def regressor_condition(U: Any, scale: Any = None) -> float:
     s = np.sqrt((X ** 2).mean(axis=0)) if scale is None else setting_vector("scale", scale, X.shape[1], positive=True)
     if (s <= 0).any():
         return float("inf")
-    sv = np.linalg.svd(X / s, compute_uv=False)
+    with np.errstate(over="ignore"):
+        Xs = X / s
+    if not np.abs(Xs).max() <= MAX_MAGNITUDE:  # a subnormal scale; never hand LAPACK an inf
+        raise OptionError(f"scale: U / scale exceeds {MAX_MAGNITUDE:g} (scale too small for U)")
+    sv = np.linalg.svd(Xs, compute_uv=False)
     return float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf")
 
 

@@ -238,7 +238,10 @@ class FrequencyDomainEstimator:
             sigma2 = (resid ** 2).sum(axis=0) / dof if dof > 0 else np.full(k, np.inf)
         std = np.sqrt(np.maximum(sigma2[:, None] * unit_var[None, :], 0.0))
         if rank < p:  # a parameter with any part in the unidentified directions is undetermined
-            undetermined = np.abs(Vt[~keep]).max(axis=0) > 1e-6
+            hidden = Vt[~keep]
+            undetermined = (np.abs(hidden).max(axis=0) > 1e-6 if hidden.size else np.zeros(p, dtype=bool))
+            if Vt.shape[0] < p:  # fewer stacked rows (2 f) than parameters: R^p beyond Vt's rows is hidden too
+                undetermined |= np.einsum("ij,ij->j", Vt[keep], Vt[keep]) < 1.0 - 1e-12
             std[:, undetermined] = np.inf
         cond = float(sv[0] ** 2 / sv[-1] ** 2) if rank == p else float("inf")
         return FrequencyEstimate(theta, std, rank, bank.count, cond)

@@ -38,6 +38,13 @@ from alloc.estimation import (
 )
 from alloc.exceptions import AllocError
 
+# the detector's and the estimators' deferred scipy imports (1-2 s on first use) are not the
+# calls' time: loaded here, before any call is timed
+import scipy.linalg  # noqa: E402, F401
+import scipy.signal  # noqa: E402, F401
+import scipy.special  # noqa: E402, F401
+import scipy.stats  # noqa: E402, F401
+
 #: per call: a priced setting is refused in milliseconds; an accepted one is at most the
 #: detector's isolation cap (about 3 s) -- with room for a machine shared with other jobs
 CALL_SECONDS = 15.0
