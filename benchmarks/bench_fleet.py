@@ -287,7 +287,7 @@ def main() -> None:
     parser.add_argument("--floor-seconds", type=float, default=5.0)
     parser.add_argument("--probe-hz", type=float, default=10.0, help="events and health probes per second, each")
     parser.add_argument("--max-websockets", type=int, default=512, help="ALLOC_MAX_WEBSOCKETS (per worker)")
-    parser.add_argument("--key-rate", type=float, default=200.0, help="ALLOC_WS_KEY_MESSAGES_PER_S (per worker)")
+    parser.add_argument("--key-rate", type=float, default=100.0, help="ALLOC_WS_KEY_MESSAGES_PER_S (per worker)")
     parser.add_argument("--generator-nice", type=int, default=10,
                         help="niceness of the load generators (they stand for other machines)")
     parser.add_argument("--server-nice", type=int, default=0, help="niceness increment of the server (negative: root)")

@@ -44,7 +44,7 @@
                                     limit; an upgrade beyond gets 503 (default 512)
 ``ALLOC_WS_KEY_MESSAGES_PER_S``     telemetry messages per second one API key's WebSockets may have
                                     processed together, per worker process; beyond, 429 unparsed,
-                                    and refusals paced at the same rate (default 200)
+                                    and refusals paced at the same rate (default 100)
 ``ALLOC_WS_KEY_BYTES_PER_S``        ... and their bytes per second (default 4 MiB)
 ``ALLOC_IDEMPOTENCY_TTL_S``         how long an ``Idempotency-Key`` and its answer are kept (24 h)
 ==================================  =================================================================
@@ -135,7 +135,7 @@ class Settings(BaseSettings):
     max_connections_per_client: int = Field(default=128, ge=1)
     reserved_requests: int = Field(default=32, ge=1, le=4096)
     max_websockets: int = Field(default=512, ge=1, le=65536)
-    ws_key_messages_per_s: float = Field(default=200.0, gt=0, le=1e6)
+    ws_key_messages_per_s: float = Field(default=100.0, gt=0, le=1e6)
     ws_key_bytes_per_s: int = Field(default=4 * MiB, ge=64 * 1024)
     idempotency_ttl_s: float = Field(default=86400.0, gt=0)
 
