@@ -364,3 +364,95 @@ def test_key_budget_never_exceeds_its_rates(tmp_path):
 @pytest.mark.slow
 def test_key_budget_never_exceeds_its_rates_many_seeds(tmp_path):
     assert _budget_rounds(range(150, 3150)) == 3000
+
+
+# ----------------------------------------- room kept for what must answer
+class _Transport:
+    """Enough of an asyncio transport for the protocol: what it writes, whether it closed."""
+
+    def __init__(self) -> None:
+        self.written, self.closed = b"", False
+
+    def get_extra_info(self, name: str, default: Any = None) -> Any:
+        return {"peername": ("127.0.0.1", 5000), "sockname": ("127.0.0.1", 8000)}.get(name, default)
+
+    def write(self, data: bytes) -> None:
+        self.written += data
+
+    def close(self) -> None:
+        self.closed = True
+
+    def is_closing(self) -> bool:
+        return self.closed
+
+    def pause_reading(self) -> None:
+        pass
+
+    def resume_reading(self) -> None:
+        pass
+
+    def set_write_buffer_limits(self, *args: Any, **kwargs: Any) -> None:
+        pass
+
+
+def _answers_at_the_limit(requests: list[tuple[str, str, dict[str, str]]], busy: int, websockets: int,
+                          limit: int = 16, reserved: int = 4) -> list[int]:
+    """Each request on a connection of its own to the real protocol, with ``busy`` HTTP tasks and
+    ``websockets`` WebSockets (and their tasks) already in flight: the status each gets."""
+    import uvicorn
+    from uvicorn.server import ServerState
+
+    import service.server as server
+    from service.priority import GATE_STATE_KEY, PriorityGate
+    from service.streams import GuardedWebSocketProtocol
+
+    async def ok(scope: dict[str, Any], receive: Any, send: Any) -> None:
+        await send({"type": "http.response.start", "status": 200, "headers": [(b"content-length", b"0")]})
+        await send({"type": "http.response.body", "body": b""})
+
+    async def scenario() -> list[int]:
+        server.limits.cache_clear()
+        config = uvicorn.Config(ok, limit_concurrency=limit, log_level="warning")
+        state = ServerState()
+        loop = asyncio.get_running_loop()
+        state.tasks.update(loop.create_future() for _ in range(busy + websockets))  # in flight, never done
+        GuardedWebSocketProtocol.open, GuardedWebSocketProtocol.running = websockets, websockets
+        statuses = []
+        for method, path, headers in requests:
+            protocol = server.GuardedHttpToolsProtocol(config, state, {GATE_STATE_KEY: PriorityGate(KEY)})
+            transport = _Transport()
+            protocol.connection_made(transport)  # type: ignore[arg-type]
+            head = f"{method} {path} HTTP/1.1\r\nhost: x\r\ncontent-length: 0\r\n" + "".join(
+                f"{k}: {v}\r\n" for k, v in headers.items()) + "\r\n"
+            protocol.data_received(head.encode())
+            for _ in range(5):
+                await asyncio.sleep(0)
+            statuses.append(int(transport.written.split(b" ", 2)[1]))
+            protocol.connection_lost(None)
+        return statuses
+    try:
+        return asyncio.run(scenario())
+    finally:
+        GuardedWebSocketProtocol.open = GuardedWebSocketProtocol.running = 0
+        import service.server as server
+        server.limits.cache_clear()
+
+
+def test_events_and_probes_have_room_beyond_the_http_limit(monkeypatch):
+    """At the HTTP limit (16 requests in flight), an allocation gets 503; an event with the key,
+    /v1/health and /v1/ready get through, up to ALLOC_RESERVED_REQUESTS (4) more; an event
+    without the key does not.  WebSockets in flight do not count toward the limit."""
+    monkeypatch.setenv("ALLOC_MAX_CONNECTIONS", "16")
+    monkeypatch.setenv("ALLOC_RESERVED_CONNECTIONS", "2")
+    monkeypatch.setenv("ALLOC_RESERVED_REQUESTS", "4")
+    event = ("POST", "/v1/vehicles/v/events", H)
+    health, ready = ("GET", "/v1/health", {}), ("GET", "/v1/ready", {})
+    allocation = ("POST", "/v1/allocate", {})
+    keyless = ("POST", "/v1/vehicles/v/events", {"X-API-Key": "wrong"})
+    requests = [allocation, event, health, ready, keyless]
+    assert _answers_at_the_limit(requests, busy=10, websockets=0) == [200] * 5
+    assert _answers_at_the_limit(requests, busy=10, websockets=600) == [200] * 5  # sockets apart
+    assert _answers_at_the_limit(requests, busy=15, websockets=600) == [200] * 5  # one place left
+    assert _answers_at_the_limit(requests, busy=16, websockets=600) == [503, 200, 200, 200, 503]
+    assert _answers_at_the_limit(requests, busy=19, websockets=0) == [503, 200, 200, 200, 503]
+    assert _answers_at_the_limit(requests, busy=20, websockets=0) == [503] * 5  # the reserve is spent
