@@ -112,30 +112,43 @@ def _name(path: str | os.PathLike[str]) -> str:
     return Path(text).name or text
 
 
-# A run of more than MAX_DEPTH dotted parts outside a string: a key or a table header nesting
-# deeper than any document may.  Possessive parts and the look-behind keep the scan linear.
-_PART = r"""(?:[\w-]++|"[^"\n]*+"|'[^'\n]*+')"""
-_LONG_KEY = re.compile(rf"""(?<![\w"'.-]){_PART}(?:[ \t]*+\.[ \t]*+{_PART}){{{MAX_DEPTH}}}""")
+# TOML's strings and comments, each matched whole or to where it would have to end (an unclosed
+# string to the end of its line or text: tomllib refuses it there), so one pass is linear
+_TOML_STRINGS = re.compile(r"""
+    "{3}(?:[^"\\]|\\.|"(?!""))*+(?:"{3}|\Z)     # multi-line basic
+  | '{3}(?:[^']|'(?!''))*+(?:'{3}|\Z)           # multi-line literal
+  | "(?:[^"\\\n]|\\.)*+(?:"|$)                  # basic
+  | '[^'\n]*+(?:'|$)                            # literal
+  | \#[^\n]*+                                   # comment
+""", re.S | re.M | re.X)
+# a run of more than MAX_DEPTH dotted parts, once every string is "": a key or table header
+# nesting deeper than a document may (possessive parts and the look-behind keep it linear)
+_LONG_KEY = re.compile(rf"""(?<![\w"'.-])(?:[\w-]++|""|'')(?:[ \t]*+\.[ \t]*+(?:[\w-]++|""|'')){{{MAX_DEPTH}}}""")
 
 
 def parse_toml(text: str, *, field: str = "path", name: str = "the text", root: str = "") -> dict[str, Any]:
     """The TOML document in ``text``, nested at most :data:`MAX_DEPTH` levels.
 
     Refused naming ``field`` (and ``name``, the file's): invalid TOML, a dotted key or table
-    header of more than :data:`MAX_DEPTH` parts (found by a linear scan before parsing), and an
-    integer too long to read; a document nested deeper is refused naming the path below
-    ``root`` (:func:`check_depth`).
+    header of more than :data:`MAX_DEPTH` parts or arrays and inline tables nested deeper (both
+    found by a linear scan of the text without its strings and comments, before ``tomllib``
+    sees it: its cost grows with the square of a key's parts), and an integer too long to
+    read; a document nested deeper is refused naming the path below ``root`` (:func:`check_depth`).
     """
-    long_key = _LONG_KEY.search(text)
+    bare = _TOML_STRINGS.sub('""', text)
+    long_key = _LONG_KEY.search(bare)
     if long_key is not None:
-        line = text.count("\n", 0, long_key.start()) + 1
+        line = bare.count("\n", 0, long_key.start()) + 1
         raise ProblemError(f"{field}: {name}: line {line}: a dotted key of more than {MAX_DEPTH} parts "
                            f"(documents nest at most {MAX_DEPTH} levels)", field=field)
+    depth = _bracket_depth(bare)
+    if depth > MAX_DEPTH:
+        raise ProblemError(f"{field}: {name} nests {depth} levels, more than the {MAX_DEPTH} allowed", field=field)
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ProblemError(f"{field}: {name} is not valid TOML ({exc})", field=field) from None
-    except RecursionError:
+    except RecursionError:  # not reached after the scan; kept so that no parser error escapes
         raise ProblemError(f"{field}: {name} nests more than {MAX_DEPTH} levels", field=field) from None
     except ValueError:
         raise ProblemError(f"{field}: {name}: {_TOO_LONG}", field=field) from None
@@ -182,7 +195,7 @@ def parse_json(text: str, *, field: str = "path", name: str = "the text") -> Any
         raise ProblemError(f"{field}: {name} nests more than {MAX_DEPTH} levels", field=field) from None
     except ValueError:
         raise ProblemError(f"{field}: {name}: {_TOO_LONG}", field=field) from None
-    depth = _json_depth(text)
+    depth = _bracket_depth(_JSON_STRING.sub("", text))
     if depth > MAX_DEPTH:
         raise ProblemError(f"{field}: {name} nests {depth} levels, more than the {MAX_DEPTH} allowed", field=field)
     return doc
@@ -193,9 +206,9 @@ _JSON_STRING = re.compile(r'"(?:[^"\\]|\\.)*+"', re.S)
 _NOT_BRACKET = re.compile(r"[^\[\]{}]+")
 
 
-def _json_depth(text: str) -> int:
-    """The deepest nesting of valid JSON text: brackets outside strings, counted at compiled speed."""
-    brackets = _NOT_BRACKET.sub("", _JSON_STRING.sub("", text)).encode("ascii")
+def _bracket_depth(text: str) -> int:
+    """The deepest nesting of brackets in a text without strings, counted at compiled speed."""
+    brackets = _NOT_BRACKET.sub("", text).encode("ascii")
     if not brackets:
         return 0
     codes = np.frombuffer(brackets, dtype=np.uint8)
