@@ -64,11 +64,21 @@ def _kind(value: Any) -> str:
     return f"{type(value).__name__} {short_repr(value)}"
 
 
+_PLAIN_KEY = re.compile(r"^[A-Za-z_][A-Za-z0-9_-]{0,63}$")
+
+
+def _child(path: str, key: Any) -> str:
+    """The path of ``key`` below ``path``: ``effectors[0].rate_max``; a key that is not a plain
+    name (empty, long, with spaces or dots) in brackets, elided: ``vehicle['']``, ``methods['a b']``."""
+    if isinstance(key, str) and _PLAIN_KEY.match(key):
+        return f"{path}.{key}" if path else key
+    return f"{path or 'vehicle'}[{short_repr(key, 40)}]"
+
+
 def _keys(table: Mapping[str, Any], path: str, allowed: Sequence[str], required: Sequence[str] = ()) -> None:
     unknown = [k for k in table if k not in allowed]
     if unknown:
-        where = f"{path}." if path else ""
-        raise _fail(f"{where}{unknown[0]}", f"unknown field; accepted: {', '.join(allowed)}")
+        raise _fail(_child(path, unknown[0]), f"unknown field; accepted: {', '.join(allowed)}")
     for k in required:
         if k not in table:
             where = f"{path}." if path else ""

@@ -15,7 +15,7 @@ import numpy as np
 from .._files import MAX_TEXT_BYTES, MAX_TOML_BYTES
 from ..exceptions import AllocError, ProblemError
 from ..problem import MAX_AXES, MAX_EFFECTORS, MAX_MAGNITUDE, Problem, short_repr
-from .fields import FORMAT, FORMAT_SIMULATION, FORMATS, WRENCH_COMPONENTS, Matrix, _fail, _keys, _kind, _list, _matrix, _table, _text, _unique
+from .fields import FORMAT, FORMAT_SIMULATION, FORMATS, WRENCH_COMPONENTS, Matrix, _child, _fail, _keys, _kind, _list, _matrix, _table, _text, _unique
 from .parts import Axis, Effector, LinearModel
 from .simulation import Simulation
 from .toml_writer import to_toml
@@ -271,7 +271,7 @@ def _methods(value: Any, problem: Problem) -> dict[str, dict[str, Any]]:
     table = _table(value, "methods")
     out: dict[str, dict[str, Any]] = {}
     for method, options in table.items():
-        path = f"methods.{method}"
+        path = _child("methods", method)
         try:
             cls = registry.get_method(method)
         except UnknownMethodError as exc:
