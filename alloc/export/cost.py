@@ -7,14 +7,13 @@ simplex's tableau, ``O(k (m + k))``) and the tables, which dominate wherever the
 * ``cgi``: the pseudo-inverse of every free set, ``2^m`` rows of ``m k`` numbers (by level or
   not), one pseudo-inverse computed per free set and level;
 * the active set with ``table=True``: every free set's factorisation per instance and key,
-  ``2^m`` rows of ``entry`` numbers (:func:`alloc.export.tables.active_set_table_entry`), one
+  ``2^m`` rows of ``entry`` numbers (:func:`alloc.export.tables.active_set_plan`), one
   factorisation per row;
 * ``iteration_bound="certify"``: no source, but a library call per demand of the sample.
 
 Bytes, seconds and peak memory are linear in those counts, with the coefficients below measured
 on this generator (tests/alloc/export/test_export_cost.py measures a grid and keeps
-measured / declared within [0.1, 2]).  An export
-priced above :data:`MAX_SOURCE_BYTES`, :data:`MAX_GENERATION_SECONDS` or
+measured / declared within [0.1, 2]).  An export priced above :data:`MAX_SOURCE_BYTES`, :data:`MAX_GENERATION_SECONDS` or
 :data:`MAX_GENERATION_MEMORY` is refused with an :class:`~alloc.export.ExportError` naming the
 field that drives it (``table`` for the tables, ``iteration_bound`` for the certification, ``m``
 otherwise), before the work is done.
@@ -26,8 +25,8 @@ from dataclasses import dataclass
 
 from .base import ExportError
 
-#: largest generated source (header and C file): 64 MiB of C is about 5 million numbers, what
-#: a compiler still builds in a minute; a flight computer holds far less
+#: largest generated source (header and C file): 64 MiB of C is about 4 million numbers (a
+#: double table of 32 MB; a flight computer holds far less)
 MAX_SOURCE_BYTES = 64 * 2 ** 20
 #: longest generation priced (CPU seconds on the reference machine, a 2-core 2026 CI runner)
 MAX_GENERATION_SECONDS = 60.0

@@ -152,8 +152,9 @@ def _export_cli(seed: int, tmp_path) -> None:
     B = rng.standard_normal((k, m))
     # a vehicle file refuses control characters in a name (1-64 characters); the description
     # takes any text
-    named = alloc.Problem(B, -np.ones(m), np.ones(m), names=_names(rng, m, seed, control=False, surrogates=False, limit=64),
-                          axes=_names(rng, k, seed, control=False, surrogates=False, limit=64))
+    plain_text = {"control": False, "surrogates": False, "limit": 64}
+    named = alloc.Problem(B, -np.ones(m), np.ones(m), names=_names(rng, m, seed, **plain_text),
+                          axes=_names(rng, k, seed, **plain_text))
     method = ("pinv", "pinv_scale", "cgi", "qp", "lp")[seed % 5]
     name = hostile_text(rng, seed, control=False, surrogates=False, limit=64) or "v"
     docs = {"hostile": _vehicle(named, name, hostile_text(rng, seed, surrogates=False)),
