@@ -19,14 +19,14 @@ from typing import Any, Union
 
 from .base import ExportError
 
-#: characters of one user text kept in a comment (the rest is cut, saying how many): a name is
+#: characters of one user text kept in a comment (the rest is cut, saying so): a name is
 #: 64 at most in a vehicle file, a description a sentence
 MAX_COMMENT_CHARS = 200
 #: characters of a prefix: C99 keeps 31 significant initial characters of an external name
 #: (5.2.4.1), and the prefix alone must be distinct within that
 MAX_PREFIX_CHARS = 31
 
-#: C99 keywords (6.4.1) and the standard's own macro-like names a prefix must not be
+#: C99's keywords (6.4.1): a prefix must not be one
 C_KEYWORDS = frozenset("""auto break case char const continue default do double else enum extern float for goto
     if inline int long register restrict return short signed sizeof static struct switch typedef union unsigned
     void volatile while _Bool _Complex _Imaginary""".split())
