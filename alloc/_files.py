@@ -8,16 +8,18 @@ then parse the text with the nesting bounded (:data:`MAX_DEPTH`), and :func:`che
 an already parsed document.  Every refusal is a :class:`~alloc.exceptions.ProblemError` (a
 ``ValueError``) naming the field.
 
-The caps, measured on this project's 2-core CI machine under load (the worst files found for
-each parser, timed in ``tests/alloc/test_file_readers.py``):
+The caps, measured on this project's 2-core machine (the worst files found for each parser,
+timed in ``tests/alloc/test_file_readers.py``; "loaded": both cores shared with about eight
+other processes):
 
 * :data:`MAX_TOML_BYTES` = 128 KiB.  ``tomllib`` is pure Python: the slowest 128 KiB found
-  (table headers of 16 dotted parts, ``[k1.a.a...]``) parses in 0.3-0.5 s; 512 KiB of them took
-  2-4 s.  The largest bundled vehicle (``ice.toml``) is 12 KiB, a tenth of the cap.
+  (table headers of 16 dotted parts, ``[k1.a.a...]``) is read and refused in 0.31 s (0.5-1 s
+  loaded); 512 KiB of them took 2-4 s loaded.  The largest bundled vehicle (``ice.toml``) is
+  12 KiB, a tenth of the cap; a 6 x 512 vehicle with a full ``B`` is 100 KB of TOML.
 * :data:`MAX_TEXT_BYTES` = 1 MiB for the other text files (vehicle JSON, PX4 parameters,
-  ArduPilot CSV tables): ``json`` is compiled; its slowest 1 MiB (empty objects through the
-  duplicate-key check) parses in about 0.2 s.  A 32-axis, 512-effector vehicle with every
-  ``B`` entry in full precision is about 0.5 MB of JSON.
+  ArduPilot CSV tables): ``json`` is compiled; its slowest 1 MiB found (small nested lists) is
+  read and refused in 0.20 s (0.5-1 s loaded).  A 32 x 512 vehicle with a full ``B`` is 0.45 MB
+  of JSON, read in 0.13 s.
 * :data:`MAX_DEPTH` = 16 levels of nesting (the bundled files reach 8); a TOML dotted key or
   table header of more parts is refused before ``tomllib`` sees it (its cost grows with the
   square of the parts: one 8,000-part key took 1 s and 260 MB).

@@ -44,6 +44,8 @@ SEED = 20261205
 BOUND = 2.0
 BUNDLED = sorted(DATA_DIR.glob("*.toml"))
 runner = CliRunner()
+#: the slowest call seen by :func:`verdict` in this session: (seconds, case); the slow runs print it
+SLOWEST: list[tuple[float, str]] = [(0.0, "")]
 
 
 # ------------------------------------------------------------------ the verdict on one call
@@ -63,6 +65,7 @@ def verdict(call: Callable[[], Any], label: str) -> str:
         pytest.fail(f"{label}: {type(exc).__name__} escaped: {str(exc)[:300]}")
     elapsed = time.perf_counter() - start
     assert elapsed < BOUND, f"{label}: {elapsed:.2f} s"
+    SLOWEST[0] = max(SLOWEST[0], (elapsed, label[:80]))
     return outcome
 
 
@@ -379,7 +382,8 @@ def test_hostile_files_large_run(tmp_path: Path) -> None:
     (tmp_path / "i").mkdir()
     vehicles = run_vehicle_files(tmp_path / "v", random.Random(SEED + 2), 4000)
     importers = run_importers(tmp_path / "i", random.Random(SEED + 3), 3000)
-    print(f"\nvehicle files: {dict(vehicles)}; importer inputs: {dict(importers)}")
+    print(f"\nvehicle files: {dict(vehicles)}; importer inputs: {dict(importers)}; slowest: "
+          f"{SLOWEST[0][0]:.3f} s ({SLOWEST[0][1]})")
     assert vehicles["refused"] > 2000 and importers["refused"] > 4000, (vehicles, importers)
 
 
