@@ -51,7 +51,12 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from ..domain import MAX_EFFECTORS
 from .fields import Matrix, _fail, _keys, _list, _matrix, _names, _positive, _real, _reals, _table, _text
+
+#: the most named failures a ``[simulation.failures]`` table may hold, counted before any is read
+#: (41,000 of them, a 0.9 MB JSON file, took 0.5 s to read; the bundled HARV carries 3)
+MAX_FAILURES = 64
 
 __all__ = ["TransferFunction", "Command", "HedgePath", "SlidingMode", "PilotSpec", "FailureSpec",
            "AllocationSpec", "Simulation"]
@@ -297,7 +302,7 @@ class FailureSpec:
             kw["delay"] = delays if isinstance(d, list) else delays[0]
         kinds = {str(k): k.spec for k in FailureKind} | {k: s for k, s in SIMULATOR_ONLY.items() if s.per_actuator}
         acts = []
-        for i, a in enumerate(_list(t.get("actuators", []), f"{path}.actuators")):
+        for i, a in enumerate(_list(t.get("actuators", []), f"{path}.actuators", high=MAX_EFFECTORS)):
             where = f"{path}.actuators[{i}]"
             at = _table(a, where)
             _keys(at, where, ("effector", "kind", *sorted({q for s in kinds.values() for q in s.params})),
@@ -442,6 +447,8 @@ class Simulation:
             kw["pilot"] = PilotSpec.from_dict(t["pilot"], f"{path}.pilot", channels, outputs)
         if "failures" in t:
             fs = _table(t["failures"], f"{path}.failures")
+            if len(fs) > MAX_FAILURES:
+                raise _fail(f"{path}.failures", f"expected at most {MAX_FAILURES} failures, got {len(fs)}")
             kw["failures"] = {_text(name, f"{path}.failures", name=True):
                               FailureSpec.from_dict(f, f"{path}.failures.{name}", n, m, p, effectors, limits,
                                                     rate_limits)

@@ -442,6 +442,12 @@ def test_depth_and_counts_are_named() -> None:
         vehicle_from_dict({"format": "alloc-vehicle/1", "name": "x", "axes": [{"name": "r"}], "effectors": [effector],
                            "model": {"states": ["x"], "outputs": [f"y{i}" for i in range(257)], "A": [[0]],
                                      "B": [[0]], "C": [[0]] * 257}})
+    harv = dict(_bundled_docs())["harv"]
+    failures = {f"f{i}": {"time": 0.0} for i in range(65)}
+    with pytest.raises(ProblemError, match="^simulation.failures: expected at most 64 failures, got 65"):
+        vehicle_from_dict({**harv, "simulation": {**harv["simulation"], "failures": failures}})
+    failures.pop("f64")
+    assert len(vehicle_from_dict({**harv, "simulation": {**harv["simulation"], "failures": failures}}).simulation.failures) == 64
     with pytest.raises(ProblemError, match=r"^effectors\[0\].min: 1000.* is too large"):
         vehicle_from_dict({"format": "alloc-vehicle/1", "name": "x", "axes": [{"name": "r"}],
                            "effectors": [{**effector, "min": 10**400}]})
