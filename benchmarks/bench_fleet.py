@@ -161,6 +161,21 @@ def _prober(base: str, vid: str, hz: float, start: float, stop: float, results: 
     results.put(out)
 
 
+def _rss_mib(pid: int) -> float:
+    """Resident memory of ``pid`` and all its descendants (the workers, the build processes), MiB."""
+    total, todo = 0, [pid]
+    while todo:
+        p = todo.pop()
+        try:
+            status = Path(f"/proc/{p}/status").read_text()
+            total += next(int(line.split()[1]) for line in status.splitlines() if line.startswith("VmRSS:"))
+            for task in Path(f"/proc/{p}/task").iterdir():
+                todo.extend(int(c) for c in (task / "children").read_text().split())
+        except (OSError, StopIteration):
+            continue
+    return total / 1024
+
+
 def _percentiles(values: list[float]) -> dict[str, float]:
     a = np.asarray(values) if values else np.array([np.nan])
     return {"n": len(values), "p50": float(np.percentile(a, 50)), "p99": float(np.percentile(a, 99)),
@@ -225,6 +240,9 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             prober = ctx.Process(target=_prober, args=(proc.url, probe_vid, args.probe_hz, start + 1.0, stop, results))
             for p in [*gens, prober]:
                 p.start()
+            rss_floor = _rss_mib(proc.proc.pid)  # the sockets are not open yet
+            time.sleep(max(0.0, start + args.seconds / 2 - time.time()))
+            rss_fleet = _rss_mib(proc.proc.pid)  # mid-run: every socket open and streaming
             outs = [results.get(timeout=DEADLINE_S) for _ in range(len(gens) + 1)]
             for p in [*gens, prober]:
                 p.join(timeout=30)
@@ -252,7 +270,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         "load_after": [round(x, 2) for x in load_after],
         "open": total("open"), "upgrade_refused": total("upgrade_refused"), "upgrade_failed": total("upgrade_failed"),
         "sent": total("sent"), "processed": total("processed"), "refused": total("refused"), "closed": total("closed"),
-        "held_back": total("held_back"), "generator_nice": args.generator_nice, "server_nice": args.server_nice,
+        "held_back": total("held_back"), "rss_mib_before": round(rss_floor, 1), "rss_mib_during": round(rss_fleet, 1), "generator_nice": args.generator_nice, "server_nice": args.server_nice,
         **{phase: {**{name: _percentiles(o[name]) for name in ("event", "health", "event_app", "health_app")},
                    "bad": o["bad"]} for phase, o in (("floor", floor_out), ("fleet", probes))},
     }
@@ -303,7 +321,8 @@ def main() -> None:
           f"non-2xx probes {r['fleet']['bad']}; event p50 {r['fleet']['event']['p50']:.1f} ms, "
           f"health p50 {r['fleet']['health']['p50']:.1f} ms; the service's own time (Server-Timing) p99: event "
           f"{r['fleet']['event_app']['p99']:.1f} ms, health {r['fleet']['health_app']['p99']:.1f} ms; sends held back "
-          f"at the end {r['held_back']}; setup {r['setup_s']} s")
+          f"at the end {r['held_back']}; service RSS {r['rss_mib_before']:.0f} MiB before the sockets, "
+          f"{r['rss_mib_during']:.0f} MiB with them; setup {r['setup_s']} s")
     if args.json:
         args.json.write_text(json.dumps(r, indent=1))
     if args.markdown:
