@@ -137,7 +137,7 @@ def _prober(base: str, vid: str, hz: float, start: float, stop: float, results: 
 
     import httpx
 
-    out: dict[str, Any] = {"event": [], "health": [], "event_app": [], "health_app": [], "bad": {}}
+    out: dict[str, Any] = {"event": [], "health": [], "event_app": [], "health_app": [], "bad": {}, "slowest": []}
     gc.disable()  # a collection here would count as the service's latency
     with httpx.Client(base_url=base, timeout=30.0) as writer, httpx.Client(base_url=base, timeout=30.0) as reader:
         writer.get("/v1/ready")
@@ -154,6 +154,7 @@ def _prober(base: str, vid: str, hz: float, start: float, stop: float, results: 
                 out[name].append((time.perf_counter() - t0) * 1e3)
                 timing = r.headers.get("server-timing", "app;dur=nan")  # the service's own share
                 out[f"{name}_app"].append(float(timing.split("dur=", 1)[1].split(",", 1)[0]))
+                out["slowest"] = sorted([*out["slowest"], (out[name][-1], name, timing)], reverse=True)[:4]
                 if r.status_code not in (200, 201):
                     out["bad"][f"{name} {r.status_code}"] = out["bad"].get(f"{name} {r.status_code}", 0) + 1
             i += 1
@@ -272,24 +273,25 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         "sent": total("sent"), "processed": total("processed"), "refused": total("refused"), "closed": total("closed"),
         "held_back": total("held_back"), "rss_mib_before": round(rss_floor, 1), "rss_mib_during": round(rss_fleet, 1), "generator_nice": args.generator_nice, "server_nice": args.server_nice,
         **{phase: {**{name: _percentiles(o[name]) for name in ("event", "health", "event_app", "health_app")},
-                   "bad": o["bad"]} for phase, o in (("floor", floor_out), ("fleet", probes))},
+                   "bad": o["bad"], "slowest": o["slowest"]} for phase, o in (("floor", floor_out), ("fleet", probes))},
     }
 
 
 def row(r: dict[str, Any]) -> str:
     refused = sum(r["refused"].values())
     upgrades = sum(r["upgrade_refused"].values()) + sum(r["upgrade_failed"].values())
+    rss = f"{r['rss_mib_before']:.0f} -> {r['rss_mib_during']:.0f}" if "rss_mib_during" in r else "-"
     return (f"| {r['sockets']:,} x {r['hz']:g} Hz | {r['workers']} ({r['database']}) | {r['open']:,} | {upgrades:,} | "
             f"{r['sent'] / r['seconds']:,.0f} | {r['processed'] / r['seconds']:,.0f} | {refused:,} | "
             f"{r['fleet']['event']['p99']:.1f} ({r['floor']['event']['p99']:.1f}) | "
             f"{r['fleet']['health']['p99']:.1f} ({r['floor']['health']['p99']:.1f}) | "
-            f"{sum(r['fleet']['bad'].values())} | {r['load_before'][0]:.1f} -> {r['load_after'][0]:.1f}, "
+            f"{sum(r['fleet']['bad'].values())} | {rss} | {r['load_before'][0]:.1f} -> {r['load_after'][0]:.1f}, "
             f"{r['cores']} cores |")
 
 
 HEADER = ("| sockets | workers | open | upgrades refused | sent msg/s | processed msg/s | refused msgs | "
-          "event p99 ms (floor) | health p99 ms (floor) | non-2xx probes | load, cores |\n"
-          "|---|---|---|---|---|---|---|---|---|---|---|")
+          "event p99 ms (floor) | health p99 ms (floor) | non-2xx probes | service RSS MiB | load, cores |\n"
+          "|---|---|---|---|---|---|---|---|---|---|---|---|")
 
 
 def main() -> None:
@@ -323,6 +325,8 @@ def main() -> None:
           f"{r['fleet']['event_app']['p99']:.1f} ms, health {r['fleet']['health_app']['p99']:.1f} ms; sends held back "
           f"at the end {r['held_back']}; service RSS {r['rss_mib_before']:.0f} MiB before the sockets, "
           f"{r['rss_mib_during']:.0f} MiB with them; setup {r['setup_s']} s")
+    for ms, name, timing in r["fleet"]["slowest"]:
+        print(f"  slowest {name}: {ms:.1f} ms, Server-Timing {timing}")
     if args.json:
         args.json.write_text(json.dumps(r, indent=1))
     if args.markdown:
