@@ -170,7 +170,7 @@ class NullSpaceExcitation:
             DN, NinvD = self._basis(free)
             if DN.shape[1] > 0:
                 e[free] = DN @ (NinvD.T @ z[free])
-        with np.errstate(divide="ignore", invalid="ignore"):
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # a room / e beyond range: no limit
             limit = np.where(e > 0, (hi - u0) / e, np.where(e < 0, (lo - u0) / e, np.inf))
         binding = int(np.argmin(limit))
         tau = float(limit[binding])
