@@ -15,7 +15,9 @@ from datetime import datetime
 from typing import Annotated, Any, Literal, Union
 
 import numpy as np
-from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, PrivateAttr, StrictInt, model_validator
+from pydantic import (
+    AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, PrivateAttr, StrictInt, WithJsonSchema, model_validator,
+)
 
 import alloc
 from alloc.health import PARAMETERS, FailureKind, KindSpec, Range
@@ -34,7 +36,13 @@ def _weight_entry(w: float) -> float:
     return w
 
 
-WeightEntry = Annotated[Finite, AfterValidator(_weight_entry)]
+# the schema states the rule the validator applies (0, or at least MIN_WEIGHT in magnitude):
+# stated as a plain number range, schema-valid weights such as 1e-288 got 422 (issue 39)
+WeightEntry = Annotated[Finite, AfterValidator(_weight_entry), WithJsonSchema({"anyOf": [
+    {"type": "number", "const": 0},
+    {"type": "number", "minimum": MIN_WEIGHT, "maximum": MAX_MAGNITUDE},
+    {"type": "number", "minimum": -MAX_MAGNITUDE, "maximum": -MIN_WEIGHT}],
+    "description": f"0, or at least {MIN_WEIGHT:g} in magnitude"})]
 EffectorVector = Annotated[list[Finite], Field(min_length=1, max_length=MAX_EFFECTORS)]
 AxisVector = Annotated[list[Finite], Field(min_length=1, max_length=MAX_AXES)]
 WeightVector = Annotated[list[WeightEntry], Field(min_length=1, max_length=MAX_EFFECTORS)]

@@ -35,7 +35,8 @@ class TelemetryConfigIn(_In):
         "(GET .../proposals) for a client to accept or reject"))
     sample_time: Seconds = Field(description="seconds between samples (the detector's thresholds assume it)")
     noise_std: Positive | Annotated[list[Positive], Field(min_length=1, max_length=MAX_AXES)] = Field(
-        description="std of the white noise on each response axis (a number: every axis)")
+        description="std of the white noise on each response axis (a number: every axis; a list: k values, the "
+                    "vehicle's axes, 422 otherwise)")
     window: Seconds = Field(default=0.25, description=f"seconds per stage-1 test; at most {MAX_WINDOW_SAMPLES} "
                                                       f"samples (and at least 4)")
     hop: json_int(ge=1, le=MAX_WINDOW_SAMPLES) | None = Field(
@@ -43,7 +44,8 @@ class TelemetryConfigIn(_In):
     false_alarm_rate: Annotated[float, Field(strict=True, gt=0, le=3.6e9, allow_inf_nan=False)] = Field(
         default=0.1, description="design false alarms per hour")
     position_noise_std: Positive | Annotated[list[Positive], Field(min_length=1, max_length=MAX_EFFECTORS)] | None = \
-        Field(default=None, description="position sensor noise (null: no position sensors)")
+        Field(default=None, description="position sensor noise (null: no position sensors; a list: m values, the "
+                                         "vehicle's effectors, 422 otherwise)")
     min_confidence: Annotated[float, Field(strict=True, gt=0, lt=1, allow_inf_nan=False)] = Field(
         default=0.95, description="posterior needed to report (effector and kind)")
     reset: StrictBool = Field(default=False, description=(
@@ -79,19 +81,26 @@ def _vector(name: str, value: float | list[float], n: int) -> list[float]:
     return [float(value)] * n
 
 
+#: said of every vector whose length is the vehicle's (the schema states only the caps)
+_PER_VEHICLE = (": n rows as t has, each of the vehicle's length (m effectors, k axes; the schema states only "
+                "the caps), 422 naming the field otherwise")
+
+
 class TelemetryBatchIn(_In):
     """``POST /v1/vehicles/{id}/telemetry`` (and one WebSocket message): ``n`` samples, in time order,
     each after the last one already received."""
 
-    t: Annotated[list[Finite], Field(min_length=1, max_length=MAX_SAMPLES, fail_fast=True,
-                                     description="sample times, s, strictly increasing")]
+    t: Annotated[list[Finite], Field(min_length=1, max_length=MAX_SAMPLES, fail_fast=True, description=(
+        "sample times, s: consecutive steps of half a sample_time to one window; a batch reaching into time "
+        "already received is 422 naming t/i; a gap longer than the window or time never received starts "
+        "a new segment (the answer's segment)"))]
     u: Annotated[list[EffectorVector], Field(min_length=1, max_length=MAX_SAMPLES, fail_fast=True,
-                                             description="applied commands, n x m")]
+                                             description=f"applied commands, n x m{_PER_VEHICLE}")]
     y: Annotated[list[AxisVector], Field(min_length=1, max_length=MAX_SAMPLES, fail_fast=True,
                                          description="measured responses (the rows of B: moments or state "
-                                                     "derivatives), n x k")]
+                                                     f"derivatives), n x k{_PER_VEHICLE}")]
     position: Annotated[list[EffectorVector], Field(min_length=1, max_length=MAX_SAMPLES, fail_fast=True)] | None = \
-        Field(default=None, description="measured positions, n x m (with position sensors only)")
+        Field(default=None, description=f"measured positions, n x m (with position sensors only){_PER_VEHICLE}")
 
 
 class TelemetryOut(BaseModel):
