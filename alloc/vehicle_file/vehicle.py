@@ -68,7 +68,42 @@ class Vehicle:
         return np.array([a.trim for a in self.axes], dtype=float)
 
     def problem(self) -> Problem:
-        """The allocation problem: ``B``, limits, ``up``, rates, weights and names, validated."""
+        """The allocation problem: ``B``, limits, ``up``, rates, weights and names, validated.
+
+        ``up`` is the effectors' ``preferred`` positions where any is declared; otherwise, when
+        the axes declare a trim (a hovering multirotor's thrust), the trim command
+        (:attr:`trim_command`), so that every method works about the operating point: the
+        direction-keeping methods (``da``, ``da_facet``, ``da_bisect``, ``pinv_scale``) keep
+        the demand's direction from it and never scale a multirotor's thrust toward the
+        rotors-off corner of the attainable set, where ``up = 0`` lies.
+        """
+        problem = self._declared_problem()
+        if any(e.preferred is not None for e in self.effectors) or not np.any(self.trim):
+            return problem
+        return problem.replace(up=self.trim_command)
+
+    @property
+    def trim_command(self) -> np.ndarray:
+        """The effector command that meets the axes' trim, closest to the declared preferred
+        positions (the default method, ``qp``: ``min |u - up|_Wu`` subject to ``B u = trim``);
+        the closest attainable moment's command when the trim is beyond reach.  Zero trims give
+        the declared ``up``.  Computed once per vehicle."""
+        cached = self.__dict__.get("_trim_command")
+        if cached is None:
+            problem = self._declared_problem()
+            if np.any(self.trim):
+                from ..api import make_allocator
+                from ..registry import DEFAULT_METHOD
+
+                cached = np.array(make_allocator(problem, DEFAULT_METHOD)(self.trim).u, dtype=float)
+            else:
+                cached = np.array(problem.up, dtype=float)
+            cached.setflags(write=False)
+            object.__setattr__(self, "_trim_command", cached)  # frozen: a cache, not a field
+        return cached
+
+    def _declared_problem(self) -> Problem:
+        """The problem exactly as the file declares it (``up`` from ``preferred`` or the default)."""
         eff = self.effectors
         rate_max = [math.inf if e.rate_max is None else e.rate_max for e in eff]
         rate_min = [(-math.inf if e.rate_max is None else -e.rate_max) if e.rate_min is None else e.rate_min
