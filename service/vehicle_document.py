@@ -19,12 +19,12 @@ content type.
 from __future__ import annotations
 
 import re
-import tomllib
 from typing import Annotated, Any
 
 from fastapi import Request
 from pydantic import Discriminator, RootModel, Tag, model_validator
 
+from alloc._files import MAX_TOML_BYTES, parse_toml
 from alloc.exceptions import ProblemError
 from alloc.vehicle_file import FORMAT, Vehicle, to_toml, vehicle_from_dict, vehicle_from_problem
 
@@ -48,14 +48,22 @@ class UnsupportedMediaType(ServiceError, status=415, slug="unsupported-media-typ
 
 
 def _parse_toml(raw: bytes) -> dict[str, Any]:
+    """The TOML body through the library's bounded reader (:func:`alloc._files.parse_toml`: the
+    size, depth and dotted-key caps a vehicle file has; ``tomllib`` alone spends time growing
+    with the square of a dotted key's parts, and lets RecursionError and ValueError out)."""
+    if len(raw) > MAX_TOML_BYTES:
+        reason = f"{len(raw):,} bytes, more than the {MAX_TOML_BYTES:,} a TOML vehicle file may have"
+        raise InvalidVehicleDocument(f"the TOML body is {reason}",
+                                     [{"loc": ["body"], "pointer": None, "reason": reason}])
     try:
-        return tomllib.loads(raw.decode("utf-8"))
+        return parse_toml(raw.decode("utf-8"), field="body", name="the body")
     except UnicodeDecodeError as exc:
         raise InvalidVehicleDocument(f"the TOML body is not UTF-8 text ({exc.reason} at byte {exc.start})",
                                      [{"loc": ["body"], "pointer": None, "reason": "not UTF-8"}]) from None
-    except tomllib.TOMLDecodeError as exc:
-        raise InvalidVehicleDocument(f"the body is not valid TOML ({exc})",
-                                     [{"loc": ["body"], "pointer": None, "reason": f"not valid TOML ({exc})"}]) from None
+    except ProblemError as exc:
+        reason = str(exc).removeprefix("body: ")
+        raise InvalidVehicleDocument(f"the body is refused: {reason}",
+                                     [{"loc": ["body"], "pointer": None, "reason": reason}]) from None
 
 
 class VehicleDocumentIn(RootModel[dict[str, Any] | bytes]):

@@ -204,3 +204,36 @@ def test_a_documents_method_defaults_reach_its_allocations(client, name, method,
     plain = alloc.allocate(vehicle.problem(), v, method)  # the library without the document's options
     assert bare.status_code == 200 and bare.json()["u"] == plain.u.tolist()
     assert not np.array_equal(plain.u, want.u), "the case must tell the defaults apart"
+
+
+def _hostile_toml(rng: random.Random) -> bytes:
+    """Seeded TOML bodies that cost tomllib super-linear time or escape it as a raw error."""
+    n = rng.choice([17, 200, 2_000, 8_000])
+    kind = rng.choice(["dotted", "header", "arrays", "tables", "digits", "big"])
+    if kind == "dotted":
+        text = "format = 'alloc-vehicle/1'\n" + ".".join(f"k{i}" for i in range(n)) + " = 1\n"
+    elif kind == "header":
+        text = "[" + ".".join("a" for _ in range(n)) + "]\nx = 1\n"
+    elif kind == "arrays":
+        text = "x = " + "[" * n + "]" * n + "\n"
+    elif kind == "tables":
+        text = "x = " + "{a = " * n + "1" + "}" * n + "\n"
+    elif kind == "digits":
+        text = "x = " + "9" * (4_301 + n) + "\n"
+    else:
+        text = "# " + "x" * (200_000 + n) + "\n"
+    return text.encode()
+
+
+def test_hostile_toml_bodies_are_422_quickly_never_5xx(client):
+    """Issue 39: the service's TOML reader is the library's bounded one (a 16 KB dotted key took 1.5 s)."""
+    import time
+
+    rng = random.Random(39)
+    for _ in range(40):
+        body = _hostile_toml(rng)
+        start = time.perf_counter()
+        r = client.post("/v1/vehicles", content=body, headers=TOML)
+        assert r.status_code in (413, 422), (r.status_code, r.text[:200])
+        assert r.headers["content-type"].startswith("application/problem+json")
+        assert time.perf_counter() - start < 2.0, body[:60]
