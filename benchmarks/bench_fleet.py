@@ -37,6 +37,8 @@ from typing import Any
 
 import numpy as np
 
+from service.config import Settings
+
 KEY = "fleet-bench-key"
 H = {"X-API-Key": KEY}
 #: the telemetry tests' small vehicle (m = 4, k = 3)
@@ -310,8 +312,11 @@ def main() -> None:
     parser.add_argument("--connect-seconds", type=float, default=20.0, help="time given to open the sockets")
     parser.add_argument("--floor-seconds", type=float, default=5.0)
     parser.add_argument("--probe-hz", type=float, default=10.0, help="events and health probes per second, each")
-    parser.add_argument("--max-websockets", type=int, default=512, help="ALLOC_MAX_WEBSOCKETS (per worker)")
-    parser.add_argument("--key-rate", type=float, default=100.0, help="ALLOC_WS_KEY_MESSAGES_PER_S (per worker)")
+    defaults = Settings()
+    parser.add_argument("--max-websockets", type=int, default=defaults.max_websockets,
+                        help="ALLOC_MAX_WEBSOCKETS (per worker; default: the service's)")
+    parser.add_argument("--key-rate", type=float, default=defaults.ws_key_messages_per_s,
+                        help="ALLOC_WS_KEY_MESSAGES_PER_S (per worker; default: the service's)")
     parser.add_argument("--generator-nice", type=int, default=10,
                         help="niceness of the load generators (they stand for other machines)")
     parser.add_argument("--server-nice", type=int, default=0, help="niceness increment of the server (negative: root)")

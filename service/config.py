@@ -41,7 +41,8 @@
                                     only for events and the other keyed priority writes,
                                     ``/v1/health`` and ``/v1/ready`` (default 32)
 ``ALLOC_MAX_WEBSOCKETS``            open WebSockets per worker process, counted apart from HTTP's
-                                    limit; an upgrade beyond gets 503 (default 512)
+                                    limit; an upgrade beyond gets 503 (default 1024: one worker
+                                    held 1,000 sockets at 50 Hz, about 85 KiB each)
 ``ALLOC_WS_KEY_MESSAGES_PER_S``     telemetry messages per second one API key's WebSockets may have
                                     processed together, per worker process; beyond, 429 unparsed,
                                     and refusals paced at the same rate (default 100)
@@ -134,7 +135,7 @@ class Settings(BaseSettings):
     reserved_connections: int = Field(default=64, ge=1)
     max_connections_per_client: int = Field(default=128, ge=1)
     reserved_requests: int = Field(default=32, ge=1, le=4096)
-    max_websockets: int = Field(default=512, ge=1, le=65536)
+    max_websockets: int = Field(default=1024, ge=1, le=65536)
     ws_key_messages_per_s: float = Field(default=100.0, gt=0, le=1e6)
     ws_key_bytes_per_s: int = Field(default=4 * MiB, ge=64 * 1024)
     idempotency_ttl_s: float = Field(default=86400.0, gt=0)

@@ -290,6 +290,25 @@ class PriorityGate:
             self._schedule_refill()
 
 
+#: the longest a liveness or readiness probe waits at the gate.  Behind a fleet's telemetry the gate
+#: is closed most of the time (each message is a priority request): probes waited up to 4.3 s in
+#: ``benchmarks/bench_fleet.py`` (2,000 sockets), and an orchestrator would restart a healthy
+#: service.  A probe is one small read; past this wait it goes in, at most one per probe request
+PROBE_WAIT_S = 0.02
+_PROBES = frozenset({"/v1/health", "/v1/ready"})
+
+
+async def _wait_turn(gate: PriorityGate, scope: Scope) -> None:
+    """The request's turn at the gate; a probe (GET of :data:`_PROBES`) waits at most :data:`PROBE_WAIT_S`."""
+    if scope.get("method") == "GET" and scope.get("path") in _PROBES:
+        try:
+            await asyncio.wait_for(gate.wait(), PROBE_WAIT_S)  # a cancelled turn is given away
+        except TimeoutError:
+            pass
+        return
+    await gate.wait()
+
+
 class PriorityMiddleware:
     """ASGI middleware: priority requests hold the gate while in flight, others wait for it."""
 
@@ -315,7 +334,7 @@ class PriorityMiddleware:
             if ticket is None and is_light(scope.get("headers", ())):
                 ticket = scope[LIGHT_KEY] = LightTicket(gate)  # type: ignore[literal-required]
             if ticket is None:
-                await gate.wait()
+                await _wait_turn(gate, scope)
                 timing.mark("gate")
                 await self.app(scope, receive, send)
                 return
@@ -325,7 +344,7 @@ class PriorityMiddleware:
                     ticket.done()  # its answer is computed: large bodies may be parsed again
                 await send(message)
             try:
-                await gate.wait()
+                await _wait_turn(gate, scope)
                 timing.mark("gate")
                 await self.app(scope, receive, send_then_close)
             finally:
