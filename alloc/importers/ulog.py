@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import sys
 import math
 import struct
 from dataclasses import dataclass
@@ -111,8 +112,7 @@ def read_ulog(path: str | Path) -> FlightLog:
     name = Path(path).name
     scan = scan_ulog(raw, name)
     try:
-        with contextlib.redirect_stdout(io.StringIO()):  # pyulog prints its warnings
-            log = ULog(io.BytesIO(raw), list(TOPICS))
+        log = ULog(io.BytesIO(raw), list(TOPICS))
     except (ULogException, ValueError, IndexError, KeyError, TypeError, OverflowError, struct.error,
             RecursionError) as exc:
         raise ProblemError(f"ulog: cannot read {name} as a ULog ({type(exc).__name__}: {exc})",
@@ -300,7 +300,10 @@ def replay_command() -> Any:
         chosen = None if vehicle is None else load_vehicle_option(vehicle)
         options = parse_options(option)
         try:  # the log and, without --vehicle, the vehicle of its parameters
-            flight = read_ulog(ulog)
+            # pyulog prints its warnings to stdout, where this command writes its JSON; the swap
+            # of sys.stdout is the command's (one thread), never the library's
+            with contextlib.redirect_stdout(sys.stderr):
+                flight = read_ulog(ulog)
             if chosen is None:
                 from .px4 import vehicle_from_params
 
