@@ -60,19 +60,30 @@ def demands(n: int, phase: float = 0.0) -> np.ndarray:
 
 
 def commands(p: alloc.Problem, n: int, excite: bool, seed: int, phase: float = 0.0,
-             method: str = "qp") -> tuple[np.ndarray, np.ndarray, list[float]]:
-    """Rate-limited allocations of the demands (and the excited commands); the factors tau."""
+             method: str = "qp") -> tuple[np.ndarray, np.ndarray, list[float], np.ndarray]:
+    """Rate-limited allocations of the demands, unexcited (``U0``) and excited (``U``); the factors
+    tau; and ``Ubase``, the unexcited allocation at the excited run's previous command (what
+    the excitation adds to each call, its cost).
+
+    The two are separate runs, each fed its own previous command: an unexcited allocation fed the
+    excited run's previous command inherits the excitation through the rate limits, and its
+    regressor looks far better conditioned than a truly unexcited flight's."""
     a = alloc.make_allocator(p, method)
     ex = NullSpaceExcitation(a, DT, amplitude=2.0, seed=seed) if excite else None
-    U0, U, taus, u_prev = [], [], [], p.up.copy()
+    U0, U, Ubase, taus, u_prev, u_prev0 = [], [], [], [], p.up.copy(), p.up.copy()
     for v in demands(n, phase):
-        r0 = a(v, u_prev=u_prev, dt=DT)
-        r = ex(v, u_prev=u_prev, dt=DT) if ex is not None else r0
+        r0 = a(v, u_prev=u_prev0, dt=DT)
+        if ex is not None:
+            r = ex(v, u_prev=u_prev, dt=DT)
+            Ubase.append(a(v, u_prev=u_prev, dt=DT).u)
+        else:
+            r = r0
+            Ubase.append(r0.u)
         U0.append(r0.u)
         U.append(r.u)
         taus.append(ex.last_scale if ex is not None else 0.0)
-        u_prev = r.u
-    return np.array(U0), np.array(U), taus
+        u_prev, u_prev0 = r.u, r0.u
+    return np.array(U0), np.array(U), taus, np.array(Ubase)
 
 
 def fail(p: alloc.Problem, U: np.ndarray, kind: str, j: int, i0: int, rng: np.random.Generator) -> tuple:
@@ -111,9 +122,9 @@ def conditioning(p: alloc.Problem) -> None:
     print("|---|---|---|---|---|")
     scale = (p.umax - p.umin) / 2
     for method in ("qp", "wls", "pinv"):
-        U0, U, taus = commands(p, 2000, True, 1, method=method)
-        act = float(np.sqrt(((U - U0) ** 2).mean()))
-        dBu = float(np.abs((U - U0) @ p.B.T).max())
+        U0, U, taus, Ubase = commands(p, 2000, True, 1, method=method)
+        act = float(np.sqrt(((U - Ubase) ** 2).mean()))
+        dBu = float(np.abs((U - Ubase) @ p.B.T).max())
         print(f"| {method} | {regressor_condition(U0, scale):.2e} | - | - | - |")
         print(f"| {method} + null-space multisine 2 deg | {regressor_condition(U, scale):.2e} | {act:.2f} | "
               f"{dBu:.1e} | {np.median(taus):.2f} |")
@@ -137,7 +148,7 @@ def column_error(p: alloc.Problem, seed: int) -> None:
     b = p.B[:, j]
     for excite in (False, True):
         rng = np.random.default_rng(seed)
-        _, U, _ = commands(p, n, excite, seed)
+        _, U, _, _ = commands(p, n, excite, seed)
         D, f = U.copy(), np.ones(n)
         f[i0:] = 0.5
         Y = responses(p, D, f, j, SEED_NOISE, rng)
@@ -237,7 +248,7 @@ def false_alarms(p: alloc.Problem, hours: float, seed: int) -> None:
 
 def timing(p: alloc.Problem, seed: int) -> None:
     rng = np.random.default_rng(seed)
-    _, U, _ = commands(p, 3000, True, seed)
+    _, U, _, _ = commands(p, 3000, True, seed)
     Y = U @ p.B.T + rng.normal(size=(len(U), p.k)) * SEED_NOISE
     rls = EffectivenessRLS(p.B, noise_std=SEED_NOISE)
     fde = FrequencyDomainEstimator(p.k, p.m, DT, band=(0.2, 2.0), spacing=0.1, window=6.0, noise_std=SEED_NOISE)
