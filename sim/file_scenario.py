@@ -26,6 +26,7 @@ from alloc.vehicle_file.simulation import Command, FailureSpec, Simulation
 from sim.blocks import ActuatorFailure, ActuatorSpec, HedgeTerm, sum_of_sines
 from sim.model import Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle
 from sim.scenarios.mimo import MimoScenario
+from sim.world import flight_of_model
 
 __all__ = ["file_scenario", "actuator_of", "command_signal", "filtered_steps"]
 
@@ -115,6 +116,7 @@ def file_scenario(fv: FileVehicle, *, static_bandwidth: float = 1000.0) -> MimoS
             B_alloc=np.array(alloc.B, dtype=float), Bk_seed=np.array(alloc.static, dtype=float),
             demand_map=np.eye(k) if alloc.demand_map is None else np.array(alloc.demand_map, dtype=float),
             Wu=_array(alloc.weights), names=effectors,
+            flight=flight_of_model(A, tuple(model.states), dict(zip(model.outputs, model.units or (), strict=False))),
         )
 
     smc = sim.smc

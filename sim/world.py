@@ -420,3 +420,55 @@ def gust_matrix(A: np.ndarray, flight: FlightCondition) -> np.ndarray:
     for row, c, gain in flight.hover:
         E[row, GUST_COMPONENTS.index(c)] += gain
     return E
+
+
+# ------------------------------------------------------------------------- vehicle files' air
+#: a hovering multirotor's linear model has no aerodynamic damping to carry a gust (hexa-x: A's
+#: rate and heave columns are zero), so the gust enters through stated damping (ours, docs/world.md):
+#: heave ``w' += HOVER_HEAVE_DAMPING (w_g)`` and ``p' += HOVER_RATE_DAMPING p_g``, ``q'`` likewise.
+#: 0.7 1/s is the momentum-theory heave damping ``Z_w ~ -0.37 g / v_h`` of a hovering rotor with
+#: v_h ~ 5 m/s (2 kg on six 10-inch rotors); 2.2 1/s is what that gives through hexa-x's rotor
+#: arms, ``(Z_w m / n) sum(y_j^2) / I_xx`` (0.75 m^2, 0.08 kg m^2).  Yaw: none (rotor drag torque).
+HOVER_HEAVE_DAMPING, HOVER_RATE_DAMPING = 0.7, 2.2
+#: ft: a hovering vehicle's altitude (ours: 50 ft, low-altitude turbulence) and span (the 1 m rotor circle)
+HOVER_ALTITUDE, HOVER_SPAN = 50.0, 1.0 / FEET
+_RATE_UNITS = {"rad/s": 1.0, "deg/s": 180.0 / math.pi}
+_SPEED_UNITS = {"m/s": FEET, "ft/s": 1.0}
+
+
+def flight_of_model(A: np.ndarray, states: tuple[str, ...], units: dict[str, str]) -> FlightCondition | None:
+    """The flight condition of a vehicle file's model, or None when there is none to state.
+
+    A model whose ``A`` is a seed scenario's (ICE, HARV lat-dir, HARV lon) flies at that
+    scenario's condition; a hover model (states among attitudes, ``p q r`` and ``w``, no
+    aerodynamic damping) gets the hover mapping (:data:`HOVER_HEAVE_DAMPING`); ``units`` are the
+    states' (where a state is also an output of the same name).
+    """
+    from sim.scenarios import harv_latdir, harv_lon, ice
+
+    A = np.asarray(A, dtype=float)
+    for module in (ice, harv_latdir, harv_lon):
+        if A.shape == module.A.shape and np.allclose(A, module.A, rtol=1e-9, atol=0.0):
+            return module.flight_condition()
+    names = {n: i for i, n in enumerate(states)}
+    rates = [(names[c], c) for c in "pqr" if c in names]
+    if {"u", "v", "alpha", "beta"} & set(names) or not rates:
+        return None
+    hover: list[tuple[int, str, float]] = []
+    # the dynamic rows (rates, heave): zero in the air-relative columns = no aerodynamic damping
+    dynamic = [i for i, _ in rates] + ([names["w"]] if "w" in names else [])
+    if np.any(A[np.ix_(dynamic, dynamic)]):
+        return None
+    for i, c in rates:
+        scale = _RATE_UNITS.get(units.get(c, ""), None)
+        if scale is None:
+            return None
+        if c != "r":
+            hover.append((i, c, HOVER_RATE_DAMPING * scale))
+    if "w" in names:
+        scale = _SPEED_UNITS.get(units.get("w", ""), None)
+        if scale is None:
+            return None
+        hover.append((names["w"], "w", HOVER_HEAVE_DAMPING * scale))
+    return FlightCondition(altitude=HOVER_ALTITUDE, speed=0.0, span=HOVER_SPAN, gust_states=(), hover=tuple(hover),
+                           source="ours: hover, the gust through stated rotor damping (sim.world HOVER_*)")
