@@ -187,8 +187,8 @@ def simulate(
         if detector is not None and detector.due(step + 1) and step < n_steps:
             # the sensors measure the plant's physics as it is now (plant._cur: the failed model after injection)
             # and the gust's state derivative where there is turbulence (the sensors measure it too)
-            for found in detector.sample(step + 1, x, positions, plant._cur.A, plant._cur.B,
-                                         disturbance=None if disturbance is None else disturbance[step + 1]):
+            gust_now = {} if disturbance is None else {"disturbance": disturbance[step + 1]}
+            for found in detector.sample(step + 1, x, positions, plant._cur.A, plant._cur.B, **gust_now):
                 at = step + 1 + detector.delay_steps
                 pending.append((at, detector.health))
                 detections.append(detection_record(found, -(-at // frame) * frame * dt,

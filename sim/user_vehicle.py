@@ -38,10 +38,9 @@ import numpy as np
 
 from alloc.exceptions import ProblemError
 from sim.autodesign import AutoDesign, auto_design, design_options, weighted_pinv
-from sim.file_scenario import actuator_of, file_scenario
+from sim.file_scenario import actuator_of, file_scenario, flight_of_model
 from sim.blocks import DEFAULT_DT, SUM_OF_SINES_TABLE_4_2, ActuatorFailure, sum_of_sines
 from sim.loop import Failure, LoopSpec, Vehicle, simulate
-from sim.world import flight_of_model
 from sim.result import SimResult
 from sim.settings import RunSettings
 

@@ -58,7 +58,8 @@ from sim.model import FlightCondition, Vehicle
 
 __all__ = ["NOISE_FAMILIES", "NoiseTerm", "parse_noise", "TURBULENCE_LEVELS", "MAX_MODEL_ERROR",
            "model_error_factors", "scaled_actuator", "measurement_noise", "quantisation_steps", "Dryden",
-           "dryden", "gust_matrix", "gust_series", "one_minus_cosine", "GUST_COMPONENTS", "FEET"]
+           "dryden", "gust_matrix", "gust_series", "one_minus_cosine", "continuous_covariance", "GUST_COMPONENTS", "FEET",
+           "HOVER_HEAVE_DAMPING", "HOVER_RATE_DAMPING", "HOVER_ALTITUDE", "HOVER_SPAN", "RATE_UNITS", "SPEED_UNITS"]
 
 # independent streams of the run's seed (any fixed integers distinct from each other)
 _TAG_MODEL, _TAG_NOISE, _TAG_TURBULENCE = 0x3D0E, 0x401E, 0x7B0C
@@ -432,43 +433,6 @@ def gust_matrix(A: np.ndarray, flight: FlightCondition) -> np.ndarray:
 HOVER_HEAVE_DAMPING, HOVER_RATE_DAMPING = 0.7, 2.2
 #: ft: a hovering vehicle's altitude (ours: 50 ft, low-altitude turbulence) and span (the 1 m rotor circle)
 HOVER_ALTITUDE, HOVER_SPAN = 50.0, 1.0 / FEET
-_RATE_UNITS = {"rad/s": 1.0, "deg/s": 180.0 / math.pi}
-_SPEED_UNITS = {"m/s": FEET, "ft/s": 1.0}
-
-
-def flight_of_model(A: np.ndarray, states: tuple[str, ...], units: dict[str, str]) -> FlightCondition | None:
-    """The flight condition of a vehicle file's model, or None when there is none to state.
-
-    A model whose ``A`` is a seed scenario's (ICE, HARV lat-dir, HARV lon) flies at that
-    scenario's condition; a hover model (states among attitudes, ``p q r`` and ``w``, no
-    aerodynamic damping) gets the hover mapping (:data:`HOVER_HEAVE_DAMPING`); ``units`` are the
-    states' (where a state is also an output of the same name).
-    """
-    from sim.scenarios import harv_latdir, harv_lon, ice
-
-    A = np.asarray(A, dtype=float)
-    for module in (ice, harv_latdir, harv_lon):
-        if A.shape == module.A.shape and np.allclose(A, module.A, rtol=1e-9, atol=0.0):
-            return module.flight_condition()
-    names = {n: i for i, n in enumerate(states)}
-    rates = [(names[c], c) for c in "pqr" if c in names]
-    if {"u", "v", "alpha", "beta"} & set(names) or not rates:
-        return None
-    hover: list[tuple[int, str, float]] = []
-    # the dynamic rows (rates, heave): zero in the air-relative columns = no aerodynamic damping
-    dynamic = [i for i, _ in rates] + ([names["w"]] if "w" in names else [])
-    if np.any(A[np.ix_(dynamic, dynamic)]):
-        return None
-    for i, c in rates:
-        scale = _RATE_UNITS.get(units.get(c, ""), None)
-        if scale is None:
-            return None
-        if c != "r":
-            hover.append((i, c, HOVER_RATE_DAMPING * scale))
-    if "w" in names:
-        scale = _SPEED_UNITS.get(units.get("w", ""), None)
-        if scale is None:
-            return None
-        hover.append((names["w"], "w", HOVER_HEAVE_DAMPING * scale))
-    return FlightCondition(altitude=HOVER_ALTITUDE, speed=0.0, span=HOVER_SPAN, gust_states=(), hover=tuple(hover),
-                           source="ours: hover, the gust through stated rotor damping (sim.world HOVER_*)")
+#: a rate state's units per rad/s, a speed state's per ft/s
+RATE_UNITS = {"rad/s": 1.0, "deg/s": 180.0 / math.pi}
+SPEED_UNITS = {"m/s": FEET, "ft/s": 1.0}

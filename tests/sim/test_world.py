@@ -325,3 +325,16 @@ def test_help_explains_each_world_flag_with_its_source():
     text = " ".join(res.stdout.split())
     for words in ("--model-error", "--noise-model", "--turbulence", "MIL-F-8785C", "Grigoriu"):
         assert words in text, words
+
+
+def test_a_detected_run_in_turbulence_hands_the_sensors_the_gust(monkeypatch):
+    seen = []
+    original = InLoopDetector.sample
+
+    def spy(self, step, x, surfaces, A_now, B_now, **kw):
+        seen.append(kw.get("disturbance"))
+        return original(self, step, x, surfaces, A_now, B_now, **kw)
+
+    monkeypatch.setattr(InLoopDetector, "sample", spy)
+    harv_latdir.run(duration=0.5, health="detected", turbulence="moderate")
+    assert seen and all(d is not None and d.shape == (3,) for d in seen) and any(np.any(d) for d in seen)
