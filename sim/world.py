@@ -54,7 +54,7 @@ from scipy import linalg, signal, stats
 
 from alloc.exceptions import AllocError
 from sim.blocks import ActuatorSpec, band_limited_noise
-from sim.model import FlightCondition, Vehicle
+from sim.model import FlightCondition
 
 __all__ = ["NOISE_FAMILIES", "NoiseTerm", "parse_noise", "TURBULENCE_LEVELS", "MAX_MODEL_ERROR",
            "model_error_factors", "scaled_actuator", "measurement_noise", "quantisation_steps", "Dryden",
