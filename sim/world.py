@@ -166,8 +166,10 @@ def measurement_noise(terms: tuple[NoiseTerm, ...], n: int, dt: float, gains: np
     """Noise (n, len(gains)) of the non-default families and what was drawn (JSON-ready).
 
     ``gains``: the seed's gains times ``noise_scale``.  The base process is the seed's band-limited
-    Gaussian one (drawn from ``default_rng([seed, tag])``, not the seed's own stream) or, with
-    ``coloured``, the Gauss-Markov-driven one; ``student-t`` maps its marginals, ``bias`` adds.
+    Gaussian one, drawn from the run's own noise stream (``default_rng(seed)``: the very sample a
+    ``gaussian`` run gets, so ``student-t`` maps that sample path's marginals and ``bias`` adds to
+    it) or, with ``coloured``, the Gauss-Markov-driven one; ``coloured`` and ``bias`` draw from the
+    world's stream ``default_rng([seed, tag])``.
     """
     rng = np.random.default_rng([seed, _TAG_NOISE])
     gains = np.asarray(gains, dtype=float)
@@ -179,7 +181,7 @@ def measurement_noise(terms: tuple[NoiseTerm, ...], n: int, dt: float, gains: np
         base = _coloured_noise(n, dt, coloured.parameter, gains.size, rng) * g
         drawn["coloured_gain"] = g
     else:
-        base = band_limited_noise(n, dt, np.ones(gains.size), rng)
+        base = band_limited_noise(n, dt, np.ones(gains.size), np.random.default_rng(seed))
     if t_term is not None:
         nu = t_term.parameter
         # Gaussian copula: exact Student-t marginal of the same std (Grigoriu 1984)

@@ -161,6 +161,14 @@ def test_coloured_driver_has_its_correlation_time():
     assert abs(estimate / tau - 1) < 0.15, estimate
 
 
+def test_the_gaussian_base_is_the_default_run_s_own_noise():
+    gains = np.array([0.1414, 0.0707])
+    n = 4000
+    default = engine.band_limited_noise(n, DT, gains, np.random.default_rng(3))
+    base, _ = world.measurement_noise(world.parse_noise("bias:0"), n, DT, gains, 3)
+    np.testing.assert_array_equal(base, default)
+
+
 def test_bias_is_a_constant_plus_a_random_walk_of_the_stated_rate():
     s0 = world.seed_noise_std(DT)
     n = int(round(120.0 / DT))
