@@ -50,6 +50,10 @@ _SETTING_SOURCES = {
     "failure": "seed sections 4.6, 4.7",
     "failure_time": "seed sections 4.6, 4.7",
     "duration": "seed sections 4.6, 4.7",
+    # the world's defaults are the seed's: its plant is its model, its noise Gaussian, its air still
+    "model_error": "seed sections 4.5-4.7 (the simulated plant is the design model)",
+    "noise_model": "seed sections 4.6, 4.7 (band-limited Gaussian noise)",
+    "turbulence": "seed sections 4.5-4.7 (no turbulence)",
 }
 
 

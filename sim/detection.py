@@ -221,14 +221,19 @@ class InLoopDetector:
         return step >= self.every and step % self.every == 0
 
     def sample(self, step: int, x: np.ndarray, surfaces: np.ndarray, A_now: np.ndarray,
-               B_now: np.ndarray) -> list[Detection]:
+               B_now: np.ndarray, *, disturbance: np.ndarray | None = None) -> list[Detection]:
         """One detector sample at integration step ``step`` (state ``x`` and surface positions there).
 
         ``A_now``, ``B_now`` are the plant's physics at that instant (the sensors measure their
-        effect: ``z' = C (A_now x + B_now u)``); the response is that less the nominal free
-        response ``C A x``, plus the differenced sensor noise.
+        effect: ``z' = C (A_now x + B_now u + d)``); the response is that less the nominal free
+        response ``C A x``, plus the differenced sensor noise.  ``disturbance`` is ``d``, the
+        state derivative the world adds at that step (turbulence: ``E g``, :func:`sim.world.gust_matrix`);
+        None: none.  The detector is not told of it: it is in the measurement, as a gust would be.
         """
-        y = self.C @ ((A_now - self.A) @ x + B_now @ surfaces)
+        xdot = (A_now - self.A) @ x + B_now @ surfaces
+        if disturbance is not None:
+            xdot = xdot + disturbance
+        y = self.C @ xdot
         y = y + (self.noise[step] - self.noise[step - self.every]) / self.sample_time
         return self.detector.update(self.pos, y, time=step * self.dt)
 

@@ -55,7 +55,9 @@ from sim.injection import inject_failure
 from sim.model import TF, Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle
 from sim.packed import DIVERGED, N_MISC, FloatSlot, IntSlot, Misc, Packed, advance, observe, record_columns
 from sim.result import SimResult
-from sim.settings import LoopSpec, anti_windup_on, boundary_layer_at
+from sim.settings import LoopSpec, SettingError, anti_windup_on, boundary_layer_at
+from sim.world import (GUST_COMPONENTS, GUST_RISE, GUST_SIGMAS, GUST_TIME, dryden, gust_matrix, gust_series,
+                       measurement_noise, model_error_factors, quantisation_steps, scaled_actuator)
 
 __all__ = ["simulate"]
 
@@ -101,14 +103,17 @@ def simulate(
     m = len(vehicle.actuators)
     n_steps = int(round(spec.duration / dt))
     t_grid = np.arange(n_steps + 1) * dt
-    inputs = _inputs(spec, t_grid)
-    plant = ScheduledPlant(
-        vehicle.A, vehicle.B, vehicle.C, vehicle.D, dt,
-        A_fail=None if failure is None else failure.A,
-        B_fail=None if failure is None else failure.B,
-        D_fail=None if failure is None else failure.D,
-    )
-    bank = ActuatorBank(vehicle.actuators, dt)
+    # Failure step: the first with t >= t_fail - dt/2 (never: n_steps + 1).
+    fail_step = n_steps + 1
+    if failure is not None:
+        due = np.nonzero(t_grid >= failure.time - 0.5 * dt)[0]
+        fail_step = int(due[0]) if due.size else n_steps + 1
+    world: dict[str, Any] = {}
+    inputs = _inputs(spec, t_grid, world)
+    plant, bank = _world_plant(spec, world)
+    gust, disturbance = _turbulence(spec, t_grid, fail_step, world)
+    if gust is not None:
+        inputs = np.hstack([inputs, gust])
     delay = DelayLine(m, dt, 0.0)
     alloc_options = dict(rate_aware=spec.rate_aware, preferred=spec.preferred, frame_period=tframe,
                          rate_horizon=spec.rate_horizon, rate_window=spec.rate_window,
@@ -116,12 +121,8 @@ def simulate(
     method_options = spec.method_options or {}
     allocator: LoopAllocator = build_allocator(vehicle, method, method_options, **alloc_options)
     position_feedback = spec.u_prev_source == "position"
-    # Failure step: the first with t >= t_fail - dt/2 (never: n_steps + 1).
-    fail_step = n_steps + 1
-    if failure is not None:
-        due = np.nonzero(t_grid >= failure.time - 0.5 * dt)[0]
-        fail_step = int(due[0]) if due.size else n_steps + 1
-    packed = _pack(spec, plant, bank, delay, frame, n_steps, fail_step)
+    packed = _pack(spec, plant, bank, delay, frame, n_steps, fail_step, quantisation=world.get("quantisation"),
+                   gust_column=0 if gust is None else inputs.shape[1] - gust.shape[1])
     # The bank's position and rate live in the packed buffer (failures write there).
     bank.pos, bank.rate = packed.view(FloatSlot.POS), packed.view(FloatSlot.RATE)
     F, I = packed.F, packed.I
@@ -185,7 +186,9 @@ def simulate(
             status = observe(step + 1, F, I, inputs)
         if detector is not None and detector.due(step + 1) and step < n_steps:
             # the sensors measure the plant's physics as it is now (plant._cur: the failed model after injection)
-            for found in detector.sample(step + 1, x, positions, plant._cur.A, plant._cur.B):
+            # and the gust's state derivative where there is turbulence (the sensors measure it too)
+            gust_now = {} if disturbance is None else {"disturbance": disturbance[step + 1]}
+            for found in detector.sample(step + 1, x, positions, plant._cur.A, plant._cur.B, **gust_now):
                 at = step + 1 + detector.delay_steps
                 pending.append((at, detector.health))
                 detections.append(detection_record(found, -(-at // frame) * frame * dt,
@@ -198,6 +201,8 @@ def simulate(
     result.allocator_t = np.arange(n_calls) * tframe
     result.allocator_status = call_status[:n_calls].copy()
     result.settings = {**spec.record(), "pilots": [p.describe() for p in pilots]}
+    if spec.worldly:  # the drawn world; absent at the defaults (the record as it always was)
+        result.settings["world"] = _jsonable_world(world)
     if detector is not None:
         result.detections = detections
     return result
@@ -221,18 +226,32 @@ def _due(pending: list[tuple[int, dict[str, Any]]], step: int) -> dict[str, Any]
     return belief
 
 
-def _inputs(spec: LoopSpec, t_grid: np.ndarray) -> np.ndarray:
+def _inputs(spec: LoopSpec, t_grid: np.ndarray, world: dict[str, Any] | None = None) -> np.ndarray:
     """Per integration step: direct commands (k), measurement noise (ny), pilots' attitude commands.
 
     Noise is on the measured outputs only, precomputed (vectorised filtering) from ``spec.seed``,
-    the seed's gains times ``spec.noise_scale``.
+    the seed's gains times ``spec.noise_scale``; a ``noise_model`` other than ``gaussian`` draws
+    its families by :func:`sim.world.measurement_noise` and records them in ``world``.
     """
     vehicle, n = spec.vehicle, t_grid.size
     noise = np.zeros((n, vehicle.C.shape[0]))
-    if spec.noise:
+    terms = spec.noise_terms()
+    measured = np.asarray(vehicle.measured)
+    gains = vehicle.noise_gains * spec.noise_scale
+    if spec.noise and all(t.family == "gaussian" for t in terms):
         rng = np.random.default_rng(spec.seed)
-        noise[:, np.asarray(vehicle.measured)] = band_limited_noise(n, spec.dt, vehicle.noise_gains * spec.noise_scale,
-                                                                    rng)
+        noise[:, measured] = band_limited_noise(n, spec.dt, gains, rng)
+    elif spec.noise:
+        noise[:, measured], drawn = measurement_noise(terms, n, spec.dt, gains, spec.seed)
+        steps = np.zeros(vehicle.C.shape[0])
+        steps[measured] = quantisation_steps(terms, spec.dt, gains)
+        if world is not None:
+            world["noise"] = {"families": [t.family for t in terms], "parameters": [t.parameter for t in terms],
+                              "output_std": dict(zip([vehicle.output_names[i] for i in measured],
+                                                     (drawn["unit_std"] * np.abs(gains)).tolist(), strict=True)),
+                              **drawn, "quantisation": steps.tolist()}
+            if np.any(steps):
+                world["quantisation"] = steps
     return np.hstack([
         np.asarray(spec.commands, dtype=float)[:n],
         noise,
@@ -240,11 +259,77 @@ def _inputs(spec: LoopSpec, t_grid: np.ndarray) -> np.ndarray:
     ])
 
 
+def _world_plant(spec: LoopSpec, world: dict[str, Any]) -> tuple[ScheduledPlant, ActuatorBank]:
+    """The plant and the actuator bank as the world has them (``model_error``: scaled, the draws in ``world``).
+
+    The nominal model (``spec.vehicle``) is left to the controller, the allocator and the detector.
+    """
+    vehicle, failure, dt = spec.vehicle, spec.failure, spec.dt
+    A_fail = None if failure is None else failure.A
+    B_fail = None if failure is None else failure.B
+    D_fail = None if failure is None else failure.D
+    if not spec.model_error:
+        plant = ScheduledPlant(vehicle.A, vehicle.B, vehicle.C, vehicle.D, dt, A_fail=A_fail, B_fail=B_fail,
+                               D_fail=D_fail)
+        return plant, ActuatorBank(vehicle.actuators, dt)
+    s, w = model_error_factors(spec.model_error, len(vehicle.actuators), spec.seed)
+
+    def scaled(M: np.ndarray | None) -> np.ndarray | None:  # column j is effector j's
+        return None if M is None else np.asarray(M, dtype=float) * s
+
+    plant = ScheduledPlant(vehicle.A, scaled(vehicle.B), vehicle.C, scaled(vehicle.D), dt, A_fail=A_fail,
+                           B_fail=scaled(B_fail), D_fail=scaled(D_fail))
+    world["model_error"] = {"error": spec.model_error, "effectors": vehicle.effector_names,
+                            "effectiveness": s.tolist(), "bandwidth": w.tolist()}
+    return plant, ActuatorBank([scaled_actuator(a, f) for a, f in zip(vehicle.actuators, w, strict=True)], dt)
+
+
+def _turbulence(spec: LoopSpec, t_grid: np.ndarray, fail_step: int, world: dict[str, Any]
+                ) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """``(per-step plant-state increments (n, nx), state-derivative disturbance (n, nx))``, or Nones.
+
+    The disturbance is ``E g`` (:func:`sim.world.gust_matrix`) of the Dryden gusts ``g``; it is held
+    over a step, so its exact increment is ``Gamma E g`` with ``Gamma = int_0^dt e^(A s) ds``, the
+    same ZOH as ``u``.  At the failure step both switch to the failed ``A``.
+    """
+    if spec.turbulence == "none":
+        return None, None
+    vehicle, failure, dt = spec.vehicle, spec.failure, spec.dt
+    flight = vehicle.flight
+    if flight is None:
+        raise SettingError(f"turbulence: vehicle {vehicle.name!r} states no flight condition and no air-relative "
+                           "states (sim.model.FlightCondition); fly it with --turbulence none", field="turbulence")
+    d = dryden(spec.turbulence, flight)
+    g = gust_series(d, t_grid.size, dt, spec.seed)
+    nx = vehicle.A.shape[0]
+    disturbance = np.empty((t_grid.size, nx))
+    increment = np.empty((t_grid.size, nx))
+    A_after = vehicle.A if failure is None or failure.A is None else failure.A
+    for A, rows in ((vehicle.A, slice(0, fail_step)), (A_after, slice(fail_step, None))):
+        E = gust_matrix(A, flight)
+        Gamma = DiscreteLTI(A, np.eye(nx), np.zeros((1, nx)), np.zeros((1, nx)), dt).Bd
+        disturbance[rows] = g[rows] @ E.T
+        increment[rows] = disturbance[rows] @ Gamma.T
+    world["turbulence"] = {**d.record(), "flight_source": flight.source, "gust_time": GUST_TIME,
+                           "gust_amplitude": GUST_SIGMAS * d.sigma_w, "gust_half_length": d.speed * GUST_RISE,
+                           "gust_matrix": gust_matrix(vehicle.A, flight).tolist(),
+                           "components": list(GUST_COMPONENTS), "std": g.std(axis=0).tolist()}
+    return increment, disturbance
+
+
+def _jsonable_world(world: dict[str, Any]) -> dict[str, Any]:
+    return {k: v for k, v in world.items() if k != "quantisation"}
+
+
 def _pack(
     spec: LoopSpec, plant: ScheduledPlant, bank: ActuatorBank, delay: DelayLine, frame: int, n_steps: int,
-    fail_step: int,
+    fail_step: int, *, quantisation: np.ndarray | None = None, gust_column: int = 0,
 ) -> Packed:
-    """The packed buffers of the run: plant, controller, actuators, delay ring, pilots, signals, constants."""
+    """The packed buffers of the run: plant, controller, actuators, delay ring, pilots, signals, constants.
+
+    ``quantisation``: per output, the step of the quantised sensor (None: none); ``gust_column``:
+    the first ``inputs`` column of the gust's per-step state increments (0: no turbulence).
+    """
     vehicle, controller, failure, pilots, dt = spec.vehicle, spec.controller, spec.failure, spec.pilots, spec.dt
     tframe = frame * dt
     k, m, ny = len(vehicle.controlled), len(vehicle.actuators), vehicle.C.shape[0]
@@ -264,6 +349,8 @@ def _pack(
     misc[Misc.FRAME] = frame
     misc[Misc.PFILTER] = any(p.filtered for p in pilots)
     misc[Misc.ANTI_WINDUP] = smc and anti_windup_on(spec.anti_windup, tframe)
+    misc[Misc.QUANT] = quantisation is not None
+    misc[Misc.GUST] = gust_column
     nx, nc, nk = vehicle.A.shape[0], controller_slots[FloatSlot.ADC].shape[0], controller_slots[FloatSlot.AK].shape[0]
     return Packed(
         floats={
@@ -278,6 +365,7 @@ def _pack(
             FloatSlot.Y: np.zeros(ny), FloatSlot.Z: np.zeros(ny), FloatSlot.CMD: np.zeros(k), FloatSlot.R: np.zeros(k),
             FloatSlot.E: np.zeros(k), FloatSlot.UC: np.zeros(k), FloatSlot.V: np.zeros(k), FloatSlot.UDEL: np.zeros(m), FloatSlot.O: np.zeros(3 * k),
             FloatSlot.SCRATCH: np.zeros((2, max(nx, ny, nc, nk, k, *pilot_floats[FloatSlot.PAF].shape, len(pilots)))),
+            FloatSlot.QSTEP: np.zeros(ny) if quantisation is None else quantisation,
         },
         ints={
             IntSlot.FIRST: bank.first, IntSlot.JAMMED: bank.jammed, IntSlot.HARDOVER: bank.hardover,

@@ -24,10 +24,12 @@ from alloc.exceptions import ProblemError
 from alloc.vehicle_file import Vehicle as FileVehicle
 from alloc.vehicle_file.simulation import Command, FailureSpec, Simulation
 from sim.blocks import ActuatorFailure, ActuatorSpec, HedgeTerm, sum_of_sines
-from sim.model import Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle
+from sim.model import Failure, FlightCondition, LoopShapedDesign, Pilot, SMCDesign, Vehicle
 from sim.scenarios.mimo import MimoScenario
+from sim import world
+from sim.scenarios import harv_latdir, harv_lon, ice
 
-__all__ = ["file_scenario", "actuator_of", "command_signal", "filtered_steps"]
+__all__ = ["file_scenario", "actuator_of", "command_signal", "filtered_steps", "flight_of_model"]
 
 
 def filtered_steps(t: np.ndarray, times: tuple[float, ...], levels: tuple[float, ...],
@@ -115,6 +117,7 @@ def file_scenario(fv: FileVehicle, *, static_bandwidth: float = 1000.0) -> MimoS
             B_alloc=np.array(alloc.B, dtype=float), Bk_seed=np.array(alloc.static, dtype=float),
             demand_map=np.eye(k) if alloc.demand_map is None else np.array(alloc.demand_map, dtype=float),
             Wu=_array(alloc.weights), names=effectors,
+            flight=flight_of_model(A, tuple(model.states), dict(zip(model.outputs, model.units or (), strict=False))),
         )
 
     smc = sim.smc
@@ -178,3 +181,39 @@ def file_scenario(fv: FileVehicle, *, static_bandwidth: float = 1000.0) -> MimoS
         default_method=sim.method, design_options=("observer", "hedge", *(f"{g}_hedge" for g in groups)),
         input_options=input_options, catalogue_vehicle=fv,  # type: ignore[arg-type]  # its [methods] defaults
     )
+
+
+def flight_of_model(A: np.ndarray, states: tuple[str, ...], units: dict[str, str]) -> FlightCondition | None:
+    """The flight condition of a vehicle file's model, or None when there is none to state.
+
+    A model whose ``A`` is a seed scenario's (ICE, HARV lat-dir, HARV lon) flies at that
+    scenario's condition; a hover model (states among attitudes, ``p q r`` and ``w``, no
+    aerodynamic damping) gets the hover mapping (:data:`sim.world.HOVER_HEAVE_DAMPING`); ``units`` are the
+    states' (where a state is also an output of the same name).
+    """
+    A = np.asarray(A, dtype=float)
+    for module in (ice, harv_latdir, harv_lon):
+        if A.shape == module.A.shape and np.allclose(A, module.A, rtol=1e-9, atol=0.0):
+            return module.flight_condition()
+    names = {n: i for i, n in enumerate(states)}
+    rates = [(names[c], c) for c in "pqr" if c in names]
+    if {"u", "v", "alpha", "beta"} & set(names) or not rates:
+        return None
+    hover: list[tuple[int, str, float]] = []
+    # the dynamic rows (rates, heave): zero in the air-relative columns = no aerodynamic damping
+    dynamic = [i for i, _ in rates] + ([names["w"]] if "w" in names else [])
+    if np.any(A[np.ix_(dynamic, dynamic)]):
+        return None
+    for i, c in rates:
+        scale = world.RATE_UNITS.get(units.get(c, ""), None)
+        if scale is None:
+            return None
+        if c != "r":
+            hover.append((i, c, world.HOVER_RATE_DAMPING * scale))
+    if "w" in names:
+        scale = world.SPEED_UNITS.get(units.get("w", ""), None)
+        if scale is None:
+            return None
+        hover.append((names["w"], "w", world.HOVER_HEAVE_DAMPING * scale))
+    return FlightCondition(altitude=world.HOVER_ALTITUDE, speed=0.0, span=world.HOVER_SPAN, gust_states=(), hover=tuple(hover),
+                           source="ours: hover, the gust through stated rotor damping (sim.world HOVER_*)")

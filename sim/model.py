@@ -14,10 +14,46 @@ import numpy as np
 
 from sim.blocks import ActuatorFailure, ActuatorSpec, HedgeTerm
 
-__all__ = ["TF", "Vehicle", "Failure", "SMCDesign", "LoopShapedDesign", "Pilot"]
+__all__ = ["TF", "FlightCondition", "Vehicle", "Failure", "SMCDesign", "LoopShapedDesign", "Pilot"]
 
 #: A transfer function ``(numerator, denominator)``, coefficients in descending powers of ``s``.
 TF = tuple[Sequence[float], Sequence[float]]
+
+
+@dataclass(frozen=True)
+class FlightCondition:
+    """Where a vehicle flies and which of its states the air moves (``--turbulence``, :mod:`sim.world`).
+
+    Attributes
+    ----------
+    altitude : float
+        ft above ground (MIL-F-8785C's turbulence intensities and scale lengths depend on it).
+    speed : float
+        ft/s, the true airspeed that carries the frozen turbulence field past the vehicle
+        (Taylor's hypothesis, MIL-F-8785C 3.7.1); for a hovering vehicle the mean wind's.
+    span : float
+        ft, the wing span ``b`` of the rotational gust filters (MIL-F-8785C 3.7.1).
+    gust_states : tuple of (state index, component, scale)
+        The air-relative states: component one of ``u v w p q r`` (gust velocities in ft/s,
+        gust rates in rad/s), ``scale`` the state's units per gust unit (``180 / pi / V`` for an
+        angle in deg driven by a velocity, ``180 / pi`` for a rate in deg/s).
+    aero : ndarray (nx, nx) of bool or None
+        The entries of ``A`` that are aerodynamic (they see the air-relative state); None: every
+        entry of a translational column, and the rows of the rate states in a rotational column.
+    hover : tuple of (state row, component, gain)
+        Direct disturbance ``x'[row] += gain * scale * gust`` for a model with no aerodynamic
+        damping to carry the gust (a hovering multirotor's linear model, :mod:`sim.world`).
+    source : str
+        Where the numbers come from.
+    """
+
+    altitude: float
+    speed: float
+    span: float
+    gust_states: tuple[tuple[int, str, float], ...]
+    source: str
+    aero: np.ndarray | None = None
+    hover: tuple[tuple[int, str, float], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -48,6 +84,8 @@ class Vehicle:
     Wu: np.ndarray | None = None
     #: effector names as the library names them (``alloc.vehicles``); default the actuator names
     names: tuple[str, ...] | None = None
+    #: flight condition and air-relative states (None: ``--turbulence`` is refused for this vehicle)
+    flight: FlightCondition | None = None
 
     @property
     def channels(self) -> list[str]:

@@ -95,6 +95,8 @@ class FloatSlot(IntEnum):
     # controller outputs [r, y_hat, y_f]; two scratch rows for matrix-vector products
     O = auto()  # noqa: E741
     SCRATCH = auto()
+    #: per output: the quantisation step of the measured value (0: none; sim.world ``quantised``)
+    QSTEP = auto()
 
 
 _N_FLOAT_SLOTS = len(FloatSlot)
@@ -124,9 +126,11 @@ _N_SLOTS = _N_FLOAT_SLOTS + len(IntSlot)
 #: Entries of the ``IntSlot.MISC`` array (run constants and switches): steps in the run,
 #: record every n-th step, failure step, SMC (else loop-shaped), observers in use, sign law
 #: (no boundary layer), actuator dynamics on, integration steps per flight-control frame,
-#: pilots with lead-lag / neuromuscular dynamics, conditional integration (:func:`anti_windup_on`).
+#: pilots with lead-lag / neuromuscular dynamics, conditional integration (:func:`anti_windup_on`),
+#: measured outputs quantised (``FloatSlot.QSTEP``), and the first ``inputs`` column of the
+#: per-step gust increment of the plant state (0: no turbulence; :mod:`sim.world`).
 Misc = IntEnum("Misc", ["N_STEPS", "RECORD_EVERY", "FAIL_STEP", "SMC", "OBSERVED", "SIGN", "ACTUATORS", "FRAME",
-                        "PFILTER", "ANTI_WINDUP"], start=0, module=__name__)
+                        "PFILTER", "ANTI_WINDUP", "QUANT", "GUST"], start=0, module=__name__)
 
 
 N_MISC = len(Misc)
@@ -229,6 +233,12 @@ def observe(step: int, F: np.ndarray, I: np.ndarray, inputs: np.ndarray) -> int:
     _affine(_mat(F, I, FloatSlot.C), x, _mat(F, I, FloatSlot.D), _vec(F, I, FloatSlot.UACT), y, scratch)
     for i in range(ny):
         z[i] = y[i] + inputs[step, k + i]
+    if misc[Misc.QUANT]:
+        # a quantised sensor: the flight computer reads the nearest multiple of the step
+        qstep = _vec(F, I, FloatSlot.QSTEP)
+        for i in range(ny):
+            if qstep[i] > 0.0:
+                z[i] = qstep[i] * np.floor(z[i] / qstep[i] + 0.5)
     for i in range(k):
         yi = y[ctrl[i]]
         if not np.isfinite(yi) or abs(yi) > bound[i]:
@@ -389,6 +399,11 @@ def advance(
                 integ[i] += tframe * e[i]
     x = _vec(F, I, FloatSlot.X)
     _affine(_mat(F, I, FloatSlot.AD), x, _mat(F, I, FloatSlot.BD), uact, x, _mat(F, I, FloatSlot.SCRATCH))
+    if misc[Misc.GUST]:
+        # turbulence: the exact ZOH increment of the gust term, precomputed per step (sim.world)
+        off = misc[Misc.GUST]
+        for i in range(x.size):
+            x[i] += inputs[step, off + i]
     # Actuator delay (DelayLine.push): the command pushed n[c] steps ago.
     udel = _vec(F, I, FloatSlot.UDEL)
     dstate = _vec(I, I, IntSlot.DSTATE)

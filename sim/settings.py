@@ -32,6 +32,7 @@ from sim.allocation import PREFERRED_POSITIONS, RATE_HORIZONS, RATE_WINDOWS
 from sim.blocks import DEFAULT_DT
 from sim.model import TF, Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle
 from sim.pilot import PILOT_MODELS
+from sim.world import MAX_MODEL_ERROR, TURBULENCE_LEVELS, parse_noise
 
 __all__ = ["Setting", "SettingError", "SettingTypeError", "LoopSettings", "RunSettings", "LoopSpec",
            "setting_of", "value_types", "check_setting", "U_PREV_SOURCES", "BOUNDARY_LAYER_RULES", "ANTI_WINDUP_RULES",
@@ -236,6 +237,21 @@ class LoopSettings:
         None, "method options key=value (value parsed as JSON, else text; see `alloc methods`), over the "
         "vehicle file's methods.METHOD defaults; repeatable", flag="--option", aliases=("-o",),
         none_means="the vehicle's defaults")
+    model_error: float = _setting(
+        0.0, "plant not the model (sim.world): each effector's B and D columns (a failure's too) times a seeded "
+        "U[1-F, 1+F] factor, each actuator's bandwidth times another; controller, allocator and detector keep the "
+        "nominal model; 0: the plant is the model", low=0.0, high=MAX_MODEL_ERROR, flag="--model-error")
+    noise_model: str = _setting(
+        "gaussian", "sensor-noise families, '+'-combined, family[:parameter] (sim.world): gaussian (the seed's); "
+        "student-t[:NU=4] (same spectrum and std, Student-t marginals through a Gaussian copula, Grigoriu 1984); "
+        "coloured[:TAU=0.5 s] (Gauss-Markov driver, same std; also colored); bias[:B=1] (constant N(0, (B s)^2) "
+        "plus a random walk of B s per minute); quantised[:Q=0.5] (measured outputs rounded to Q s); s: the "
+        "output's noise std; the detector is told the seed's noise", flag="--noise-model")
+    turbulence: str = _setting(
+        "none", "Dryden turbulence and one 1-cosine gust at 10 s, MIL-F-8785C 3.7.1-3.7.2 at the scenario's flight "
+        "condition (low altitude: sigma_w = 0.1 W20, W20 = 15/30/45 kn; above 2000 ft: the 1e-2/1e-3/1e-5 "
+        "exceedance sigma, L = 1750 ft); the air-relative states see it (sim.world)",
+        choices=TURBULENCE_LEVELS, flag="--turbulence")
     record_every: int = _setting(10, "record every n-th integration step", low=1, high=MAX_RECORD_EVERY,
                                  flag="--record-every", verdict=False)
 
@@ -244,6 +260,20 @@ class LoopSettings:
             object.__setattr__(self, f.name, check_setting(f.name, getattr(self, f.name)))
         self._resolve_health()
         self.frame_steps()
+        self.noise_terms()
+
+    def noise_terms(self) -> tuple[Any, ...]:
+        """The families of ``noise_model`` (:func:`sim.world.parse_noise`; SettingError naming it if bad)."""
+        try:
+            return parse_noise(self.noise_model)
+        except ValueError as exc:
+            raise SettingError(f"noise_model: {exc}", field="noise_model") from None
+
+    @property
+    def worldly(self) -> bool:
+        """Whether any world setting differs from its default (the plant is not the model)."""
+        return bool(self.model_error) or self.turbulence != "none" or \
+            any(t.family != "gaussian" for t in self.noise_terms())
 
     def _resolve_health(self) -> None:
         """``health`` and ``allocator_knows_failure`` are one choice: either may be given, they must agree."""

@@ -38,7 +38,7 @@ import numpy as np
 
 from alloc.exceptions import ProblemError
 from sim.autodesign import AutoDesign, auto_design, design_options, weighted_pinv
-from sim.file_scenario import actuator_of, file_scenario
+from sim.file_scenario import actuator_of, file_scenario, flight_of_model
 from sim.blocks import DEFAULT_DT, SUM_OF_SINES_TABLE_4_2, ActuatorFailure, sum_of_sines
 from sim.loop import Failure, LoopSpec, Vehicle, simulate
 from sim.result import SimResult
@@ -158,6 +158,7 @@ def flight_model(source: Any, *, design: Mapping[str, Any] | None = None,
         controlled=controlled, measured=measured, noise_gains=gains, B_alloc=B_axes,
         # no seed matrix for a user's aircraft: ``static`` is the unconstrained (weighted) pseudo-inverse
         Bk_seed=allocation @ ad.demand_map, demand_map=ad.demand_map, Wu=Wu, names=fv.effector_names,
+        flight=flight_of_model(A, tuple(model.states), file_units(fv)["outputs"]),
     )
     ad.report["commands"] = {
         "signal": "seed Table 4-2 sum of sines (Eq 4.13) into each reference model, channel i phase i pi/4",

@@ -28,7 +28,7 @@ import numpy as np
 from alloc.vehicles import HARV_LATDIR_EFFECTORS
 
 from sim.blocks import ActuatorFailure, ActuatorSpec, HedgeTerm, sum_of_sines
-from sim.model import Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle
+from sim.model import Failure, FlightCondition, LoopShapedDesign, Pilot, SMCDesign, Vehicle
 from sim.scenarios.mimo import MimoScenario, mimo_scenario, run_mimo
 from sim.result import SimResult
 from sim.scenarios.registry import register_scenario
@@ -71,6 +71,21 @@ def _actuators() -> tuple[ActuatorSpec, ...]:
     )
 
 
+#: ft, ft/s: the seed gives no altitude or speed for Eq 4.16 ("this low speed, high angle of attack,
+#: flight condition", section 4.6, line 2912 of the OCR'd seed); ours: 25,000 ft and 250 ft/s
+#: (about M 0.25), a HARV high-alpha test point's order of magnitude at alpha0 = 29.7 deg
+ALTITUDE, SPEED = 25000.0, 250.0
+
+
+def flight_condition() -> FlightCondition:
+    """Where the HARV lat-dir model flies (ours, :data:`ALTITUDE`, :data:`SPEED`) and what the air moves:
+    sideslip (deg) sees ``v_g / V``, the body rates (deg/s) ``p_g, r_g``; span 37.5 ft (the F/A-18's)."""
+    deg = 180.0 / np.pi
+    return FlightCondition(altitude=ALTITUDE, speed=SPEED, span=37.5,
+                           gust_states=((0, "v", deg / SPEED), (1, "p", deg), (2, "r", deg)),
+                           source="ours: the seed gives no altitude or speed for Eq 4.16")
+
+
 def vehicle() -> Vehicle:
     """Nominal HARV lat-dir model; allocation rows: beta-dot and ps-dot effectiveness."""
     B_alloc = C[[0, 3]] @ B
@@ -79,6 +94,7 @@ def vehicle() -> Vehicle:
         actuators=_actuators(), controlled=(0, 3), measured=(0, 1, 2),
         noise_gains=np.array([0.0707, 0.1414, 0.1414]),  # seed section 4.6
         B_alloc=B_alloc, Bk_seed=SEED_BK, demand_map=B_alloc @ SEED_BK, names=HARV_LATDIR_EFFECTORS,
+        flight=flight_condition(),
     )
 
 

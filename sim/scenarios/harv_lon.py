@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from sim.blocks import ActuatorFailure, ActuatorSpec, HedgeTerm, sum_of_sines
-from sim.model import Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle
+from sim.model import Failure, FlightCondition, LoopShapedDesign, Pilot, SMCDesign, Vehicle
 from sim.scenarios.mimo import MimoScenario, mimo_scenario, run_mimo
 from sim.result import SimResult
 
@@ -49,13 +49,26 @@ def _actuators(tv_wn: float = 20.0) -> tuple[ActuatorSpec, ...]:
     )
 
 
+#: ft/s: M 0.6 at 30,000 ft (seed section 4.5, line 2619 of the OCR'd seed), standard atmosphere a = 994.8 ft/s
+SPEED = 0.6 * 994.8
+
+
+def flight_condition() -> FlightCondition:
+    """seed section 4.5's condition; angle of attack (deg) sees ``w_g / V``, pitch rate (deg/s) ``q_g``;
+    span 37.5 ft (the F/A-18's, ours)."""
+    deg = 180.0 / np.pi
+    return FlightCondition(altitude=30000.0, speed=SPEED, span=37.5,
+                           gust_states=((0, "w", deg / SPEED), (1, "q", deg)),
+                           source="seed section 4.5: M 0.6, 30,000 ft; span ours")
+
+
 def vehicle() -> Vehicle:
     """Nominal HARV longitudinal model; allocation rows: q-dot effectiveness."""
     B_alloc = B[[1]]
     return Vehicle(
         name="harv_lon", A=A, B=B, C=np.eye(2), D=np.zeros((2, 2)), output_names=OUTPUTS,
         actuators=_actuators(), controlled=(1,), measured=(0, 1), noise_gains=np.array([1.0, 1.0]),
-        B_alloc=B_alloc, Bk_seed=SEED_BK, demand_map=B_alloc @ SEED_BK,
+        B_alloc=B_alloc, Bk_seed=SEED_BK, demand_map=B_alloc @ SEED_BK, flight=flight_condition(),
     )
 
 

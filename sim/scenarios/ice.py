@@ -28,7 +28,7 @@ import numpy as np
 from alloc.vehicles import ICE_B_FULL, ICE_BK_SEED, ICE_EFFECTORS
 
 from sim.blocks import ActuatorFailure, ActuatorSpec, HedgeTerm, sum_of_sines
-from sim.model import Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle
+from sim.model import Failure, FlightCondition, LoopShapedDesign, Pilot, SMCDesign, Vehicle
 from sim.pilot import CROSSOVER_DELAY, CROSSOVER_NEUROMUSCULAR, crossover_gain
 from sim.scenarios.mimo import MimoScenario, mimo_scenario, run_mimo
 from sim.result import SimResult
@@ -117,6 +117,25 @@ def _actuators() -> tuple[ActuatorSpec, ...]:
     return tuple(ActuatorSpec.two_real_poles(n, **p) for n, p in zip(EFFECTORS, table, strict=True))
 
 
+def flight_condition() -> FlightCondition:
+    """Where ICE flies and what the air moves (``--turbulence``, :mod:`sim.world`).
+
+    seed section 4.7 ("1g, wings-level, M = 0.3, h = 15,000 ft", line 3258 of the OCR'd seed):
+    15,000 ft and M 0.3 with the standard atmosphere's 1057.4 ft/s there, V = 317.2 ft/s -- the
+    model agrees: the inertial terms of A are U0 pi/180 = 5.3737 and W0 pi/180 = 1.3310, so
+    sqrt(U0^2 + W0^2) = 317.2 ft/s.  States u, w, v in ft/s and qb, pb, rb in deg/s (seed
+    section 4.7 state list); the aerodynamic entries of A are those the plant failure doubles
+    (not :data:`_KINEMATIC`).  Span 37.5 ft: ours (the seed gives none; a fighter's, the F/A-18's).
+    """
+    deg = 180.0 / np.pi
+    s = STATES.index
+    return FlightCondition(
+        altitude=15000.0, speed=317.2, span=37.5,
+        gust_states=((s("u"), "u", 1.0), (s("w"), "w", 1.0), (s("v"), "v", 1.0), (s("pb"), "p", deg),
+                     (s("qb"), "q", deg), (s("rb"), "r", deg)),
+        aero=~_KINEMATIC, source="seed section 4.7: M 0.3, 15,000 ft; span ours")
+
+
 def vehicle() -> Vehicle:
     """The nominal ICE model with its allocation data."""
     gains = np.full(len(OUTPUTS), 0.1414)  # seed section 4.7 noise gains
@@ -125,6 +144,7 @@ def vehicle() -> Vehicle:
         name="ice", A=A, B=B, C=C, D=D, output_names=OUTPUTS, actuators=_actuators(),
         controlled=CONTROLLED, measured=tuple(range(len(OUTPUTS))), noise_gains=gains,
         B_alloc=B_DESIGN, Bk_seed=SEED_BK, demand_map=np.eye(3), Wu=WU, names=ICE_EFFECTORS,
+        flight=flight_condition(),
     )
 
 

@@ -111,7 +111,8 @@ def run_mimo(
     spec, flown = mimo_spec(scenario, **options)
     criteria.use_scenario(scenario)  # its runs are judged by the criteria built from this object
     result = simulate(spec, progress=progress, step_times=step_times)
-    result.settings = {**flown.record(), "pilots": result.settings["pilots"]}
+    world = {"world": result.settings["world"]} if "world" in result.settings else {}  # the drawn world (sim.world)
+    result.settings = {**flown.record(), "pilots": result.settings["pilots"], **world}
     return result
 
 

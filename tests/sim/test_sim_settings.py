@@ -202,7 +202,9 @@ def test_recorded_settings_round_trip_to_the_same_run(case):
     given = _random_settings(rng, scenario)
     first = get_scenario(scenario)(**given)
     record = first.settings
-    assert set(record) == {f.name for f in FIELDS} | {"pilots"}
+    # the world's draws are recorded when a world setting is not its default (sim.world)
+    worldly = given.get("turbulence", "none") != "none"
+    assert set(record) == {f.name for f in FIELDS} | {"pilots"} | ({"world"} if worldly else set())
     for name, value in given.items():  # what was given is recorded as given ...
         if name != "frame_period" and not (name == "failure_time" and "failure" not in given):
             assert record[name] == value, name
@@ -222,7 +224,7 @@ def test_the_recorded_settings_command_line_flies_the_same_run(case):
     rng = np.random.default_rng(2000 + case)
     scenario = ["ice", "harv_latdir"][case]
     result = get_scenario(scenario)(**_random_settings(rng, scenario))
-    options = {k: v for k, v in result.settings.items() if k != "pilots"}
+    options = {k: v for k, v in result.settings.items() if k not in ("pilots", "world")}  # world: draws, not settings
     line = command_line(scenario, **options)
     res = runner.invoke(alloc_app, shlex.split(line)[1:])
     assert res.exit_code in (0, 1), (line, res.stderr)  # 1: the run diverged, as the library's did
