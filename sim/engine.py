@@ -200,6 +200,7 @@ def simulate(
     result.settings = {**spec.record(), "pilots": [p.describe() for p in pilots]}
     if detector is not None:
         result.detections = detections
+        result.detector = detector.describe()
     return result
 
 
