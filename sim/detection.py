@@ -234,6 +234,8 @@ class InLoopDetector:
         self._rate = np.zeros(m)
         self._rate_out = np.zeros(m)
         self.delay_steps = int(np.ceil(design.processing_delay / dt - 1e-9))
+        self.previous_health: dict[str, EffectorHealth] = {}
+        self.last_y = np.zeros(len(self.rows))
 
     def step_model(self, u_cmd: np.ndarray) -> None:
         """Advance the nominal actuator copy one integration step with ``u_cmd`` held."""
@@ -258,7 +260,13 @@ class InLoopDetector:
         """
         y = self.C @ ((A_now - self.A) @ x + B_now @ surfaces)
         y = y + (self.noise[step] - self.noise[step - self.every]) / self.sample_time
+        self.previous_health = dict(self.detector.health)
+        self.last_y = y
         return self.detector.update(self.pos, y, time=step * self.dt)
+
+    def health_before(self, effector: str) -> EffectorHealth | None:
+        """``effector``'s health before the last sample (what a detection in it replaced)."""
+        return self.previous_health.get(effector)
 
     def describe(self) -> dict[str, Any]:
         """The detector as flown, JSON-ready: its response outputs (by name) and its design."""

@@ -24,11 +24,19 @@ Evidence (:func:`evidence_log_ratio`)
     Over the same probation, the log likelihood ratio of the response residuals under the
     belief with the detection against the belief without it (the effector's entry as before),
     the residuals whitened by the noise's autocorrelation: ``ln L_belief - ln L_before =
-    (|W r_before|^2 - |W r_belief|^2) / 2``.  It is *decisive* at ``ln 100`` (Jeffreys' scale:
-    a Bayes factor above 100 is "decisive"; H. Jeffreys, *Theory of Probability*, 3rd ed.
-    1961, appendix B).  A detection the data favour decisively is kept whatever the
-    tracking: a real jam makes tracking worse too, and the belief is then the best the
-    allocator can act on.
+    (|W r_before|^2 - |W r_belief|^2) / 2``.  It is *decisive* when it reaches ``ln 100``
+    (Jeffreys' scale: a Bayes factor above 100 is "decisive"; H. Jeffreys, *Theory of
+    Probability*, 3rd ed. 1961, appendix B) **and** the belief fits the data: its whitened
+    residuals' sum of squares within ``chi2.isf(level, n k)`` (``n`` samples, ``k`` axes).
+    A ratio between two models that both fail to fit (a plant-level failure outside every
+    effector hypothesis) says which is less wrong, not that either is right.  A detection the
+    data favour decisively is kept whatever the tracking: a real jam makes tracking worse too,
+    and the belief is then the best the allocator can act on.
+
+Looks.  The rule looks at every sample of the probation from ``min_after`` samples on
+(a grossly harmful belief is withdrawn early), at ``level / (k looks)``: Bonferroni over the
+channels and the looks, so a harmless detection is withdrawn with probability at most
+``level`` in all.
 
 A detection is withdrawn when the tracking is significantly worse and the evidence for it is
 not decisive (:func:`judge`).
@@ -45,7 +53,7 @@ import numpy as np
 from ..exceptions import OptionError
 
 __all__ = ["HarmDesign", "DEFAULT_HARM", "TrackingTest", "Verdict", "tracking_test", "evidence_log_ratio",
-           "effective_samples", "judge"]
+           "effective_samples", "judge", "looks", "belief_fits", "whitener"]
 
 
 @dataclass(frozen=True)
@@ -73,6 +81,20 @@ class HarmDesign:
     min_before : int
         Fewest samples of the before window for a tracking test (10); with fewer the detection
         is kept (no reference to judge it against).
+    min_after : int
+        Samples after the application before the first look (5: 0.5 s, the after window's
+        mean square is then an average of a few independent values at the effective sizes seen).
+    quarantine : float
+        Seconds after a withdrawal by the monitor during which new detections are withdrawn at
+        once, never applied (2 s, the probation: the time the loop needs to show its tracking
+        again without them).
+    fit_gate : bool
+        Whether a detection is applied only when the belief with it fits the residuals since its
+        onset (whitened sum of squares within ``chi2.isf(level, n k)``, as for the evidence):
+        a belief that leaves the response unexplained is not acted on (True).
+    active : bool
+        False: none of it (no hold, gate, probation or quarantine): each detection is applied as
+        it comes, the loop of before the rule (for tests of the delivery path itself).
     """
 
     probation: float = 2.0
@@ -81,6 +103,10 @@ class HarmDesign:
     max_lag: int = 10
     decisive: float = 100.0
     min_before: int = 10
+    min_after: int = 5
+    quarantine: float = 2.0
+    fit_gate: bool = True
+    active: bool = True
 
     def __post_init__(self) -> None:
         for name in ("probation", "before"):
@@ -135,7 +161,8 @@ class TrackingTest:
         return asdict(self)
 
 
-def tracking_test(before: np.ndarray, after: np.ndarray, design: HarmDesign = DEFAULT_HARM) -> TrackingTest:
+def tracking_test(before: np.ndarray, after: np.ndarray, design: HarmDesign = DEFAULT_HARM,
+                  looks: int = 1) -> TrackingTest:
     """Whether the tracking ``after`` (n2, k) is significantly worse than ``before`` (n1, k)
     (the module docstring: mean-square ratios, effective dof, F test, Bonferroni)."""
     from scipy.stats import f as f_dist
@@ -151,7 +178,7 @@ def tracking_test(before: np.ndarray, after: np.ndarray, design: HarmDesign = DE
     ms1 = np.mean(before ** 2, axis=0)
     ms2 = np.mean(after ** 2, axis=0)
     ratio = np.where(ms1 > 0, ms2 / np.where(ms1 > 0, ms1, 1.0), np.where(ms2 > 0, np.inf, 1.0))
-    threshold = f_dist.isf(design.level / k, n2, n1)
+    threshold = f_dist.isf(design.level / k / looks, n2, n1)
     p = f_dist.sf(np.minimum(ratio, 1e300), n2, n1)
     return TrackingTest(tuple(map(float, ratio)), tuple(map(float, n2)), tuple(map(float, n1)),
                         tuple(map(float, threshold)), tuple(map(float, p)), bool((ratio > threshold).any()))
@@ -199,14 +226,27 @@ class Verdict:
                 "log_evidence": self.log_evidence, "decisive": self.decisive}
 
 
+def looks(design: HarmDesign, sample_time: float) -> int:
+    """How many times a probation is looked at (every sample from ``min_after`` to its end)."""
+    return max(1, int(round(design.probation / sample_time)) - design.min_after + 1)
+
+
+def belief_fits(sum_of_squares: float, n_values: int, design: HarmDesign = DEFAULT_HARM) -> bool:
+    """Whether whitened residuals with this sum of squares over ``n_values`` numbers are noise."""
+    from scipy.stats import chi2
+
+    return bool(sum_of_squares <= chi2.isf(design.level, max(1, n_values)))
+
+
 def judge(before: np.ndarray, after: np.ndarray, log_evidence: float | None,
-          design: HarmDesign = DEFAULT_HARM) -> Verdict:
-    """Withdraw when the tracking is significantly worse and the evidence is not decisive."""
-    decisive = log_evidence is not None and log_evidence >= math.log(design.decisive)
+          design: HarmDesign = DEFAULT_HARM, *, fits: bool = True, n_looks: int = 1) -> Verdict:
+    """Withdraw when the tracking is significantly worse and the evidence is not decisive
+    (``fits``: whether the belief's residuals are noise, :func:`belief_fits`)."""
+    decisive = log_evidence is not None and log_evidence >= math.log(design.decisive) and fits
     if len(before) < design.min_before:
         return Verdict(False, f"kept: {len(before)} samples before the onset, fewer than {design.min_before}",
                        None, log_evidence, decisive)
-    test = tracking_test(before, after, design)
+    test = tracking_test(before, after, design, n_looks)
     if not test.worse:
         return Verdict(False, "kept: the tracking since is not significantly worse than before", test,
                        log_evidence, decisive)
@@ -216,5 +256,6 @@ def judge(before: np.ndarray, after: np.ndarray, log_evidence: float | None,
     worst = int(np.argmax(np.asarray(test.ratio) / np.asarray(test.threshold)))
     return Verdict(True, f"tracking worse since applied (channel {worst}: mean-square ratio "
                    f"{test.ratio[worst]:.3g} > F threshold {test.threshold[worst]:.3g}) and the residual evidence "
-                   f"not decisive (log Bayes factor {log_evidence if log_evidence is not None else float('nan'):.3g} "
-                   f"< ln {design.decisive:g})", test, log_evidence, decisive)
+                   f"not decisive (log Bayes factor {log_evidence if log_evidence is not None else float('nan'):.3g}"
+                   f"{'' if fits else ', the belief does not fit the residuals'}; decisive: >= ln "
+                   f"{design.decisive:g} and a fit)", test, log_evidence, decisive)
