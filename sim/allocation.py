@@ -25,7 +25,8 @@ if TYPE_CHECKING:
     from sim.model import Failure, Vehicle
 
 __all__ = ["LoopAllocator", "STATIC", "PREFERRED_POSITIONS", "RATE_HORIZONS", "actuator_lag", "allocation_problem",
-           "build_allocator", "health_events", "preferred_positions", "rate_horizon_scale", "RATE_WINDOWS"]
+           "build_allocator", "health_events", "hold_commands", "preferred_positions", "rate_horizon_scale",
+           "RATE_WINDOWS", "stuck_effectors"]
 
 #: Name of the seed's printed static distribution (not a registry method).
 STATIC = "static"
@@ -301,3 +302,42 @@ def _excited(chosen: LoopAllocator, solve: Any, problem: Any, frame_period: floa
         return out.u, out.v_achieved, code[out.status]
 
     return excited
+
+
+def stuck_effectors(vehicle: Vehicle, health: Mapping[str, Any]) -> list[int]:
+    """Indices of the effectors a belief says are stuck: jammed, hard-over (a jam at a stop) or floating."""
+    names = list(vehicle.effector_names)
+    return sorted(names.index(name) for name, h in health.items() if h.jam_position is not None or h.floating)
+
+
+def hold_commands(allocator: LoopAllocator, held: Mapping[int, float]) -> LoopAllocator:
+    """``allocator`` whose command to each effector of ``held`` (index -> command) is that value.
+
+    A belief that an effector is stuck is never enforced by commanding it.  The allocator
+    solves with the believed position (its moment is accounted for in ``v_achieved``), but the
+    command sent is the one the effector had before the belief: if the surface really is stuck
+    the command does nothing; if it is not, the surface stays where it was, instead of being
+    driven to the believed position, which would make a false belief self-fulfilling (the
+    residual of "jammed at p" and of "healthy, commanded to p" are the same, so the detector
+    could never see the contradiction, and a healthy surface driven to a stop loses its
+    authority).  Held where it was, a healthy surface keeps responding as commanded in the
+    detector's nominal copy, and the detector, which tests every effector against its current
+    model, sees the difference between its position and the believed one.  Flight software
+    does the same: PX4's ``ControlAllocator::check_for_motor_failures`` removes a motor reported
+    failed from the effectiveness matrix and ArduPilot's ``AP_MotorsMatrix::check_for_failed_motor``
+    boosts the others (``thrust_boost``); neither drives the failed motor to a believed state.
+    Wells (2002, section 1.3.4) treats a failed effector as a known contribution to the moment
+    that the healthy ones compensate, not as a position to be commanded.
+    """
+    if not held:
+        return allocator
+    index = np.fromiter(held.keys(), dtype=np.int64)
+    values = np.fromiter(held.values(), dtype=float)
+
+    def holding(v: np.ndarray, u_prev: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray, int]:
+        u, v_achieved, status = allocator(v, u_prev, dt)
+        u = np.array(u, dtype=float)
+        u[index] = values
+        return u, v_achieved, status
+
+    return holding

@@ -47,9 +47,11 @@ from typing import Any
 import numpy as np
 
 from alloc.effector_health import EffectorHealth
+from alloc.exceptions import AllocError
 from alloc.estimation import Detection, FailureDetector
 from sim.blocks import actuator_heun_step, band_limited_noise
 from sim.model import Vehicle
+from sim.settings import SettingError
 
 __all__ = ["DetectionDesign", "InLoopDetector", "response_outputs", "response_noise_std", "response_noise_correlation",
            "DEFAULT_DESIGN"]
@@ -108,13 +110,33 @@ def design_with(long_window: float | None) -> DetectionDesign:
 
 
 def response_outputs(vehicle: Vehicle) -> tuple[int, ...]:
-    """Measured outputs whose derivative the effectors drive directly and with no feedthrough."""
+    """Measured outputs whose derivative the effectors drive directly, with no feedthrough and
+    with a stated sensor noise (a positive noise gain).
+
+    An output whose stated noise is zero (the auto-design of a vehicle file gives noise only to
+    the controlled outputs, :mod:`sim.user_vehicle`) is left out of the detector's response set.
+    A real sensor has finite precision, but the vehicle does not state it, and any floor chosen
+    here (a resolution in the output's units) would be a number the detector's threshold then
+    depends on without a source: a chi-square test on a made-up level is a made-up test.  The
+    outputs with a stated noise carry the detector's evidence; the others are not tested (the
+    detector's problem is built on the kept rows only).  The run's JSON names the rows kept
+    (``detector.response_outputs``).
+    """
+    gains = _noise_gains(vehicle)
     out = []
     for i in vehicle.measured:
         drive = vehicle.C[i] @ vehicle.B
-        if np.abs(vehicle.D[i]).max(initial=0.0) == 0.0 and np.abs(drive).max(initial=0.0) > 0.0:
+        if (np.abs(vehicle.D[i]).max(initial=0.0) == 0.0 and np.abs(drive).max(initial=0.0) > 0.0
+                and gains[i] > 0.0):
             out.append(int(i))
     return tuple(out)
+
+
+def _noise_gains(vehicle: Vehicle) -> np.ndarray:
+    """The stated sensor-noise gain of every output (0 for the unmeasured)."""
+    gains = np.zeros(vehicle.C.shape[0])
+    gains[np.asarray(vehicle.measured, dtype=int)] = vehicle.noise_gains
+    return gains
 
 
 #: lags (detector samples) of the measured noise autocorrelation told to the detector
@@ -144,10 +166,8 @@ def response_noise_correlation(dt: float, sample_time: float) -> tuple[float, ..
 
 def response_noise_std(vehicle: Vehicle, dt: float, sample_time: float, noise_scale: float = 1.0) -> np.ndarray:
     """Per response output: the differenced sensor noise's std at the sample period."""
-    gains = np.zeros(vehicle.C.shape[0])
-    gains[np.asarray(vehicle.measured)] = vehicle.noise_gains
     rows = list(response_outputs(vehicle))
-    return _differenced_noise(dt, sample_time)[0] * gains[rows] * noise_scale
+    return _differenced_noise(dt, sample_time)[0] * _noise_gains(vehicle)[rows] * noise_scale
 
 
 class InLoopDetector:
@@ -180,18 +200,26 @@ class InLoopDetector:
         self.every = max(1, int(round(design.sample_time / dt)))
         self.sample_time = self.every * dt
         self.rows = list(response_outputs(vehicle))
+        self.output_names = tuple(vehicle.output_names)
+        if not self.rows:
+            raise SettingError(
+                f"health: 'detected' needs a response output (measured, driven by the effectors, no "
+                f"feedthrough, with a stated sensor noise); vehicle {vehicle.name!r} has none", field="health")
         self.C = vehicle.C[self.rows]
         self.A = np.asarray(vehicle.A, dtype=float)
         self.noise = noise[:, self.rows]
         self.dt = dt
         problem = alloc.Problem(self.C @ vehicle.B, vehicle.umin, vehicle.umax, up=preferred,
                                 rate_min=-vehicle.rate_max, rate_max=vehicle.rate_max, names=vehicle.effector_names)
-        self.detector = FailureDetector(
-            problem, response_noise_std(vehicle, dt, self.sample_time, noise_scale if noise_scale > 0 else 1.0),
-            self.sample_time,
-            false_alarm_rate=design.false_alarm_rate, window=design.window, hop=design.hop,
-            min_confidence=design.min_confidence, long_window=design.long_window,
-            noise_correlation=response_noise_correlation(dt, self.sample_time))
+        try:
+            self.detector = FailureDetector(
+                problem, response_noise_std(vehicle, dt, self.sample_time, noise_scale if noise_scale > 0 else 1.0),
+                self.sample_time,
+                false_alarm_rate=design.false_alarm_rate, window=design.window, hop=design.hop,
+                min_confidence=design.min_confidence, long_window=design.long_window,
+                noise_correlation=response_noise_correlation(dt, self.sample_time))
+        except AllocError as exc:
+            raise _design_error(exc, vehicle.name) from exc
         self.actuators = actuators
         m = len(vehicle.actuators)
         spec = vehicle.actuators
@@ -206,6 +234,8 @@ class InLoopDetector:
         self._rate = np.zeros(m)
         self._rate_out = np.zeros(m)
         self.delay_steps = int(np.ceil(design.processing_delay / dt - 1e-9))
+        self.previous_health: dict[str, EffectorHealth] = {}
+        self.last_y = np.zeros(len(self.rows))
 
     def step_model(self, u_cmd: np.ndarray) -> None:
         """Advance the nominal actuator copy one integration step with ``u_cmd`` held."""
@@ -235,12 +265,35 @@ class InLoopDetector:
             xdot = xdot + disturbance
         y = self.C @ xdot
         y = y + (self.noise[step] - self.noise[step - self.every]) / self.sample_time
+        self.previous_health = dict(self.detector.health)
+        self.last_y = y
         return self.detector.update(self.pos, y, time=step * self.dt)
+
+    def health_before(self, effector: str) -> EffectorHealth | None:
+        """``effector``'s health before the last sample (what a detection in it replaced)."""
+        return self.previous_health.get(effector)
+
+    def describe(self) -> dict[str, Any]:
+        """The detector as flown, JSON-ready: its response outputs (by name) and its design."""
+        return {"response_outputs": [self.output_names[i] for i in self.rows], "design": self.design.record()}
 
     @property
     def health(self) -> dict[str, EffectorHealth]:
         """The detector's current belief (a copy)."""
         return dict(self.detector.health)
+
+
+#: the library detector's settings that a run setting gives (the others come from the design)
+_RUN_SETTING_OF = {"long_window": "detector_long_window", "noise_std": "noise_scale"}
+
+
+def _design_error(exc: AllocError, vehicle: str) -> SettingError:
+    """A library detector's refusal of the in-loop design, named by the run setting it comes
+    from (``--detector-long-window``, ``--noise-scale``; else ``--health``, the choice of a
+    detector at all): never the method's, whose errors the CLI reports against ``--method``."""
+    field = _RUN_SETTING_OF.get(exc.field or "", "health")
+    return SettingError(f"{field}: the in-loop detector of vehicle {vehicle!r} refuses its design: {exc}",
+                        field=field)
 
 
 def detection_record(detection: Detection, applied_time: float, failure_time: float | None) -> dict[str, Any]:

@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from sim.allocation import LoopAllocator, build_allocator, preferred_positions
+from sim.allocation import LoopAllocator, build_allocator, hold_commands, preferred_positions
 from sim.blocks import (
     ActuatorBank,
     DelayLine,
@@ -51,6 +51,7 @@ from sim.blocks import (
     tf_to_ss,
 )
 from sim.detection import InLoopDetector, design_with, detection_record
+from sim.harm import InLoopHarm
 from sim.injection import inject_failure
 from sim.model import TF, Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle
 from sim.packed import DIVERGED, N_MISC, FloatSlot, IntSlot, Misc, Packed, advance, observe, record_columns
@@ -161,9 +162,12 @@ def simulate(
     # --health detected: the detector on the simulated sensors (never the failure), and the
     # beliefs waiting for their processing delay: (step the allocator gets it, belief)
     detector = _detector(spec, inputs) if spec.health_mode == "detected" else None
+    harm = InLoopHarm(vehicle, detector) if detector is not None else None
     pending: list[tuple[int, dict[str, Any]]] = []
     detections: list[dict[str, Any]] = []
     x = packed.view(FloatSlot.X)
+    z, r = packed.view(FloatSlot.Z), packed.view(FloatSlot.R)
+    controlled = np.asarray(vehicle.controlled)
     for step in iterator:
         if status == diverged:
             n_done = step
@@ -172,8 +176,9 @@ def simulate(
             t0 = clock()
         if step % frame == 0:
             if pending and step >= pending[0][0]:
-                allocator = build_allocator(vehicle, method, method_options, health=_due(pending, step),
-                                            first_call=step // frame, **alloc_options)
+                harm.apply(_due(pending, step), u_cmd, step * dt)
+                allocator = hold_commands(build_allocator(vehicle, method, method_options, health=harm.belief,
+                                                          first_call=step // frame, **alloc_options), harm.held)
             u_prev = positions.copy() if position_feedback else u_cmd
             u_cmd, v_achieved, call_status[step // frame] = allocator(v, u_prev, tframe)
         status = step_once(step, u_cmd, v_achieved, F, I, inputs, rec)
@@ -186,13 +191,23 @@ def simulate(
             status = observe(step + 1, F, I, inputs)
         if detector is not None and detector.due(step + 1) and step < n_steps:
             # the sensors measure the plant's physics as it is now (plant._cur: the failed model after injection)
+            at = step + 1 + detector.delay_steps
+            applied = -(-at // frame) * frame * dt
             # and the gust's state derivative where there is turbulence (the sensors measure it too)
             gust_now = {} if disturbance is None else {"disturbance": disturbance[step + 1]}
-            for found in detector.sample(step + 1, x, positions, plant._cur.A, plant._cur.B, **gust_now):
-                at = step + 1 + detector.delay_steps
+            found = detector.sample(step + 1, x, positions, plant._cur.A, plant._cur.B, **gust_now)
+            # the loop's tracking as the flight computer measures it (r - z, the last frame's)
+            harm.observe((step + 1) * dt, r - z[controlled], detector.last_y, detector.pos)
+            for detection in found:
+                detections.append(detection_record(detection, applied, None if failure is None else failure.time))
+                detections[-1]["applied"] = harm.detected(detections[-1])  # False: refused (sim.harm)
+                if detections[-1]["applied"]:
+                    pending.append((at, detector.health))
+            withdrawn = harm.verdicts((step + 1) * dt)
+            for w in withdrawn:
+                w["applied_time"] = applied
+            if withdrawn or harm.released:  # a belief back, or a hold released (a probation passed)
                 pending.append((at, detector.health))
-                detections.append(detection_record(found, -(-at // frame) * frame * dt,
-                                                   None if failure is None else failure.time))
     if timed:
         step_times.append(times[:n_done])
     n = (n_done + record_every - 1) // record_every  # samples recorded before step n_done
@@ -205,6 +220,8 @@ def simulate(
         result.settings["world"] = _jsonable_world(world)
     if detector is not None:
         result.detections = detections
+        result.withdrawals = harm.withdrawals
+        result.detector = {**detector.describe(), "do_no_harm": harm.describe()}
     return result
 
 

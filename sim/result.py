@@ -111,6 +111,10 @@ class SimResult:
     settings: dict[str, Any] = field(default_factory=dict)
     #: a ``detected`` run's detections (:func:`sim.detection.detection_record`), None otherwise
     detections: list[dict[str, Any]] | None = None
+    #: a ``detected`` run's withdrawn detections (:mod:`alloc.estimation.harm`), None otherwise
+    withdrawals: list[dict[str, Any]] | None = None
+    #: a ``detected`` run's detector as flown: its response outputs, design and monitor (:mod:`sim.detection`)
+    detector: dict[str, Any] | None = None
 
     # ------------------------------------------------------------------ metrics
     @property
@@ -210,6 +214,8 @@ class SimResult:
             "settings": self.settings,
             "verdict": None if verdict is None else verdict.to_json(),
             **({} if self.detections is None else {"detections": self.detections}),
+            **({} if self.withdrawals is None else {"withdrawals": self.withdrawals}),
+            **({} if self.detector is None else {"detector": self.detector}),
         }
 
     def time_histories(self) -> dict[str, np.ndarray | list[str]]:

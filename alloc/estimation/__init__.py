@@ -33,14 +33,14 @@ from .. import _lazy
 from ._checks import SampleError, StateError
 
 if TYPE_CHECKING:
-    from .detection import Detection, FailureDetector
+    from .detection import Detection, FailureDetector, Withdrawal
     from .excitation import NullSpaceExcitation, RandomWeightAllocator, regressor_condition
     from .frequency import FrequencyDomainEstimator, FrequencyEstimate
     from .rls import EffectivenessRLS, RecursiveLeastSquares
 
 __all__ = [
     "RecursiveLeastSquares", "EffectivenessRLS", "FrequencyDomainEstimator", "FrequencyEstimate",
-    "FailureDetector", "Detection", "NullSpaceExcitation", "RandomWeightAllocator", "regressor_condition",
+    "FailureDetector", "Detection", "Withdrawal", "NullSpaceExcitation", "RandomWeightAllocator", "regressor_condition",
     "SampleError", "StateError",
 ]
 
@@ -48,7 +48,7 @@ __all__ = [
 # their compiled kernels (numba, 0.2-0.3 s of CPU), which a caller that only detects, such
 # as the service at start, should not pay for.
 _LAZY = {
-    "Detection": "detection", "FailureDetector": "detection",
+    "Detection": "detection", "FailureDetector": "detection", "Withdrawal": "detection",
     "NullSpaceExcitation": "excitation", "RandomWeightAllocator": "excitation", "regressor_condition": "excitation",
     "FrequencyDomainEstimator": "frequency", "FrequencyEstimate": "frequency",
     "EffectivenessRLS": "rls", "RecursiveLeastSquares": "rls",

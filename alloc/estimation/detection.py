@@ -85,11 +85,11 @@ from ._checks import (
     state_count,
     state_mapping,
 )
-from .isolation import Detection, Isolation
+from .isolation import Detection, Isolation, Withdrawal
 
-__all__ = ["FailureDetector", "Detection", "MAX_KEPT", "MAX_DETECTOR_BYTES", "MAX_ISOLATION_CELLS", "detector_bytes"]
+__all__ = ["FailureDetector", "Detection", "Withdrawal", "MAX_KEPT", "MAX_DETECTOR_BYTES", "MAX_ISOLATION_CELLS", "detector_bytes"]
 
-#: detections kept in the state (older ones are dropped; the caller has received them)
+#: detections (and withdrawals) kept in the state (older ones are dropped; the caller has received them)
 MAX_KEPT = 64
 #: The largest working set a detector's settings may imply (:func:`detector_bytes`): 256 MiB.
 #: The isolation's ``L x L`` tables dominate (peak 6-10 ``L^2`` numbers measured with tracemalloc,
@@ -209,6 +209,12 @@ class FailureDetector(Isolation):
         self._design()
         self.health: dict[str, EffectorHealth] = {}
         self.detections: list[Detection] = []
+        #: detections taken back (:meth:`withdraw`), oldest first, at most MAX_KEPT
+        self.withdrawals: list[Withdrawal] = []
+        self._unpopped: list[Withdrawal] = []  # withdrawals not yet handed out by pop_withdrawals
+        # per effector under a detection: its health before the first detection of the chain
+        # (what "nothing failed" restores), and the latest detection's time and kind
+        self._active: dict[str, dict[str, Any]] = {}
         self.alarm_count = 0  # stage-1 alarms (isolated or not)
         self.unisolated_count = 0  # alarms dropped without a decision
         self.samples = 0
@@ -437,6 +443,9 @@ class FailureDetector(Isolation):
         ev = detection.event
         # a new finding replaces what was known of that effector (a jam would otherwise
         # take precedence over reduced limits, see alloc.health)
+        name = self.problem.names[self.problem.index(ev.effector)]
+        before = self._active.get(name, {}).get("before", self.health.get(name))
+        self._active[name] = {"before": before, "time": float(detection.time), "kind": ev.kind.value}
         _, health = apply_event(self.problem, self.health, FailureEvent(ev.effector, FailureKind.REPAIR))
         _, self.health = apply_event(self.problem, health, ev)
         j = self.problem.index(detection.event.effector)
@@ -445,6 +454,51 @@ class FailureDetector(Isolation):
         self.detections.append(detection)
         del self.detections[:-MAX_KEPT]
         self._restart()
+
+    # ------------------------------------------------------------------ withdrawal
+    def withdraw(self, effector: str, time: float, reason: str, statistic: float | None = None) -> Withdrawal:
+        """Take back the detection standing on ``effector``: its health before the detection (the
+        first of a chain of refinements) is restored and a :class:`Withdrawal` recorded.
+
+        For a component that judges a detection by its consequences (a tracking monitor that
+        sees the allocation do worse with it than without); the detector withdraws on its own
+        evidence too.  ``time`` in seconds (finite), ``reason`` in words.  The buffers restart:
+        their residuals were computed against the event's model.  SampleError naming the field
+        when ``effector`` is unknown or has no detection standing.
+        """
+        if not isinstance(effector, str):
+            raise SampleError(f"effector: expected an effector name, got {short_repr(effector)}")
+        if effector not in self.problem.names:
+            raise SampleError(f"effector: {effector!r} is not one of {list(self.problem.names)}")
+        if effector not in self._active:
+            raise SampleError(f"effector: no detection of {effector!r} stands to withdraw")
+        t = as_real("time", time, SampleError)
+        if not isinstance(reason, str):
+            raise SampleError(f"reason: expected a string, got {short_repr(reason)}")
+        if statistic is not None:
+            statistic = as_real("statistic", statistic, SampleError)
+        active = self._active.pop(effector)
+        withdrawal = Withdrawal(effector=effector, kind=active["kind"], time=t, detection_time=active["time"],
+                                statistic=statistic, reason=reason[:200])
+        health = dict(self.health)
+        if active["before"] is None:
+            health.pop(effector, None)
+        else:
+            health[effector] = active["before"]
+        self.health = health
+        self.withdrawals.append(withdrawal)
+        del self.withdrawals[:-MAX_KEPT]
+        self._unpopped.append(withdrawal)
+        del self._unpopped[:-MAX_KEPT]
+        self._restart()
+        return withdrawal
+
+    def pop_withdrawals(self) -> list[Withdrawal]:
+        """The withdrawals since the last call (oldest first; at most MAX_KEPT), then forgets them
+        (:attr:`withdrawals` keeps them): :meth:`update` returns only detections, so a caller
+        that applies what the detector believes asks for these after each update."""
+        out, self._unpopped = self._unpopped, []
+        return out
 
     # ------------------------------------------------------------------ durable state
     def to_dict(self) -> dict[str, Any]:
@@ -464,6 +518,10 @@ class FailureDetector(Isolation):
             "buffer": {"U": self._U[order].tolist(), "K": self._K[order].tolist(), "R": self._R[order].tolist(), "Q": self._Q[order].tolist(),
                        "T": self._T[order].tolist()},
             "detections": [d.to_dict() for d in self.detections],
+            "withdrawals": [w.to_dict() for w in self.withdrawals],
+            "unpopped": len(self._unpopped),
+            "active": {name: {"before": None if a["before"] is None else a["before"].to_dict(), "time": a["time"],
+                              "kind": a["kind"]} for name, a in self._active.items()},
         }
 
     @classmethod
@@ -523,6 +581,14 @@ class FailureDetector(Isolation):
         if not isinstance(d["detections"], list):
             raise StateError("detections: expected a list")
         det.detections = [_detection_from_dict(x) for x in d["detections"][-MAX_KEPT:]]
+        # absent from states stored before withdrawals existed
+        withdrawals = d.get("withdrawals", [])
+        if not isinstance(withdrawals, list):
+            raise StateError("withdrawals: expected a list")
+        det.withdrawals = [_withdrawal_from_dict(x) for x in withdrawals[-MAX_KEPT:]]
+        unpopped = state_count("unpopped", d.get("unpopped", 0))
+        det._unpopped = det.withdrawals[len(det.withdrawals) - min(unpopped, len(det.withdrawals)):]
+        det._active = _active_from_dict(d.get("active", {}), det)
         return det
 
 
@@ -546,6 +612,35 @@ def _detection_from_dict(d: Any) -> Detection:
         return Detection(event=event, **rest)
     except (TypeError, ValueError, KeyError) as exc:
         raise StateError(f"detections: {exc}") from None
+
+
+def _withdrawal_from_dict(d: Any) -> Withdrawal:
+    if not isinstance(d, dict) or set(d) != {f for f in Withdrawal.__dataclass_fields__}:
+        raise StateError(f"withdrawals: expected mappings with {sorted(Withdrawal.__dataclass_fields__)}")
+    if not (isinstance(d["effector"], str) and isinstance(d["kind"], str) and isinstance(d["reason"], str)):
+        raise StateError("withdrawals: effector, kind and reason must be strings")
+    return Withdrawal(effector=d["effector"], kind=d["kind"], time=as_real("withdrawals", d["time"], StateError),
+                      detection_time=as_real("withdrawals", d["detection_time"], StateError),
+                      statistic=None if d["statistic"] is None else as_real("withdrawals", d["statistic"], StateError),
+                      reason=d["reason"][:200])
+
+
+def _active_from_dict(d: Any, det: FailureDetector) -> dict[str, dict[str, Any]]:
+    """The standing detections' records (``active``), each on an effector the health lists."""
+    if not isinstance(d, dict):
+        raise StateError("active: expected a mapping of effector name to its standing detection")
+    out = {}
+    for name, a in d.items():
+        if name not in det.problem.names or not isinstance(a, dict) or set(a) != {"before", "time", "kind"}:
+            raise StateError(f"active: expected effector names of the problem with before, time, kind; got {short_repr(name)}")
+        if not isinstance(a["kind"], str):
+            raise StateError("active: kind must be a string")
+        try:
+            before = None if a["before"] is None else health_from_dict({name: a["before"]})[name]
+        except (TypeError, ValueError) as exc:
+            raise StateError(f"active: {exc}") from None
+        out[name] = {"before": before, "time": as_real("active", a["time"], StateError), "kind": a["kind"]}
+    return out
 
 
 #: a stored detection's fields that may be null

@@ -33,7 +33,7 @@ import numpy as np
 
 from ..health import FailureEvent, FailureKind
 
-__all__ = ["Detection", "Isolation"]
+__all__ = ["Detection", "Withdrawal", "Isolation"]
 
 #: rate-limit candidates, fractions of the nominal rate
 _RATE_FRACTIONS = np.geomspace(0.02, 0.9, 40)
@@ -75,6 +75,28 @@ class Detection:
                       **{f: getattr(ev, f) for f in ("position", "fraction", "lo", "hi", "rate_min", "rate_max")
                          if getattr(ev, f) is not None}}
         return d
+
+
+@dataclass(frozen=True)
+class Withdrawal:
+    """A detection taken back: the effector's health before it is restored.
+
+    ``effector`` and ``kind`` (the failure kind withdrawn, its :class:`~alloc.health.FailureKind`
+    value); ``time`` of the withdrawal and ``detection_time`` of the detection withdrawn, in
+    seconds; ``statistic`` the evidence for "nothing failed" against the event (twice the log
+    likelihood ratio over the data since the event; ``None`` when another component asked,
+    :meth:`~.detection.FailureDetector.withdraw`); ``reason`` in words.
+    """
+
+    effector: str
+    kind: str
+    time: float
+    detection_time: float
+    statistic: float | None
+    reason: str
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
 
 
 @dataclass
