@@ -120,7 +120,11 @@ class InLoopHarm:
                           "never applied")
         if reason is not None:
             by = "quarantine" if reason.startswith("quarantine") else "fit"
-            w = self.detector.detector.withdraw(name, record["time"], reason)
+            w = self._withdraw(name, record["time"], reason)
+            if w is None:  # the detector took it back on its own evidence in the same sample
+                record["probation"] = {"verdict": "withdrawn", "reason": "withdrawn by the detector first",
+                                       "time": record["time"], "statistics": None}
+                return False
             record["probation"] = {"verdict": "withdrawn", "reason": reason, "time": record["time"], "statistics": None}
             self.withdrawals.append({"effector": name, "kind": w.kind, "time": w.time, "detection_time": w.detection_time,
                                      "detected_applied_time": None, "applied_time": None, "by": by,
@@ -153,6 +157,18 @@ class InLoopHarm:
             if p.applied_time is None and belief.get(p.effector) is not None:
                 p.applied_time = time
 
+    def _withdraw(self, effector: str, t: float, reason: str):
+        """The detector's withdrawal of ``effector``'s standing detection, or None when none stands
+        any more (the detector withdrew or replaced it on its own evidence first)."""
+        from alloc.estimation import SampleError
+
+        try:
+            return self.detector.detector.withdraw(effector, t, reason)
+        except SampleError as exc:
+            if "stands to withdraw" not in str(exc):
+                raise
+            return None
+
     def verdicts(self, t: float) -> list[dict[str, Any]]:
         """Judge the probations that end by ``t``; withdraw on the detector those the rule rejects.
 
@@ -177,8 +193,8 @@ class InLoopHarm:
                 self._cleared.add(p.effector)
                 self.released = True
             if verdict.withdraw:
-                self.detector.detector.withdraw(p.effector, t, verdict.reason)
-                self._popped_own.add((p.effector, t))
+                if self._withdraw(p.effector, t, verdict.reason) is not None:
+                    self._popped_own.add((p.effector, t))
                 self._quiet_until = t + self.design.quarantine
                 self._standing.pop(p.effector, None)
                 out.append({"effector": p.effector, "kind": p.kind, "time": t, "detection_time": p.detection_time,

@@ -132,3 +132,21 @@ def test_a_real_jam_is_detected_and_kept():
 def test_no_failure_no_detection_no_withdrawal():
     s = get_scenario("ice")(method="qp", seed=1, duration=20.0, health="detected").summary()
     assert s["detections"] == [] and s["withdrawals"] == [] and not s["diverged"]
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_detected_flights_in_a_hostile_world_never_raise(seed):
+    """A seeded generator of worlds the detector is not told of (turbulence, Student-t noise,
+    model error): the do-no-harm rule may find the detector already withdrew a detection on its
+    own evidence in the same sample; the flight goes on (once a SampleError ended the run)."""
+    from sim.user_vehicle import fly as fly_file
+
+    rng = np.random.default_rng(seed)
+    world = {"turbulence": str(rng.choice(["light", "moderate", "severe"])),
+             "noise_model": str(rng.choice(["gaussian", "student-t:4", "coloured"])),
+             "model_error": float(rng.choice([0.0, 0.2]))}
+    res = fly_file("hexa-x", method="qp", duration=30.0, seed=seed, health="detected", dt=0.005,
+                   frame_period=0.01, **world)
+    assert np.isfinite(res.effectors).all()
+    for w in res.withdrawals:
+        assert w["effector"] in res.effector_names
