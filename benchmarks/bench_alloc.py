@@ -421,7 +421,7 @@ def markdown(out: dict) -> str:
               "| k | m | floor µs | qp | wls | lp | da |", "|---|---|---|---|---|---|---|"]
     lines += [f"| {r['k']} | {r['m']} | {r['floor_us']:.2f} | {r['qp']:.1f} | {r['wls']:.1f} | {r['lp']:.1f} | "
               f"{r['da']:.1f} |" for r in out["scaling"]]
-    lines += ["", "| goal (issue 11) | measured | met? |", "|---|---|---|"]
+    lines += ["", "| goal | measured | met? |", "|---|---|---|"]
     for g in out["goals"]:
         shown = f"{1.0 / g['value']:.2f}×" if "batch" in g["goal"] else f"{g['value']:.2f}"
         lines.append(f"| {g['goal']} | {shown} | {'met' if g['met'] else '**not met**'} |")

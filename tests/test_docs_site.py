@@ -129,7 +129,7 @@ def test_performance_latency_table_is_the_committed_run():
             assert abs(int(got[4]) - again_ratio * median) <= 0.06 * again_ratio * median + 1, (method, sequence)
     # every other table row of the run (tails, batch, scaling, goals) is a row of the committed file
     committed = {_normal(r) for rows_ in sections.values() for r in rows_}
-    others = [r for r in _pipe_rows("| method | per-call min" + rest) if r[0] not in ("method", "k", "goal (issue 11)")]
+    others = [r for r in _pipe_rows("| method | per-call min" + rest) if r[0] not in ("method", "k", "goal")]
     assert len(others) >= 30
     for row in others:
         assert _normal(row) in committed, row

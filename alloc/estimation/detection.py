@@ -85,6 +85,8 @@ from ._checks import (
     state_count,
     state_mapping,
 )
+from ._records import detection_from_dict as _detection_from_dict
+from ._records import withdrawal_from_dict as _withdrawal_from_dict
 from .isolation import Detection, Isolation, Withdrawal
 
 __all__ = ["FailureDetector", "Detection", "Withdrawal", "MAX_KEPT", "MAX_DETECTOR_BYTES", "MAX_ISOLATION_CELLS", "detector_bytes"]
@@ -597,34 +599,6 @@ class _NonFinite(Exception):
     restores its state and refuses the sample)."""
 
 
-def _detection_from_dict(d: Any) -> Detection:
-    if not isinstance(d, dict) or "event" not in d:
-        raise StateError("detections: expected mappings with an event")
-    try:
-        ev = dict(d["event"])
-        event = FailureEvent(ev.pop("effector"), ev.pop("kind"), **ev)
-        rest = {k: v for k, v in d.items() if k != "event"}
-        for name, value in rest.items():  # every number recorded is finite (an unknown name: Detection's TypeError)
-            if name == "samples":
-                rest[name] = state_count("detections", value)
-            elif value is not None or name not in _OPTIONAL_NUMBERS:
-                rest[name] = as_real("detections", value, StateError)
-        return Detection(event=event, **rest)
-    except (TypeError, ValueError, KeyError) as exc:
-        raise StateError(f"detections: {exc}") from None
-
-
-def _withdrawal_from_dict(d: Any) -> Withdrawal:
-    if not isinstance(d, dict) or set(d) != {f for f in Withdrawal.__dataclass_fields__}:
-        raise StateError(f"withdrawals: expected mappings with {sorted(Withdrawal.__dataclass_fields__)}")
-    if not (isinstance(d["effector"], str) and isinstance(d["kind"], str) and isinstance(d["reason"], str)):
-        raise StateError("withdrawals: effector, kind and reason must be strings")
-    return Withdrawal(effector=d["effector"], kind=d["kind"], time=as_real("withdrawals", d["time"], StateError),
-                      detection_time=as_real("withdrawals", d["detection_time"], StateError),
-                      statistic=None if d["statistic"] is None else as_real("withdrawals", d["statistic"], StateError),
-                      reason=d["reason"][:200])
-
-
 def _active_from_dict(d: Any, det: FailureDetector) -> dict[str, dict[str, Any]]:
     """The standing detections' records (``active``), each on an effector the health lists."""
     if not isinstance(d, dict):
@@ -644,9 +618,6 @@ def _active_from_dict(d: Any, det: FailureDetector) -> dict[str, dict[str, Any]]
 
 
 #: a stored detection's fields that may be null
-_OPTIONAL_NUMBERS = ("parameter", "parameter_std", "end_position")
-
-
 def _correlation_setting(value: Any) -> np.ndarray:
     """``noise_correlation`` as a 1-D array of finite lags in (-1, 1), or OptionError naming it."""
     arr = as_float_array("noise_correlation", value, OptionError)
