@@ -25,7 +25,8 @@ Model error (a Bayesian estimate with a stated prior, stabilised forgetting)
     not yet learnt, a residual the stated model error could explain is not evidence.
 Scale (robust, learnt)
     ``s_i`` is ``max(1, learnt)`` times the stated noise: an exponentially weighted mean of
-    ``|r|`` clipped at ``4 s`` (memory ``scale_memory``), times ``sqrt(pi / 2)`` (a Gaussian's
+    ``|r|`` clipped at ``4 s`` (memory ``scale_memory``, with :data:`PRIOR_SAMPLES` at the
+    stated level so it is learnt within a second or two, not a memory), times ``sqrt(pi / 2)`` (a Gaussian's
     mean absolute value).  Never below the stated level: heavier tails are handled below, not
     by believing the sensors worse than stated.
 Heavy tails (Huber)
@@ -64,6 +65,10 @@ __all__ = ["RobustSettings", "NominalLearner", "learner_cost", "MAX_LEARNER_FLOP
 #: The learnt model's work per sample, ``k p^3`` flops (``p`` parameters per axis): 2^27, about
 #: 0.1 s of one core in the worst case; the seed's ICE (k 6, p 32) is 2e5.
 MAX_LEARNER_FLOPS = 2 ** 27
+#: The stated noise law's weight in the learnt scale and correlation, in samples (5: half a
+#: second at the in-loop detector's 10 Hz; the learnt law dominates after a second or two,
+#: the stated one keeps the first few samples' estimates from being a sample or two's noise)
+PRIOR_SAMPLES = 5.0
 #: a Gaussian's ``E|x| = sqrt(2 / pi) sigma``
 _MAD_TO_STD = math.sqrt(math.pi / 2.0)
 
@@ -165,10 +170,12 @@ class NominalLearner:
         self.lam_model = math.exp(-dt / settings.model_memory)
         self.lam_scale = math.exp(-dt / settings.scale_memory)
         self.stated_rho = np.zeros(settings.lags) if rho is None else _pad(rho, settings.lags)
-        self.abs_mean = np.full(k, 1.0 / _MAD_TO_STD)  # E|r| under the stated level
-        self.c0 = 1.0  # weighted mean of clipped r^2 (all axes)
-        self.cl = np.zeros(settings.lags)  # weighted mean of lagged products
-        self.weight = 0.0  # sum of the correlation's weights (how much is learnt)
+        # discounted sums (weight a^age) of |r| per axis, of clipped r^2 and of lagged products
+        # (over axes), and of the weights; the estimates add PRIOR_SAMPLES at the stated law
+        self.sum_abs = np.zeros(k)
+        self.sum_c0 = 0.0
+        self.sum_cl = np.zeros(settings.lags)
+        self.weight = 0.0
         self.history = np.zeros((settings.lags, k))  # last clipped residuals, newest first
         self.u_prev: np.ndarray | None = None
         self.samples = 0
@@ -182,7 +189,9 @@ class NominalLearner:
 
     def scale(self) -> np.ndarray:
         """The noise scale, in units of the stated level (at least 1)."""
-        return np.maximum(1.0, self.abs_mean * _MAD_TO_STD)
+        n0 = PRIOR_SAMPLES
+        abs_mean = (n0 / _MAD_TO_STD + self.sum_abs) / (n0 + self.weight)
+        return np.maximum(1.0, abs_mean * _MAD_TO_STD)
 
     def residual(self, r0: np.ndarray, phi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(r, s)``: the innovation of the stated-whitened nominal residual ``r0`` in units of the
@@ -199,11 +208,11 @@ class NominalLearner:
         h = self.settings.huber
         a = self.lam_scale
         clipped_abs = np.minimum(np.abs(r) * s, 4.0 * self.scale())
-        self.abs_mean = a * self.abs_mean + (1.0 - a) * clipped_abs
         rc = np.clip(r, -h, h)
-        self.c0 = a * self.c0 + (1.0 - a) * float(rc @ rc) / self.k
-        self.cl = a * self.cl + (1.0 - a) * (self.history @ rc) / self.k
-        self.weight = a * self.weight + (1.0 - a)
+        self.sum_abs = a * self.sum_abs + clipped_abs
+        self.sum_c0 = a * self.sum_c0 + float(rc @ rc) / self.k
+        self.sum_cl = a * self.sum_cl + (self.history @ rc) / self.k
+        self.weight = a * self.weight + 1.0
         self.history = np.roll(self.history, 1, axis=0)
         self.history[0] = rc
         if model:
@@ -238,9 +247,8 @@ class NominalLearner:
 
     def correlation(self, n: int) -> np.ndarray | None:
         """The autocorrelation (lags ``1..n-1``) to whiten an ``n``-sample window with."""
-        w = self.weight
-        learnt = self.cl / max(self.c0, 1e-300)
-        rho = w * learnt + (1.0 - w) * self.stated_rho
+        n0 = PRIOR_SAMPLES
+        rho = (n0 * self.stated_rho + self.sum_cl) / max(n0 + self.sum_c0, 1e-300)
         rho = _pad(rho, n - 1)
         from scipy.linalg import LinAlgError, cholesky, toeplitz
 
@@ -257,7 +265,8 @@ class NominalLearner:
     # ------------------------------------------------------------------ durable state
     def to_dict(self) -> dict[str, Any]:
         return {"settings": self.settings.record(), "J": self.J.tolist(), "h": self.h.tolist(),
-                "abs_mean": self.abs_mean.tolist(), "c0": self.c0, "cl": self.cl.tolist(), "weight": self.weight,
+                "sum_abs": self.sum_abs.tolist(), "sum_c0": self.sum_c0, "sum_cl": self.sum_cl.tolist(),
+                "weight": self.weight,
                 "history": self.history.tolist(), "u_prev": None if self.u_prev is None else self.u_prev.tolist(),
                 "samples": self.samples}
 
@@ -270,13 +279,14 @@ class NominalLearner:
         if not np.allclose(self.J, np.swapaxes(self.J, 1, 2), rtol=0.0, atol=0.0):
             raise StateError("robust.J: not symmetric")
         self.h = state_array("robust.h", d.get("h"), (k, p))
-        self.abs_mean = state_array("robust.abs_mean", d.get("abs_mean"), (k,))
-        self.cl = state_array("robust.cl", d.get("cl"), (L,))
+        self.sum_abs = state_array("robust.sum_abs", d.get("sum_abs"), (k,))
+        self.sum_cl = state_array("robust.sum_cl", d.get("sum_cl"), (L,))
         self.history = state_array("robust.history", d.get("history"), (L, k))
-        self.c0 = float(state_array("robust.c0", d.get("c0"), ()))
+        self.sum_c0 = float(state_array("robust.sum_c0", d.get("sum_c0"), ()))
         self.weight = float(state_array("robust.weight", d.get("weight"), ()))
-        if not (self.c0 >= 0 and 0 <= self.weight <= 1 and (self.abs_mean >= 0).all()):
-            raise StateError("robust: c0, weight (in [0, 1]) and abs_mean must be non-negative")
+        most = 1.0 / (1.0 - self.lam_scale)  # the discounted count's limit
+        if not (self.sum_c0 >= 0 and 0 <= self.weight <= most * (1 + 1e-9) and (self.sum_abs >= 0).all()):
+            raise StateError(f"robust: sum_c0 and sum_abs must be non-negative, weight in [0, {most:g}]")
         self.u_prev = None if d.get("u_prev") is None else state_array("robust.u_prev", d["u_prev"], (self.m,))
         self.samples = state_count("robust.samples", d.get("samples", 0))
         self._solve()
