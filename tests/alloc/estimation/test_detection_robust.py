@@ -150,7 +150,7 @@ def test_stored_state_is_checked():
     det = FailureDetector(problem, SIGMA, DT, robust=RobustSettings(lags=4))
     _fly(det, rng, plant, phases, freqs, 50)
     state = det.to_dict()
-    for key, bad in (("J", "x"), ("sum_abs", [-1.0] * problem.k), ("weight", 1e9), ("cl", [float("nan")] * 4)):
+    for key, bad in (("J", "x"), ("sum_abs", [-1.0] * problem.k), ("weight", 1e9), ("sum_cl", [float("nan")] * 4)):
         broken = {**state, "robust": {**state["robust"], key: bad}}
         with pytest.raises(StateError):
             FailureDetector.from_dict(problem, broken)
