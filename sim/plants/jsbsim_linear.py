@@ -168,7 +168,7 @@ def vehicle_document(lin: Linearisation) -> dict[str, Any]:
         effectors.append({
             "name": name, "kind": s.kind, "unit": "deg",
             "description": f"{s.description}; deviation from its trim {trim:.4f} deg",
-            "min": round(s.lo - trim, 6), "max": round(s.hi - trim, 6), "rate_max": round(s.rate, 6),
+            "min": s.lo - trim, "max": s.hi - trim, "rate_max": s.rate,
             "preferred": 0.0, "dynamics": {"bandwidth": ACTUATOR_BANDWIDTH[name]},
         })
     rows = [STATES.index(ch) for ch in CONTROLLED]
