@@ -168,6 +168,9 @@ class JSBSimPlant:
             if p not in spec.params:
                 raise ProblemError(f"{p}: a {kind!r} failure does not take it (it takes "
                                    f"{', '.join(spec.params) or 'no parameters'})", field=p)
+        for p, default in spec.params.items():
+            if default is None and p not in params:
+                raise ProblemError(f"{p}: required for a {kind!r} failure", field=p)
         i = int(effector)
         limits = (float(self.lo0[i]), float(self.hi0[i]))
         params = resolve_defaults(spec, params, limits=limits, position=float(self.pos[i]))
