@@ -79,3 +79,37 @@ def test_real_time_factor_is_recorded(cruise):
     # measured 50-70x real time on 2 shared cores (plant, controller and qp allocator at 120 Hz)
     assert cruise.real_time_factor > 1.0
     assert cruise.settings["plant"]["name"] == "jsbsim:f22" and cruise.settings["design"]["K_rho"] > 0
+
+
+# ------------------------------------------------------------------ command line (sim.plants.cli)
+def test_failure_names_parse_by_the_kind_table():
+    from sim.plants.cli import parse_failure
+
+    eff = ("stab_l", "tvc")
+    assert parse_failure("jam:stab_l@0", eff) == ("stab_l", "jam", {"position": 0.0})
+    assert parse_failure("hardover:stab_l", eff) == ("stab_l", "hardover", {})
+    assert parse_failure("rate_limits:tvc@-5:5", eff) == ("tvc", "rate_limits", {"rate_min": -5.0, "rate_max": 5.0})
+    for bad in ("melt:stab_l", "jam:canard@1", "jam:stab_l@x", "jam:stab_l@1:2", "jam", "jam:stab_l@nan"):
+        with pytest.raises(AllocError) as e:
+            parse_failure(bad, eff)
+        assert e.value.field == "failure", bad
+
+
+def test_cli_flies_and_linearises(tmp_path):
+    import json
+
+    import alloc
+    from typer.testing import CliRunner
+
+    from sim.plants.cli import app
+
+    runner = CliRunner()
+    out = runner.invoke(app, ["fly", "jsbsim:f22", "--duration", "3", "--failure", "jam:stab_l@0"])
+    assert out.exit_code == 0, out.output
+    summary = json.loads(out.output)
+    assert summary["diverged"] is False and summary["told"] is True
+    out = runner.invoke(app, ["linearise", "jsbsim:f22", "--out", str(tmp_path / "f22.toml")])
+    assert out.exit_code == 0, out.output
+    assert alloc.load_vehicle(tmp_path / "f22.toml").model.controlled == ("q", "p", "r")
+    out = runner.invoke(app, ["fly", "jsbsim:f16"])
+    assert out.exit_code != 0 and isinstance(out.exception, AllocError) and out.exception.field == "plant"
