@@ -5,7 +5,8 @@
 actuator model), and the closed loop of :mod:`sim.plants.jsbsim_loop` (controller, qp allocator,
 plant) through its default doublets.  The loop's frame is one JSBSim step.  Then one 20 s flight
 per failure (at 5 s), told and blind: whether it diverged and when, peak alpha deviation and RMS
-pitch-rate error (command minus measured) after the failure.
+pitch-rate error (command minus measured) after the failure; with the observers fed the
+allocator's command (the seed's loop) and, for the stabilator failures, the measured positions.
 """
 
 from __future__ import annotations
@@ -60,14 +61,17 @@ def main() -> None:
         print(f"{'1/' + str(hz) + ' s':>12s} {alone:11.0f}x {statistics.median(r for r, _ in loops):11.1f}x  "
               f"{any(d for _, d in loops)}")
     print()
-    print("| failure at 5 s | allocator | diverged at | peak alpha (deg) | RMS q error after 5 s (deg/s) |")
-    print("|---|---|---|---|---|")
+    print("| failure at 5 s | allocator | observers fed | diverged at | peak alpha (deg) "
+          "| RMS q error after 5 s (deg/s) |")
+    print("|---|---|---|---|---|---|")
     for label, failure in FAILURES:
-        for told in ((True,) if failure is None else (True, False)):
-            f = fly(duration=args.seconds, failure=failure, told=told)
-            when = f"{f.t[-1]:.2f} s" if f.diverged else "no"
-            print(f"| {label} | {'told' if told else 'blind'} | {when} | {f.peak('alpha'):.2f} | "
-                  f"{f.rms_error('q', after=5.0):.3f} |")
+        inputs = ("command", "position") if failure is None or failure[0].startswith("stab") else ("command",)
+        for observer_input in inputs:
+            for told in ((True,) if failure is None else (True, False)):
+                f = fly(duration=args.seconds, failure=failure, told=told, observer_input=observer_input)
+                when = f"{f.t[-1]:.2f} s" if f.diverged else "no"
+                print(f"| {label} | {'told' if told else 'blind'} | {observer_input} | {when} | "
+                      f"{f.peak('alpha'):.2f} | {f.rms_error('q', after=5.0):.3f} |")
 
 
 if __name__ == "__main__":

@@ -20,6 +20,9 @@ controller knows comes from the linearisation (the vehicle file
 * failures: at ``failure_time`` the plant gets the failure; a told allocator is rebuilt on the
   problem with the failure's health (:func:`alloc.health.apply_event`), a blind one keeps the
   nominal problem.
+* the observers' input (``observer_input``): ``"command"``, the allocator's command, as in the
+  seed's loop (its observers model no actuators), or ``"position"``, the effector positions the
+  plant reports at the frame's start -- what a blind allocator's jammed surface really does.
 """
 
 from __future__ import annotations
@@ -39,13 +42,15 @@ from sim.plants.jsbsim import JSBSimPlant
 from sim.plants.jsbsim_linear import CONTROLLED, VEHICLE_FILE
 from sim.plants.jsbsim_model import STATES
 
-__all__ = ["DESIGN_OPTIONS", "OUTPUT_BOUND", "Flight", "SMCLoop", "fly", "doublets"]
+__all__ = ["DESIGN_OPTIONS", "OUTPUT_BOUND", "OBSERVER_INPUTS", "Flight", "SMCLoop", "fly", "doublets"]
 
 #: the one design option changed from sim.autodesign's defaults (module docstring says why)
 DESIGN_OPTIONS = {"stability_margin": 0.005}
 #: divergence: any output deviation beyond these (vt m/s, alpha deg, q deg/s, theta deg, beta deg,
 #: p deg/s, r deg/s, phi deg) ends the flight as diverged
 OUTPUT_BOUND = np.array([60.0, 15.0, 60.0, 30.0, 10.0, 120.0, 60.0, 60.0])
+#: what the observers take as the effectors' input (module docstring)
+OBSERVER_INPUTS = ("command", "position")
 
 
 def doublets(t: np.ndarray, amplitude: tuple[float, float, float] = (2.0, 10.0, 2.0)) -> np.ndarray:
@@ -75,12 +80,16 @@ class SMCLoop:
     """The controller and allocator of the module docstring, designed on ``vehicle`` at frame ``T``."""
 
     def __init__(self, vehicle: str | Path = VEHICLE_FILE, *, T: float, method: str = "qp",
-                 design: dict[str, Any] | None = None) -> None:
+                 design: dict[str, Any] | None = None, observer_input: str = "command") -> None:
         import alloc
         from alloc import vehicles
         from sim.blocks import observer_gain
         from sim.user_vehicle import flight_model
 
+        if observer_input not in OBSERVER_INPUTS:
+            raise AllocError(f"observer_input: {observer_input!r}; expected one of {', '.join(OBSERVER_INPUTS)}",
+                             field="observer_input")
+        self.observer_input = observer_input
         self.fv = vehicles.get_vehicle(vehicle)
         if tuple(self.fv.model.states) != STATES or tuple(self.fv.effector_names) != JSBSimPlant.effectors:
             raise AllocError(f"vehicle: {self.fv.name!r} is not a JSBSim F-22 model (states {STATES}, effectors "
@@ -129,8 +138,10 @@ class SMCLoop:
         _, health = apply_event(self.problem, {}, FailureEvent(effector, kind, **params))
         self.allocator = alloc.make_allocator(self.problem.with_health(health), self.method)
 
-    def step(self, y: np.ndarray, command: np.ndarray) -> tuple[np.ndarray, np.ndarray, str]:
-        """One frame: outputs ``y`` and channel commands in; effector commands, ``v`` and the status out."""
+    def step(self, y: np.ndarray, command: np.ndarray, positions: np.ndarray | None = None,
+             ) -> tuple[np.ndarray, np.ndarray, str]:
+        """One frame: outputs ``y``, channel commands and (``observer_input="position"``) the effector
+        positions in; effector commands, ``v`` and the allocator's status out."""
         r = np.empty(len(self.refs))
         for i, (Ad, Bd, c, d) in enumerate(self.refs):
             r[i] = float((c @ self.xr[i])[0] + d[0, 0] * command[i])
@@ -143,7 +154,12 @@ class SMCLoop:
         v = self.demand_map @ u_c
         res = self.allocator(v, u_prev=self.u, dt=self.T)
         u = np.asarray(res.u, dtype=float)
-        w = np.concatenate([u, y])
+        if self.observer_input == "position":
+            if positions is None:
+                raise AllocError("positions: observer_input='position' needs the plant's positions", field="positions")
+            w = np.concatenate([positions, y])
+        else:
+            w = np.concatenate([u, y])
         for i, (Ad, Bd) in enumerate(self.obs):
             self.xh[i] = Ad @ self.xh[i] + Bd @ w
         self.u = u
@@ -186,7 +202,8 @@ class Flight:
 
 def fly(*, duration: float = 20.0, method: str = "qp", failure: tuple[str, str, dict[str, float]] | None = None,
         failure_time: float = 5.0, told: bool = True, commands: Callable[[np.ndarray], np.ndarray] | None = doublets,
-        plant: JSBSimPlant | None = None, vehicle: str | Path = VEHICLE_FILE, seed: int = 0) -> Flight:
+        plant: JSBSimPlant | None = None, vehicle: str | Path = VEHICLE_FILE, seed: int = 0,
+        observer_input: str = "command") -> Flight:
     """Fly the F-22 for ``duration`` s; ``failure = (effector, kind, params)`` at ``failure_time``.
 
     ``commands(t) -> (len(t), 3)`` deg/s on q, p, r (default :func:`doublets`; None: hold trim).
@@ -196,7 +213,7 @@ def fly(*, duration: float = 20.0, method: str = "qp", failure: tuple[str, str, 
         raise AllocError(f"duration: expected (0, 600] s, got {duration!r}", field="duration")
     plant = plant or JSBSimPlant()
     T = plant.h
-    loop = SMCLoop(vehicle, T=T, method=method)
+    loop = SMCLoop(vehicle, T=T, method=method, observer_input=observer_input)
     n = int(round(duration / T))
     t = np.arange(n + 1) * T
     cmd = np.zeros((n + 1, len(CONTROLLED))) if commands is None else np.asarray(commands(t), dtype=float)
@@ -222,7 +239,7 @@ def fly(*, duration: float = 20.0, method: str = "qp", failure: tuple[str, str, 
                 executed = {p: v for p, v in plant.failures[-1].items() if p not in ("time", "effector", "kind")}
                 loop.tell(name, kind, executed)
             failed = True
-        u, v, st = loop.step(Y[k], cmd[k])
+        u, v, st = loop.step(Y[k], cmd[k], plant.positions())
         U[k], V[k] = u, v
         status.append(st)
         Y[k + 1] = plant.step(u, T)
@@ -235,6 +252,7 @@ def fly(*, duration: float = 20.0, method: str = "qp", failure: tuple[str, str, 
     return Flight(t=t[:end], outputs=Y[:end], commands=cmd[:end], u_cmd=U[:end], positions=P[:end], v=V[:end],
                   status=status, diverged=diverged, wall_seconds=wall,
                   settings={"method": method, "told": told, "failure": failure, "failure_time": failure_time,
+                            "observer_input": observer_input,
                             "duration": duration, "frame": T, "plant": plant.describe(),
                             "design": {"K_rho": loop.fm.design.report["switching"]["K_rho"],
                                        "rho": loop.rho.tolist(), "eps": loop.eps.tolist(),
