@@ -156,7 +156,8 @@ class JSBSimPlant:
         Positions and limits are deviations from trim (deg), rates deg/s.  Raises ProblemError
         naming ``effector``, ``kind`` or the parameter for bad input.
         """
-        if isinstance(effector, bool) or not isinstance(effector, (int, np.integer)) or not 0 <= effector < len(EFFECTORS):
+        m = len(EFFECTORS)
+        if isinstance(effector, bool) or not isinstance(effector, (int, np.integer)) or not 0 <= effector < m:
             raise ProblemError(f"effector: expected an index in [0, {len(EFFECTORS) - 1}] ({', '.join(EFFECTORS)}), "
                                f"got {effector!r}", field="effector")
         if not (isinstance(kind, str) and kind in {k.value for k in FailureKind}):

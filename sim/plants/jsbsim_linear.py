@@ -216,8 +216,9 @@ def _provenance(lin: Linearisation) -> list[str]:
     for name, (fwd, bwd) in lin.one_sided.items():
         if name in EFFECTORS:
             rows = [STATES.index(ch) for ch in CONTROLLED]
-            lines.append(f"Kink at the trim in {name}: one-sided q/p/r-dot rows forward {np.round(fwd[rows], 5).tolist()}, "
-                         f"backward {np.round(bwd[rows], 5).tolist()} (the model holds their mean).")
+            lines.append(f"Kink at the trim in {name}: one-sided q/p/r-dot rows forward "
+                         f"{np.round(fwd[rows], 5).tolist()}, backward {np.round(bwd[rows], 5).tolist()} "
+                         "(the model holds their mean).")
         else:
             lines.append(f"Kink at the trim in state {name}: forward and backward columns differ by more than "
                          f"{KINK_RTOL:.0%}; the model holds their mean.")

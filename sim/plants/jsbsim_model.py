@@ -333,7 +333,7 @@ class F22:
             self.fdm[s.prop] = float(x)
 
     def positions(self) -> np.ndarray:
-        """The positions the aerodynamics reads now, in degrees (the mean for the stabilator halves)."""
+        """Our external properties now (degrees, :data:`SURFACES` order; the aero reads the halves' mean)."""
         return np.array([self.fdm[s.prop] for s in SURFACES])
 
     # ---- state
