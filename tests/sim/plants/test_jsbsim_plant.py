@@ -11,6 +11,7 @@ import pytest
 jsbsim = pytest.importorskip("jsbsim", reason="jsbsim not installed: pip install 'alloc-toolkit[plants]'")
 
 from alloc.exceptions import AllocError, ProblemError  # noqa: E402
+from alloc.health import FAILURE_KINDS  # noqa: E402
 from sim.plant import Plant  # noqa: E402
 from sim.plants.jsbsim import JSBSimPlant, make_plant  # noqa: E402
 from sim.plants.jsbsim_linear import (CONTROLLED, EFFECTORS, VEHICLE_FILE, b_envelope, linearise,  # noqa: E402
@@ -292,3 +293,25 @@ def test_bad_construction_names_the_field():
     with pytest.raises(AllocError) as e:
         JSBSimPlant(jsbsim_dt=1.0)
     assert e.value.field == "jsbsim_dt"
+
+
+@pytest.mark.parametrize("kind", sorted(FAILURE_KINDS))
+def test_every_registered_failure_kind_runs_on_the_plant(plant, kind):
+    """Each row of the failure-kind table, with its example parameters, is executed (no kind is re-listed here)."""
+    plant.fail(0, kind, dict(FAILURE_KINDS[kind].example))
+    y = plant.step(np.array([1.0, 1.0, 0, 0, 0]), 12 * H)
+    assert np.all(np.isfinite(y)) and plant.failures[-1]["kind"] == kind
+    assert plant.lo[0] <= plant.positions()[0] <= plant.hi[0]
+
+
+def test_positions_respect_limits_and_rates_under_random_commands(plant):
+    rng = np.random.default_rng(7)
+    span = plant.hi0 - plant.lo0
+    prev = plant.positions()
+    for _ in range(200):
+        u = plant.lo0 - 0.2 * span + rng.random(5) * 1.4 * span  # beyond the limits too
+        plant.step(u, H)
+        pos = plant.positions()
+        assert np.all(pos >= plant.lo0 - 1e-12) and np.all(pos <= plant.hi0 + 1e-12)
+        assert np.all(np.abs(pos - prev) <= plant.rate0 * H * (1 + 1e-12))
+        prev = pos
