@@ -5,23 +5,23 @@ effector position inside ``FGFDMExec.run()`` before the aerodynamics reads it, s
 written from Python do not hold.  :func:`build_aircraft` writes a copy of the aircraft file
 whose ``<flight_control>`` is replaced by pass-through channels (each position the aerodynamics
 reads = an external property of ours) and whose aerodynamics, mass, propulsion and ground
-reactions are untouched.  The copy goes to a cache directory keyed by the source file's hash,
-never into the repository or the installed package.
+reactions are untouched.  The copy goes to a cache directory named by the hash of the generated
+file, never into the repository or the installed package.
 
 What the F-22's aerodynamics reads (read from the file by :func:`aero_inputs`, checked in the
 tests) and how each is driven here:
 
-=========================  =====================================  ==============================
-property the aero reads    effectors (external properties)        stock FCS limits / rate
-=========================  =====================================  ==============================
-``fcs/elevator-pos-rad``   ``stab_l``, ``stab_r``: the mean        +-30 deg, 2 norm/s = 60 deg/s
-``fcs/tvc-pos-rad``        ``tvc`` (pitch nozzle)                 +-20 deg, 2 norm/s = 40 deg/s
-``fcs/left-aileron-pos-rad`` ``aileron`` (antisymmetric pair)     +-25 deg, 2.29 norm/s = 57 deg/s
-``fcs/rudder-pos-rad``     ``rudder`` (twin rudders together)     +-30 deg, 2.673 norm/s = 80 deg/s
-``fcs/lef-pos-rad``        ``lef`` (leading-edge flaps)           0..35 deg, 0.55 s full travel
-``fcs/flap-pos-norm``      ``flap`` (trailing-edge, 1 = 30 deg)   0..30 deg, 3 s per half travel
-``fcs/speedbrake-pos-norm`` left at 0 (not an effector)           --
-=========================  =====================================  ==============================
+============================  ====================================  =================================
+property the aero reads       effectors (external properties)       stock FCS limits / rate
+============================  ====================================  =================================
+``fcs/elevator-pos-rad``      ``stab_l``, ``stab_r``: the mean      +-30 deg, 2 norm/s = 60 deg/s
+``fcs/tvc-pos-rad``           ``tvc`` (pitch nozzle)                +-20 deg, 2 norm/s = 40 deg/s
+``fcs/left-aileron-pos-rad``  ``aileron`` (antisymmetric pair)      +-25 deg, 2.29 norm/s = 57 deg/s
+``fcs/rudder-pos-rad``        ``rudder`` (twin rudders together)    +-30 deg, 2.673 norm/s = 80 deg/s
+``fcs/lef-pos-rad``           ``lef`` (leading-edge flaps)          0..35 deg, 0.55 s full travel
+``fcs/flap-pos-norm``         ``flap`` (trailing-edge, 1 = 30 deg)  0..30 deg, 3 s per half travel
+``fcs/speedbrake-pos-norm``   left at 0 (not an effector)           --
+============================  ====================================  =================================
 
 The aerodynamics reads only the *symmetric* stabilator; the stock FCS computes a differential
 stabilator that nothing reads.  The two halves here are therefore two effectors whose mean is
