@@ -9,7 +9,7 @@ controller knows comes from the linearisation (the vehicle file
   :func:`sim.user_vehicle.flight_model`), at the frame period ``T`` (one JSBSim step, 1/120 s).
   One option differs from its defaults, and it is stated: ``stability_margin = 0.005`` 1/s,
   because the model's slow airspeed mode under rate control sits at -0.0087 1/s, right of the
-  default -0.01 (the design passes with every other mode at least 11 times further left);
+  default -0.01 (the next mode of the check is at -0.355 1/s, 40 times further left);
 * controller, each frame: reference models (``100 / (s^2 + 20 s + 100)``, from the design) of the
   commands, one full-order observer per channel (seed section 3.3) on all eight measured
   outputs, ``sigma = K0 e + K_-1 int(e)`` with ``e = r - y_hat``, ``u_c = rho sat(sigma / eps)``
