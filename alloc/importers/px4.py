@@ -1,6 +1,9 @@
 """PX4 control-allocation parameters -> vehicle.
 
-Reads the parameters PX4's ``control_allocator`` module uses (PX4-Autopilot
+Reads a QGroundControl parameter file or a PX4 airframe file as PX4 ships it
+(``ROMFS/px4fmu_common/init.d/airframes/``: ``#!/bin/sh``, ``. ${R}etc/init.d/rc.vtol_defaults``,
+``param set-default ...``; the shell lines are skipped and listed, :func:`read_params_report`), and
+from them the parameters PX4's ``control_allocator`` module uses (PX4-Autopilot
 ``src/modules/control_allocator/module.yaml``; defaults in brackets):
 
 * ``CA_AIRFRAME`` [0]: 0 multirotor, 1 fixed-wing, 2 standard VTOL (others refused).
@@ -19,15 +22,20 @@ Effectiveness, by PX4's own code (PX4/PX4-Autopilot ``src/modules/control_alloca
 ActuatorEffectiveness/``):
 
 * rotors: ``ActuatorEffectivenessRotors::computeEffectivenessMatrix``
-  (``ActuatorEffectivenessRotors.cpp``, commit 25ab311a8229): thrust ``ct * a``, moment
+  (``ActuatorEffectivenessRotors.cpp``, commit 25ab311a8229; the same formula at
+  ``VehicleActuatorEffectiveness/ActuatorEffectivenessRotors.cpp``, commit 1da805dc2d25): thrust ``ct * a``, moment
   ``ct * (p x a) - ct * km * a`` for the normalised axis ``a`` (:func:`alloc.vehicle_file.rotor_wrench`).
   Fixed-wing: the axis is fixed forward ``(1, 0, 0)`` and propeller torque disabled (``km = 0``;
   ``ActuatorEffectivenessFixedWing.cpp``: ``AxisConfiguration::FixedForward``,
   ``enablePropellerTorque(false)``).  Standard VTOL: ``km = 0`` for a rotor whose axis is not
   upwards (``|ax|, |ay| < 0.1``, ``az < -0.5``; ``ActuatorEffectivenessStandardVTOL.cpp``:
   ``enablePropellerTorqueNonUpwards(false)``), i.e. the pusher.
-* surfaces: ``ActuatorEffectivenessControlSurfaces``: the column is ``(TRQ_R, TRQ_P, TRQ_Y)`` in
-  the moment rows, no force; flaps (types 9, 10) and airbrakes (11) get a zero column.
+* surfaces: ``ActuatorEffectivenessControlSurfaces::updateParams`` (``src/modules/control_allocator/
+  VehicleActuatorEffectiveness/ActuatorEffectivenessControlSurfaces.cpp``, commit 136b586a3f5a; types
+  1..18 in ``src/lib/control_allocation/actuator_effectiveness/ActuatorEffectivenessControlSurfaces.hpp``,
+  commit 44bce91dc7c4): the column is ``(TRQ_R, TRQ_P, TRQ_Y)`` in the moment rows, no force; flaps
+  (types 9, 10), the airbrake (11), the steering wheel (16) and spoilers (17, 18) get a zero column,
+  as ``updateParams`` zeroes their torque (:data:`NO_TORQUE_TYPES`).  A-tails (13, 14) keep theirs.
 
 The axes are PX4's six: ``roll, pitch, yaw`` (moments) and ``fx, fy, fz`` (forces); with
 ``axes="auto"`` (default) the axes no effector acts on are left out (a multirotor keeps
@@ -41,15 +49,21 @@ Normalisation (``normalize``):
   (PX4 allocates them against normalised setpoints), so on a fixed-wing or VTOL the moment
   rows mix the rotors' N m with the surfaces' normalised units.
 * ``"px4"``: PX4's ``ControlAllocationPseudoInverse::updateControlAllocationMatrixScale`` and
-  ``normalizeControlAllocationMatrix`` (``ControlAllocationPseudoInverse.cpp``, commit
-  089afb091546), expressed on ``B``.  PX4 computes the mix ``M = pinv(B)`` (m x 6) of each
-  matrix and divides its columns by scales ``s``:
+  ``normalizeControlAllocationMatrix`` as PX4 has them now (``src/lib/control_allocation/
+  control_allocation/ControlAllocationPseudoInverse.cpp``, commit 1316f1cea719), expressed on ``B``.
+  PX4 computes the mix ``M = pinv(B)`` (m x 6) of each matrix and divides its columns by scales ``s``:
   roll and pitch share ``s = max over those two of sqrt(|M_col|^2 / (n / 2))``, ``n`` the
   entries of that column above 1e-3 in magnitude -- only for matrices with "normalize RPY"
   (multirotor: matrix 0; fixed-wing: none; standard VTOL: matrix 0), otherwise 1; yaw
-  ``s = max_i M_i,yaw`` (signed maximum) under the same condition; the three forces share
-  ``s = mean over effectors with a non-zero force row of |M_i,force|`` (the norm of the
-  3-vector), 1 if none.  A scale at or below FLT_EPSILON leaves its columns unscaled.
+  ``s = max_i M_i,yaw`` (signed maximum) under the same condition; each force axis its own
+  ``s = mean over the effectors acting on that axis of |M_i,axis|`` (``> FLT_EPSILON``), z first,
+  and an axis no effector acts on takes z's scale (1 when nothing acts on z).  An older PX4
+  (``src/modules/control_allocator/ControlAllocation/ControlAllocationPseudoInverse.cpp``, commit
+  089afb091546) shared one force scale, the mean norm of each effector's 3-vector; the two agree
+  for a multirotor (only fz) and differ for a standard VTOL's pusher (fx and fz now normalised
+  apart: the pusher's fx entry is 1 and each lift rotor's fz -1/4, where the shared scale gave
+  both 2/5).
+  A scale at or below FLT_EPSILON leaves its columns unscaled (the force columns follow x's).
   Since the allocation is ``u = M diag(1/s) c``, the setpoint ``c`` PX4 allocates is
   ``diag(s) B u``: the normalised effectiveness is ``diag(s) B`` (rows scaled), computed
   per matrix (each matrix's columns with its own ``s``).  Not reproduced: PX4 then zeroes
@@ -63,7 +77,9 @@ from __future__ import annotations
 
 import math
 import numbers
+import re
 from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -77,15 +93,19 @@ from ..vehicle_file.fields import FORMAT, WRENCH_COMPONENTS
 from ..vehicle_file.parts import rotor_wrench
 from ..vehicle_file.vehicle import Vehicle, vehicle_from_dict
 
-__all__ = ["read_params", "vehicle_from_params", "px4_scales", "AIRFRAMES", "SURFACE_TYPES", "DEFAULTS"]
+__all__ = ["read_params", "read_params_report", "ParamsRead", "vehicle_from_params", "px4_scales", "AIRFRAMES", "SURFACE_TYPES", "NO_TORQUE_TYPES", "DEFAULTS"]
 
 #: CA_AIRFRAME values this importer reads
 AIRFRAMES = {0: "multirotor", 1: "fixed-wing", 2: "standard VTOL"}
-#: CA_SV_CSn_TYPE (ActuatorEffectivenessControlSurfaces.hpp ``Type``; 15 from the SIH airframes)
+#: CA_SV_CSn_TYPE: ActuatorEffectivenessControlSurfaces.hpp ``Type`` (PX4-Autopilot, 1..18)
 SURFACE_TYPES = {1: "left_aileron", 2: "right_aileron", 3: "elevator", 4: "rudder", 5: "left_elevon",
                  6: "right_elevon", 7: "left_v_tail", 8: "right_v_tail", 9: "left_flap", 10: "right_flap",
-                 11: "airbrake", 12: "custom", 15: "single_channel_aileron"}
-_NO_TORQUE_TYPES = (9, 10, 11)  # torque.setZero() in ActuatorEffectivenessControlSurfaces::updateParams
+                 11: "airbrake", 12: "custom", 13: "left_a_tail", 14: "right_a_tail", 15: "single_channel_aileron",
+                 16: "steering_wheel", 17: "left_spoiler", 18: "right_spoiler"}
+#: the types whose torque PX4 zeroes (``torque.setZero()`` in ActuatorEffectivenessControlSurfaces::
+#: updateParams): flaps and spoilers are driven by their own setpoints, the steering wheel steers on
+#: the ground, the airbrake brakes; none is allocated against a torque
+NO_TORQUE_TYPES = (9, 10, 11, 16, 17, 18)
 #: module.yaml defaults of the per-rotor and per-surface parameters
 DEFAULTS = {"PX": 0.0, "PY": 0.0, "PZ": 0.0, "AX": 0.0, "AY": 0.0, "AZ": -1.0, "CT": 6.5, "KM": 0.05,
             "TYPE": 1, "TRQ_R": 0.0, "TRQ_P": 0.0, "TRQ_Y": 0.0, "TRIM": 0.0}
@@ -97,24 +117,68 @@ _INT32 = (-(2**31), 2**31 - 1)
 _INT_TYPES = range(1, 9)
 
 
+@dataclass(frozen=True)
+class ParamsRead:
+    """What :func:`read_params_report` read: the parameters, and the lines it left out on purpose.
+
+    ``skipped`` holds ``(line number, line)`` for each shell line of an airframe file (``. ${R}etc/
+    init.d/rc.vtol_defaults``, ``set MAV_TYPE 22``, ``if``/``fi``): PX4 runs them, they set no
+    parameter this importer reads, so they are listed rather than refused.
+    """
+
+    params: dict[str, float | int]
+    skipped: tuple[tuple[int, str], ...] = ()
+    airframe: bool = False
+
+    def skipped_summary(self, limit: int = 6) -> str:
+        """One line naming the skipped lines (the first ``limit`` quoted), or ``""`` when none."""
+        if not self.skipped:
+            return ""
+        shown = ", ".join(f"{n}: {text[:40]!r}" for n, text in self.skipped[:limit])
+        more = f", and {len(self.skipped) - limit} more" if len(self.skipped) > limit else ""
+        return f"{len(self.skipped)} shell line(s) skipped (line {shown}{more})"
+
+
+#: a PX4 parameter name: at most 16 characters (param_t names, ``PARAM_ID_LEN``), letters, digits, _
+_NAME = re.compile(r"[A-Za-z0-9_]{1,16}")
+_PARAM_LINE = re.compile(r"\s*param\s+(set|set-default)(\s|$)")
+
+
 def read_params(source: str | Path) -> dict[str, float | int]:
-    """Parameters from a QGroundControl ``.params`` file (or its text), or airframe lines.
+    """Parameters from a QGroundControl ``.params`` file, a PX4 airframe file, or their text.
+
+    :func:`read_params_report` without the report of skipped lines.
+    """
+    return read_params_report(source).params
+
+
+def read_params_report(source: str | Path) -> ParamsRead:
+    """Parameters from a QGroundControl ``.params`` file, a PX4 airframe file, or their text.
 
     QGroundControl lines are tab-separated ``vehicle_id component_id NAME value type``
     (``1\\t1\\tCA_ROTOR0_PX\\t0.15\\t9``; type 9 = float32, 1-8 integers, 10 float64);
-    ``#`` starts a comment.  PX4 airframe lines ``param set-default NAME value`` (and
-    ``param set``) are read too, so an airframe file's parameters can be pasted.
+    ``#`` starts a comment.  A text with a ``#!`` first line or any ``param set``/``param
+    set-default`` line is a PX4 airframe file as PX4 ships it (``ROMFS/px4fmu_common/init.d/
+    airframes/``): its ``param set-default NAME value`` and ``param set NAME value`` lines are read,
+    every other line is a shell line, skipped and listed in :attr:`ParamsRead.skipped`.  As in PX4,
+    a ``param set`` value wins over a ``param set-default`` of the same name, whatever their order;
+    a name set twice the same way is refused (naming both lines): a dump has each name once, and in
+    an airframe the second line silently undoes the first.  Parameters inside shell conditionals
+    (``if ... fi``) are read as if the condition held.
 
     A file is read through :func:`alloc._files.read_user_file` (a regular file of at most
     :data:`~alloc._files.MAX_TEXT_BYTES`, 1 MiB: a full PX4 parameter dump is about 40 KB); a
-    text is held to the same length.  A value is a finite number within ``1e50`` in magnitude.
+    text is held to the same length.  A name is at most 16 letters, digits or ``_`` (PX4's
+    limit); a value is a finite number within ``1e50`` in magnitude.  A path is a
+    :class:`~pathlib.Path`, or a string of one line that ends in ``.params`` or names a file.
 
     Raises
     ------
     ProblemError
         naming the line (``params: line 7: ...``), or ``path`` for a file that cannot be read.
     """
-    if isinstance(source, Path) or (isinstance(source, str) and "\n" not in source and source.endswith(".params")):
+    if isinstance(source, Path) or (isinstance(source, str) and "\n" not in source
+                                    and (source.endswith(".params") or Path(source).is_file())):
         text = read_user_text(source, field="path", max_bytes=MAX_TEXT_BYTES)
     elif isinstance(source, str):
         if len(source) > MAX_TEXT_BYTES:
@@ -123,35 +187,59 @@ def read_params(source: str | Path) -> dict[str, float | int]:
         text = source
     else:
         raise ProblemError(f"params: expected a path or the file's text, got {type(source).__name__}", field="params")
-    out: dict[str, float | int] = {}
-    for n, raw in enumerate(text.splitlines(), start=1):
+    lines = text.splitlines()
+    airframe = bool(lines) and lines[0].startswith("#!") or any(_PARAM_LINE.match(line) for line in lines)
+    values: dict[str, dict[str, float | int]] = {"set-default": {}, "set": {}, "qgc": {}}
+    first_line: dict[tuple[str, str], int] = {}
+    skipped: list[tuple[int, str]] = []
+    for n, raw in enumerate(lines, start=1):
         line = raw.split("#", 1)[0].strip()
         if not line:
             continue
         words = line.split()
-        if words[0] == "param" and len(words) >= 4 and words[1] in ("set", "set-default"):
-            name, value, kind = words[2], words[3], None
+        if _PARAM_LINE.match(line):
+            if len(words) != 4:
+                raise ProblemError(f"params: line {n}: expected 'param {words[1]} NAME value', got "
+                                   f"{raw.strip()[:60]!r}", field="params")
+            kind, name, value, code = words[1], words[2], words[3], None
+        elif airframe:
+            skipped.append((n, raw.strip()))
+            continue
         elif len(words) == 5:
-            name, value, kind = words[2], words[3], words[4]
+            kind, name, value, code = "qgc", words[2], words[3], words[4]
         else:
             raise ProblemError(f"params: line {n}: expected 'vehicle component NAME value type' (tab-separated) or "
                                f"'param set-default NAME value', got {raw.strip()[:60]!r}", field="params")
-        try:
-            code = None if kind is None else int(kind)
-            if code is not None and code in _INT_TYPES:
-                number: float | int = int(value)
-            elif code is None and _looks_int(value):
-                number = int(value)
-            else:
-                number = float(value)
-        except ValueError:
-            raise ProblemError(f"params: line {n}: {name[:60]}: {value[:40]!r} is not a number of type {kind[:20]}",
-                               field="params") from None
-        if not abs(number) <= MAX_MAGNITUDE:
-            raise ProblemError(f"params: line {n}: {name[:60]}: must be finite with |x| <= {MAX_MAGNITUDE:g}, got "
-                               f"{value[:40]!r}", field="params")
-        out[name] = number
-    return out
+        if not _NAME.fullmatch(name):
+            raise ProblemError(f"params: line {n}: {name[:40]!r} is not a PX4 parameter name (at most 16 letters, "
+                               "digits or _)", field="params")
+        number = _number(value, code, f"params: line {n}: {name}")
+        if (kind, name) in first_line:
+            raise ProblemError(f"params: line {n}: {name} is set again (first at line {first_line[kind, name]}); "
+                               "a parameter is set once", field="params")
+        first_line[kind, name] = n
+        values[kind][name] = number
+    return ParamsRead({**values["qgc"], **values["set-default"], **values["set"]}, tuple(skipped), airframe)
+
+
+def _number(value: str, kind: str | None, label: str) -> float | int:
+    """A parameter's value: an integer for QGroundControl's integer types (and integer text in an
+    airframe), else a float; finite and within ``1e50``, or refused naming ``label``."""
+    try:
+        code = None if kind is None else int(kind)
+        if code is not None and code in _INT_TYPES:
+            number: float | int = int(value)
+        elif code is None and _looks_int(value):
+            number = int(value)
+        else:
+            number = float(value)
+    except ValueError:
+        raise ProblemError(f"{label[:80]}: {value[:40]!r} is not a number" +
+                           ("" if kind is None else f" of type {kind[:20]}"), field="params") from None
+    if not abs(number) <= MAX_MAGNITUDE:
+        raise ProblemError(f"{label[:80]}: must be finite with |x| <= {MAX_MAGNITUDE:g}, got {value[:40]!r}",
+                           field="params")
+    return number
 
 
 def _looks_int(text: str) -> bool:
@@ -243,7 +331,7 @@ def vehicle_from_params(params: Mapping[str, Any], *, name: str = "px4", normali
     for i in range(n_surfaces):
         kind = _integer(params, f"CA_SV_CS{i}_TYPE", DEFAULTS["TYPE"], 0, _INT32[1])
         torque = [_get(params, f"CA_SV_CS{i}_TRQ_{a}", 0.0) for a in "RPY"]
-        if kind in _NO_TORQUE_TYPES:
+        if kind in NO_TORQUE_TYPES:
             torque = [0.0, 0.0, 0.0]
         base = SURFACE_TYPES.get(kind, f"surface_type{kind}")
         label = base if base not in names else f"{base}_{i}"
@@ -352,10 +440,15 @@ def px4_scales(B6: np.ndarray, *, normalize_rpy: bool) -> np.ndarray:
             s[0] = s[1] = s_rp
         if s_yaw > _FLT_EPSILON:
             s[2] = s_yaw
-    norms = np.linalg.norm(M[:, 3:6], axis=1)
-    nonzero = norms > _FLT_EPSILON
-    if nonzero.any():
-        s_force = float(norms.sum() / nonzero.sum())
-        if s_force > _FLT_EPSILON:
-            s[3:6] = s_force
+    # each force axis its own scale: the mean |M_i,axis| over the effectors acting on it; an axis no
+    # effector acts on takes z's scale (z first, 1 when nothing acts on z either)
+    s_z = 1.0
+    for axis in (5, 4, 3):
+        magnitudes = np.abs(M[:, axis])
+        acting = int((magnitudes > _FLT_EPSILON).sum())
+        s[axis] = float(magnitudes.sum()) / acting if acting else s_z
+        if axis == 5:
+            s_z = s[5]
+    if not s[3] > _FLT_EPSILON:  # PX4 divides the three force columns only when x's scale is usable
+        s[3:6] = 1.0
     return s
