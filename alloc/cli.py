@@ -289,7 +289,7 @@ class DefaultMethodCommand(TyperCommand):
 
 #: help of every ``--vehicle`` option (alloc allocate, alloc ams, alloc sim, alloc bench)
 VEHICLE_HELP = ("a catalogue vehicle (see `alloc vehicles`; ALLOC_VEHICLE_PATH adds folders of files) or a "
-                "vehicle file (.toml, .json, PX4 .params)")
+                "vehicle file (.toml, .json; PX4 .params or airframe file; ArduPilot .csv factor table or .param file)")
 
 
 def load_vehicle_option(source: str, param_hint: str = "--vehicle") -> Any:
@@ -300,10 +300,21 @@ def load_vehicle_option(source: str, param_hint: str = "--vehicle") -> Any:
     FIFO, a device, an oversized or too deeply nested file: :mod:`alloc._files`), and an
     importer's (a PX4 ``.params`` file's parameter), each an :class:`~alloc.AllocError`.
     """
+    import warnings
+
     from . import vehicles
+    from .exceptions import SkippedLinesWarning
 
     try:
-        return vehicles.get_vehicle(source)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", SkippedLinesWarning)
+            vehicle = vehicles.get_vehicle(source)
+        for w in caught:  # an importer's list of skipped lines: one note line, not a warning's source dump
+            if issubclass(w.category, SkippedLinesWarning):
+                print(f"note: {param_hint} {w.message}", file=sys.stderr)
+            else:
+                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        return vehicle
     except AllocError as exc:
         where = "" if exc.field in ("vehicle", "path") else f"{source}: "
         raise typer.BadParameter(f"{where}{exc}", param_hint=param_hint) from None

@@ -93,7 +93,7 @@ from ..vehicle_file.fields import FORMAT, WRENCH_COMPONENTS
 from ..vehicle_file.parts import rotor_wrench
 from ..vehicle_file.vehicle import Vehicle, vehicle_from_dict
 
-__all__ = ["read_params", "read_params_report", "ParamsRead", "vehicle_from_params", "px4_scales", "AIRFRAMES", "SURFACE_TYPES", "NO_TORQUE_TYPES", "DEFAULTS"]
+__all__ = ["read_params", "read_params_report", "params_from_text", "looks_like_airframe", "ParamsRead", "vehicle_from_params", "px4_scales", "AIRFRAMES", "SURFACE_TYPES", "NO_TORQUE_TYPES", "DEFAULTS"]
 
 #: CA_AIRFRAME values this importer reads
 AIRFRAMES = {0: "multirotor", 1: "fixed-wing", 2: "standard VTOL"}
@@ -187,8 +187,18 @@ def read_params_report(source: str | Path) -> ParamsRead:
         text = source
     else:
         raise ProblemError(f"params: expected a path or the file's text, got {type(source).__name__}", field="params")
+    return params_from_text(text)
+
+
+def looks_like_airframe(text: str) -> bool:
+    """Whether ``text`` is a PX4 airframe file: a ``#!`` first line or a ``param set[-default]`` line."""
+    return text.startswith("#!") or any(_PARAM_LINE.match(line) for line in text.splitlines())
+
+
+def params_from_text(text: str) -> ParamsRead:
+    """:func:`read_params_report` of a text already read (and held to its length)."""
     lines = text.splitlines()
-    airframe = bool(lines) and lines[0].startswith("#!") or any(_PARAM_LINE.match(line) for line in lines)
+    airframe = looks_like_airframe(text)
     values: dict[str, dict[str, float | int]] = {"set-default": {}, "set": {}, "qgc": {}}
     first_line: dict[tuple[str, str], int] = {}
     skipped: list[tuple[int, str]] = []
