@@ -385,7 +385,9 @@ def _whole(value: Any, name: str) -> int:
 def vehicle_from_ardupilot_params(params: Mapping[str, Any], *, name: str | None = None, **options: Any) -> Vehicle:
     """The vehicle of an ArduPilot parameter set: the built-in frame of ``FRAME_CLASS`` and
     ``FRAME_TYPE`` (:func:`frame_of_params`), with ``MOT_SLEW_UP_TIME`` / ``MOT_SLEW_DN_TIME``
-    as rate limits when positive (ArduPilot: 0 = no limit).  ``options`` go to
+    as rate limits when positive (ArduPilot: 0 = no limit).  A vehicle's rate limits come as a
+    pair: with only ``MOT_SLEW_UP_TIME`` positive, the decrease is held to the same rate (the vehicle
+    file's ``rate_min = -rate_max``), more cautious than ArduPilot.  ``options`` go to
     :func:`vehicle_from_factors`."""
     if not isinstance(params, Mapping):
         raise ProblemError(f"params: expected a mapping of parameter names to numbers, got {type(params).__name__}",
