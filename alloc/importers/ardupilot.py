@@ -124,6 +124,7 @@ def read_factor_table(source: str | Path) -> tuple[list[str], np.ndarray]:
                            field="factors")
     rows, where = _toml_rows(text, label) if toml else _csv_rows(text)
     names, table = [], []
+    first_row: dict[str, int] = {}
     for i, row in enumerate(rows, start=0 if toml else 2):
         at = where.format(i)
         if not isinstance(row, dict):
@@ -140,6 +141,10 @@ def read_factor_table(source: str | Path) -> tuple[list[str], np.ndarray]:
                     continue
                 raise ProblemError(f"factors: {at}: {axis}: required", field="factors")
             values.append(_factor(raw, f"factors: {at}: {axis}"))
+        if name.strip() in first_row:
+            raise ProblemError(f"factors: {at}: motor {name.strip()[:40]!r} is named twice (first at "
+                               f"{where.format(first_row[name.strip()])})", field="factors")
+        first_row[name.strip()] = i
         names.append(name.strip())
         table.append(values)
     return names, np.array(table, dtype=float)
