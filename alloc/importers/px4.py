@@ -89,14 +89,15 @@ from .._files import MAX_TEXT_BYTES, read_user_text
 from ..domain import MAX_MAGNITUDE
 from ..exceptions import ProblemError
 from ..domain import as_float_array, short_repr
-from ..vehicle_file.fields import FORMAT, WRENCH_COMPONENTS
+from ..vehicle_file.fields import FORMAT, FORMAT_SCHEDULE, WRENCH_COMPONENTS
 from ..vehicle_file.parts import rotor_wrench
 from ..vehicle_file.vehicle import Vehicle, vehicle_from_dict
+from .px4_tiltrotor import RotorGeometry, Tiltrotor
 
 __all__ = ["read_params", "read_params_report", "params_from_text", "looks_like_airframe", "ParamsRead", "vehicle_from_params", "px4_scales", "AIRFRAMES", "SURFACE_TYPES", "NO_TORQUE_TYPES", "DEFAULTS"]
 
 #: CA_AIRFRAME values this importer reads
-AIRFRAMES = {0: "multirotor", 1: "fixed-wing", 2: "standard VTOL"}
+AIRFRAMES = {0: "multirotor", 1: "fixed-wing", 2: "standard VTOL", 3: "tiltrotor VTOL"}
 #: CA_SV_CSn_TYPE: ActuatorEffectivenessControlSurfaces.hpp ``Type`` (PX4-Autopilot, 1..18)
 SURFACE_TYPES = {1: "left_aileron", 2: "right_aileron", 3: "elevator", 4: "rudder", 5: "left_elevon",
                  6: "right_elevon", 7: "left_v_tail", 8: "right_v_tail", 9: "left_flap", 10: "right_flap",
@@ -284,7 +285,7 @@ def _count(params: Mapping[str, Any], name: str, high: int) -> int:
 
 
 def vehicle_from_params(params: Mapping[str, Any], *, name: str = "px4", normalize: str = "none",
-                        axes: str = "auto") -> Vehicle:
+                        axes: str = "auto", at: Mapping[str, float] | None = None) -> Vehicle:
     """The vehicle PX4 would allocate for with these parameters (see the module docstring).
 
     Parameters
@@ -294,7 +295,13 @@ def vehicle_from_params(params: Mapping[str, Any], *, name: str = "px4", normali
     normalize : {"none", "px4"}
         ``"none"``: physical effectiveness; ``"px4"``: PX4's normalised effectiveness.
     axes : {"auto", "all"}
-        ``"auto"`` leaves out the axes no effector acts on; ``"all"`` keeps PX4's six.
+        ``"auto"`` leaves out the axes no effector acts on (at any scheduling point); ``"all"``
+        keeps PX4's six.
+    at : mapping, optional
+        Tiltrotor only (``CA_AIRFRAME`` 3, :mod:`alloc.importers.px4_tiltrotor`): the scheduling
+        variables' values (``tilt`` or ``collective_tilt``, ``airspeed``).  Without it the vehicle
+        carries a ``[schedule]`` and its ``B`` is at the nominal point (tilts at their minimum, trim
+        airspeed); with it, ``B`` is rebuilt at those values and the vehicle has no schedule.
     """
     if not isinstance(params, Mapping):
         raise ProblemError(f"params: expected a mapping of parameter names to numbers (read_params), got "
@@ -312,6 +319,13 @@ def vehicle_from_params(params: Mapping[str, Any], *, name: str = "px4", normali
     n_rotors = _count(params, "CA_ROTOR_COUNT", _MAX_ROTORS)
     n_surfaces = _count(params, "CA_SV_CS_COUNT", _MAX_SURFACES) if airframe != 0 else 0
     reversible = _integer(params, "CA_R_REV", 0, _INT32[0], _INT32[1])  # a bitmask
+    tiltrotor = Tiltrotor(params, _get, _integer, n_rotors) if airframe == 3 else None
+    if at is not None and tiltrotor is None:
+        raise ProblemError(f"at: only a tiltrotor (CA_AIRFRAME 3) has scheduling variables; this is a "
+                           f"{AIRFRAMES[airframe]}", field="at")
+    values = tiltrotor.values(at) if tiltrotor is not None else {}
+    geometry: list[RotorGeometry] = []
+    surface_columns: dict[int, np.ndarray] = {}
 
     columns: list[np.ndarray] = []  # 6-vectors, PX4's axis order
     matrix: list[int] = []  # which PX4 matrix each effector is in
@@ -332,8 +346,14 @@ def vehicle_from_params(params: Mapping[str, Any], *, name: str = "px4", normali
             raise ProblemError(f"CA_R{i}_SLEW: must be >= 0, got {slew:g}", field=f"CA_R{i}_SLEW")
         if slew > 0:
             e["rate_max"] = _rate(1.0 - lo, slew, f"CA_R{i}_SLEW")
-        columns.append(rotor_wrench(position, axis, ct, km))
-        if normalize == "none" and ct >= _FLT_EPSILON and math.hypot(*axis) > _FLT_EPSILON and ct > 0:
+        geometry.append(RotorGeometry((position[0], position[1], position[2]), (axis[0], axis[1], axis[2]), ct, km,
+                                      -1 if tiltrotor is None else tiltrotor.rotor_tilt[i]))
+        if tiltrotor is not None:  # the tilt turns the column and PX4 rewrites its yaw and thrust rows
+            columns.append(tiltrotor.rotor_column(geometry[-1], values))
+        else:
+            columns.append(rotor_wrench(position, axis, ct, km))
+        if normalize == "none" and tiltrotor is None and ct >= _FLT_EPSILON and math.hypot(*axis) > _FLT_EPSILON \
+                and ct > 0:
             e["rotor"] = {"position": position, "axis": axis, "ct": ct, "km": km}
         matrix.append(0)
         effectors.append(e)
@@ -357,30 +377,50 @@ def vehicle_from_params(params: Mapping[str, Any], *, name: str = "px4", normali
             raise ProblemError(f"CA_SV{i}_SLEW: must be >= 0, got {slew:g}", field=f"CA_SV{i}_SLEW")
         if slew > 0:
             e["rate_max"] = _rate(2.0, slew, f"CA_SV{i}_SLEW")
-        columns.append(np.array([*torque, 0.0, 0.0, 0.0]))
+        surface_columns[len(columns)] = np.array([*torque, 0.0, 0.0, 0.0])
+        factor = 1.0 if tiltrotor is None else tiltrotor.surface_factor(values)
+        columns.append(factor * surface_columns[len(columns)])
         matrix.append(0 if airframe == 1 else 1)
         effectors.append(e)
+    if tiltrotor is not None:
+        for t, column in enumerate(tiltrotor.tilt_columns(geometry)):
+            columns.append(column)
+            matrix.append(0)
+            effectors.append({"name": f"tilt{t + 1}", "kind": "thrust-vector", "unit": "1", "min": -1.0, "max": 1.0})
     if not effectors:
         raise ProblemError("CA_ROTOR_COUNT: the parameters define no rotor and no control surface",
                            field="CA_ROTOR_COUNT")
 
     B6 = np.array(columns, dtype=float).T  # (6, m)
+    m = B6.shape[1]
+    terms: list[dict[str, Any]] = []
+    if tiltrotor is not None and at is None:
+        terms = tiltrotor.terms(geometry, m) + tiltrotor.surface_term(surface_columns, m)
     if normalize == "px4":
-        rpy = {0: (True,), 1: (False,), 2: (True, False)}[airframe]
+        # a tiltrotor's scales are those of the tilts at their minimum, kept as they turn (as PX4)
+        hover = B6 if tiltrotor is None else _tiltrotor_B6(tiltrotor, geometry, surface_columns, m)
+        rpy = {0: (True,), 1: (False,), 2: (True, False), 3: (True, False)}[airframe]
         with np.errstate(over="ignore", invalid="ignore"):  # extreme geometry: checked just below
             for mat in sorted(set(matrix)):
                 cols = [j for j, mj in enumerate(matrix) if mj == mat]
                 try:
-                    B6[:, cols] = px4_scales(B6[:, cols], normalize_rpy=rpy[mat])[:, None] * B6[:, cols]
+                    s = px4_scales(hover[:, cols], normalize_rpy=rpy[mat])[:, None]
                 except np.linalg.LinAlgError as exc:
                     raise ProblemError(f"normalize: PX4's normalisation has no answer for these parameters ({exc})",
                                        field="normalize") from None
+                for target in (B6, *(term["B"] for term in terms)):
+                    target[:, cols] = s * target[:, cols]
     for j in range(B6.shape[1]):  # the parameters are each within 1e50; their products may not be
         if not np.all(np.abs(B6[:, j]) <= MAX_MAGNITUDE):
             where = f"CA_ROTOR{j}" if j < n_rotors else f"CA_SV_CS{j - n_rotors}"
             raise ProblemError(f"{where}: the effectiveness column of these parameters is not finite within "
                                f"{MAX_MAGNITUDE:g}: {short_repr(B6[:, j].tolist())}", field=where)
-    keep = list(range(6)) if axes == "all" else [r for r in range(6) if np.any(B6[r] != 0.0)]
+    for i, term in enumerate(terms):
+        if not np.all(np.abs(term["B"]) <= MAX_MAGNITUDE):
+            raise ProblemError(f"CA_ROTOR_COUNT: schedule term {i} is not finite within {MAX_MAGNITUDE:g}",
+                               field="CA_ROTOR_COUNT")
+    acting = np.any(B6 != 0.0, axis=1) | np.any([np.any(t["B"] != 0.0, axis=1) for t in terms] or [False], axis=0)
+    keep = list(range(6)) if axes == "all" else [r for r in range(6) if acting[r]]
     if not keep:
         raise ProblemError("CA_ROTOR_COUNT: no effector acts on any axis (all columns zero)", field="CA_ROTOR_COUNT")
     moment_unit, force_unit = ("1", "1") if normalize == "px4" else ("N m", "N")
@@ -405,7 +445,30 @@ def vehicle_from_params(params: Mapping[str, Any], *, name: str = "px4", normali
                    f"computeEffectivenessMatrix and ActuatorEffectivenessControlSurfaces; normalize={normalize}"),
         "axes": doc_axes, "effectors": effectors,
     }
+    if tiltrotor is not None and at is not None:
+        doc["description"] += " at " + ", ".join(f"{k} {v:g}" for k, v in values.items())
+    if terms:
+        doc["format"] = FORMAT_SCHEDULE
+        doc["schedule"] = {"variables": tiltrotor.variables() if tiltrotor is not None else [],
+                           "terms": [{**t, "B": [[float(t["B"][r, j]) for j in range(m)] for r in keep]}
+                                     for t in terms]}
     return vehicle_from_dict(doc)
+
+
+def _tiltrotor_B6(tiltrotor: Tiltrotor, geometry: list[RotorGeometry], surfaces: Mapping[int, np.ndarray],
+                  m: int) -> np.ndarray:
+    """A tiltrotor's six-row ``B`` at the nominal point (tilts at their minimum, trim airspeed): where PX4
+    computes its normalisation scales."""
+    values = tiltrotor.values(None)
+    B6 = np.zeros((6, m))
+    for j, rotor in enumerate(geometry):
+        B6[:, j] = tiltrotor.rotor_column(rotor, values)
+    factor = tiltrotor.surface_factor(values)
+    for j, column in surfaces.items():
+        B6[:, j] = factor * column
+    for t, column in enumerate(tiltrotor.tilt_columns(geometry)):
+        B6[:, m - len(tiltrotor.tilts) + t] = column
+    return B6
 
 
 def _rate(full_range: float, slew: float, name: str) -> float:

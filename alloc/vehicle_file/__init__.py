@@ -33,8 +33,11 @@ allocation problem, a method's defaults and (optionally) the simulator need::
     states = [...]; outputs = [...]; A = [...]; B = [...]; C = [...]; D = [...]
     units = [...]                 # optional, one per output (plots and tables label them)
 
-    [simulation]                  # format 1.1 only: the vehicle's own closed-loop design
+    [simulation]                  # format 1.1 or later: the vehicle's own closed-loop design
     ...                           # (alloc.vehicle_file.simulation; the seed's ICE and HARV carry theirs)
+
+    [schedule]                    # format 1.2 only: B as a function of named variables (tilt, airspeed)
+    ...                           # (alloc.vehicle_file.schedule); B above is its value at the nominal point
 
 The effectiveness of an effector is given one of three ways: the whole matrix
 (``[effectiveness] B``), its column (``effectiveness = [...]``, one entry per axis: a
@@ -74,14 +77,15 @@ from typing import Any
 
 from .._files import MAX_TEXT_BYTES, MAX_TOML_BYTES, parse_json, parse_toml, read_user_text
 from ..exceptions import ProblemError, SkippedLinesWarning
-from .fields import DATA_DIR, EFFECTOR_KINDS, FORMAT, FORMAT_SIMULATION, FORMATS, SCHEMA_PATH, WRENCH_COMPONENTS
+from .fields import DATA_DIR, EFFECTOR_KINDS, FORMAT, FORMAT_SCHEDULE, FORMAT_SIMULATION, FORMATS, SCHEMA_PATH, WRENCH_COMPONENTS
 from .parts import Axis, Dynamics, Effector, LinearModel, Rotor, rotor_wrench
+from .schedule import Schedule, ScheduledEffectiveness
 from .simulation import Simulation
 from .toml_writer import to_toml
 from .vehicle import Vehicle, vehicle_from_dict, vehicle_from_problem
 
 __all__ = [
-    "FORMAT", "FORMAT_SIMULATION", "FORMATS", "SCHEMA_PATH", "Simulation", "DATA_DIR", "EFFECTOR_KINDS", "WRENCH_COMPONENTS",
+    "FORMAT", "FORMAT_SIMULATION", "FORMAT_SCHEDULE", "FORMATS", "Schedule", "ScheduledEffectiveness", "SCHEMA_PATH", "Simulation", "DATA_DIR", "EFFECTOR_KINDS", "WRENCH_COMPONENTS",
     "Dynamics", "Rotor", "Effector", "Axis", "LinearModel", "Vehicle",
     "load_vehicle", "vehicle_from_dict", "vehicle_from_problem", "vehicle_names", "rotor_wrench", "to_toml",
 ]

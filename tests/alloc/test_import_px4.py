@@ -241,7 +241,7 @@ def test_bad_params_lines_are_named(text, message):
 
 
 @pytest.mark.parametrize("params, message", [
-    ({"CA_AIRFRAME": 3, "CA_ROTOR_COUNT": 4}, "CA_AIRFRAME: 3 is not supported"),
+    ({"CA_AIRFRAME": 4, "CA_ROTOR_COUNT": 4}, "CA_AIRFRAME: 4 is not supported"),  # tailsitter
     ({"CA_ROTOR_COUNT": 13}, "CA_ROTOR_COUNT: expected an integer 0..12"),
     ({"CA_ROTOR_COUNT": 0}, "CA_ROTOR_COUNT: the parameters define no rotor"),
     ({"CA_ROTOR_COUNT": 1, "CA_R0_SLEW": -1.0}, "CA_R0_SLEW: must be >= 0"),
