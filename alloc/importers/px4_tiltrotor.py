@@ -219,7 +219,9 @@ class Tiltrotor:
                     moment[2] = 0.0
                 pair[factor][:3, j] = moment
         variable = "tilt" if self.by_angle else "collective_tilt"
-        return [{"factor": factor, "variable": variable, "scale": scale, "offset": offset, "B": B}
+        # a term's angle is in its variable's unit: degrees for tilt, radians for the unitless collective
+        to_unit = (lambda a: a) if self.by_angle else math.radians
+        return [{"factor": factor, "variable": variable, "scale": to_unit(scale), "offset": to_unit(offset), "B": B}
                 for (scale, offset), pair in groups.items() for factor, B in pair.items()]
 
     def surface_term(self, columns: Mapping[int, np.ndarray], m: int) -> list[dict[str, Any]]:
