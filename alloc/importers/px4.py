@@ -6,7 +6,9 @@ Reads a QGroundControl parameter file or a PX4 airframe file as PX4 ships it
 from them the parameters PX4's ``control_allocator`` module uses (PX4-Autopilot
 ``src/modules/control_allocator/module.yaml``; defaults in brackets):
 
-* ``CA_AIRFRAME`` [0]: 0 multirotor, 1 fixed-wing, 2 standard VTOL (others refused).
+* ``CA_AIRFRAME`` [0]: 0 multirotor, 1 fixed-wing, 2 standard VTOL, 3 tiltrotor VTOL (its tilts,
+  ``CA_SV_TL*`` and ``CA_ROTORn_TILT``, and airspeed scaling: :mod:`alloc.importers.px4_tiltrotor`;
+  a ``[schedule]`` in tilt and airspeed); others refused.
 * ``CA_ROTOR_COUNT`` [0] and per rotor ``CA_ROTORn_PX/PY/PZ`` [0] (m, body axes x forward,
   y right, z down), ``CA_ROTORn_AX/AY/AZ`` [0, 0, -1] (thrust axis), ``CA_ROTORn_CT`` [6.5]
   (thrust at full command), ``CA_ROTORn_KM`` [0.05] (moment per thrust, > 0 counter-clockwise);
