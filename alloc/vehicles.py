@@ -379,7 +379,7 @@ def get_vehicle(source: str | os.PathLike[str] | Vehicle) -> Vehicle:
     if not isinstance(source, (str, os.PathLike)):
         raise ProblemError(f"vehicle: expected a name or a path, got {type(source).__name__}", field="vehicle")
     path = Path(source)
-    if path.suffix.lower() in VEHICLE_SUFFIXES or os.sep in str(source) or path.is_file():
+    if path.suffix.lower() in VEHICLE_SUFFIXES or os.sep in str(source) or os.path.isfile(path):  # os.path: a name too long for the file system is no file, not an OSError
         return load_vehicle(path)
     raise ProblemError(f"vehicle: unknown {str(source)!r}; known: {', '.join(entries)}; or a vehicle file "
                        f"({', '.join(VEHICLE_SUFFIXES)})", field="vehicle")

@@ -79,6 +79,7 @@ from __future__ import annotations
 
 import math
 import numbers
+import os
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -181,7 +182,7 @@ def read_params_report(source: str | Path) -> ParamsRead:
         naming the line (``params: line 7: ...``), or ``path`` for a file that cannot be read.
     """
     if isinstance(source, Path) or (isinstance(source, str) and "\n" not in source
-                                    and (source.endswith(".params") or Path(source).is_file())):
+                                    and (source.endswith(".params") or os.path.isfile(source))):
         text = read_user_text(source, field="path", max_bytes=MAX_TEXT_BYTES)
     elif isinstance(source, str):
         if len(source) > MAX_TEXT_BYTES:
@@ -412,15 +413,17 @@ def vehicle_from_params(params: Mapping[str, Any], *, name: str = "px4", normali
                                        field="normalize") from None
                 for target in (B6, *(term["B"] for term in terms)):
                     target[:, cols] = s * target[:, cols]
-    for j in range(B6.shape[1]):  # the parameters are each within 1e50; their products may not be
-        if not np.all(np.abs(B6[:, j]) <= MAX_MAGNITUDE):
-            where = f"CA_ROTOR{j}" if j < n_rotors else f"CA_SV_CS{j - n_rotors}"
+    # the parameters are each within 1e50; their products may not be, nor a term at its largest factor
+    # (sin, cos: 1; the surfaces' square: at the top of the airspeed clamp)
+    peaks = [1.0 if t["factor"] in ("sin", "cos") else (t["scale"] * t["clamp"][1] + t["offset"]) ** 2 for t in terms]
+    with np.errstate(over="ignore", invalid="ignore"):
+        largest = np.max([np.abs(B6), *(peak * np.abs(t["B"]) for peak, t in zip(peaks, terms))], axis=(0, 1))
+    for j in range(m):
+        if not largest[j] <= MAX_MAGNITUDE:
+            where = (f"CA_ROTOR{j}" if j < n_rotors else f"CA_SV_CS{j - n_rotors}" if j < n_rotors + n_surfaces
+                     else f"CA_SV_TL{j - n_rotors - n_surfaces}")
             raise ProblemError(f"{where}: the effectiveness column of these parameters is not finite within "
                                f"{MAX_MAGNITUDE:g}: {short_repr(B6[:, j].tolist())}", field=where)
-    for i, term in enumerate(terms):
-        if not np.all(np.abs(term["B"]) <= MAX_MAGNITUDE):
-            raise ProblemError(f"CA_ROTOR_COUNT: schedule term {i} is not finite within {MAX_MAGNITUDE:g}",
-                               field="CA_ROTOR_COUNT")
     acting = np.any(B6 != 0.0, axis=1) | np.any([np.any(t["B"] != 0.0, axis=1) for t in terms] or [False], axis=0)
     keep = list(range(6)) if axes == "all" else [r for r in range(6) if acting[r]]
     if not keep:

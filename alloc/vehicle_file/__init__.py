@@ -69,6 +69,7 @@ those, and :func:`load_vehicle` here, which reads any of the formats, sits above
 
 from __future__ import annotations
 
+import os
 import warnings
 from collections.abc import Mapping
 from dataclasses import replace
@@ -130,9 +131,9 @@ def load_vehicle(source: str | Path | Mapping[str, Any]) -> Vehicle:
         raise ProblemError(f"source: expected a path, a bundled name or a document, got {type(source).__name__}",
                            field="source")
     path = Path(source)
-    if not path.exists() and isinstance(source, str) and path.suffix == "" and "/" not in source:
+    if not os.path.exists(path) and isinstance(source, str) and path.suffix == "" and "/" not in source:
         bundled = DATA_DIR / f"{source}.toml"
-        if not bundled.exists():
+        if not os.path.exists(bundled):
             raise ProblemError(f"path: no file {source!r} and no bundled vehicle of that name; bundled: "
                                f"{', '.join(vehicle_names())}", field="path")
         path = bundled

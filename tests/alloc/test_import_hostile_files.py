@@ -20,7 +20,7 @@ from alloc.cli import app
 from alloc.exceptions import AllocError, SkippedLinesWarning
 
 DATA = Path(__file__).parent / "data" / "px4_airframes"
-SEEDS = range(160)
+SEEDS = range(180)
 BAD_NUMBERS = ["nan", "inf", "-inf", "1e400", "abc", "0x1G", "1" * 400, "${VALUE}", "1,5"]
 #: what every refusal starts with: a field (a parameter name, factors, path) or a line
 FIELD_OR_LINE = re.compile(r"^(params: line \d+: |factors: |path: |[A-Z][A-Z0-9_]{1,15}: )")
@@ -40,13 +40,14 @@ def originals() -> dict[str, tuple[str, str]]:
     """kind -> (file name, text) of the files the mutations start from."""
     return {"airframe": ("13000_hostile", (DATA / "1103_standard_vtol_sih.hil").read_text()),
             "hexa": ("6001_hostile", (DATA / "6001_hexa_x").read_text()),
+            "tiltrotor": ("13100_hostile", (DATA / "13100_generic_vtol_tiltrotor").read_text()),
             "params": ("hostile.params", QGC), "ardupilot": ("hostile.param", ARDUPILOT),
             "csv": ("hostile.csv", CSV)}
 
 
 def value_lines(kind: str, lines: list[str]) -> list[int]:
     """Indices of the lines that set a value (the ones a mutation of a value targets)."""
-    if kind in ("airframe", "hexa"):
+    if kind in ("airframe", "hexa", "tiltrotor"):
         return [i for i, line in enumerate(lines) if line.startswith("param set")]
     if kind == "csv":
         return list(range(1, len(lines)))
@@ -113,7 +114,7 @@ def mutate(seed: int) -> tuple[str, str, str, str | None]:
             cls = int(rng.choice([0, 6, 7, 13, 99, -1]))
             lines[1] = f"FRAME_CLASS,{cls}"
             expected = rf"^FRAME_CLASS: {cls} is not supported"
-        elif kind in ("airframe", "hexa", "params"):
+        elif kind in ("airframe", "hexa", "tiltrotor", "params"):
             count = int(rng.choice([13, 99, -1]))
             key = "CA_ROTOR_COUNT"
             lines = [line for line in lines if key not in line]
@@ -168,3 +169,18 @@ def test_cli_refuses_a_hostile_vehicle_in_one_line(seed, tmp_path):
     assert res.exit_code == 2, (res.stdout, res.stderr)
     assert len(lines) == 1 and "--vehicle" in lines[0] and "Traceback" not in res.stderr, res.stderr
     assert re.search(expected.lstrip("^"), lines[0]), (expected, lines[0])
+
+
+@pytest.mark.parametrize("name", ["x" * 5000, "x" * 5000 + ".csv", "x" * 5000 + ".params", "a\x00b", "a\x00b.param"])
+def test_names_no_file_system_takes_are_refused_by_field(name):
+    """A name too long for the file system, or with a NUL byte: a refusal naming path or vehicle, no OSError."""
+    from alloc.importers.px4 import read_params
+    from alloc.vehicles import get_vehicle
+
+    for call in (alloc.load_vehicle, get_vehicle):
+        with pytest.raises(AllocError) as info:
+            call(name)
+        assert info.value.field in ("path", "vehicle"), str(info.value)
+    if "\n" not in name and name.endswith(".params"):
+        with pytest.raises(AllocError, match="^path: "):
+            read_params(name)
