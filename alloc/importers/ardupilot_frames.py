@@ -3,8 +3,9 @@
 Transcribed from ``AP_MotorsMatrix::setup_quad_matrix``, ``setup_hexa_matrix``, ``setup_octa_matrix``,
 ``setup_octaquad_matrix`` and ``setup_y6_matrix`` (ArduPilot/ardupilot
 ``libraries/AP_Motors/AP_MotorsMatrix.cpp``, the table-driven version with ``MotorDef`` /
-``MotorDefRaw`` arrays), with the class and type numbers of ``AP_Motors_Class.h``
-(``motor_frame_class``, ``motor_frame_type``).  Each motor is the row of one ``add_motor`` call
+``MotorDefRaw`` arrays and ``normalise_rpy_factors`` normalising throttle too; read from a stored
+copy whose commit the copy did not record), with the class and type numbers of
+``AP_Motors_Class.h`` (``motor_frame_class``, ``motor_frame_type``).  Each motor is the row of one ``add_motor`` call
 (position angle in degrees for roll and pitch, yaw factor, test order) or of ``add_motor_raw``
 (roll and pitch factors given).  The factors then follow :func:`alloc.importers.ardupilot.frame_factors`:
 ``roll = cos(radians(roll_angle + 90))``, ``pitch = cos(radians(pitch_angle))``, throttle 1, and
