@@ -135,3 +135,14 @@ def test_missing_motor_row_cells_are_named():
         read_factor_table("motor,roll,pitch,yaw\nm1,1,0,1\nm2,-1,0\n")
     names, M = read_factor_table("motor,roll,pitch,yaw\nm1,1,0,1\n")
     assert vehicle_from_factors(M, names).m == 1  # one motor is a table; its rank is the user's business
+
+
+def test_other_commands_take_the_importer_files(tmp_path):
+    """`--vehicle` is one option on every command: `alloc ams summary` reads an ArduPilot .param file."""
+    (tmp_path / "y6.param").write_text("FRAME_CLASS,5\nFRAME_TYPE,10\n")
+    res = CliRunner().invoke(app, ["ams", "summary", "--vehicle", str(tmp_path / "y6.param")])
+    assert res.exit_code == 0, res.output
+    assert "vertices" in res.stdout
+    bad = CliRunner().invoke(app, ["ams", "summary", "--vehicle", str(tmp_path / "none.param")])
+    lines = [line for line in bad.stderr.splitlines() if line.strip()]
+    assert bad.exit_code == 2 and len(lines) == 1 and "none.param" in lines[0], bad.stderr
