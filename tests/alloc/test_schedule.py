@@ -206,3 +206,49 @@ def test_cli_allocates_at_a_scheduled_point(tmp_path):
     bad = CliRunner().invoke(app, ["allocate", "--vehicle", str(path), "--v", "0,0,0,-13", "--at", "tilt=95"])
     lines = [line for line in bad.stderr.splitlines() if line.strip()]
     assert bad.exit_code == 2 and len(lines) == 1 and "tilt: must be in [0, 90]" in lines[0], bad.stderr
+
+
+def _mutate_schedule(doc: dict, rng: np.random.Generator) -> dict:
+    """One hostile change to the [schedule] of ``doc`` (a copy): a value, a key, a shape or a count."""
+    doc = json.loads(json.dumps(doc))
+    sched = doc["schedule"]
+    bad_values = [float("nan"), float("inf"), 1e400, 1e60, "x", True, None, [], {}, -1e51]
+    op = int(rng.integers(7))
+    if op == 0:  # a bad number somewhere in a variable
+        var = sched["variables"][int(rng.integers(len(sched["variables"])))]
+        var[str(rng.choice(["min", "max", "nominal"]))] = bad_values[int(rng.integers(len(bad_values)))]
+    elif op == 1:  # a bad entry of a term's matrix
+        term = sched["terms"][int(rng.integers(len(sched["terms"])))]
+        term["B"][int(rng.integers(len(term["B"])))][0] = bad_values[int(rng.integers(len(bad_values)))]
+    elif op == 2:  # a missing or unknown key
+        target = sched["terms"][0] if rng.random() < 0.5 else sched["variables"][0]
+        if rng.random() < 0.5:
+            target.pop(str(rng.choice(sorted(target))))
+        else:
+            target["surprise"] = 1
+    elif op == 3:  # a wrong shape
+        term = sched["terms"][int(rng.integers(len(sched["terms"])))]
+        term["B"] = term["B"][:-1] if rng.random() < 0.5 else [row[:-1] for row in term["B"]]
+    elif op == 4:  # too many terms or variables
+        key = str(rng.choice(["terms", "variables"]))
+        sched[key] = sched[key] * 20
+    elif op == 5:  # a factor, variable or clamp that is not one
+        term = sched["terms"][int(rng.integers(len(sched["terms"])))]
+        term[str(rng.choice(["factor", "variable", "clamp", "scale"]))] = bad_values[int(rng.integers(len(bad_values)))]
+    else:  # a huge scale: the factor leaves 1e50 within the range
+        sched["terms"][-1]["scale"] = float(rng.choice([1e20, 1e26, -1e30]))
+    return doc
+
+
+@pytest.mark.parametrize("seed", range(60))
+def test_hostile_schedules_are_refused_by_field_or_evaluate_finite(params, seed):
+    rng = np.random.default_rng(seed)
+    doc = _mutate_schedule(vehicle_from_params(params).to_dict(), rng)
+    try:
+        v = vehicle_from_dict(doc)
+    except ProblemError as exc:
+        assert str(exc).startswith(("schedule", "format")) and exc.field.startswith(("schedule", "format")), str(exc)
+        return
+    for _ in range(5):
+        x = {var.name: float(rng.uniform(var.min, var.max)) for var in v.schedule.variables}
+        assert np.isfinite(v.scheduled().evaluate(x)).all()
