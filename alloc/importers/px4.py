@@ -97,7 +97,7 @@ from ..vehicle_file.parts import rotor_wrench
 from ..vehicle_file.vehicle import Vehicle, vehicle_from_dict
 from .px4_tiltrotor import RotorGeometry, Tiltrotor
 
-__all__ = ["read_params", "read_params_report", "params_from_text", "looks_like_airframe", "ParamsRead", "vehicle_from_params", "px4_scales", "AIRFRAMES", "SURFACE_TYPES", "NO_TORQUE_TYPES", "DEFAULTS"]
+__all__ = ["read_params", "read_params_report", "params_from_text", "reads_parameter", "READ_PARAMETERS", "looks_like_airframe", "ParamsRead", "vehicle_from_params", "px4_scales", "AIRFRAMES", "SURFACE_TYPES", "NO_TORQUE_TYPES", "DEFAULTS"]
 
 #: CA_AIRFRAME values this importer reads
 AIRFRAMES = {0: "multirotor", 1: "fixed-wing", 2: "standard VTOL", 3: "tiltrotor VTOL"}
@@ -133,14 +133,33 @@ class ParamsRead:
     params: dict[str, float | int]
     skipped: tuple[tuple[int, str], ...] = ()
     airframe: bool = False
+    #: ``(line number, name)`` of each later setting of a parameter this importer does not read (the
+    #: last wins, as in PX4's shell); one it reads, set twice the same way, is refused instead
+    overridden: tuple[tuple[int, str], ...] = ()
 
     def skipped_summary(self, limit: int = 6) -> str:
-        """One line naming the skipped lines (the first ``limit`` quoted), or ``""`` when none."""
-        if not self.skipped:
-            return ""
-        shown = ", ".join(f"{n}: {text[:40]!r}" for n, text in self.skipped[:limit])
-        more = f", and {len(self.skipped) - limit} more" if len(self.skipped) > limit else ""
-        return f"{len(self.skipped)} shell line(s) skipped (line {shown}{more})"
+        """One line naming the skipped lines (the first ``limit`` quoted) and the overridden
+        parameters, or ``""`` when there are none."""
+        parts = []
+        if self.skipped:
+            shown = ", ".join(f"{n}: {text[:40]!r}" for n, text in self.skipped[:limit])
+            more = f", and {len(self.skipped) - limit} more" if len(self.skipped) > limit else ""
+            parts.append(f"{len(self.skipped)} shell line(s) skipped (line {shown}{more})")
+        if self.overridden:
+            shown = ", ".join(f"{name[:20]} at line {n}" for n, name in self.overridden[:limit])
+            more = f", and {len(self.overridden) - limit} more" if len(self.overridden) > limit else ""
+            parts.append(f"{len(self.overridden)} parameter(s) this importer does not read set again, the last "
+                         f"kept ({shown}{more})")
+        return "; ".join(parts)
+
+
+#: the parameters :func:`vehicle_from_params` reads: every ``CA_`` one and these
+READ_PARAMETERS = ("MPC_THR_HOVER", "FW_AIRSPD_TRIM", "FW_AIRSPD_STALL", "FW_AIRSPD_MAX", "FW_ARSP_SCALE_EN")
+
+
+def reads_parameter(name: str) -> bool:
+    """Whether :func:`vehicle_from_params` reads the parameter ``name``."""
+    return name.startswith("CA_") or name in READ_PARAMETERS
 
 
 #: a PX4 parameter name: at most 16 characters (param_t names, ``PARAM_ID_LEN``), letters, digits, _
@@ -165,9 +184,12 @@ def read_params_report(source: str | Path) -> ParamsRead:
     set-default`` line is a PX4 airframe file as PX4 ships it (``ROMFS/px4fmu_common/init.d/
     airframes/``): its ``param set-default NAME value`` and ``param set NAME value`` lines are read,
     every other line is a shell line, skipped and listed in :attr:`ParamsRead.skipped`.  As in PX4,
-    a ``param set`` value wins over a ``param set-default`` of the same name, whatever their order;
-    a name set twice the same way is refused (naming both lines): a dump has each name once, and in
-    an airframe the second line silently undoes the first.  Parameters inside shell conditionals
+    a ``param set`` value wins over a ``param set-default`` of the same name, whatever their order.
+    A parameter this importer reads (:func:`reads_parameter`) set twice the same way is refused,
+    naming both lines: the second would silently undo the first and change ``B``; any other
+    parameter set twice keeps its last value, as PX4's shell does, and is listed in
+    :attr:`ParamsRead.overridden` (shipped airframes do this: an old ``13014_vtol_babyshark`` sets
+    ``MPC_JERK_AUTO`` twice).  Parameters inside shell conditionals
     (``if ... fi``) are read as if the condition held.
 
     A file is read through :func:`alloc._files.read_user_file` (a regular file of at most
@@ -206,6 +228,7 @@ def params_from_text(text: str) -> ParamsRead:
     values: dict[str, dict[str, float | int]] = {"set-default": {}, "set": {}, "qgc": {}}
     first_line: dict[tuple[str, str], int] = {}
     skipped: list[tuple[int, str]] = []
+    overridden: list[tuple[int, str]] = []
     for n, raw in enumerate(lines, start=1):
         line = raw.split("#", 1)[0].strip()
         if not line:
@@ -229,11 +252,14 @@ def params_from_text(text: str) -> ParamsRead:
                                "digits or _)", field="params")
         number = _number(value, code, f"params: line {n}: {name}")
         if (kind, name) in first_line:
-            raise ProblemError(f"params: line {n}: {name} is set again (first at line {first_line[kind, name]}); "
-                               "a parameter is set once", field="params")
+            if reads_parameter(name):  # a silent override would change B: the file must say which it means
+                raise ProblemError(f"params: line {n}: {name} is set again (first at line {first_line[kind, name]}); "
+                                   "a parameter is set once", field="params")
+            overridden.append((n, name))
         first_line[kind, name] = n
         values[kind][name] = number
-    return ParamsRead({**values["qgc"], **values["set-default"], **values["set"]}, tuple(skipped), airframe)
+    return ParamsRead({**values["qgc"], **values["set-default"], **values["set"]}, tuple(skipped), airframe,
+                      tuple(overridden))
 
 
 def _number(value: str, kind: str | None, label: str) -> float | int:

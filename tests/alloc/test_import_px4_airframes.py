@@ -179,6 +179,16 @@ def test_surface_types_px4_zeroes_get_no_torque():
     assert set(NO_TORQUE_TYPES) == {9, 10, 11, 16, 17, 18}
 
 
+def test_a_parameter_the_importer_does_not_read_may_be_set_twice():
+    # as an old 13014_vtol_babyshark does (MPC_JERK_AUTO 8, then 15): PX4's shell keeps the last
+    text = "#!/bin/sh\nparam set MPC_JERK_AUTO 8\nparam set MPC_JERK_AUTO 15\nparam set-default CA_ROTOR_COUNT 4\n"
+    read = read_params_report(text)
+    assert read.params["MPC_JERK_AUTO"] == 15 and read.overridden == ((3, "MPC_JERK_AUTO"),)
+    assert "MPC_JERK_AUTO at line 3" in read.skipped_summary()
+    with pytest.raises(ProblemError, match=r"^params: line 3: CA_ROTOR_COUNT is set again \(first at line 2\)"):
+        read_params("#!/bin/sh\nparam set-default CA_ROTOR_COUNT 4\nparam set-default CA_ROTOR_COUNT 6\n")
+
+
 @pytest.mark.parametrize("text, message", [
     ("param set-default CA_ROTOR_COUNT 4\nparam set-default CA_ROTOR_COUNT 6\n",
      "params: line 2: CA_ROTOR_COUNT is set again (first at line 1)"),
