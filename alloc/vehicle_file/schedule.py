@@ -183,7 +183,8 @@ class ScheduledEffectiveness:
 
     ``evaluate(values)`` takes the variables by name (a mapping) or in declared order (a
     sequence), each finite and within its declared range, and returns the ``(k, m)`` matrix in a
-    buffer this object owns (overwritten by the next call: copy it to keep it).
+    buffer this object owns (overwritten by the next call: copy it to keep it; one thread per
+    object), or in the caller's ``out``.
     """
 
     def __init__(self, B: Matrix | np.ndarray, schedule: Schedule) -> None:
@@ -222,14 +223,16 @@ class ScheduledEffectiveness:
                                    field=v.name)
         return [float(value) for value in x]
 
-    def evaluate(self, values: Mapping[str, float] | Sequence[float]) -> np.ndarray:
-        """``B(x)``, shape ``(k, m)``, in this object's buffer."""
+    def evaluate(self, values: Mapping[str, float] | Sequence[float], out: np.ndarray | None = None) -> np.ndarray:
+        """``B(x)``, shape ``(k, m)``: in this object's buffer, or in ``out`` (a C-contiguous float64
+        array of that shape; then no state of this object is touched, so threads may share it)."""
         x = self.values(values)
-        f = self._factors
+        f = self._factors if out is None else np.empty(len(self._terms))
         for j, (term, i, unit) in enumerate(self._terms):
             f[j] = term.value(x[i], unit)
-        np.dot(f, self._stack, out=self._out)
-        self._out += self._base
-        return self._out.reshape(self.shape)
+        flat = self._out if out is None else out.reshape(-1)
+        np.dot(f, self._stack, out=flat)
+        flat += self._base
+        return flat.reshape(self.shape)
 
     __call__ = evaluate

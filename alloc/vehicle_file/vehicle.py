@@ -141,7 +141,7 @@ class Vehicle:
             cached = (self.scheduled(), self.problem())
             object.__setattr__(self, "_schedule_cache", cached)  # frozen: a cache, not a field
         evaluator, nominal = cached
-        return nominal.replace(B=evaluator.evaluate(values).copy())
+        return nominal.replace(B=evaluator.evaluate(values, out=np.empty((self.k, self.m))))
 
     def method_options(self, method: str) -> dict[str, Any]:
         """This vehicle's defaults for ``method`` (``{}`` when it has none): a fresh copy."""

@@ -252,3 +252,15 @@ def test_hostile_schedules_are_refused_by_field_or_evaluate_finite(params, seed)
     for _ in range(5):
         x = {var.name: float(rng.uniform(var.min, var.max)) for var in v.schedule.variables}
         assert np.isfinite(v.scheduled().evaluate(x)).all()
+
+
+def test_evaluate_into_the_callers_array_leaves_the_buffer_alone(params):
+    v = vehicle_from_params(params)
+    ev = v.scheduled()
+    inside = ev.evaluate({"tilt": 10.0})
+    before = inside.copy()
+    out = np.empty_like(before)
+    got = ev.evaluate({"tilt": 80.0, "airspeed": 19.0}, out=out)
+    assert np.shares_memory(got, out) and np.array_equal(inside, before)  # the object's buffer unchanged
+    np.testing.assert_allclose(out, vehicle_from_params(params, at={"tilt": 80.0, "airspeed": 19.0}).problem().B,
+                               atol=1e-13)
