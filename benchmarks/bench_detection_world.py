@@ -94,13 +94,14 @@ COARSEST_DT = {"tailless": 0.002}
 
 
 def fly(vehicle: str, case: str | None, *, condition: str, health: str, seed: int, failure_time: float,
-        duration: float, dt: float, frame_period: float | None = FRAME, method: str = "qp") -> dict[str, Any]:
+        duration: float, dt: float, frame_period: float | None = FRAME, method: str = "qp",
+        detector_model: str = "learnt") -> dict[str, Any]:
     """One closed-loop flight and what the tables need of it."""
     world = CONDITIONS[condition]
     dt = min(dt, COARSEST_DT.get(vehicle, dt))
     t0 = time.perf_counter()
     common = dict(method=method, duration=duration, seed=seed, health=health, dt=dt, frame_period=frame_period,
-                  **world)
+                  **world, **({"detector_model": detector_model} if health == "detected" else {}))
     if vehicle in SCENARIOS or vehicle == "ice-seed":
         from sim.scenarios import get_scenario
 
@@ -119,7 +120,8 @@ def fly(vehicle: str, case: str | None, *, condition: str, health: str, seed: in
             "failure_time": None if case is None else failure_time, "duration": duration, "dt": dt,
             "diverged": s["diverged"], "simulated": s["duration"], "channels": s["channels"],
             "detections": s.get("detections", []), "withdrawals": s.get("withdrawals", []), "failed": failed,
-            "world": res.settings.get("world"), "wall": time.perf_counter() - t0}
+            "world": res.settings.get("world"), "detector_model": detector_model if health == "detected" else None,
+            "wall": time.perf_counter() - t0}
 
 
 def _job(key: str, kwargs: dict[str, Any]) -> tuple[str, dict[str, Any]]:
@@ -364,6 +366,8 @@ def main() -> None:
     r.add_argument("--failure-time", type=float, default=10.0,
                    help="s of flight before the failure (delays: uniform in [F, F+1]; benefit: F)")
     r.add_argument("--dt", type=float, default=0.005, help="integration step (s) of false/delays/benefit")
+    r.add_argument("--detector-model", choices=("learnt", "exact"), default="learnt",
+                   help="the in-loop detector's model (sim setting detector_model); use a separate --out per model")
     r.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="processes")
     p = sub.add_parser("report", help="print the tables of what finished")
     p.add_argument("--out", type=Path, required=True)
@@ -385,6 +389,7 @@ def main() -> None:
         jobs = jobs_benefit(conds, vehicles, a.seeds, a.failure_time, a.dt)
     else:
         jobs = jobs_example(conds, a.seeds)
+    jobs = [(key, {**kw, "detector_model": a.detector_model}) for key, kw in jobs]
     _run(a.out, a.section, jobs, a.workers)
     print(report(a.out, markdown=True))
 

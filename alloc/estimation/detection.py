@@ -365,7 +365,13 @@ class FailureDetector(Isolation):
                      None if self._pending is None else dict(self._pending), self.alarm_count,
                      self.unisolated_count)
             self._U[i], self._K[i], self._R[i], self._Q[i], self._T[i] = u, known, r, q, t
-            self._Rc[i] = r if self.robust is None else np.clip(r, -self.robust.huber, self.robust.huber)
+            if self._learner is not None:
+                # stage 1 judges the innovation in predictive units, Huber-clipped; the
+                # isolation fits amplitudes, so it sees it in the noise scale its columns use
+                self._Rc[i] = np.clip(r, -self.robust.huber, self.robust.huber)
+                self._R[i] = r * s_pred / self._learner.scale()
+            else:
+                self._Rc[i] = r
             self._head = (i + 1) % self.L
             self._count = min(self._count + 1, self.L)
             self._since_test += 1
