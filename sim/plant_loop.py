@@ -42,6 +42,7 @@ def fly_plant(
     noise: np.ndarray | None = None, output_bound: float | np.ndarray = 1.0e3, record_every: int = 1,
     alloc_options: dict[str, Any] | None = None, u_prev_source: str = "command", seed: int = 0,
     record_state: tuple[str, ...] = (), scenario: str | None = None, timing: dict[str, float] | None = None,
+    output_limits: np.ndarray | None = None,
 ) -> SimResult:
     """Fly ``controller`` + the allocator of ``method`` against ``plant`` for ``duration`` seconds.
 
@@ -59,6 +60,9 @@ def fly_plant(
         Sensor noise added to the outputs the controller sees.
     output_bound : float or ndarray
         Divergence bound on ``|controlled output|`` (:mod:`sim.result`).
+    output_limits : ndarray (ny,) or None
+        A further divergence bound on every plant output (a multirotor past 90 deg of bank has lost
+        control whatever its rates); None: none.
     record_state : tuple of str
         Keys of ``plant.state()`` recorded into ``result.extra`` at every recorded sample.
     timing : dict or None
@@ -107,7 +111,8 @@ def fly_plant(
                                 first_call=-(-fail_step // frame))
         z = y if noise is None else y + noise[step]
         yc = y[controlled]
-        if not (np.all(np.isfinite(y)) and np.all(np.abs(yc) <= bound)):
+        if not (np.all(np.isfinite(y)) and np.all(np.abs(yc) <= bound)) or (
+                output_limits is not None and np.any(np.abs(y) > output_limits)):
             n_done = step
             break
         if step % frame == 0:
