@@ -158,7 +158,7 @@ def fly_plant(
         unallocated=rec["unalloc"][:n], extra=extra,
         allocator_t=np.arange(n_calls) * tframe, allocator_status=call_status[:n_calls].copy(),
     )
-    result.settings = {"plant": plant.describe(), "controller": controller.describe(), "health": health,
+    result.settings = {"plant": plant.describe(), "control_law": controller.describe(), "health": health,
                        "allocator_knows_failure": health == "told", "dt": dt, "frame_period": tframe,
                        "method": method, "method_options": options, "seed": seed}
     return result
