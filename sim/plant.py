@@ -66,6 +66,16 @@ class Plant(Protocol):
         """JSON-ready description for ``result.settings["plant"]``: name, source, trim, step."""
         ...
 
+    # Added for the plant loop (sim.plant_loop): what a told allocator is told, and what is recorded.
+    def executed(self) -> list[Any]:
+        """Every failure injected so far as the plant executed it, defaults filled in (a jam without a
+        position holds the one it had), as :class:`sim.blocks.ActuatorFailure`: what a told allocator hears."""
+        ...
+
+    def limits(self) -> tuple[np.ndarray, np.ndarray]:
+        """Effector position limits now (deviations from trim; failures change them)."""
+        ...
+
 
 class LinearPlant:
     """The project's linear model as a :class:`Plant`: ``x' = A x + B u_pos``, ``y = C x + D u_pos``.
@@ -130,6 +140,9 @@ class LinearPlant:
 
     def positions(self) -> np.ndarray:
         return self._bank.pos.copy()
+
+    def limits(self) -> tuple[np.ndarray, np.ndarray]:
+        return self._bank.lo.copy(), self._bank.hi.copy()
 
     def state(self) -> dict[str, float]:
         return {f"{name}": float(x) for name, x in zip(self.outputs, self._outputs(), strict=True)}

@@ -104,7 +104,6 @@ def fly_plant(
     plant_time = 0.0
     clock = time.perf_counter
     start = clock()
-    limits = getattr(plant, "limits", None)
     for step in range(n_steps + 1):
         if step == fail_step:
             allocator = _inject(plant, failure, vehicle, method, options, alloc_kw, health, allocator,
@@ -125,8 +124,7 @@ def fly_plant(
             rec["ref"][row], rec["out"][row], rec["cmd"][row] = controller.reference, yc, controller.command
             rec["pseudo"][row], rec["unalloc"][row] = controller.pseudo, v - v_achieved
             rec["eff"][row] = plant.positions()
-            lo, hi = limits() if limits is not None else (vehicle.umin, vehicle.umax)
-            rec["lo"][row], rec["hi"][row] = lo, hi
+            rec["lo"][row], rec["hi"][row] = plant.limits()
             outputs_rec[row] = y
             if state_rec:
                 st = plant.state()
