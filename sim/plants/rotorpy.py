@@ -201,8 +201,10 @@ class RotorPyPlant:
             speeds_cmd = self._speed_command(u)
             self._state["wind"] = self._wind_at(self._k)
             s = _pack(self._state)
+            # RotorPy's integrator (RK45, its tolerances); the first trial step is the whole step: scipy's
+            # guess from |f(t0)| is 1e-6 s at an exact hover (f = 0) and costs a dozen steps to grow back
             sol = scipy.integrate.solve_ivp(lambda t, x: mr._s_dot_fn(t, x, speeds_cmd), (0.0, self.dt_step), s,
-                                            **mr.integrator_kwargs)
+                                            first_step=self.dt_step, **mr.integrator_kwargs)
             s = sol["y"][:, -1]
             s[6:10] /= np.linalg.norm(s[6:10])
             s[16:] = np.clip(s[16:], mr.rotor_speed_min, mr.rotor_speed_max)
