@@ -240,8 +240,7 @@ class RotorPyPlant:
         if kind in SIMULATOR_ONLY:
             raise ProblemError(f"kind: --plant rotorpy has one motor time constant for every rotor; {kind!r} "
                                "cannot change one rotor's", field="kind")
-        bank = self._bank
-        bank.pos = self._applied_command()
+        bank = self._bank  # its position is the command stage's: a jam holds the command it has now
         executed = bank.apply_failure(ActuatorFailure(int(effector), kind, **(params or {})))
         self._stopped[:] = bank.effectiveness == 0.0
         self._failures.append({"effector": self.effectors[executed.index], "kind": executed.kind,
@@ -265,9 +264,6 @@ class RotorPyPlant:
                 "failures": list(self._failures)}
 
     # ------------------------------------------------------------------ inside
-    def _applied_command(self) -> np.ndarray:
-        return self._bank.pos.copy()
-
     def _speed_command(self, u: np.ndarray) -> np.ndarray:
         """The command stage of one step: hard-over target, limits, slew, jam; then ``w = w_max sqrt(f u)``."""
         b = self._bank

@@ -198,3 +198,12 @@ def test_rotor_loss_told_flies_20_s(doc):
     assert np.min(r.extra["altitude_m"]) > -1.0
     tail = r.t >= 18.0  # settled: level again
     assert np.degrees(np.max(np.abs(r.extra["phi"][tail]))) < 1.0
+
+
+def test_cli_plant_linear_is_the_engine_and_says_so(tmp_path):
+    out = tmp_path / "run.json"
+    res = runner.invoke(app, ["sim", "--vehicle", "hexa-x", "--plant", "linear", "--duration", "0.2", "--json",
+                              str(out)])
+    assert res.exit_code == 0, res.output
+    settings = json.loads(out.read_text())["settings"]
+    assert settings["plant"]["name"] == "linear" and "design" in settings  # the auto-designed SMC, as without --plant
