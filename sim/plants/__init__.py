@@ -15,7 +15,11 @@ A RotorPy run (:func:`fly_on_plant`):
 - no sensor noise (the cascade reads RotorPy's state; the engine's noise gains are sized to the sum of
   sines); ``--turbulence light|moderate|severe`` is the world's Dryden turbulence and 1-cosine gust
   (:mod:`sim.world` at the vehicle's flight condition) as RotorPy's wind, translational components only;
-- health ``blind`` or ``told``.
+- health ``blind`` or ``told``;
+- every frame is recorded; ``result.settings`` records ``dt``, ``record_every`` and ``noise`` as flown
+  (the engine's ``dt``, ``record_every``, ``noise`` and ``noise_scale`` do not apply), and the settings
+  a plant run cannot fly (``detected``, ``model_error``, ``excitation``, a noise family, the pilot and
+  the seed's controllers) are refused naming the setting.
 """
 
 from __future__ import annotations
@@ -123,7 +127,7 @@ def fly_on_plant(source: Any, plant: str, settings: RunSettings | None = None, *
     record = {**flown.record(), **result.settings}
     record.update(duration=duration, method=method, failure=None if failure is None else failure.name,
                   failure_time=None if failure is None else failure.time, frame_period=frame, dt=frame,
-                  noise=False, controller="cascade", units=_units(fm), trim_u=fm.trim_u.tolist(),
+                  noise=False, record_every=1, controller="cascade", units=_units(fm), trim_u=fm.trim_u.tolist(),
                   real_time_factor=timing["simulated_s"] / max(timing["wall_s"], 1e-9), timing=timing)
     if world is not None:
         record["world"] = world
