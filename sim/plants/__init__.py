@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from alloc.exceptions import ProblemError
+from sim.plants.rotorpy import DEFAULT_STEP  # rotorpy itself is imported when a plant is built
 from sim.result import SimResult
 from sim.settings import RunSettings, SettingError
 
@@ -42,7 +43,7 @@ PLANTS = {
 }
 DEFAULT_PLANT = "linear"
 #: s: the flight-control frame (and plant step) of a RotorPy run unless --frame-rate says otherwise
-ROTORPY_FRAME = 0.004
+ROTORPY_FRAME = DEFAULT_STEP
 #: divergence bounds on the hover model's outputs (phi, theta, psi, p, q, r, w): past 90 deg of bank or pitch,
 #: 20 rad/s of roll or pitch rate, 60 rad/s of yaw rate or 20 m/s of heave the vehicle has lost control
 HOVER_LIMITS = {"phi": np.pi / 2, "theta": np.pi / 2, "psi": np.inf, "p": 20.0, "q": 20.0, "r": 60.0,
@@ -61,8 +62,10 @@ def check_plant(name: Any) -> str:
 def rotorpy_plant(fm: Any, *, dt_step: float, wind: np.ndarray | None = None) -> Any:
     """The :class:`sim.plants.rotorpy.RotorPyPlant` of a flight model; SettingError naming ``plant`` when the
     package is missing, ProblemError naming the vehicle's field it cannot fly."""
+    from sim.plants.rotorpy import RotorPyPlant
+
     try:
-        from sim.plants.rotorpy import RotorPyPlant
+        import rotorpy  # noqa: F401 (the [plants] extra)
     except ImportError as exc:
         raise SettingError(f"plant: rotorpy is not installed ({exc}); pip install 'alloc-toolkit[plants]'",
                            field="plant") from None

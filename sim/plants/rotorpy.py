@@ -50,8 +50,9 @@ from sim.plant import _whole_steps
 
 __all__ = ["RotorPyPlant", "rotorpy_parameters", "DEFAULT_DRAG", "DEFAULT_STEP"]
 
-#: s: the plant's integration step (wind and command held over it; RK45 adapts inside it)
-DEFAULT_STEP = 0.002
+#: s: the plant's step, wind and command held over it (RK45 adapts inside it); 250 Hz, a multirotor
+#: rate loop's frame (PX4 runs its rate loop at 250 Hz to 1 kHz)
+DEFAULT_STEP = 0.004
 #: RotorPy's drag coefficients for a vehicle that states none: its Hummingbird's (rotorpy.vehicles.hummingbird_params),
 #: frame drag c_D (N/(m/s)^2), rotor drag k_d and induced inflow k_z (N/(rad/s)/(m/s)), translational lift k_h (N/(m/s)^2)
 DEFAULT_DRAG = {"c_Dx": 0.5e-2, "c_Dy": 0.5e-2, "c_Dz": 1e-2, "k_d": 1.19e-4, "k_z": 2.32e-4, "k_h": 3.39e-3,
