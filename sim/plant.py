@@ -26,7 +26,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-__all__ = ["Plant", "LinearPlant"]
+__all__ = ["Plant", "LinearPlant", "command_of"]
 
 
 @runtime_checkable
@@ -126,7 +126,7 @@ class LinearPlant:
 
     def step(self, u_cmd: np.ndarray, dt: float) -> np.ndarray:
         """Advance ``dt`` (a whole number of ``dt_step``) holding ``u_cmd``; the outputs after it."""
-        u = np.asarray(u_cmd, dtype=float)
+        u = command_of(u_cmd, len(self.effectors))
         n = _whole_steps(dt, self.dt_step)
         p, bank = self._plant, self._bank
         for _ in range(n):
@@ -166,6 +166,17 @@ class LinearPlant:
     def describe(self) -> dict[str, Any]:
         return {"name": self.name, "source": self.source, "step": self.dt_step, "actuators": self.actuators,
                 "trim": "the model's operating point (deviations are zero there)", "failures": list(self._failures)}
+
+
+def command_of(u_cmd: Any, m: int) -> np.ndarray:
+    """``u_cmd`` as m finite floats (ProblemError naming ``u_cmd`` otherwise): a plant's input boundary."""
+    from alloc.exceptions import ProblemError
+
+    u = np.asarray(u_cmd, dtype=float)
+    if u.shape != (m,) or not np.all(np.isfinite(u)):
+        raise ProblemError(f"u_cmd: expected {m} finite effector commands, got shape {u.shape}"
+                           f"{'' if u.shape != (m,) else ' with a non-finite entry'}", field="u_cmd")
+    return u
 
 
 def _whole_steps(dt: float, dt_step: float) -> int:

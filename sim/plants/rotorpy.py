@@ -46,7 +46,7 @@ from typing import Any
 import numpy as np
 
 from alloc.exceptions import ProblemError
-from sim.plant import _whole_steps
+from sim.plant import _whole_steps, command_of
 
 __all__ = ["RotorPyPlant", "rotorpy_parameters", "DEFAULT_DRAG", "DEFAULT_STEP"]
 
@@ -196,7 +196,7 @@ class RotorPyPlant:
         """Advance ``dt`` (whole plant steps) holding the deviation command ``u_cmd``."""
         import scipy.integrate
 
-        u = np.asarray(u_cmd, dtype=float)
+        u = command_of(u_cmd, len(self.effectors))
         mr = self._multirotor
         for _ in range(_whole_steps(dt, self.dt_step)):
             speeds_cmd = self._speed_command(u)

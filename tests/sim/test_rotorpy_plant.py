@@ -135,6 +135,13 @@ def test_hostile_commands_never_break_the_plant(model):
         assert all(np.isfinite(x) for x in plant.state().values())
     speeds = np.array([plant.state()[f"motor{j + 1}_rad_s"] for j in range(m)])
     assert np.all(speeds >= 0.0) and np.all(speeds <= plant.w_max + 1e-9)
+    # outside the domain: refused at the boundary, naming the command, the plant unchanged
+    before = plant.state()
+    for bad in (np.full(m, np.nan), np.zeros(m + 1)):
+        with pytest.raises(AllocError) as info:
+            plant.step(bad, STEP)
+        assert info.value.field == "u_cmd"
+    assert plant.state() == before
 
 
 @pytest.mark.parametrize("field, change", [
