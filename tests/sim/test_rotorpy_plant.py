@@ -241,3 +241,12 @@ def test_cli_plant_linear_is_the_engine_and_says_so(tmp_path):
     assert res.exit_code == 0, res.output
     settings = json.loads(out.read_text())["settings"]
     assert settings["plant"]["name"] == "linear" and "design" in settings  # the auto-designed SMC, as without --plant
+
+
+@pytest.mark.slow
+def test_holding_yaw_first_loses_the_hexacopter():
+    # Du, Quan, Cai 2015: after a rotor loss yaw authority is one-signed; an allocation that meets yaw
+    # before roll and pitch leaves them without authority (measured: past 90 deg of bank at 11.5 s)
+    r = fly_on_plant("hexa-x", "rotorpy", method="qp", method_options={"priorities": [2, 2, 3, 1]},
+                     failure="float:motor1", health="told", duration=20.0)
+    assert r.diverged and 10.0 < r.t[-1] < 20.0
