@@ -2,7 +2,7 @@
 
 Run: ``python -m benchmarks.bench_rotorpy [--duration 20] [--vehicle hexa-x]``.  Every row is one
 :func:`sim.plants.fly_on_plant` run (qp, the vehicle's priorities, ``float:motor1`` at 10 s, seed 0):
-roll and pitch RMS after the failure (deg), the lowest altitude below the hover (m), the heading
+roll and pitch RMS after the failure (deg; a diverged run: up to its end), the lowest altitude below the hover (m), the heading
 change at the end (deg, yaw is given up), the horizontal drift at the end (m, no position loop), and
 the real-time factor (simulated / wall seconds of the loop, RotorPy's share in brackets).
 Also the plant alone: 2 s of RotorPy at its step with the trim command (no controller, no allocator).
@@ -35,6 +35,9 @@ def hover_row(vehicle: str, health: str, turbulence: str, duration: float, failu
         "rtf": timing["simulated_s"] / timing["wall_s"],
         "rtf_plant": timing["simulated_s"] / timing["plant_s"],
         "wind_std": r.settings.get("world", {}).get("std"),
+        "t_end": float(t[-1]),
+        "detections": sum(1 for d in (r.detections or []) if d["applied"]),
+        "withdrawals": len(r.withdrawals or []),
     }
 
 
@@ -64,14 +67,21 @@ def main() -> None:
     print("| health | turbulence | diverged | roll RMS deg | pitch RMS deg | max abs roll deg | altitude loss m "
           "| heading end deg | drift m | real-time factor (plant) |")
     print("|---|---|---|---|---|---|---|---|---|---|")
+    notes = []
     for turbulence in args.turbulence:
-        for health in ("told", "blind"):
+        for health in ("told", "blind", "detected"):
             row = hover_row(args.vehicle, health, turbulence, args.duration, "float:motor1")
-            print(f"| {health} | {turbulence} | {row['diverged']} | {row['phi_rms']:.2f} | {row['theta_rms']:.2f} | "
+            if health == "detected":
+                notes.append(f"detected, {turbulence}: {row['detections']} beliefs applied, {row['withdrawals']} "
+                             f"withdrawn; run ended at {row['t_end']:.2f} s")
+            diverged = f"at {row['t_end']:.2f} s" if row["diverged"] else "no"
+            print(f"| {health} | {turbulence} | {diverged} | {row['phi_rms']:.2f} | {row['theta_rms']:.2f} | "
                   f"{row['phi_max']:.1f} | {row['altitude_loss']:.2f} | {row['heading']:.1f} | {row['drift']:.1f} | "
                   f"{row['rtf']:.2f} ({row['rtf_plant']:.2f}) |")
             if row["wind_std"] is not None and health == "told":
-                print(f"|  | wind std north/east/down m/s: {', '.join(f'{s:.2f}' for s in row['wind_std'])} |||||||||")
+                notes.append(f"wind std north/east/down m/s, {turbulence}: {', '.join(f'{s:.2f}' for s in row['wind_std'])}")
+    for note in notes:
+        print(note)
 
 
 if __name__ == "__main__":

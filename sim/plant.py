@@ -76,6 +76,12 @@ class Plant(Protocol):
         """Effector position limits now (deviations from trim; failures change them)."""
         ...
 
+    def sensed(self) -> np.ndarray:
+        """``x' - A x``: the model's states' derivative as the plant's physics gives it now (gyros and
+        accelerometers, noise-free), less the nominal model's free response ``A x``: the effectors' (and
+        the world's) share, which the in-loop detector (``--health detected``) samples."""
+        ...
+
 
 class LinearPlant:
     """The project's linear model as a :class:`Plant`: ``x' = A x + B u_pos``, ``y = C x + D u_pos``.
@@ -143,6 +149,11 @@ class LinearPlant:
 
     def limits(self) -> tuple[np.ndarray, np.ndarray]:
         return self._bank.lo.copy(), self._bank.hi.copy()
+
+    def sensed(self) -> np.ndarray:
+        """``(A_now - A) x + B_now u_pos`` (the engine's expression; ``A_now``, ``B_now``: the model as it is now)."""
+        p = self._plant
+        return (p._cur.A - self.vehicle.A) @ p.x + p._cur.B @ self._bank.pos
 
     def state(self) -> dict[str, float]:
         return {f"{name}": float(x) for name, x in zip(self.outputs, self._outputs(), strict=True)}

@@ -15,10 +15,11 @@ A RotorPy run (:func:`fly_on_plant`):
 - no sensor noise (the cascade reads RotorPy's state; the engine's noise gains are sized to the sum of
   sines); ``--turbulence light|moderate|severe`` is the world's Dryden turbulence and 1-cosine gust
   (:mod:`sim.world` at the vehicle's flight condition) as RotorPy's wind, translational components only;
-- health ``blind`` or ``told``;
+- health ``blind``, ``told`` or ``detected`` (the engine's in-loop detector and do-no-harm monitor on
+  RotorPy's own state derivative, noise-free, designed for the seed's noise level times ``noise_scale``);
 - every frame is recorded; ``result.settings`` records ``dt``, ``record_every`` and ``noise`` as flown
   (the engine's ``dt``, ``record_every``, ``noise`` and ``noise_scale`` do not apply), and the settings
-  a plant run cannot fly (``detected``, ``model_error``, ``excitation``, a noise family, the pilot and
+  a plant run cannot fly (``model_error``, ``excitation``, a noise family, the pilot and
   the seed's controllers) are refused naming the setting.
 """
 
@@ -126,7 +127,8 @@ def fly_on_plant(source: Any, plant: str, settings: RunSettings | None = None, *
         output_limits=limits, record_every=1, seed=flown.seed, record_state=RECORDED_STATE, timing=timing,
         alloc_options=dict(rate_aware=flown.rate_aware, preferred=flown.preferred, rate_horizon=flown.rate_horizon,
                            rate_window=flown.rate_window),
-        u_prev_source=flown.u_prev_source, scenario=fv.name)
+        u_prev_source=flown.u_prev_source, scenario=fv.name,
+        detection=dict(noise_scale=flown.noise_scale, long_window=flown.detector_long_window))
     record = {**flown.record(), **result.settings}
     record.update(duration=duration, method=method, failure=None if failure is None else failure.name,
                   failure_time=None if failure is None else failure.time, frame_period=frame, dt=frame,
@@ -140,9 +142,6 @@ def fly_on_plant(source: Any, plant: str, settings: RunSettings | None = None, *
 
 def _refuse_unflown(flown: RunSettings) -> None:
     """Settings a plant run does not fly: refused by name rather than ignored."""
-    if flown.health_mode == "detected":
-        raise SettingError("health: 'detected' needs the detector's linear model of the plant; a --plant other "
-                           "than linear flies blind or told", field="health")
     for name, default in (("model_error", 0.0), ("excitation", 0.0), ("noise_model", "gaussian")):
         if getattr(flown, name) != default:
             raise SettingError(f"{name}: a --plant other than linear does not fly it (the plant is not the model "

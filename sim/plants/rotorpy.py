@@ -165,6 +165,7 @@ class RotorPyPlant:
                           f"{unknown[0]!r} is none of them")
         self.effectors = tuple(vehicle.effector_names)
         self.vehicle = vehicle
+        self.states = tuple(fv.model.states) if fv.model is not None else ()
         self.params = params
         self.dt_step = float(dt_step)
         self.wind = None if wind is None else np.asarray(wind, dtype=float)
@@ -188,6 +189,7 @@ class RotorPyPlant:
         self._k = 0
         self._failures: list[dict[str, Any]] = []
         speeds = self.w_max * np.sqrt(np.clip(self.trim_u, 0.0, 1.0))
+        self._speeds_cmd = speeds
         self._state = {"x": np.zeros(3), "v": np.zeros(3), "q": np.array([0.0, 0.0, 0.0, 1.0]), "w": np.zeros(3),
                        "wind": self._wind_at(0), "rotor_speeds": speeds}
         return self._outputs()
@@ -200,6 +202,7 @@ class RotorPyPlant:
         mr = self._multirotor
         for _ in range(_whole_steps(dt, self.dt_step)):
             speeds_cmd = self._speed_command(u)
+            self._speeds_cmd = speeds_cmd
             self._state["wind"] = self._wind_at(self._k)
             s = _pack(self._state)
             # RotorPy's integrator (RK45, its tolerances); the first trial step is the whole step: scipy's
@@ -232,6 +235,33 @@ class RotorPyPlant:
         out.update({"wind_north_mps": wind[0], "wind_east_mps": wind[1], "wind_down_mps": wind[2]})
         out.update({f"{n}_rad_s": w for n, w in zip(self.effectors, st["rotor_speeds"], strict=True)})
         return {k: float(v) for k, v in out.items()}
+
+    def sensed(self) -> np.ndarray:
+        """The model's states' derivative from RotorPy's own (``Multirotor._s_dot_fn`` at the state now),
+        less the nominal free response ``A x``: body rates' derivative, Euler-angle rates (ZYX kinematics)
+        and body velocities' derivative ``R^T v_ned' - w x v_body``, in the project's frames."""
+        missing = [i for i, n in enumerate(self.states) if n not in _OUTPUTS]
+        if missing or not self.states:
+            i = missing[0] if missing else 0
+            raise _refuse(f"model.states[{i}]", f"senses {', '.join(_OUTPUTS)}; the model's states are {self.states}")
+        st = self._state
+        sdot = self._multirotor._s_dot_fn(0.0, _pack(st), self._speeds_cmd)
+        now = _measure(st)
+        phi, theta = now["phi"], now["theta"]
+        w = np.array([now["p"], now["q"], now["r"]])
+        from scipy.spatial.transform import Rotation
+
+        R = _FLIP @ Rotation.from_quat(st["q"]).as_matrix() @ _FLIP
+        v_body = np.array([now["u"], now["v"], now["w"]])
+        v_body_dot = R.T @ (_FLIP @ sdot[3:6]) - np.cross(w, v_body)
+        w_dot = _FLIP @ sdot[10:13]
+        turn = w[1] * np.sin(phi) + w[2] * np.cos(phi)
+        rates = {"phi": w[0] + np.tan(theta) * turn, "theta": w[1] * np.cos(phi) - w[2] * np.sin(phi),
+                 "psi": turn / np.cos(theta), "p": w_dot[0], "q": w_dot[1], "r": w_dot[2],
+                 "u": v_body_dot[0], "v": v_body_dot[1], "w": v_body_dot[2]}
+        x = np.array([now[n] for n in self.states])
+        xdot = np.array([rates[n] for n in self.states])
+        return xdot - np.asarray(self.vehicle.A, dtype=float) @ x
 
     def fail(self, effector: int, kind: str, params: dict[str, float] | None = None) -> None:
         """Execute ``kind`` on rotor ``effector``'s command stage from the next step on (module docstring)."""

@@ -41,7 +41,7 @@ def _spec(fm, health: str, frame_period: float | None = None) -> LoopSpec:
         method_options=vehicles.method_options(fm.source, "qp", None), frame_period=frame_period)
 
 
-@pytest.mark.parametrize("health, frame_period", [("told", None), ("blind", 0.002)])
+@pytest.mark.parametrize("health, frame_period", [("told", None), ("blind", 0.002), ("detected", None)])
 def test_linear_plant_in_the_plant_loop_reproduces_the_engine(hexa, health, frame_period):
     spec = _spec(hexa, health, frame_period)
     engine = simulate(spec)
@@ -53,7 +53,8 @@ def test_linear_plant_in_the_plant_loop_reproduces_the_engine(hexa, health, fram
         method_options=spec.method_options, duration=DURATION, dt=DT, frame_steps=spec.frame_steps(),
         failure=spec.failure, health=health, noise=noise, output_bound=hexa.output_bound,
         alloc_options=dict(rate_aware=spec.rate_aware, preferred=spec.preferred, rate_horizon=spec.rate_horizon,
-                           rate_window=spec.rate_window))
+                           rate_window=spec.rate_window),
+        detection=dict(noise_scale=spec.noise_scale, long_window=spec.detector_long_window))
     assert not engine.diverged and not loop.diverged
     assert loop.t.shape == engine.t.shape
     for name in ("output", "reference", "pseudo", "effectors", "unallocated"):
@@ -63,6 +64,9 @@ def test_linear_plant_in_the_plant_loop_reproduces_the_engine(hexa, health, fram
     assert np.max(np.abs(engine.effectors[engine.t >= FAIL_AT, 0] - engine.effectors[engine.t >= FAIL_AT, 0][0])) > 0
     assert np.max(np.abs(engine.output)) > 0.1
     np.testing.assert_array_equal(loop.allocator_status, engine.allocator_status)
+    if health == "detected":  # the same detections at the same instants, the same monitor
+        assert engine.detections and loop.detections == engine.detections
+        assert loop.withdrawals == engine.withdrawals and loop.detector == engine.detector
 
 
 def test_linear_plant_keeps_the_contract(hexa):
@@ -100,9 +104,9 @@ def test_linear_plant_refuses_a_step_that_is_not_whole(hexa):
     assert "no-such-kind" in str(info.value)
 
 
-def test_plant_loop_refuses_detected(hexa):
+def test_plant_loop_refuses_an_unknown_health_mode(hexa):
     spec = _spec(hexa, "told")
     with pytest.raises(SettingError) as info:
         fly_plant(LinearPlant(hexa.vehicle, DT), EngineController(spec), hexa.vehicle, method="qp", duration=0.01,
-                  dt=DT, health="detected")
+                  dt=DT, health="oracle")
     assert info.value.field == "health"

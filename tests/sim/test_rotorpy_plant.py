@@ -164,7 +164,7 @@ def test_a_vehicle_rotorpy_cannot_fly_is_refused_by_field(field, change):
 
 
 @pytest.mark.parametrize("field, setting", [
-    ("health", {"health": "detected"}), ("model_error", {"model_error": 0.1}), ("excitation", {"excitation": 1.0}),
+    ("noise_model", {"noise_model": "student-t"}), ("model_error", {"model_error": 0.1}), ("excitation", {"excitation": 1.0}),
     ("controller", {"controller": "loopshape"}), ("plant", {}),
 ])
 def test_a_setting_a_plant_run_cannot_fly_is_refused_by_name(field, setting):
@@ -188,11 +188,11 @@ def _hexa_model():
 def test_cli_plant_errors_are_one_line_exit_2():
     for args, words in ((["--vehicle", "hexa-x", "--plant", "nope"], "unknown plant 'nope'"),
                         (["ice", "--plant", "rotorpy"], "seed scenario"),
-                        (["--vehicle", "hexa-x", "--plant", "rotorpy", "--health", "detected", "--duration", "1"],
-                         "detected")):
+                        (["--vehicle", "hexa-x", "--plant", "rotorpy", "--model-error", "0.1", "--duration", "1"],
+                         "model_error")):
         res = runner.invoke(app, ["sim", *args])
         assert res.exit_code == 2, res.output
-        assert "--plant" in res.output or "--health" in res.output
+        assert "--plant" in res.output or "--model-error" in res.output
         assert words in res.output
 
 
@@ -250,3 +250,19 @@ def test_holding_yaw_first_loses_the_hexacopter():
     r = fly_on_plant("hexa-x", "rotorpy", method="qp", method_options={"priorities": [2, 2, 3, 1]},
                      failure="float:motor1", health="told", duration=20.0)
     assert r.diverged and 10.0 < r.t[-1] < 20.0
+
+
+def test_detected_finds_the_lost_rotor_on_rotorpy():
+    # the engine's detector on RotorPy's sensed response: measured, motor1 found 0.1 s after the loss
+    # (as stuck at zero thrust, which for a rotor is the same event as a float)
+    r = fly_on_plant("hexa-x", "rotorpy", method="qp", failure="float:motor1", failure_time=1.0, health="detected",
+                     duration=2.0)
+    applied = [d for d in r.detections if d["applied"]]
+    assert applied and applied[0]["effector"] == "motor1" and 1.0 < applied[0]["time"] <= 1.5
+    assert r.settings["health"] == "detected" and r.detector["do_no_harm"]
+
+
+def test_detected_hover_in_turbulence_raises_no_alarm():
+    # measured over 20 s of moderate turbulence: no detection (the wind reaches heave, not the moments)
+    r = fly_on_plant("hexa-x", "rotorpy", method="qp", health="detected", duration=6.0, turbulence="moderate")
+    assert not r.diverged and r.detections == [] and r.withdrawals == []
