@@ -9,6 +9,9 @@ with the seed's section 4.3 design applied to it (:class:`sim.user_vehicle.Vehic
 without one is refused in one line (no plant to fly).  The scenario's vehicle's ``[methods.<method>]`` defaults (ICE's daisy groups) reach the allocator
 (:func:`sim.scenarios.mimo.run_mimo`).
 
+``--plant rotorpy`` flies a multirotor vehicle file with a ``[body]`` on RotorPy's nonlinear physics
+instead of its linear model (:mod:`sim.plants`); ``--plant linear`` is the default, recorded.
+
 Registered as the entry point ``sim`` of the group ``alloc.commands`` (``pyproject.toml``).
 
 Exit codes: 0 the run stayed bounded; 1 the run diverged (see :mod:`sim.result`);
