@@ -9,6 +9,9 @@ with the seed's section 4.3 design applied to it (:class:`sim.user_vehicle.Vehic
 without one is refused in one line (no plant to fly).  The scenario's vehicle's ``[methods.<method>]`` defaults (ICE's daisy groups) reach the allocator
 (:func:`sim.scenarios.mimo.run_mimo`).
 
+``--plant rotorpy`` flies a multirotor vehicle file with a ``[body]`` on RotorPy's nonlinear physics
+instead of its linear model (:mod:`sim.plants`); ``--plant linear`` is the default, recorded.
+
 Registered as the entry point ``sim`` of the group ``alloc.commands`` (``pyproject.toml``).
 
 Exit codes: 0 the run stayed bounded; 1 the run diverged (see :mod:`sim.result`);
@@ -98,6 +101,9 @@ def sim_command(
         None, "--parquet", help="write the time histories to this new file (Parquet, full precision; needs pyarrow)"
     ),
     plot_path: Optional[Path] = typer.Option(None, "--plot", help="write a PNG plot to this new file"),
+    plant: Optional[str] = typer.Option(
+        None, "--plant", metavar="NAME", help="the plant flown: linear (default: the vehicle's linear model in the "
+        "compiled engine) or rotorpy (RotorPy's nonlinear multirotor, a vehicle file with [body]; sim/plants)"),
     force: bool = typer.Option(False, "--force", help="overwrite output files that exist"),
     list_: bool = typer.Option(False, "--list", callback=list_scenarios, is_eager=True, expose_value=False,
                                help="list the scenarios, their defaults and failures, and exit"),
@@ -128,6 +134,7 @@ def sim_command(
             raise typer.BadParameter(str(exc.args[0]), param_hint="SCENARIO") from None
     else:  # a vehicle file's model, the seed's section 4.3 design (sim.user_vehicle)
         run, scenario = flown, flown.name
+    runner = run if plant is None else _plant_run(plant, flown, scenario, run)
     if design and isinstance(flown, str):
         raise typer.BadParameter(f"{scenario} flies the seed's own design; --design is for a vehicle file's "
                                  "auto-design", param_hint="--design")
@@ -153,9 +160,11 @@ def sim_command(
     if design:
         kwargs["design"] = parse_options(design)
     try:
-        result = run(progress=simulated > PROGRESS_AFTER, **kwargs)
+        result = runner(progress=simulated > PROGRESS_AFTER, **kwargs)
     except AllocError as exc:  # a setting (sim.settings.SettingError), the method and its options
         hint = flag_of(exc.field) if exc.field in _SETTING_NAMES else "--method"
+        if plant not in (None, "linear") and exc.field not in _SETTING_NAMES:  # what the plant cannot fly
+            hint = "--plant"
         raise typer.BadParameter(str(exc), param_hint=hint) from None
     except TypeError as exc:
         raise typer.BadParameter(f"scenario {scenario!r} does not take this option: {exc}") from None
@@ -183,6 +192,31 @@ def sim_command(
     if result.diverged:
         typer.echo(f"diverged at t = {result.duration:.3f} s", err=True)
         raise typer.Exit(EXIT_DIVERGED)
+
+
+def _plant_run(plant: str, flown: Any, scenario: str, run: Any) -> Any:
+    """The runner of ``--plant``: the scenario's own for ``linear`` (its result records the plant), else
+    :func:`sim.plants.fly_on_plant` on the vehicle file; a one-line usage error naming ``--plant``."""
+    from sim.plants import check_plant, fly_on_plant
+
+    try:
+        check_plant(plant)
+    except AllocError as exc:
+        raise typer.BadParameter(str(exc), param_hint="--plant") from None
+    if plant == "linear":
+        def linear(**options: Any) -> Any:
+            result = run(**options)
+            result.settings["plant"] = {"name": "linear", "source": "the vehicle's linear model, compiled engine"}
+            return result
+        return linear
+    if isinstance(flown, str):
+        raise typer.BadParameter(f"{scenario} flies its linear model (a seed scenario); --plant {plant} flies a "
+                                 "multirotor vehicle file with a [body] (--vehicle FILE)", param_hint="--plant")
+
+    def on_plant(progress: bool = False, **options: Any) -> Any:
+        return fly_on_plant(flown.vehicle, plant, progress=progress, **options)
+
+    return on_plant
 
 
 #: every run setting's name (an error naming one is reported against its option)

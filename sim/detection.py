@@ -270,7 +270,13 @@ class InLoopDetector:
         xdot = (A_now - self.A) @ x + B_now @ surfaces
         if disturbance is not None:
             xdot = xdot + disturbance
-        y = self.C @ xdot
+        return self.sample_response(step, xdot)
+
+    def sample_response(self, step: int, response: np.ndarray) -> list[Detection]:
+        """One detector sample from the measured state derivative less the nominal free response
+        (``x' - A x``, the model's states): what :meth:`sample` computes from a linear plant, and what a
+        plant that is not the model (:mod:`sim.plant_loop`) measures.  The sensors' differenced noise is added."""
+        y = self.C @ response
         y = y + (self.noise[step] - self.noise[step - self.every]) / self.sample_time
         self.previous_health = dict(self.detector.health)
         self.last_y = y

@@ -204,6 +204,8 @@ _G = 9.81
 _HEXA_ROTORS = ((0.0, 0.5, -0.05), (0.0, -0.5, 0.05), (0.43, -0.25, -0.05), (-0.43, 0.25, 0.05),
                 (0.43, 0.25, 0.05), (-0.43, -0.25, -0.05))
 _HEXA_MASS, _HEXA_INERTIA = 2.0, (0.08, 0.08, 0.15)
+#: rad/s at full command (6.5 N): assumed, a 10-inch propeller near 8600 rpm; RotorPy's k_eta = 6.5 / 900^2
+_HEXA_ROTOR_SPEED_MAX = 900.0
 
 
 def tailless_document() -> dict[str, Any]:
@@ -247,7 +249,9 @@ def hexa_document() -> dict[str, Any]:
         "format": FORMAT, "name": "hexa-x",
         "description": "Hexacopter example (6 rotors, X): PX4 6001_hexa_x geometry, 2 kg, hover linear model",
         "source": "rotor positions and KM from PX4 ROMFS airframe 6001_hexa_x, CT 6.5 N (PX4 default); mass 2 kg "
-                  "and inertia diag(0.08, 0.08, 0.15) kg m^2 are this example's; motor lag 1/30 s, slew 0.1 s",
+                  "and inertia diag(0.08, 0.08, 0.15) kg m^2 are this example's; motor lag 1/30 s, slew 0.1 s; [body]: "
+                  "the same mass and inertia (its hover model is this [model] exactly), rotor_speed_max 900 rad/s "
+                  "assumed (a 10-inch propeller near 8600 rpm), motor time constant the effectors' 1/30 s",
         "axes": [{"name": "roll", "unit": "N m"}, {"name": "pitch", "unit": "N m"}, {"name": "yaw", "unit": "N m"},
                  {"name": "thrust", "unit": "N", "wrench": "fz", "trim": -_HEXA_MASS * _G,
                   "description": "body z force (down positive): hover at -m g"}],
@@ -257,6 +261,7 @@ def hexa_document() -> dict[str, Any]:
                       for i, (x, y, km) in enumerate(_HEXA_ROTORS)],
         "methods": {"cgi": {"priorities": [2, 2, 1, 3]}, "qp": {"priorities": [2, 2, 1, 3]},
                     "lp": {"priorities": [2, 2, 1, 3]}},
+        "body": {"mass": _HEXA_MASS, "inertia": list(_HEXA_INERTIA), "rotor_speed_max": _HEXA_ROTOR_SPEED_MAX},
         "model": {"states": states, "outputs": states,
                   "units": ["rad", "rad", "rad", "rad/s", "rad/s", "rad/s", "m/s"], "A": _floats(A), "B": _floats(Bm), "C": _floats(np.eye(7)),
                   "D": _floats(np.zeros((7, 6))), "controlled": ["p", "q", "r", "w"]},

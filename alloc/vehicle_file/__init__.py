@@ -29,6 +29,10 @@ allocation problem, a method's defaults and (optionally) the simulator need::
     [methods.daisy]               # per-vehicle method defaults (alloc's option names)
     groups = [["m1", "m2"], ["m3"]]
 
+    [body]                        # optional: mass, inertia, rotor physics (alloc.vehicle_file.body);
+    mass = 2.0                    # without [model], the hover linear model is derived from it
+    inertia = [0.08, 0.08, 0.15]
+
     [model]                       # optional rigid-body linear model x' = A x + B u, y = C x + D u
     states = [...]; outputs = [...]; A = [...]; B = [...]; C = [...]; D = [...]
     units = [...]                 # optional, one per output (plots and tables label them)
@@ -79,6 +83,7 @@ from typing import Any
 from .._files import MAX_TEXT_BYTES, MAX_TOML_BYTES, parse_json, parse_toml, read_user_text
 from ..exceptions import ProblemError, SkippedLinesWarning
 from .fields import DATA_DIR, EFFECTOR_KINDS, FORMAT, FORMAT_SCHEDULE, FORMAT_SIMULATION, FORMATS, SCHEMA_PATH, WRENCH_COMPONENTS
+from .body import Body
 from .parts import Axis, Dynamics, Effector, LinearModel, Rotor, rotor_wrench
 from .schedule import Schedule, ScheduledEffectiveness
 from .simulation import Simulation
@@ -87,7 +92,7 @@ from .vehicle import Vehicle, vehicle_from_dict, vehicle_from_problem
 
 __all__ = [
     "FORMAT", "FORMAT_SIMULATION", "FORMAT_SCHEDULE", "FORMATS", "Schedule", "ScheduledEffectiveness", "SCHEMA_PATH", "Simulation", "DATA_DIR", "EFFECTOR_KINDS", "WRENCH_COMPONENTS",
-    "Dynamics", "Rotor", "Effector", "Axis", "LinearModel", "Vehicle",
+    "Body", "Dynamics", "Rotor", "Effector", "Axis", "LinearModel", "Vehicle",
     "load_vehicle", "vehicle_from_dict", "vehicle_from_problem", "vehicle_names", "rotor_wrench", "to_toml",
 ]
 

@@ -16,6 +16,7 @@ from .._files import MAX_TEXT_BYTES, MAX_TOML_BYTES
 from ..exceptions import AllocError, ProblemError
 from ..problem import MAX_AXES, MAX_EFFECTORS, MAX_MAGNITUDE, Problem, short_repr
 from .fields import FORMAT, FORMAT_SCHEDULE, FORMAT_SIMULATION, FORMATS, WRENCH_COMPONENTS, Matrix, _child, _fail, _keys, _kind, _list, _matrix, _table, _text, _unique
+from .body import Body
 from .parts import Axis, Effector, LinearModel
 from .schedule import Schedule, ScheduledEffectiveness
 from .simulation import Simulation
@@ -45,9 +46,13 @@ class Vehicle:
     simulation: Simulation | None = None
     #: ``B`` as a function of scheduling variables (format 1.2); ``B`` above is its value at the nominal point
     schedule: Schedule | None = None
+    #: the rigid body and its rotors' physics (``[body]``, :mod:`~alloc.vehicle_file.body`)
+    body: Body | None = None
+    #: whether ``model`` is the hover model derived from ``body`` (the file gave no ``[model]``)
+    model_derived: bool = False
 
-    FIELDS = ("format", "name", "description", "source", "axes", "effectors", "effectiveness", "methods", "model",
-              "simulation", "schedule")
+    FIELDS = ("format", "name", "description", "source", "axes", "effectors", "effectiveness", "methods", "body",
+              "model", "simulation", "schedule")
 
     @property
     def k(self) -> int:
@@ -161,7 +166,9 @@ class Vehicle:
             out["effectiveness"] = {"B": [list(r) for r in self.B]}
         if self.methods:
             out["methods"] = self.method_table()
-        if self.model is not None:
+        if self.body is not None:
+            out["body"] = self.body.to_dict()
+        if self.model is not None and not self.model_derived:
             out["model"] = self.model.to_dict()
         if self.simulation is not None:
             out["simulation"] = self.simulation.to_dict()
@@ -224,8 +231,12 @@ def vehicle_from_dict(doc: Any) -> Vehicle:
     m = len(effectors)
     B, given = _effectiveness(t, axes, effectors)
     model = LinearModel.from_dict(t["model"], "model", m) if "model" in t else None
+    body = Body.from_dict(t["body"], "body", effectors) if "body" in t else None
+    derived = model is None and body is not None
+    if derived:
+        model = body.hover_model(axes, B)
     vehicle = Vehicle(name=name, axes=axes, effectors=effectors, B=B, B_given=given, description=description,
-                      source=source, model=model)
+                      source=source, model=model, body=body, model_derived=derived)
     try:
         problem = vehicle.problem()
     except ProblemError as exc:  # the per-field checks above should leave nothing; say where if they do

@@ -1,1 +1,174 @@
-"""Third-party nonlinear plants of the closed loop (the optional ``[plants]`` extra); see :mod:`sim.plant`."""
+"""The plants ``alloc sim --plant NAME`` flies, and the runner of a vehicle file on one of them.
+
+``linear`` (the default) is the vehicle's linear model in the compiled engine (:mod:`sim.engine`;
+:class:`sim.plant.LinearPlant` is its reference implementation of the contract).  ``rotorpy`` is RotorPy's
+nonlinear multirotor (:mod:`sim.plants.rotorpy`, the ``[plants]`` extra), flown by
+:func:`sim.plant_loop.fly_plant` with the multirotor cascade (:class:`sim.plant_control.CascadeController`)
+holding a level hover at the trim.
+
+A RotorPy run (:func:`fly_on_plant`):
+
+- the flight-control frame is ``frame_period`` (default :data:`ROTORPY_FRAME`, 250 Hz) and the plant
+  steps once per frame (RotorPy's RK45 adapts inside the step); ``dt`` is not used;
+- the references are a level hover at heading 0 and the trim altitude (no sum-of-sines commands: those are
+  the seed's auto-design's, sized for the linear model);
+- no sensor noise (the cascade reads RotorPy's state; the engine's noise gains are sized to the sum of
+  sines); ``--turbulence light|moderate|severe`` is the world's Dryden turbulence and 1-cosine gust
+  (:mod:`sim.world` at the vehicle's flight condition) as RotorPy's wind, translational components only;
+- health ``blind``, ``told`` or ``detected`` (the engine's in-loop detector and do-no-harm monitor on
+  RotorPy's own state derivative, noise-free, designed for the seed's noise level times ``noise_scale``);
+- every frame is recorded; ``result.settings`` records ``dt``, ``record_every`` and ``noise`` as flown
+  (the engine's ``dt``, ``record_every``, ``noise`` and ``noise_scale`` do not apply), and the settings
+  a plant run cannot fly (``model_error``, ``excitation``, a noise family, the pilot and
+  the seed's controllers) are refused naming the setting.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+
+from alloc.exceptions import ProblemError
+from sim.plants.rotorpy import DEFAULT_STEP  # rotorpy itself is imported when a plant is built
+from sim.result import SimResult
+from sim.settings import RunSettings, SettingError
+
+__all__ = ["PLANTS", "DEFAULT_PLANT", "ROTORPY_FRAME", "check_plant", "fly_on_plant", "rotorpy_plant"]
+
+#: the plants by ``--plant`` name, with what each is
+PLANTS = {
+    "linear": "the vehicle's linear model in the compiled engine (sim.engine)",
+    "rotorpy": "RotorPy's nonlinear multirotor (rotorpy 3.0.0, the [plants] extra), any rotor count",
+}
+DEFAULT_PLANT = "linear"
+#: s: the flight-control frame (and plant step) of a RotorPy run unless --frame-rate says otherwise
+ROTORPY_FRAME = DEFAULT_STEP
+#: divergence bounds on the hover model's outputs (phi, theta, psi, p, q, r, w): past 90 deg of bank or pitch,
+#: 20 rad/s of roll or pitch rate, 60 rad/s of yaw rate or 20 m/s of heave the vehicle has lost control
+HOVER_LIMITS = {"phi": np.pi / 2, "theta": np.pi / 2, "psi": np.inf, "p": 20.0, "q": 20.0, "r": 60.0,
+                "u": np.inf, "v": np.inf, "w": 20.0}
+#: plant state recorded into result.extra on a RotorPy run
+RECORDED_STATE = ("altitude_m", "north_m", "east_m", "wind_north_mps", "wind_east_mps", "wind_down_mps")
+
+
+def check_plant(name: Any) -> str:
+    """``name`` if it is a plant (:data:`PLANTS`); SettingError naming ``plant`` otherwise."""
+    if not isinstance(name, str) or name not in PLANTS:
+        raise SettingError(f"plant: unknown plant {name!r}; plants: {', '.join(PLANTS)}", field="plant")
+    return name
+
+
+def rotorpy_plant(fm: Any, *, dt_step: float, wind: np.ndarray | None = None) -> Any:
+    """The :class:`sim.plants.rotorpy.RotorPyPlant` of a flight model; SettingError naming ``plant`` when the
+    package is missing, ProblemError naming the vehicle's field it cannot fly."""
+    from sim.plants.rotorpy import RotorPyPlant
+
+    try:
+        import rotorpy  # noqa: F401 (the [plants] extra)
+    except ImportError as exc:
+        raise SettingError(f"plant: rotorpy is not installed ({exc}); pip install 'alloc-toolkit[plants]'",
+                           field="plant") from None
+    return RotorPyPlant(fm.source, fm.vehicle, fm.trim_u, dt_step=dt_step, wind=wind)
+
+
+def fly_on_plant(source: Any, plant: str, settings: RunSettings | None = None, *, progress: bool = False,
+                 **options: Any) -> SimResult:
+    """Fly vehicle ``source`` (a file, a catalogue name or a vehicle) on ``plant`` (module docstring).
+
+    ``settings`` / ``options``: :class:`sim.settings.RunSettings` (method, failure, failure_time, duration,
+    health, frame_period, turbulence, seed ...).  ``result.settings["plant"]`` is the plant's ``describe()``.
+    """
+    from alloc import vehicles
+    from alloc.registry import DEFAULT_METHOD
+    from sim.plant_control import CascadeController, CascadeGains
+    from sim.plant_loop import fly_plant
+    from sim.user_vehicle import DEFAULT_DURATION, DEFAULT_FAILURE_TIME, flight_model
+
+    check_plant(plant)
+    if plant == "linear":
+        from sim.user_vehicle import fly
+
+        result = fly(source, settings, progress=progress, **options)
+        result.settings["plant"] = {"name": "linear", "source": PLANTS["linear"]}
+        return result
+    given, extra = RunSettings.split(options)
+    if extra:
+        raise TypeError(f"{sorted(extra)[0]}: not a run setting of a --plant {plant} run")
+    flown = given if settings is None else replace(settings, **options)
+    fv = vehicles.get_vehicle(source)
+    if fv.simulation is not None:
+        raise SettingError(f"plant: {fv.name!r} flies its own [simulation] design on its linear model; "
+                           f"--plant {plant} flies multirotors with a [body]", field="plant")
+    if fv.model is None:
+        raise SettingError(f"plant: {fv.name!r} has no [model] and no [body]; --plant {plant} needs a [body]",
+                           field="plant")
+    _refuse_unflown(flown)
+    fm = flight_model(fv)
+    frame = ROTORPY_FRAME if flown.frame_period is None else float(flown.frame_period)
+    duration = DEFAULT_DURATION if flown.duration is None else float(flown.duration)
+    method = DEFAULT_METHOD if flown.method is None else flown.method
+    method_options = vehicles.method_options(fm.source, method, flown.method_options)
+    failure = flown.failure
+    if isinstance(failure, str):
+        failure = fm.failure(failure, DEFAULT_FAILURE_TIME if flown.failure_time is None else flown.failure_time)
+    n_steps = int(round(duration / frame))
+    wind, world = _wind(fm, flown, n_steps + 1, frame)
+    the_plant = rotorpy_plant(fm, dt_step=frame, wind=wind)
+    tau = the_plant.params["tau_m"]
+    controller = CascadeController(fv, fm.vehicle, CascadeGains.for_motor_lag(tau), frame)
+    limits = np.array([HOVER_LIMITS.get(o, np.inf) for o in fm.vehicle.output_names])
+    bound = np.array([HOVER_LIMITS[c] for c in fm.vehicle.channels])
+    timing: dict[str, float] = {}
+    result = fly_plant(
+        the_plant, controller, fm.vehicle, method=method, method_options=method_options, duration=duration,
+        dt=frame, frame_steps=1, failure=failure, health=flown.health_mode, output_bound=bound,
+        output_limits=limits, record_every=1, seed=flown.seed, record_state=RECORDED_STATE, timing=timing,
+        alloc_options=dict(rate_aware=flown.rate_aware, preferred=flown.preferred, rate_horizon=flown.rate_horizon,
+                           rate_window=flown.rate_window),
+        u_prev_source=flown.u_prev_source, scenario=fv.name,
+        detection=dict(noise_scale=flown.noise_scale, long_window=flown.detector_long_window))
+    record = {**flown.record(), **result.settings}
+    record.update(duration=duration, method=method, failure=None if failure is None else failure.name,
+                  failure_time=None if failure is None else failure.time, frame_period=frame, dt=frame,
+                  noise=False, record_every=1, controller="cascade", units=_units(fm), trim_u=fm.trim_u.tolist(),
+                  real_time_factor=timing["simulated_s"] / max(timing["wall_s"], 1e-9), timing=timing)
+    if world is not None:
+        record["world"] = world
+    result.settings = record
+    return result
+
+
+def _refuse_unflown(flown: RunSettings) -> None:
+    """Settings a plant run does not fly: refused by name rather than ignored."""
+    for name, default in (("model_error", 0.0), ("excitation", 0.0), ("noise_model", "gaussian")):
+        if getattr(flown, name) != default:
+            raise SettingError(f"{name}: a --plant other than linear does not fly it (the plant is not the model "
+                               "already; no excitation or noise families in the plant loop)", field=name)
+    if flown.controller != "smc" or flown.pilot != "standin" or flown.pilot_gain is not None or \
+            flown.pilot_delay is not None:
+        raise SettingError("controller: a --plant other than linear flies the multirotor cascade "
+                           "(sim.plant_control), no pilot", field="controller")
+
+
+def _wind(fm: Any, flown: RunSettings, n: int, dt: float) -> tuple[np.ndarray | None, dict[str, Any] | None]:
+    """World wind (n, 3), m/s north-east-down, of ``--turbulence`` at the vehicle's flight condition."""
+    if flown.turbulence == "none":
+        return None, None
+    from sim.world import FEET, dryden, gust_series
+
+    flight = fm.vehicle.flight
+    if flight is None:
+        raise ProblemError(f"turbulence: vehicle {fm.vehicle.name!r} states no flight condition", field="turbulence")
+    d = dryden(flown.turbulence, flight)
+    g = gust_series(d, n, dt, flown.seed)
+    wind = g[:, :3] * FEET  # u along north (the mean wind's direction), v east, w down
+    return wind, {"turbulence": d.record(), "components": ["north", "east", "down"], "unit": "m/s",
+                  "std": wind.std(axis=0).tolist(), "rotational_gusts": "not applied (RotorPy's wind is a velocity)"}
+
+
+def _units(fm: Any) -> dict[str, Any]:
+    from sim.user_vehicle import file_units
+
+    return file_units(fm.source)
