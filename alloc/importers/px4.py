@@ -72,6 +72,7 @@ import numpy as np
 from .._files import MAX_TEXT_BYTES, read_user_text
 from ..domain import MAX_MAGNITUDE
 from ..exceptions import ProblemError
+from ..px4_mix import FLT_EPSILON, mix_scales
 from ..domain import as_float_array, short_repr
 from ..vehicle_file.fields import FORMAT, WRENCH_COMPONENTS
 from ..vehicle_file.parts import rotor_wrench
@@ -91,7 +92,6 @@ DEFAULTS = {"PX": 0.0, "PY": 0.0, "PZ": 0.0, "AX": 0.0, "AY": 0.0, "AZ": -1.0, "
             "TYPE": 1, "TRQ_R": 0.0, "TRQ_P": 0.0, "TRQ_Y": 0.0, "TRIM": 0.0}
 _MAX_ROTORS = 12
 _MAX_SURFACES = 8
-_FLT_EPSILON = float(np.finfo(np.float32).eps)
 _INT32 = (-(2**31), 2**31 - 1)
 #: MAVLink MAV_PARAM_TYPE codes QGroundControl writes: 1-8 integers, 9 float32, 10 float64
 _INT_TYPES = range(1, 9)
@@ -235,7 +235,7 @@ def vehicle_from_params(params: Mapping[str, Any], *, name: str = "px4", normali
         if slew > 0:
             e["rate_max"] = _rate(1.0 - lo, slew, f"CA_R{i}_SLEW")
         columns.append(rotor_wrench(position, axis, ct, km))
-        if normalize == "none" and ct >= _FLT_EPSILON and math.hypot(*axis) > _FLT_EPSILON and ct > 0:
+        if normalize == "none" and ct >= FLT_EPSILON and math.hypot(*axis) > FLT_EPSILON and ct > 0:
             e["rotor"] = {"position": position, "axis": axis, "ct": ct, "km": km}
         matrix.append(0)
         effectors.append(e)
@@ -322,7 +322,7 @@ def _upwards(axis: list[float]) -> bool:
     """PX4's test in computeEffectivenessMatrix (on the normalised axis)."""
     a = np.asarray(axis, dtype=float)
     n = float(np.linalg.norm(a))
-    if not n > _FLT_EPSILON:
+    if not n > FLT_EPSILON:
         return True  # a zero axis gives a zero column anyway
     a = a / n
     return abs(a[0]) < 0.1 and abs(a[1]) < 0.1 and a[2] < -0.5
@@ -338,24 +338,4 @@ def px4_scales(B6: np.ndarray, *, normalize_rpy: bool) -> np.ndarray:
     B6 = as_float_array("B6", B6, ProblemError)
     if B6.ndim != 2 or B6.shape[0] != 6 or not np.isfinite(B6).all():
         raise ProblemError(f"B6: expected a finite 6 x m matrix, got shape {B6.shape}", field="B6")
-    m = B6.shape[1]
-    M = np.linalg.pinv(B6)  # (m, 6)
-    s = np.ones(6)
-    if normalize_rpy:
-        def rp_scale(col: np.ndarray) -> float:
-            n = int((np.abs(col) > 1e-3).sum())
-            return math.sqrt(float(col @ col) / (n / 2.0)) if n > 0 else 1.0
-
-        s_rp = max(rp_scale(M[:, 0]), rp_scale(M[:, 1]))
-        s_yaw = float(M[:, 2].max()) if m else 1.0
-        if s_rp > _FLT_EPSILON:
-            s[0] = s[1] = s_rp
-        if s_yaw > _FLT_EPSILON:
-            s[2] = s_yaw
-    norms = np.linalg.norm(M[:, 3:6], axis=1)
-    nonzero = norms > _FLT_EPSILON
-    if nonzero.any():
-        s_force = float(norms.sum() / nonzero.sum())
-        if s_force > _FLT_EPSILON:
-            s[3:6] = s_force
-    return s
+    return mix_scales(np.linalg.pinv(B6), normalize_rpy=normalize_rpy)
