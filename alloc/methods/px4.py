@@ -54,13 +54,16 @@ module after ``allocate``).
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
+from .._kernels import close_out, copy_demand, finish, packed_out, rate_window_into
 from .._linalg import RCOND, check_rcond
 from ..exceptions import SolverError
 from ..method import FloatArray, Method, register
 from ..options import choice, real
-from ..problem import Problem
+from ..problem import MAX_MAGNITUDE, Problem
 from ..px4_mix import ZERO_ENTRY, mix_scales
+from ..result import EXACT_RTOL
 from .pseudo_inverse import distribution_matrix
 
 #: PX4's ``MC_AIRMODE`` values, by name (0, 1, 2)
@@ -68,6 +71,8 @@ AIRMODES = ("disabled", "roll_pitch", "roll_pitch_yaw")
 #: PX4's ``MINIMUM_YAW_MARGIN``: the upper limits are raised by this fraction of the range
 #: while yaw is desaturated, so some yaw remains at full thrust
 YAW_MARGIN = 0.15
+#: rows of the desaturation columns (``C``, ``U``) in the kernels
+_ROLL, _PITCH, _YAW, _FZ = 0, 1, 2, 3
 #: PX4's six axes, in its order (the roles an axis of the problem can have)
 PX4_AXES = ("roll", "pitch", "yaw", "fx", "fy", "fz")
 #: the problem's axis names (lower case) that take each role
@@ -87,16 +92,106 @@ def axis_roles(axes: tuple[str, ...]) -> dict[str, int | None]:
     return out
 
 
-def desaturation_gain(vec: FloatArray, u: FloatArray, lo: FloatArray, hi: FloatArray, usable: np.ndarray) -> float:
-    """PX4's ``computeDesaturationGain``: over the usable effectors outside ``[lo, hi]``, the
-    step along ``vec`` that brings each back to its violated bound; the most negative step plus
-    the most positive one (each at least 0 in magnitude), so opposite saturations balance."""
-    below = usable & (u < lo)
-    above = usable & (u > hi)
-    k = np.concatenate(((lo[below] - u[below]) / vec[below], (hi[above] - u[above]) / vec[above]))
-    if k.size == 0:
-        return 0.0
-    return min(float(k.min()), 0.0) + max(float(k.max()), 0.0)
+@njit(cache=True, nogil=True, _nrt=False)
+def _gain(vec, usable, u, lo, hi, margin):  # pragma: no cover - compiled
+    """PX4's ``computeDesaturationGain``: over the usable effectors outside ``[lo, top]``
+    (``top = hi + margin (hi - lo)``), the step along ``vec`` that brings each back to its
+    violated bound; the most negative step plus the most positive one (each counted from 0),
+    so that opposite saturations balance."""
+    k_min = 0.0
+    k_max = 0.0
+    for i in range(u.shape[0]):
+        if usable[i] == 0.0:
+            continue
+        top = hi[i] + margin * (hi[i] - lo[i])
+        if u[i] < lo[i]:
+            g = (lo[i] - u[i]) / vec[i]
+            k_min = min(k_min, g)
+            k_max = max(k_max, g)
+        if u[i] > top:
+            g = (top - u[i]) / vec[i]
+            k_min = min(k_min, g)
+            k_max = max(k_max, g)
+    return k_min + k_max
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def _desaturate(C, U, axis, u, lo, hi, margin, down):  # pragma: no cover - compiled
+    """PX4's ``desaturateActuators`` along row ``axis`` of ``C`` (``U`` marks the usable
+    entries), in place: the gain, then half the gain still needed.  ``down`` != 0: only a step
+    whose gain has that sign (PX4's ``increase_only`` on thrust)."""
+    vec = C[axis]
+    g = _gain(vec, U[axis], u, lo, hi, margin)
+    if down != 0.0 and g * down < 0.0:
+        return
+    for i in range(u.shape[0]):
+        u[i] += g * vec[i]
+    g = 0.5 * _gain(vec, U[axis], u, lo, hi, margin)
+    for i in range(u.shape[0]):
+        u[i] += g * vec[i]
+
+
+@njit(cache=True, nogil=True)
+def px4_mix(M1, myaw, yaw, C, U, mode, down, B, up, v, lo, hi, u):  # pragma: no cover - compiled
+    """PX4's ``allocate`` into ``u`` for demand ``v`` within ``[lo, hi]`` (not yet clipped).
+
+    ``M1`` is the first mix (m x k; yaw left out unless ``mode`` is 2), ``myaw`` the yaw column
+    added later (``yaw`` its axis, -1 for none), ``C``/``U`` the normalised desaturation columns
+    (rows roll, pitch, yaw, fz; a zero row for an absent axis) and their usable entries,
+    ``mode`` 0/1/2 PX4's ``MC_AIRMODE``, ``down`` the sign of a thrust-lowering gain."""
+    k, m = B.shape
+    d = np.empty(k)  # v - B up
+    for i in range(k):
+        s = 0.0
+        for j in range(m):
+            s += B[i, j] * up[j]
+        d[i] = v[i] - s
+    for j in range(m):
+        s = up[j]
+        for i in range(k):
+            s += M1[j, i] * d[i]
+        u[j] = s
+    if mode == 2:  # mixAirmodeRPY: thrust both ways, then yaw given up
+        _desaturate(C, U, _FZ, u, lo, hi, 0.0, 0.0)
+        _desaturate(C, U, _YAW, u, lo, hi, 0.0, 0.0)
+        return
+    if mode == 1:  # mixAirmodeRP: thrust both ways
+        _desaturate(C, U, _FZ, u, lo, hi, 0.0, 0.0)
+    else:  # mixAirmodeDisabled: thrust only reduced, then roll, then pitch
+        _desaturate(C, U, _FZ, u, lo, hi, 0.0, down)
+        _desaturate(C, U, _ROLL, u, lo, hi, 0.0, 0.0)
+        _desaturate(C, U, _PITCH, u, lo, hi, 0.0, 0.0)
+    # mixYaw: yaw added, room at the top raised by the margin, then thrust only reduced
+    if yaw >= 0:
+        for j in range(m):
+            u[j] += myaw[j] * d[yaw]
+    _desaturate(C, U, _YAW, u, lo, hi, YAW_MARGIN, 0.0)
+    _desaturate(C, U, _FZ, u, lo, hi, 0.0, down)
+
+
+@njit(cache=True, nogil=True)
+def fused_px4(M1, myaw, yaw, C, U, mode, down, B, up, umin, umax, rate_min, rate_max, lo, hi, rtol, vmax,
+              v, u_prev, dt):  # pragma: no cover - compiled
+    """One call of ``px4`` (the allocator's packed fast path, with or without rate limits):
+    domain checks, the Eq 1.28 window when ``dt > 0`` (into the scratch ``lo``, ``hi``),
+    :func:`px4_mix`, then the clip, ``B u`` and the status of :func:`alloc._kernels.finish`.
+    Returns ``(out, code, 0)``: code 3 ``v``, 4 ``u_prev`` outside the valid domain."""
+    k, m = B.shape
+    out = packed_out(m, k)
+    if not copy_demand(v, out, m, vmax):
+        return out, 3, 0
+    if dt > 0.0:
+        for j in range(m):
+            if not abs(u_prev[j]) <= vmax:
+                return out, 4, 0
+        rate_window_into(umin, umax, rate_min, rate_max, u_prev, dt, lo, hi)
+        a, b = lo, hi
+    else:
+        a, b = umin, umax
+    px4_mix(M1, myaw, yaw, C, U, mode, down, B, up, v, a, b, out[:m])
+    code = finish(B, out[:m], a, b, v, out[m:m + k], rtol)
+    close_out(out, m, k)
+    return out, code, 0
 
 
 @register("px4")
@@ -131,57 +226,35 @@ class PX4SequentialDesaturation(Method):
         M[np.abs(M / scale) < zero] = 0.0  # PX4's normalizeControlAllocationMatrix
         self.M = M
         Mn = M / scale
-        # desaturation moves along the normalised columns (PX4's); the step's size is the gain's
-        self._cols = {role: (None if roles[role] is None else np.ascontiguousarray(Mn[:, roles[role]]))
-                      for role in DESATURATED}
-        self._usable = {role: (None if c is None else np.abs(c) >= weak) for role, c in self._cols.items()}
-        yaw = roles["yaw"]
+        # desaturation moves along the normalised columns (PX4's); the step's size is the gain's.
+        # Rows roll, pitch, yaw, fz; an absent axis is a zero row (its steps are 0).
+        C = np.zeros((len(DESATURATED), problem.m))
+        for r, role in enumerate(DESATURATED):
+            if roles[role] is not None:
+                C[r] = Mn[:, roles[role]]
+        U = (np.abs(C) >= weak).astype(float) * (C != 0.0)
+        yaw = -1 if roles["yaw"] is None else roles["yaw"]
+        full = airmode == "roll_pitch_yaw"
         # the first mix leaves yaw out except in full airmode (PX4 mixes it separately)
-        self._M_first = M.copy()
-        if yaw is not None and airmode != "roll_pitch_yaw":
-            self._M_first[:, yaw] = 0.0
-        self._Myaw = None if yaw is None or airmode == "roll_pitch_yaw" else np.ascontiguousarray(M[:, yaw])
-        self._yaw = yaw
-        thrust = self._cols["fz"]
+        M1 = M.copy()
+        myaw = np.zeros(problem.m)
+        if yaw >= 0 and not full:
+            M1[:, yaw] = 0.0
+            myaw = M[:, yaw].copy()
         # the sign of a thrust step that lowers the commands' sum (PX4: a positive gain on fz)
-        self._thrust_down = 1.0 if thrust is None or thrust.sum() <= 0.0 else -1.0
-        self._B = np.array(problem.B)
-        self._up = np.array(problem.up)
-
-    def _desaturate(self, u: FloatArray, role: str, lo: FloatArray, hi: FloatArray, reduce_only: bool = False) -> None:
-        """PX4's ``desaturateActuators`` along ``role``'s column, in place."""
-        vec = self._cols[role]
-        if vec is None:
-            return
-        usable = self._usable[role]
-        gain = desaturation_gain(vec, u, lo, hi, usable)
-        if reduce_only and gain * self._thrust_down < 0.0:
-            return
-        u += gain * vec
-        u += 0.5 * desaturation_gain(vec, u, lo, hi, usable) * vec
-
-    def _mix_yaw(self, u: FloatArray, d: FloatArray, lo: FloatArray, hi: FloatArray) -> None:
-        """PX4's ``mixYaw``: yaw added, desaturated with 15 % more room at the top, thrust only reduced."""
-        if self._Myaw is not None:
-            u += self._Myaw * d[self._yaw]
-        self._desaturate(u, "yaw", lo, hi + YAW_MARGIN * (hi - lo))
-        self._desaturate(u, "fz", lo, hi, reduce_only=True)
+        down = 1.0 if C[_FZ].sum() <= 0.0 else -1.0
+        p = problem
+        # writable contiguous copies: the compiled kernels see one array type (no recompiles)
+        self._mix = (M1, myaw, yaw if not full else -1, C, U, AIRMODES.index(airmode), down, np.array(p.B),
+                     np.array(p.up))
+        self.packed = self.packed_rate = (fused_px4, (*self._mix, np.array(p.umin), np.array(p.umax),
+                                                      np.array(p.rate_min), np.array(p.rate_max),
+                                                      np.zeros(p.m), np.zeros(p.m), EXACT_RTOL, MAX_MAGNITUDE))
 
     def solve(self, v, lo, hi, u_prev):
-        d = v - self._B @ self._up
-        u = self._up + self._M_first @ d
-        mode = self.airmode
-        if mode == "disabled":
-            self._desaturate(u, "fz", lo, hi, reduce_only=True)
-            self._desaturate(u, "roll", lo, hi)
-            self._desaturate(u, "pitch", lo, hi)
-            self._mix_yaw(u, d, lo, hi)
-        elif mode == "roll_pitch":
-            self._desaturate(u, "fz", lo, hi)
-            self._mix_yaw(u, d, lo, hi)
-        else:
-            self._desaturate(u, "fz", lo, hi)
-            self._desaturate(u, "yaw", lo, hi)
+        u = np.empty(self.problem.m)
+        lo, hi = np.array(lo, dtype=float), np.array(hi, dtype=float)
+        px4_mix(*self._mix, np.array(v, dtype=float), lo, hi, u)
         if not np.isfinite(u).all():  # beyond the float range: the allocator's safe answer
             raise SolverError("px4: non-finite command (demand or mix beyond the float range)")
         return np.minimum(np.maximum(u, lo), hi), 0
