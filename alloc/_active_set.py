@@ -32,11 +32,14 @@ caller raises :class:`~alloc.exceptions.SolverError` (the allocator's safe fallb
 Speed (measured in ``benchmarks/bench_alloc.py``): the factorisation of a free set depends
 on the level and the set alone, so it is cached per (level, free set) in the allocator's
 packed state (bitwise equal to a recomputation: the cache changes the cost, never the
-answer).  Every call starts from the clipped Eq 1.23 answer, never from the previous call's
-working set: an answer is then a function of the call's data bit for bit.  (Warm starts made
-answers depend on call history where they are unique only to round-off: with ``Wv``
+answer).  By default every call starts from the clipped Eq 1.23 answer, never from the previous
+call's working set: an answer is then a function of the call's data bit for bit.  (Warm starts
+made answers depend on call history where they are unique only to round-off: with ``Wv``
 eigenvalues 7.7e29 and 3.4e13, in the domain, a long-lived allocator returned another point
-than a fresh one; adversarial seed 10037684, moments 0.81 vs -0.39 on the weak axis.)  All work arrays
+than a fresh one; adversarial seed 10037684, moments 0.81 vs -0.39 on the weak axis.)  The
+``warm_start`` option opts in to the C export's warm start (:func:`_warm_pick`, the single call
+only), refused by :mod:`alloc._warm` on problems like that one; its answers agree with the cold
+ones to round-off (tests/alloc/test_warm_start.py).  All work arrays
 live in the packed state (no allocation per call but the result).  The entry points that
 mutate that state hold the GIL (no ``nogil``): an allocator shared by threads stays safe.
 """
