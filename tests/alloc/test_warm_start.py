@@ -226,3 +226,21 @@ def test_shared_by_threads_each_answer_is_a_cold_one_to_round_off():
     for th in threads:
         th.join()
     assert max(worst) <= U_RTOL
+
+
+def test_a_warm_run_that_hits_the_cap_is_redone_cold():
+    """With the cap at 1 iteration a level (two levels: a run takes at most 2), a warm start
+    that needs more fails, and the call is redone from the cold start: more iterations than one
+    run can take, and the cold allocator's answer bit for bit (ICE, call 72 of a seeded random
+    sequence, found by search)."""
+    p = ice()
+    V = random_demands(np.random.default_rng(1), p, 300)
+    warm = alloc.make_allocator(p, "qp", warm_start=True)
+    for v in V[:72]:
+        warm(v)
+    cold = alloc.make_allocator(p, "qp")
+    warm.impl._impl.maxit = cold.impl._impl.maxit = 1
+    rw, rc = warm(V[72]), cold(V[72])
+    assert rc.status is not alloc.Status.FALLBACK and rw.status == rc.status
+    assert rw.iterations > 2 and rw.iterations == 1 + rc.iterations  # the failed warm level, then the cold run
+    np.testing.assert_array_equal(rw.u, rc.u)
