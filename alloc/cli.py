@@ -63,6 +63,10 @@ class InputError(ClickException):
         self.where = where
 
 
+#: notes for stderr after a successful command (an importer's skipped lines); an error replaces them
+NOTES: list[str] = []
+
+
 def _one_line(text: str) -> str:
     return " ".join(text.split())
 
@@ -100,9 +104,11 @@ class OneLineErrors(TyperGroup):
              standalone_mode: bool = True, **extra: Any) -> Any:
         if not standalone_mode:
             return super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+        NOTES.clear()
         try:
             code = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
         except ClickException as exc:
+            NOTES.clear()  # an error is the one stderr line
             if type(exc).__name__ == "NoArgsIsHelpError":  # the help itself (typer's own test)
                 if not _rich_help(exc.ctx):  # rich has printed it already
                     typer.echo(exc.format_message())
@@ -111,6 +117,9 @@ class OneLineErrors(TyperGroup):
         except typer.Abort:
             typer.echo("Aborted!", err=True)
             sys.exit(1)
+        for note in NOTES:  # what an importer left out of a file, said once the command has succeeded
+            typer.echo(f"note: {note}", err=True)
+        NOTES.clear()
         sys.exit(code if isinstance(code, int) else 0)
 
 
@@ -289,7 +298,7 @@ class DefaultMethodCommand(TyperCommand):
 
 #: help of every ``--vehicle`` option (alloc allocate, alloc ams, alloc sim, alloc bench)
 VEHICLE_HELP = ("a catalogue vehicle (see `alloc vehicles`; ALLOC_VEHICLE_PATH adds folders of files) or a "
-                "vehicle file (.toml, .json, PX4 .params)")
+                "vehicle file (.toml, .json; PX4 .params or airframe file; ArduPilot .csv factor table or .param file)")
 
 
 def load_vehicle_option(source: str, param_hint: str = "--vehicle") -> Any:
@@ -300,10 +309,21 @@ def load_vehicle_option(source: str, param_hint: str = "--vehicle") -> Any:
     FIFO, a device, an oversized or too deeply nested file: :mod:`alloc._files`), and an
     importer's (a PX4 ``.params`` file's parameter), each an :class:`~alloc.AllocError`.
     """
+    import warnings
+
     from . import vehicles
+    from .exceptions import SkippedLinesWarning
 
     try:
-        return vehicles.get_vehicle(source)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", SkippedLinesWarning)
+            vehicle = vehicles.get_vehicle(source)
+        for w in caught:  # an importer's list of skipped lines: one note line, not a warning's source dump
+            if issubclass(w.category, SkippedLinesWarning):
+                NOTES.append(f"{param_hint} {w.message}")
+            else:
+                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        return vehicle
     except AllocError as exc:
         where = "" if exc.field in ("vehicle", "path") else f"{source}: "
         raise typer.BadParameter(f"{where}{exc}", param_hint=param_hint) from None
@@ -448,6 +468,8 @@ def allocate_command(
     repeat: int = typer.Option(100, "--repeat", min=1, max=1_000_000,
                                help=f"calls timed for the solve time (stopping early after {TIMING_BUDGET_S:g} s)"),
     as_json: bool = typer.Option(False, "--json", help="print the result as JSON"),
+    at: list[str] = typer.Option([], "--at", help="a scheduled vehicle's variable NAME=VALUE (tilt=30, airspeed=12; "
+                                 "the vehicle's [schedule]); others at their nominal values; repeatable"),
 ) -> None:
     """Allocate one demand and print the effector commands, the status and honest timings.
 
@@ -467,7 +489,11 @@ def allocate_command(
     if vehicle is not None:
         vehicle_file = load_vehicle_option(vehicle)
         p, from_file = vehicle_file.problem(), {}
+        if at:
+            p = _problem_at(vehicle_file, at)
     else:
+        if at:
+            raise typer.BadParameter("--at needs a scheduled --vehicle", param_hint="--at")
         p, from_file = _problem_from_file(problem)
     demand = _merge(None if v is None else _floats(v, "--v"), from_file, "v", "--v")
     if demand is None:
@@ -512,6 +538,26 @@ def allocate_command(
         typer.echo(f"  {label:<12} {u: .6g}")
     for axis, want, got in zip(p.axes, result.v, result.v_achieved):
         typer.echo(f"  {axis:<12} demand {want: .6g}  achieved {got: .6g}")
+
+
+def _problem_at(vehicle: Any, pairs: list[str]) -> alloc.Problem:
+    """The vehicle's problem at ``--at NAME=VALUE`` values (its [schedule]), or a one-line usage error."""
+    values: dict[str, float] = {}
+    for pair in pairs:
+        key, sep, text = pair.partition("=")
+        if not sep or not key.strip():
+            raise typer.BadParameter(f"expected NAME=VALUE, got {pair[:60]!r}", param_hint="--at")
+        try:
+            value = float(text)
+        except ValueError:
+            raise typer.BadParameter(f"{key.strip()[:40]}: {text[:40]!r} is not a number", param_hint="--at") from None
+        if key.strip() in values:
+            raise typer.BadParameter(f"{key.strip()[:40]} given twice", param_hint="--at")
+        values[key.strip()] = value
+    try:
+        return vehicle.problem_at(values)
+    except AllocError as exc:
+        raise typer.BadParameter(str(exc), param_hint="--at") from None
 
 
 @app.command("export", cls=DefaultMethodCommand)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 __all__ = [
     "AllocError",
+    "SkippedLinesWarning",
     "ProblemError",
     "ProblemTypeError",
     "DemandError",
@@ -68,3 +69,8 @@ class SolverError(AllocError, RuntimeError):
     Never escapes an allocator call: the allocator catches it and returns the
     documented safe answer with ``status="fallback"``.
     """
+
+
+class SkippedLinesWarning(UserWarning):
+    """An importer read a file and left some of its lines out on purpose (a PX4 airframe's shell
+    lines: ``. ${R}etc/init.d/rc.vtol_defaults``, ``set MAV_TYPE 22``); the message lists them."""

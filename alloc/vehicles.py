@@ -18,7 +18,8 @@ Its entries come from, in this order:
    tailless   tailless example, ICE's eight surfaces                       3 x 8
    ========== ============================================================ ======
 
-2. the vehicle files (``.toml``, ``.json``, PX4 ``.params``) in the folders named by the
+2. the vehicle files (:data:`VEHICLE_SUFFIXES`: ``.toml``, ``.json``, PX4 ``.params``, ArduPilot
+   ``.csv`` factor tables and ``.param``/``.parm`` files) in the folders named by the
    environment variable ``ALLOC_VEHICLE_PATH`` (:data:`VEHICLE_PATH_ENV`, folders separated
    by ``os.pathsep``), each named by its file name without the extension;
 3. the entry points of the group ``alloc.vehicles`` (:data:`ENTRY_POINT_GROUP`) of installed
@@ -202,7 +203,7 @@ VEHICLE_PATH_ENV = "ALLOC_VEHICLE_PATH"
 #: entry-point group through which installed packages add vehicles (name -> path or callable)
 ENTRY_POINT_GROUP = "alloc.vehicles"
 #: the file extensions a vehicle file may have (:func:`alloc.vehicle_file.load_vehicle`)
-VEHICLE_SUFFIXES = (".toml", ".json", ".params")
+VEHICLE_SUFFIXES = (".toml", ".json", ".params", ".csv", ".param", ".parm")
 
 
 @dataclass(frozen=True)
@@ -378,7 +379,7 @@ def get_vehicle(source: str | os.PathLike[str] | Vehicle) -> Vehicle:
     if not isinstance(source, (str, os.PathLike)):
         raise ProblemError(f"vehicle: expected a name or a path, got {type(source).__name__}", field="vehicle")
     path = Path(source)
-    if path.suffix.lower() in VEHICLE_SUFFIXES or os.sep in str(source) or path.is_file():
+    if path.suffix.lower() in VEHICLE_SUFFIXES or os.sep in str(source) or os.path.isfile(path):  # os.path: a name too long for the file system is no file, not an OSError
         return load_vehicle(path)
     raise ProblemError(f"vehicle: unknown {str(source)!r}; known: {', '.join(entries)}; or a vehicle file "
                        f"({', '.join(VEHICLE_SUFFIXES)})", field="vehicle")

@@ -48,7 +48,7 @@ import numpy as np
 
 from alloc.effector_health import EffectorHealth
 from alloc.exceptions import AllocError
-from alloc.estimation import Detection, FailureDetector
+from alloc.estimation import Detection, FailureDetector, RobustSettings
 from sim.blocks import actuator_heun_step, band_limited_noise
 from sim.model import Vehicle
 from sim.settings import SettingError
@@ -93,6 +93,9 @@ class DetectionDesign:
     min_confidence: float = 0.95
     processing_delay: float = 0.02
     long_window: float | None = 1.6
+    #: ``learnt`` (residuals against a nominal model learnt from a stated uncertainty,
+    #: :class:`alloc.estimation.RobustSettings` at its defaults) or ``exact``
+    model: str = "learnt"
 
     def record(self) -> dict[str, Any]:
         return asdict(self)
@@ -101,12 +104,14 @@ class DetectionDesign:
 DEFAULT_DESIGN = DetectionDesign()
 
 
-def design_with(long_window: float | None) -> DetectionDesign:
-    """The default design with the run setting ``detector_long_window`` applied: ``None`` keeps
-    the default's second window, ``0`` removes it, a positive value replaces it."""
+def design_with(long_window: float | None, model: str = "learnt") -> DetectionDesign:
+    """The default design with the run settings ``detector_long_window`` (``None`` keeps the
+    default's second window, ``0`` removes it, a positive value replaces it) and
+    ``detector_model`` applied."""
+    design = replace(DEFAULT_DESIGN, model=model)
     if long_window is None:
-        return DEFAULT_DESIGN
-    return replace(DEFAULT_DESIGN, long_window=float(long_window) if long_window > 0 else None)
+        return design
+    return replace(design, long_window=float(long_window) if long_window > 0 else None)
 
 
 def response_outputs(vehicle: Vehicle) -> tuple[int, ...]:
@@ -217,7 +222,9 @@ class InLoopDetector:
                 self.sample_time,
                 false_alarm_rate=design.false_alarm_rate, window=design.window, hop=design.hop,
                 min_confidence=design.min_confidence, long_window=design.long_window,
-                noise_correlation=response_noise_correlation(dt, self.sample_time))
+                noise_correlation=response_noise_correlation(dt, self.sample_time),
+                robust=RobustSettings() if design.model == "learnt" else None,
+                effector_lag=_lags(vehicle) if design.model == "learnt" and actuators else None)
         except AllocError as exc:
             raise _design_error(exc, vehicle.name) from exc
         self.actuators = actuators
@@ -281,6 +288,12 @@ class InLoopDetector:
     def health(self) -> dict[str, EffectorHealth]:
         """The detector's current belief (a copy)."""
         return dict(self.detector.health)
+
+
+def _lags(vehicle: Vehicle) -> np.ndarray:
+    """Each actuator's lag in seconds, the rate regressors' scale: ``c1 / wn2`` of a second-order
+    actuator (its low-frequency delay), ``1 / a`` of a first-order one."""
+    return np.array([s.c1 / s.wn2 if s.order == 2 else 1.0 / s.c1 for s in vehicle.actuators])
 
 
 #: the library detector's settings that a run setting gives (the others come from the design)

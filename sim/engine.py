@@ -229,7 +229,7 @@ def _detector(spec: LoopSpec, inputs: np.ndarray) -> InLoopDetector:
     """The in-loop detector of a ``detected`` run, on the run's own sensor noise (``inputs``' noise columns)."""
     vehicle = spec.vehicle
     k, ny = len(vehicle.controlled), vehicle.C.shape[0]
-    design = design_with(spec.detector_long_window)
+    design = design_with(spec.detector_long_window, spec.detector_model)
     return InLoopDetector(vehicle, spec.dt, inputs[:, k:k + ny], noise_scale=spec.noise_scale,
                           actuators=spec.actuators, preferred=preferred_positions(vehicle, spec.preferred),
                           design=design)

@@ -29,6 +29,9 @@ import numpy as np
 
 from alloc.exceptions import AllocError
 from sim.allocation import PREFERRED_POSITIONS, RATE_HORIZONS, RATE_WINDOWS
+
+#: ``--detector-model`` choices (sim.detection)
+DETECTOR_MODELS = ("learnt", "exact")
 from sim.blocks import DEFAULT_DT
 from sim.model import TF, Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle
 from sim.pilot import PILOT_MODELS
@@ -205,6 +208,11 @@ class LoopSettings:
         "budget (sim.detection.DetectionDesign); 0: none, the 0.4 s window alone", unit="s", low=0.0,
         high=MAX_LONG_WINDOW, flag="--detector-long-window",
         none_means="the design's (sim.detection.DEFAULT_DESIGN.long_window)")
+    detector_model: str = _setting(
+        "learnt", "what the in-loop detector (--health detected) judges residuals against: a nominal model "
+        "learnt in flight from a stated 20 % model uncertainty, with a learnt noise scale and correlation and "
+        "Huber-clipped residuals (alloc.estimation.robust), or the stated model and noise taken as exact",
+        choices=DETECTOR_MODELS, flag="--detector-model")
     excitation: float = _setting(0.0, "null-space excitation added to every command (seed 1.3.2.5): each "
                                  "effector's multisine peak, B e = 0, within position and rate limits "
                                  "(sim.allocation.EXCITATION_BAND); 0: none", unit="deg", low=0.0,

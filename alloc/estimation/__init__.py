@@ -37,11 +37,12 @@ if TYPE_CHECKING:
     from .excitation import NullSpaceExcitation, RandomWeightAllocator, regressor_condition
     from .frequency import FrequencyDomainEstimator, FrequencyEstimate
     from .rls import EffectivenessRLS, RecursiveLeastSquares
+    from .robust import RobustSettings
 
 __all__ = [
     "RecursiveLeastSquares", "EffectivenessRLS", "FrequencyDomainEstimator", "FrequencyEstimate",
     "FailureDetector", "Detection", "Withdrawal", "NullSpaceExcitation", "RandomWeightAllocator", "regressor_condition",
-    "SampleError", "StateError",
+    "RobustSettings", "SampleError", "StateError",
 ]
 
 # Loaded on first access (alloc/_lazy.py): the excitation module needs the allocators and
@@ -51,7 +52,7 @@ _LAZY = {
     "Detection": "detection", "FailureDetector": "detection", "Withdrawal": "detection",
     "NullSpaceExcitation": "excitation", "RandomWeightAllocator": "excitation", "regressor_condition": "excitation",
     "FrequencyDomainEstimator": "frequency", "FrequencyEstimate": "frequency",
-    "EffectivenessRLS": "rls", "RecursiveLeastSquares": "rls",
+    "EffectivenessRLS": "rls", "RecursiveLeastSquares": "rls", "RobustSettings": "robust",
 }
 
 

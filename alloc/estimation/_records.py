@@ -5,8 +5,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from ..health import FailureEvent
-from ..problem import as_real
+from ..health import FailureEvent, health_from_dict
+from ..problem import as_real, short_repr
 from ._checks import StateError, state_count
 from .isolation import Detection, Withdrawal
 
@@ -41,3 +41,21 @@ def withdrawal_from_dict(d: Any) -> Withdrawal:
                       detection_time=as_real("withdrawals", d["detection_time"], StateError),
                       statistic=None if d["statistic"] is None else as_real("withdrawals", d["statistic"], StateError),
                       reason=d["reason"][:200])
+
+
+def active_from_dict(d: Any, det: Any) -> dict[str, dict[str, Any]]:
+    """The standing detections' records (``active``), each on an effector the health lists."""
+    if not isinstance(d, dict):
+        raise StateError("active: expected a mapping of effector name to its standing detection")
+    out = {}
+    for name, a in d.items():
+        if name not in det.problem.names or not isinstance(a, dict) or set(a) != {"before", "time", "kind"}:
+            raise StateError(f"active: expected effector names of the problem with before, time, kind; got {short_repr(name)}")
+        if not isinstance(a["kind"], str):
+            raise StateError("active: kind must be a string")
+        try:
+            before = None if a["before"] is None else health_from_dict({name: a["before"]})[name]
+        except (TypeError, ValueError) as exc:
+            raise StateError(f"active: {exc}") from None
+        out[name] = {"before": before, "time": as_real("active", a["time"], StateError), "kind": a["kind"]}
+    return out

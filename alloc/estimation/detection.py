@@ -85,9 +85,14 @@ from ._checks import (
     state_count,
     state_mapping,
 )
+from ._glr import correlation_setting as _correlation_setting
+from ._glr import linear_glr as _linear_glr
+from ._glr import whitener as _whitener
+from ._records import active_from_dict as _active_from_dict
 from ._records import detection_from_dict as _detection_from_dict
 from ._records import withdrawal_from_dict as _withdrawal_from_dict
 from .isolation import Detection, Isolation, Withdrawal
+from .robust import NominalLearner, RobustSettings
 
 __all__ = ["FailureDetector", "Detection", "Withdrawal", "MAX_KEPT", "MAX_DETECTOR_BYTES", "MAX_ISOLATION_CELLS", "detector_bytes"]
 
@@ -153,12 +158,19 @@ class FailureDetector(Isolation):
         the sequence are zero; only those shorter than the window are used); ``None``: white.
         OptionError when not a correlation (outside (-1, 1), or the window's correlation
         matrix not positive definite).
+    robust : True, mapping or RobustSettings, optional
+        Judge residuals against a nominal model learnt in flight from a stated model
+        uncertainty, with a learnt scale and correlation and Huber-clipped residuals
+        (:mod:`.robust`); ``None`` (default): the stated model and noise are exact.
+    effector_lag : float or array (m,), optional
+        Seconds of each actuator's lag, for a robust detector to learn lag errors (rate
+        regressors); ``None``: positions only.
     """
 
     def __init__(self, problem: Problem, noise_std: Any, sample_time: float, *, false_alarm_rate: float = 0.1,
                  window: float = 0.25, hop: int | None = None, position_noise_std: Any = None,
                  min_confidence: float = 0.95, noise_correlation: Any = None,
-                 long_window: float | None = None) -> None:
+                 long_window: float | None = None, robust: Any = None, effector_lag: Any = None) -> None:
         if not isinstance(problem, Problem):
             raise OptionError(f"problem: expected an alloc.Problem, got {type(problem).__name__}")
         self.problem = problem
@@ -207,7 +219,16 @@ class FailureDetector(Isolation):
         self._whiten = None if self.noise_correlation is None else _whitener(self.noise_correlation, self.N)
         self._whiten_long = (None if self.noise_correlation is None or not self.N_long
                              else _whitener(self.noise_correlation, self.N_long))
-        self._Bn = Bn
+        self._Bn = self._Bn0 = Bn
+        self.robust = None if robust is None or robust is False else RobustSettings.from_value(robust)
+        if effector_lag is not None and self.robust is None:
+            raise OptionError("effector_lag: only a robust detector uses it (robust = None)")
+        self.effector_lag = (None if effector_lag is None
+                             else setting_vector("effector_lag", np.broadcast_to(effector_lag, (m,)) if np.ndim(effector_lag) == 0 else effector_lag, m))
+        if self.effector_lag is not None and not ((self.effector_lag >= 0) & (self.effector_lag <= 3600)).all():
+            raise OptionError("effector_lag: expected seconds in [0, 3600] for every effector")
+        self._learner = (None if self.robust is None else
+                         NominalLearner(self.robust, Bn, self.effector_lag, self.noise_correlation, self.dt))
         self._design()
         self.health: dict[str, EffectorHealth] = {}
         self.detections: list[Detection] = []
@@ -286,6 +307,7 @@ class FailureDetector(Isolation):
         self._U = np.zeros((L, m))
         self._K = np.zeros((L, m))
         self._R = np.zeros((L, k))
+        self._Rc = np.zeros((L, k))  # what stage 1 sees: R, Huber-clipped when robust
         self._Q = np.zeros((L, m))
         self._T = np.zeros(L)
         self._head = 0
@@ -327,6 +349,10 @@ class FailureDetector(Isolation):
             rate_state = self._rate_state.copy()
             known = self._known_positions(u)
             r = (y - self._B_eff @ known) / self.noise_std
+            r0 = r
+            if self._learner is not None:
+                phi = self._learner.regressor(known)
+                r, s_pred = self._learner.residual(r0, phi)
             q = np.zeros(m) if pos is None else (pos - known) / self.position_std
             if not (np.abs(r).max(initial=0.0) <= MAX_MAGNITUDE and np.abs(q).max(initial=0.0) <= MAX_MAGNITUDE):
                 self._rate_state = rate_state
@@ -334,40 +360,49 @@ class FailureDetector(Isolation):
                 raise SampleError(f"{field}: the whitened residual leaves the valid domain (|x| <= {MAX_MAGNITUDE:g}) "
                                   "at this noise level; refused, the state is unchanged")
             i = self._head
-            saved = (self._U[i].copy(), self._K[i].copy(), self._R[i].copy(), self._Q[i].copy(), self._T[i],
+            saved = (self._U[i].copy(), self._K[i].copy(), self._R[i].copy(), self._Rc[i].copy(), self._Q[i].copy(), self._T[i],
                      self._head, self._count, self._since_test, self.samples, self.last_time, rate_state,
                      None if self._pending is None else dict(self._pending), self.alarm_count,
                      self.unisolated_count)
             self._U[i], self._K[i], self._R[i], self._Q[i], self._T[i] = u, known, r, q, t
+            self._Rc[i] = r if self.robust is None else np.clip(r, -self.robust.huber, self.robust.huber)
             self._head = (i + 1) % self.L
             self._count = min(self._count + 1, self.L)
             self._since_test += 1
             self.samples += 1
             self.last_time = t
-            if self._count < self.N or self._since_test < self.hop:
-                return []
-            self._since_test = 0
-            try:
-                return self._test(t)
-            except _NonFinite as exc:
-                (self._U[i], self._K[i], self._R[i], self._Q[i], self._T[i], self._head, self._count,
-                 self._since_test, self.samples, self.last_time, self._rate_state, self._pending, self.alarm_count,
-                 self.unisolated_count) = saved
-                raise SampleError(f"y: the test would record a non-finite {exc} at this sample's scale; refused, "
-                                  "the state is unchanged") from None
+            out: list[Detection] = []
+            if self._count >= self.N and self._since_test >= self.hop:
+                self._since_test = 0
+                try:
+                    out = self._test(t)
+                except _NonFinite as exc:
+                    (self._U[i], self._K[i], self._R[i], self._Rc[i], self._Q[i], self._T[i], self._head, self._count,
+                     self._since_test, self.samples, self.last_time, self._rate_state, self._pending, self.alarm_count,
+                     self.unisolated_count) = saved
+                    raise SampleError(f"y: the test would record a non-finite {exc} at this sample's scale; refused, "
+                                      "the state is unchanged") from None
+            if self._learner is not None:  # an alarm being isolated, or just decided, is not the nominal model
+                self._learner.learn(r0, phi, r, s_pred, known, model=self._pending is None and not out)
+            return out
 
-    def _window(self, n: int) -> tuple[np.ndarray, ...]:
+    def _window(self, n: int, clipped: bool = False) -> tuple[np.ndarray, ...]:
         idx = (self._head - n + np.arange(n)) % self.L
-        return self._U[idx], self._R[idx], self._Q[idx], self._T[idx], self._K[idx]
+        return self._U[idx], (self._Rc if clipped else self._R)[idx], self._Q[idx], self._T[idx], self._K[idx]
 
     def _stage1(self, n: int) -> tuple[np.ndarray, np.ndarray]:
         """Stage-1 statistics of the tested effectors over the last ``n`` samples (``N`` or ``N_long``)."""
         tested = self.tested
-        U, R, Q, _, _ = self._window(n)
+        U, R, Q, _, _ = self._window(n, clipped=True)
         Bw = self._Bn[:, tested]
         c = np.einsum("ij,ij->j", Bw, Bw)
         S = R @ Bw  # (n, t): b~_j . r~
-        stat = _linear_glr(S, U[:, tested], c, self._whiten if n == self.N else self._whiten_long)
+        if self._learner is None:
+            whiten = self._whiten if n == self.N else self._whiten_long
+        else:
+            rho = self._learner.correlation(n)
+            whiten = None if rho is None else _whitener(rho, n)
+        stat = _linear_glr(S, U[:, tested], c, whiten)
         if self.has_position:  # position sensors: their own (white) noise
             stat = stat + _linear_glr(Q[:, tested], U[:, tested], np.ones(len(tested)))
         return tested, stat
@@ -382,8 +417,9 @@ class FailureDetector(Isolation):
         Returns ``(n - N + 1, len(tested))``: row ``i`` the statistics after sample
         ``i + N - 1``, those :meth:`update` compares with :meth:`threshold`.  Nothing changes.
         """
-        if self.has_position:
-            raise OptionError("window_statistics: not for a detector with position sensors")
+        if self.has_position or self.robust is not None:
+            raise OptionError("window_statistics: not for a detector with position sensors or a robust one "
+                              "(its model and scale change with every sample)")
         if long and not self.N_long:
             raise OptionError("window_statistics: long=True for a detector without a long_window")
         m, k, N = self.problem.m, self.problem.k, self.N_long if long else self.N
@@ -413,6 +449,8 @@ class FailureDetector(Isolation):
         if len(self.tested) == 0:
             return []
         gamma = self.threshold()
+        if self._learner is not None:  # the learnt columns in the learnt scale's units (stage 1, isolation)
+            self._Bn = self._learner.effectiveness(self._Bn0) / self._learner.scale()[:, None]
         if self._pending is None:
             tested, stat = self._stage1(self.N)
             if self.N_long and self._count >= self.N_long and not (stat > gamma).any():
@@ -513,11 +551,14 @@ class FailureDetector(Isolation):
             "position_noise_std": self.position_std.tolist() if self.has_position else None,
             "min_confidence": self.min_confidence,
             "noise_correlation": None if self.noise_correlation is None else self.noise_correlation.tolist(),
+            "robust": None if self._learner is None else self._learner.to_dict(),
+            "effector_lag": None if self.effector_lag is None else self.effector_lag.tolist(),
             "health": health_to_dict(self.health),
             "samples": self.samples, "last_time": None if math.isinf(self.last_time) else self.last_time,
             "alarm_count": self.alarm_count, "unisolated_count": self.unisolated_count,
             "since_test": self._since_test, "pending": self._pending, "rate_state": self._rate_state.tolist(),
-            "buffer": {"U": self._U[order].tolist(), "K": self._K[order].tolist(), "R": self._R[order].tolist(), "Q": self._Q[order].tolist(),
+            "buffer": {"U": self._U[order].tolist(), "K": self._K[order].tolist(), "R": self._R[order].tolist(),
+                       "Rc": self._Rc[order].tolist(), "Q": self._Q[order].tolist(),
                        "T": self._T[order].tolist()},
             "detections": [d.to_dict() for d in self.detections],
             "withdrawals": [w.to_dict() for w in self.withdrawals],
@@ -538,7 +579,9 @@ class FailureDetector(Isolation):
                       window=d["window"], hop=d["hop"], position_noise_std=d["position_noise_std"],
                       min_confidence=d["min_confidence"],
                       noise_correlation=d.get("noise_correlation"),  # absent from states stored before it
-                      long_window=d.get("long_window"))
+                      long_window=d.get("long_window"),
+                      robust=None if d.get("robust") is None else _robust_settings(d["robust"]),
+                      effector_lag=d.get("effector_lag"))
         except (OptionError, TypeError, ValueError) as exc:  # the settings: named by the constructor's message
             raise StateError(str(exc)) from None
         try:
@@ -568,6 +611,9 @@ class FailureDetector(Isolation):
         det._U[:n] = state_array("U", buf.get("U", []) if n else np.zeros((0, m)), (n, m))
         det._K[:n] = state_array("K", buf.get("K", []) if n else np.zeros((0, m)), (n, m))
         det._R[:n] = state_array("R", buf.get("R", []) if n else np.zeros((0, k)), (n, k))
+        det._Rc[:n] = state_array("Rc", buf["Rc"], (n, k)) if n and "Rc" in buf else det._R[:n]
+        if det._learner is not None:
+            det._learner.load(d["robust"])
         det._Q[:n] = state_array("Q", buf.get("Q", []) if n else np.zeros((0, m)), (n, m))
         det._T[:n] = T
         det._head, det._count = n % det.L, n
@@ -599,77 +645,7 @@ class _NonFinite(Exception):
     restores its state and refuses the sample)."""
 
 
-def _active_from_dict(d: Any, det: FailureDetector) -> dict[str, dict[str, Any]]:
-    """The standing detections' records (``active``), each on an effector the health lists."""
-    if not isinstance(d, dict):
-        raise StateError("active: expected a mapping of effector name to its standing detection")
-    out = {}
-    for name, a in d.items():
-        if name not in det.problem.names or not isinstance(a, dict) or set(a) != {"before", "time", "kind"}:
-            raise StateError(f"active: expected effector names of the problem with before, time, kind; got {short_repr(name)}")
-        if not isinstance(a["kind"], str):
-            raise StateError("active: kind must be a string")
-        try:
-            before = None if a["before"] is None else health_from_dict({name: a["before"]})[name]
-        except (TypeError, ValueError) as exc:
-            raise StateError(f"active: {exc}") from None
-        out[name] = {"before": before, "time": as_real("active", a["time"], StateError), "kind": a["kind"]}
-    return out
-
-
-#: a stored detection's fields that may be null
-def _correlation_setting(value: Any) -> np.ndarray:
-    """``noise_correlation`` as a 1-D array of finite lags in (-1, 1), or OptionError naming it."""
-    arr = as_float_array("noise_correlation", value, OptionError)
-    if arr.ndim != 1 or arr.size == 0 or arr.size > 100_000:
-        raise OptionError(f"noise_correlation: expected a sequence of 1 to 100000 lags, got shape {arr.shape}")
-    check_magnitude("noise_correlation", arr, OptionError)
-    if not (np.abs(arr) < 1.0).all():
-        i = int(np.argmax(~(np.abs(arr) < 1.0)))
-        raise OptionError(f"noise_correlation: lag {i + 1} = {arr[i]:g} is not inside (-1, 1)")
-    return arr.copy()
-
-
-def _whitener(rho: np.ndarray, n: int) -> np.ndarray:
-    """``W`` (n, n) with ``W Sigma W^T = I``, ``Sigma`` the window's Toeplitz correlation matrix."""
-    # here, not at import: scipy.linalg is 0.2 s of the service's start, and few detectors whiten
-    from scipy.linalg import LinAlgError, cholesky, solve_triangular, toeplitz
-
-    lags = np.zeros(n)
-    lags[0] = 1.0
-    use = min(n - 1, rho.size)
-    lags[1:1 + use] = rho[:use]
-    try:
-        factor = cholesky(toeplitz(lags), lower=True)
-    except LinAlgError:
-        raise OptionError(f"noise_correlation: not positive definite over the {n}-sample window "
-                          "(not the autocorrelation of any noise)") from None
-    return solve_triangular(factor, np.eye(n), lower=True)
-
-
-def _linear_glr(S: np.ndarray, U: np.ndarray, c: np.ndarray, whiten: np.ndarray | None = None) -> np.ndarray:
-    """Twice the log GLR of ``s_t = c (theta_1 + theta_2 u_t) + e`` per column, ``e ~ N(0, c Sigma)``.
-
-    Generalised least squares: ``s``, the constant regressor ``x_1`` and ``u`` are whitened
-    first (``W``, ``W Sigma W^T = I``; none: white), ``u``'s part along ``x_1`` removed (``u_c``,
-    orthogonal columns), then ``(x_1 . s)^2 / (c x_1 . x_1) + (u_c . s)^2 / (c u_c . u_c)``,
-    chi-square with the rank's degrees of freedom under ``theta = 0``.  Unwhitened this is
-    ``(sum s)^2 / (n c) + (sum s (u - mean u))^2 / (c sum (u - mean u)^2)``.  A column whose
-    ``u`` does not vary contributes only the first term (rank 1: no information on the second
-    parameter, none invented).
-    """
-    n = S.shape[-2]  # leading axes, if any, are windows (window_statistics)
-    x1 = np.ones(n)
-    if whiten is not None:
-        S, U, x1 = whiten @ S, whiten @ U, whiten @ x1
-    x11 = float(x1 @ x1)
-    Uc = U - x1[:, None] * ((x1 @ U) / x11)[..., None, :]
-    cc = np.where(c > 0, c, np.inf)
-    s0 = x1 @ S
-    s1 = np.einsum("...ij,...ij->...j", S, Uc)
-    uu = np.einsum("...ij,...ij->...j", Uc, Uc)
-    # does u vary, beyond round-off of the whitening? (relative to u's own size, not u_c's)
-    scale = np.maximum(np.abs(U).max(axis=-2, initial=0.0), 1e-300)
-    varies = uu > (1e-12 * scale) ** 2 * n
-    term2 = np.where(varies, s1 * s1 / (cc * np.where(varies, uu, 1.0)), 0.0)
-    return s0 * s0 / (x11 * cc) + term2
+def _robust_settings(d: Any) -> RobustSettings:
+    if not isinstance(d, dict) or not isinstance(d.get("settings"), dict):
+        raise StateError("robust: expected null or a mapping with its settings")
+    return RobustSettings.from_value(d["settings"])

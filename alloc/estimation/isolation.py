@@ -177,7 +177,8 @@ class Isolation:
             return None
         fits, post, ib, T, n_all = weighed
         jbest, fit = fits[ib]
-        eff_conf = float(sum(pw for (j, _), pw in zip(fits, post) if j == jbest))
+        # a sum of posteriors: round-off may carry it past 1 (1.0000000000016744 was printed)
+        eff_conf = min(1.0, float(sum(pw for (j, _), pw in zip(fits, post) if j == jbest)))
         # the kind's confidence: the posterior of this effector's hypotheses that tell an
         # allocator the same thing as the best (a jam at 59.9 and a hard-over at 60 do)
         same = sum(pw for (j, f), pw in zip(fits, post) if j == jbest and self._same_consequence(jbest, fit, f))

@@ -8,7 +8,9 @@ before desaturation (``output_armed_stabilizing``).  The factors come from
 * ``add_motor(motor, angle, yaw_factor, order)``: ``roll = cos(radians(angle + 90))``,
   ``pitch = cos(radians(angle))``, ``throttle = 1`` (``add_motor_raw``'s default), with
   ``yaw_factor`` ``AP_MOTORS_MATRIX_YAW_FACTOR_CCW = 1`` or ``_CW = -1``; the frames are the
-  tables of ``setup_quad_matrix`` / ``setup_hexa_matrix`` (:data:`FRAMES`);
+  tables of ``setup_quad_matrix``, ``setup_hexa_matrix``, ``setup_octa_matrix``,
+  ``setup_octaquad_matrix`` and ``setup_y6_matrix`` (:data:`FRAMES`, :mod:`alloc.importers.ardupilot_frames`),
+  chosen by the parameters ``FRAME_CLASS`` and ``FRAME_TYPE`` (:func:`vehicle_from_ardupilot_params`);
 * ``add_motor_raw(motor, roll, pitch, yaw, order[, throttle])`` for raw tables;
 
 and then ``normalise_rpy_factors``: roll, pitch and yaw factors each scaled so the largest
@@ -26,7 +28,9 @@ ArduPilot's normalised input units, motors commanded in [0, 1]) is, by ``effecti
   row scales).
 
 A user's table: CSV with a header row ``motor,roll,pitch,yaw[,throttle]`` or TOML with
-``[[motors]]`` tables of ``name, roll, pitch, yaw[, throttle]``.
+``[[motors]]`` tables of ``name, roll, pitch, yaw[, throttle]``.  An ArduPilot parameter file
+(``.param`` as Mission Planner saves it, ``NAME,value``; or ``.parm``, ``NAME value``) names a
+built-in frame by ``FRAME_CLASS`` and ``FRAME_TYPE`` (:func:`read_ardupilot_params`).
 """
 
 from __future__ import annotations
@@ -35,7 +39,9 @@ import csv
 import io
 import math
 import numbers
-from collections.abc import Sequence
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -46,33 +52,33 @@ from ..domain import MAX_EFFECTORS, MAX_MAGNITUDE, short_repr
 from ..exceptions import ProblemError
 from ..vehicle_file.fields import FORMAT, _text, _unique
 from ..vehicle_file.vehicle import Vehicle, vehicle_from_dict
+from .ardupilot_frames import FRAME_CLASSES, FRAME_TYPES, TABLES, Y6_DEFAULT, Motor, frame_name
 
 __all__ = ["FRAMES", "YAW_CW", "YAW_CCW", "frame_factors", "normalise_rpy_factors", "read_factor_table",
-           "vehicle_from_factors", "vehicle_from_frame"]
+           "vehicle_from_factors", "vehicle_from_frame", "read_ardupilot_params", "vehicle_from_ardupilot_params",
+           "frame_of_params"]
 
 YAW_CW = -1.0  # AP_MOTORS_MATRIX_YAW_FACTOR_CW
 YAW_CCW = 1.0  # AP_MOTORS_MATRIX_YAW_FACTOR_CCW
 
-#: (angle in degrees, yaw factor, testing order) per motor, in motor order: AP_MotorsMatrix.cpp
-#: setup_quad_matrix / setup_hexa_matrix, MOTOR_FRAME_TYPE_X and MOTOR_FRAME_TYPE_PLUS
-FRAMES: dict[str, tuple[tuple[float, float, int], ...]] = {
-    "quad-x": ((45, YAW_CCW, 1), (-135, YAW_CCW, 3), (-45, YAW_CW, 4), (135, YAW_CW, 2)),
-    "quad-plus": ((90, YAW_CCW, 2), (-90, YAW_CCW, 4), (0, YAW_CW, 1), (180, YAW_CW, 3)),
-    "hexa-x": ((90, YAW_CW, 2), (-90, YAW_CCW, 5), (-30, YAW_CW, 6), (150, YAW_CCW, 3), (30, YAW_CCW, 1),
-               (-150, YAW_CW, 4)),
-    "hexa-plus": ((0, YAW_CW, 1), (180, YAW_CCW, 4), (-120, YAW_CW, 5), (60, YAW_CCW, 2), (-60, YAW_CCW, 6),
-                  (120, YAW_CW, 3)),
-}
+#: built-in frame name -> its motors (:mod:`alloc.importers.ardupilot_frames`, in motor order):
+#: every (FRAME_CLASS, FRAME_TYPE) table of quad, hexa, octa, octa-quad and Y6 ("quad-x", "octa-quad-x", "y6b")
+FRAMES: dict[str, tuple[Motor, ...]] = {
+    **{frame_name(c, t): motors for (c, t), motors in TABLES.items()}, "y6": Y6_DEFAULT}
 _AXES = ("roll", "pitch", "yaw", "throttle")
 
 
 def frame_factors(frame: str) -> np.ndarray:
-    """The normalised factor table (motors x [roll, pitch, yaw, throttle]) of a built-in frame."""
+    """The normalised factor table (motors x [roll, pitch, yaw, throttle]) of a built-in frame.
+
+    ``add_motor``'s factors ``roll = cos(radians(roll_angle + 90))``, ``pitch = cos(radians(pitch_angle))``,
+    or ``add_motor_raw``'s as given; throttle 1; then :func:`normalise_rpy_factors`.
+    """
     if not isinstance(frame, str) or frame not in FRAMES:
         raise ProblemError(f"frame: unknown {short_repr(frame)}; built in: {', '.join(FRAMES)}", field="frame")
-    motors = FRAMES[frame]
-    raw = np.array([[math.cos(math.radians(angle + 90)), math.cos(math.radians(angle)), yaw, 1.0]
-                    for angle, yaw, _ in motors])
+    raw = np.array([[m.roll, m.pitch, m.yaw, 1.0] if m.raw else
+                    [math.cos(math.radians(m.roll + 90)), math.cos(math.radians(m.pitch)), m.yaw, 1.0]
+                    for m in FRAMES[frame]])
     return normalise_rpy_factors(raw)
 
 
@@ -118,6 +124,7 @@ def read_factor_table(source: str | Path) -> tuple[list[str], np.ndarray]:
                            field="factors")
     rows, where = _toml_rows(text, label) if toml else _csv_rows(text)
     names, table = [], []
+    first_row: dict[str, int] = {}
     for i, row in enumerate(rows, start=0 if toml else 2):
         at = where.format(i)
         if not isinstance(row, dict):
@@ -134,6 +141,10 @@ def read_factor_table(source: str | Path) -> tuple[list[str], np.ndarray]:
                     continue
                 raise ProblemError(f"factors: {at}: {axis}: required", field="factors")
             values.append(_factor(raw, f"factors: {at}: {axis}"))
+        if name.strip() in first_row:
+            raise ProblemError(f"factors: {at}: motor {name.strip()[:40]!r} is named twice (first at "
+                               f"{where.format(first_row[name.strip()])})", field="factors")
+        first_row[name.strip()] = i
         names.append(name.strip())
         table.append(values)
     return names, np.array(table, dtype=float)
@@ -170,7 +181,7 @@ def _csv_rows(text: str) -> tuple[list[dict[str, Any]], str]:
     return rows, "row {}"
 
 
-def _factor(raw: Any, label: str, *, text: bool = True) -> float:
+def _factor(raw: Any, label: str, *, text: bool = True, field: str = "factors") -> float:
     """One factor: a number (or, with ``text``, its text: a CSV cell), finite and within ``1e50``;
     refused naming ``label``."""
     try:
@@ -178,13 +189,13 @@ def _factor(raw: Any, label: str, *, text: bool = True) -> float:
             raise TypeError
         x = float(raw)
     except (TypeError, ValueError):
-        raise ProblemError(f"{label}: {short_repr(raw)} is not a number", field="factors") from None
+        raise ProblemError(f"{label}: {short_repr(raw)} is not a number", field=field) from None
     except OverflowError:  # an integer beyond float64
         x = math.inf
     if not math.isfinite(x):
-        raise ProblemError(f"{label}: must be finite, got {short_repr(raw)}", field="factors")
+        raise ProblemError(f"{label}: must be finite, got {short_repr(raw)}", field=field)
     if not abs(x) <= MAX_MAGNITUDE:
-        raise ProblemError(f"{label}: |x| must be <= {MAX_MAGNITUDE:g}, got {short_repr(raw)}", field="factors")
+        raise ProblemError(f"{label}: |x| must be <= {MAX_MAGNITUDE:g}, got {short_repr(raw)}", field=field)
     return x
 
 
@@ -292,3 +303,110 @@ def vehicle_from_frame(frame: str, **options: Any) -> Vehicle:
     """The vehicle of a built-in ArduPilot frame (``"quad-x"``, ``"hexa-x"``, ...; :data:`FRAMES`)."""
     options.setdefault("name", f"ardupilot-{frame}")
     return vehicle_from_factors(frame_factors(frame), **options)
+
+
+#: an ArduPilot parameter name: at most 16 characters (AP_MAX_NAME_SIZE), capitals, digits, _
+_AP_NAME = re.compile(r"[A-Z0-9_]{1,16}")
+_AP_SEPARATOR = re.compile(r"\s*,\s*|\s+")
+
+
+def read_ardupilot_params(source: str | Path) -> dict[str, float | int]:
+    """Parameters from an ArduPilot parameter file (a path, or its text).
+
+    One parameter a line, ``NAME,value`` (Mission Planner's ``.param``) or ``NAME value`` (MAVProxy's
+    ``.parm``, tab or spaces); ``#`` starts a comment.  A file is read through
+    :func:`alloc._files.read_user_file` (at most :data:`~alloc._files.MAX_TEXT_BYTES`, 1 MiB; a full
+    ArduCopter dump is about 30 KB) and a text held to the same length.  Refused naming the line
+    (``params: line 4: ...``): another shape, a name that is not ArduPilot's (16 capitals, digits or
+    ``_`` at most), a value that is not a finite number within ``1e50``, a name given twice.
+    """
+    if isinstance(source, Path) or (isinstance(source, str) and "\n" not in source
+                                    and source.lower().endswith((".param", ".parm"))):
+        text = read_user_text(source, field="path", max_bytes=MAX_TEXT_BYTES)
+    elif isinstance(source, str):
+        if len(source) > MAX_TEXT_BYTES:
+            raise ProblemError(f"params: the text is {len(source)} characters, more than the {MAX_TEXT_BYTES} "
+                               "allowed", field="params")
+        text = source
+    else:
+        raise ProblemError(f"params: expected a path or the file's text, got {type(source).__name__}", field="params")
+    out: dict[str, float | int] = {}
+    first: dict[str, int] = {}
+    for n, raw in enumerate(text.splitlines(), start=1):
+        line = raw.split("#", 1)[0].strip()
+        if not line:
+            continue
+        words = _AP_SEPARATOR.split(line)
+        if len(words) != 2:
+            raise ProblemError(f"params: line {n}: expected 'NAME,value' or 'NAME value', got {raw.strip()[:60]!r}",
+                               field="params")
+        name, value = words
+        if not _AP_NAME.fullmatch(name):
+            raise ProblemError(f"params: line {n}: {name[:40]!r} is not an ArduPilot parameter name (at most 16 "
+                               "capitals, digits or _)", field="params")
+        if name in first:
+            raise ProblemError(f"params: line {n}: {name} is set again (first at line {first[name]})",
+                               field="params")
+        first[name] = n
+        number = _factor(value, f"params: line {n}: {name}", field="params")
+        out[name] = int(number) if value.lstrip("+-").isdigit() else number
+    return out
+
+
+def frame_of_params(params: Mapping[str, Any]) -> str:
+    """The built-in frame (:data:`FRAMES`) that ``FRAME_CLASS`` and ``FRAME_TYPE`` select.
+
+    ``FRAME_CLASS`` is required (ArduPilot's 0 means "not set up"); ``FRAME_TYPE`` defaults to
+    1 (X), ArduPilot's default.  A Y6 takes its default table for any type but Y6B (10) and Y6F (11),
+    as ``setup_y6_matrix`` does.  Refused naming the parameter: a missing or unsupported class, a type
+    the class has no table for (listing the ones it has).
+    """
+    if "FRAME_CLASS" not in params:
+        raise ProblemError("FRAME_CLASS: missing; the parameters must name the frame class (1 quad, 2 hexa, "
+                           "3 octa, 4 octa-quad, 5 Y6)", field="FRAME_CLASS")
+    frame_class = _whole(params["FRAME_CLASS"], "FRAME_CLASS")
+    if frame_class not in FRAME_CLASSES:
+        known = ", ".join(f"{k} ({v})" for k, v in FRAME_CLASSES.items())
+        raise ProblemError(f"FRAME_CLASS: {short_repr(params['FRAME_CLASS'])} is not supported; supported: {known}",
+                           field="FRAME_CLASS")
+    frame_type = _whole(params.get("FRAME_TYPE", 1), "FRAME_TYPE")
+    if frame_class == 5 and (5, frame_type) not in TABLES:
+        return "y6"
+    if (frame_class, frame_type) not in TABLES:
+        have = ", ".join(f"{t} ({FRAME_TYPES[t]})" for c, t in TABLES if c == frame_class)
+        raise ProblemError(f"FRAME_TYPE: {short_repr(params.get('FRAME_TYPE', 1))} has no table for FRAME_CLASS "
+                           f"{frame_class} ({FRAME_CLASSES[frame_class]}); it has: {have}", field="FRAME_TYPE")
+    return frame_name(frame_class, frame_type)
+
+
+def _whole(value: Any, name: str) -> int:
+    """A whole number (a class or type code), refused naming ``name``."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(float(value)) \
+            or not float(value).is_integer():
+        raise ProblemError(f"{name}: expected a whole number, got {short_repr(value)}", field=name)
+    return int(value)
+
+
+def vehicle_from_ardupilot_params(params: Mapping[str, Any], *, name: str | None = None, **options: Any) -> Vehicle:
+    """The vehicle of an ArduPilot parameter set: the built-in frame of ``FRAME_CLASS`` and
+    ``FRAME_TYPE`` (:func:`frame_of_params`), with ``MOT_SLEW_UP_TIME`` / ``MOT_SLEW_DN_TIME``
+    as rate limits when positive (ArduPilot: 0 = no limit).  A vehicle's rate limits come as a
+    pair: with only ``MOT_SLEW_UP_TIME`` positive, the decrease is held to the same rate (the vehicle
+    file's ``rate_min = -rate_max``), more cautious than ArduPilot.  ``options`` go to
+    :func:`vehicle_from_factors`."""
+    if not isinstance(params, Mapping):
+        raise ProblemError(f"params: expected a mapping of parameter names to numbers, got {type(params).__name__}",
+                           field="params")
+    frame = frame_of_params(params)
+    for key, param in (("slew_up_time", "MOT_SLEW_UP_TIME"), ("slew_down_time", "MOT_SLEW_DN_TIME")):
+        if param in params:
+            seconds = params[param]
+            if isinstance(seconds, bool) or not isinstance(seconds, numbers.Real) or not seconds >= 0:
+                raise ProblemError(f"{param}: must be a number of seconds >= 0, got {short_repr(seconds)}",
+                                   field=param)
+            if seconds > 0:
+                options.setdefault(key, seconds)
+    options.setdefault("name", name or f"ardupilot-{frame}")
+    vehicle = vehicle_from_factors(frame_factors(frame), **options)
+    return replace(vehicle, description=f"ArduPilot {frame} (FRAME_CLASS {int(params['FRAME_CLASS'])}, FRAME_TYPE "
+                                        f"{int(params.get('FRAME_TYPE', 1))}), {vehicle.m} motors")

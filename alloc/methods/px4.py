@@ -3,8 +3,10 @@
 Restated from PX4-Autopilot's ``control_allocator`` module (read, not copied):
 ``src/modules/control_allocator/ControlAllocation/ControlAllocationSequentialDesaturation.cpp``
 (commit 1bbd11683f715ebce43c377e0c8628d783ba5b04; the yaw margin is ``MINIMUM_YAW_MARGIN`` of
-its header) on top of ``ControlAllocationPseudoInverse.cpp`` (commit
-089afb0915460c7768ea0e3ee1dad5a93c20ab5e).  The unit tests that pin it are
+its header), the same steps as PX4 has them now at
+``src/lib/control_allocation/control_allocation/ControlAllocationSequentialDesaturation.cpp``
+(commit ef41cd8aee7a), on top of ``ControlAllocationPseudoInverse.cpp`` (its normalisation:
+:mod:`alloc.px4_mix`).  The unit tests that pin it are
 ``ControlAllocationSequentialDesaturationTest.cpp`` (commit 5cda32d5565b); their numbers are
 reproduced in ``tests/alloc/test_px4.py``.
 
@@ -59,7 +61,7 @@ from numba import njit
 from .._kernels import close_out, copy_demand, finish, packed_out, rate_window_into
 from .._linalg import RCOND, check_rcond
 from ..exceptions import SolverError
-from ..method import FloatArray, Method, register
+from ..method import Method, register
 from ..options import choice, real
 from ..problem import MAX_MAGNITUDE, Problem
 from ..px4_mix import ZERO_ENTRY, mix_scales

@@ -33,8 +33,11 @@ allocation problem, a method's defaults and (optionally) the simulator need::
     states = [...]; outputs = [...]; A = [...]; B = [...]; C = [...]; D = [...]
     units = [...]                 # optional, one per output (plots and tables label them)
 
-    [simulation]                  # format 1.1 only: the vehicle's own closed-loop design
+    [simulation]                  # format 1.1 or later: the vehicle's own closed-loop design
     ...                           # (alloc.vehicle_file.simulation; the seed's ICE and HARV carry theirs)
+
+    [schedule]                    # format 1.2 only: B as a function of named variables (tilt, airspeed)
+    ...                           # (alloc.vehicle_file.schedule); B above is its value at the nominal point
 
 The effectiveness of an effector is given one of three ways: the whole matrix
 (``[effectiveness] B``), its column (``effectiveness = [...]``, one entry per axis: a
@@ -66,20 +69,24 @@ those, and :func:`load_vehicle` here, which reads any of the formats, sits above
 
 from __future__ import annotations
 
+import os
+import warnings
 from collections.abc import Mapping
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 from .._files import MAX_TEXT_BYTES, MAX_TOML_BYTES, parse_json, parse_toml, read_user_text
-from ..exceptions import ProblemError
-from .fields import DATA_DIR, EFFECTOR_KINDS, FORMAT, FORMAT_SIMULATION, FORMATS, SCHEMA_PATH, WRENCH_COMPONENTS
+from ..exceptions import ProblemError, SkippedLinesWarning
+from .fields import DATA_DIR, EFFECTOR_KINDS, FORMAT, FORMAT_SCHEDULE, FORMAT_SIMULATION, FORMATS, SCHEMA_PATH, WRENCH_COMPONENTS
 from .parts import Axis, Dynamics, Effector, LinearModel, Rotor, rotor_wrench
+from .schedule import Schedule, ScheduledEffectiveness
 from .simulation import Simulation
 from .toml_writer import to_toml
 from .vehicle import Vehicle, vehicle_from_dict, vehicle_from_problem
 
 __all__ = [
-    "FORMAT", "FORMAT_SIMULATION", "FORMATS", "SCHEMA_PATH", "Simulation", "DATA_DIR", "EFFECTOR_KINDS", "WRENCH_COMPONENTS",
+    "FORMAT", "FORMAT_SIMULATION", "FORMAT_SCHEDULE", "FORMATS", "Schedule", "ScheduledEffectiveness", "SCHEMA_PATH", "Simulation", "DATA_DIR", "EFFECTOR_KINDS", "WRENCH_COMPONENTS",
     "Dynamics", "Rotor", "Effector", "Axis", "LinearModel", "Vehicle",
     "load_vehicle", "vehicle_from_dict", "vehicle_from_problem", "vehicle_names", "rotor_wrench", "to_toml",
 ]
@@ -92,11 +99,17 @@ def vehicle_names() -> list[str]:
 
 
 def load_vehicle(source: str | Path | Mapping[str, Any]) -> Vehicle:
-    """Read a vehicle: a file (``.toml``, ``.json``, PX4 ``.params``), a document, or a bundled name.
+    """Read a vehicle: a file, a document, or a bundled name.
 
-    A bare name without an extension that is not a file (``"ice"``) is a bundled vehicle
-    file (:func:`vehicle_names`).  PX4 parameter files go through
-    :func:`alloc.importers.px4.vehicle_from_params` with its defaults.
+    A file is a vehicle file (``.toml``, ``.json``), or a flight stack's file read by an importer
+    with its defaults: a PX4 ``.params`` file or airframe file as PX4 ships it (any other name whose
+    text starts with ``#!`` or has ``param set-default`` lines: ``13000_my_quadplane``,
+    ``1103_standard_vtol_sih.hil``; :func:`alloc.importers.px4.vehicle_from_params`, shell lines
+    skipped and listed in a :class:`~alloc.exceptions.SkippedLinesWarning`), an ArduPilot motor
+    factor table ``.csv`` (:func:`alloc.importers.ardupilot.vehicle_from_factors`) or parameter file
+    ``.param``/``.parm`` (``FRAME_CLASS``, ``FRAME_TYPE``:
+    :func:`alloc.importers.ardupilot.vehicle_from_ardupilot_params`).  A bare name without an
+    extension that is not a file (``"ice"``) is a bundled vehicle file (:func:`vehicle_names`).
 
     A file is read through :func:`alloc._files.read_user_file` and parsed with its bounds:
     regular files only (not a directory, FIFO or device, nor a symlink to one), at most
@@ -118,20 +131,50 @@ def load_vehicle(source: str | Path | Mapping[str, Any]) -> Vehicle:
         raise ProblemError(f"source: expected a path, a bundled name or a document, got {type(source).__name__}",
                            field="source")
     path = Path(source)
-    if not path.exists() and isinstance(source, str) and path.suffix == "" and "/" not in source:
+    if not os.path.exists(path) and isinstance(source, str) and path.suffix == "" and "/" not in source:
         bundled = DATA_DIR / f"{source}.toml"
-        if not bundled.exists():
+        if not os.path.exists(bundled):
             raise ProblemError(f"path: no file {source!r} and no bundled vehicle of that name; bundled: "
                                f"{', '.join(vehicle_names())}", field="path")
         path = bundled
     suffix = path.suffix.lower()
-    if suffix == ".params":
-        from ..importers.px4 import read_params, vehicle_from_params
+    if suffix in (".toml", ".json"):
+        cap = MAX_TOML_BYTES if suffix == ".toml" else MAX_TEXT_BYTES
+        text = read_user_text(path, field="path", max_bytes=cap)
+        parse = parse_toml if suffix == ".toml" else parse_json
+        return vehicle_from_dict(parse(text, field="path", name=path.name))
+    return _import_vehicle(path, suffix)
 
-        return vehicle_from_params(read_params(path), name=path.stem)
-    if suffix not in (".toml", ".json"):
-        raise ProblemError(f"path: unknown extension {path.suffix!r}; use .toml, .json or .params", field="path")
-    cap = MAX_TOML_BYTES if suffix == ".toml" else MAX_TEXT_BYTES
-    text = read_user_text(path, field="path", max_bytes=cap)
-    parse = parse_toml if suffix == ".toml" else parse_json
-    return vehicle_from_dict(parse(text, field="path", name=path.name))
+
+#: what each importer's file looks like, for the messages: one list for every refusal of a path
+_KNOWN_FILES = (".toml or .json vehicle files, PX4 .params or airframe files (ROMFS airframes, with or without "
+                "an extension), ArduPilot .csv factor tables or .param/.parm parameter files")
+
+
+def _import_vehicle(path: Path, suffix: str) -> Vehicle:
+    """A vehicle from a flight stack's file: by extension, else (an airframe's name, ``13000_my_quadplane``,
+    ``1103_standard_vtol_sih.hil``) by its text.  Skipped shell lines are listed in a
+    :class:`~alloc.exceptions.SkippedLinesWarning` and in the vehicle's ``source``."""
+    if suffix == ".csv":
+        from ..importers.ardupilot import read_factor_table, vehicle_from_factors
+
+        names, factors = read_factor_table(path)
+        return vehicle_from_factors(factors, names, name=path.stem)
+    if suffix in (".param", ".parm"):
+        from ..importers.ardupilot import read_ardupilot_params, vehicle_from_ardupilot_params
+
+        return vehicle_from_ardupilot_params(read_ardupilot_params(path), name=path.stem)
+    from ..importers.px4 import looks_like_airframe, params_from_text, vehicle_from_params
+
+    text = read_user_text(path, field="path", max_bytes=MAX_TEXT_BYTES)
+    if suffix != ".params" and not looks_like_airframe(text):
+        what = f"unknown extension {path.suffix!r}" if suffix else f"{path.name} has no extension"
+        raise ProblemError(f"path: {what} and is not a PX4 airframe file (no '#!' first line, no 'param set-default' "
+                           f"lines); vehicles are read from {_KNOWN_FILES}", field="path")
+    read = params_from_text(text)
+    vehicle = vehicle_from_params(read.params, name=path.stem)
+    summary = read.skipped_summary()
+    if not summary:
+        return vehicle
+    warnings.warn(f"{path.name}: {summary}", SkippedLinesWarning, stacklevel=3)
+    return replace(vehicle, source=f"{vehicle.source}; PX4 airframe file {path.name}: {summary}")

@@ -17,8 +17,11 @@ FORMAT = "alloc-vehicle/1"
 #: format 1 with the optional ``[simulation]`` section (:mod:`~alloc.vehicle_file.simulation`); a
 #: document is written in the oldest format that carries it (1 without the section)
 FORMAT_SIMULATION = "alloc-vehicle/1.1"
+#: format 1.1 with the optional ``[schedule]`` section (:mod:`~alloc.vehicle_file.schedule`): the
+#: effectiveness as a function of named scheduling variables; written only when the section is there
+FORMAT_SCHEDULE = "alloc-vehicle/1.2"
 #: the formats this library reads
-FORMATS = (FORMAT, FORMAT_SIMULATION)
+FORMATS = (FORMAT, FORMAT_SIMULATION, FORMAT_SCHEDULE)
 #: the published JSON Schema of the format
 SCHEMA_PATH = Path(__file__).parents[1] / "schemas" / "vehicle-1.schema.json"
 #: the bundled vehicle files (the seed's aircraft): ``load_vehicle("ice")`` reads ``ice.toml`` here

@@ -15,8 +15,9 @@ import numpy as np
 from .._files import MAX_TEXT_BYTES, MAX_TOML_BYTES
 from ..exceptions import AllocError, ProblemError
 from ..problem import MAX_AXES, MAX_EFFECTORS, MAX_MAGNITUDE, Problem, short_repr
-from .fields import FORMAT, FORMAT_SIMULATION, FORMATS, WRENCH_COMPONENTS, Matrix, _child, _fail, _keys, _kind, _list, _matrix, _table, _text, _unique
+from .fields import FORMAT, FORMAT_SCHEDULE, FORMAT_SIMULATION, FORMATS, WRENCH_COMPONENTS, Matrix, _child, _fail, _keys, _kind, _list, _matrix, _table, _text, _unique
 from .parts import Axis, Effector, LinearModel
+from .schedule import Schedule, ScheduledEffectiveness
 from .simulation import Simulation
 from .toml_writer import to_toml
 
@@ -42,9 +43,11 @@ class Vehicle:
     model: LinearModel | None = None
     #: the vehicle's own closed-loop design (format 1.1), flown instead of the section 4.3 auto-design
     simulation: Simulation | None = None
+    #: ``B`` as a function of scheduling variables (format 1.2); ``B`` above is its value at the nominal point
+    schedule: Schedule | None = None
 
     FIELDS = ("format", "name", "description", "source", "axes", "effectors", "effectiveness", "methods", "model",
-              "simulation")
+              "simulation", "schedule")
 
     @property
     def k(self) -> int:
@@ -119,13 +122,35 @@ class Vehicle:
             rate_min=rate_min, rate_max=rate_max, names=self.effector_names, axes=self.axis_names,
         )
 
+    def scheduled(self) -> ScheduledEffectiveness:
+        """The evaluator of ``B(x)`` (:class:`~alloc.vehicle_file.schedule.ScheduledEffectiveness`); a vehicle
+        without a ``[schedule]`` is refused naming ``schedule``."""
+        if self.schedule is None:
+            raise ProblemError(f"schedule: vehicle {self.name!r} declares no [schedule]; its B is constant",
+                               field="schedule")
+        return ScheduledEffectiveness(self.B, self.schedule)
+
+    def problem_at(self, values: Mapping[str, float]) -> Problem:
+        """The allocation problem with ``B`` at the scheduling variables' ``values`` (by name; an
+        absent variable takes its nominal value); limits, rates, weights and ``up`` as :meth:`problem`.
+
+        The evaluator and the nominal problem are made once per vehicle (a cache, as
+        :attr:`trim_command`); each call evaluates ``B`` and validates one new Problem."""
+        cached = self.__dict__.get("_schedule_cache")
+        if cached is None:
+            cached = (self.scheduled(), self.problem())
+            object.__setattr__(self, "_schedule_cache", cached)  # frozen: a cache, not a field
+        evaluator, nominal = cached
+        return nominal.replace(B=evaluator.evaluate(values, out=np.empty((self.k, self.m))))
+
     def method_options(self, method: str) -> dict[str, Any]:
         """This vehicle's defaults for ``method`` (``{}`` when it has none): a fresh copy."""
         return json.loads(json.dumps(self.methods.get(method, {})))
 
     def to_dict(self) -> dict[str, Any]:
         """The document (JSON-able; ``vehicle_from_dict(v.to_dict()) == v``)."""
-        out: dict[str, Any] = {"format": FORMAT if self.simulation is None else FORMAT_SIMULATION, "name": self.name}
+        fmt = FORMAT_SCHEDULE if self.schedule is not None else FORMAT if self.simulation is None else FORMAT_SIMULATION
+        out: dict[str, Any] = {"format": fmt, "name": self.name}
         if self.description:
             out["description"] = self.description
         if self.source:
@@ -140,6 +165,8 @@ class Vehicle:
             out["model"] = self.model.to_dict()
         if self.simulation is not None:
             out["simulation"] = self.simulation.to_dict()
+        if self.schedule is not None:
+            out["schedule"] = self.schedule.to_dict()
         return out
 
     def method_table(self) -> dict[str, dict[str, Any]]:
@@ -206,7 +233,7 @@ def vehicle_from_dict(doc: Any) -> Vehicle:
     if "methods" in t:
         vehicle = replace(vehicle, methods=_methods(t["methods"], problem))
     if "simulation" in t:
-        if fmt != FORMAT_SIMULATION:
+        if fmt == FORMAT:
             raise _fail("simulation", f"the [simulation] section needs format = {FORMAT_SIMULATION!r}")
         if model is None:
             raise _fail("simulation", "the [simulation] section flies the [model]; give the model")
@@ -215,6 +242,10 @@ def vehicle_from_dict(doc: Any) -> Vehicle:
             effectors=vehicle.effector_names, n=len(model.states),
             limits=tuple((float(lo), float(hi)) for lo, hi in zip(problem.umin, problem.umax, strict=True)),
             rate_limits=tuple((float(lo), float(hi)) for lo, hi in zip(problem.rate_min, problem.rate_max, strict=True))))
+    if "schedule" in t:
+        if fmt != FORMAT_SCHEDULE:
+            raise _fail("schedule", f"the [schedule] section needs format = {FORMAT_SCHEDULE!r}")
+        vehicle = replace(vehicle, schedule=Schedule.from_dict(t["schedule"], "schedule", k, m))
     return vehicle
 
 

@@ -195,13 +195,14 @@ def test_standard_vtol_by_hand_and_px4_two_matrices():
     assert v.effectors[4].rotor.km == 0.0
     vn = vehicle_from_params(read_params(VTOL), normalize="px4")
     Bn = vn.problem().B
-    # matrix 0 (rotors, RPY normalised): roll/pitch/yaw rows as the quad's (1/sqrt 8, 1/4), forces: the pusher's
-    # |M| = 1 / 6.5, each lift rotor's 1 / (4 * 6.5): s = (1/6.5 + 4/(4 * 6.5)) / 5 = 2 / (5 * 6.5) for fx and fz
+    # matrix 0 (rotors, RPY normalised): roll/pitch/yaw rows as the quad's (1/sqrt 8, 1/4).  Forces, each axis
+    # apart (ControlAllocationPseudoInverse.cpp, commit 1316f1cea719): fx only the pusher, |M_fx| = 1 / 6.5, s_x =
+    # 1 / 6.5 and its row 6.5 * s_x = 1; fz the four lift rotors, |M_fz| = 1 / (4 * 6.5) each: s_z = 1 / 26, row -1/4.
+    # (PX4 commit 089afb091546 shared s = (1/6.5 + 4/(4 * 6.5)) / 5 = 2 / 32.5 for both: rows 0.4 and -0.4.)
     r = 1 / math.sqrt(8)
-    s_force = 2 / (5 * CT)
     np.testing.assert_allclose(Bn[:, :5], np.array([
         [-r, r, r, -r, 0.0], [r, -r, r, -r, 0.0], [0.25, 0.25, -0.25, -0.25, 0.0],
-        [0.0, 0.0, 0.0, 0.0, CT * s_force], [-CT * s_force] * 4 + [0.0]]), rtol=1e-12, atol=1e-15)
+        [0.0, 0.0, 0.0, 0.0, 1.0], [-0.25] * 4 + [0.0]]), rtol=1e-12, atol=1e-15)
     # matrix 1 (surfaces, not RPY normalised, no forces): unchanged
     np.testing.assert_array_equal(Bn[:, 5:], expected[:, 5:])
 
@@ -240,7 +241,7 @@ def test_bad_params_lines_are_named(text, message):
 
 
 @pytest.mark.parametrize("params, message", [
-    ({"CA_AIRFRAME": 3, "CA_ROTOR_COUNT": 4}, "CA_AIRFRAME: 3 is not supported"),
+    ({"CA_AIRFRAME": 4, "CA_ROTOR_COUNT": 4}, "CA_AIRFRAME: 4 is not supported"),  # tailsitter
     ({"CA_ROTOR_COUNT": 13}, "CA_ROTOR_COUNT: expected an integer 0..12"),
     ({"CA_ROTOR_COUNT": 0}, "CA_ROTOR_COUNT: the parameters define no rotor"),
     ({"CA_ROTOR_COUNT": 1, "CA_R0_SLEW": -1.0}, "CA_R0_SLEW: must be >= 0"),
