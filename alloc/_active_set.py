@@ -32,11 +32,14 @@ caller raises :class:`~alloc.exceptions.SolverError` (the allocator's safe fallb
 Speed (measured in ``benchmarks/bench_alloc.py``): the factorisation of a free set depends
 on the level and the set alone, so it is cached per (level, free set) in the allocator's
 packed state (bitwise equal to a recomputation: the cache changes the cost, never the
-answer).  Every call starts from the clipped Eq 1.23 answer, never from the previous call's
-working set: an answer is then a function of the call's data bit for bit.  (Warm starts made
-answers depend on call history where they are unique only to round-off: with ``Wv``
+answer).  By default every call starts from the clipped Eq 1.23 answer, never from the previous
+call's working set: an answer is then a function of the call's data bit for bit.  (Warm starts
+made answers depend on call history where they are unique only to round-off: with ``Wv``
 eigenvalues 7.7e29 and 3.4e13, in the domain, a long-lived allocator returned another point
-than a fresh one; adversarial seed 10037684, moments 0.81 vs -0.39 on the weak axis.)  All work arrays
+than a fresh one; adversarial seed 10037684, moments 0.81 vs -0.39 on the weak axis.)  The
+``warm_start`` option opts in to the C export's warm start (:func:`_warm_pick`, the single call
+only), refused by :mod:`alloc._warm` on problems like that one; its answers agree with the cold
+ones to round-off (tests/alloc/test_warm_start.py).  All work arrays
 live in the packed state (no allocation per call but the result).  The entry points that
 mutate that state hold the GIL (no ``nogil``): an allocator shared by threads stays safe.
 """
@@ -51,7 +54,8 @@ from ._kernels import _FREE_BITS, close_out, copy_demand, finish, packed_out, ra
 from ._active_set_layout import (CACHE_ENTRIES, CACHE_FLOATS, _A, _B, _BV, _CONST, _DIAG, _DYN, _E, _FACTORED, _FIDX,
                                  _FINAL, _FREE, _G, _GAM, _H, _HEAD, _HI, _K, _KU, _KV, _LAM, _LO, _M, _MAXIT, _MISC,
                                  _N, _NCW, _NEXT_SLOT, _NLEV, _NLW, _P0, _PERM, _PINNED, _R, _RMAX, _RMIN, _SCALE,
-                                 _STARTS, _T, _TABLE, _TABU, _TMP, _U, _UMAX, _UMIN, _UP, _UPC, _WU, _Y)
+                                 _STARTS, _T, _TABLE, _TABU, _TMP, _U, _UMAX, _UMIN, _UP, _UPC, _UW, _WARM, _WSIDE, _WU,
+                                 _WVALID, _Y)
 # _FACTORED: read by benchmarks/bench_alloc.py and tests/benchmarks/test_bench_alloc.py from here
 from ._lsq_factor import SIGMA_RTOL, _factors, _lsolve, _ltsolve, _slot_offsets
 
@@ -283,13 +287,15 @@ def _level(mats, vecs, ivecs, bankL, bank, r0, r1, lev, gam, diag, iup, ilo, ihi
 
 
 def pack(A, T, perm, starts, gammas, final, Wu, diag, up, B, P0, umin, umax, rate_min, rate_max, maxit,
-         vmax, rtol, Kv=None, Ku=None):
+         vmax, rtol, Kv=None, Ku=None, warm=False):
     """The solver's data and state: the argument tuple of :func:`lexico_call` before ``v``.
 
     ``up`` is the preference point, or with ``Kv`` (m x k) and ``Ku`` (m x m) its constant
     part: the call's preference point is ``up + Kv v (+ Ku u_prev with rate limits)``
     (``dynamic``).  ``vmax`` bounds the valid input domain, ``rtol`` is the ``exact``
     tolerance.  The cache holds up to ``CACHE_ENTRIES`` free sets within ``CACHE_FLOATS``.
+    ``warm``: the single call (:func:`lexico_call`) keeps its answer's working set and starts
+    the next from it (:func:`_warm_pick`); batches and :func:`lexico_solve` stay cold.
     """
     n, m = A.shape
     k = B.shape[0]
@@ -300,7 +306,7 @@ def pack(A, T, perm, starts, gammas, final, Wu, diag, up, B, P0, umin, umax, rat
     for i, M in ((_A, A), (_T, T), (_WU, Wu), (_B, B), (_P0, P0)) + (((_KV, Kv), (_KU, Ku)) if Kv is not None else ()):
         M = np.asarray(M, dtype=float)
         mats[i, :M.shape[0], :M.shape[1]] = M
-    vecs = np.zeros((_CONST + 1, max(m, n, k, nlev, 2)))
+    vecs = np.zeros((_WSIDE + 1, max(m, n, k, nlev, 2)))
     for i, x in ((_UP, up), (_UMIN, umin), (_UMAX, umax), (_RMIN, rate_min), (_RMAX, rate_max), (_GAM, gammas),
                  (_CONST, [vmax, rtol])):
         x = np.asarray(x, dtype=float)
@@ -313,8 +319,9 @@ def pack(A, T, perm, starts, gammas, final, Wu, diag, up, B, P0, umin, umax, rat
         own.append((n, 0))
     ncw = max(1, max(nc for nc, _ in own))
     nlw = max(1, max(nl for _, nl in own))
-    ivecs = np.zeros((_TABLE, max(m, n, nlev + 1, words + 1, _NLW + 1)), dtype=np.int64)
-    ivecs[_HEAD, :_NLW + 1] = [n, m, k, nlev, int(final), int(diag), int(maxit), words, int(Kv is not None), ncw, nlw]
+    ivecs = np.zeros((_TABLE, max(m, n, nlev + 1, words + 1, _WVALID + 1)), dtype=np.int64)
+    ivecs[_HEAD, :_WVALID + 1] = [n, m, k, nlev, int(final), int(diag), int(maxit), words, int(Kv is not None), ncw,
+                                  nlw, int(bool(warm)), 0]
     ivecs[_PERM, :n] = perm
     ivecs[_STARTS, :nlev + 1] = starts
     ivecs[_MISC, _NEXT_SLOT] = 1  # the next free cache slot (slot 0 is scratch)
@@ -354,26 +361,68 @@ def _start(mats, vecs, ivecs, v, ilo, ihi, iup, m, k):  # pragma: no cover - com
 
 
 @njit(cache=True, nogil=True, _nrt=False)
-def _run(mats, vecs, ivecs, bankL, bank, v, ilo, ihi, iup):  # pragma: no cover - compiled
-    """All levels for one demand, into ``vecs[_U]``; returns ``(iterations, ok)``.
+def _first_objective(mats, vecs, ivecs, x, iup, m):  # pragma: no cover - compiled
+    """The first level's objective at ``x``: ``||A_0 x - b_0||^2 + g_0^2 (x - up)' Wu (x - up)``."""
+    r1 = ivecs[_STARTS, 1]
+    acc = 0.0
+    for i in range(r1):
+        e = vecs[_BV, i]
+        for j in range(m):
+            e -= mats[_A, i, j] * x[j]
+        acc += e * e
+    gam = vecs[_GAM, 0]
+    if gam != 0.0:
+        q = 0.0
+        for j in range(m):
+            d = 0.0
+            if ivecs[_HEAD, _DIAG] != 0:
+                d = mats[_WU, j, j] * (x[j] - vecs[iup, j])
+            else:
+                for s in range(m):
+                    d += mats[_WU, j, s] * (x[s] - vecs[iup, s])
+            q += (x[j] - vecs[iup, j]) * d
+        acc += gam * gam * q
+    return acc
 
-    ``b = T v[perm]``; level ``l`` is rows ``A[starts[l]:starts[l+1]]`` with weight
-    ``gammas[l]``; ``final`` adds the preference level holding every row (stage 2 of ``qp``).
-    The bounds and the preference point are the rows ``ilo``, ``ihi``, ``iup`` of ``vecs``.
-    """
-    n, m, k, nlev = ivecs[_HEAD, _N], ivecs[_HEAD, _M], ivecs[_HEAD, _K], ivecs[_HEAD, _NLEV]
+
+@njit(cache=True, nogil=True, _nrt=False)
+def _warm_pick(mats, vecs, ivecs, ilo, ihi, iup, m):  # pragma: no cover - compiled
+    """Replace the cold start (``vecs[_U]``, ``ivecs[_FREE]``) by the kept working set on this
+    call's bounds -- held effectors at the same side's bound, free ones at their last value
+    clipped -- when the first level's objective is not larger there; True when taken.  The C
+    export's ``warm_pick`` (alloc/export/templates_active_set.py), the same rule."""
+    x = vecs[_TMP]  # scratch: the levels write it before they read it
+    for j in range(m):
+        side = vecs[_WSIDE, j]
+        lo, hi = vecs[ilo, j], vecs[ihi, j]
+        x[j] = lo if side < 0.0 else hi if side > 0.0 else min(max(vecs[_UW, j], lo), hi)
+    if _first_objective(mats, vecs, ivecs, x, iup, m) > _first_objective(mats, vecs, ivecs, vecs[_U], iup, m):
+        return False
+    for j in range(m):
+        vecs[_U, j] = x[j]
+        ivecs[_FREE, j] = 1 if vecs[ilo, j] < x[j] < vecs[ihi, j] else 0
+    return True
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def _warm_keep(vecs, ivecs, ihi, m):  # pragma: no cover - compiled
+    """Keep the finished run's answer and working set (each effector free, or held at its
+    lower or upper bound) for the next call."""
+    for j in range(m):
+        vecs[_UW, j] = vecs[_U, j]
+        vecs[_WSIDE, j] = 0.0 if ivecs[_FREE, j] != 0 else (1.0 if vecs[_U, j] >= vecs[ihi, j] else -1.0)
+    ivecs[_HEAD, _WVALID] = 1
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def _levels(mats, vecs, ivecs, bankL, bank, ilo, ihi, iup):  # pragma: no cover - compiled
+    """Every level from the start in ``vecs[_U]``, ``ivecs[_FREE]``; ``(iterations, ok)``."""
+    n, m, nlev = ivecs[_HEAD, _N], ivecs[_HEAD, _M], ivecs[_HEAD, _NLEV]
     maxit = ivecs[_HEAD, _MAXIT]
     diag = ivecs[_HEAD, _DIAG] != 0
-    for i in range(n):
-        acc = 0.0
-        for q in range(n):
-            acc += mats[_T, i, q] * v[ivecs[_PERM, q]]
-        vecs[_BV, i] = acc
-    _start(mats, vecs, ivecs, v, ilo, ihi, iup, m, k)
     for j in range(m):
         ivecs[_PINNED, j] = 0
     total = 0
-    ok = True
     for l in range(nlev + (1 if ivecs[_HEAD, _FINAL] else 0)):
         if l < nlev:
             r0, r1, gam = ivecs[_STARTS, l], ivecs[_STARTS, l + 1], vecs[_GAM, l]
@@ -381,11 +430,36 @@ def _run(mats, vecs, ivecs, bankL, bank, v, ilo, ihi, iup):  # pragma: no cover 
             r0, r1, gam = n, n, 1.0
         it = _level(mats, vecs, ivecs, bankL, bank, r0, r1, l, gam, diag, iup, ilo, ihi, maxit, m)
         if it < 0:
-            total += maxit
-            ok = False
-            break
+            return total + maxit, False
         total += it
-    return total, ok
+    return total, True
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def _run(mats, vecs, ivecs, bankL, bank, v, ilo, ihi, iup, warm):  # pragma: no cover - compiled
+    """All levels for one demand, into ``vecs[_U]``; returns ``(iterations, ok)``.
+
+    ``b = T v[perm]``; level ``l`` is rows ``A[starts[l]:starts[l+1]]`` with weight
+    ``gammas[l]``; ``final`` adds the preference level holding every row (stage 2 of ``qp``).
+    The bounds and the preference point are the rows ``ilo``, ``ihi``, ``iup`` of ``vecs``.
+    ``warm``: start from the kept working set where :func:`_warm_pick` takes it; a run from it
+    that hits the cap is redone from the cold start (a call then does at most twice the work).
+    """
+    n, m, k = ivecs[_HEAD, _N], ivecs[_HEAD, _M], ivecs[_HEAD, _K]
+    for i in range(n):
+        acc = 0.0
+        for q in range(n):
+            acc += mats[_T, i, q] * v[ivecs[_PERM, q]]
+        vecs[_BV, i] = acc
+    _start(mats, vecs, ivecs, v, ilo, ihi, iup, m, k)
+    if not (warm and ivecs[_HEAD, _WVALID] != 0 and _warm_pick(mats, vecs, ivecs, ilo, ihi, iup, m)):
+        return _levels(mats, vecs, ivecs, bankL, bank, ilo, ihi, iup)
+    total, ok = _levels(mats, vecs, ivecs, bankL, bank, ilo, ihi, iup)
+    if ok:
+        return total, ok
+    _start(mats, vecs, ivecs, v, ilo, ihi, iup, m, k)
+    again, ok = _levels(mats, vecs, ivecs, bankL, bank, ilo, ihi, iup)
+    return total + again, ok
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -443,12 +517,18 @@ def _call_into(mats, vecs, ivecs, bankL, bank, v, u_prev, dt, out):  # pragma: n
     iup = _target(mats, vecs, ivecs, v, u_prev, rate)
     if iup < 0:
         return 2, 0
-    it, ok = _run(mats, vecs, ivecs, bankL, bank, v, ilo, ihi, iup)
+    warm = ivecs[_HEAD, _WARM] != 0
+    it, ok = _run(mats, vecs, ivecs, bankL, bank, v, ilo, ihi, iup, warm)
     if not ok:
+        ivecs[_HEAD, _WVALID] = 0
         return 5, it
+    if warm:
+        _warm_keep(vecs, ivecs, ihi, m)
     for j in range(m):
         out[j] = vecs[_U, j]
     code = finish(mats[_B, :k, :m], out[:m], vecs[ilo], vecs[ihi], v, out[m:m + k], rtol)
+    if code == 2:
+        ivecs[_HEAD, _WVALID] = 0
     close_out(out, m, k)
     return code, it
 
@@ -465,7 +545,7 @@ def lexico_solve(mats, vecs, ivecs, bankL, bank, v, lo, hi, u_prev, rate):  # pr
     iup = _target(mats, vecs, ivecs, v, u_prev, rate)
     if iup < 0:
         return vecs[_UPC, :m].copy(), -1, False
-    it, ok = _run(mats, vecs, ivecs, bankL, bank, v, _LO, _HI, iup)
+    it, ok = _run(mats, vecs, ivecs, bankL, bank, v, _LO, _HI, iup, False)
     return vecs[_U, :m].copy(), it, ok
 
 
@@ -482,7 +562,7 @@ def _finished_into(mats, vecs, ivecs, bankL, bank, V, U, Vach, codes, a, b):  # 
         if iup < 0:
             codes[i] = 2
             continue
-        if not _run(mats, vecs, ivecs, bankL, bank, V[i], _UMIN, _UMAX, iup)[1]:
+        if not _run(mats, vecs, ivecs, bankL, bank, V[i], _UMIN, _UMAX, iup, False)[1]:
             codes[i] = 5
             continue
         for j in range(m):

@@ -21,15 +21,16 @@
 # bit for bit the same (benchmarks/bench_alloc.py; tests/alloc/test_fastcall.py).  The caller
 # (``lexico_call``, ``lexico_batch_finished``) owns the arrays for the whole call.
 
-#: int header fields (``ivecs[0]``)
-_N, _M, _K, _NLEV, _FINAL, _DIAG, _MAXIT, _WORDS, _DYN, _NCW, _NLW = range(11)
+#: int header fields (``ivecs[0]``); ``_WARM``: the single call keeps its working set (the
+#: ``warm_start`` option), ``_WVALID``: a kept one is there (rows ``_UW``, ``_WSIDE`` of ``vecs``)
+_N, _M, _K, _NLEV, _FINAL, _DIAG, _MAXIT, _WORDS, _DYN, _NCW, _NLW, _WARM, _WVALID = range(13)
 #: ``mats`` rows
 _A, _T, _WU, _B, _P0, _KV, _KU = range(7)
 #: ``ivecs[_MISC]`` columns: the next free cache slot, factorisations computed
 _NEXT_SLOT, _FACTORED = range(2)
 #: ``vecs`` rows
 (_UP, _UMIN, _UMAX, _RMIN, _RMAX, _GAM, _U, _LO, _HI, _UPC, _BV, _R, _E, _LAM,
- _G, _H, _Y, _TMP, _SCALE, _CONST) = range(20)
+ _G, _H, _Y, _TMP, _SCALE, _CONST, _UW, _WSIDE) = range(22)
 #: ``ivecs`` rows
 _HEAD, _PERM, _STARTS, _FREE, _PINNED, _TABU, _FIDX, _KEY, _MISC, _TABLE = range(10)
 #: cache budget per allocator, floats (2 MiB), and entry cap (free sets beyond are computed, not

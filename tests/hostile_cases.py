@@ -101,7 +101,9 @@ def _option(rng: np.random.Generator, name: str, k: int, m: int, backends: list[
     if rng.random() < 0.8:
         valid = {"rcond": [0.0, 1e-12, 1e-6, 0.5, 0.999999], "incremental": [True, False],
                  "gamma": [1e-8, 1e-4, 1.0, 1e6], "angles": [1, 2, 3, 16, 100],
-                 "max_rounds": [1, 2, 40, 1000], "resolution": [2, 3, 16, 64]}
+                 "max_rounds": [1, 2, 40, 1000], "resolution": [2, 3, 16, 64], "warm_start": [True, False],
+                 "airmode": ["disabled", "roll_pitch", "roll_pitch_yaw"], "weak": [0.0, 0.2, 1.0],
+                 "zero": [0.0, 1e-3, 0.5]}
         if name in valid:
             return valid[name][int(rng.integers(len(valid[name])))]
         if name == "priorities":
@@ -112,8 +114,12 @@ def _option(rng: np.random.Generator, name: str, k: int, m: int, backends: list[
             return str(rng.choice(ok))
     if name == "rcond":
         return rng.choice(np.array([0.0, 1e-12, 1e-6, 0.5, 0.999999, 2.0, -5, "x", math.nan, True], dtype=object))
-    if name == "incremental":
+    if name in ("incremental", "warm_start"):
         return rng.choice(np.array([True, False, "x"], dtype=object))
+    if name == "airmode":
+        return rng.choice(np.array(["disabled", "roll_pitch_yaw", "x", 2, None], dtype=object))
+    if name in ("weak", "zero"):
+        return rng.choice(np.array([0.0, 0.2, -1.0, math.nan, 1e300, "x"], dtype=object))
     if name == "priorities":
         kind = rng.integers(7)
         if kind == 0:

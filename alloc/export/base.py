@@ -17,6 +17,7 @@ import numpy as np
 from ..exceptions import AllocError
 from ..problem import MAX_MAGNITUDE
 from ..result import EXACT_RTOL
+from .._warm import WARM_COND_MAX, WARM_ROUND_OFF  # noqa: F401 - re-exported (export's names)
 from .certify import Certificate
 
 #: bumped whenever the generated code changes for the same input
@@ -56,17 +57,8 @@ TABLE_BUDGET = 256 * 1024
 #: heap.  16 KiB is under a tenth of an STM32F4's 192 KB of RAM; ICE qp keeps 26 free sets in
 #: its 612-byte slots (the 4 x 6 hexacopter's kernels are tabulated and keep none)
 CACHE_BUDGET = 16 * 1024
-#: the warm start (``warm_start=True``) is refused beyond this condition number of a level's
-#: weighted effectiveness (its singular values above the round-off cut) or of the preference
-#: weight: there the optimum is determined only to round-off times it, and a warm start ends
-#: elsewhere within that (measured on the adversarial suite: answers apart by up to 0.85 of the
-#: limit span and attainable demands called unattainable at 1e9 and beyond, none apart by
-#: more than 1e-12 below 1e6)
-WARM_COND_MAX = 1e6
-#: singular values below this fraction of the largest are round-off (an exactly rank-deficient
-#: effectiveness, which the factorisation cuts at 1e-12 and the warm start handles): two
-#: decades under that cut, since a column subset's largest singular value can be smaller
-WARM_ROUND_OFF = 1e-14
+# the warm start's conditioning limits (WARM_COND_MAX, WARM_ROUND_OFF) are the library's, shared with the
+# host's warm_start option: alloc/_warm.py
 
 #: ``float`` ``lp``: the simplex's tolerances (alloc._simplex's names; the double build takes the
 #: library's values) at float's round-off.  Reduced costs and pivots at 1e-5 (about 80 float ulps

@@ -11,7 +11,7 @@ import numpy as np
 from ..problem import Problem
 from . import templates, templates_active_set, templates_simplex
 from .base import (CACHE_BUDGET, CGI_RTOL, FLOAT_CGI_RTOL, FLOAT_MU_EPS, FLOAT_SIGMA_RTOL, FLOAT_SIMPLEX_TOLS,
-                   TABLE_BUDGET, WARM_COND_MAX, WARM_ROUND_OFF, ExportError, _ints, _Real)
+                   TABLE_BUDGET, WARM_COND_MAX, ExportError, _ints, _Real)
 from .certify import Certificate, certify
 
 
@@ -184,38 +184,11 @@ def _warm_conditioning(instances: list[Any], aset: Any, n: int, m: int) -> None:
     it, that is nearly but not exactly rank-deficient; rows of A (axes with their weights)
     scaled more than WARM_COND_MAX apart; or each instance's Wu conditioned beyond
     WARM_COND_MAX."""
-    def gray(M: np.ndarray) -> float | None:
-        s = np.linalg.svd(M, compute_uv=False)
-        if not s.size or not s[0] > 0:
-            return None
-        bad = s[(s > WARM_ROUND_OFF * s[0]) & (s * WARM_COND_MAX < s[0])]
-        return float(s[0] / bad[-1]) if bad.size else None
+    from .._warm import warm_conditioning
 
-    A = instances[0]._state[0][aset._A, :n, :m]
-    worst = gray(A)
-    what = "weighted effectiveness Wv^(1/2) B"
-    rows = np.abs(A).max(axis=1)
-    rows = rows[rows > 0]
-    if worst is None and rows.size and rows.max() / WARM_COND_MAX > rows.min():
-        # a weak row with a large demand still moves the optimum, but a factorisation resolves
-        # it only to round-off of the strong rows (its singular vectors' entries are relative)
-        with np.errstate(over="ignore"):
-            worst, what = float(rows.max() / rows.min()), "weighted effectiveness's rows (axes scaled apart)"
-    if worst is None:
-        for i in range(m):
-            for j in range(i + 1, m):
-                if (c := gray(A[:, [i, j]])) is not None:
-                    worst, what = c, f"weighted effectiveness's columns {i} and {j} (nearly parallel)"
-                    break
-            if worst is not None:
-                break
-    if worst is None:
-        for lex in instances:
-            w = np.linalg.eigvalsh(lex._state[0][aset._WU, :m, :m])
-            with np.errstate(over="ignore"):
-                c = w[-1] / w[0] if w[0] > 0 else np.inf
-            if not c <= WARM_COND_MAX:
-                worst, what = c, "preference weight Wu"
+    found = warm_conditioning(instances[0]._state[0][aset._A, :n, :m],
+                              [lex._state[0][aset._WU, :m, :m] for lex in instances])
+    worst, what = found if found is not None else (None, "")
     if worst is not None:
         raise ExportError(f"warm_start: the problem's {what} has condition number {worst:.2g}, above "
                           f"{WARM_COND_MAX:g}: its optimum is determined only to round-off times that, so a "

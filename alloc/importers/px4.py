@@ -91,6 +91,7 @@ import numpy as np
 from .._files import MAX_TEXT_BYTES, read_user_text
 from ..domain import MAX_MAGNITUDE
 from ..exceptions import ProblemError
+from ..px4_mix import FLT_EPSILON, mix_scales
 from ..domain import as_float_array, short_repr
 from ..vehicle_file.fields import FORMAT, FORMAT_SCHEDULE, WRENCH_COMPONENTS
 from ..vehicle_file.parts import rotor_wrench
@@ -115,7 +116,6 @@ DEFAULTS = {"PX": 0.0, "PY": 0.0, "PZ": 0.0, "AX": 0.0, "AY": 0.0, "AZ": -1.0, "
             "TYPE": 1, "TRQ_R": 0.0, "TRQ_P": 0.0, "TRQ_Y": 0.0, "TRIM": 0.0}
 _MAX_ROTORS = 12
 _MAX_SURFACES = 8
-_FLT_EPSILON = float(np.finfo(np.float32).eps)
 _INT32 = (-(2**31), 2**31 - 1)
 #: MAVLink MAV_PARAM_TYPE codes QGroundControl writes: 1-8 integers, 9 float32, 10 float64
 _INT_TYPES = range(1, 9)
@@ -381,7 +381,7 @@ def vehicle_from_params(params: Mapping[str, Any], *, name: str = "px4", normali
             columns.append(tiltrotor.rotor_column(geometry[-1], values))
         else:
             columns.append(rotor_wrench(position, axis, ct, km))
-        if normalize == "none" and tiltrotor is None and ct >= _FLT_EPSILON and math.hypot(*axis) > _FLT_EPSILON \
+        if normalize == "none" and tiltrotor is None and ct >= FLT_EPSILON and math.hypot(*axis) > FLT_EPSILON \
                 and ct > 0:
             e["rotor"] = {"position": position, "axis": axis, "ct": ct, "km": km}
         matrix.append(0)
@@ -514,7 +514,7 @@ def _upwards(axis: list[float]) -> bool:
     """PX4's test in computeEffectivenessMatrix (on the normalised axis)."""
     a = np.asarray(axis, dtype=float)
     n = float(np.linalg.norm(a))
-    if not n > _FLT_EPSILON:
+    if not n > FLT_EPSILON:
         return True  # a zero axis gives a zero column anyway
     a = a / n
     return abs(a[0]) < 0.1 and abs(a[1]) < 0.1 and a[2] < -0.5
@@ -530,29 +530,4 @@ def px4_scales(B6: np.ndarray, *, normalize_rpy: bool) -> np.ndarray:
     B6 = as_float_array("B6", B6, ProblemError)
     if B6.ndim != 2 or B6.shape[0] != 6 or not np.isfinite(B6).all():
         raise ProblemError(f"B6: expected a finite 6 x m matrix, got shape {B6.shape}", field="B6")
-    m = B6.shape[1]
-    M = np.linalg.pinv(B6)  # (m, 6)
-    s = np.ones(6)
-    if normalize_rpy:
-        def rp_scale(col: np.ndarray) -> float:
-            n = int((np.abs(col) > 1e-3).sum())
-            return math.sqrt(float(col @ col) / (n / 2.0)) if n > 0 else 1.0
-
-        s_rp = max(rp_scale(M[:, 0]), rp_scale(M[:, 1]))
-        s_yaw = float(M[:, 2].max()) if m else 1.0
-        if s_rp > _FLT_EPSILON:
-            s[0] = s[1] = s_rp
-        if s_yaw > _FLT_EPSILON:
-            s[2] = s_yaw
-    # each force axis its own scale: the mean |M_i,axis| over the effectors acting on it; an axis no
-    # effector acts on takes z's scale (z first, 1 when nothing acts on z either)
-    s_z = 1.0
-    for axis in (5, 4, 3):
-        magnitudes = np.abs(M[:, axis])
-        acting = int((magnitudes > _FLT_EPSILON).sum())
-        s[axis] = float(magnitudes.sum()) / acting if acting else s_z
-        if axis == 5:
-            s_z = s[5]
-    if not s[3] > _FLT_EPSILON:  # PX4 divides the three force columns only when x's scale is usable
-        s[3:6] = 1.0
-    return s
+    return mix_scales(np.linalg.pinv(B6), normalize_rpy=normalize_rpy)

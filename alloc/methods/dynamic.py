@@ -33,10 +33,10 @@ from .._linalg import sqrt_factor
 from ..exceptions import OptionError, ProblemError
 from ..domain import singular_within_round_off
 from ..problem import MAX_MAGNITUDE, MIN_WEIGHT, Problem, as_float_array, check_magnitude
-from ..options import weight
+from ..options import flag, weight
 from ..method import FloatArray, Method, register
 from .pseudo_inverse import distribution_matrix
-from .quadratic import LexicoLS
+from .quadratic import ACTIVE_SET, WARM_START_DOC, LexicoLS, check_warm_backend
 
 
 #: Range of the singular values of ``W1`` and ``W2``: their squares ``W'W`` and the sum
@@ -85,10 +85,12 @@ class DynamicAllocation(Method):
     options = {
         "W1": weight("weight of the distance to the static distribution u_s (scalar, vector or matrix; default I)"),
         "W2": weight("weight of the movement from u_prev (scalar, vector or matrix; default I)"),
+        "warm_start": flag(False, WARM_START_DOC + "; one working set each for calls with and without u_prev"),
     }
 
-    def __init__(self, problem: Problem, *, W1: object = None, W2: object = None) -> None:
+    def __init__(self, problem: Problem, *, W1: object = None, W2: object = None, warm_start: bool = False) -> None:
         super().__init__(problem)
+        warm = check_warm_backend(warm_start, ACTIVE_SET, "dynamic")
         p = problem
         m = p.m
         W1m = _weight(W1, m, "W1")
@@ -106,9 +108,9 @@ class DynamicAllocation(Method):
         c0 = p.up - self.P @ (p.B @ p.up)
         try:  # the stages check Q1 and Wd as a problem's Wu: name the options the caller gave
             self._static = LexicoLS(p, [np.arange(p.k)], [0.0], final=True, Wu=Q1,  # no u_prev
-                                    target=(c0, self.P, np.zeros((m, m))))
+                                    target=(c0, self.P, np.zeros((m, m))), warm_start=warm)
             self._dynamic = LexicoLS(p, [np.arange(p.k)], [0.0], final=True, Wu=Wd,
-                                     target=(self._M1 @ c0, self._M1 @ self.P, self._M2))
+                                     target=(self._M1 @ c0, self._M1 @ self.P, self._M2), warm_start=warm)
         except ProblemError as exc:
             if exc.field != "Wu":
                 raise

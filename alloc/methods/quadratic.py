@@ -30,7 +30,7 @@ import numpy as np
 from .._active_set import _HEAD, _MAXIT, lexico_batch_finished, lexico_call, lexico_solve, pack
 from .._linalg import check_real_option
 from ..exceptions import OptionError, SolverError
-from ..options import choice, levels, real
+from ..options import choice, flag, levels, real
 from ..problem import MAX_MAGNITUDE, Problem
 from ..method import FloatArray, Method, register
 from ..result import EXACT_RTOL, exact_tolerance
@@ -154,6 +154,35 @@ def _upper_sqrt(W: FloatArray) -> FloatArray:
     return np.linalg.cholesky(W).T
 
 
+#: the ``warm_start`` option of ``qp``, ``wls`` and ``dynamic`` (compiled active set only)
+WARM_START_DOC = ("keep the last call's working set and start the next call from it (answers agree with a cold "
+                  "call to round-off, not bit for bit; refused on ill-conditioned problems)")
+
+
+def check_warm_start(A: FloatArray, Wu: FloatArray) -> None:
+    """Refuse ``warm_start`` (OptionError naming it) where the optimum is determined only to
+    round-off times a condition number above :data:`alloc._warm.WARM_COND_MAX`: a warm start
+    would end elsewhere.  The same rule as the C export's."""
+    from .._warm import WARM_COND_MAX, warm_conditioning
+
+    found = warm_conditioning(A, [Wu])
+    if found is not None:
+        worst, what = found
+        raise OptionError(f"warm_start: the problem's {what} has condition number {worst:.2g}, above "
+                          f"{WARM_COND_MAX:g}: its optimum is determined only to round-off times that, so a "
+                          "warm start would end elsewhere; allocate cold (warm_start=False)", field="warm_start")
+
+
+def check_warm_backend(warm_start: bool, backend: str, method: str) -> bool:
+    """``warm_start`` as a bool; True only with the compiled active set (OptionError naming it)."""
+    if not isinstance(warm_start, (bool, np.bool_)):
+        raise OptionError(f"{method}: warm_start must be True or False, got {warm_start!r}", field="warm_start")
+    if warm_start and backend != ACTIVE_SET:
+        raise OptionError(f"warm_start: only the compiled active set keeps a working set ({method} backend "
+                          f"{backend!r} does not); use backend='active_set'", field="warm_start")
+    return bool(warm_start)
+
+
 class LexicoLS:
     """Data and state of the compiled lexicographic least-squares solver (:mod:`alloc._active_set`).
 
@@ -162,12 +191,13 @@ class LexicoLS:
     ``min (u - up)' Wu (u - up)`` with every moment held (stage 2, Eq 1.21).  With
     ``target = (d, Kv, Ku)`` the preference point of a call is ``d + Kv v`` (``+ Ku u_prev``
     with rate limits) instead of the problem's ``up`` (``dynamic``).  The packed arrays
-    carry the warm-start working set and the factorisation cache from call to call.
+    carry the factorisation cache from call to call and, with ``warm_start``, the last single
+    call's answer and working set (:data:`WARM_START_DOC`).
     """
 
     def __init__(self, problem: Problem, groups: Sequence[np.ndarray], gammas: Sequence[float],
                  final: bool, Wu: FloatArray | None = None,
-                 target: tuple[FloatArray, FloatArray, FloatArray] | None = None) -> None:
+                 target: tuple[FloatArray, FloatArray, FloatArray] | None = None, warm_start: bool = False) -> None:
         p = problem
         perm = np.concatenate([np.asarray(g, dtype=np.int64) for g in groups])
         T = np.zeros((p.k, p.k))
@@ -182,9 +212,11 @@ class LexicoLS:
         # start of a cold call: the Eq 1.23 weighted pseudo-inverse in the same Wu metric
         P0 = distribution_matrix(p if Wu is p.Wu else p.replace(Wu=Wu))
         up, Kv, Ku = (p.up, None, None) if target is None else target
+        if warm_start:
+            check_warm_start(A, Wu)
         self._state = pack(A, T, perm, starts, np.asarray(gammas, dtype=float), final, Wu, _is_diagonal(Wu),
                            up, p.B, P0, p.umin, p.umax, p.rate_min, p.rate_max, 50 + 10 * (p.m + p.k),
-                           MAX_MAGNITUDE, EXACT_RTOL, Kv, Ku)
+                           MAX_MAGNITUDE, EXACT_RTOL, Kv, Ku, warm=bool(warm_start))
         #: ``(kernel, state)``: the allocator's one-call fast path, ``kernel(*state, v, u_prev, dt)``
         self.packed = (lexico_call, self._state)
 
@@ -252,16 +284,19 @@ class _ActiveSetOrBackend(Method):
 class TwoStageQP(_ActiveSetOrBackend):
     equation = "Eqs 1.20-1.21"
     summary = "stage 1 min moment error (Wv), stage 2 min (u-up)'Wu(u-up) at that moment"
-    options = {"backend": _AS_BACKEND, "priorities": levels("priority level per axis; larger levels are met first")}
+    options = {"backend": _AS_BACKEND, "priorities": levels("priority level per axis; larger levels are met first"),
+               "warm_start": flag(False, WARM_START_DOC)}
 
-    def __init__(self, problem: Problem, *, backend: str = ACTIVE_SET, priorities: Sequence[int] | None = None) -> None:
+    def __init__(self, problem: Problem, *, backend: str = ACTIVE_SET, priorities: Sequence[int] | None = None,
+                 warm_start: bool = False) -> None:
         super().__init__(problem)
         self.backend = _backend_choice(backend, "qp")
+        warm = check_warm_backend(warm_start, self.backend, "qp")
         self.groups = check_priorities(priorities, problem.k) or [np.arange(problem.k)]
         if self.backend != ACTIVE_SET:
             self._impl = _SolverTwoStageQP(problem, backend=self.backend, priorities=priorities)
             return
-        self._impl = LexicoLS(problem, self.groups, [0.0] * len(self.groups), final=True)
+        self._impl = LexicoLS(problem, self.groups, [0.0] * len(self.groups), final=True, warm_start=warm)
         self.packed = self.packed_rate = self._impl.packed
 
 
@@ -271,17 +306,20 @@ class WeightedLeastSquares(_ActiveSetOrBackend):
     summary = "min (Bu-v)'Wv(Bu-v) + gamma^2 (u-up)'Wu(u-up) over the limits"
     options = {"backend": _AS_BACKEND,
                "gamma": real(1e-4, "weight of the preference term (at most 1e6 on the qpsolvers/DAQP backends)",
-                             low=0.0, low_open=True, high=MAX_MAGNITUDE)}
+                             low=0.0, low_open=True, high=MAX_MAGNITUDE),
+               "warm_start": flag(False, WARM_START_DOC)}
 
-    def __init__(self, problem: Problem, *, backend: str = ACTIVE_SET, gamma: float = 1e-4) -> None:
+    def __init__(self, problem: Problem, *, backend: str = ACTIVE_SET, gamma: float = 1e-4,
+                 warm_start: bool = False) -> None:
         super().__init__(problem)
         self.backend = _backend_choice(backend, "wls")
+        warm = check_warm_backend(warm_start, self.backend, "wls")
         # the valid domain's bound on numbers: gamma = 1e300 squared is inf (every call a fallback)
         g = check_real_option(gamma, "wls", "gamma", 0.0, MAX_MAGNITUDE, open_lo=True)
         self.gamma = g
         if self.backend != ACTIVE_SET:
             self._impl = _SolverWLS(problem, backend=self.backend, gamma=g)
             return
-        self._impl = LexicoLS(problem, [np.arange(problem.k)], [g], final=False)
+        self._impl = LexicoLS(problem, [np.arange(problem.k)], [g], final=False, warm_start=warm)
         self.packed = self.packed_rate = self._impl.packed
 

@@ -189,7 +189,7 @@ def seed_length_sweep(seeds: int = 3) -> list[Spec]:
     criteria (:mod:`sim.criteria`, in every row): every method (``da`` for its three identical
     backends, :data:`SAME_AS_DA`) and ``static``, blind and told; :data:`SEED_LENGTH_FAILURES`;
     the crossover-model pilot at the seed's frame rate; ``seeds`` noise seeds.  Sized for 2
-    shared cores (345 runs, about 20 CPU minutes at 3 seeds); no open loop.  Ordered seed by seed."""
+    shared cores (375 runs, about 22 CPU minutes at 3 seeds); no open loop.  Ordered seed by seed."""
     seed_list = list(range(1, seeds + 1))
     methods = [m for m in all_methods() if m not in SAME_AS_DA]
     specs: list[Spec] = []

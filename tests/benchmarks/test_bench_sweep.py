@@ -128,10 +128,12 @@ def test_recovery_time() -> None:
 
 def test_seed_length_sweep_axes() -> None:
     """The seed's run lengths (ICE 40 s, failure at 20 s; HARV lat-dir 50 s, failure at 25 s), crossover pilot."""
+    import alloc
     from benchmarks.compare.sweep import SAME_AS_DA, SEED_LENGTH_FAILURES, seed_length_sweep
 
     specs = seed_length_sweep(3)
-    assert len({s["id"] for s in specs}) == len(specs) == (2 * 11 + 1) * 3 * (2 + 3)  # 11 methods x 2 arms + static
+    methods = len([m for m in alloc.methods() if m not in SAME_AS_DA])
+    assert len({s["id"] for s in specs}) == len(specs) == (2 * methods + 1) * 3 * (2 + 3)  # methods x 2 arms + static
     assert {(s["scenario"], s["duration"], s["failure_time"]) for s in specs} == {("ice", 40.0, 20.0),
                                                                                ("harv_latdir", 50.0, 25.0)}
     assert {s["failure"] for s in specs if s["scenario"] == "harv_latdir"} == set(SEED_LENGTH_FAILURES["harv_latdir"])
