@@ -228,7 +228,8 @@ class FailureDetector(Isolation):
         if self.effector_lag is not None and not ((self.effector_lag >= 0) & (self.effector_lag <= 3600)).all():
             raise OptionError("effector_lag: expected seconds in [0, 3600] for every effector")
         self._learner = (None if self.robust is None else
-                         NominalLearner(self.robust, Bn, self.effector_lag, self.noise_correlation, self.dt))
+                         NominalLearner(self.robust, Bn, problem.umax - problem.umin, self.effector_lag,
+                                        self.noise_correlation, self.dt))
         self._design()
         self.health: dict[str, EffectorHealth] = {}
         self.detections: list[Detection] = []

@@ -118,12 +118,12 @@ class RobustSettings:
             out = cls(**value)
         else:
             raise OptionError(f"robust: expected true, a mapping of settings or None, got {type(value).__name__}")
-        setting_real("robust.model_uncertainty", out.model_uncertainty, 0.0, 10.0)
-        setting_real("robust.model_memory", out.model_memory, 0.0, 1e6, lo_open=True)
-        setting_real("robust.scale_memory", out.scale_memory, 0.0, 1e6, lo_open=True)
-        setting_real("robust.huber", out.huber, 0.5, 100.0)
+        setting_real("robust/model_uncertainty", out.model_uncertainty, 0.0, 10.0)
+        setting_real("robust/model_memory", out.model_memory, 0.0, 1e6, lo_open=True)
+        setting_real("robust/scale_memory", out.scale_memory, 0.0, 1e6, lo_open=True)
+        setting_real("robust/huber", out.huber, 0.5, 100.0)
         if isinstance(out.lags, bool) or not isinstance(out.lags, (int, np.integer)) or not 1 <= out.lags <= 256:
-            raise OptionError(f"robust.lags: expected an integer in [1, 256], got {out.lags!r}")
+            raise OptionError(f"robust/lags: expected an integer in [1, 256], got {out.lags!r}")
         return out
 
 
@@ -137,12 +137,18 @@ class NominalLearner:
     """The learnt residual model of one detector (see the module docstring).
 
     ``B`` (k, m) the nominal effectiveness as the detector whitens it (rows divided by the
-    stated noise), ``lag`` (m,) the actuators' lags in seconds or None (no rate regressors),
-    ``rho`` the stated autocorrelation (lags 1..) or None (white), ``dt`` the sample time.
+    stated noise), ``span`` (m,) each effector's travel, ``lag`` (m,) the actuators' lags in
+    seconds or None (no rate regressors), ``rho`` the stated autocorrelation (lags 1..) or None
+    (white), ``dt`` the sample time.
+
+    Units: the parameters are kept relative -- regressors divided by the travel, each axis's
+    parameters by its largest ``|b_ij| span_j`` -- so the prior's standard deviations lie in
+    ``[1e-12, F]`` and the arithmetic stays in range over the detector's whole domain
+    (``|B / noise| <= 1e50``, travels up to 1e50).
     """
 
-    def __init__(self, settings: RobustSettings, B: np.ndarray, lag: np.ndarray | None, rho: np.ndarray | None,
-                 dt: float) -> None:
+    def __init__(self, settings: RobustSettings, B: np.ndarray, span: np.ndarray, lag: np.ndarray | None,
+                 rho: np.ndarray | None, dt: float) -> None:
         self.settings = settings
         k, m = B.shape
         self.k, self.m, self.dt = k, m, dt
@@ -154,13 +160,18 @@ class NominalLearner:
                               f"at most {MAX_LEARNER_FLOPS:.3g} (fewer effectors, or no effector_lag)")
         self.p = p
         F = settings.model_uncertainty
-        scale = np.abs(B) * F
+        span = np.where(np.asarray(span, dtype=float) > 0, span, 1.0)
+        self.span = np.concatenate([span, span]) if self.lagged else span  # (p,)
+        with np.errstate(over="ignore", under="ignore"):
+            moved = np.abs(B) * span[None, :]
+            row = moved.max(axis=1, initial=0.0)
+        self.row = np.where((row > 0) & np.isfinite(row), row, 1.0)  # (k,)
+        rel = np.minimum(moved / self.row[:, None], 1.0)
+        scale = rel * F
         if self.lagged:
-            scale = np.hstack([scale, np.abs(B) * F * lag[None, :]])
-        # entries the model says are zero stay zero (a scaled column has no new entries); the
-        # floor keeps J0 finite, 1e-9 of the row's largest prior std
-        floor = 1e-9 * np.maximum(scale.max(axis=1, initial=0.0), 1e-300)[:, None]
-        self.prior_var = np.maximum(scale, floor) ** 2  # (k, p)
+            scale = np.hstack([scale, rel * F * np.minimum(lag, 3600.0)[None, :]])
+        # entries the model says are zero stay (nearly) zero: a scaled column has no new entries
+        self.prior_var = np.maximum(scale, 1e-12) ** 2  # (k, p)
         self.J = np.zeros((k, p, p))
         self.J[:, np.arange(p), np.arange(p)] = 1.0 / self.prior_var
         self.h = np.zeros((k, p))
@@ -182,10 +193,11 @@ class NominalLearner:
 
     # ------------------------------------------------------------------ per sample
     def regressor(self, known: np.ndarray) -> np.ndarray:
+        """The sample's regressors in travel units (positions, and rates when lagged)."""
         if not self.lagged:
-            return known
+            return known / self.span
         rate = np.zeros(self.m) if self.u_prev is None else (known - self.u_prev) / self.dt
-        return np.concatenate([known, rate])
+        return np.concatenate([known, rate]) / self.span
 
     def scale(self) -> np.ndarray:
         """The noise scale, in units of the stated level (at least 1)."""
@@ -196,8 +208,8 @@ class NominalLearner:
     def residual(self, r0: np.ndarray, phi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(r, s)``: the innovation of the stated-whitened nominal residual ``r0`` in units of the
         predictive standard deviation, and that standard deviation (in stated units)."""
-        pred = self.theta @ phi
-        var = self.scale() ** 2 + np.einsum("p,kpq,q->k", phi, self.cov, phi)
+        pred = self.row * (self.theta @ phi)
+        var = self.scale() ** 2 + self.row ** 2 * np.einsum("p,kpq,q->k", phi, self.cov, phi)
         s = np.sqrt(var)
         return (r0 - pred) / s, s
 
@@ -217,14 +229,14 @@ class NominalLearner:
         self.history[0] = rc
         if model:
             lam = self.lam_model
-            s2 = self.scale() ** 2
-            J0 = 1.0 / self.prior_var
-            outer = np.outer(phi, phi)
-            self.J *= lam
-            self.J[:, np.arange(self.p), np.arange(self.p)] += (1.0 - lam) * J0
-            self.J += outer[None, :, :] / s2[:, None, None]
-            self.h = lam * self.h + phi[None, :] * (r0 / s2)[:, None]
-            self._solve()
+            w = self.row / self.scale() ** 2  # r0_i = row_i theta_i . phi + noise of variance s_i^2
+            J = self.J * lam
+            J[:, np.arange(self.p), np.arange(self.p)] += (1.0 - lam) / self.prior_var
+            J += np.outer(phi, phi)[None, :, :] * (w * self.row)[:, None, None]
+            hv = lam * self.h + phi[None, :] * (w * r0)[:, None]
+            if np.isfinite(J).all() and np.isfinite(hv).all():  # else: a sample beyond range teaches nothing
+                self.J, self.h = J, hv
+                self._solve()
         self.u_prev = known.copy()
         self.samples += 1
 
@@ -243,7 +255,7 @@ class NominalLearner:
     # ------------------------------------------------------------------ the test's view
     def effectiveness(self, B: np.ndarray) -> np.ndarray:
         """The learnt effectiveness ``B + delta`` (stated-whitened rows) of the known positions."""
-        return B + self.theta[:, : self.m]
+        return B + self.row[:, None] * self.theta[:, : self.m] / self.span[None, : self.m]
 
     def correlation(self, n: int) -> np.ndarray | None:
         """The autocorrelation (lags ``1..n-1``) to whiten an ``n``-sample window with."""
@@ -275,20 +287,20 @@ class NominalLearner:
         if not isinstance(d, dict):
             raise StateError("robust: expected a mapping")
         k, p, L = self.k, self.p, self.settings.lags
-        self.J = state_array("robust.J", d.get("J"), (k, p, p))
+        self.J = state_array("robust/J", d.get("J"), (k, p, p))
         if not np.allclose(self.J, np.swapaxes(self.J, 1, 2), rtol=0.0, atol=0.0):
-            raise StateError("robust.J: not symmetric")
-        self.h = state_array("robust.h", d.get("h"), (k, p))
-        self.sum_abs = state_array("robust.sum_abs", d.get("sum_abs"), (k,))
-        self.sum_cl = state_array("robust.sum_cl", d.get("sum_cl"), (L,))
-        self.history = state_array("robust.history", d.get("history"), (L, k))
-        self.sum_c0 = float(state_array("robust.sum_c0", d.get("sum_c0"), ()))
-        self.weight = float(state_array("robust.weight", d.get("weight"), ()))
+            raise StateError("robust/J: not symmetric")
+        self.h = state_array("robust/h", d.get("h"), (k, p))
+        self.sum_abs = state_array("robust/sum_abs", d.get("sum_abs"), (k,))
+        self.sum_cl = state_array("robust/sum_cl", d.get("sum_cl"), (L,))
+        self.history = state_array("robust/history", d.get("history"), (L, k))
+        self.sum_c0 = float(state_array("robust/sum_c0", d.get("sum_c0"), ()))
+        self.weight = float(state_array("robust/weight", d.get("weight"), ()))
         most = 1.0 / (1.0 - self.lam_scale)  # the discounted count's limit
         if not (self.sum_c0 >= 0 and 0 <= self.weight <= most * (1 + 1e-9) and (self.sum_abs >= 0).all()):
             raise StateError(f"robust: sum_c0 and sum_abs must be non-negative, weight in [0, {most:g}]")
-        self.u_prev = None if d.get("u_prev") is None else state_array("robust.u_prev", d["u_prev"], (self.m,))
-        self.samples = state_count("robust.samples", d.get("samples", 0))
+        self.u_prev = None if d.get("u_prev") is None else state_array("robust/u_prev", d["u_prev"], (self.m,))
+        self.samples = state_count("robust/samples", d.get("samples", 0))
         self._solve()
 
 

@@ -125,9 +125,9 @@ def test_state_round_trip_continues_bit_for_bit():
 
 
 @pytest.mark.parametrize("robust, field", [
-    ({"huber": -1.0}, "robust.huber"), ({"model_memory": 0.0}, "robust.model_memory"),
-    ({"lags": 0}, "robust.lags"), ({"colour": 1}, "robust"), ("yes", "robust"),
-    ({"model_uncertainty": float("nan")}, "robust.model_uncertainty"),
+    ({"huber": -1.0}, "robust/huber"), ({"model_memory": 0.0}, "robust/model_memory"),
+    ({"lags": 0}, "robust/lags"), ({"colour": 1}, "robust"), ("yes", "robust"),
+    ({"model_uncertainty": float("nan")}, "robust/model_uncertainty"),
 ])
 def test_bad_settings_name_their_field(robust, field):
     problem = alloc.Problem(np.eye(2), -np.ones(2), np.ones(2))

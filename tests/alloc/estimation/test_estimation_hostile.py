@@ -266,11 +266,14 @@ def freq_case(rng: np.random.Generator, counts: Counter) -> None:
 
 
 DET_FIELDS = {"problem", "noise_std", "sample_time", "false_alarm_rate", "window", "hop", "position_noise_std",
-              "min_confidence", "noise_correlation", "long_window"}
+              "min_confidence", "noise_correlation", "long_window", "robust", "effector_lag", "robust/lags",
+              "robust/model_uncertainty"}
 DET_STATE_FIELDS = DET_FIELDS | {"state", "kind", "health", "samples", "last_time", "alarm_count",
                                  "unisolated_count", "since_test", "pending", "rate_state", "buffer", "detections",
                                  "U", "K", "R", "Q", "T",
-                                 "withdrawals", "unpopped", "active"}  # the withdrawal's state (FailureDetector.withdraw)
+                                 "withdrawals", "unpopped", "active", "Rc", "robust", "robust/J", "robust/h",
+                                 "robust/sum_abs", "robust/sum_cl", "robust/sum_c0", "robust/weight",
+                                 "robust/history", "robust/u_prev", "robust/samples", "effector_lag"}  # the withdrawal's state (FailureDetector.withdraw)
 
 
 def hostile_problem(rng: np.random.Generator) -> alloc.Problem:
@@ -293,6 +296,11 @@ def det_case(rng: np.random.Generator, counts: Counter) -> None:
         "position_noise_std": None if rng.random() < 0.7 else 0.1, "min_confidence": 0.95,
         "noise_correlation": None if rng.random() < 0.7 else [0.3, 0.1],
         "long_window": None if rng.random() < 0.7 else 0.5})
+    if rng.random() < 0.4:  # the learnt nominal model (alloc.estimation.robust)
+        kwargs["robust"] = True if rng.random() < 0.7 else {"lags": int(rng.integers(1, 20)),
+                                                            "model_uncertainty": float(rng.uniform(0, 2))}
+        if rng.random() < 0.5:
+            kwargs["effector_lag"] = float(rng.uniform(0, 0.3))
     det = attempt(lambda: FailureDetector(**kwargs), DET_FIELDS, counts, "FailureDetector()")
     if det is None:
         return
