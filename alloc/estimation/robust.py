@@ -233,7 +233,11 @@ class NominalLearner:
             J = self.J * lam
             J[:, np.arange(self.p), np.arange(self.p)] += (1.0 - lam) / self.prior_var
             J += np.outer(phi, phi)[None, :, :] * (w * self.row)[:, None, None]
-            hv = lam * self.h + phi[None, :] * (w * r0)[:, None]
+            # Huber's M-estimate: a sample teaches at most ``huber`` predictive standard deviations
+            # (a failure's first samples, before its alarm, would otherwise move the model by
+            # their whole size -- a hard-over is hundreds of them)
+            r0_taught = r0 - (r - rc) * s
+            hv = lam * self.h + phi[None, :] * (w * r0_taught)[:, None]
             if np.isfinite(J).all() and np.isfinite(hv).all():  # else: a sample beyond range teaches nothing
                 self.J, self.h = J, hv
                 self._solve()
