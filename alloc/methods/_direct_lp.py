@@ -17,6 +17,7 @@ import math
 
 import numpy as np
 
+from .. import _ray_simplex
 from .._kernels import facet_polish, matvec, rmatvec
 from ..exceptions import SolverError
 from ..method import FloatArray, Method
@@ -34,9 +35,13 @@ class RayLP(Method):
     equation = "Eqs 1.15-1.17"
     summary = "largest admissible moment along v as an LP, scaled back when attainable"
 
-    def __init__(self, problem: Problem, *, backend: str = "daqp") -> None:
+    def __init__(self, problem: Problem, *, backend: str = "daqp", simplex: bool = False) -> None:
         super().__init__(problem)
         name = check_backend(backend, backends(lp=True), "da")
+        #: the compiled ray simplex (:mod:`alloc._ray_simplex`) answers first; the backend's
+        #: model only where it stops at its iteration bound or on a singular basis
+        self.simplex = bool(simplex)
+        self.simplex_fallbacks = 0
         p = problem
         # The LP is solved in scaled variables so that its data are O(1) whatever the
         # magnitudes of B and the limits (1e-30 to 1e48 in the adversarial suite):
@@ -66,6 +71,15 @@ class RayLP(Method):
         self._u0 = np.array(p.up)  # base point without rate limits (up is within the limits)
         self._Bu0 = p.B @ self._u0
         self._rhs0 = self._QBs @ (self._u0 - self._c0)
+        self._x0 = self._to_x(self._u0)
+        if self.simplex:
+            kq = self._Q.shape[0]
+            self._F = _ray_simplex.ray_matrix(self._A[:, :-1])
+            self._xlo, self._xhi = self._lb[:-1].copy(), self._ub[:-1].copy()
+            nw, ni = _ray_simplex.work_sizes(kq, p.m)
+            self._work, self._iwork = np.empty(nw), np.empty(ni, dtype=np.int64)
+            # a ray crosses few vertices; the bound only stops a pathological pivot path
+            self._max_pivots = 50 * (kq + 1) + 4 * p.m
         z = self._rhs0  # feasible at set-up: u = up, t = 0
         try:
             self._model = make_backend(name, None, self._c, self._A, z, z, self._lb, self._ub)
@@ -108,7 +122,23 @@ class RayLP(Method):
             lb, ub = self._lb.copy(), self._ub.copy()
             lb[:-1], ub[:-1] = self._to_x(lo), self._to_x(hi)
             rhs = matvec(self._QBs, u0 - self._c0)
-        x, it = self._model.solve(A=A, lb=lb, ub=ub, bl=rhs, bu=rhs)
+        x = None
+        if self.simplex:
+            # writable, contiguous arrays only: one compiled signature (a pickled copy's arrays are writable)
+            if lb is self._lb:
+                x0, xlo, xhi = self._x0, self._xlo, self._xhi
+            else:
+                xlo, xhi = lb[:-1].copy(), ub[:-1].copy()
+                x0 = np.minimum(np.maximum(self._to_x(u0), xlo), xhi)
+            xs = np.empty(p.m)
+            code, t, it = _ray_simplex.solve_ray(self._F, -A[:, -1], x0, xlo, xhi, float(ub[-1]),
+                                                 self._max_pivots, self._work, self._iwork, xs)
+            if code == _ray_simplex.OPTIMAL:
+                x = np.append(xs, t)
+            else:
+                self.simplex_fallbacks += 1
+        if x is None:
+            x, it = self._model.solve(A=A, lb=lb, ub=ub, bl=rhs, bu=rhs)
         ustar = np.minimum(np.maximum(self._c0 + self._D * x[:-1], lo), hi)
         a = float(x[-1]) * (self._sigma / norm)
         if self._Q.shape[0] == p.k:

@@ -66,8 +66,9 @@ class DirectAllocation(RayLP):
 
     equation = "Eqs 1.15-1.17"
     summary = "largest admissible moment along v (AMS boundary), scaled back when attainable"
-    options = {"backend": choice("auto", "'auto': the cheaper of facet search and LP by a measured cost "
-                                         "model; 'facet'; or an LP solver", lambda: ["auto", "facet", *backends(lp=True)])}
+    options = {"backend": choice("auto", "'auto': the cheaper of facet search and the compiled ray simplex by "
+                                         "a measured cost model; 'facet'; 'simplex'; or an LP solver",
+                                 lambda: ["auto", "facet", "simplex", *backends(lp=True)])}
 
     @classmethod
     def facet_subsets(cls, problem: Problem, options: dict[str, Any]) -> int:
@@ -91,7 +92,11 @@ class DirectAllocation(RayLP):
                 Method.__init__(self, problem)
                 self._facet = FacetSearch(problem)
                 return
-            backend = "daqp"
+            backend = "simplex"
+        if backend == "simplex":
+            # the compiled ray simplex, DAQP's model behind it (alloc._ray_simplex)
+            super().__init__(problem, backend="daqp", simplex=True)
+            return
         super().__init__(problem, backend=backend)
 
     def solve_batch(self, V, lo, hi):

@@ -160,7 +160,8 @@ class FacetSearch(Method):
         self.build_time = time.perf_counter() - t0
 
     def _use_lp(self, reason: str) -> None:
-        self._lp = RayLP(self.problem, backend="daqp")  # the LP formulation of the same problem
+        # the LP formulation of the same problem (the compiled ray simplex, DAQP behind it)
+        self._lp = RayLP(self.problem, backend="daqp", simplex=True)
         self.lp_reason = reason
 
     # ------------------------------------------------------------ tables
