@@ -144,12 +144,45 @@ def _iterate_long(T, basis, status, x, lb, ub, d, budget):  # pragma: no cover -
     return False, budget, flips
 
 
+@njit(cache=True, nogil=True, _nrt=False)
+def _crash(F, G, cnorm, q, hi, basis, status, m, jt, n0):  # pragma: no cover - compiled
+    """A starting basis near the optimal facet: ``t`` and the ``k - 1`` moving effectors whose
+    columns lie nearest the tangent plane where the ray leaves the ellipsoid ``{A z : |z| <= 1}``
+    that approximates the set (normal ``G q``, ``G = (A A')^-1``).  Every variable is still at
+    zero (``u = u0``, ``t = 0``), so the basis is feasible whatever it is; a good one saves the
+    walk across the set's facets (32-42 pivots from the artificial basis at k = 4, m = 96)."""
+    k = F.shape[0]
+    for i in range(k):
+        n0[i] = 0.0
+        for r in range(k):
+            n0[i] += G[i, r] * q[r]
+    basis[0] = jt
+    status[jt] = _BASIC
+    for slot in range(1, k):
+        best, pick = np.inf, -1
+        for j in range(m):
+            if status[j] == _BASIC or not (hi[j] > 0.0 or hi[m + j] > 0.0) or not cnorm[j] > 0.0:
+                continue
+            s = 0.0
+            for i in range(k):
+                s += n0[i] * F[i, j]
+            s = abs(s) / cnorm[j]
+            if s < best:
+                best, pick = s, j
+        if pick < 0:
+            return False
+        basis[slot] = pick
+        status[pick] = _BASIC
+    return True
+
+
 @njit(cache=True, nogil=True)
-def solve_ray(F, q, x0, lb, ub, t_max, max_iter, work, iwork, x):  # pragma: no cover - compiled
+def solve_ray(F, q, x0, lb, ub, t_max, max_iter, work, iwork, x, G, cnorm):  # pragma: no cover - compiled
     """Maximise ``t`` (see the module docstring); write ``x``; return ``(code, t, pivots)``.
 
     ``F`` from :func:`ray_matrix` (its column ``2 m`` is overwritten with ``-q``), ``x0``
-    within ``[lb, ub]``; ``work``/``iwork`` of :func:`work_sizes`.
+    within ``[lb, ub]``; ``work``/``iwork`` of :func:`work_sizes`; ``G = (A A')^-1`` and the
+    columns' norms ``cnorm`` for the starting basis (:func:`_crash`).
     """
     k, N = F.shape
     m = x0.shape[0]
@@ -181,14 +214,21 @@ def solve_ray(F, q, x0, lb, ub, t_max, max_iter, work, iwork, x):  # pragma: no 
     hi[jt] = t_max
     cost[jt] = -1.0
     for i in range(k):
-        j = jt + 1 + i
-        hi[j] = 0.0
-        basis[i] = j
-        status[j] = _BASIC
+        hi[jt + 1 + i] = 0.0
         b[i] = 0.0
-        for jj in range(N):
-            T[i, jj] = F[i, jj]
-    _reduced_costs(T, basis, cost, d)
+    # (d's first k entries hold the ellipsoid normal until _refactor writes the reduced costs)
+    crashed = _crash(F, G, cnorm, q, hi, basis, status, m, jt, d[:k]) and _refactor(F, basis, status, xs, b, cost, T, d, W)
+    if not crashed:  # a singular guess: the artificial basis, always valid
+        for j in range(N):
+            status[j] = _LOWER
+            xs[j] = 0.0
+        for i in range(k):
+            j = jt + 1 + i
+            basis[i] = j
+            status[j] = _BASIC
+            for jj in range(N):
+                T[i, jj] = F[i, jj]
+        _reduced_costs(T, basis, cost, d)
     pivots = 0
     since = 0
     while True:
@@ -224,3 +264,197 @@ def solve_ray(F, q, x0, lb, ub, t_max, max_iter, work, iwork, x):  # pragma: no 
     for j in range(m):
         x[j] = min(max(x0[j] + xs[j] - xs[m + j], lb[j]), ub[j])
     return OPTIMAL, max(xs[jt], 0.0), pivots
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def _solve_small(M, rhs, out, piv_tol):  # pragma: no cover - compiled
+    """``out = M^-1 rhs`` by Gaussian elimination with partial pivoting (``M`` is overwritten);
+    False when a pivot is at most ``piv_tol``."""
+    n = M.shape[0]
+    for i in range(n):
+        out[i] = rhs[i]
+    for c in range(n):
+        p, best = c, abs(M[c, c])
+        for i in range(c + 1, n):
+            if abs(M[i, c]) > best:
+                p, best = i, abs(M[i, c])
+        if not best > piv_tol:
+            return False
+        if p != c:
+            for j in range(n):
+                M[c, j], M[p, j] = M[p, j], M[c, j]
+            out[c], out[p] = out[p], out[c]
+        for i in range(c + 1, n):
+            f = M[i, c] / M[c, c]
+            if f != 0.0:
+                for j in range(c, n):
+                    M[i, j] -= f * M[c, j]
+                out[i] -= f * out[c]
+    for c in range(n - 1, -1, -1):
+        s = out[c]
+        for j in range(c + 1, n):
+            s -= M[c, j] * out[j]
+        out[c] = s / M[c, c]
+    return True
+
+
+@njit(cache=True, nogil=True)
+def dual_ray(A, q, x0, lb, ub, G, cnorm, max_iter, x):  # pragma: no cover - compiled
+    """The ray LP from its dual side; write ``x``; return ``(code, t, iterations)``.
+
+    By LP duality ``t* = min h(y)`` over ``y . q = 1``, ``h(y) = sum_j max(y.a_j hi_j,
+    -y.a_j lo_j)`` (``hi = ub - x0``, ``lo = x0 - lb``): a convex piecewise-linear function of
+    the facet normal ``y``.  A vertex holds ``k - 1`` columns ``F`` with ``y . a_j = 0`` (a facet's
+    free effectors); every other effector sits at the bound the sign of ``y . a_j`` picks, and
+    ``[A_F, -q] (w_F, t) = -A_N w_N`` gives the free ones.  When one of them is outside its
+    range it leaves ``F``: ``y`` moves along the edge that makes it reach the violated bound, past
+    every kink (bound flip) while ``h`` still decreases, and the column at the kink where it
+    stops increasing enters (the long-step dual ratio test).  Each step is O(k m + m log m +
+    k^3), and the walk starts at the facet an ellipsoid approximation predicts (:func:`_crash`'s
+    rule), so a call takes a few steps where the primal walk from ``u0`` took one pivot per
+    few effectors.  Codes as :func:`solve_ray`'s; any failure is left to that solver.
+    """
+    k, m = A.shape
+    if k < 1:
+        return NUMERICAL, 0.0, 0
+    hi = np.empty(m)
+    lo = np.empty(m)
+    moving = np.empty(m, dtype=np.bool_)
+    for j in range(m):
+        hi[j] = max(ub[j] - x0[j], 0.0)
+        lo[j] = max(x0[j] - lb[j], 0.0)
+        moving[j] = hi[j] + lo[j] > 0.0 and cnorm[j] > 0.0
+    F = np.empty(max(k - 1, 0), dtype=np.int64)
+    inF = np.zeros(m, dtype=np.bool_)
+    n0 = G @ q
+    for slot in range(k - 1):
+        best, pick = np.inf, -1
+        for j in range(m):
+            if inF[j] or not moving[j]:
+                continue
+            s = 0.0
+            for i in range(k):
+                s += n0[i] * A[i, j]
+            s = abs(s) / cnorm[j]
+            if s < best:
+                best, pick = s, j
+        if pick < 0:
+            return NUMERICAL, 0.0, 0
+        F[slot] = pick
+        inF[pick] = True
+    M = np.empty((k, k))
+    e = np.zeros(k)
+    y = np.empty(k)
+    delta = np.empty(k)
+    z = np.empty(k)
+    rhs = np.empty(k)
+    ya = np.empty(m)
+    da = np.empty(m)
+    w = np.empty(m)
+    brk = np.empty(m)
+    scale = 0.0
+    for j in range(m):
+        scale = max(scale, cnorm[j])
+    tol = 1e-12 * max(scale, 1.0)
+    # y: y . a_F = 0, y . q = 1
+    for s in range(k - 1):
+        for i in range(k):
+            M[s, i] = A[i, F[s]]
+    for i in range(k):
+        M[k - 1, i] = q[i]
+    e[k - 1] = 1.0
+    if not _solve_small(M, e, y, tol):
+        return NUMERICAL, 0.0, 0
+    for it in range(max_iter):
+        for j in range(m):
+            s = 0.0
+            for i in range(k):
+                s += y[i] * A[i, j]
+            ya[j] = s
+            w[j] = 0.0 if inF[j] or not moving[j] else (hi[j] if s > 0.0 else (-lo[j] if s < 0.0 else 0.0))
+        # the free effectors and t: [A_F, -q] (w_F, t) = -A_N w_N
+        for i in range(k):
+            s = 0.0
+            for j in range(m):
+                if w[j] != 0.0:
+                    s -= A[i, j] * w[j]
+            rhs[i] = s
+            for c in range(k - 1):
+                M[i, c] = A[i, F[c]]
+            M[i, k - 1] = -q[i]
+        if not _solve_small(M, rhs, z, tol):
+            return NUMERICAL, 0.0, it
+        # the most violated free effector (a tie at y . a_j = 0 counts as no violation)
+        r, worst, sgn = -1, 0.0, 0.0
+        for c in range(k - 1):
+            j = F[c]
+            span = 1e-9 * (1.0 + hi[j] + lo[j])
+            if z[c] - hi[j] > max(worst, span):
+                r, worst, sgn = c, z[c] - hi[j], 1.0
+            elif -lo[j] - z[c] > max(worst, span):
+                r, worst, sgn = c, -lo[j] - z[c], -1.0
+        if r < 0:
+            t = z[k - 1]
+            if not (t >= -1e-9) or not np.isfinite(t):
+                return NUMERICAL, 0.0, it
+            for c in range(k - 1):
+                w[F[c]] = z[c]
+            for j in range(m):
+                x[j] = min(max(x0[j] + w[j], lb[j]), ub[j])
+            return OPTIMAL, max(t, 0.0), it
+        # direction: delta . a_F[r] = sgn, delta . a_F[other] = 0, delta . q = 0
+        for s in range(k - 1):
+            for i in range(k):
+                M[s, i] = A[i, F[s]]
+            e[s] = 0.0
+        for i in range(k):
+            M[k - 1, i] = q[i]
+        e[k - 1] = 0.0
+        e[r] = sgn
+        if not _solve_small(M, e, delta, tol):
+            return NUMERICAL, 0.0, it
+        e[r] = 0.0
+        e[k - 1] = 1.0
+        jr = F[r]
+        slope = hi[jr] if sgn > 0.0 else lo[jr]
+        nb = 0
+        for j in range(m):
+            if inF[j] or not moving[j]:
+                da[j] = 0.0
+                continue
+            s = 0.0
+            for i in range(k):
+                s += delta[i] * A[i, j]
+            da[j] = s
+            if ya[j] > 0.0 or (ya[j] == 0.0 and s > 0.0):
+                slope += hi[j] * s
+            else:
+                slope -= lo[j] * s
+            if (ya[j] > 0.0 and s < 0.0) or (ya[j] < 0.0 and s > 0.0):
+                brk[nb] = -ya[j] / s
+                nb += 1
+        if not slope < 0.0:
+            return NUMERICAL, 0.0, it  # no descent (degenerate vertex): the primal walk instead
+        # the long step: pass kinks in order while h still decreases
+        order = np.argsort(brk[:nb])
+        idx = np.empty(nb, dtype=np.int64)
+        c = 0
+        for j in range(m):
+            if not inF[j] and moving[j] and ((ya[j] > 0.0 and da[j] < 0.0) or (ya[j] < 0.0 and da[j] > 0.0)):
+                idx[c] = j
+                c += 1
+        enter, step = -1, 0.0
+        for o in range(nb):
+            j = idx[order[o]]
+            slope += abs(da[j]) * (hi[j] + lo[j])
+            if slope >= 0.0:
+                enter, step = j, brk[order[o]]
+                break
+        if enter < 0:
+            return NUMERICAL, 0.0, it  # unbounded dual: impossible with u0 feasible; round-off
+        for i in range(k):
+            y[i] += step * delta[i]
+        inF[jr] = False
+        inF[enter] = True
+        F[r] = enter
+    return ITERATION_LIMIT, 0.0, max_iter

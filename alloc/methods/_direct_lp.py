@@ -20,6 +20,7 @@ import numpy as np
 from .. import _ray_simplex
 from .._kernels import facet_polish, matvec, rmatvec
 from ..exceptions import SolverError
+from ..facet_cost import lp_build_bytes, lp_build_seconds
 from ..method import FloatArray, Method
 from ..problem import Problem
 from ..solvers import backends, make_backend
@@ -34,6 +35,16 @@ class RayLP(Method):
 
     equation = "Eqs 1.15-1.17"
     summary = "largest admissible moment along v as an LP, scaled back when attainable"
+
+    @classmethod
+    def build_cost(cls, problem: Problem, **options: object) -> float:
+        """The ray LP's set-up, measured (:func:`alloc.facet_cost.lp_build_seconds`)."""
+        return lp_build_seconds(problem.k, problem.m)
+
+    @classmethod
+    def build_memory(cls, problem: Problem, **options: object) -> int:
+        """The ray LP's set-up, measured (:func:`alloc.facet_cost.lp_build_bytes`)."""
+        return lp_build_bytes(problem.k, problem.m)
 
     def __init__(self, problem: Problem, *, backend: str = "daqp", simplex: bool = False) -> None:
         super().__init__(problem)
@@ -76,6 +87,11 @@ class RayLP(Method):
             kq = self._Q.shape[0]
             self._F = _ray_simplex.ray_matrix(self._A[:, :-1])
             self._xlo, self._xhi = self._lb[:-1].copy(), self._ub[:-1].copy()
+            Ax = self._A[:, :-1]
+            # the ellipsoid (A A')^-1 behind the starting basis (full row rank: Q is a row basis)
+            self._G = np.array(np.linalg.inv(Ax @ Ax.T), order="C") if kq else np.zeros((0, 0))
+            self._cnorm = np.linalg.norm(Ax, axis=0)
+            self._Ax = np.array(Ax, order="C")
             nw, ni = _ray_simplex.work_sizes(kq, p.m)
             self._work, self._iwork = np.empty(nw), np.empty(ni, dtype=np.int64)
             # a ray crosses few vertices; the bound only stops a pathological pivot path
@@ -131,8 +147,13 @@ class RayLP(Method):
                 xlo, xhi = lb[:-1].copy(), ub[:-1].copy()
                 x0 = np.minimum(np.maximum(self._to_x(u0), xlo), xhi)
             xs = np.empty(p.m)
-            code, t, it = _ray_simplex.solve_ray(self._F, -A[:, -1], x0, xlo, xhi, float(ub[-1]),
-                                                 self._max_pivots, self._work, self._iwork, xs)
+            qd = -A[:, -1]
+            code, t, it = _ray_simplex.dual_ray(self._Ax, qd, x0, xlo, xhi, self._G, self._cnorm,
+                                                self._max_pivots, xs)
+            if code != _ray_simplex.OPTIMAL:
+                code, t, it = _ray_simplex.solve_ray(self._F, -A[:, -1], x0, xlo, xhi, float(ub[-1]),
+                                                     self._max_pivots, self._work, self._iwork, xs, self._G,
+                                                     self._cnorm)
             if code == _ray_simplex.OPTIMAL:
                 x = np.append(xs, t)
             else:

@@ -32,7 +32,7 @@ from ..options import choice
 from ..problem import Problem
 from ..solvers import backends
 from ._direct_lp import RayLP
-from .facet_search import FACET_LIMIT, FacetSearch, facet_build_seconds
+from .facet_search import FACET_LIMIT, FacetSearch
 
 
 def facet_call_us(m: int, k: int) -> float:
@@ -81,9 +81,18 @@ class DirectAllocation(RayLP):
 
     @classmethod
     def build_cost(cls, problem: Problem, **options: Any) -> float:
-        """The facet enumeration when the facet backend is used, else an LP set-up (milliseconds)."""
-        subsets = cls.facet_subsets(problem, options)
-        return facet_build_seconds(subsets) if subsets else super().build_cost(problem, **options)
+        """The facet search's (:class:`FacetSearch`) when the facet backend is used, else the
+        ray LP's set-up (milliseconds, :func:`alloc.facet_cost.lp_build_seconds`)."""
+        if cls.facet_subsets(problem, options):
+            return FacetSearch.build_cost(problem)
+        return super().build_cost(problem, **options)
+
+    @classmethod
+    def build_memory(cls, problem: Problem, **options: Any) -> int:
+        """The facet search's tables when the facet backend is used, else the ray LP's."""
+        if cls.facet_subsets(problem, options):
+            return FacetSearch.build_memory(problem)
+        return super().build_memory(problem, **options)
 
     def __init__(self, problem: Problem, *, backend: str = "auto") -> None:
         self._facet = None
