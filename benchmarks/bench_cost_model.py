@@ -47,7 +47,7 @@ CELLS: list[tuple[str, int, int, str, dict]] = [
                                                                     (100, 32), (141, 16))],
     *[("da_facet", 4, m, "random", {}) for m in (12, 32, 71, 72)],
     *[("da_facet", 6, m, "random", {}) for m in (10, 20, 28, 29)],
-    ("da_facet", 14, 17, "random", {}),
+    ("da_facet", 8, 16, "random", {}), ("da_facet", 14, 17, "random", {}),
     ("da_facet", 3, 64, "fullW", {}), ("da_table", 3, 64, "fullW", {"resolution": 64}),
     ("da_facet", 6, 20, "fullW", {}),
     ("da_facet", 3, 26, "near", {}), ("da_table", 3, 26, "near", {"resolution": 64}),
