@@ -1,23 +1,28 @@
-"""Compiled bounded-variable simplex for ``da``'s ray LP (seed Eqs 1.15-1.17).
+"""Compiled solvers of ``da``'s ray LP (seed Eqs 1.15-1.17): a dual facet walk, a primal simplex behind it.
 
 In the scaled variables of :class:`alloc.methods._direct_lp.RayLP` (``u = c + D x``,
 ``x`` in ``[-1, 1]``, ``A = Q B D / sigma``, ``q = Q d / |d|``) the ray LP is
 
     maximise t   subject to   A x - t q = A x0,   lb <= x <= ub,   0 <= t <= t_max,
 
-``x0`` the base point.  Written about the base point, ``x = x0 + p - n`` with ``p, n >= 0``,
-it is ``A p - A n - t q + e = 0`` with one artificial ``e_i`` per row fixed at ``[0, 0]``.
-Every call starts from the same basis -- the artificials, all at zero, everything else at its
-lower bound (``u = u0``, ``t = 0``) -- which is feasible, so there is no phase 1: the first
-pivots swap the artificials out at step 0 and never let them back (their bounds are equal).
-The pivots are :mod:`alloc._simplex`'s (Dantzig's rule, Bland's after degenerate pivots,
-refactorisation every ``REFACTOR_EVERY`` pivots), so the answer is a function of the call's
-data, not of earlier calls.
+``x0`` the base point.  :func:`dual_ray` answers first: it walks the attainable set's facet
+normals (the LP's dual) from the facet an ellipsoid approximation predicts, a few O(k m) steps.
+Where it stops (a degenerate vertex, its step bound), :func:`solve_ray`, a bounded-variable
+primal simplex, solves the same LP; the caller's DAQP model is the last resort.
 
-Why not the DAQP model: a proximal-point LP solve costs 86 us at k = 4, m = 24 and 434 us at
-m = 96, 2.2 ms at m = 192 (super-linear: its iterations grow with m and each is O(m^2) in the
-normal equations); a simplex pivot here is O(k N) with N = 2 m + k + 1 and a ray crosses
-few vertices (``benchmarks/bench_da_cost.py --large``).
+:func:`solve_ray`: written about the base point, ``x = x0 + p - n`` with ``p, n >= 0``, the LP
+is ``A p - A n - t q + e = 0`` with one artificial ``e_i`` per row fixed at ``[0, 0]``.  Every
+call starts from the same basis (history independent): ``t`` and the ``k - 1`` columns nearest
+the predicted facet, or the artificials when those are singular, every variable at zero
+(``u = u0``, ``t = 0``), which is feasible, so there is no phase 1.  The pivots are
+:mod:`alloc._simplex`'s rules (Dantzig's, Bland's after degenerate pivots, refactorisation every
+``REFACTOR_EVERY`` pivots) with bound flips taken in passes (:func:`_iterate_long`).
+
+Why not the DAQP model alone: a proximal-point LP solve per call cost 86 us at k = 4, m = 24,
+434 us at m = 96 and 2.2 ms at m = 192 (super-linear in m); the primal walk from ``u0`` takes a
+pivot per few effectors (32-42 at m = 96, 121 us a call); the dual walk a median of one step
+(45-50 us a call at m = 96, 79-87 us at m = 192 under load 7-9; ``benchmarks/bench_da_cost.py
+--large``).
 """
 
 from __future__ import annotations
@@ -200,14 +205,12 @@ def solve_ray(F, q, x0, lb, ub, t_max, max_iter, work, iwork, x, G, cnorm):  # p
     cost = work[o + 4 * N:o + 5 * N]
     b = work[o + 5 * N:o + 5 * N + k]
     status = iwork[:N]
-    frozen = iwork[N:2 * N]
     basis = iwork[2 * N:2 * N + k]
     for j in range(N):
         lo[j] = 0.0
         xs[j] = 0.0
         cost[j] = 0.0
         status[j] = _LOWER
-        frozen[j] = 0
     for j in range(m):
         hi[j] = max(ub[j] - x0[j], 0.0)
         hi[m + j] = max(x0[j] - lb[j], 0.0)

@@ -115,8 +115,9 @@ class RayLP(Method):
 
         The LP runs along the unit direction ``d / |d|`` in scaled variables (see
         ``__init__``) so that its bound on the distance (the AMS's extent) is a constant
-        and, without rate limits, no bound is re-sent per call.  The LP (DAQP's proximal
-        iterations) meets the equality to ~1e-8 relative; on a facet hit (``k - 1``
+        and, without rate limits, no bound is re-sent per call.  With ``simplex`` the compiled
+        solvers of :mod:`alloc._ray_simplex` answer first (exact vertices); the LP (DAQP's
+        proximal iterations) meets the equality to ~1e-8 relative; on a facet hit (``k - 1``
         effectors strictly inside their limits) the point is then re-solved exactly from
         Eq 1.16 on that facet (:func:`alloc._kernels.facet_polish`).  Edges and degenerate
         facets keep the LP's answer.
