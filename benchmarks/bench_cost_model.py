@@ -12,8 +12,9 @@ holds a cell when both lie in ``[0.1, 2]``.  A facet search that the model route
 Conditionings: ``random`` (seeded Gaussian ``B``, diagonal weights), ``fullW`` (the same with full
 symmetric positive definite ``Wu`` and ``Wv``: the facet builds do not read the weights, shown
 here), ``near`` (rank ``k - 1`` plus ``1e-9`` Gaussian: the hyperplane tolerance merges
-directions unevenly; routed to the LP before any enumeration), ``mild`` (rank ``k - 1`` plus
-``1e-6``: enumerated, a few more tiles than in general position).
+directions unevenly; routed to the LP before any enumeration), ``nearW`` (the same with full
+weights), ``mild`` (rank ``k - 1`` plus ``1e-6``: enumerated, a few more tiles than in general
+position).
 
 Usage::
 
@@ -51,6 +52,7 @@ CELLS: list[tuple[str, int, int, str, dict]] = [
     ("da_facet", 3, 64, "fullW", {}), ("da_table", 3, 64, "fullW", {"resolution": 64}),
     ("da_facet", 6, 20, "fullW", {}),
     ("da_facet", 3, 26, "near", {}), ("da_table", 3, 26, "near", {"resolution": 64}),
+    ("da_facet", 3, 26, "nearW", {}), ("da_table", 3, 26, "nearW", {"resolution": 64}),
     ("da_facet", 3, 64, "near", {}), ("da_facet", 4, 20, "near", {}), ("da_facet", 6, 14, "near", {}),
     ("da_facet", 3, 64, "mild", {}), ("da_table", 3, 26, "mild", {"resolution": 64}),
     ("da_facet", 4, 32, "mild", {}),
@@ -107,10 +109,10 @@ def problem(k: int, m: int, conditioning: str):
     if conditioning == "random":
         return p
     B, Wu, Wv = p.B, None, None
-    if conditioning in ("near", "mild"):
-        eps = 1e-9 if conditioning == "near" else 1e-6
+    if conditioning in ("near", "nearW", "mild"):
+        eps = 1e-6 if conditioning == "mild" else 1e-9
         B = rng.standard_normal((k, k - 1)) @ rng.standard_normal((k - 1, m)) + eps * rng.standard_normal((k, m))
-    if conditioning == "fullW":
+    if conditioning in ("fullW", "nearW"):
         L = rng.standard_normal((m, m))
         Wu = L @ L.T / m + np.eye(m)
         L = rng.standard_normal((k, k))
