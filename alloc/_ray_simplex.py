@@ -30,11 +30,13 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from ._kernels import facet_polish
 from ._simplex import (_BASIC, _LOWER, _UPPER, BLAND_AFTER, DEGENERATE_TOL, DUAL_TOL, FEASIBLE_RTOL,
                        ITERATION_LIMIT, NUMERICAL, OPTIMAL, REFACTOR_EVERY, TIE_RTOL, _eliminate, _reduced_costs,
                        _refactor, _step_to_bound)
 
-__all__ = ["ray_matrix", "solve_ray", "work_sizes", "OPTIMAL", "ITERATION_LIMIT", "NUMERICAL"]
+__all__ = ["ray_matrix", "solve_ray", "dual_ray", "ray_call", "work_sizes", "OPTIMAL", "ITERATION_LIMIT",
+           "NUMERICAL"]
 
 
 def ray_matrix(A: np.ndarray) -> np.ndarray:
@@ -461,3 +463,54 @@ def dual_ray(A, q, x0, lb, ub, G, cnorm, max_iter, x):  # pragma: no cover - com
         inF[enter] = True
         F[r] = enter
     return ITERATION_LIMIT, 0.0, max_iter
+
+
+@njit(cache=True, nogil=True)
+def ray_call(v, Bu0, u0, B, Q, Ax, G, cnorm, x0, xlo, xhi, c0, D, lo, hi, sigma, max_iter):  # pragma: no cover - compiled
+    """One nominal ``da`` call through :func:`dual_ray` in one compiled pass: the demand measured
+    from the base point, the unit ray in the row basis ``Q``, the walk, the boundary control,
+    the exact re-solve on its facet (:func:`alloc._kernels.facet_polish`) and Eq 1.15's scaling
+    back.  Returns ``(code, u, iterations)``; any code but ``OPTIMAL`` leaves the call to the
+    caller's slower path (the primal simplex, then DAQP).  The same arithmetic, in the same
+    order, as :meth:`alloc.methods._direct_lp.RayLP.solve` without rate limits.
+    """
+    k, m = B.shape
+    r = Q.shape[0]
+    d = v - Bu0
+    if r != k:  # the part of d in the range of B (rank-deficient B)
+        z = np.zeros(r)
+        for i in range(r):
+            for j in range(k):
+                z[i] += Q[i, j] * d[j]
+        for j in range(k):
+            s = 0.0
+            for i in range(r):
+                s += Q[i, j] * z[i]
+            d[j] = s
+    vmax, dmax = 0.0, 0.0
+    for i in range(k):
+        vmax = max(vmax, abs(v[i]))
+        dmax = max(dmax, abs(d[i]))
+    if not dmax > 1e-14 * max(1.0, vmax):
+        return OPTIMAL, u0.copy(), 0
+    ds = d / dmax
+    ds2 = 0.0
+    for i in range(k):
+        ds2 += ds[i] * ds[i]
+    norm = dmax * np.sqrt(ds2)
+    dsn = ds / np.sqrt(ds2)
+    q = np.zeros(r)
+    for i in range(r):
+        for j in range(k):
+            q[i] += Q[i, j] * dsn[j]
+    xs = np.empty(m)
+    code, t, it = dual_ray(Ax, q, x0, xlo, xhi, G, cnorm, max_iter, xs)
+    if code != OPTIMAL:
+        return code, xs, it
+    ustar = np.minimum(np.maximum(c0 + D * xs, lo), hi)
+    a = t * (sigma / norm)
+    if r == k:
+        a, ustar, _ = facet_polish(B, ustar, d, u0, lo, hi, a)
+    if a >= 1.0:
+        return OPTIMAL, u0 + (ustar - u0) / a, it
+    return OPTIMAL, ustar, it

@@ -92,6 +92,8 @@ class RayLP(Method):
             self._G = np.array(np.linalg.inv(Ax @ Ax.T), order="C") if kq else np.zeros((0, 0))
             self._cnorm = np.linalg.norm(Ax, axis=0)
             self._Ax = np.array(Ax, order="C")
+            # writable copies (one compiled signature; a pickled copy's arrays are writable)
+            self._umin, self._umax = np.array(p.umin), np.array(p.umax)
             nw, ni = _ray_simplex.work_sizes(kq, p.m)
             self._work, self._iwork = np.empty(nw), np.empty(ni, dtype=np.int64)
             # a ray crosses few vertices; the bound only stops a pathological pivot path
@@ -172,6 +174,14 @@ class RayLP(Method):
 
     def solve(self, v, lo, hi, u_prev):
         p = self.problem
+        if self.simplex and lo is p.umin and hi is p.umax:
+            # the nominal call in one compiled pass (alloc._ray_simplex.ray_call); the path below
+            # only when the dual walk stops
+            code, u, it = _ray_simplex.ray_call(v, self._Bu0, self._u0, self._B, self._Q, self._Ax, self._G,
+                                                self._cnorm, self._x0, self._xlo, self._xhi, self._c0, self._D,
+                                                self._umin, self._umax, self._sigma, self._max_pivots)
+            if code == _ray_simplex.OPTIMAL:
+                return u, it
         if lo is p.umin and hi is p.umax:
             u0, Bu0 = self._u0, self._Bu0
         else:
