@@ -19,10 +19,10 @@ the predicted facet, or the artificials when those are singular, every variable 
 ``REFACTOR_EVERY`` pivots) with bound flips taken in passes (:func:`_iterate_long`).
 
 Why not the DAQP model alone: a proximal-point LP solve per call cost 86 us at k = 4, m = 24,
-434 us at m = 96 and 2.2 ms at m = 192 (super-linear in m); the primal walk from ``u0`` takes a
-pivot per few effectors (32-42 at m = 96, 121 us a call); the dual walk a median of one step
-(45-50 us a call at m = 96, 79-87 us at m = 192 under load 7-9; ``benchmarks/bench_da_cost.py
---large``).
+432 us at m = 96 and 2.2 ms at m = 192 (super-linear in m); the primal walk from ``u0`` takes a
+pivot per few effectors (32-42 at m = 96, 121 us a call); the dual walk a median of one to three
+steps, and a nominal call is one compiled pass (:func:`ray_call`): 30 us a call at m = 96 and
+61 us at m = 192 under load 7 (``python -m benchmarks.bench_da_cost --large``).
 """
 
 from __future__ import annotations

@@ -44,7 +44,7 @@ def facet_call_us(m: int, k: int) -> float:
 def lp_call_us(m: int, k: int) -> float:
     """Modelled median us per call of the LP backend ``auto`` uses, the compiled ray simplex
     (``benchmarks/bench_da_cost.py``)."""
-    return 21.5 + 0.07 * k * m
+    return 7.5 + (0.015 * k + 0.008 * k * k) * m
 
 
 def facet_is_cheaper(m: int, k: int) -> bool:
@@ -52,7 +52,7 @@ def facet_is_cheaper(m: int, k: int) -> bool:
 
     Fits to ``benchmarks/bench_da_cost.py`` (median us per call, k = 1..6, m = 4..64, load
     7-9, 2026-12-06): facet search ``5.5 + (0.025 + 0.0045 k) C(m, k-1)`` (0.038-0.053 us per
-    subset), the ray simplex ``21.5 + 0.07 k m`` (22-49 us).  Never the facet search beyond
+    subset), the compiled ray LP ``7.5 + (0.015 k + 0.008 k^2) m`` (7-36 us).  Never the facet search beyond
     :data:`FACET_LIMIT` subsets.  With the DAQP model as the LP (``47.4 + 2.94 m``, before the
     ray simplex) the facet search was chosen up to 3 x 64 at 2.2x the LP's cost.
     """
