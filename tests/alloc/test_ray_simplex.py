@@ -71,3 +71,22 @@ def test_a_failed_walk_falls_back_and_counts_it():
         assert a.status == b.status
         assert np.abs(a.v_achieved - b.v_achieved).max() <= 1e-6 * max(1.0, float(np.abs(v).max()))
     assert f.impl.simplex_fallbacks == 5
+
+
+def test_a_copy_answers_bit_for_bit_whatever_the_call_history():
+    """Every call starts from the same predicted facet: a pickled copy, fed the demands in another
+    order, answers each one bit for bit like the original (nominal and rate-limited)."""
+    import pickle
+
+    rng = np.random.default_rng(7)
+    p = random_problem(rng, 4, 96, "general")
+    f = alloc.make_allocator(p, "da")
+    assert f.impl._facet is None and f.impl.simplex  # auto: the ray LP at 4 x 96
+    V = random_demands(rng, p, 30)
+    V[::2] *= 4.0
+    u_prev = 0.5 * (p.umin + p.umax)
+    first = [(f(v).u.copy(), f(v, u_prev=u_prev, dt=0.01).u.copy()) for v in V]
+    g = pickle.loads(pickle.dumps(f))
+    for i in rng.permutation(len(V)):
+        nominal, rated = first[i]
+        assert np.array_equal(g(V[i]).u, nominal) and np.array_equal(g(V[i], u_prev=u_prev, dt=0.01).u, rated)
