@@ -88,8 +88,10 @@ class RayLP(Method):
             self._F = _ray_simplex.ray_matrix(self._A[:, :-1])
             self._xlo, self._xhi = self._lb[:-1].copy(), self._ub[:-1].copy()
             Ax = self._A[:, :-1]
-            # the ellipsoid (A A')^-1 behind the starting basis (full row rank: Q is a row basis)
-            self._G = np.array(np.linalg.inv(Ax @ Ax.T), order="C") if kq else np.zeros((0, 0))
+            # the ellipsoid (A A')^-1 behind the starting basis; a pseudo-inverse, since every
+            # effector may be jammed (A = 0): only the start depends on it, never the answer
+            G = np.linalg.pinv(Ax @ Ax.T) if kq and np.isfinite(Ax).all() else np.zeros((kq, kq))
+            self._G = np.array(G if np.isfinite(G).all() else np.zeros((kq, kq)), order="C")
             self._cnorm = np.linalg.norm(Ax, axis=0)
             self._Ax = np.array(Ax, order="C")
             # writable copies (one compiled signature; a pickled copy's arrays are writable)

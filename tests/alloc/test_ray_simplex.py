@@ -90,3 +90,17 @@ def test_a_copy_answers_bit_for_bit_whatever_the_call_history():
     for i in rng.permutation(len(V)):
         nominal, rated = first[i]
         assert np.array_equal(g(V[i]).u, nominal) and np.array_equal(g(V[i], u_prev=u_prev, dt=0.01).u, rated)
+
+
+def test_jammed_effectors_build_and_answer():
+    """Every effector jammed (A = 0) or all but two: the LP path builds (the start's ellipsoid is a
+    pseudo-inverse) and answers what HiGHS does."""
+    B = np.random.default_rng(0).normal(size=(4, 30))
+    for lo, hi in [(np.full(30, 0.3), np.full(30, 0.3)),
+                   (np.r_[np.full(28, 0.2), -1.0, -1.0], np.r_[np.full(28, 0.2), 1.0, 1.0])]:
+        p = alloc.Problem(B, lo, hi)
+        f, ref = alloc.make_allocator(p, "da", backend="simplex"), alloc.make_allocator(p, "da", backend="highs")
+        assert not f.build_error
+        for v in np.random.default_rng(1).normal(size=(5, 4)):
+            a, b = f(v), ref(v)
+            assert a.status == b.status and np.abs(a.v_achieved - b.v_achieved).max() <= 1e-6 * max(1.0, np.abs(v).max())
