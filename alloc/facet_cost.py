@@ -38,9 +38,10 @@ FACET_LIMIT = 20_000
 #                                               1.1 at 2 x 512, 0.42 at 2 x 8 (the base)
 #   da_bisect, k = 3: + 60 us S                 the edge table, a Python loop per facet
 #                                               (44-65 us per subset measured, 3 x 16 to 3 x 223)
-#   da_table, k = 3: + res^2 (20 us + 1.2 us S) ray casts of about 4 res^2 directions against
-#                                               every tile (2 S): 129 us per res^2 at 3 x 16,
-#                                               2.06 ms at 3 x 64 (resolution 64)
+#   da_table, k = 3: + 20 ms + res^2 (20 us + 1.2 us S)   ray casts of about 4 res^2 directions
+#                                               against every tile (2 S): 110-129 us per res^2 at
+#                                               3 x 16, 2.06 ms at 3 x 64 (resolution 64); the 20 ms:
+#                                               3 x 16 at resolution 16 took 35-75 ms under load 5-9
 #              bytes + 80 res^2 + 24 min(4 res^2 x 2 S x 3, 2e6)   the candidate table and the
 #                                               chunked ray casts' temporaries (<= 2 million tests)
 #
@@ -60,7 +61,7 @@ GENERATOR_PAIR_SECONDS = 0.4e-6
 FACET_BYTES = 64
 FACET_BASE_BYTES = 64 << 10
 _BISECT_SUBSET_SECONDS = 60e-6
-_TABLE_CELL_SECONDS, _TABLE_CELL_SUBSET_SECONDS = 20e-6, 1.2e-6
+_TABLE_BASE_SECONDS, _TABLE_CELL_SECONDS, _TABLE_CELL_SUBSET_SECONDS = 20e-3, 20e-6, 1.2e-6
 _TABLE_CELL_BYTES, _TABLE_TEST_BYTES, _TABLE_CHUNK_TESTS = 80, 24, 2_000_000
 # Declared call cost (``Method.call_cost``): a nominal call scans every tile (about two per
 # subset) with a k x k product, a rate-limited call recomputes every facet's gap, O(m) each;
@@ -83,7 +84,7 @@ def facet_build_bytes(subsets: int, k: int, m: int) -> int:
 
 def table_build_seconds(subsets: int, resolution: int) -> float:
     """Declared build time (s) of ``da_table``'s (resolution x 2 resolution) direction table."""
-    return float(resolution) ** 2 * (_TABLE_CELL_SECONDS + _TABLE_CELL_SUBSET_SECONDS * subsets)
+    return _TABLE_BASE_SECONDS + float(resolution) ** 2 * (_TABLE_CELL_SECONDS + _TABLE_CELL_SUBSET_SECONDS * subsets)
 
 
 def table_build_bytes(subsets: int, resolution: int) -> int:

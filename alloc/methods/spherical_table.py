@@ -36,7 +36,7 @@ class SphericalTable(FacetSearch):
     @classmethod
     def table_seconds(cls, problem: Problem, resolution: int) -> float:
         """Declared build time (s) of the k = 3 (resolution x 2 resolution) direction table:
-        ``resolution^2 x (20 + 1.2 S) us`` (0 where no table is built; :mod:`alloc.facet_cost`)."""
+        ``20 ms + resolution^2 x (20 + 1.2 S) us`` (0 where no table is built; :mod:`alloc.facet_cost`)."""
         if problem.k != 3:
             return 0.0
         return table_build_seconds(cls.facet_subsets(problem, {}), resolution)
@@ -76,8 +76,9 @@ class SphericalTable(FacetSearch):
         seconds = facets + cls.table_seconds(problem, resolution)
         if seconds <= BUILD_LIMIT_SECONDS:
             return
-        per_cell = cls.table_seconds(problem, 1)
-        fits = int(math.isqrt(int(max(BUILD_LIMIT_SECONDS - facets, 0.0) / per_cell)))
+        base = cls.table_seconds(problem, 0)  # the table's fixed part
+        per_cell = cls.table_seconds(problem, 1) - base
+        fits = int(math.isqrt(int(max(BUILD_LIMIT_SECONDS - facets - base, 0.0) / per_cell)))
         hint = f"resolution <= {fits} fits" if fits >= 2 else "no table fits; use 'da_facet'"
         raise OptionError(f"resolution: da_table's declared build time {seconds:.3g} s at resolution {resolution} "
                           f"exceeds the build bound of {BUILD_LIMIT_SECONDS:g} s ({hint})", field="resolution")
