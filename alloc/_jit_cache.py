@@ -366,6 +366,9 @@ def _warm_cases() -> list[tuple[Any, dict[str, dict[str, Any]]]]:
                 options[f"{name}:incremental"] = {**opts, "incremental": True}
             if "backend" in spec:  # an explicit solver backend: the LP/QP paths' own kernels
                 options[f"{name}:daqp"] = {**opts, "backend": "daqp"}
+                # da's compiled ray simplex (lp's own backend of that name is its default);
+                # a method without such a backend refuses it and the variant is skipped
+                options[f"{name}:simplex"] = {**opts, "backend": "simplex"}
         cases.append((problem, options))
     return cases
 

@@ -8,54 +8,61 @@ import the methods' compiled kernels (numba) to do it.
 
 from __future__ import annotations
 
-__all__ = ["FACET_LIMIT", "FACET_SECONDS", "FACET_BYTES", "facet_build_seconds", "facet_build_bytes"]
+import numpy as np
+
+__all__ = ["FACET_LIMIT", "FACET_SECONDS", "FACET_BYTES", "NEAR_FLAT_RTOL", "TILES_PER_SUBSET",
+           "facet_build_seconds", "facet_build_bytes", "table_build_seconds", "table_build_bytes",
+           "lp_build_seconds", "lp_build_bytes", "near_flat_ratio"]
 
 #: The facet limit: ``da``'s ``backend="auto"`` uses the facet search only up to this many
-#: facet generator subsets C(m, k-1) (k = 6, m = 64 has 7.6 million), and the service's
-#: default build budget is the declared build cost of an enumeration this large (3.0 s).
+#: facet generator subsets C(m, k-1) (k = 6, m = 64 has 7.6 million).
 FACET_LIMIT = 20_000
 
-# Declared build cost and memory (``Method.build_cost``, ``Method.build_memory``), CPU seconds
-# and RSS growth measured on the project's machine (2 shared cores at load 8-11, 2026-12-01;
-# ``benchmarks/bench_cost_bounds.py``), per facet generator subset S = C(m_free, k-1):
+# Declared build cost and memory (``Method.build_cost``, ``Method.build_memory``): CPU seconds
+# and bytes on the project's machine (2 shared cores), fitted to the builds measured by
+# ``benchmarks/bench_cost_model.py`` (2026-12-06, load 2-6; every cell and its ratio are in
+# docs/contract.md).  S = C(m_free, k-1) facet generator subsets; a tile holds rows of k and
+# m numbers (its inverse, corner control and edge steps), so the work is S x (k m + k^3):
 #
-#   method      problem              S        build     per subset   RSS growth
-#   da_facet    k=3, m=64            2,016    0.14 s    68 us        18 MiB
-#   da_facet    k=3, m=141           9,870    0.81 s    82 us        199 MiB
-#   da_facet    k=3, m=200           19,900   2.38 s    120 us       513 MiB
-#   da_facet    k=3, m=283           39,903   7.35 s    184 us       1,295 MiB
-#   da_facet    k=6, m=20            15,504   0.72 s    46 us        60-71 MiB
-#   da_bisect   k=3, m=64 / 141 / 200         0.40 / 2.04 / 5.10 s (about 200 us per subset)
-#   da_table    k=3, m=64 / 100, resolution 64  9.1 / 22.0 s (the direction table dominates)
-#   largest admitted (declared / measured): k=3, m=223 da_facet 5.2 / 3.4 s, da_bisect
-#   12.1 / 6.4 s, 1,011 / 683 MiB; k=6, m=28 14.7 / 8.2-9.1 s, 1,008 / 743 MiB; k=4, m=71
-#   8.6 / 3.2-3.9 s, 991 / 603 MiB
+#   seconds = 1 ms + S (0.15 us k m + 0.02 us k^3) + 0.4 us m^2
 #
-# High rank (2026-12-05, under load; the vertex enumeration no longer runs at build and the
-# cross product is a QR beyond k = 6): k=14, m=17 0.26 s / 28 MiB (declared 0.36 s / 35 MiB;
-# before, 14.5 s and 3 GiB); k=16, m=19 0.26 s / 59 MiB (0.58 s / 72 MiB); k=20, m=23 1.1 s /
-# 205 MiB (1.3 s / 249 MiB); k=24, m=27 1.4-2.1 s / 554 MiB (3.6 s / 694 MiB).
+# (the m^2 term: grouping the columns by direction, pairwise; it dominates only at k = 2).
+# Measured per subset and k m entry: 0.10-0.14 us from 3 x 64 to 6 x 28 (0.103 at 3 x 64,
+# 0.142 at 3 x 141, 0.112 at 3 x 223, 0.109 at 4 x 32, 0.126 at 6 x 20, 0.128 at 6 x 28);
+# the k^3 term from 14 x 17 (0.099-0.20 s: 0.42 us k m + k^3 per subset, the k x k inverses)
+# and 8 x 16 (0.25 s; model 0.34 s).  Predicted / measured 0.64-1.2 over the grid.  The
+# earlier model (150 us per subset up to k m = 480) was fitted before the vertex enumeration
+# left the build and over-predicted 4-15x (measured / declared 0.06-0.25).
 #
-# Every table holds a row of m (or (k-1) x m) numbers per tile, so time and memory grow
-# with S x k m.  The model: FACET_SECONDS per subset up to k m = 480, growing in proportion
-# beyond; da_bisect adds 200 us per subset at k = 3 (its edge table, a Python loop per
-# facet), growing the same way; da_table adds resolution^2 x (300 + 2 S) us (ray casts of the
-# cell centres and corners against every tile); FACET_BYTES per subset and k m entry.  It
-# over-predicts every measurement above, by 1.1-3.3x (time) and 1.3-2x (memory), and predicts
-# the worst builds reported in issue 22 within 1.0-1.3x (k = 3, m = 447: da_facet 41.8 s
-# declared / 41 s measured, da_bisect 97 / 77 s, da_table 860 / 781 s, 8.0 GiB / 5 GB;
-# m = 69, resolution 128: 82 / 81 s).  Builds predicted beyond
-# :data:`~alloc.registry.BUILD_LIMIT_SECONDS` or :data:`~alloc.registry.BUILD_LIMIT_BYTES`
-# are never started: the facet searches use the LP formulation instead (k = 3: m > 223 by
-# memory; k = 4: m > 71; k = 6: m > 28), ``da_table`` refuses a larger table naming ``resolution``.
-#: seconds per facet generator subset enumerated at build, up to k m = 480 entries
-FACET_SECONDS = 150e-6
-_FACET_REFERENCE_ENTRIES = 480
+#   bytes = 64 KiB + 64 S k m                   measured / declared 0.55-0.69 (3 x 64 to 6 x 28),
+#                                               1.1 at 2 x 512, 0.42 at 2 x 8 (the base)
+#   da_bisect, k = 3: + 60 us S                 the edge table, a Python loop per facet
+#                                               (44-65 us per subset measured, 3 x 16 to 3 x 223)
+#   da_table, k = 3: + 20 ms + res^2 (20 us + 1.2 us S)   ray casts of about 4 res^2 directions
+#                                               against every tile (2 S): 110-129 us per res^2 at
+#                                               3 x 16, 2.06 ms at 3 x 64 (resolution 64); the 20 ms:
+#                                               3 x 16 at resolution 16 took 35-75 ms under load 5-9
+#              bytes + 80 res^2 + 24 min(4 res^2 x 2 S x 3, 2e6)   the candidate table and the
+#                                               chunked ray casts' temporaries (<= 2 million tests)
+#
+# Builds predicted beyond :data:`~alloc.registry.BUILD_LIMIT_SECONDS` or
+# :data:`~alloc.registry.BUILD_LIMIT_BYTES` are never started: the facet searches use the LP
+# formulation instead (k = 3: m > 223; k = 4: m > 71; k = 6: m > 28, all by memory),
+# ``da_table`` refuses a larger table naming ``resolution``.
+#: the fixed part of a facet build (problem checks, the allocator's fallback)
+FACET_BASE_S = 1e-3
+#: seconds per facet generator subset and entry of B (k m)
+FACET_SECONDS = 0.15e-6
+#: seconds per facet generator subset and k^3 (the tiles' k x k inverses)
+FACET_K3_SECONDS = 0.02e-6
+#: seconds per pair of columns (grouping the generators by direction)
+GENERATOR_PAIR_SECONDS = 0.4e-6
 #: bytes per facet generator subset and entry of B (k m) that the facet tables hold
 FACET_BYTES = 64
-_BISECT_SUBSET_SECONDS = 200e-6
-_TABLE_CELL_SECONDS, _TABLE_CELL_SUBSET_SECONDS = 300e-6, 2.0e-6
-_TABLE_TEMPORARY_BYTES = 96 << 20
+FACET_BASE_BYTES = 64 << 10
+_BISECT_SUBSET_SECONDS = 60e-6
+_TABLE_BASE_SECONDS, _TABLE_CELL_SECONDS, _TABLE_CELL_SUBSET_SECONDS = 20e-3, 20e-6, 1.2e-6
+_TABLE_CELL_BYTES, _TABLE_TEST_BYTES, _TABLE_CHUNK_TESTS = 80, 24, 2_000_000
 # Declared call cost (``Method.call_cost``): a nominal call scans every tile (about two per
 # subset) with a k x k product, a rate-limited call recomputes every facet's gap, O(m) each;
 # declared / worst measured under load: k=3, m=141 33 / 8.9 ms; k=6, m=22 60 / 5.8 ms; k=3, m=200
@@ -63,12 +70,72 @@ _TABLE_TEMPORARY_BYTES = 96 << 20
 _CALL_BASE_S, _CALL_SUBSET_K2_S, _CALL_SUBSET_M_S = 1e-3, 0.05e-6, 0.02e-6
 
 
-def facet_build_seconds(subsets: int, entries: int = 0) -> float:
+def facet_build_seconds(subsets: int, k: int, m: int) -> float:
     """Declared build time (s) of a facet enumeration over ``subsets`` generator subsets of a
-    ``B`` with ``entries = k m`` entries (0: the per-subset cost at small sizes)."""
-    return FACET_SECONDS * subsets * max(1.0, entries / _FACET_REFERENCE_ENTRIES)
+    k x m ``B`` (the fit above)."""
+    return (FACET_BASE_S + subsets * (FACET_SECONDS * k * m + FACET_K3_SECONDS * k ** 3)
+            + GENERATOR_PAIR_SECONDS * m * m)
 
 
-def facet_build_bytes(subsets: int, entries: int) -> int:
-    """Declared memory (bytes) of the facet tables over ``subsets`` subsets of ``entries = k m``."""
-    return FACET_BYTES * subsets * entries
+def facet_build_bytes(subsets: int, k: int, m: int) -> int:
+    """Declared memory (bytes) of the facet tables over ``subsets`` subsets of a k x m ``B``."""
+    return FACET_BASE_BYTES + FACET_BYTES * subsets * k * m
+
+
+def table_build_seconds(subsets: int, resolution: int) -> float:
+    """Declared build time (s) of ``da_table``'s (resolution x 2 resolution) direction table."""
+    return _TABLE_BASE_SECONDS + float(resolution) ** 2 * (_TABLE_CELL_SECONDS + _TABLE_CELL_SUBSET_SECONDS * subsets)
+
+
+def table_build_bytes(subsets: int, resolution: int) -> int:
+    """Declared bytes of ``da_table``'s direction table and its ray casts' temporaries (k = 3)."""
+    tests = min(4 * resolution ** 2 * 2 * subsets * 3, _TABLE_CHUNK_TESTS)
+    return _TABLE_CELL_BYTES * resolution ** 2 + _TABLE_TEST_BYTES * tests
+
+#: A ``B`` whose unit active columns have a singular value ratio in ``[1e-10, NEAR_FLAT_RTOL)``
+#: is nearly rank-deficient: above 1e-10 the attainable set counts as full rank, but its
+#: hyperplane search (``DIRECTION_TOL`` = 1e-9) merges directions for some hyperplanes and not
+#: for others, and one subset then lands in many facets.  Measured (rank k-1 plus a Gaussian
+#: perturbation, ``benchmarks/bench_cost_model.py``): 3 x 26 at 1e-9, 15,962 tiles for 325
+#: subsets (da_table 51 s against 3.9 s declared; da_facet 3 x 64, 893,114 tiles, 8.8 s and
+#: 2.1 GiB against 0.3 s and 24 MiB); at ratios 3e-7 to 1e-6 at most 1.1 tiles per 2 subsets.
+#: Such a ``B`` is routed to the LP before any enumeration.
+NEAR_FLAT_RTOL = 1e-7
+_RANK_RTOL = 1e-10  # the attainable set's own rank cut (alloc.ams.geometry)
+#: the most tiles per facet generator subset a build enumerates (2 in general position; more,
+#: from uneven merging that the near-flat test did not see, sends the build to the LP)
+TILES_PER_SUBSET = 3
+
+
+def near_flat_ratio(problem) -> float:
+    """The smallest singular value ratio of ``problem``'s unit active columns that lies in
+    ``[1e-10, NEAR_FLAT_RTOL)``, or 0.0 when none does (a cheap SVD of a k x m matrix)."""
+    B = problem.B[:, problem.umax > problem.umin]
+    norms = np.linalg.norm(B, axis=0)
+    B = B[:, norms > 0]
+    if B.shape[1] == 0 or not np.isfinite(B).all():
+        return 0.0
+    s = np.linalg.svd(B / np.linalg.norm(B, axis=0), compute_uv=False)
+    ratios = s / s[0]
+    near = ratios[(ratios >= _RANK_RTOL) & (ratios < NEAR_FLAT_RTOL)]
+    return float(near.min()) if near.size else 0.0
+
+
+# The LP route (``da``'s LP backends and the facet searches' redirect, the ray LP of
+# alloc.methods._direct_lp): a scaled copy of B, a row basis, the DAQP model and the compiled
+# simplex's tableau.  Measured through make_allocator (the allocator's own checks and safe
+# answer included): 1.1-1.5 ms from 3 x 26 to 6 x 29, 2.6-3.4 ms at 3 x 224; the bare set-up
+# 0.25-0.42 ms up to 16 x 128, 6.2 ms at 32 x 512; traced peak 51 KiB at 3 x 26, 76 KiB at
+# 6 x 29, 236 KiB at 4 x 72, 1.7 MiB at 3 x 224 (the allocator's m x m weighted factors).
+_LP_BASE_S, _LP_KMKM_S = 2e-3, 2e-9
+_LP_BASE_BYTES = 64 << 10
+
+
+def lp_build_seconds(k: int, m: int) -> float:
+    """Declared build time (s) of the ray LP: ``2 ms + 2 ns k m (k + m)``."""
+    return _LP_BASE_S + _LP_KMKM_S * k * m * (k + m)
+
+
+def lp_build_bytes(k: int, m: int) -> int:
+    """Declared bytes of the ray LP's build: ``64 KiB + 8 (8 k m + 6 m^2 + 4 k^2)``."""
+    return _LP_BASE_BYTES + 8 * (8 * k * m + 6 * m * m + 4 * k * k)

@@ -16,6 +16,7 @@ Its entries come from, in this order:
    harv       F-18/HARV lateral-directional, seed Eq 4.16 (``harv_latdir``) 3 x 5
    hexa-x     hexacopter example, PX4 6001_hexa_x geometry                 4 x 6
    tailless   tailless example, ICE's eight surfaces                       3 x 8
+   x57-dep    distributed propulsion example after NASA's X-57 (14 props)  4 x 18
    ========== ============================================================ ======
 
 2. the vehicle files (:data:`VEHICLE_SUFFIXES`: ``.toml``, ``.json``, PX4 ``.params``, ArduPilot

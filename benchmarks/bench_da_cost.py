@@ -14,13 +14,21 @@ Cells with more facet generator subsets C(m, k-1) than :data:`FACET_LIMIT` are n
 is bounded below by the fitted model :func:`alloc.methods.direct.facet_call_us` (the sequential
 search tests every tile, so its cost grows with C(m, k-1)) and printed in brackets.
 
-Usage: ``nice -n 10 python -m benchmarks.bench_da_cost [--calls 300] [--seed 0]``.
+The LP backend timed is the one ``auto`` uses, the compiled ray simplex (``backend="simplex"``).
+
+``--large``: ``da`` at k = 4 and m = 6 .. 192 (``auto``, its ray simplex, the DAQP model it
+replaced) and the cascaded methods ``cgi`` and ``daisy``, each as the median us per call and as a
+ratio to a floor measured in the same run (``pinv``, one compiled affine call), with the
+machine's load before and after.
+
+Usage: ``nice -n 10 python -m benchmarks.bench_da_cost [--calls 300] [--seed 0] [--large]``.
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+import os
 import time
 
 import numpy as np
@@ -55,11 +63,40 @@ def _medians(allocators: list[alloc.Allocator], V: np.ndarray, rng: np.random.Ge
     return [float(np.median(ts)) / 1e3 for ts in times]
 
 
+LARGE_MS = (6, 12, 24, 48, 96, 192)
+LARGE = (("pinv", {}), ("da", {}), ("da", {"backend": "simplex"}), ("da", {"backend": "daqp"}), ("cgi", {}),
+         ("daisy", {"groups": "halves"}))
+
+
+def large(calls: int, seed: int) -> None:
+    """``da`` and the cascaded methods at k = 4, m = 6 .. 192 (see the module docstring)."""
+    rng = np.random.default_rng(seed)
+    print("load average before: %.2f %.2f %.2f" % os.getloadavg())
+    labels = [name + ("" if not o or "groups" in o else f"[{o['backend']}]") for name, o in LARGE]
+    print("k  m   " + "  ".join(f"{x:>14}" for x in labels) + "   (median us per call; x floor = pinv)")
+    for m in LARGE_MS:
+        p = random_problem(rng, 4, m, "general", rates=False)
+        V = random_demands(rng, p, calls)
+        allocators = []
+        for name, options in LARGE:
+            if "groups" in options:
+                options = {"groups": [list(range(m // 2)), list(range(m // 2, m))]}
+            allocators.append(alloc.make_allocator(p, name, **options))
+        us = _medians(allocators, V, rng)
+        cells = [f"{u:7.1f} {u / us[0]:5.1f}x" for u in us]
+        print(f"4  {m:3d} " + "  ".join(cells), flush=True)
+    print("load average after: %.2f %.2f %.2f" % os.getloadavg())
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--calls", type=int, default=300)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--large", action="store_true", help="da and the cascades at k = 4, m = 6 .. 192")
     args = ap.parse_args()
+    if args.large:
+        large(args.calls, args.seed)
+        return
     rng = np.random.default_rng(args.seed)
     print("k  m   facets  facet_us  lp_us   auto  auto_us  ratio  choice  model_facet  model_lp")
     worst = worst_choice = 0.0
@@ -72,11 +109,11 @@ def main() -> None:
             V = random_demands(rng, p, args.calls)
             auto = "facet" if facet_is_cheaper(m, k) else "lp"
             if nf <= FACET_LIMIT:
-                backends = ("facet", "daqp", "auto")
+                backends = ("facet", "simplex", "auto")
                 facet_us, lp_us, auto_us = _medians([alloc.make_allocator(p, "da", backend=b) for b in backends], V, rng)
                 facet_txt = f"{facet_us:8.1f}"
             else:
-                lp_us, auto_us = _medians([alloc.make_allocator(p, "da", backend=b) for b in ("daqp", "auto")], V, rng)
+                lp_us, auto_us = _medians([alloc.make_allocator(p, "da", backend=b) for b in ("simplex", "auto")], V, rng)
                 facet_us = facet_call_us(m, k)
                 facet_txt = f"[{facet_us:6.0f}]"
             cheaper = min(facet_us, lp_us)

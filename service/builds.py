@@ -56,7 +56,7 @@ import numpy as np
 import alloc
 
 from .config import OPTION_CAPS
-from .cost import FACET_SECONDS, answer_bytes, batch_seconds, build_seconds, call_seconds, estimate_bytes
+from .cost import answer_bytes, batch_seconds, build_seconds, call_seconds, estimate_bytes
 from .responses import batch_json
 from .errors import InvalidRequest, ServiceUnavailable, TooManyRequests, field_error
 from .warm import warm_up
@@ -92,9 +92,9 @@ def check_build_cost(problem: alloc.Problem, method: str, options: dict[str, Any
         return seconds
     cls = alloc.registry.get_method(method)
     subsets = cls.facet_subsets(problem, dict(options)) if cls.needs_ams else 0
-    facet_part = FACET_SECONDS * subsets
+    facet_part = cls.enumeration_cost(problem, dict(options))[0] if hasattr(cls, "enumeration_cost") else 0.0
     cost = (f"{method}: predicted build time {seconds:.3g} s exceeds the service's build budget of {budget:g} s "
-            f"(cap; {subsets:,} facet subsets C(m_free, k-1) x {FACET_SECONDS * 1e6:g} us")
+            f"(cap; {subsets:,} facet subsets C(m_free, k-1): {facet_part:.3g} s")
     if seconds > facet_part * 1.0001 and "resolution" in cls.options:
         res = options.get("resolution", 64)
         raise _reject("options/resolution", f"{cost}, plus a {res} x {2 * res} direction table); "

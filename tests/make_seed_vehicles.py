@@ -1,4 +1,4 @@
-"""Write the seed's aircraft (and two examples) as vehicle files (alloc/data/vehicles/*.toml), once.
+"""Write the seed's aircraft (and three examples) as vehicle files (alloc/data/vehicles/*.toml), once.
 
     .venv/bin/python tests/make_seed_vehicles.py
 
@@ -267,9 +267,79 @@ def hexa_document() -> dict[str, Any]:
                   "D": _floats(np.zeros((7, 6))), "controlled": ["p", "q", "r", "w"]},
     }
 
+#: X-57-like high-lift propeller stations (m, each side), chosen: evenly spaced from 0.9 m to
+#: 4.15 m; the public sources give the count (12) and the leading-edge placement, not stations
+_X57_STATIONS = (0.9, 1.55, 2.2, 2.85, 3.5, 4.15)
+#: kg (about 3,000 lb: NASA's fact sheet) and kg m^2 (Ixx, Iyy, Izz: chosen for a light twin)
+_X57_MASS, _X57_INERTIA = 1361.0, (1400.0, 1800.0, 3000.0)
+#: N: level-flight thrust = drag at a chosen lift-to-drag ratio of 10 (1,361 kg x 9.81 / 10)
+_X57_TRIM_THRUST = 1335.0
+#: surfaces (rad): N m per rad at q = 980 Pa (40 m/s, sea level), S = 6.2 m^2, b = 9.6 m, mean
+#: chord 0.65 m, all chosen: aileron dCl/d(delta) 0.08 each (980 6.2 9.6 0.08 = 4,667 N m) with
+#: 5 % adverse yaw; stabilator dCm/d(delta) -1.5 (-5,924 N m); rudder dCn/d(delta) -0.06
+#: (-3,500 N m) with 10 % roll
+_X57_SURFACES = (("aileron_l", [-4667.0, 0.0, 233.0, 0.0], 0.35), ("aileron_r", [4667.0, 0.0, -233.0, 0.0], 0.35),
+                 ("stabilator", [0.0, -5924.0, 0.0, 0.0], 0.26), ("rudder", [-350.0, 0.0, -3500.0, 0.0], 0.44))
+
+
+def x57_document() -> dict[str, Any]:
+    """A distributed-propulsion example after NASA's X-57 Maxwell (Mod IV layout): 18 effectors
+    on roll, pitch, yaw and forward thrust (the source line says which numbers are sourced)."""
+    rotors = []
+    for side, sgn in (("l", -1.0), ("r", 1.0)):  # 0.6 m ahead of and 0.15 m below the CG (chosen)
+        rotors += [{"name": f"hl{n + 1}_{side}", "kind": "rotor", "unit": "1", "min": 0.0, "max": 1.0, "rate_max": 8.0,
+                    "dynamics": {"bandwidth": 25.0},
+                    "rotor": {"position": [0.6, sgn * y, 0.15], "axis": [1.0, 0.0, 0.0], "ct": 250.0, "km": 0.05 * sgn}}
+                   for n, y in enumerate(_X57_STATIONS)]
+    rotors += [{"name": f"cruise_{side}", "kind": "rotor", "unit": "1", "min": 0.0, "max": 1.0, "rate_max": 4.0,
+                "dynamics": {"bandwidth": 15.0},
+                "rotor": {"position": [0.3, sgn * 4.8, 0.0], "axis": [1.0, 0.0, 0.0], "ct": 1500.0, "km": 0.08 * sgn}}
+               for side, sgn in (("l", -1.0), ("r", 1.0))]
+    surfaces = [{"name": name, "kind": "surface", "unit": "rad", "min": -lim, "max": lim, "rate_max": 1.5,
+                 "dynamics": {"bandwidth": 20.0}, "effectiveness": col} for name, col, lim in _X57_SURFACES]
+    props = [e["name"] for e in rotors]
+    # rigid body, small angles, no aerodynamic damping (as hexa-x): phi' = p, ..., p' = L / Ixx, ...,
+    # u' = X / mass; mass 1,361 kg (about 3,000 lb, sourced); inertias chosen for a light twin
+    from alloc.vehicle_file import rotor_wrench
+
+    W = np.array([rotor_wrench(e["rotor"]["position"], e["rotor"]["axis"], e["rotor"]["ct"], e["rotor"]["km"])
+                  for e in rotors]).T
+    B_axes = np.hstack([W[[0, 1, 2, 3]], np.array([e["effectiveness"] for e in surfaces]).T])
+    A = np.zeros((7, 7))
+    A[0, 3] = A[1, 4] = A[2, 5] = 1.0
+    Bm = np.zeros((7, B_axes.shape[1]))
+    Bm[3:6] = B_axes[:3] / np.array([[_X57_INERTIA[0]], [_X57_INERTIA[1]], [_X57_INERTIA[2]]])
+    Bm[6] = B_axes[3] / _X57_MASS
+    states = ["phi", "theta", "psi", "p", "q", "r", "u"]
+    return {
+        "format": FORMAT, "name": "x57-dep",
+        "description": "Distributed electric propulsion example after NASA's X-57 Maxwell (Mod IV layout): 12 "
+                       "high-lift and 2 wingtip cruise propellers, ailerons, stabilator and rudder; 4 axes x 18 "
+                       "effectors",
+        "source": "layout (12 high-lift propellers on the wing leading edge, 2 cruise propellers of 5 ft diameter at "
+                  "the wingtips, 10.5 kW per high-lift motor, about 3,000 lb): NASA's X-57 Mod IV release of "
+                  "2020-03-27 (reprinted by greencarcongress.com and aerotechnews.com, 2020-04-03) and NASA's X-57 "
+                  "fact sheet as quoted by avionicsea.com (2023-06-27). Chosen here, not sourced: span 9.6 m (the "
+                  "often-quoted 31.6 ft, unchecked against a primary source), propeller stations, static thrusts "
+                  "(momentum theory, figure of merit 0.7: 250 N per high-lift, 1,500 N per cruise propeller at an "
+                  "assumed 60 kW), torque ratios km, the surfaces' moment derivatives (q = 980 Pa, S = 6.2 m^2), "
+                  "limits, rates, actuator bandwidths, the inertias diag(1400, 1800, 3000) kg m^2 of the rigid-body "
+                  "model (mass 1,361 kg: 3,000 lb) and its lack of aerodynamic damping, the thrust trim 1,335 N (L/D 10). An allocation example, not a "
+                  "model of the aircraft.",
+        "axes": [{"name": "roll", "unit": "N m"}, {"name": "pitch", "unit": "N m"}, {"name": "yaw", "unit": "N m"},
+                 {"name": "thrust", "unit": "N", "wrench": "fx", "trim": _X57_TRIM_THRUST,
+                  "description": "body x force (forward positive): trimmed at the drag of level flight"}],
+        "effectors": rotors + surfaces,
+        "methods": {"daisy": {"groups": [[e["name"] for e in surfaces], props]}},
+        "model": {"states": states, "outputs": states,
+                  "units": ["rad", "rad", "rad", "rad/s", "rad/s", "rad/s", "m/s"], "A": _floats(A), "B": _floats(Bm),
+                  "C": _floats(np.eye(7)), "D": _floats(np.zeros((7, B_axes.shape[1]))),
+                  "controlled": ["p", "q", "r", "u"]},
+    }
+
 
 #: the bundled examples that are not the seed's: file name -> document
-EXAMPLES = {"tailless": tailless_document, "hexa-x": hexa_document}
+EXAMPLES = {"tailless": tailless_document, "hexa-x": hexa_document, "x57-dep": x57_document}
 
 
 def main() -> None:

@@ -29,6 +29,7 @@ corner and its edges; ``u_d*`` is the boundary control of :meth:`AttainableSet.m
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -155,7 +156,11 @@ class AttainableSet:
     (20, 22)
     """
 
-    def __init__(self, problem: Problem, lo: ArrayLike | None = None, hi: ArrayLike | None = None) -> None:
+    def __init__(self, problem: Problem, lo: ArrayLike | None = None, hi: ArrayLike | None = None, *,
+                 tile_limit: int | None = None) -> None:
+        # tile_limit: refuse (ProblemError) a tiling of more tiles, counted before any is built
+        # (the facet searches' build is priced for at most that many; see alloc.facet_cost)
+        self._tile_limit = tile_limit
         if not isinstance(problem, Problem):
             raise TypeError(f"problem: expected alloc.Problem, got {type(problem).__name__}")
         self.problem = problem
@@ -213,6 +218,14 @@ class AttainableSet:
         # tiles: one per simple facet, a zonotopal tiling of each merged polygon
         low_hi = (self.sign < 0) & self.active  # a class's low end: members at lo if sign>0
         simple = free_cls.sum(axis=1) == r - 1
+        if self._tile_limit is not None:
+            # a merged facet of F directions holds C(F, r-1) tiles; tolerance merging that is not
+            # transitive (directions within DIRECTION_TOL of some hyperplanes, not of others) can
+            # put one subset into many facets: 15,962 tiles for 325 subsets at 3 x 26
+            count = int(simple.sum()) + sum(math.comb(int(n), r - 1) for n in free_cls[~simple].sum(axis=1))
+            if count > self._tile_limit:
+                raise ProblemError(f"AMS: {count:,} facet tiles exceed the limit of {self._tile_limit:,} "
+                                   "(directions coplanar within DIRECTION_TOL for some hyperplanes only)")
         tf = [np.flatnonzero(simple)]
         ts = [np.nonzero(free_cls[simple])[1].reshape(int(simple.sum()), r - 1)]
         th = [fixed_hi[simple] | (free_eff[simple] & low_hi)]

@@ -17,8 +17,10 @@ import math
 
 import numpy as np
 
+from .. import _ray_simplex
 from .._kernels import facet_polish, matvec, rmatvec
 from ..exceptions import SolverError
+from ..facet_cost import lp_build_bytes, lp_build_seconds
 from ..method import FloatArray, Method
 from ..problem import Problem
 from ..solvers import backends, make_backend
@@ -34,9 +36,23 @@ class RayLP(Method):
     equation = "Eqs 1.15-1.17"
     summary = "largest admissible moment along v as an LP, scaled back when attainable"
 
-    def __init__(self, problem: Problem, *, backend: str = "daqp") -> None:
+    @classmethod
+    def build_cost(cls, problem: Problem, **options: object) -> float:
+        """The ray LP's set-up, measured (:func:`alloc.facet_cost.lp_build_seconds`)."""
+        return lp_build_seconds(problem.k, problem.m)
+
+    @classmethod
+    def build_memory(cls, problem: Problem, **options: object) -> int:
+        """The ray LP's set-up, measured (:func:`alloc.facet_cost.lp_build_bytes`)."""
+        return lp_build_bytes(problem.k, problem.m)
+
+    def __init__(self, problem: Problem, *, backend: str = "daqp", simplex: bool = False) -> None:
         super().__init__(problem)
         name = check_backend(backend, backends(lp=True), "da")
+        #: the compiled ray simplex (:mod:`alloc._ray_simplex`) answers first; the backend's
+        #: model only where it stops at its iteration bound or on a singular basis
+        self.simplex = bool(simplex)
+        self.simplex_fallbacks = 0
         p = problem
         # The LP is solved in scaled variables so that its data are O(1) whatever the
         # magnitudes of B and the limits (1e-30 to 1e48 in the adversarial suite):
@@ -66,6 +82,24 @@ class RayLP(Method):
         self._u0 = np.array(p.up)  # base point without rate limits (up is within the limits)
         self._Bu0 = p.B @ self._u0
         self._rhs0 = self._QBs @ (self._u0 - self._c0)
+        self._x0 = self._to_x(self._u0)
+        if self.simplex:
+            kq = self._Q.shape[0]
+            self._F = _ray_simplex.ray_matrix(self._A[:, :-1])
+            self._xlo, self._xhi = self._lb[:-1].copy(), self._ub[:-1].copy()
+            Ax = self._A[:, :-1]
+            # the ellipsoid (A A')^-1 behind the starting basis; a pseudo-inverse, since every
+            # effector may be jammed (A = 0): only the start depends on it, never the answer
+            G = np.linalg.pinv(Ax @ Ax.T) if kq and np.isfinite(Ax).all() else np.zeros((kq, kq))
+            self._G = np.array(G if np.isfinite(G).all() else np.zeros((kq, kq)), order="C")
+            self._cnorm = np.linalg.norm(Ax, axis=0)
+            self._Ax = np.array(Ax, order="C")
+            # writable copies (one compiled signature; a pickled copy's arrays are writable)
+            self._umin, self._umax = np.array(p.umin), np.array(p.umax)
+            nw, ni = _ray_simplex.work_sizes(kq, p.m)
+            self._work, self._iwork = np.empty(nw), np.empty(ni, dtype=np.int64)
+            # a ray crosses few vertices; the bound only stops a pathological pivot path
+            self._max_pivots = 50 * (kq + 1) + 4 * p.m
         z = self._rhs0  # feasible at set-up: u = up, t = 0
         try:
             self._model = make_backend(name, None, self._c, self._A, z, z, self._lb, self._ub)
@@ -85,8 +119,9 @@ class RayLP(Method):
 
         The LP runs along the unit direction ``d / |d|`` in scaled variables (see
         ``__init__``) so that its bound on the distance (the AMS's extent) is a constant
-        and, without rate limits, no bound is re-sent per call.  The LP (DAQP's proximal
-        iterations) meets the equality to ~1e-8 relative; on a facet hit (``k - 1``
+        and, without rate limits, no bound is re-sent per call.  With ``simplex`` the compiled
+        solvers of :mod:`alloc._ray_simplex` answer first (exact vertices); the LP (DAQP's
+        proximal iterations) meets the equality to ~1e-8 relative; on a facet hit (``k - 1``
         effectors strictly inside their limits) the point is then re-solved exactly from
         Eq 1.16 on that facet (:func:`alloc._kernels.facet_polish`).  Edges and degenerate
         facets keep the LP's answer.
@@ -108,7 +143,28 @@ class RayLP(Method):
             lb, ub = self._lb.copy(), self._ub.copy()
             lb[:-1], ub[:-1] = self._to_x(lo), self._to_x(hi)
             rhs = matvec(self._QBs, u0 - self._c0)
-        x, it = self._model.solve(A=A, lb=lb, ub=ub, bl=rhs, bu=rhs)
+        x = None
+        if self.simplex:
+            # writable, contiguous arrays only: one compiled signature (a pickled copy's arrays are writable)
+            if lb is self._lb:
+                x0, xlo, xhi = self._x0, self._xlo, self._xhi
+            else:
+                xlo, xhi = lb[:-1].copy(), ub[:-1].copy()
+                x0 = np.minimum(np.maximum(self._to_x(u0), xlo), xhi)
+            xs = np.empty(p.m)
+            qd = -A[:, -1]
+            code, t, it = _ray_simplex.dual_ray(self._Ax, qd, x0, xlo, xhi, self._G, self._cnorm,
+                                                self._max_pivots, xs)
+            if code != _ray_simplex.OPTIMAL:
+                code, t, it = _ray_simplex.solve_ray(self._F, -A[:, -1], x0, xlo, xhi, float(ub[-1]),
+                                                     self._max_pivots, self._work, self._iwork, xs, self._G,
+                                                     self._cnorm)
+            if code == _ray_simplex.OPTIMAL:
+                x = np.append(xs, t)
+            else:
+                self.simplex_fallbacks += 1
+        if x is None:
+            x, it = self._model.solve(A=A, lb=lb, ub=ub, bl=rhs, bu=rhs)
         ustar = np.minimum(np.maximum(self._c0 + self._D * x[:-1], lo), hi)
         a = float(x[-1]) * (self._sigma / norm)
         if self._Q.shape[0] == p.k:
@@ -120,6 +176,14 @@ class RayLP(Method):
 
     def solve(self, v, lo, hi, u_prev):
         p = self.problem
+        if self.simplex and lo is p.umin and hi is p.umax:
+            # the nominal call in one compiled pass (alloc._ray_simplex.ray_call); the path below
+            # only when the dual walk stops
+            code, u, it = _ray_simplex.ray_call(v, self._Bu0, self._u0, self._B, self._Q, self._Ax, self._G,
+                                                self._cnorm, self._x0, self._xlo, self._xhi, self._c0, self._D,
+                                                self._umin, self._umax, self._sigma, self._max_pivots)
+            if code == _ray_simplex.OPTIMAL:
+                return u, it
         if lo is p.umin and hi is p.umax:
             u0, Bu0 = self._u0, self._Bu0
         else:

@@ -13,8 +13,9 @@ and the boundary solution is scaled back along the ray (Eq 1.15):
 the demanded direction (status ``unattainable``).
 
 Backends: the exact facet search of :mod:`alloc.methods.facet_search` (``da_facet``:
-precomputed facet inverses, compiled) and the LP of :mod:`alloc.methods._direct_lp` on a persistent
-DAQP (or HiGHS) model, polished on the facet it finds.  ``backend="auto"`` picks the backend a measured cost model says is
+precomputed facet inverses, compiled) and the LP of :mod:`alloc.methods._direct_lp`: the compiled ray
+simplex (``backend="simplex"``, :mod:`alloc._ray_simplex`; a persistent DAQP model behind it) or a persistent
+DAQP (or HiGHS) model alone, polished on the facet it finds.  ``backend="auto"`` picks the backend a measured cost model says is
 cheaper per call (:func:`facet_is_cheaper`; never the facet search beyond ``FACET_LIMIT``).  With a rank-deficient ``B`` the ray
 follows the part of ``d`` in the range of ``B``; the rest is reported as unallocated.  When the ray leaves the AMS through an
 edge or a degenerate facet, ``u*`` is not unique (the moment is).  The facet-search
@@ -32,30 +33,28 @@ from ..options import choice
 from ..problem import Problem
 from ..solvers import backends
 from ._direct_lp import RayLP
-from .facet_search import FACET_LIMIT, FacetSearch, facet_build_seconds
+from .facet_search import FACET_LIMIT, FacetSearch
 
 
 def facet_call_us(m: int, k: int) -> float:
     """Modelled median us per call of the compiled facet search (``benchmarks/bench_da_cost.py``)."""
-    return -1.7 + 0.078 * math.comb(m, max(k - 1, 0))
+    return 5.5 + (0.025 + 0.0045 * k) * math.comb(m, max(k - 1, 0))
 
 
 def lp_call_us(m: int, k: int) -> float:
-    """Modelled median us per call of the LP backend (``benchmarks/bench_da_cost.py``; refitted
-    2026-11-30 on a quiet machine after the LP became a fresh equilibrated DAQP solve per call)."""
-    return 47.4 + 2.94 * m
+    """Modelled median us per call of the LP backend ``auto`` uses, the compiled ray simplex
+    (``benchmarks/bench_da_cost.py``)."""
+    return 7.5 + (0.015 * k + 0.008 * k * k) * m
 
 
 def facet_is_cheaper(m: int, k: int) -> bool:
     """The measured per-call cost model of ``backend="auto"``.
 
-    Linear fits to ``benchmarks/bench_da_cost.py`` (median us per call, k = 1..6,
-    m = 4..64): facet search ``-1.7 + 0.078 C(m, k-1)``, LP ``47.4 + 2.94 m`` (the LP's
-    cost hardly depends on k).  Never the facet search beyond :data:`FACET_LIMIT` subsets.
-    Refitted on a quiet machine (2026-11-30) when each LP call became a fresh, equilibrated
-    DAQP solve: the old LP fit (``31 + 4.2 m - 6.6 k``) chose the LP at k = 6, m = 12 at
-    1.5-2.5x the facet search's cost; with the refit the chosen backend is within 1.03x of
-    the cheaper one on every measured cell (issue-11 goal: 1.5x).
+    Fits to ``benchmarks/bench_da_cost.py`` (median us per call, k = 1..6, m = 4..64, load
+    7-9, 2026-12-06): facet search ``5.5 + (0.025 + 0.0045 k) C(m, k-1)`` (0.038-0.053 us per
+    subset), the compiled ray LP ``7.5 + (0.015 k + 0.008 k^2) m`` (7-36 us).  Never the facet search beyond
+    :data:`FACET_LIMIT` subsets.  With the DAQP model as the LP (``47.4 + 2.94 m``, before the
+    ray simplex) the facet search was chosen up to 3 x 64 at 2.2x the LP's cost.
     """
     return math.comb(m, max(k - 1, 0)) <= FACET_LIMIT and facet_call_us(m, k) <= lp_call_us(m, k)
 
@@ -66,8 +65,9 @@ class DirectAllocation(RayLP):
 
     equation = "Eqs 1.15-1.17"
     summary = "largest admissible moment along v (AMS boundary), scaled back when attainable"
-    options = {"backend": choice("auto", "'auto': the cheaper of facet search and LP by a measured cost "
-                                         "model; 'facet'; or an LP solver", lambda: ["auto", "facet", *backends(lp=True)])}
+    options = {"backend": choice("auto", "'auto': the cheaper of facet search and the compiled ray simplex by "
+                                         "a measured cost model; 'facet'; 'simplex'; or an LP solver",
+                                 lambda: ["auto", "facet", "simplex", *backends(lp=True)])}
 
     @classmethod
     def facet_subsets(cls, problem: Problem, options: dict[str, Any]) -> int:
@@ -80,9 +80,18 @@ class DirectAllocation(RayLP):
 
     @classmethod
     def build_cost(cls, problem: Problem, **options: Any) -> float:
-        """The facet enumeration when the facet backend is used, else an LP set-up (milliseconds)."""
-        subsets = cls.facet_subsets(problem, options)
-        return facet_build_seconds(subsets) if subsets else super().build_cost(problem, **options)
+        """The facet search's (:class:`FacetSearch`) when the facet backend is used, else the
+        ray LP's set-up (milliseconds, :func:`alloc.facet_cost.lp_build_seconds`)."""
+        if cls.facet_subsets(problem, options):
+            return FacetSearch.build_cost(problem)
+        return super().build_cost(problem, **options)
+
+    @classmethod
+    def build_memory(cls, problem: Problem, **options: Any) -> int:
+        """The facet search's tables when the facet backend is used, else the ray LP's."""
+        if cls.facet_subsets(problem, options):
+            return FacetSearch.build_memory(problem)
+        return super().build_memory(problem, **options)
 
     def __init__(self, problem: Problem, *, backend: str = "auto") -> None:
         self._facet = None
@@ -91,7 +100,11 @@ class DirectAllocation(RayLP):
                 Method.__init__(self, problem)
                 self._facet = FacetSearch(problem)
                 return
-            backend = "daqp"
+            backend = "simplex"
+        if backend == "simplex":
+            # the compiled ray simplex, DAQP's model behind it (alloc._ray_simplex)
+            super().__init__(problem, backend="daqp", simplex=True)
+            return
         super().__init__(problem, backend=backend)
 
     def solve_batch(self, V, lo, hi):

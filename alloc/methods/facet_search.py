@@ -50,10 +50,9 @@ import numpy as np
 
 from ..ams.geometry import AttainableSet
 from ..exceptions import OptionError, SolverError
-from ..facet_cost import (_BISECT_SUBSET_SECONDS, _CALL_BASE_S, _CALL_SUBSET_K2_S, _CALL_SUBSET_M_S,  # noqa: F401
-                           _FACET_REFERENCE_ENTRIES, _TABLE_CELL_SECONDS, _TABLE_CELL_SUBSET_SECONDS,
-                           _TABLE_TEMPORARY_BYTES, FACET_BYTES, FACET_LIMIT, FACET_SECONDS,
-                           facet_build_bytes, facet_build_seconds)
+from ..facet_cost import (_CALL_BASE_S, _CALL_SUBSET_K2_S, _CALL_SUBSET_M_S, FACET_BYTES, FACET_LIMIT,
+                           FACET_SECONDS, NEAR_FLAT_RTOL, TILES_PER_SUBSET, facet_build_bytes, facet_build_seconds,
+                           lp_build_bytes, near_flat_ratio)
 from ..options import integer
 from ..problem import Problem
 from ..method import BUILD_LIMIT_BYTES, BUILD_LIMIT_SECONDS, FloatArray, Method, register
@@ -98,8 +97,8 @@ class FacetSearch(Method):
     def enumeration_cost(cls, problem: Problem, options: dict[str, Any] | None = None) -> tuple[float, int]:
         """Declared ``(seconds, bytes)`` of the facet enumeration and its search tables
         (:func:`facet_build_seconds`, :func:`facet_build_bytes`; subclasses add their own tables)."""
-        subsets, entries = cls.facet_subsets(problem, options or {}), problem.k * problem.m
-        return facet_build_seconds(subsets, entries), facet_build_bytes(subsets, entries)
+        subsets, k, m = cls.facet_subsets(problem, options or {}), problem.k, problem.m
+        return facet_build_seconds(subsets, k, m), facet_build_bytes(subsets, k, m)
 
     @classmethod
     def build_cost(cls, problem: Problem, **options: Any) -> float:
@@ -110,15 +109,21 @@ class FacetSearch(Method):
 
     @classmethod
     def build_memory(cls, problem: Problem, **options: Any) -> int:
-        """The facet tables (:meth:`enumeration_cost`); the LP's within the build bounds' redirect."""
+        """The facet tables (:meth:`enumeration_cost`); the LP's where the build is routed there
+        (:func:`alloc.facet_cost.lp_build_bytes`)."""
         if cls.redirected(problem, options):
-            return super().build_memory(problem, **options)
+            return lp_build_bytes(problem.k, problem.m)
         return cls.enumeration_cost(problem, options)[1]
 
     @classmethod
     def redirected(cls, problem: Problem, options: dict[str, Any] | None = None) -> str:
         """Why the build uses the LP formulation instead of enumerating ("" if it does not):
-        the enumeration's declared time or memory beyond the build bounds."""
+        a nearly rank-deficient ``B`` (:func:`near_flat_ratio`), or the enumeration's declared
+        time or memory beyond the build bounds."""
+        ratio = near_flat_ratio(problem)
+        if ratio:
+            return (f"B is nearly rank-deficient (singular value ratio {ratio:.1e} of its unit columns, below "
+                    f"{NEAR_FLAT_RTOL:g}): its facet tiling is not priced")
         seconds, nbytes = cls.enumeration_cost(problem, options)
         if seconds > BUILD_LIMIT_SECONDS:
             return (f"the facet enumeration's declared build time {seconds:.3g} s exceeds the build bound of "
@@ -153,14 +158,18 @@ class FacetSearch(Method):
             self._use_lp(too_large)
         else:
             try:
-                self.ams = AttainableSet(problem)
+                # more tiles than the model prices (a tiling in general position has 2 per
+                # subset) only come from uneven tolerance merging: the LP instead
+                limit = TILES_PER_SUBSET * max(self.facet_subsets(problem, {}), 1)
+                self.ams = AttainableSet(problem, tile_limit=limit)
                 self._prepare()
             except Exception as exc:  # noqa: BLE001 - degenerate geometry: handled, not refused
                 self._use_lp(f"{type(exc).__name__}: {exc}")
         self.build_time = time.perf_counter() - t0
 
     def _use_lp(self, reason: str) -> None:
-        self._lp = RayLP(self.problem, backend="daqp")  # the LP formulation of the same problem
+        # the LP formulation of the same problem (the compiled ray simplex, DAQP behind it)
+        self._lp = RayLP(self.problem, backend="daqp", simplex=True)
         self.lp_reason = reason
 
     # ------------------------------------------------------------ tables

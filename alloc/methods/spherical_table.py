@@ -19,8 +19,8 @@ from ..method import BUILD_LIMIT_SECONDS, FloatArray, register
 from ..options import integer
 from ..problem import Problem
 from . import _facet_kernels as _kernels
-from .facet_search import (_TABLE_CELL_SECONDS, _TABLE_CELL_SUBSET_SECONDS, _TABLE_TEMPORARY_BYTES, _TOL, FacetSearch,
-                           _int_option)
+from ..facet_cost import table_build_bytes, table_build_seconds
+from .facet_search import _TOL, FacetSearch, _int_option
 
 __all__ = ["SphericalTable"]
 
@@ -36,11 +36,10 @@ class SphericalTable(FacetSearch):
     @classmethod
     def table_seconds(cls, problem: Problem, resolution: int) -> float:
         """Declared build time (s) of the k = 3 (resolution x 2 resolution) direction table:
-        ``resolution^2 x (300 + 2 S) us`` (0 where no table is built)."""
+        ``20 ms + resolution^2 x (20 + 1.2 S) us`` (0 where no table is built; :mod:`alloc.facet_cost`)."""
         if problem.k != 3:
             return 0.0
-        subsets = cls.facet_subsets(problem, {})
-        return float(resolution) ** 2 * (_TABLE_CELL_SECONDS + _TABLE_CELL_SUBSET_SECONDS * subsets)
+        return table_build_seconds(cls.facet_subsets(problem, {}), resolution)
 
     @classmethod
     def build_cost(cls, problem: Problem, **options: Any) -> float:
@@ -54,12 +53,12 @@ class SphericalTable(FacetSearch):
     @classmethod
     def build_memory(cls, problem: Problem, **options: Any) -> int:
         """The facet tables plus the direction table's 10 resolution^2 candidate indices and
-        the ray casts' temporaries (chunks of 2 million tile tests: 41 MiB measured at m = 20)."""
+        the ray casts' temporaries (chunks of at most 2 million tile tests; :mod:`alloc.facet_cost`)."""
         res = options.get("resolution", cls.options["resolution"].default)
         extra = 0
         if (problem.k == 3 and isinstance(res, (int, np.integer)) and not isinstance(res, (bool, np.bool_))
                 and res > 0 and not cls.redirected(problem, options)):
-            extra = 8 * 10 * int(res) ** 2 + _TABLE_TEMPORARY_BYTES
+            extra = table_build_bytes(cls.facet_subsets(problem, options), int(res))
         return super().build_memory(problem, **options) + extra
 
     def __init__(self, problem: Problem, *, resolution: int = 64) -> None:
@@ -77,8 +76,9 @@ class SphericalTable(FacetSearch):
         seconds = facets + cls.table_seconds(problem, resolution)
         if seconds <= BUILD_LIMIT_SECONDS:
             return
-        per_cell = cls.table_seconds(problem, 1)
-        fits = int(math.isqrt(int(max(BUILD_LIMIT_SECONDS - facets, 0.0) / per_cell)))
+        base = cls.table_seconds(problem, 0)  # the table's fixed part
+        per_cell = cls.table_seconds(problem, 1) - base
+        fits = int(math.isqrt(int(max(BUILD_LIMIT_SECONDS - facets - base, 0.0) / per_cell)))
         hint = f"resolution <= {fits} fits" if fits >= 2 else "no table fits; use 'da_facet'"
         raise OptionError(f"resolution: da_table's declared build time {seconds:.3g} s at resolution {resolution} "
                           f"exceeds the build bound of {BUILD_LIMIT_SECONDS:g} s ({hint})", field="resolution")

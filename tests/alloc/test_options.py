@@ -61,7 +61,7 @@ def test_method_info_lists_json_specs(method):
         ("wls", {"gamma": "big"}, "gamma: must be a finite number, got 'big'"),
         ("qp", {"backend": "nope"}, "backend: must be one of active_set, daqp"),
         ("lp", {"backend": "osqp"}, "backend: must be one of simplex, daqp, highs, got 'osqp'"),
-        ("da", {"backend": "simplex"}, "backend: must be one of auto, facet, daqp, highs, got 'simplex'"),
+        ("da", {"backend": "osqp"}, "backend: must be one of auto, facet, simplex, daqp, highs, got 'osqp'"),
         ("da_bisect", {"angles": 0}, "angles: must be >= 1 and <= 1024, got 0"),
         ("da_bisect", {"max_rounds": 2.5}, "max_rounds: must be an integer, got 2.5"),
         ("da_table", {"resolution": 1}, "resolution: must be >= 2, got 1"),

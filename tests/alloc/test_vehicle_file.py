@@ -55,7 +55,7 @@ def test_seed_vehicle_file_is_the_catalogue_problem_bit_for_bit(name):
     assert v.method_options("daisy") == {"groups": vehicles.daisy_groups(name)}
 
 
-EXAMPLES = ("hexa-x", "tailless")
+EXAMPLES = ("hexa-x", "tailless", "x57-dep")
 
 
 def test_every_catalogue_entry_has_a_file_and_back():
@@ -386,3 +386,18 @@ def test_seeded_malformed_simulation_sections_raise_problem_error_naming_a_path(
             continue
         assert vehicle_from_dict(v.to_dict()) == v, trial
     assert rejected > 100, rejected
+
+
+def test_x57_example_columns_are_its_geometry():
+    """The distributed-propulsion example: a forward-thrusting propeller at (x, y, z) gives
+    fx = ct, yaw = -ct y, pitch = ct z, roll = -ct km (alloc.vehicle_file.rotor_wrench, PX4's
+    convention); the surfaces carry their stated derivatives; 18 effectors on 4 axes."""
+    v = load_vehicle("x57-dep")
+    p = v.problem()
+    assert (p.k, p.m) == (4, 18) and v.effector_names[:6] == tuple(f"hl{i}_l" for i in range(1, 7))
+    hl1_r, cruise_l = v.effector_names.index("hl1_r"), v.effector_names.index("cruise_l")
+    np.testing.assert_allclose(p.B[:, hl1_r], [-250.0 * 0.05, 250.0 * 0.15, -250.0 * 0.9, 250.0], atol=1e-12)
+    np.testing.assert_allclose(p.B[:, cruise_l], [1500.0 * 0.08, 0.0, 1500.0 * 4.8, 1500.0], atol=1e-12)
+    np.testing.assert_allclose(p.B[:, v.effector_names.index("stabilator")], [0.0, -5924.0, 0.0, 0.0])
+    # every effector moves the set: full rank, no zero column
+    assert np.linalg.matrix_rank(p.B) == 4 and (np.abs(p.B).sum(axis=0) > 0).all()

@@ -60,7 +60,7 @@ def test_harv_ganging_is_eq_4_19():
 
 # ------------------------------------------------------------------ the catalogue
 SEED_NAMES = ["ice", "ice-design", "ice-mid", "harv"]
-EXAMPLES = ["hexa-x", "tailless"]
+EXAMPLES = ["hexa-x", "tailless", "x57-dep"]
 
 
 def test_every_command_names_the_same_problems_the_same_way():

@@ -32,7 +32,7 @@ def _sim(*args: str):
 
 
 def test_the_catalogue_is_the_one_named_in_the_brief():
-    assert CATALOGUE == ["harv", "hexa-x", "ice", "ice-design", "ice-mid", "tailless"]
+    assert CATALOGUE == ["harv", "hexa-x", "ice", "ice-design", "ice-mid", "tailless", "x57-dep"]
 
 
 @pytest.mark.parametrize("health", HEALTH_MODES)
