@@ -495,7 +495,6 @@ class FailureDetector(Isolation):
         # a new finding replaces what was known of that effector (a jam would otherwise
         # take precedence over reduced limits, see alloc.health)
         name = self.problem.names[self.problem.index(ev.effector)]
-        refinement = name in self._active
         before = self._active.get(name, {}).get("before", self.health.get(name))
         self._active[name] = {"before": before, "time": float(detection.time), "kind": ev.kind.value}
         _, health = apply_event(self.problem, self.health, FailureEvent(ev.effector, FailureKind.REPAIR))
@@ -505,7 +504,7 @@ class FailureDetector(Isolation):
                                else detection.end_position)
         self.detections.append(detection)
         del self.detections[:-MAX_KEPT]
-        _probation.start(self, name, detection.time, refinement)
+        _probation.start(self, name, detection.time)
         self._restart()
 
     # ------------------------------------------------------------------ withdrawal

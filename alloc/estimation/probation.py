@@ -71,16 +71,11 @@ def position_under(h: EffectorHealth | None, u: float, prev: float, dt: float) -
     return p, 0.0 if h.floating else h.effectiveness
 
 
-def start(det: Any, name: str, time: float, refinement: bool) -> None:
-    """Put the detection just applied on ``name`` (at ``time``) on probation (none when 0 s).
-
-    A refinement (a detection on an effector whose earlier detection stands) ends the chain's
-    probation instead: it was found against the earlier detection's model, which is evidence
-    against that model, not for the health before the chain (measured: judging refinements
-    against it withdrew 11 real failures of 36, a correct hard-over among them, after a wrong
-    refinement)."""
+def start(det: Any, name: str, time: float) -> None:
+    """Put the detection just applied on ``name`` (at ``time``) on probation (none when 0 s); a
+    refinement's probation replaces its chain's, against the same health before the chain."""
     det._probations.pop(name, None)
-    if det.probation > 0 and not refinement:
+    if det.probation > 0:
         j = det.problem.index(name)
         det._probations[name] = {"time": float(time), "end": float(time) + det.probation, "llr": 0.0,
                                  "samples": 0, "rate": float(det._rate_state[j])}
