@@ -392,7 +392,7 @@ class FailureDetector(Isolation):
                                       "the state is unchanged") from None
             if self._learner is not None:  # an alarm being isolated, or just decided, is not the nominal model
                 self._learner.learn(r0, phi, r, s_pred, known, model=self._pending is None and not out)
-            for name, statistic in _probation.step(self, t, u, known, r, q):  # after the test: nothing to restore
+            for name, statistic in _probation.step(self, t, u, known, r, q, None if self._learner is None else s_pred):  # after the test: nothing to restore
                 self.withdraw(name, t, _probation.REASON, statistic)
             return out
 

@@ -45,7 +45,7 @@ import numpy as np
 
 from ..effector_health import EffectorHealth
 from ..health import FailureEvent, FailureKind, apply_event
-from ..problem import as_real
+from ..problem import MAX_MAGNITUDE, as_real
 from ._checks import StateError, state_count
 
 __all__ = ["DECISIVE_LOG", "REASON", "position_under", "start", "step", "explained_fraction",
@@ -93,10 +93,12 @@ def _kappa(det: Any) -> float:
     return 1.0 / max(1.0, 1.0 + 2.0 * float(np.sum(rho)))
 
 
-def step(det: Any, t: float, u: np.ndarray, known: np.ndarray, r: np.ndarray, q: np.ndarray) -> list[tuple[str, float]]:
+def step(det: Any, t: float, u: np.ndarray, known: np.ndarray, r: np.ndarray, q: np.ndarray,
+         s_pred: np.ndarray | None) -> list[tuple[str, float]]:
     """One sample's evidence (taken at ``t`` with commands ``u``, known positions ``known`` and
-    residuals ``r``, ``q`` under the belief) for every detection on probation; returns the
-    ``(effector, statistic)`` to withdraw.  Probations that end are closed."""
+    residuals ``r``, ``q`` under the belief; ``s_pred`` the robust detector's predictive standard
+    deviation of each axis, in stated units, or None) for every detection on probation; returns
+    the ``(effector, statistic)`` to withdraw.  Probations that end are closed."""
     out: list[tuple[str, float]] = []
     if not det._probations:
         return out
@@ -110,17 +112,24 @@ def step(det: Any, t: float, u: np.ndarray, known: np.ndarray, r: np.ndarray, q:
         p_b, f_b = position_under(before, float(u[j]), rec["rate"], det.dt)
         p_n, f_n = float(known[j]), float(det._f_known[j])
         with np.errstate(over="ignore", invalid="ignore"):
-            delta = det._Bn[:, j] * ((f_n * p_n - u[j]) - (f_b * p_b - u[j]))
+            # r_before - r_belief: the stated-whitened column on the effective positions; the
+            # robust detector's learnt model acts on the positions themselves (its regressor),
+            # and its innovation is divided by the predictive std (lag regressors left out)
+            delta = det._Bn0[:, j] * (f_n * p_n - f_b * p_b)
+            if s_pred is not None:
+                delta = (delta + det._learner.theta[:, j] * (p_n - p_b)) / s_pred
             r_b = r + delta
             gain = float(r_b @ r_b - r @ r)
             if det.has_position:
                 q_b = q[j] + (p_n - p_b) / det.position_std[j]
                 gain += float(q_b * q_b - q[j] * q[j])
             llr = rec["llr"] + 0.5 * kappa * gain
-        rec = {**rec, "llr": float(min(max(llr, -1e300), 1e300)) if math.isfinite(llr) else rec["llr"],
+        # held in the stored domain (|x| <= 1e50, as every number of a state): far past ln 100 already
+        bounded = float(min(max(llr, -MAX_MAGNITUDE), MAX_MAGNITUDE)) if not math.isnan(llr) else rec["llr"]
+        rec = {**rec, "llr": bounded,
                "samples": rec["samples"] + 1, "rate": p_b}
         if rec["llr"] <= -DECISIVE_LOG:
-            out.append((name, -2.0 * rec["llr"]))
+            out.append((name, min(-2.0 * rec["llr"], MAX_MAGNITUDE)))
         if rec["llr"] <= -DECISIVE_LOG or t >= rec["end"]:
             del det._probations[name]
         else:

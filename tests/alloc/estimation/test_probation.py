@@ -68,8 +68,11 @@ def test_no_probation_no_withdrawal() -> None:
 @pytest.mark.parametrize("robust", [False, True])
 @pytest.mark.parametrize("kind", REAL_KINDS)
 def test_real_failures_are_not_withdrawn(robust: bool, kind: str) -> None:
-    """Seeded worlds (failure on effector 2 at 2 s, 6 s of data): the failed effector's detection
-    is never withdrawn.  False detections on other effectors may be (that is the rule's job)."""
+    """Seeded worlds (failure on effector 2 at 2 s, 6 s of data): no detection of the failed
+    effector's true kind (a jam and a hard-over hold it alike) is ever withdrawn, and the effector
+    ends failed.  A wrong kind may be (measured: the learnt model's first report of a loss of
+    effectiveness in world 1 was a jam, withdrawn 0.14 s later, the loss found at 3.4 s); so may
+    false detections on other effectors (that is the rule's job)."""
     for seed in range(3 if not robust else 2):
         rng = np.random.default_rng(seed)
         p = random_vehicle(rng)
@@ -80,7 +83,9 @@ def test_real_failures_are_not_withdrawn(robust: bool, kind: str) -> None:
             found += det.update(U[i], Y[i])
         failed = p.names[2]
         assert any(d.event.effector == failed for d in found), (seed, kind)
-        assert [w for w in det.withdrawals if w.effector == failed] == [], (seed, kind)
+        same = {"jam", "hardover"} if kind in ("jam", "hardover") else {kind}
+        assert [w for w in det.withdrawals if w.effector == failed and w.kind in same] == [], (seed, kind)
+        assert failed in det.health, (seed, kind)
         for d in found:
             assert 0.0 <= d.improvement <= 1.0 and 0.0 <= d.confidence <= 1.0
         mine = [d for d in found if d.event.effector == failed]
@@ -159,3 +164,27 @@ def test_hostile_streams_raise_only_sample_errors(data: st.DataObject) -> None:
             assert math.isfinite(rec["llr"])
     if not robust:  # the robust learner's sums may leave the stored domain (|x| <= 1e50): not round-tripped here
         FailureDetector.from_dict(det.problem, json.loads(json.dumps(det.to_dict())))
+
+
+@pytest.mark.parametrize("robust", [False, True])
+def test_overwhelming_evidence_stays_in_the_stored_domain(robust: bool) -> None:
+    """Whitened columns of 1e40: one sample's log ratio is about -1e82 (exact).  The withdrawal is made
+    (not refused), its statistic and the stored numbers within |x| <= 1e50, and the state loads."""
+    rng = np.random.default_rng(5)
+    p = random_vehicle(rng)
+    big = type(p)(np.asarray(p.B) * 1e30, p.umin, p.umax, rate_min=p.rate_min, rate_max=p.rate_max, names=p.names)
+    det = FailureDetector(big, 1e-10, DT, window=0.5, robust=True if robust else None)
+    det._emit(Detection(event=FailureEvent(p.names[1], FailureKind.JAM, position=8.0), time=0.0, onset=0.0,
+                        statistic=30.0, threshold=20.0, confidence=0.99, effector_confidence=0.99, kind_confidence=1.0,
+                        parameter=8.0, parameter_std=0.1, samples=1))
+    n = 40  # the robust detector's evidence is in the predictive scale, which holds the 20 % model error
+    U = commands(rng, p.m, n)
+    for i in range(n):
+        det.update(U[i], U[i] @ np.asarray(big.B).T, time=(i + 1) * DT)
+        FailureDetector.from_dict(big, json.loads(json.dumps(det.to_dict())))
+    (w,) = det.pop_withdrawals()
+    assert p.names[1] not in det.health
+    if robust:  # the predictive std holds the model error of the whole column: far less evidence
+        assert 2 * DECISIVE_LOG <= w.statistic <= 1e50
+    else:
+        assert w.statistic == 1e50
