@@ -11,11 +11,12 @@ sample by sample:
     Lambda_n = kappa sum_t 0.5 (|r_before,t|^2 - |r_belief,t|^2)     (+ the same of q with sensors)
 
 The residuals are whitened as the detector whitens them (by the stated noise; for the robust
-detector, the learnt model's innovation in the learnt scale).  A health acts on effector ``j``
-through its effective deviation ``d = f p - u`` (``p`` its position under that health, ``f`` its
-effectiveness, 0 floating), so ``r_before = r_belief + b_j (d_belief - d_before)`` with ``b_j`` the
-effector's whitened column as the isolation sees it, and ``q_before = q_belief + (p_belief -
-p_before) / sigma_p``.  ``kappa = 1 / (1 + 2 sum_l rho_l)`` (at most 1; ``rho`` the stated or the
+detector, the learnt model's innovation over its predictive standard deviation ``s``).  A health
+acts on effector ``j`` through its position ``p`` and effectiveness ``f`` (0 floating), so
+``r_before = r_belief + b_j (f_belief p_belief - f_before p_before)`` with ``b_j = B_j / sigma``,
+plus, for the robust detector, its learnt coefficient on the position ``theta_j (p_belief -
+p_before)``, the whole over ``s`` (its lag regressors are left out); and ``q_before = q_belief +
+(p_belief - p_before) / sigma_p``.  ``kappa = 1 / (1 + 2 sum_l rho_l)`` (at most 1; ``rho`` the stated or the
 learnt autocorrelation) scales correlated samples to the independent ones they are worth, the
 effective sample size of :func:`.harm.effective_samples`: an approximation of the exact
 generalised-least-squares ratio that keeps each sample's cost ``O(k)``.
@@ -25,7 +26,8 @@ The detection is withdrawn (reason :data:`REASON`, statistic ``-2 Lambda``) as s
 when its probation ends without that.  If the belief is the plant (the model and noise as
 stated), ``1 / exp(Lambda)`` is a non-negative martingale of mean 1, so by Ville's inequality the
 chance that it ever reaches 100 -- a real failure withdrawn, at any of the looks -- is at most
-1/100 with no correction for looking every sample.  A surface commanded still gives no evidence
+1/100 with no correction for looking every sample (exact for white noise and the stated model;
+``kappa`` and the learnt law make it an approximation otherwise).  A surface commanded still gives no evidence
 either way (its belief and its health before predict the same response): nothing is withdrawn.
 Free parameters: the probation (2 s, :class:`.harm.HarmDesign`'s reasoning: two time constants of
 the loop's slowest channel) and ln 100.
