@@ -390,10 +390,13 @@ class FailureDetector(Isolation):
                      self.unisolated_count) = saved
                     raise SampleError(f"y: the test would record a non-finite {exc} at this sample's scale; refused, "
                                       "the state is unchanged") from None
-            if self._learner is not None:  # an alarm being isolated, or just decided, is not the nominal model
-                self._learner.learn(r0, phi, r, s_pred, known, model=self._pending is None and not out)
-            for name, statistic in _probation.step(self, t, u, known, r, q, None if self._learner is None else s_pred):  # after the test: nothing to restore
+            robust = self._learner is not None
+            # after the test (nothing to restore), before the learner moves on (its residuals)
+            for name, statistic in _probation.step(self, t, u, known, r, q, r0 if robust else None,
+                                                   s_pred if robust else None):
                 self.withdraw(name, t, _probation.REASON, statistic)
+            if robust:  # an alarm being isolated, or just decided, is not the nominal model
+                self._learner.learn(r0, phi, r, s_pred, known, model=self._pending is None and not out)
             return out
 
     def _window(self, n: int, clipped: bool = False) -> tuple[np.ndarray, ...]:

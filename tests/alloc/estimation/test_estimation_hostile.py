@@ -269,10 +269,11 @@ DET_FIELDS = {"problem", "noise_std", "sample_time", "false_alarm_rate", "window
               "min_confidence", "noise_correlation", "long_window"}
 DET_STATE_FIELDS = DET_FIELDS | {"state", "kind", "health", "samples", "last_time", "alarm_count",
                                  "unisolated_count", "since_test", "pending", "rate_state", "buffer", "detections",
-                                 "U", "K", "R", "Q", "T",
+                                 "U", "K", "R", "Rc", "Q", "T",
                                  "withdrawals", "unpopped", "active",  # the withdrawal's state (FailureDetector.withdraw)
-                                 "robust", "probation", "probations", "probations.time", "probations.end",
-                                 "probations.llr", "probations.samples", "probations.rate"}  # the learner, the probation
+                                 "robust", "effector_lag", "probation", "probations", "probations.time", "probations.end",
+                                 "probations.llr", "probations.samples", "probations.rate",
+                                 "probations.ss_before", "probations.values"}  # the learner, the probation
 
 
 def hostile_problem(rng: np.random.Generator) -> alloc.Problem:
