@@ -175,7 +175,9 @@ def test_batches_and_events_interleaving_keep_one_event_sequence(app, client):
 
     def events() -> None:
         for i in range(12):
-            body = {"effector": "d", "kind": "effectiveness", "fraction": 0.9 - 0.05 * i}
+            # reduced limits the commands (within +-10) never reach: the model of the data stays
+            # right (a wrong one would leave the health before unfit, and nothing withdrawn)
+            body = {"effector": "d", "kind": "limits", "lo": -24.0 + 0.1 * i, "hi": 24.0 - 0.1 * i}
             statuses.append(client.post(f"/v1/vehicles/{vid}/events", json=body, headers=H).status_code)
 
     other = threading.Thread(target=events)
@@ -192,4 +194,4 @@ def test_batches_and_events_interleaving_keep_one_event_sequence(app, client):
     health = client.get(f"/v1/vehicles/{vid}/health").json()
     assert health["health_version"] == len(items) == 14
     a, d = health["effectors"][0], health["effectors"][3]
-    assert a["status"] == "healthy" and d["effectiveness"] == pytest.approx(0.9 - 0.05 * 11)
+    assert a["status"] == "healthy" and d["limits"] == pytest.approx([-24.0 + 1.1, 24.0 - 1.1])
