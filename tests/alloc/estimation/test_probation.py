@@ -71,7 +71,7 @@ def test_real_failures_are_not_withdrawn(robust: bool, kind: str) -> None:
     """Seeded worlds (failure on effector 2 at 2 s, 6 s of data): no detection of the failed
     effector's true kind (a jam and a hard-over hold it alike) is ever withdrawn, and the effector
     ends failed.  A wrong kind may be (measured: the learnt model's first report of a loss of
-    effectiveness in world 1 was a jam, withdrawn 0.14 s later, the loss found at 3.4 s); so may
+    effectiveness in world 1 was a jam, withdrawn 0.12 s later, the loss found at 3.3 s); so may
     false detections on other effectors (that is the rule's job)."""
     for seed in range(3 if not robust else 2):
         rng = np.random.default_rng(seed)
