@@ -13,10 +13,11 @@ sample by sample:
 The residuals are whitened as the detector whitens them (by the stated noise; for the robust
 detector, the learnt model's innovation over its predictive standard deviation ``s``).  A health
 acts on effector ``j`` through its position ``p`` and effectiveness ``f`` (0 floating), so
-``r_before = r_belief + b_j (f_belief p_belief - f_before p_before)`` with ``b_j = B_j / sigma``,
-plus, for the robust detector, its learnt coefficient on the position ``theta_j (p_belief -
-p_before)``, the whole over ``s`` (its lag regressors are left out); and ``q_before = q_belief +
-(p_belief - p_before) / sigma_p``.  ``kappa = 1 / (1 + 2 sum_l rho_l)`` (at most 1; ``rho`` the stated or the
+the stated-whitened residual under the health before is ``r_belief + b_j (f_belief p_belief -
+f_before p_before)`` with ``b_j = B_j / sigma``; the robust detector's is its learner's innovation
+of that, with the regressor and the predictive std of the position before (and the Gaussian's
+``ln s`` term, since the two stds differ); and ``q_before = q_belief + (p_belief - p_before) /
+sigma_p``.  ``kappa = 1 / (1 + 2 sum_l rho_l)`` (at most 1; ``rho`` the stated or the
 learnt autocorrelation) scales correlated samples to the independent ones they are worth, the
 effective sample size of :func:`.harm.effective_samples`: an approximation of the exact
 generalised-least-squares ratio that keeps each sample's cost ``O(k)``.
@@ -54,6 +55,7 @@ from ..effector_health import EffectorHealth
 from ..health import FailureEvent, FailureKind, apply_event
 from ..problem import MAX_MAGNITUDE, as_real
 from ._checks import StateError, state_count
+from .robust import PRIOR_SAMPLES
 
 __all__ = ["DECISIVE_LOG", "REASON", "position_under", "start", "step", "explained_fraction",
            "probations_to_dict", "probations_from_dict"]
@@ -95,7 +97,7 @@ def _kappa(det: Any) -> float:
     """The evidence one correlated sample is worth, in independent samples (at most 1)."""
     if det._learner is not None:
         lr = det._learner
-        rho = (5.0 * lr.stated_rho + lr.sum_cl) / max(5.0 + lr.sum_c0, 1e-300)  # the learnt law (robust.PRIOR_SAMPLES)
+        rho = (PRIOR_SAMPLES * lr.stated_rho + lr.sum_cl) / max(PRIOR_SAMPLES + lr.sum_c0, 1e-300)  # as lr.correlation
     elif det.noise_correlation is not None:
         rho = det.noise_correlation[: det.N - 1]
     else:
