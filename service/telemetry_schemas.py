@@ -19,7 +19,7 @@ from .errors import InvalidRequest, field_error
 from .schemas import AxisVector, EffectorVector, EventOut, Finite, HealthOut, _In, json_int
 from .telemetry import MAX_SAMPLES, MAX_WINDOW_SAMPLES, DetectorSettings
 
-__all__ = ["TelemetryConfigIn", "TelemetryBatchIn", "TelemetryOut", "TelemetryResult", "DetectionOut",
+__all__ = ["TelemetryConfigIn", "TelemetryBatchIn", "TelemetryOut", "TelemetryResult", "DetectionOut", "WithdrawalOut",
            "ProposalOut", "ProposalList", "ProposalDecided"]
 
 Positive = Annotated[float, Field(strict=True, gt=0, le=MAX_MAGNITUDE, allow_inf_nan=False)]
@@ -48,6 +48,17 @@ class TelemetryConfigIn(_In):
                                          "vehicle's effectors, 422 otherwise)")
     min_confidence: Annotated[float, Field(strict=True, gt=0, lt=1, allow_inf_nan=False)] = Field(
         default=0.95, description="posterior needed to report (effector and kind)")
+    model: Literal["learnt", "exact"] = Field(default="exact", description=(
+        "learnt: residuals against a nominal model learnt in flight from model_uncertainty, with a learnt noise "
+        "scale and correlation (alloc.estimation.robust); exact: the vehicle's B and noise_std taken as exact "
+        "(the stage-1 statistic exactly chi-square when they are)"))
+    model_uncertainty: Annotated[float, Field(strict=True, ge=0, le=10, allow_inf_nan=False)] = Field(
+        default=0.2, description="model learnt: the stated relative uncertainty of each effectiveness entry, one "
+                                 "standard deviation (0.2: within 20 %); ignored by the exact model")
+    probation: Annotated[float, Field(strict=True, ge=0, le=3600, allow_inf_nan=False)] = Field(
+        default=2.0, description="seconds each detection is judged on the detector's own evidence after it is "
+                                 "applied: withdrawn when the residuals favour the health before it by a Bayes "
+                                 "factor of 100 or more (Jeffreys' decisive); 0: never")
     reset: StrictBool = Field(default=False, description=(
         "true: start a new detector even if nothing else changes (buffers, segments and counters "
         "dropped; health and proposals kept). A PUT that changes a setting always does; one that "
@@ -60,7 +71,8 @@ class TelemetryConfigIn(_In):
                                                                         self.position_noise_std, nominal.m)
         settings = DetectorSettings(sample_time=self.sample_time, noise_std=noise, window=self.window, hop=self.hop,
                                     false_alarm_rate=self.false_alarm_rate, position_noise_std=position,
-                                    min_confidence=self.min_confidence)
+                                    min_confidence=self.min_confidence, model=self.model,
+                                    model_uncertainty=self.model_uncertainty, probation=self.probation)
         n = settings.window_samples()
         if n > MAX_WINDOW_SAMPLES:
             reason = (f"{self.window:g} s at {self.sample_time:g} s per sample is {n} samples; at most "
@@ -116,6 +128,9 @@ class TelemetryOut(BaseModel):
                                       "or time never received before the last sample, starts one)")
     health_version: int
     pending_proposals: int
+    withdrawals: list[dict[str, Any]] = Field(default_factory=list, description=(
+        "the detector's withdrawals, oldest first (the last 64): effector, kind, time, detection_time, reason, "
+        "statistic (twice the log Bayes factor for the health before)"))
 
 
 class DetectionOut(BaseModel):
@@ -124,13 +139,33 @@ class DetectionOut(BaseModel):
     params: dict[str, float]
     time: float = Field(description="s, the sample time the detection was decided at")
     onset: float = Field(description="s, the estimated start of the failure")
-    confidence: float
+    confidence: float = Field(ge=0, le=1, description=(
+        "how sure: the posterior of this effector and of a kind with the same consequence, among every kind on "
+        "every movable effector (equal priors, BIC-penalised likelihoods), in [0, 1]"))
+    improvement: float | None = Field(default=None, ge=0, le=1, description=(
+        "how much better: the fraction of the whitened residual sum of squares over the fitted samples, under the "
+        "model before the detection, that the detection explains (1 - SS_belief / SS_before, clipped to [0, 1]); "
+        "null for detections stored before it was computed"))
     evidence: dict[str, float | int | None] = Field(
         description="statistic and threshold of the stage-1 test (chi-square under no failure), samples fitted, "
                     "effector and kind confidences, the estimated parameter and its std")
     applied: bool = Field(description="true: recorded as a health event (policy auto)")
     event_seq: int | None = Field(description="the event it became (the health_version after it)")
     proposal_id: int | None = Field(description="policy confirm: the proposal to accept or reject")
+
+
+class WithdrawalOut(BaseModel):
+    effector: str
+    kind: str = Field(description="the failure kind withdrawn")
+    time: float = Field(description="s, the sample time of the withdrawal")
+    detection_time: float = Field(description="s, the decision time of the detection withdrawn")
+    reason: str
+    statistic: float | None = Field(description=(
+        "twice the log Bayes factor of the health before against the detection over its probation (at least "
+        "2 ln 100 = 9.21 when the detector withdrew it)"))
+    applied: bool = Field(description="true: recorded as health events restoring the health before (policy auto)")
+    event_seq: int | None = Field(description="policy auto: the last of those events (the health_version after it)")
+    proposal_id: int | None = Field(description="policy confirm: the pending proposal marked withdrawn, if any")
 
 
 class TelemetryResult(BaseModel):
@@ -140,6 +175,8 @@ class TelemetryResult(BaseModel):
     last_time: float | None
     policy: Literal["auto", "confirm"]
     detections: list[DetectionOut]
+    withdrawals: list[WithdrawalOut] = Field(description=(
+        "detections the detector withdrew during this batch, on its own evidence (probation)"))
     segment: Literal["first", "gap", "unseen_time"] | None = Field(description=(
         "why this batch started a new segment (the detector restarted on it: buffers and pending alarm "
         "emptied): its first batch, a gap longer than the window after the last sample, or a time before "
@@ -150,7 +187,8 @@ class TelemetryResult(BaseModel):
 
 class ProposalOut(BaseModel):
     id: int
-    status: Literal["pending", "accepted", "rejected"]
+    status: Literal["pending", "accepted", "rejected", "withdrawn"] = Field(description=(
+        "withdrawn: the detector withdrew the detection (its probation) while the proposal was pending"))
     effector: str
     kind: str
     params: dict[str, float]

@@ -20,6 +20,12 @@ Every write is one transaction, with the guarantees of a posted event (:mod:`ser
   (bad sample, out of order, over its price) changes nothing.
 * Accepting a proposal commits its event and its new status together; rejecting one
   commits the status and marks the detector for realignment (its belief drops the proposal).
+* A withdrawal the detector makes (its probation, :mod:`alloc.estimation.probation`) commits
+  with the batch that made it: under ``auto`` as the events restoring the effector's health
+  before the detection (a repair, then that health's failures: :func:`service.telemetry.restoring_events`),
+  in the order the detector made them among the batch's detections, under the same health
+  condition as they; under ``confirm`` the pending proposal of the detection withdrawn takes
+  the status ``withdrawn`` (a decided one is left as it is: the answer reports the withdrawal).
 
 Work runs on :class:`TelemetryRunner` threads (two, a bounded queue: 429 beyond), never on the
 event loop nor on the writer threads events use.
@@ -47,8 +53,8 @@ from .errors import Conflict, InvalidRequest, NotFound, TooManyRequests, field_e
 from .health import dump_health, to_problem
 from .store import VehicleStore
 from .telemetry import (
-    BatchOutcome, DetectorSettings, Policy, Samples, batch_seconds, belief, detection_out, event_of, run_batch,
-    segments_of,
+    BatchOutcome, DetectorSettings, Policy, Samples, batch_seconds, belief, detection_out, event_of,
+    restoring_events, run_batch, segments_of, withdrawal_out,
 )
 from .vehicle_state import VehicleState
 
@@ -230,11 +236,12 @@ class TelemetryStore:
             pending = session.scalar(select(func.count()).where(_PROPOSALS.c.vehicle_id == vehicle_id,
                                                              _PROPOSALS.c.status == "pending"))
         det = row.state or {}
-        return {"vehicle_id": vehicle_id, "policy": row.policy, "settings": row.config, "revision": row.revision,
+        settings = DetectorSettings.from_record(row.config).record()  # the model of a record stored before it
+        return {"vehicle_id": vehicle_id, "policy": row.policy, "settings": settings, "revision": row.revision,
                 "samples": det.get("samples", 0), "last_time": det.get("last_time"),
                 "alarms": det.get("alarm_count", 0), "unisolated_alarms": det.get("unisolated_count", 0),
                 "segments": segments_of(det)["count"], "health_version": state.version,
-                "pending_proposals": int(pending or 0)}
+                "pending_proposals": int(pending or 0), "withdrawals": list(det.get("withdrawals", []))}
 
     # ---------------------------------------------------------------- batches
     def ingest(self, vehicle_id: str, make_samples: Callable[[VehicleState, DetectorSettings], Samples],
@@ -287,7 +294,7 @@ class TelemetryStore:
                 continue
             if applied == _HEALTH:
                 continue  # run again on the new health
-            new_state, events, proposal_ids = applied
+            new_state, events, proposal_ids, w_seqs, w_ids = applied
             if new_state is not None:
                 self.store.prebuild(new_state)
             detections = []
@@ -297,29 +304,52 @@ class TelemetryStore:
                 out["event_seq"] = events[i] if policy is Policy.AUTO else None
                 out["proposal_id"] = proposal_ids[i] if policy is Policy.CONFIRM else None
                 detections.append(out)
+            withdrawals = [{**withdrawal_out(w), "applied": w_seqs[i] is not None, "event_seq": w_seqs[i],
+                            "proposal_id": w_ids[i]} for i, (w, _) in enumerate(outcome.withdrawals)]
             return {"vehicle_id": vehicle_id, "accepted": len(samples), "samples": outcome.samples,
                     "last_time": outcome.last_time, "policy": policy.value, "detections": detections,
+                    "withdrawals": withdrawals,
                     "segment": outcome.segment, "segments": outcome.segments,
                     "health_version": vehicle.version if new_state is None else new_state.version}
         raise Conflict(f"vehicle {vehicle_id!r}: too many concurrent telemetry writes from other processes; retry")
 
-    def _commit(self, db: Any, vehicle: VehicleState, row: Any, policy: Policy,
-                outcome: BatchOutcome) -> tuple[VehicleState | None, list[int], list[int]] | str:
+    def _commit(self, db: Any, vehicle: VehicleState, row: Any, policy: Policy, outcome: BatchOutcome
+                ) -> tuple[VehicleState | None, list[int], list[int], list[int | None], list[int | None]] | str:
         """Write a batch's outcome in the open transaction; :data:`_HEALTH` when an event moved
-        the vehicle's health since ``vehicle`` was read (``auto`` detections only),
-        :data:`_REVISION` when another telemetry write won."""
+        the vehicle's health since ``vehicle`` was read (``auto`` detections and withdrawals
+        only), :data:`_REVISION` when another telemetry write won.  Returns the new state, the
+        detections' event seqs (auto) or proposal ids (confirm), and the withdrawals' last
+        restoring event seq (auto) or withdrawn proposal id (confirm, None when none was pending)."""
         new_state: VehicleState | None = None
         seqs: list[int] = []
         ids: list[int] = []
+        w_seqs: list[int | None] = [None] * len(outcome.withdrawals)
+        w_ids: list[int | None] = [None] * len(outcome.withdrawals)
         synced = vehicle.version  # the belief is aligned with this version now (run_batch realigned it)
-        if policy is Policy.AUTO and outcome.detections:
-            appended = append_events(db, vehicle, [
-                (d.event, f"telemetry: detected at t = {d.time:.4f} s, confidence {d.confidence:.4f}")
-                for d in outcome.detections])
+        if policy is Policy.AUTO and (outcome.detections or outcome.withdrawals):
+            events, owners = [], []  # owners: which detection or withdrawal each event is of
+            for what, i in outcome.order:
+                if what == "detection":
+                    d = outcome.detections[i]
+                    events.append((d.event, f"telemetry: detected at t = {d.time:.4f} s, confidence "
+                                            f"{d.confidence:.4f}, improvement {d.improvement or 0.0:.4f}"))
+                    owners.append((what, i))
+                else:
+                    w, before = outcome.withdrawals[i]
+                    note = (f"telemetry: withdrawn at t = {w.time:.4f} s the {w.kind} detected at t = "
+                            f"{w.detection_time:.4f} s ({w.reason}; statistic {w.statistic or 0.0:.4g})")
+                    for ev in restoring_events(w.effector, before):
+                        events.append((ev, note))
+                        owners.append((what, i))
+            appended = append_events(db, vehicle, events)
             if appended is None:
                 return _HEALTH
             new_state, rows = appended
-            seqs = [r["seq"] for r in rows]
+            for (what, i), r in zip(owners, rows):
+                if what == "detection":
+                    seqs.append(r["seq"])
+                else:
+                    w_seqs[i] = r["seq"]  # the last of its events: the health before is restored there
             # the detector applies its findings as "replaces what was known"; a posted event may
             # combine with what was known instead: the next batch realigns when the two differ
             synced = new_state.version if dump_health(outcome.belief) == dump_health(new_state.health) else -1
@@ -337,7 +367,26 @@ class TelemetryStore:
                     params=out["params"], detection=out, health_version=vehicle.version, event_seq=None,
                     created_at=utcnow(), decided_at=None)).inserted_primary_key[0]))
             self._trim(db, vehicle.id)
-        return new_state, seqs, ids
+        if policy is Policy.CONFIRM and outcome.withdrawals:
+            w_ids = self._withdraw_proposals(db, vehicle.id, outcome)
+        return new_state, seqs, ids, w_seqs, w_ids
+
+    def _withdraw_proposals(self, db: Any, vehicle_id: str, outcome: BatchOutcome) -> list[int | None]:
+        """Mark ``withdrawn`` the pending proposal of each withdrawn detection (same effector and
+        decision time), in the open transaction; the ids marked (None: no pending one)."""
+        pending = db.execute(select(_PROPOSALS.c.id, _PROPOSALS.c.effector, _PROPOSALS.c.detection)
+                             .where(_PROPOSALS.c.vehicle_id == vehicle_id, _PROPOSALS.c.status == "pending")
+                             .order_by(_PROPOSALS.c.id)).all()
+        out: list[int | None] = []
+        for w, _ in outcome.withdrawals:
+            match = next((p.id for p in reversed(pending) if p.effector == w.effector
+                          and p.detection.get("time") == w.detection_time), None)
+            if match is not None:
+                db.execute(update(_PROPOSALS).where(_PROPOSALS.c.id == match, _PROPOSALS.c.status == "pending")
+                           .values(status="withdrawn", decided_at=utcnow()))
+                pending = [p for p in pending if p.id != match]
+            out.append(match)
+        return out
 
     def _trim(self, db: Any, vehicle_id: str) -> None:
         """Keep the newest :data:`MAX_PROPOSALS` proposals of the vehicle (decided ones go first)."""

@@ -10,7 +10,7 @@ from ..problem import as_real, short_repr
 from ._checks import StateError, state_count
 from .isolation import Detection, Withdrawal
 
-_OPTIONAL_NUMBERS = ("parameter", "parameter_std", "end_position")
+_OPTIONAL_NUMBERS = ("parameter", "parameter_std", "end_position", "improvement")
 
 
 

@@ -66,6 +66,7 @@ refused (SampleError naming ``y``) and the state is unchanged; counters stay bel
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -91,6 +92,7 @@ from ._glr import whitener as _whitener
 from ._records import active_from_dict as _active_from_dict
 from ._records import detection_from_dict as _detection_from_dict
 from ._records import withdrawal_from_dict as _withdrawal_from_dict
+from . import probation as _probation
 from .isolation import Detection, Isolation, Withdrawal
 from .robust import NominalLearner, RobustSettings
 
@@ -162,6 +164,9 @@ class FailureDetector(Isolation):
         Judge residuals against a nominal model learnt in flight from a stated model
         uncertainty, with a learnt scale and correlation and Huber-clipped residuals
         (:mod:`.robust`); ``None`` (default): the stated model and noise are exact.
+    probation : float
+        Seconds each applied detection is judged on its own evidence, withdrawn when the data
+        favour the health before it decisively (:mod:`.probation`); 0: never (default 2 s).
     effector_lag : float or array (m,), optional
         Seconds of each actuator's lag, for a robust detector to learn lag errors (rate
         regressors); ``None``: positions only.
@@ -170,7 +175,8 @@ class FailureDetector(Isolation):
     def __init__(self, problem: Problem, noise_std: Any, sample_time: float, *, false_alarm_rate: float = 0.1,
                  window: float = 0.25, hop: int | None = None, position_noise_std: Any = None,
                  min_confidence: float = 0.95, noise_correlation: Any = None,
-                 long_window: float | None = None, robust: Any = None, effector_lag: Any = None) -> None:
+                 long_window: float | None = None, robust: Any = None, effector_lag: Any = None,
+                 probation: float = 2.0) -> None:
         if not isinstance(problem, Problem):
             raise OptionError(f"problem: expected an alloc.Problem, got {type(problem).__name__}")
         self.problem = problem
@@ -230,6 +236,8 @@ class FailureDetector(Isolation):
         self._learner = (None if self.robust is None else
                          NominalLearner(self.robust, Bn, problem.umax - problem.umin, self.effector_lag,
                                         self.noise_correlation, self.dt))
+        self.probation = setting_real("probation", probation, 0.0, 3600.0)
+        self._probations: dict[str, dict[str, Any]] = {}  # effector -> its evidence so far (.probation)
         self._design()
         self.health: dict[str, EffectorHealth] = {}
         self.detections: list[Detection] = []
@@ -389,7 +397,12 @@ class FailureDetector(Isolation):
                      self.unisolated_count) = saved
                     raise SampleError(f"y: the test would record a non-finite {exc} at this sample's scale; refused, "
                                       "the state is unchanged") from None
-            if self._learner is not None:  # an alarm being isolated, or just decided, is not the nominal model
+            robust = self._learner is not None
+            # after the test (nothing to restore), before the learner moves on (its residuals)
+            for name, statistic in _probation.step(self, t, u, known, r, q, r0 if robust else None,
+                                                   s_pred if robust else None):
+                self.withdraw(name, t, _probation.REASON, statistic)
+            if robust:  # an alarm being isolated, or just decided, is not the nominal model
                 self._learner.learn(r0, phi, r, s_pred, known, model=self._pending is None and not out)
             return out
 
@@ -478,6 +491,7 @@ class FailureDetector(Isolation):
                        detection.parameter_std, detection.end_position, *detection.event.params.values())
             if not all(x is None or math.isfinite(x) for x in numbers):
                 raise _NonFinite("detection")
+            detection = replace(detection, improvement=_probation.explained_fraction(self, detection))
             self._emit(detection)
             return [detection]
         pending["hops"] += 1
@@ -500,6 +514,7 @@ class FailureDetector(Isolation):
                                else detection.end_position)
         self.detections.append(detection)
         del self.detections[:-MAX_KEPT]
+        _probation.start(self, name, detection.time)
         self._restart()
 
     # ------------------------------------------------------------------ withdrawal
@@ -525,6 +540,7 @@ class FailureDetector(Isolation):
         if statistic is not None:
             statistic = as_real("statistic", statistic, SampleError)
         active = self._active.pop(effector)
+        self._probations.pop(effector, None)
         withdrawal = Withdrawal(effector=effector, kind=active["kind"], time=t, detection_time=active["time"],
                                 statistic=statistic, reason=reason[:200])
         health = dict(self.health)
@@ -560,6 +576,7 @@ class FailureDetector(Isolation):
             "noise_correlation": None if self.noise_correlation is None else self.noise_correlation.tolist(),
             "robust": None if self._learner is None else self._learner.to_dict(),
             "effector_lag": None if self.effector_lag is None else self.effector_lag.tolist(),
+            "probation": self.probation, "probations": _probation.probations_to_dict(self._probations),
             "health": health_to_dict(self.health),
             "samples": self.samples, "last_time": None if math.isinf(self.last_time) else self.last_time,
             "alarm_count": self.alarm_count, "unisolated_count": self.unisolated_count,
@@ -588,7 +605,7 @@ class FailureDetector(Isolation):
                       noise_correlation=d.get("noise_correlation"),  # absent from states stored before it
                       long_window=d.get("long_window"),
                       robust=None if d.get("robust") is None else _robust_settings(d["robust"]),
-                      effector_lag=d.get("effector_lag"))
+                      effector_lag=d.get("effector_lag"), probation=d.get("probation", 2.0))
         except (OptionError, TypeError, ValueError) as exc:  # the settings: named by the constructor's message
             raise StateError(str(exc)) from None
         try:
@@ -644,6 +661,7 @@ class FailureDetector(Isolation):
         unpopped = state_count("unpopped", d.get("unpopped", 0))
         det._unpopped = det.withdrawals[len(det.withdrawals) - min(unpopped, len(det.withdrawals)):]
         det._active = _active_from_dict(d.get("active", {}), det)
+        det._probations = _probation.probations_from_dict(d.get("probations", {}), det)  # absent before probation
         return det
 
 

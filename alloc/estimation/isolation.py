@@ -52,7 +52,10 @@ class Detection:
     chi-square under no failure); ``confidence`` = ``effector_confidence * kind_confidence``;
     ``parameter`` and ``parameter_std`` the estimated jam position or effectiveness fraction
     (the rate of a rate limit, without a std; ``None`` for the kinds with none or several);
-    ``samples`` the fit used; ``end_position`` a rate-limited surface's estimated position.
+    ``samples`` the fit used; ``end_position`` a rate-limited surface's estimated position;
+    ``improvement`` the share of the residual sum of squares over those samples that the
+    detection explains, in [0, 1] (:func:`.probation.explained_fraction`; ``None`` in states
+    stored before it).
     """
 
     event: FailureEvent
@@ -67,6 +70,7 @@ class Detection:
     parameter_std: float | None
     samples: int
     end_position: float | None = None
+    improvement: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)

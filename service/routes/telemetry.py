@@ -124,7 +124,8 @@ async def ingest(vehicle_id: VehicleId, body: TelemetryBatchIn, request: Request
 # ----------------------------------------------------------------- proposals
 @router.get("/{vehicle_id}/proposals", response_model=ProposalList, summary="Detections proposed as events")
 def list_proposals(vehicle_id: VehicleId, telemetry: Telemetry,
-                   status: Literal["pending", "accepted", "rejected"] | None = Query(default=None)) -> ProposalList:
+                   status: Literal["pending", "accepted", "rejected", "withdrawn"] | None = Query(default=None)
+                   ) -> ProposalList:
     return ProposalList(vehicle_id=vehicle_id, items=[ProposalOut(**p) for p in telemetry.proposals(vehicle_id, status)])
 
 

@@ -270,10 +270,13 @@ DET_FIELDS = {"problem", "noise_std", "sample_time", "false_alarm_rate", "window
               "robust/model_uncertainty"}
 DET_STATE_FIELDS = DET_FIELDS | {"state", "kind", "health", "samples", "last_time", "alarm_count",
                                  "unisolated_count", "since_test", "pending", "rate_state", "buffer", "detections",
-                                 "U", "K", "R", "Q", "T",
-                                 "withdrawals", "unpopped", "active", "Rc", "robust", "robust/J", "robust/h",
-                                 "robust/sum_abs", "robust/sum_cl", "robust/sum_c0", "robust/weight",
-                                 "robust/history", "robust/u_prev", "robust/samples", "effector_lag"}  # the withdrawal's state (FailureDetector.withdraw)
+                                 "U", "K", "R", "Rc", "Q", "T",
+                                 "withdrawals", "unpopped", "active",  # the withdrawal's state (FailureDetector.withdraw)
+                                 "robust", "robust/J", "robust/h", "robust/sum_abs", "robust/sum_cl", "robust/sum_c0",
+                                 "robust/weight", "robust/history", "robust/u_prev", "robust/samples", "effector_lag",
+                                 "probation", "probations", "probations.time", "probations.end",
+                                 "probations.llr", "probations.samples", "probations.rate",
+                                 "probations.ss_before", "probations.values"}  # the learner, the probation
 
 
 def hostile_problem(rng: np.random.Generator) -> alloc.Problem:
