@@ -57,7 +57,7 @@ from typing import Any
 import numpy as np
 
 from ..exceptions import OptionError
-from ..problem import as_float_array
+from ..problem import MAX_MAGNITUDE, as_float_array
 from ._checks import StateError, setting_real, state_array, state_count
 
 __all__ = ["RobustSettings", "NominalLearner", "learner_cost", "MAX_LEARNER_FLOPS"]
@@ -221,7 +221,7 @@ class NominalLearner:
         a = self.lam_scale
         clipped_abs = np.minimum(np.abs(r) * s, 4.0 * self.scale())
         rc = np.clip(r, -h, h)
-        self.sum_abs = a * self.sum_abs + clipped_abs
+        self.sum_abs = np.minimum(a * self.sum_abs + clipped_abs, 1e-3 * MAX_MAGNITUDE)  # stays storable
         self.sum_c0 = a * self.sum_c0 + float(rc @ rc) / self.k
         self.sum_cl = a * self.sum_cl + (self.history @ rc) / self.k
         self.weight = a * self.weight + 1.0
@@ -238,7 +238,9 @@ class NominalLearner:
             # their whole size -- a hard-over is hundreds of them)
             r0_taught = r0 - (r - rc) * s
             hv = lam * self.h + phi[None, :] * (w * r0_taught)[:, None]
-            if np.isfinite(J).all() and np.isfinite(hv).all():  # else: a sample beyond range teaches nothing
+            # a sample that would take the stored state beyond the domain teaches nothing (whitened
+            # columns near 1e40 make one sample's information 1e80): the model stays where it was
+            if np.abs(J).max(initial=0.0) <= MAX_MAGNITUDE and np.abs(hv).max(initial=0.0) <= MAX_MAGNITUDE:
                 self.J, self.h = J, hv
                 self._solve()
         self.u_prev = known.copy()
