@@ -370,7 +370,7 @@ def main() -> None:
     r.add_argument("--failure-time", type=float, default=10.0,
                    help="s of flight before the failure (delays: uniform in [F, F+1]; benefit: F)")
     r.add_argument("--dt", type=float, default=0.005, help="integration step (s) of false/delays/benefit")
-    r.add_argument("--detector-model", choices=("learnt", "exact"), default="learnt",
+    r.add_argument("--detector-model", choices=("learnt", "exact"), default="learnt",  # what these tables are about
                    help="the in-loop detector's model (sim setting detector_model); use a separate --out per model")
     r.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="processes")
     p = sub.add_parser("report", help="print the tables of what finished")

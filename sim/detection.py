@@ -93,9 +93,9 @@ class DetectionDesign:
     min_confidence: float = 0.95
     processing_delay: float = 0.02
     long_window: float | None = 1.6
-    #: ``learnt`` (residuals against a nominal model learnt from a stated uncertainty,
-    #: :class:`alloc.estimation.RobustSettings` at its defaults) or ``exact``
-    model: str = "learnt"
+    #: ``exact`` or ``learnt`` (residuals against a nominal model learnt from a stated
+    #: uncertainty, :class:`alloc.estimation.RobustSettings` at its defaults)
+    model: str = "exact"
 
     def record(self) -> dict[str, Any]:
         return asdict(self)
@@ -104,7 +104,7 @@ class DetectionDesign:
 DEFAULT_DESIGN = DetectionDesign()
 
 
-def design_with(long_window: float | None, model: str = "learnt") -> DetectionDesign:
+def design_with(long_window: float | None, model: str = "exact") -> DetectionDesign:
     """The default design with the run settings ``detector_long_window`` (``None`` keeps the
     default's second window, ``0`` removes it, a positive value replaces it) and
     ``detector_model`` applied."""
