@@ -481,7 +481,8 @@ def _variant(row: dict[str, Any]) -> tuple[float, float]:
 
 def report(out: Path, markdown: bool) -> str:
     # the second window is a run setting: each table's title says when its runs had one
-    design = ", ".join(f"{k} {v:g}" for k, v in DEFAULT_DESIGN.record().items() if k != "long_window")
+    design = ", ".join(f"{k} {v:g}" if isinstance(v, (int, float)) else f"{k} {v}"
+                       for k, v in DEFAULT_DESIGN.record().items() if k != "long_window")
     rho = ", ".join(f"{x:+.3f}" for x in response_noise_correlation(0.0005, DEFAULT_DESIGN.sample_time)[:5])
     parts = [f"Detector design (sim.detection.DEFAULT_DESIGN): {design}; noise autocorrelation told to it "
              f"(measured, lags 1-5 of {DEFAULT_DESIGN.sample_time:g} s): {rho}.\n"]

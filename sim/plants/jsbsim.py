@@ -181,6 +181,25 @@ class JSBSimPlant:
             self._execute(effect, i, params)
         self.failures.append({"time": self.time, "effector": EFFECTORS[i], "kind": kind, **params})
 
+    def executed(self) -> list[Any]:
+        """The failures as executed (defaults filled in), as :class:`sim.blocks.ActuatorFailure`."""
+        from sim.blocks import ActuatorFailure
+
+        return [ActuatorFailure(EFFECTORS.index(f["effector"]), f["kind"],
+                                **{k: v for k, v in f.items() if k not in ("time", "effector", "kind")})
+                for f in self.failures]
+
+    def limits(self) -> tuple[np.ndarray, np.ndarray]:
+        """Effector position limits now (deviations from trim, deg; failures change them)."""
+        return self.lo.copy(), self.hi.copy()
+
+    def sensed(self) -> np.ndarray:
+        """Not given yet: the in-loop detector's sensed response (``x' - A x``) needs the linear
+        model's state mapped from JSBSim's, which this plant does not do; a detected run on it is
+        refused here rather than fed a made-up signal."""
+        raise NotImplementedError("sensed: the JSBSim plant does not give the detector's response yet "
+                                  "(--health detected on --plant jsbsim)")
+
     def _execute(self, effect: Effect, i: int, p: dict[str, float]) -> None:
         if effect in (Effect.HOLD, Effect.RUN_TO_STOP):
             # a jam stops where it is told (rate 0 from now: the target is reached at once when it is
