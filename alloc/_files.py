@@ -40,7 +40,7 @@ import numpy as np
 
 from .exceptions import ProblemError
 
-__all__ = ["MAX_TEXT_BYTES", "MAX_TOML_BYTES", "MAX_LOG_BYTES", "MAX_DEPTH", "read_user_file", "read_user_text",
+__all__ = ["MAX_TEXT_BYTES", "MAX_TOML_BYTES", "MAX_LOG_BYTES", "MAX_DEPTH", "read_user_file", "read_user_text", "params_text",
            "parse_toml", "parse_json", "check_depth"]
 
 #: the byte cap of a text file a user hands the library other than TOML (vehicle JSON, PX4
@@ -97,6 +97,19 @@ def read_user_file(path: str | os.PathLike[str], *, field: str = "path", max_byt
     if len(raw) > max_bytes:  # the file grew between the check and the read
         raise ProblemError(f"{field}: {name} is more than the {max_bytes} bytes allowed", field=field)
     return raw
+
+
+def params_text(source: Any, *, is_path: bool) -> str:
+    """A parameter file's text: read from ``source`` when ``is_path`` (or a :class:`~pathlib.Path`),
+    else ``source`` itself, held to :data:`MAX_TEXT_BYTES`; refused naming ``path`` or ``params``."""
+    if isinstance(source, Path) or (isinstance(source, str) and is_path):
+        return read_user_text(source, field="path", max_bytes=MAX_TEXT_BYTES)
+    if isinstance(source, str):
+        if len(source) > MAX_TEXT_BYTES:
+            raise ProblemError(f"params: the text is {len(source)} characters, more than the {MAX_TEXT_BYTES} "
+                               "allowed", field="params")
+        return source
+    raise ProblemError(f"params: expected a path or the file's text, got {type(source).__name__}", field="params")
 
 
 def read_user_text(path: str | os.PathLike[str], *, field: str = "path", max_bytes: int = MAX_TEXT_BYTES) -> str:

@@ -47,7 +47,7 @@ from typing import Any
 
 import numpy as np
 
-from .._files import MAX_TEXT_BYTES, MAX_TOML_BYTES, parse_toml, read_user_text
+from .._files import MAX_TEXT_BYTES, MAX_TOML_BYTES, params_text, parse_toml, read_user_text
 from ..domain import MAX_EFFECTORS, MAX_MAGNITUDE, short_repr
 from ..exceptions import ProblemError
 from ..vehicle_file.fields import FORMAT, _text, _unique
@@ -320,16 +320,8 @@ def read_ardupilot_params(source: str | Path) -> dict[str, float | int]:
     (``params: line 4: ...``): another shape, a name that is not ArduPilot's (16 capitals, digits or
     ``_`` at most), a value that is not a finite number within ``1e50``, a name given twice.
     """
-    if isinstance(source, Path) or (isinstance(source, str) and "\n" not in source
-                                    and source.lower().endswith((".param", ".parm"))):
-        text = read_user_text(source, field="path", max_bytes=MAX_TEXT_BYTES)
-    elif isinstance(source, str):
-        if len(source) > MAX_TEXT_BYTES:
-            raise ProblemError(f"params: the text is {len(source)} characters, more than the {MAX_TEXT_BYTES} "
-                               "allowed", field="params")
-        text = source
-    else:
-        raise ProblemError(f"params: expected a path or the file's text, got {type(source).__name__}", field="params")
+    text = params_text(source, is_path=isinstance(source, str) and "\n" not in source
+                       and source.lower().endswith((".param", ".parm")))
     out: dict[str, float | int] = {}
     first: dict[str, int] = {}
     for n, raw in enumerate(text.splitlines(), start=1):

@@ -88,7 +88,7 @@ from typing import Any
 
 import numpy as np
 
-from .._files import MAX_TEXT_BYTES, read_user_text
+from .._files import params_text
 from ..domain import MAX_MAGNITUDE
 from ..exceptions import ProblemError
 from ..px4_mix import FLT_EPSILON, mix_scales
@@ -203,16 +203,8 @@ def read_params_report(source: str | Path) -> ParamsRead:
     ProblemError
         naming the line (``params: line 7: ...``), or ``path`` for a file that cannot be read.
     """
-    if isinstance(source, Path) or (isinstance(source, str) and "\n" not in source
-                                    and (source.endswith(".params") or os.path.isfile(source))):
-        text = read_user_text(source, field="path", max_bytes=MAX_TEXT_BYTES)
-    elif isinstance(source, str):
-        if len(source) > MAX_TEXT_BYTES:
-            raise ProblemError(f"params: the text is {len(source)} characters, more than the {MAX_TEXT_BYTES} "
-                               "allowed", field="params")
-        text = source
-    else:
-        raise ProblemError(f"params: expected a path or the file's text, got {type(source).__name__}", field="params")
+    text = params_text(source, is_path=isinstance(source, str) and "\n" not in source
+                       and (source.endswith(".params") or os.path.isfile(source)))
     return params_from_text(text)
 
 
