@@ -210,7 +210,10 @@ class NominalLearner:
         predictive standard deviation, and that standard deviation (in stated units)."""
         pred = self.row * (self.theta @ phi)
         var = self.scale() ** 2 + self.row ** 2 * np.einsum("p,kpq,q->k", phi, self.cov, phi)
-        s = np.sqrt(var)
+        # beyond the domain (a parameter variance times a regressor of 1e50) the spread is the
+        # domain's edge, so |r| s stays a number (inf * 0 was a NaN in the learnt scale)
+        cap = MAX_MAGNITUDE * MAX_MAGNITUDE
+        s = np.sqrt(np.where(np.isfinite(var), np.minimum(var, cap), cap))
         return (r0 - pred) / s, s
 
     def learn(self, r0: np.ndarray, phi: np.ndarray, r: np.ndarray, s: np.ndarray, known: np.ndarray, *,

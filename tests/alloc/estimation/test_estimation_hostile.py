@@ -273,6 +273,8 @@ DET_STATE_FIELDS = DET_FIELDS | {"state", "kind", "health", "samples", "last_tim
                                  "U", "K", "R", "Rc", "Q", "T",
                                  "withdrawals", "unpopped", "active",  # the withdrawal's state (FailureDetector.withdraw)
                                  "robust", "robust/J", "robust/h", "robust/sum_abs", "robust/sum_cl", "robust/sum_c0",
+                                 "robust/model_uncertainty", "robust/model_memory", "robust/scale_memory",
+                                 "robust/huber", "robust/lags",
                                  "robust/weight", "robust/history", "robust/u_prev", "robust/samples", "effector_lag",
                                  "probation", "probations", "probations.time", "probations.end",
                                  "probations.llr", "probations.samples", "probations.rate",
