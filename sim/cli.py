@@ -1,11 +1,18 @@
 """``alloc sim SCENARIO`` / ``alloc sim --vehicle NAME|FILE``: run a closed-loop scenario, print its
 summary, write JSON, CSV and PNG.
 
+``--failure`` takes a scenario's own failures by name (ICE ``seed``, HARV ``failure1``), the
+failure catalogue's names where the scenario has one (``jam1``, ``effectiveness2``:
+:mod:`sim.failure_catalogue`, what the comparison sweep flies) and any text of the library's
+failure grammar naming the vehicle's effectors (``jam:elevon_l@5+float:lef_l``,
+:mod:`alloc.failure_grammar`); ``--list`` shows each scenario's.  The classic scenarios
+(pendulum, F-16, DC-8) have no allocator and no effector to fail: their own failures only.
+
 ``--vehicle`` takes what every ``alloc`` command takes (:func:`alloc.vehicles.get_vehicle`):
 a scenario's name, or a catalogue vehicle whose name or alias is a scenario's (``harv`` flies
 ``harv_latdir``).  Any other vehicle -- a user's file -- with a ``[model]`` flies that model
 with the seed's section 4.3 design applied to it (:class:`sim.user_vehicle.VehicleScenario`;
-``--design key=value`` overrides a choice, ``--failure <kind>:<effector>[@value]``); a file
+``--design key=value`` overrides a choice); a file
 without one is refused in one line (no plant to fly).  The scenario's vehicle's ``[methods.<method>]`` defaults (ICE's daisy groups) reach the allocator
 (:func:`sim.scenarios.mimo.run_mimo`).
 
@@ -30,6 +37,7 @@ from typing import Any, Optional
 import typer
 
 from alloc.exceptions import AllocError
+from alloc.failure_grammar import GRAMMAR as FAILURE_GRAMMAR
 from alloc.cli import VEHICLE_HELP, load_vehicle_option, output_file, parse_options
 from sim.cli_settings import flag_of, setting_words, with_setting_options
 from sim.settings import RunSettings
@@ -58,7 +66,25 @@ def list_scenarios(value: bool) -> None:
                    f"failure {run.default_failure or NO_FAILURE}")
         for failure, text in run.failures.items():
             typer.echo(f"  --failure {failure}: {text}")
+        for failure, text in (run.catalogue() if hasattr(run, "catalogue") else {}).items():
+            typer.echo(f"  --failure {failure}: catalogue, {text}")
+        if hasattr(run, "check_failure"):
+            typer.echo(f"  --failure {FAILURE_GRAMMAR}")
     raise typer.Exit()
+
+
+def check_failure(run: Any, scenario: str, failure: str) -> None:
+    """A one-line usage error naming ``--failure`` unless ``run`` takes ``failure``: its own failures,
+    its catalogue names and the failure grammar where it has effectors to fail (``check_failure``)."""
+    if hasattr(run, "check_failure"):
+        try:
+            run.check_failure(failure)
+        except AllocError as exc:
+            raise typer.BadParameter(f"{scenario}: {exc}; or {NO_FAILURE}", param_hint="--failure") from None
+    elif failure not in run.failures:  # a classic scenario (no allocator, no effector to fail): its own only
+        known = [*run.failures, NO_FAILURE]
+        raise typer.BadParameter(f"unknown failure {failure!r} for {scenario} (its plant has no effector failures: "
+                                 f"its own failures only); known: {known}", param_hint="--failure")
 
 
 def scenario_of_vehicle(source: str) -> Any:
@@ -142,9 +168,8 @@ def sim_command(
         failure = run.default_failure
     elif failure == NO_FAILURE:
         failure = None
-    elif not (run.accepts_failure(failure) if hasattr(run, "accepts_failure") else failure in run.failures):
-        known = sorted(run.failures) + [NO_FAILURE]
-        raise typer.BadParameter(f"unknown failure {failure!r} for {scenario}; known: {known}", param_hint="--failure")
+    else:
+        check_failure(run, scenario, failure)
     simulated = run.default_duration if duration is None else duration
     if failure_time is not None:
         if failure is None:

@@ -344,9 +344,10 @@ def known_failed_effectors(result: SimResult) -> tuple[int, ...]:
     scenario = _SCENARIOS.get(result.scenario)
     if scenario is not None:
         try:
-            return failed_effectors(scenario.failure(result.failure, result.failure_time))
+            # its own failures, its catalogue names and grammar texts (sim.failure_catalogue)
+            return failed_effectors(scenario.resolve_failure(result.failure, result.failure_time))
         except (KeyError, ValueError):
-            pass  # not one of the scenario's own: a registered source may know it
+            pass  # not one the scenario resolves: a registered source may know it
     for source in _FAILURE_SOURCES:
         failure = source(result.scenario, result.failure, result.failure_time)
         if failure is not None:

@@ -180,6 +180,7 @@ def file_scenario(fv: FileVehicle, *, static_bandwidth: float = 1000.0) -> MimoS
         commands=commands, output_bound=np.array(sim.output_bound, dtype=float), default_duration=sim.duration,
         default_method=sim.method, design_options=("observer", "hedge", *(f"{g}_hedge" for g in groups)),
         input_options=input_options, catalogue_vehicle=fv,  # type: ignore[arg-type]  # its [methods] defaults
+        failures={name: f.description or name for name, f in sim.failures.items()},
     )
 
 

@@ -341,8 +341,10 @@ class RunSettings(LoopSettings):
     method: str | None = _setting(None, "allocation method (see `alloc methods`) or 'static', the seed's printed "
                                   "distribution", flag="--method",
                                   none_means="the scenario's (the seed's: pinv for ice, ganging for the HARV)")
-    failure: str | Failure | None = _setting(None, "failure injected (see --list); 'none' on the command line for "
-                                             "a nominal run", flag="--failure", none_means="the scenario's own "
+    failure: str | Failure | None = _setting(None, "failure injected: the scenario's own (seed, failure1), a catalogue "
+                                             "name (jam1, effectiveness2, ...) or kind:effector@values text "
+                                             "(jam:elevon_l@5, several joined by '+'), see --list; 'none' on the "
+                                             "command line for a nominal run", flag="--failure", none_means="the scenario's own "
                                              "(harv_latdir_failure2: failure2), else none")
     failure_time: float | None = _setting(None, "failure time, before the end of the run", unit="s", low=0.0,
                                           flag="--failure-time", none_means="the seed's")

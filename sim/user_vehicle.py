@@ -19,9 +19,10 @@ loop needs; this module assembles it:
   model, channel ``i`` phase-shifted by ``i pi / 4`` (ICE's roll channel: ``pi / 4``), scaled so
   its peak pseudo-command is ``command_fraction`` of ``rho``.  No pilot model: a user's
   vehicle names no attitude the pilot would fly.
-* **failures** by name, ``<kind>:<effector>[@<value>[:<value>]]`` (several joined by ``+``),
-  any kind of the failure-kind table (:mod:`alloc.health`) or a per-actuator simulator-only
-  one, the values filling the kind's parameters in order.  ``float:motor1`` is a rotor loss
+* **failures** by name in the library's grammar (:mod:`alloc.failure_grammar`),
+  ``<kind>:<effector>[@<value>[:<value>]]`` (several joined by ``+``), any kind of the
+  failure-kind table (:mod:`alloc.health`) or a per-actuator simulator-only one, the values
+  filling the kind's parameters in order.  ``float:motor1`` is a rotor loss
   (no thrust, no moment); ``effectiveness:motor1@0.5`` half of it; ``jam:elevon_l@5`` a
   surface stuck at 5 (file units; without a value, where it is at the failure);
   ``hardover:x`` runs to ``max``; ``limits:x@lo:hi``; ``bandwidth:x@wn`` (never told).
@@ -29,7 +30,6 @@ loop needs; this module assembles it:
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass, fields, replace
 from typing import Any
@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from alloc.exceptions import ProblemError
+from alloc.failure_grammar import GRAMMAR, parse_failure
 from sim.autodesign import AutoDesign, auto_design, design_options, weighted_pinv
 from sim.file_scenario import actuator_of, file_scenario, flight_of_model
 from sim.blocks import DEFAULT_DT, SUM_OF_SINES_TABLE_4_2, ActuatorFailure, sum_of_sines
@@ -50,8 +51,8 @@ __all__ = ["FlightModel", "VehicleScenario", "flight_model", "vehicle_failure", 
 #: simulated seconds of a run unless told (the failure halfway)
 DEFAULT_DURATION = 20.0
 DEFAULT_FAILURE_TIME = 10.0
-#: how a failure is named on a user's vehicle
-FAILURE_SYNTAX = "<kind>:<effector>[@<value>[:<value>]] (several joined by '+'), e.g. float:motor1, jam:elevon_l@5"
+#: how a failure is named on a user's vehicle: the library's grammar (:mod:`alloc.failure_grammar`)
+FAILURE_SYNTAX = GRAMMAR
 #: divergence bound on a controlled output, x its command peak
 OUTPUT_BOUND_FACTOR = 20.0
 
@@ -176,71 +177,31 @@ def flight_model(source: Any, *, design: Mapping[str, Any] | None = None,
                        output_bound=OUTPUT_BOUND_FACTOR * command_peak, units=units)
 
 
-def _value(text: str, what: str, part: str) -> float:
-    try:
-        x = float(text)
-    except ValueError:
-        raise ProblemError(f"failure: {part!r}: {what} {text!r} is not a number", field="failure") from None
-    if not math.isfinite(x):
-        raise ProblemError(f"failure: {part!r}: {what} must be finite, got {text!r}", field="failure")
-    return x
-
-
-def _kind_spec(kind: str, part: str) -> Any:
-    """The failure-kind table row of ``kind`` (:mod:`alloc.health`), per-actuator simulator-only rows included."""
-    from alloc.health import SIMULATOR_ONLY, FailureKind
-
-    if kind in SIMULATOR_ONLY and SIMULATOR_ONLY[kind].per_actuator:
-        return SIMULATOR_ONLY[kind]
-    if kind in FailureKind:
-        return FailureKind(kind).spec
-    kinds = [str(k) for k in FailureKind] + [k for k, spec in SIMULATOR_ONLY.items() if spec.per_actuator]
-    raise ProblemError(f"failure: {part!r}: expected {FAILURE_SYNTAX}; kinds: {', '.join(kinds)}", field="failure")
-
-
 def vehicle_failure(fm: FlightModel, name: str, time: float) -> Failure:
-    """The :class:`sim.loop.Failure` named ``name`` (:data:`FAILURE_SYNTAX`) at ``time``.
+    """The :class:`sim.loop.Failure` named ``name`` (:data:`FAILURE_SYNTAX`, :mod:`alloc.failure_grammar`) at ``time``.
 
     The values after ``@`` fill the kind's parameters in the order of its row in
     :data:`alloc.health.FAILURE_KINDS` (``limits:x@lo:hi``); a parameter left out takes the
     row's default (a jam without a position holds the position at the instant of failure).
-    Positions are in the file's units.
+    Positions are in the file's units, checked against the file's limits.
     """
     from alloc.health import PARAMETERS, Range
 
-    if not isinstance(name, str) or not name:
-        raise ProblemError(f"failure: expected {FAILURE_SYNTAX}, got {name!r}", field="failure")
+    effectors = fm.source.effectors
     names = list(fm.vehicle.effector_names)
+    parts = parse_failure(name, names, limits=[(e.min, e.max) for e in effectors])
     failures = []
-    for part in name.split("+"):
-        kind, sep, rest = part.partition(":")
-        spec = _kind_spec(kind, part)
-        if not sep:
-            raise ProblemError(f"failure: {part!r}: expected {FAILURE_SYNTAX}", field="failure")
-        effector, at, text = rest.partition("@")
-        if effector not in names:
-            raise ProblemError(f"failure: {part!r}: unknown effector {effector!r}; effectors: {', '.join(names)}",
-                               field="failure")
-        i = names.index(effector)
-        values = text.split(":") if at else []
-        if len(values) > len(spec.params):
-            takes = ", ".join(spec.params) or "no value"
-            raise ProblemError(f"failure: {part!r}: {kind} takes {takes}", field="failure")
+    for part in parts:
+        i = names.index(part.effector)
         params = {}
-        for param, text_value in zip(spec.params, values, strict=False):
-            x = _value(text_value, param, part)
+        for param, x in part.params.items():
             known = PARAMETERS.get(param)
-            if known is not None and known.range == Range.POSITION:
-                e = fm.source.effectors[i]
-                if not e.min <= x <= e.max:
-                    raise ProblemError(f"failure: {part!r}: {param} {x:g} is outside {effector}'s limits "
-                                       f"[{e.min:g}, {e.max:g}]", field="failure")
-                x -= fm.trim_u[i]  # the loop flies deviations from trim
-            params[param] = x
+            # the loop flies deviations from trim
+            params[param] = x - fm.trim_u[i] if known is not None and known.range == Range.POSITION else x
         try:
-            failures.append(ActuatorFailure(i, kind, **params))
+            failures.append(ActuatorFailure(i, part.kind, **params))
         except ProblemError as exc:
-            raise ProblemError(f"failure: {part!r}: {exc}", field="failure") from None
+            raise ProblemError(f"failure: {part.text()!r}: {exc}", field="failure") from None
     return Failure(name=name, time=float(time), description=f"{name} at t = {time:g} s", actuators=tuple(failures))
 
 
@@ -357,7 +318,7 @@ class VehicleScenario:
     A file with a ``[simulation]`` section is its scenario: its failures by name, its default
     duration and method, its pilot.  Any other file: ``failures`` lists a rotor loss
     (``float``) and a jam at the failure instant for every effector, as examples; any name of
-    :data:`FAILURE_SYNTAX` is accepted (:meth:`accepts_failure`), and the pilot settings are
+    :data:`FAILURE_SYNTAX` is accepted (:meth:`check_failure`), and the pilot settings are
     refused (a vehicle file's model names no pilot).  Calling it flies :func:`fly`.
     """
 
@@ -390,13 +351,30 @@ class VehicleScenario:
             self.failures[f"float:{e.name}"] = f"{e.name} floats: no control power (a rotor loss)"
             self.failures[f"jam:{e.name}@<position>"] = f"{e.name} held at <position> ({e.unit})"
 
-    def accepts_failure(self, name: str) -> bool:
-        """Whether ``name`` is a failure of this vehicle: the file's own by name, else :data:`FAILURE_SYNTAX`."""
+    def check_failure(self, name: object) -> None:
+        """ProblemError (field ``failure``, saying what is taken) unless ``name`` is a failure of this
+        vehicle: the file's own by name, or a text of :data:`FAILURE_SYNTAX` naming its effectors."""
+        if isinstance(name, str) and name in self.failures:
+            return
         if self.vehicle.simulation is not None:
-            return name in self.failures
-        kinds = name.split("+")
-        names = self.vehicle.effector_names
-        return all(":" in k and k.partition(":")[2].partition("@")[0] in names for k in kinds)
+            from sim.file_scenario import file_scenario
+
+            file_scenario(self.vehicle).check_failure(name)
+            return
+        try:
+            parse_failure(name, self.vehicle.effector_names,
+                          limits=[(e.min, e.max) for e in self.vehicle.effectors])
+        except ProblemError as exc:
+            examples = ", ".join(list(self.failures)[:4])
+            raise ProblemError(f"{exc}; e.g. {examples}", field="failure") from None
+
+    def accepts_failure(self, name: str) -> bool:
+        """Whether :meth:`check_failure` takes ``name``."""
+        try:
+            self.check_failure(name)
+        except ProblemError:
+            return False
+        return True
 
     def __call__(self, **options: Any) -> SimResult:
         return fly(self.vehicle, **options)

@@ -212,11 +212,11 @@ SCENARIO = MimoScenario(
     loop_shaped_design=loop_shaped_design, failure=failure, pilot=_roll_pilot, pilot_element=PILOT_ELEMENT,
     commands=lambda t: np.zeros((t.size, 2)), output_bound=OUTPUT_BOUND, default_duration=50.0,
     default_method="ganging", design_options=("observer", "hedge", "cross_hedge"), input_options=("phi_command",),
-    catalogue_vehicle="harv",
+    catalogue_vehicle="harv", failures=FAILURES, catalogue_effectors=("aileron", "rudder"), failure_time=25.0,
 )
 
 
-@mimo_scenario(SCENARIO, failures=FAILURES,
+@mimo_scenario(SCENARIO,
                description="F-18/HARV lat-dir MIMO SMC, ps and beta tracking, five effectors (seed 4.6)")
 def run(**options: Any) -> SimResult:
     """Run the HARV lat-dir scenario: :func:`sim.scenarios.mimo.run_mimo` options, plus ``observer``,

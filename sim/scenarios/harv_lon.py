@@ -149,11 +149,11 @@ SCENARIO = MimoScenario(
     failure=lambda name, time: failure(name, 10.0 if time is None else time),
     pilot=_pitch_pilot, pilot_element=PILOT_ELEMENT, commands=lambda t: np.zeros((t.size, 1)),
     output_bound=OUTPUT_BOUND, default_duration=30.0, default_method="ganging",
-    design_options=("design", "observer", "hedge"),
+    design_options=("design", "observer", "hedge"), failures=FAILURES, failure_time=10.0,
 )
 
 
-@mimo_scenario(SCENARIO, failures=FAILURES,
+@mimo_scenario(SCENARIO,
                description="F-18/HARV longitudinal pitch-rate SMC, stabilator + pitch thrust vector (seed 4.5)")
 def run(**options: Any) -> SimResult:
     """Run the HARV longitudinal scenario: :func:`sim.scenarios.mimo.run_mimo` options, plus

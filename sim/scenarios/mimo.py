@@ -12,13 +12,13 @@ from __future__ import annotations
 
 import inspect
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 import numpy as np
 
 from alloc import vehicles
-from sim import criteria
+from sim import criteria, failure_catalogue
 from sim.allocation import STATIC
 from sim.engine import simulate
 from sim.model import TF, Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle
@@ -64,6 +64,13 @@ class MimoScenario:
     catalogue_vehicle : str or None
         The :mod:`alloc.vehicles` entry whose ``[methods.<name>]`` defaults (ICE's daisy
         groups) the allocator gets under the run's ``method_options``.
+    failures : mapping
+        The failures ``failure`` builds by name -> description (the seed's composite ones).
+    catalogue_effectors : tuple of str
+        The effectors (by name) of the failure catalogue's ``<kind>1`` (the first) and
+        ``<kind>2`` (both) (:mod:`sim.failure_catalogue`); none: no catalogue names.
+    failure_time : float or None
+        When a catalogue or grammar failure happens unless told (s); None: half the default duration.
     """
 
     name: str
@@ -81,6 +88,24 @@ class MimoScenario:
     design_options: tuple[str, ...] = ("observer", "hedge")
     input_options: tuple[str, ...] = ()
     catalogue_vehicle: str | None = None
+    failures: Mapping[str, str] = field(default_factory=dict)
+    catalogue_effectors: tuple[str, ...] = ()
+    failure_time: float | None = None
+
+    def catalogue(self) -> dict[str, str]:
+        """Catalogue name -> grammar text on this scenario's vehicle (read when asked: registered kinds count)."""
+        return failure_catalogue.catalogue(self.vehicle(), self.catalogue_effectors)
+
+    def resolve_failure(self, name: str, time: float | None) -> Failure:
+        """The failure ``name`` names: the scenario's own, a catalogue name or grammar text
+        (:func:`sim.failure_catalogue.resolve`); ``time`` None: the failure's own or :attr:`failure_time`."""
+        default = 0.5 * self.default_duration if self.failure_time is None else self.failure_time
+        return failure_catalogue.resolve(name, time, named=self.failure, own=self.failures, vehicle=self.vehicle(),
+                                         catalogued=self.catalogue(), default_time=default)
+
+    def check_failure(self, name: object) -> None:
+        """ProblemError (field ``failure``, saying what is taken) unless :meth:`resolve_failure` takes ``name``."""
+        failure_catalogue.check(name, own=self.failures, vehicle=self.vehicle(), catalogued=self.catalogue())
 
 
 def run_mimo(
@@ -129,7 +154,8 @@ def mimo_spec(scenario: MimoScenario, **options: Any) -> tuple[LoopSpec, RunSett
     duration = scenario.default_duration if settings.duration is None else settings.duration
     failure = settings.failure
     # a failure by the scenario's name, or any sim.model.Failure (e.g. the benchmark's catalogue)
-    fail = failure if isinstance(failure, Failure) or failure is None else scenario.failure(failure, settings.failure_time)
+    fail = failure if isinstance(failure, Failure) or failure is None else scenario.resolve_failure(
+        failure, settings.failure_time)
     if settings.controller == "smc":
         design: SMCDesign | LoopShapedDesign = scenario.smc_design(
             **{k: v for k, v in extra.items() if k in scenario.design_options})
@@ -168,21 +194,24 @@ run_mimo.__signature__ = _signature()  # type: ignore[attr-defined]
 
 
 def mimo_scenario(
-    scenario: MimoScenario, *, description: str, failures: Mapping[str, str]
+    scenario: MimoScenario, *, description: str, failures: Mapping[str, str] | None = None
 ) -> Callable[[Callable[..., SimResult]], Scenario]:
     """Register ``run(**options)`` (which calls :func:`run_mimo` on ``scenario``) as ``scenario.name``.
 
-    The registry's default duration and method are the scenario's.  ``run``
-    is marked ``accepts_failure_objects``: :func:`run_mimo` takes a
-    :class:`sim.model.Failure` as well as a failure name (the benchmark
-    catalogue hands its failures over that way).
+    The registry's default duration and method are the scenario's, its named failures
+    ``failures`` (default the scenario's).  ``run`` is marked ``accepts_failure_objects``:
+    :func:`run_mimo` takes a :class:`sim.model.Failure` as well as a failure name; and it
+    carries ``catalogue()`` (catalogue name -> grammar text) and ``check_failure(name)``, so
+    that ``alloc sim`` takes and lists catalogue names and the grammar (:mod:`sim.failure_catalogue`).
     """
 
     def decorate(run: Callable[..., SimResult]) -> Scenario:
         run.accepts_failure_objects = True  # type: ignore[attr-defined]
+        run.catalogue = scenario.catalogue  # type: ignore[attr-defined]
+        run.check_failure = scenario.check_failure  # type: ignore[attr-defined]
         criteria.use_scenario(scenario)  # its criteria table exists before any run (docs, sweeps)
         return register_scenario(
-            scenario.name, description=description, failures=dict(failures),
+            scenario.name, description=description, failures=dict(scenario.failures if failures is None else failures),
             default_duration=scenario.default_duration, default_method=scenario.default_method,
         )(run)
 
