@@ -23,6 +23,7 @@ objects (attribute ``accepts_failure_objects``: the MIMO scenarios of ``sim.scen
 from __future__ import annotations
 
 import importlib
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -94,7 +95,8 @@ def make_failure(scenario: str, name: str, time: float) -> Any:
     if _parse(name) is None:
         raise ValueError(f"failure: {name!r} is not a catalogue failure; expected <kind><1|2> with kind in "
                          f"{catalogue_kinds()}")
-    return _scenario(scenario).resolve_failure(canonical_name(name), float(time))
+    failure = _scenario(scenario).resolve_failure(canonical_name(name), float(time))
+    return replace(failure, name=name)  # a legacy name (loe1) stays the run's name, as it was run
 
 
 def failure_effectors(scenario: str, name: str) -> np.ndarray:
