@@ -79,14 +79,11 @@ FEW_SEEDS = 10
 
 # ----------------------------------------------------------------------------- closed-loop sections
 def _failure_description(scenario: str, failure: str) -> str:
-    from .failures import FAILED_EFFECTORS, canonical_name, is_catalogue
+    from .failures import CATALOGUE_SCENARIOS, canonical_name, failed_effectors, is_catalogue
 
     if is_catalogue(failure):
-        from alloc import vehicles
-
-        names = {"ice": vehicles.ICE_EFFECTORS, "harv_latdir": vehicles.HARV_LATDIR_EFFECTORS}.get(scenario)
-        idx = FAILED_EFFECTORS.get(scenario, ())[: int(failure[-1])]
-        who = ", ".join(names[i] for i in idx) if names else "?"
+        # the effectors by the names the scenario gives its catalogue (sim.failure_catalogue)
+        who = ", ".join(failed_effectors(scenario)[: int(failure[-1])]) if scenario in CATALOGUE_SCENARIOS else "?"
         return f"{canonical_name(failure)[:-1]} of {who} (catalogue, effector only; see benchmarks/compare/failures.py)"
     try:
         from sim.scenarios import get_scenario
