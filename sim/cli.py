@@ -80,7 +80,8 @@ def check_failure(run: Any, scenario: str, failure: str) -> None:
         try:
             run.check_failure(failure)
         except AllocError as exc:
-            raise typer.BadParameter(f"{scenario}: {exc}; or {NO_FAILURE}", param_hint="--failure") from None
+            raise typer.BadParameter(f"unknown failure {failure!r} for {scenario}: {exc}; or {NO_FAILURE}",
+                                     param_hint="--failure") from None
     elif failure not in run.failures:  # a classic scenario (no allocator, no effector to fail): its own only
         known = [*run.failures, NO_FAILURE]
         raise typer.BadParameter(f"unknown failure {failure!r} for {scenario} (its plant has no effector failures: "

@@ -341,7 +341,7 @@ def closedloop(vehicle: str = typer.Option(..., "--vehicle", metavar="NAME|FILE"
     import alloc
     from alloc.vehicles import method_options
     from sim.allocation import STATIC
-    from sim.user_vehicle import flight_model, vehicle_failure
+    from sim.user_vehicle import VehicleScenario, flight_model, vehicle_failure
 
     from .closedloop import run_closed
     from .sweep import closed_spec
@@ -350,12 +350,12 @@ def closedloop(vehicle: str = typer.Option(..., "--vehicle", metavar="NAME|FILE"
     if failure_time >= duration:
         raise typer.BadParameter(f"{failure_time:g} s is not before the end of the run ({duration:g} s)",
                                  param_hint="--failure-time")
-    if v.simulation is not None:  # the file's own loop: its failures by name (sim.file_scenario)
-        if failure not in v.simulation.failures:
-            raise typer.BadParameter(f"unknown failure {failure!r} for {v.name}; known: {sorted(v.simulation.failures)}",
-                                     param_hint="--failure")
-    else:
-        vehicle_failure(flight_model(v), failure, failure_time)  # a malformed name fails here, before any run
+    try:  # the file's own failures by name, or the failure grammar on its effectors: refused before any run
+        VehicleScenario(v).check_failure(failure)
+    except alloc.AllocError as exc:
+        raise typer.BadParameter(f"unknown failure {failure!r} for {v.name}: {exc}", param_hint="--failure") from None
+    if v.simulation is None:
+        vehicle_failure(flight_model(v), failure, failure_time)  # against the trimmed model's limits
     names: list[str] = []
     for m in method or alloc.methods():
         if m == STATIC:  # the loop's fixed pseudo-inverse, no registry method (sim.allocation)

@@ -280,6 +280,15 @@ def check_simulator_support(specs: Sequence[Spec]) -> None:
                 raise ValueError(f"sweep axis {key!r}: scenario {scenario!r} does not accept it{hint}; "
                                  f"it accepts {sorted(accepted)}")
         failure = spec["failure"]
-        if not is_catalogue(failure) and failure not in get_scenario(scenario).failures:
+        run = get_scenario(scenario)
+        if is_catalogue(failure) or (scenario, f"failure {failure}") in seen:
+            continue
+        seen.add((scenario, f"failure {failure}"))
+        if hasattr(run, "check_failure"):  # its own, its catalogue's or the failure grammar (sim.failure_catalogue)
+            try:
+                run.check_failure(failure)
+            except alloc.AllocError as exc:
+                raise ValueError(f"failure {failure!r}: scenario {scenario!r} does not take it: {exc}") from None
+        elif failure not in run.failures:
             raise ValueError(f"failure {failure!r}: not a catalogue failure ({', '.join(catalogue_names())}) and "
-                             f"not one scenario {scenario!r} defines ({', '.join(get_scenario(scenario).failures)})")
+                             f"not one scenario {scenario!r} defines ({', '.join(run.failures)})")

@@ -422,7 +422,9 @@ def test_cli_seed_file_and_scenario_print_the_same_summary(tmp_path):
     assert bad.exit_code == 2 and "unknown failure" in bad.output
     bench = runner.invoke(app, ["bench", "closedloop", "--vehicle", "alloc/data/vehicles/ice.toml",
                                 "--failure", "float:de3"])  # refused before any run: the file's failures by name
-    assert bench.exit_code == 2 and "unknown failure 'float:de3' for ice; known: ['seed']" in bench.output
+    # the file's own failures and the failure grammar on its effectors (de3 is the seed's code, not a name)
+    assert bench.exit_code == 2 and "unknown failure 'float:de3' for ice" in bench.output
+    assert "unknown effector 'de3'" in bench.output and "its failures: seed" in bench.output
 
 
 def test_comparison_row_of_the_seed_file_is_the_scenarios():
