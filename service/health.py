@@ -3,7 +3,8 @@
 The failure kinds, their parameters, meanings and precedence are defined once, in
 the table of :mod:`alloc.health` (``FAILURE_KINDS``, ``EffectorHealth``, ``apply_event``,
 ``apply_health``).  This module only maps the JSON event bodies of
-:mod:`service.schemas` (derived from that table) to :class:`alloc.health.FailureEvent`, reports the library's
+:mod:`service.schemas` (derived from that table, or written as text in the library's failure grammar,
+:mod:`alloc.failure_grammar`) to :class:`alloc.health.FailureEvent`, reports the library's
 validation errors as 422 against the field they name (``exc.field``), and shapes the
 health for responses and for the database (``health_to_dict``).
 """
@@ -17,13 +18,14 @@ from alloc.health import (
     HEALTHY, EffectorHealth, FailureEvent, FailureKind, Health, apply_health, health_from_dict, health_to_dict,
     resolve_event,
 )
+from alloc.failure_grammar import EffectorFailure, format_failure
 from alloc.health import apply_event as _apply_event
 
 from .errors import InvalidRequest, field_error
 from .schemas import EffectorHealthOut, EventIn
 
 __all__ = ["EffectorHealth", "Health", "apply_event", "to_problem", "health_out", "load_health", "dump_health",
-           "to_failure_event"]
+           "to_failure_event", "failure_text"]
 
 
 def to_failure_event(event: EventIn) -> FailureEvent:
@@ -31,6 +33,17 @@ def to_failure_event(event: EventIn) -> FailureEvent:
     kind = FailureKind(event.kind)
     return FailureEvent(event.effector, kind,
                         **{p: getattr(event, p) for p in kind.spec.params if getattr(event, p) is not None})
+
+
+def failure_text(effector: str, kind: str, params: dict[str, Any]) -> str | None:
+    """A recorded event in the failure grammar (``hardover:elevon_l@30``), None for a kind no longer registered.
+
+    The parameters are written in the kind's order (:func:`alloc.failure_grammar.format_failure`).
+    """
+    if kind not in FailureKind:
+        return None
+    order = FailureKind(kind).spec.params
+    return format_failure(EffectorFailure(kind, effector, {p: params[p] for p in order if p in params}))
 
 
 def apply_event(nominal: alloc.Problem, health: Health, event: EventIn) -> tuple[str, Health, dict[str, Any]]:

@@ -16,7 +16,7 @@ from typing import Annotated, Any, Literal, Union
 
 import numpy as np
 from pydantic import (
-    AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, PrivateAttr, StrictInt, WithJsonSchema, model_validator,
+    AfterValidator, BaseModel, BeforeValidator, ConfigDict, Discriminator, Field, PrivateAttr, StrictInt, WithJsonSchema, model_validator,
 )
 
 import alloc
@@ -372,7 +372,40 @@ def _event_model(spec: KindSpec) -> type[_Event]:
 #: one JSON body per failure kind, derived from the library's table (registered kinds included)
 EVENT_MODELS: dict[str, type[_Event]] = {kind.value: _event_model(kind.spec) for kind in FailureKind}
 
-EventIn = Annotated[Union[tuple(EVENT_MODELS.values())], Field(discriminator="kind")]  # noqa: UP007
+
+
+def event_of_text(data: Any) -> Any:
+    """A body written in the library's failure grammar, ``{"failure": "jam:elevon_l@5", "note": ...}``,
+    as the same event with its kind's fields (``effector``, ``kind``, ``position``); any other body unchanged.
+
+    One event is one effector's failure: text joining several (``+``) is refused, and so are a
+    simulator-only kind (never told) and ``failure`` beside the fields it stands for.
+    """
+    if not (isinstance(data, dict) and "failure" in data):
+        return data
+    from alloc.failure_grammar import parse_failure
+
+    others = sorted(set(data) - {"failure", "note"})
+    if others:
+        raise ValueError(f"failure: give the failure as text or as effector, kind and parameters, not both "
+                         f"(also given: {', '.join(others)})")
+    try:
+        parts = parse_failure(data["failure"])
+    except alloc.AllocError as exc:
+        raise ValueError(str(exc)) from None
+    if len(parts) != 1:
+        raise ValueError(f"failure: {len(parts)} effector failures joined; an event is one (post one event each)")
+    part = parts[0]
+    if part.kind not in FailureKind:
+        raise ValueError(f"failure: {part.kind!r} changes actuator dynamics (simulator only, never told); "
+                         f"event kinds: {', '.join(k.value for k in FailureKind)}")
+    return {"effector": part.effector, "kind": part.kind, **part.params,
+            **({"note": data["note"]} if "note" in data else {})}
+
+
+#: an event body: its kind's fields, or the same failure as text (:func:`event_of_text`)
+EventIn = Annotated[Union[tuple(EVENT_MODELS.values())], Discriminator("kind"),  # noqa: UP007
+                    BeforeValidator(event_of_text)]
 
 #: the event kinds: exactly the library's failure kinds (alloc.health.FailureKind)
 EVENT_KINDS = frozenset(EVENT_MODELS)
@@ -383,6 +416,9 @@ class EventOut(BaseModel):
     effector: str
     kind: str
     params: dict[str, Any]
+    failure: str | None = Field(default=None, description=(
+        "the event in the failure grammar, kind:effector@values (alloc.failure_grammar; what a request's "
+        "'failure' takes); null for a kind no longer registered"))
     note: str | None
     recorded_at: datetime
 

@@ -31,7 +31,7 @@ from ..errors import (
     _LIBRARY_ERRORS, InvalidRequest, ServiceError, Unauthorized,
     _validation_errors, field_error, library_error_fields, problem_response,
 )
-from ..health import health_out
+from ..health import failure_text, health_out
 from ..keys import key_matches
 from ..schemas import NOT_FOUND, PROBLEM_RESPONSES, UNAUTHORIZED, EventOut, HealthOut, ProblemOut
 from ..store import VehicleState
@@ -132,8 +132,9 @@ def list_proposals(vehicle_id: VehicleId, telemetry: Telemetry,
 async def _decide(telemetry: TelemetryStore, vehicle_id: str, pid: int, accept: bool) -> ProposalDecided:
     proposal, new_state, event = await telemetry.runner.run(telemetry.decide, vehicle_id, pid, accept)
     state = new_state or telemetry.store.get(vehicle_id)
-    return ProposalDecided(proposal=ProposalOut(**proposal), event=None if event is None else EventOut(**event),
-                           health=_health(state))
+    out = None if event is None else EventOut(
+        **{**event, "failure": failure_text(event["effector"], event["kind"], event["params"])})
+    return ProposalDecided(proposal=ProposalOut(**proposal), event=out, health=_health(state))
 
 
 @router.post("/{vehicle_id}/proposals/{pid}/accept", response_model=ProposalDecided, dependencies=WriteAccess,

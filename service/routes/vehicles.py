@@ -17,7 +17,7 @@ from ..bodies import JsonRoute
 from ..db import EventRow
 from ..deps import IdempotencyKey, StoreDep, end_parse_turn, idempotency, require_api_key
 from ..responses import allocation_response
-from ..health import health_out
+from ..health import failure_text, health_out
 from ..schemas import (
     NOT_FOUND, PROBLEM_RESPONSES, UNAUTHORIZED,
     AllocationOut, AmsOut, AmsVehicleRequest, BatchOut, EventIn, EventList, EventOut, EventRecorded,
@@ -48,7 +48,7 @@ def _health_out(s: VehicleState) -> HealthOut:
 
 def _event_out(e: EventRow) -> EventOut:
     return EventOut(seq=e.seq, effector=e.effector, kind=e.kind, params=e.params, note=e.note,
-                    recorded_at=e.recorded_at)
+                    recorded_at=e.recorded_at, failure=failure_text(e.effector, e.kind, e.params))
 
 
 @router.post("", response_model=VehicleOut, status_code=status.HTTP_201_CREATED,
