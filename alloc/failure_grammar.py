@@ -42,7 +42,7 @@ MAX_PARTS = 64
 FIELD = "failure"
 
 # ASCII digits only: float() also reads "1_0", " 5", "inf", "nan" and other scripts' digits
-_NUMBER = re.compile(r"^[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?$")
+_NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
 _SEPARATORS = ("+", "@")
 
 
@@ -85,7 +85,7 @@ def _spec(kind: str, part: str) -> Any:
 
 
 def _number(text: str, param: str, part: str) -> float:
-    if not _NUMBER.match(text):
+    if not _NUMBER.fullmatch(text):  # fullmatch: '$' would let a trailing newline through
         raise _error(part, f"{param} {short_repr(text)} is not a finite number (digits, optional sign, "
                            "decimal point and exponent)")
     value = float(text)
@@ -165,7 +165,7 @@ def parse_failure(text: object, effectors: Sequence[str] | None = None, *,
 def _format_number(value: float) -> str:
     """The shortest text that reads back as the same float (``15`` for 15.0, ``30.000000000000004`` kept)."""
     if value == int(value) and abs(value) < 1e15:
-        return str(int(value))
+        return "-0" if value == 0.0 and math.copysign(1.0, value) < 0 else str(int(value))
     return repr(value)
 
 
