@@ -3,8 +3,8 @@
 The new kind, ``damage`` (battle damage: part of the control power *and* of the travel lost),
 is ONE row of the specification table in :mod:`alloc.health`, registered here with
 :func:`alloc.health.register_failure_kind`.  Nothing else is written anywhere: the library's
-health, the simulator's actuators (told and untold runs), the service's event schema and the
-sweep's catalogue all read the table.
+health and failure grammar, the simulator's actuators (told and untold runs), ``alloc sim``,
+the service's event schema and the sweep's catalogue all read the table.
 """
 
 from __future__ import annotations
@@ -79,14 +79,16 @@ def _fly(failure, told: bool):
 
 def test_told_and_untold_simulator_runs_honour_it(damage, monkeypatch):
     import sim.engine
-    from benchmarks.compare.failures import catalogue_names, make_failure
+    from benchmarks.compare.failures import catalogue_names, catalogue_texts, make_failure
     from sim.allocation import allocation_problem
     from sim.blocks import ActuatorFailure
     from sim.loop import Failure
     from sim.scenarios import ice
 
-    # the sweep's catalogue has it (parameters set by its effects' severities: 25 %, a quarter range)
+    # the sweep's catalogue has it (parameters set by its effects' severities: 25 %, a quarter range),
+    # written in the failure grammar on the effector ICE names for it
     assert catalogue_names()[-2:] == ["damage1", "damage2"]
+    assert catalogue_texts("ice")["damage1"] == "damage:elevon_l@0.25:-7.5:7.5"
     failure = make_failure("ice", "damage1", FAILURE_TIME)
     assert failure.actuators == (ActuatorFailure(0, "damage", fraction=0.25, lo=-7.5, hi=7.5),)
     # the same failure written with two built-in kinds: the simulator must fly both the same, bit for bit
@@ -121,6 +123,44 @@ def test_told_and_untold_simulator_runs_honour_it(damage, monkeypatch):
     np.testing.assert_array_equal(told_run.output[~after], blind.output[~after])  # the same until the failure
     assert not np.array_equal(told_run.output[after], blind.output[after])  # telling it changes the flight
     assert not np.array_equal(told_run.effectors[after], blind.effectors[after])
+
+
+def test_the_grammar_reads_and_writes_it(damage):
+    from alloc.failure_grammar import EffectorFailure, failure_kinds, format_failure, parse_failure
+
+    assert "damage" in failure_kinds()
+    text = "damage:elevon_l@0.25:-7.5:7.5"
+    parsed = parse_failure(text, vehicles.problem("ice").names)
+    assert parsed == (EffectorFailure("damage", "elevon_l", {"fraction": 0.25, "lo": -7.5, "hi": 7.5}),)
+    assert format_failure(parsed) == text
+    with pytest.raises(alloc.ProblemError, match=r"^failure: 'damage:elevon_l@0.25': lo is required"):
+        parse_failure("damage:elevon_l@0.25")
+
+
+def test_alloc_sim_flies_it(damage, tmp_path):
+    """``alloc sim ice --failure damage1`` (the catalogue name) and the text it stands for: one flight."""
+    import json
+
+    from typer.testing import CliRunner
+
+    from alloc.cli import app
+    from sim.scenarios import get_scenario
+
+    runner = CliRunner()
+    args = ["--failure-time", str(FAILURE_TIME), "--duration", "1", "--method", "qp", "--told"]
+    by_name = runner.invoke(app, ["sim", "ice", "--failure", "damage1", *args], prog_name="alloc")
+    by_text = runner.invoke(app, ["sim", "ice", "--failure", "damage:elevon_l@0.25:-7.5:7.5", *args],
+                            prog_name="alloc")
+    assert by_name.exit_code == 0 and by_text.exit_code == 0, (by_name.output[-800:], by_text.output[-800:])
+    named, texted = json.loads(by_name.stdout), json.loads(by_text.stdout)
+    assert named["failure"] == "damage1" and not named["diverged"] and named["failure_time"] == FAILURE_TIME
+    for summary in (named, texted):  # the one difference: the name the run was given
+        summary.pop("failure"), summary["settings"].pop("failure")
+    assert named == texted
+    listed = runner.invoke(app, ["sim", "--list"], prog_name="alloc")
+    assert "--failure damage1: catalogue, damage:elevon_l@0.25:-7.5:7.5" in listed.stdout
+    run = get_scenario("ice")(failure="damage1", failure_time=FAILURE_TIME, duration=1.0, method="qp", seed=0)
+    assert np.abs(run.effectors[run.t >= FAILURE_TIME, 0]).max() <= 7.5
 
 
 @pytest.fixture
@@ -161,6 +201,13 @@ def test_a_service_event_honours_it(service_app):
             r = client.post(f"/v1/vehicles/{vid}/events", json=bad, headers=headers)
             assert r.status_code == 422, r.text
             assert pointer in [e["pointer"] for e in r.json()["errors"]], r.json()
+        # the same failure as text, and each recorded event written back in the grammar
+        r = client.post(f"/v1/vehicles/{vid}/events", json={"failure": "damage:elevon_r@0.5:-10:10"},
+                        headers=headers)
+        assert r.status_code == 201, r.text
+        assert r.json()["event"]["params"] == {"fraction": 0.5, "lo": -10.0, "hi": 10.0}
+        assert [e["failure"] for e in client.get(f"/v1/vehicles/{vid}/events").json()["items"]] == [
+            "damage:elevon_l@0.25:-7.5:7.5", "damage:elevon_r@0.5:-10:10"]
         schemas = client.get("/openapi.json").json()["components"]["schemas"]
         assert set(schemas["DamageEvent"]["required"]) == {"effector", "kind", "fraction", "lo", "hi"}
 
