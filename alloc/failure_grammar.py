@@ -31,7 +31,7 @@ from .domain import short_repr
 from .exceptions import ProblemError
 from .health import SIMULATOR_ONLY, FailureKind, check_parameters
 
-__all__ = ["GRAMMAR", "EffectorFailure", "failure_kinds", "parse_failure", "format_failure", "MAX_TEXT", "MAX_PARTS"]
+__all__ = ["GRAMMAR", "MAX_PARTS", "MAX_TEXT", "EffectorFailure", "failure_kinds", "format_failure", "parse_failure"]
 
 #: the grammar, as messages and help texts quote it
 GRAMMAR = "<kind>:<effector>[@<value>[:<value>...]] (several joined by '+'), e.g. jam:elevon_l@5, float:motor1"
@@ -102,10 +102,13 @@ def _check(failure: EffectorFailure, part: str, spec: Any, names: Sequence[str] 
         if failure.effector not in names:
             raise _error(part, f"unknown effector {short_repr(failure.effector)}; effectors: {', '.join(names)}")
         i = list(names).index(failure.effector)
+
+    def pair(bounds: Sequence[tuple[float, float]] | None) -> tuple[float, float] | None:
+        return None if bounds is None or i is None else (float(bounds[i][0]), float(bounds[i][1]))
+
     try:
-        check_parameters(spec.name, failure.params, effector=failure.effector,
-                         limits=None if limits is None or i is None else tuple(map(float, limits[i])),
-                         rate_limits=None if rate_limits is None or i is None else tuple(map(float, rate_limits[i])))
+        check_parameters(spec.name, failure.params, effector=failure.effector, limits=pair(limits),
+                         rate_limits=pair(rate_limits))
     except ProblemError as exc:
         raise _error(part, str(exc)) from None
 

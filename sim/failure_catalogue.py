@@ -37,16 +37,30 @@ from __future__ import annotations
 
 import re
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any
 
 from alloc.exceptions import ProblemError
-from alloc.failure_grammar import GRAMMAR, EffectorFailure, format_failure, parse_failure
+from alloc.failure_grammar import (
+    EffectorFailure,
+    format_failure,
+    parse_failure,
+)
 from alloc.health import Effect, FailureKind
 from sim.blocks import ActuatorFailure
 from sim.model import Failure, Vehicle
 
-__all__ = ["SEVERITY", "RIDES_WITH", "LOE_FRACTION", "LIMIT_FRACTION", "RATE_FRACTION", "catalogue_kinds",
-           "catalogue_names", "catalogue_kind", "catalogue", "failure_of_text", "failure_help"]
+__all__ = [
+    "LIMIT_FRACTION",
+    "LOE_FRACTION",
+    "RATE_FRACTION",
+    "RIDES_WITH",
+    "SEVERITY",
+    "catalogue",
+    "catalogue_kind",
+    "catalogue_kinds",
+    "catalogue_names",
+    "failure_help",
+    "failure_of_text",
+]
 
 LOE_FRACTION = 0.25
 LIMIT_FRACTION = 0.25

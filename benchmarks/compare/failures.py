@@ -30,10 +30,18 @@ import numpy as np
 
 from sim import criteria as _criteria
 from sim.failure_catalogue import (
-    LIMIT_FRACTION, LOE_FRACTION, RATE_FRACTION, RIDES_WITH, SEVERITY, catalogue_kind, catalogue_kinds, catalogue_names,
+    LIMIT_FRACTION,
+    LOE_FRACTION,
+    RATE_FRACTION,
+    RIDES_WITH,
+    SEVERITY,
+    catalogue_kind,
+    catalogue_kinds,
+    catalogue_names,
 )
 
-__all__ = ["KINDS", "FAILED_EFFECTORS", "SEVERITY", "RIDES_WITH", "LOE_FRACTION", "LIMIT_FRACTION", "RATE_FRACTION",
+# FAILED_EFFECTORS (scenario -> effector indices) is read from the scenarios when asked (__getattr__)
+__all__ = ["KINDS", "SEVERITY", "RIDES_WITH", "LOE_FRACTION", "LIMIT_FRACTION", "RATE_FRACTION",
            "CATALOGUE_SCENARIOS", "catalogue_kinds", "catalogue_names", "catalogue_texts", "canonical_name",
            "is_catalogue", "make_failure", "failed_effectors", "failure_effectors"]
 

@@ -14,9 +14,21 @@ import pytest
 
 import alloc
 from alloc.failure_grammar import (
-    GRAMMAR, MAX_PARTS, MAX_TEXT, EffectorFailure, failure_kinds, format_failure, parse_failure,
+    GRAMMAR,
+    MAX_PARTS,
+    MAX_TEXT,
+    EffectorFailure,
+    failure_kinds,
+    format_failure,
+    parse_failure,
 )
-from alloc.health import FAILURE_KINDS, PARAMETERS, SIMULATOR_ONLY, SIMULATOR_PARAMETERS, Range
+from alloc.health import (
+    FAILURE_KINDS,
+    PARAMETERS,
+    SIMULATOR_ONLY,
+    SIMULATOR_PARAMETERS,
+    Range,
+)
 
 EFFECTORS = ("elevon_l", "lef_l", "motor 1", "rotor:3", "flap-2", "élevon")
 LIMITS = (-30.0, 30.0)
@@ -125,8 +137,8 @@ def test_hostile_text_is_refused_naming_the_field(seed):
 
 
 @pytest.mark.parametrize("text, says", [
-    ("foo:elevon_l", "unknown kind 'foo'; kinds: jam, hardover, float, effectiveness, limits, rate_limits, repair, "
-                     "bandwidth"),
+    ("foo:elevon_l", ("unknown kind 'foo'; kinds: jam, hardover, float, effectiveness, limits, rate_limits, "
+                      "repair, bandwidth")),
     ("jam:zz@1", "unknown effector 'zz'; effectors: elevon_l, lef_l"),
     ("jam:elevon_l@nan", "position 'nan' is not a finite number"),
     ("jam:elevon_l@40", "outside its nominal limits [-30, 30]"),
