@@ -82,10 +82,10 @@ def check_failure(run: Any, scenario: str, failure: str) -> None:
         except AllocError as exc:
             raise typer.BadParameter(f"unknown failure {failure!r} for {scenario}: {exc}; or {NO_FAILURE}",
                                      param_hint="--failure") from None
-    elif failure not in run.failures:  # a classic scenario (no allocator, no effector to fail): its own only
+    elif failure not in run.failures:  # a classic scenario (no effector to fail), harv_latdir_failure2 (Fig 4-81)
         known = [*run.failures, NO_FAILURE]
-        raise typer.BadParameter(f"unknown failure {failure!r} for {scenario} (its plant has no effector failures: "
-                                 f"its own failures only); known: {known}", param_hint="--failure")
+        raise typer.BadParameter(f"unknown failure {failure!r} for {scenario}: it takes its own failures only; "
+                                 f"known: {known}", param_hint="--failure")
 
 
 def scenario_of_vehicle(source: str) -> Any:

@@ -39,11 +39,7 @@ import re
 from collections.abc import Callable, Mapping, Sequence
 
 from alloc.exceptions import ProblemError
-from alloc.failure_grammar import (
-    EffectorFailure,
-    format_failure,
-    parse_failure,
-)
+from alloc.failure_grammar import EffectorFailure, format_failure, parse_failure
 from alloc.health import Effect, FailureKind
 from sim.blocks import ActuatorFailure
 from sim.model import Failure, Vehicle
@@ -58,8 +54,10 @@ __all__ = [
     "catalogue_kind",
     "catalogue_kinds",
     "catalogue_names",
+    "check",
     "failure_help",
     "failure_of_text",
+    "resolve",
 ]
 
 LOE_FRACTION = 0.25

@@ -109,7 +109,10 @@ async def delete_vehicle(vehicle_id: VehicleId, store: StoreDep) -> Response:
 
 
 @router.post("/{vehicle_id}/events", response_model=EventRecorded, status_code=status.HTTP_201_CREATED,
-             dependencies=WriteAccess, responses=UNAUTHORIZED, summary="Record a failure or repair of one effector")
+             dependencies=WriteAccess, responses=UNAUTHORIZED, summary="Record a failure or repair of one effector",
+             description="The body is the kind's fields (below), or the same failure as text in the library's "
+                         "failure grammar: {\"failure\": \"jam:elevon_l@5\", \"note\": ...} (kind:effector@values, "
+                         "one effector, a told kind; alloc/failure_grammar.py).")
 async def record_event(vehicle_id: VehicleId, body: EventIn, store: StoreDep, request: Request,
                        idempotency_key: IdempotencyKey = None) -> Response:
     # Committed (fsync'd) on the writer threads and visible to every process before the
