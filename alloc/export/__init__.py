@@ -50,6 +50,7 @@ from .base import (FLOAT_EXACT_RTOL, FLOAT_TOLERANCE, FLOAT_VMAX, GENERATOR_VERS
 from .certify import Certificate
 from .cost import ExportCost, check
 from .exporter import Exporter, Settings, exportable, exporter_for
+from .tables import _cascade_table  # noqa: F401 - the cgi table builder, by the package's name (alloc.export.cascade)
 from .text import c_prefix, comment_text, fill
 
 __all__ = ["export_c", "ExportedKernel", "ExportError", "EXPORTABLE", "exportable", "PRECISIONS",
