@@ -1,9 +1,10 @@
 """Digests of the C the generator writes for every exportable method on every catalogue vehicle.
 
-Run before and after a change of the generator's structure (not of its output)::
+Run before and after a change of the generator's structure (not of its output), with the
+checkout's library first on the path (the script's folder is, the checkout is not)::
 
-    python tests/alloc/export/export_digests.py save before.json
-    python tests/alloc/export/export_digests.py compare before.json
+    PYTHONPATH=. python tests/alloc/export/export_digests.py save before.json
+    PYTHONPATH=. python tests/alloc/export/export_digests.py compare before.json
 
 Each case exports one (vehicle, method, settings) and records the sha256 of header + source
 (raw text: on one machine the bits are the same; across machines LAPACK's last bits differ,
@@ -81,6 +82,7 @@ def run() -> dict[str, str]:
 
 if __name__ == "__main__":
     action, path = sys.argv[1], sys.argv[2]
+    print(f"library: {alloc.__file__}")
     now = run()
     if action == "save":
         with open(path, "w") as f:
