@@ -110,7 +110,9 @@ def _price(method: str, exporter: Exporter, data: Any, problem: Problem, real: _
     if isinstance(settings.iteration_bound, str) and settings.iteration_bound == "certify":
         calls = sample_size(k, m, exporter.certify_random)
     return check(ExportCost(numbers=common + priced.numbers + priced.table_numbers, table_numbers=priced.table_numbers,
-                            free_sets=priced.free_sets, certify_calls=calls, k=k, m=m, method=method))
+                            free_sets=priced.free_sets, certify_calls=calls, k=k, m=m, method=method,
+                            template_bytes=priced.template_bytes, fixed=exporter.fixed,
+                            table_hint=exporter.table_hint))
 
 
 def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "double",

@@ -13,6 +13,10 @@ from .exporter import Exporter, Filled, Priced, Settings, exporter
 from .tables import _cascade_level_fields
 
 
+#: bytes of the templates and the header's prose (the closed forms' 9,000 and the cascade's loop)
+TEMPLATE_BYTES = 10_000
+
+
 def _by_level(data: CascadeData) -> bool:
     return data.groups is not None and len(data.groups) > 1
 
@@ -26,7 +30,7 @@ class CascadeExporter(Exporter):
         assert isinstance(data, CascadeData)
         k, m = problem.k, problem.m
         levels = len(data.groups) if _by_level(data) else 1  # type: ignore[arg-type]
-        return Priced(numbers=0, table_numbers=(m * k) << m, free_sets=levels << m)
+        return Priced(numbers=0, table_numbers=(m * k) << m, free_sets=levels << m, template_bytes=TEMPLATE_BYTES)
 
     def fill(self, export: ExportData, allocator: Any, problem: Problem, real: _Real, fields: dict[str, Any],
              settings: Settings) -> Filled:

@@ -13,6 +13,10 @@ from .base import _Real
 from .exporter import Exporter, Filled, Priced, Settings, exporter
 
 
+#: bytes of the templates and the header's prose (measured 7,948 to 9,755 for the closed forms)
+TEMPLATE_BYTES = 9_000
+
+
 class _PseudoInverse(Exporter):
     def check_options(self, method: str, options: Mapping[str, Any]) -> None:
         # the bias of an incremental pseudo-inverse is u_prev: not the kernel's constant c
@@ -24,7 +28,7 @@ class _PseudoInverse(Exporter):
 @exporter("affine")
 class AffineExporter(_PseudoInverse):
     def price(self, data: Any, problem: Problem, real: _Real, settings: Settings) -> Priced:
-        return Priced(numbers=problem.m + problem.m * problem.k)
+        return Priced(numbers=problem.m + problem.m * problem.k, template_bytes=TEMPLATE_BYTES)
 
     def fill(self, export: ExportData, allocator: Any, problem: Problem, real: _Real, fields: dict[str, Any],
              settings: Settings) -> Filled:
@@ -37,7 +41,7 @@ class AffineExporter(_PseudoInverse):
 @exporter("scaled")
 class ScaledExporter(_PseudoInverse):
     def price(self, data: Any, problem: Problem, real: _Real, settings: Settings) -> Priced:
-        return Priced(numbers=problem.m * problem.k)
+        return Priced(numbers=problem.m * problem.k, template_bytes=TEMPLATE_BYTES)
 
     def fill(self, export: ExportData, allocator: Any, problem: Problem, real: _Real, fields: dict[str, Any],
              settings: Settings) -> Filled:

@@ -22,6 +22,7 @@ from ..export_data import ExportData, KernelData
 from ..problem import Problem
 from .base import ExportError, _Real
 from .certify import Certificate
+from .cost import FIXED_CLOSED, TABLE_HINT
 
 __all__ = ["Exporter", "Settings", "Priced", "Filled", "exporter", "exporter_for", "exportable", "methods_of_kind"]
 
@@ -48,6 +49,8 @@ class Priced:
     table_numbers: int = 0
     #: free sets factorised (or inverted) for the tables
     free_sets: int = 0
+    #: bytes of the kind's templates and the header's prose (measured)
+    template_bytes: int = 0
 
 
 @dataclass(frozen=True)
@@ -74,6 +77,10 @@ class Exporter:
     kind: ClassVar[str] = ""
     #: extra random demands of the certification sample (:func:`alloc.export.certify.sample_size`)
     certify_random: ClassVar[int] = 0
+    #: seconds and peak memory of the fixed part of an export (:mod:`alloc.export.cost`)
+    fixed: ClassVar[tuple[float, int]] = FIXED_CLOSED
+    #: what to do about tables above the export's caps
+    table_hint: ClassVar[str] = TABLE_HINT
 
     def check_options(self, method: str, options: Mapping[str, Any]) -> None:
         """Refuse (OptionError naming it) an option whose kernel is not exported; before the build."""
