@@ -14,13 +14,21 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import ClassVar, Union
+from typing import ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["AffineData", "ScaledData", "CascadeData", "ActiveSetData", "SimplexData", "KernelData", "ExportData",
-           "KINDS"]
+__all__ = [
+    "KINDS",
+    "ActiveSetData",
+    "AffineData",
+    "CascadeData",
+    "ExportData",
+    "KernelData",
+    "ScaledData",
+    "SimplexData",
+]
 
 FloatArray = NDArray[np.float64]
 
@@ -87,7 +95,7 @@ class SimplexData:
     pivots: Callable[[np.ndarray, np.ndarray, np.ndarray], int]
 
 
-KernelData = Union[AffineData, ScaledData, CascadeData, ActiveSetData, SimplexData]
+KernelData = AffineData | ScaledData | CascadeData | ActiveSetData | SimplexData
 #: the kinds of kernel a method may declare (``@register(name, export=kind)``)
 KINDS = tuple(cls.kind for cls in (AffineData, ScaledData, CascadeData, ActiveSetData, SimplexData))
 

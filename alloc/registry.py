@@ -13,6 +13,7 @@ from typing import Any
 
 from . import method as _method
 from .exceptions import UnknownMethodError
+from .export_data import KINDS
 from .method import (
     BUILD_LIMIT_BYTES,
     BUILD_LIMIT_SECONDS,
@@ -23,12 +24,12 @@ from .method import (
     Method,
     register,
 )
-from .export_data import KINDS
 from .options import validate
 from .problem import Problem
 
-__all__ = ["Method", "register", "get_method", "methods", "families", "exportable", "method_info", "build", "DEFAULT_METHOD", "FloatArray",
-           "CHEAP_BUILD_SECONDS", "BUILD_LIMIT_SECONDS", "BUILD_LIMIT_BYTES", "CALL_LIMIT_SECONDS", "CAPABILITIES"]
+__all__ = ["Method", "register", "get_method", "methods", "families", "exportable", "method_info", "build",
+           "DEFAULT_METHOD", "FloatArray", "CHEAP_BUILD_SECONDS", "BUILD_LIMIT_SECONDS", "BUILD_LIMIT_BYTES",
+           "CALL_LIMIT_SECONDS", "CAPABILITIES"]
 
 #: the method used wherever none is named (library, command line, HTTP): ``qp`` meets every
 #: attainable demand exactly (seed Eqs 1.20-1.21), which the pseudo-inverse family (Eq 1.23) does not

@@ -79,9 +79,7 @@ def private_reads(root: Path = ROOT, packages: tuple[str, ...] = SCANNED) -> dic
             rel = path.relative_to(root).as_posix()
             for node in ast.walk(ast.parse(path.read_text())):
                 if isinstance(node, ast.Attribute) and node.attr in names and not (
-                        isinstance(node.value, ast.Name) and node.value.id in ("self", "cls")):
-                    found.setdefault((rel, ast.unparse(node)), node.lineno)
-                elif isinstance(node, ast.Call) and getattr(node.func, "id", None) in ("getattr", "hasattr") \
+                        isinstance(node.value, ast.Name) and node.value.id in ("self", "cls")) or isinstance(node, ast.Call) and getattr(node.func, "id", None) in ("getattr", "hasattr") \
                         and len(node.args) >= 2 and isinstance(node.args[1], ast.Constant) \
                         and node.args[1].value in names:
                     found.setdefault((rel, ast.unparse(node)), node.lineno)

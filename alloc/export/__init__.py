@@ -40,7 +40,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from ..exceptions import OptionError, UnknownMethodError
+from ..exceptions import UnknownMethodError
 from ..problem import Problem
 from . import templates
 # the kinds' exporters register themselves (alloc.export.exporter), one module per kind
@@ -50,7 +50,6 @@ from .base import (FLOAT_EXACT_RTOL, FLOAT_TOLERANCE, FLOAT_VMAX, GENERATOR_VERS
 from .certify import Certificate
 from .cost import ExportCost, check
 from .exporter import Exporter, Settings, exportable, exporter_for
-from .tables import _cascade_table  # noqa: F401 - the cgi table builder, by the package's name (alloc.export.cascade)
 from .text import c_prefix, comment_text, fill
 
 __all__ = ["export_c", "ExportedKernel", "ExportError", "EXPORTABLE", "exportable", "PRECISIONS",

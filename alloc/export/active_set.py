@@ -4,7 +4,8 @@ cap per level and per call, optional tables, cache and warm start (:mod:`alloc.e
 
 from __future__ import annotations
 
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 from ..exceptions import OptionError
 from ..export_data import ActiveSetData, ExportData
@@ -14,7 +15,6 @@ from .certify import bound_text
 from .cost import FIXED_ACTIVE_SET
 from .exporter import Exporter, Filled, Priced, Settings, exporter
 from .tables import _active_set_fields, _iteration_budget, active_set_plan
-
 
 #: bytes of the templates and the header's prose, and more per instance beyond the first
 #: (measured 31,221 to 37,209 with and without warm start; dynamic has two instances)

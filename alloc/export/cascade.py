@@ -10,8 +10,7 @@ from ..problem import Problem
 from . import templates_cascade, templates_closed_form
 from .base import _Real
 from .exporter import Exporter, Filled, Priced, Settings, exporter
-from .tables import _cascade_level_fields
-
+from .tables import _cascade_level_fields, _cascade_table
 
 #: bytes of the templates and the header's prose (the closed forms' 9,000 and the cascade's loop)
 TEMPLATE_BYTES = 10_000
@@ -39,9 +38,5 @@ class CascadeExporter(Exporter):
         if _by_level(data):
             fields.update(_cascade_level_fields(data, problem, real, settings.table))
             return Filled(body=templates_cascade.CASCADE_LEVELS)
-        # the table builder as the package names it (alloc.export._cascade_table), looked up at the
-        # call: tests/alloc/export/test_export_cost.py stops an export there, after its pricing
-        from . import _cascade_table
-
         fields.update(TAB_P=_cascade_table(data, problem, real, settings.table))
         return Filled(body=templates_closed_form.CASCADE)

@@ -3,7 +3,8 @@
 
 from __future__ import annotations
 
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 from ..exceptions import OptionError
 from ..export_data import AffineData, ExportData, ScaledData
@@ -11,7 +12,6 @@ from ..problem import Problem
 from . import templates_closed_form
 from .base import _Real
 from .exporter import Exporter, Filled, Priced, Settings, exporter
-
 
 #: bytes of the templates and the header's prose (measured 7,948 to 9,755 for the closed forms)
 TEMPLATE_BYTES = 9_000

@@ -15,8 +15,9 @@ the package), and a description class in :mod:`alloc.export_data`.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any, Callable, ClassVar, Mapping
+from typing import Any, ClassVar
 
 from ..export_data import ExportData, KernelData
 from ..problem import Problem
@@ -24,7 +25,7 @@ from .base import ExportError, _Real
 from .certify import Certificate
 from .cost import FIXED_CLOSED, TABLE_HINT
 
-__all__ = ["Exporter", "Settings", "Priced", "Filled", "exporter", "exporter_for", "exportable", "methods_of_kind"]
+__all__ = ["Exporter", "Filled", "Priced", "Settings", "exportable", "exporter", "exporter_for", "methods_of_kind"]
 
 
 @dataclass(frozen=True)

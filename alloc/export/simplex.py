@@ -4,7 +4,8 @@ problem printed as constants, its pivot cap and an optional per-call pivot bound
 
 from __future__ import annotations
 
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 from ..exceptions import OptionError
 from ..export_data import ExportData, SimplexData
@@ -14,7 +15,6 @@ from .certify import SIMPLEX_RANDOM_DEMANDS, simplex_bound_text
 from .cost import FIXED_SIMPLEX
 from .exporter import Exporter, Filled, Priced, Settings, _no_tables, exporter
 from .tables import _iteration_budget, _simplex_fields, _simplex_pivots
-
 
 #: bytes of the templates and the header's prose (measured 21,733)
 TEMPLATE_BYTES = 22_000

@@ -178,7 +178,7 @@ class FacetSearch(Method):
         flat set, which is searched otherwise)."""
         if self._lp is not None or getattr(self, "_flat", True):
             return 0
-        return int(len(self._tiles))
+        return len(self._tiles)
 
     def _use_lp(self, reason: str) -> None:
         # the LP formulation of the same problem (the compiled ray simplex, DAQP behind it)

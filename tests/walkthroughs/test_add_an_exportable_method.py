@@ -5,7 +5,6 @@ and removed again."""
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 from typer.testing import CliRunner
 

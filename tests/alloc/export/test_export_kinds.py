@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from test_export_golden import digest
 
 import alloc
 import alloc.export
@@ -20,7 +21,6 @@ import alloc.registry
 import alloc.vehicles
 from alloc.export import ExportError, export_c
 from alloc.export_data import KINDS, ActiveSetData, AffineData, ExportData
-from test_export_golden import digest
 
 #: (vehicle, method) -> digest of the double kernel (defaults), or the field an export refuses
 DIGESTS = {
