@@ -19,7 +19,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
-from ..export_data import ExportData, KernelData
+from ..export_data import KINDS, ExportData, KernelData
 from ..problem import Problem
 from .base import ExportError, _Real
 from .certify import Certificate
@@ -82,6 +82,8 @@ class Exporter:
     fixed: ClassVar[tuple[float, int]] = FIXED_CLOSED
     #: what to do about tables above the export's caps
     table_hint: ClassVar[str] = TABLE_HINT
+    #: the kernel keeps a working set between calls when exported with ``warm_start``
+    keeps_working_set: ClassVar[bool] = False
 
     def check_options(self, method: str, options: Mapping[str, Any]) -> None:
         """Refuse (OptionError naming it) an option whose kernel is not exported; before the build."""
@@ -105,10 +107,8 @@ class Exporter:
         if table:
             raise ExportError(_no_tables(method), field="table")
 
-    #: the kernel keeps a working set between calls when exported with ``warm_start``
-    keeps_working_set: ClassVar[bool] = False
-
     def price(self, data: KernelData, problem: Problem, real: _Real, settings: Settings) -> Priced:
+        """What the kernel prints beyond the common constants, before any table is made."""
         raise NotImplementedError
 
     def fill(self, export: ExportData, allocator: Any, problem: Problem, real: _Real, fields: dict[str, Any],
@@ -124,8 +124,6 @@ _EXPORTERS: dict[str, Exporter] = {}
 
 def exporter(kind: str) -> Callable[[type[Exporter]], type[Exporter]]:
     """Class decorator registering the exporter of kernels of ``kind``."""
-    from ..export_data import KINDS
-
     if kind not in KINDS:
         raise TypeError(f"exporter: unknown kind {kind!r}; declared kinds: {', '.join(KINDS)}")
 
