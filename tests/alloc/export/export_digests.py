@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import re
 import sys
 import time
 
@@ -57,6 +58,21 @@ def cases() -> list[tuple[str, str, dict]]:
     out.append(("tailless", "nonesuch", {}))
     out.append(("tailless", "da", {}))
     return out
+
+
+#: a floating literal of the generated source (not part of an identifier)
+_LITERAL = re.compile(r"(?<![\w.])-?\d+\.\d*(?:e[-+]?\d+)?")
+
+
+def rounded_digest(vehicle: str, method: str) -> str:
+    """sha256 (16 hex digits) of the double kernel with the default settings, as
+    test_export_golden.py hashes: literals rounded to 1e-9 (LAPACK's last bits differ between
+    numpy builds), the library's version and the input's fingerprint masked."""
+    kernel = export_c(alloc.vehicles.problem(vehicle), method, precision="double")
+    text = (kernel.header + kernel.source).replace(alloc.__version__, "@VERSION@")
+    text = _LITERAL.sub(lambda match: repr(round(float(match.group()), 9) + 0.0), text)
+    text = re.sub(r"data sha256 [0-9a-f]+", "data sha256 @DATA@", text)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
 def key(vehicle: str, method: str, settings: dict) -> str:

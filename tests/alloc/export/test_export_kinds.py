@@ -2,8 +2,9 @@
 method, and the kernel's public description (``Allocator.export_data``); the generated C of
 every exportable method on every catalogue vehicle is pinned.
 
-The digests are :func:`test_export_golden.digest`'s (literals rounded to 1e-9, the library's
-version and the input's fingerprint masked), of the double kernel with the default settings.
+The digests are :func:`export_digests.rounded_digest`'s (test_export_golden.py's: literals
+rounded to 1e-9, the library's version and the input's fingerprint masked), of the double
+kernel with the default settings.
 They were recorded when the generator stopped branching on method names; that change was
 checked with tests/alloc/export/export_digests.py, which compared 281 exports and refusals
 (187 kernels) byte for byte before and after it.
@@ -13,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_export_golden import digest
+from export_digests import rounded_digest
 
 import alloc
 import alloc.export
@@ -99,7 +100,7 @@ def test_every_catalogue_vehicle_is_pinned():
 def test_generated_source_of_every_vehicle_and_method(case):
     vehicle, method = case
     try:
-        got = digest(vehicle, method, "double", None)
+        got = rounded_digest(vehicle, method)
     except ExportError as exc:
         got = f"refused: {exc.field}"
     assert got == DIGESTS[case]
