@@ -381,6 +381,27 @@ class LexicographicL1:
         self._iwork = np.zeros(2 * N + k, dtype=np.int64)
         self.max_iter = 50 * (N + k)
 
+    # The scaled problem, read by the C generator (alloc.export_data.SimplexData); not to be written.
+    @property
+    def F(self) -> np.ndarray:
+        """The scaled tableau ``[A, -A, -I, I]`` (k x N)."""
+        return self._F
+
+    @property
+    def rho(self) -> np.ndarray:
+        """The row scales of the tableau."""
+        return self._rho
+
+    @property
+    def D(self) -> np.ndarray:
+        """The half-widths of the limits (the column scaling)."""
+        return self._D
+
+    @property
+    def costs(self) -> np.ndarray:
+        """The stages' normalised cost rows."""
+        return self._costs
+
     def solve(self, v: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, int, int]:
         """``(u, code, pivots)`` for demand ``v`` within ``[lo, hi]`` (``code`` 0: optimal)."""
         u = np.empty(self._D.shape[0])

@@ -12,6 +12,7 @@ from numpy.typing import ArrayLike
 from ._kernels import finish_batch, finish_owned, fused_affine, owned_demand
 from ._threads import split_rows, threads_for
 from .exceptions import AllocError, DemandError, MethodTypeError, ProblemTypeError, SolverError
+from .export_data import ExportData
 from .problem import MAX_MAGNITUDE, Problem, as_float_array, check_magnitude
 from .registry import DEFAULT_METHOD, FloatArray, Method, build
 from .result import EXACT_RTOL, BatchResult, Result, Status
@@ -231,6 +232,15 @@ class Allocator(_CallBase):  # type: ignore[misc,valid-type]
 
     def __repr__(self) -> str:
         return f"Allocator(method={self.method!r}, {self.problem!r})"
+
+    def export_data(self) -> ExportData | None:
+        """What the C generator reads of this allocator (:mod:`alloc.export_data`): the method's
+        kernel, of its declared kind (:attr:`alloc.method.Method.export`), and the safe answer;
+        ``None`` where the method was not built or this instance has no exportable kernel."""
+        kernel = None if self.impl is None else self.impl.export_data()
+        if kernel is None:
+            return None
+        return ExportData(method=self.method, kernel=kernel, safe=self._safe.affine_map())
 
     def _call_py(self, v: ArrayLike, *, u_prev: ArrayLike | None = None, dt: float | None = None) -> Result:
         """``allocator(v, u_prev=None, dt=None)``: the call (in Python; see the class docstring)."""

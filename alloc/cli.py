@@ -296,6 +296,19 @@ class DefaultMethodCommand(TyperCommand):
         super().format_help(ctx, formatter)
 
 
+class ExportCommand(DefaultMethodCommand):
+    """``alloc export``: its ``--method`` help lists the exportable methods, read from the
+    registry when the help is drawn (a method registered by a plugin is listed too)."""
+
+    def format_help(self, ctx: typer.Context, formatter: Any) -> None:
+        from .export import exportable
+
+        for param in self.params:
+            if param.name == "method":
+                param.help = f"method to export: {', '.join(exportable())} (those declaring a C kernel)"
+        super().format_help(ctx, formatter)
+
+
 #: help of every ``--vehicle`` option (alloc allocate, alloc ams, alloc sim, alloc bench)
 VEHICLE_HELP = ("a catalogue vehicle (see `alloc vehicles`; ALLOC_VEHICLE_PATH adds folders of files) or a "
                 "vehicle file (.toml, .json; PX4 .params or airframe file; ArduPilot .csv factor table or .param file)")
@@ -401,6 +414,10 @@ def methods_command(as_json: bool = typer.Option(False, "--json", help="print JS
         typer.echo(f"{info['name']:<11} {info['equation']:<28} {info['summary']}")
         for opt, doc in info["options"].items():
             typer.echo(f"{'':<13}--option {opt}=...  {doc}")
+        if info["family"] != info["name"]:
+            typer.echo(f"{'':<13}the allocation of {info['family']}, by another algorithm")
+        if info["export"] is not None:
+            typer.echo(f"{'':<13}alloc export: a C kernel ({info['export']})")
 
 
 @app.command("vehicles")
@@ -560,10 +577,10 @@ def _problem_at(vehicle: Any, pairs: list[str]) -> alloc.Problem:
         raise typer.BadParameter(str(exc), param_hint="--at") from None
 
 
-@app.command("export", cls=DefaultMethodCommand)
+@app.command("export", cls=ExportCommand)
 def export_command(
     vehicle: str = typer.Option(..., "--vehicle", metavar="NAME|FILE", help=VEHICLE_HELP),
-    method: Optional[str] = typer.Option(None, "--method", "-m", help="method to export (alloc.export.EXPORTABLE)"),
+    method: Optional[str] = typer.Option(None, "--method", "-m", help="method to export (alloc.export.exportable())"),
     precision: str = typer.Option("double", "--precision", help="scalar type of the kernel: double or float"),
     out: Path = typer.Option(..., "--out", help="folder for the .h/.c pair (created)"),
     option: list[str] = typer.Option([], "--option", "-o", help="method option key=value (as for allocate)"),

@@ -20,6 +20,7 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
+from .export_data import KINDS, KernelData
 from .options import Option
 from .problem import Problem
 
@@ -94,6 +95,17 @@ class Method(ABC):
     supports_priorities: ClassVar[bool] = False
     #: implements a vectorised :meth:`solve_batch`
     supports_batch: ClassVar[bool] = False
+    #: the kind of C kernel :func:`alloc.export.export_c` writes for it (one of
+    #: :data:`alloc.export_data.KINDS`; the method returns that kind's description from
+    #: :meth:`export_data`), or ``None``: not exported
+    export: ClassVar[str | None] = None
+    #: the allocation the method computes, named by its family's first method: methods of one
+    #: family return the same allocation by different algorithms (``da``, ``da_bisect``,
+    #: ``da_facet``, ``da_table``: direct allocation); by default the method's own name
+    family: ClassVar[str] = ""
+    #: the option that takes a static distribution matrix (m x k) acting on the demand (``G``
+    #: of ``ganging``), or ``None``; a simulator fills it with its scenario's design distribution
+    distribution_option: ClassVar[str | None] = None
 
     @classmethod
     def facet_subsets(cls, problem: Problem, options: dict[str, Any]) -> int:
@@ -185,20 +197,31 @@ class Method(ABC):
         """
         return self.fused
 
+    def export_data(self) -> KernelData | None:
+        """The description of this built method's kernel, of its declared :attr:`export` kind
+        (:mod:`alloc.export_data`), for the C generator; ``None`` where this instance cannot be
+        exported (not exportable, or options such as another backend).  Default ``None``."""
+        return None
+
 
 #: the capability attributes a registration may set (``@register(name, affine=True, ...)``)
 CAPABILITIES = ("affine", "needs_ams", "supports_priorities", "supports_batch")
 
 
-def register(name: str, **capabilities: bool):
+def register(name: str, *, export: str | None = None, family: str | None = None, **capabilities: bool):
     """Class decorator registering an allocation method under ``name``.
 
     ``capabilities`` set the declared capability attributes of :class:`Method`
-    (``affine``, ``needs_ams``, ``supports_priorities``, ``supports_batch``).
+    (``affine``, ``needs_ams``, ``supports_priorities``, ``supports_batch``); ``export`` the
+    kind of C kernel it exports as (:attr:`Method.export`, one of
+    :data:`alloc.export_data.KINDS`); ``family`` the allocation it computes
+    (:attr:`Method.family`, default ``name``).
     """
     unknown = sorted(set(capabilities) - set(CAPABILITIES))
     if unknown:
         raise TypeError(f"register: unknown capabilities {unknown}; accepted: {', '.join(CAPABILITIES)}")
+    if export is not None and export not in KINDS:
+        raise TypeError(f"register: unknown export kind {export!r}; accepted: {', '.join(KINDS)}")
 
     def deco(cls: type[Method]) -> type[Method]:
         if name in _REGISTRY:
@@ -206,6 +229,10 @@ def register(name: str, **capabilities: bool):
         cls.name = name
         for cap, value in capabilities.items():
             setattr(cls, cap, bool(value))
+        # set on every registered class: a subclass registered under its own name must not
+        # inherit its parent's kernel or family by accident
+        cls.export = export
+        cls.family = name if family is None else family
         _REGISTRY[name] = cls
         return cls
 

@@ -51,6 +51,10 @@ class Option:
         (``"must be in [0, 1)"``) when the value is not admissible.
     constraint : str
         The admissible values in words, e.g. ``"[0, 1)"``, ``">= 1"``, ``"one of daqp, highs"``.
+    call_cap : float, optional
+        For an option that sets how many iterations one call may run: the largest value a
+        shared host (the service, where a call runs on its event loop) accepts.  The library
+        itself accepts every admissible value.
     """
 
     type: str
@@ -58,6 +62,7 @@ class Option:
     doc: str
     check: Callable[[Any], Any] = field(repr=False, compare=False)
     constraint: str = ""
+    call_cap: float | None = None
 
     def describe(self) -> str:
         """One line for ``alloc methods`` and ``GET /v1/methods``: meaning, constraint, default."""
@@ -103,8 +108,9 @@ def real(default: float | None, doc: str, *, low: float = -math.inf, high: float
     return Option("float", default, doc, check, constraint)
 
 
-def integer(default: int | None, doc: str, *, low: int | None = None, high: int | None = None) -> Option:
-    """An integer (not a bool, not a float) in ``[low, high]``."""
+def integer(default: int | None, doc: str, *, low: int | None = None, high: int | None = None,
+            call_cap: int | None = None) -> Option:
+    """An integer (not a bool, not a float) in ``[low, high]``; ``call_cap``: :attr:`Option.call_cap`."""
     constraint = " and ".join(c for c in (f">= {low}" if low is not None else "",
                                           f"<= {high}" if high is not None else "") if c)
 
@@ -116,7 +122,7 @@ def integer(default: int | None, doc: str, *, low: int | None = None, high: int 
             raise ValueError(f"must be {constraint}")
         return n
 
-    return Option("int", default, doc, check, constraint)
+    return Option("int", default, doc, check, constraint, call_cap)
 
 
 def flag(default: bool, doc: str) -> Option:

@@ -13,6 +13,7 @@ from typing import Any
 
 from . import method as _method
 from .exceptions import UnknownMethodError
+from .export_data import KINDS
 from .method import (
     BUILD_LIMIT_BYTES,
     BUILD_LIMIT_SECONDS,
@@ -26,8 +27,9 @@ from .method import (
 from .options import validate
 from .problem import Problem
 
-__all__ = ["Method", "register", "get_method", "methods", "method_info", "build", "DEFAULT_METHOD", "FloatArray",
-           "CHEAP_BUILD_SECONDS", "BUILD_LIMIT_SECONDS", "BUILD_LIMIT_BYTES", "CALL_LIMIT_SECONDS", "CAPABILITIES"]
+__all__ = ["Method", "register", "get_method", "methods", "families", "exportable", "method_info", "build",
+           "DEFAULT_METHOD", "FloatArray", "CHEAP_BUILD_SECONDS", "BUILD_LIMIT_SECONDS", "BUILD_LIMIT_BYTES",
+           "CALL_LIMIT_SECONDS", "CAPABILITIES"]
 
 #: the method used wherever none is named (library, command line, HTTP): ``qp`` meets every
 #: attainable demand exactly (seed Eqs 1.20-1.21), which the pseudo-inverse family (Eq 1.23) does not
@@ -55,17 +57,37 @@ def methods() -> list[str]:
     return sorted(_method._REGISTRY)
 
 
+def families() -> dict[str, list[str]]:
+    """Each declared family (:attr:`Method.family`: methods computing one allocation by
+    different algorithms) and its registered members, sorted; a method alone is its own."""
+    out: dict[str, list[str]] = {}
+    for name in methods():
+        out.setdefault(get_method(name).family, []).append(name)
+    return out
+
+
+def exportable() -> list[str]:
+    """The methods that declare a C kernel (:attr:`Method.export`; ``alloc export`` writes
+    them): kind by kind in the order of :data:`alloc.export_data.KINDS` (closed forms first),
+    each kind's methods in the order they were registered."""
+    _load_builtin()
+    registered = _method._REGISTRY
+    return [name for kind in KINDS for name, cls in registered.items() if cls.export == kind]
+
+
 def method_info(name: str) -> dict[str, Any]:
     """Name, seed equation, summary, options and capabilities of a method (CLI and service).
 
     ``options`` maps each option to one descriptive line; ``option_specs`` gives the typed
-    specification (type, default, constraint, doc).
+    specification (type, default, constraint, doc); ``family`` the allocation it computes and
+    ``export`` the kind of C kernel ``alloc export`` writes for it (``None``: not exported).
     """
     cls = get_method(name)
     return {"name": name, "equation": cls.equation, "summary": cls.summary,
             "options": {opt: spec.describe() for opt, spec in cls.options.items()},
             "option_specs": {opt: spec.to_dict() for opt, spec in cls.options.items()},
-            "capabilities": {cap: bool(getattr(cls, cap)) for cap in CAPABILITIES}}
+            "capabilities": {cap: bool(getattr(cls, cap)) for cap in CAPABILITIES},
+            "family": cls.family, "export": cls.export}
 
 
 def build(problem: Problem, name: str, options: dict[str, Any]) -> Method:

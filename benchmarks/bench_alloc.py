@@ -170,7 +170,7 @@ def tail_rows(p: alloc.Problem, V: np.ndarray, names: tuple[str, ...] = ("qp", "
         per_run = [float(np.percentile(t, 99) / np.median(t)) for t in T]
         best = T.min(axis=0)
         f = fresh(name)
-        ivecs = f._packed[1][2]  # the solver's int state; ivecs[_MISC, _FACTORED] counts factorisations
+        ivecs = f.impl.packed[1][2]  # the solver's int state; ivecs[_MISC, _FACTORED] counts factorisations
         its, factored = np.empty(len(V)), np.empty(len(V))
         for i, v in enumerate(V):
             before = int(ivecs[_MISC, _FACTORED])

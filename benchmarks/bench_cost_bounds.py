@@ -70,7 +70,7 @@ def calls(cells: list[tuple[int, int]], n: int, seed: int) -> None:
             V[::5] *= 20.0
             t = call_times(f, p, V)
             declared = cls.call_cost(p, **options)
-            lp = " -> lp" if getattr(f.impl, "_lp", None) is not None else ""
+            lp = " -> lp" if getattr(f.impl, "uses_lp", False) else ""
             print(f"{k:2d} {m:3d}  {label:<16} {build:8.3f} {cls.build_cost(p, **options):8.3g}  "
                   f"{1e3 * np.median(t):8.3f} {1e3 * t.max():8.3f} {1e3 * declared:9.3f} {declared / t.max():6.1f}{lp}",
                   flush=True)
@@ -87,7 +87,7 @@ r0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
 t0 = time.process_time()
 try:
     f = alloc.make_allocator(p, name, **options)
-    lp = getattr(f.impl, "_lp", None) is not None
+    lp = bool(getattr(f.impl, "uses_lp", False))
 except alloc.AllocError as exc:
     print(json.dumps({"refused": str(exc)})); raise SystemExit
 t1 = time.process_time()

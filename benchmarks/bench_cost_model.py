@@ -82,10 +82,10 @@ except alloc.AllocError as exc:
 out["cpu_s"] = time.process_time() - t0
 out["rss_b"] = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - r0) * 1024
 impl = f.impl
-lp = getattr(impl, "_lp", None) is not None
+lp = bool(getattr(impl, "uses_lp", False))
 out["route"] = "lp" if lp else "facets"
 out["reason"] = getattr(impl, "lp_reason", "")
-out["tiles"] = 0 if lp or getattr(impl, "_flat", True) else int(len(impl._tiles))
+out["tiles"] = getattr(impl, "tile_count", 0)
 if lp:  # what the routed build declares: the LP's set-up
     out["declared_s"] = get_method("da").build_cost(p, backend="daqp")
 del f, impl

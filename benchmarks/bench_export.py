@@ -322,9 +322,9 @@ def certification_rows(calls: int, methods: tuple[str, ...] = ("qp", "wls", "dyn
             kernel = export_c(p, method, iteration_bound="certify")
             cert = kernel.certificate
             allocator = alloc.make_allocator(p, method)
-            if method == "lp":  # pivots, also where the library stops at its cap (a fallback of 0 iterations)
-                lex = allocator.impl._lex
-                counts = np.array([lex.solve(v, p.umin, p.umax)[2] for v in fresh])
+            if cert.unit == "pivots":  # also where the library stops at its cap (a fallback of 0 iterations)
+                simplex = allocator.export_data().kernel
+                counts = np.array([simplex.pivots(v, p.umin, p.umax) for v in fresh])
                 cap, analytic = kernel.maxit - 1, None
             else:
                 counts = np.array([allocator(v).iterations for v in fresh])

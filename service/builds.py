@@ -55,7 +55,6 @@ import numpy as np
 
 import alloc
 
-from .config import OPTION_CAPS
 from .cost import answer_bytes, batch_seconds, build_seconds, call_seconds, estimate_bytes
 from .responses import batch_json
 from .errors import InvalidRequest, ServiceUnavailable, TooManyRequests, field_error
@@ -78,11 +77,13 @@ def _reject(field_name: str, reason: str) -> InvalidRequest:
 def check_build_cost(problem: alloc.Problem, method: str, options: dict[str, Any], budget: float) -> float:
     """Refuse, before it starts, a build predicted to exceed ``budget`` seconds; return the prediction.
 
-    Per-call option caps (``OPTION_CAPS``: iterations a single allocation may run) are
-    checked too.  The prediction is :func:`service.cost.build_seconds`.
+    Per-call option caps (:attr:`alloc.options.Option.call_cap`, declared by the method:
+    iterations a single allocation may run) are checked too.  The prediction is
+    :func:`service.cost.build_seconds`.
     """
+    specs = alloc.registry.get_method(method).options if method in alloc.methods() else {}
     for name, value in options.items():
-        cap = OPTION_CAPS.get((method, name))
+        cap = specs[name].call_cap if name in specs else None
         if cap is not None and isinstance(value, (int, float)) and not isinstance(value, bool) and value > cap:
             raise _reject(f"options/{name}", f"{method}: option {name} = {value} exceeds the service's cap of {cap}")
     if method not in alloc.methods():

@@ -74,7 +74,7 @@ from pydantic_settings import BaseSettings, SettingsConfigDict
 from .cost import DEFAULT_BUILD_BUDGET_S
 
 __all__ = ["Settings", "MAX_EFFECTORS", "MAX_AXES", "MAX_BATCH", "MAX_DIRECTIONS", "MAX_MAGNITUDE",
-           "MIN_WEIGHT", "OPTION_CAPS"]
+           "MIN_WEIGHT"]
 
 MiB = 1024 * 1024
 
@@ -92,13 +92,9 @@ MAX_DIRECTIONS = 256
 MAX_MAGNITUDE = 1e9
 #: smallest magnitude of a non-zero weight entry (Wu, Wv): 1 / MAX_MAGNITUDE, for the same reason
 MIN_WEIGHT = 1e-9
-#: per-call bounds on method options that set how many iterations one allocation may run
-#: (a call runs on the event loop): the library accepts any positive value, a shared service cannot.
-#: Build-time options are bounded by the build-cost model instead (service.cost).
-OPTION_CAPS: dict[tuple[str, str], int] = {
-    ("da_bisect", "angles"): 1024,
-    ("da_bisect", "max_rounds"): 1000,
-}
+# Per-call bounds on method options that set how many iterations one allocation may run (a call
+# runs on the event loop) are declared on the options' specs (alloc.options.Option.call_cap) and
+# read by service.builds.  Build-time options are bounded by the build-cost model (service.cost).
 
 
 class Settings(BaseSettings):

@@ -10,8 +10,8 @@ measured numbers with the methods: :mod:`alloc.methods.facet_search`), and a pre
 The policy is the service's own: the default budget is 3.0 s of declared build time, more
 than a facet enumeration at the library's facet limit (:data:`alloc.facet_cost.FACET_LIMIT`
 subsets: 0.46 s at 6 x 21 under the measured model), so the service admits every build the
-library's own ``backend="auto"`` would choose.  Per-call option caps live in
-:mod:`service.config`.
+library's own ``backend="auto"`` would choose.  Per-call option caps are declared on the
+methods' option specs (:attr:`alloc.options.Option.call_cap`) and checked by :mod:`service.builds`.
 
 Memory: a facet-enumerating allocator holds about 4.5 KiB per subset (k = 6, m = 20:
 60-71 MiB measured as RSS growth), so one build at the cap is ~90 MiB transient.  Cached

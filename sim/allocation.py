@@ -180,7 +180,9 @@ def build_allocator(
 
     ``static`` ignores the failure and the health (a fixed matrix cannot be told anything).
     ``health`` (a detector's belief) replaces ``failure`` (see :func:`allocation_problem`).
-    For ``ganging`` the seed's distribution ``B_k`` (in demand units) is the default gang.
+    A method that takes a static distribution matrix (its declared
+    :attr:`~alloc.method.Method.distribution_option`: ``ganging``'s ``G``) gets the seed's
+    distribution ``B_k`` (in demand units) unless the options give one.
 
     With ``rate_aware`` (default) every call passes ``u_prev`` and the frame
     period ``dt = T`` (seed Eq 1.28); ``u_prev`` is clipped into the (told)
@@ -239,9 +241,10 @@ def build_allocator(
     from alloc.result import Status
 
     opts = dict(options)
-    if method == "ganging" and "G" not in opts:
-        # alloc's gang acts on the demand v = demand_map u_c: G = B_k demand_map^-1.
-        opts["G"] = vehicle.Bk_seed @ np.linalg.inv(vehicle.demand_map)
+    gang = alloc.registry.get_method(method).distribution_option if method in alloc.methods() else None
+    if gang is not None and gang not in opts:
+        # the allocator's distribution acts on the demand v = demand_map u_c: G = B_k demand_map^-1
+        opts[gang] = vehicle.Bk_seed @ np.linalg.inv(vehicle.demand_map)
     problem = allocation_problem(vehicle, failure, preferred=preferred, health=health)
     if rate_aware and frame_period is not None:
         scale = rate_horizon_scale(vehicle, frame_period, rate_horizon)

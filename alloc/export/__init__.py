@@ -13,7 +13,10 @@ the library's compiled code in the same order of operations: it returns the libr
 answers bit for bit and the same statuses (tests/alloc/export/test_export.py checks it); the ``float``
 build agrees to :data:`FLOAT_TOLERANCE` (see there) and clamps its output to its bounds exactly.
 
-Methods: ``pinv``, ``pinv_clip``, ``ganging`` (``u = clip(c + P v)``), ``pinv_scale`` (the
+Which methods: those that declare a kind of kernel (``@register(name, export=kind)``, read
+through :meth:`alloc.Allocator.export_data`) whose kind has an exporter here
+(:mod:`alloc.export.exporter`, one module per kind); :data:`EXPORTABLE` lists them.  Today:
+``pinv``, ``pinv_clip``, ``ganging`` (``u = clip(c + P v)``), ``pinv_scale`` (the
 increment scaled into the box), ``cgi`` (the cascaded generalized inverse over a table of every
 free set's pseudo-inverse; without priority levels) and the active-set ``wls``, ``qp`` (with ``priorities``) and
 ``dynamic`` (its two solver instances, without and with ``u_prev``), whose iteration count per
@@ -37,19 +40,28 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from ..exceptions import OptionError, UnknownMethodError
+from ..exceptions import UnknownMethodError
 from ..problem import Problem
-from . import templates, templates_cascade, templates_closed_form
-from .base import (_ACTIVE_SET_METHODS, EXPORTABLE, FLOAT_EXACT_RTOL, FLOAT_TOLERANCE, FLOAT_VMAX, GENERATOR_VERSION,
-                   PRECISIONS, ExportedKernel, ExportError, _Real, _short, _version)
-from .certify import SIMPLEX_RANDOM_DEMANDS, Certificate, bound_text, simplex_bound_text
+from . import templates
+# the kinds' exporters register themselves (alloc.export.exporter), one module per kind
+from . import active_set, cascade, closed_form, simplex  # noqa: F401
+from .base import (FLOAT_EXACT_RTOL, FLOAT_TOLERANCE, FLOAT_VMAX, GENERATOR_VERSION, PRECISIONS, ExportedKernel,
+                   ExportError, _Real, _short, _version)
+from .certify import Certificate
 from .cost import ExportCost, check
-from .tables import (_active_set_fields, _cascade_level_fields, _cascade_table, _iteration_budget, _simplex_fields,
-                     _simplex_pivots, active_set_plan)
+from .exporter import Exporter, Settings, exportable, exporter_for
 from .text import c_prefix, comment_text, fill
 
-__all__ = ["export_c", "ExportedKernel", "ExportError", "EXPORTABLE", "PRECISIONS", "GENERATOR_VERSION",
-           "FLOAT_TOLERANCE", "FLOAT_EXACT_RTOL", "FLOAT_VMAX", "Certificate", "ExportCost"]
+__all__ = ["export_c", "ExportedKernel", "ExportError", "EXPORTABLE", "exportable", "PRECISIONS",
+           "GENERATOR_VERSION", "FLOAT_TOLERANCE", "FLOAT_EXACT_RTOL", "FLOAT_VMAX", "Certificate", "ExportCost"]
+
+
+def __getattr__(name: str) -> Any:
+    # EXPORTABLE is read from the registry when first asked for (after any user's registrations
+    # made before), so importing alloc.export does not load every method
+    if name == "EXPORTABLE":
+        return exportable()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 # --------------------------------------------------------------------------- the generator
@@ -69,8 +81,9 @@ def _resolve(problem_or_vehicle: Any, method: str, options: Mapping[str, Any] | 
 
 
 def _check_method(method: Any) -> str:
-    if not isinstance(method, str) or method not in EXPORTABLE:
-        raise UnknownMethodError(f"method: {method!r} cannot be exported to C; exportable: {', '.join(EXPORTABLE)}",
+    names = exportable()
+    if not isinstance(method, str) or method not in names:
+        raise UnknownMethodError(f"method: {method!r} cannot be exported to C; exportable: {', '.join(names)}",
                                  field="method")
     return method
 
@@ -83,33 +96,22 @@ def _checksum(problem: Problem) -> str:
     return h.hexdigest()[:16]
 
 
-def _price(method: str, impl: Any, problem: Problem, real: _Real, table: bool | None,
-           iteration_bound: Any) -> ExportCost:
+def _price(method: str, exporter: Exporter, data: Any, problem: Problem, real: _Real,
+           settings: Settings) -> ExportCost:
     """The export's cost (:mod:`alloc.export.cost`), refused beyond its caps before the tables
-    are made."""
+    are made: the common constants and the kind's own (:meth:`Exporter.price`)."""
     from .certify import sample_size
 
     k, m = problem.k, problem.m
-    numbers, tables, free_sets = 2 * m * k + 6 * m, 0, 0  # B, SAFE_P; UP, limits, rates, SAFE_C
-    if method in ("pinv", "pinv_clip", "ganging"):
-        numbers += m + m * k
-    elif method == "pinv_scale":
-        numbers += m * k
-    elif method == "cgi":
-        levels = len(impl.groups) if impl.groups is not None and len(impl.groups) > 1 else 1
-        tables, free_sets = (m * k) << m, levels << m
-    elif method == "lp":
-        F, costs = impl._lex._F, impl._lex._costs
-        numbers += F.size + costs.size + F.shape[0] + F.shape[1]
-    else:
-        lexico = [impl._static, impl._dynamic] if method == "dynamic" else [impl._impl]
-        _, consts, tables, free_sets = active_set_plan(lexico, real, table)
-        numbers += consts
+    common = 2 * m * k + 6 * m  # B, SAFE_P; UP, limits, rates, SAFE_C
+    priced = exporter.price(data, problem, real, settings)
     calls = 0
-    if isinstance(iteration_bound, str) and iteration_bound == "certify":
-        calls = sample_size(k, m, SIMPLEX_RANDOM_DEMANDS if method == "lp" else 0)
-    return check(ExportCost(numbers=numbers + tables, table_numbers=tables, free_sets=free_sets,
-                            certify_calls=calls, k=k, m=m, method=method))
+    if isinstance(settings.iteration_bound, str) and settings.iteration_bound == "certify":
+        calls = sample_size(k, m, exporter.certify_random)
+    return check(ExportCost(numbers=common + priced.numbers + priced.table_numbers, table_numbers=priced.table_numbers,
+                            free_sets=priced.free_sets, certify_calls=calls, k=k, m=m, method=method,
+                            template_bytes=priced.template_bytes, fixed=exporter.fixed,
+                            table_hint=exporter.table_hint))
 
 
 def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "double",
@@ -191,31 +193,29 @@ def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "d
         naming the field for a precision, prefix or constant the export cannot take.
     """
     from ..api import make_allocator
+    from ..registry import get_method
 
     method = _check_method(method)
     if precision not in PRECISIONS:
         raise ExportError(f"precision: expected one of {', '.join(PRECISIONS)}, got {precision!r}", field="precision")
     problem, title, opts = _resolve(problem_or_vehicle, method, options)
-    if opts.get("incremental"):
-        raise OptionError(f"incremental: {method} with incremental=True is not exported (the bias is u_prev)",
-                          field="incremental")
-    if method in _ACTIVE_SET_METHODS and opts.get("backend", "active_set") != "active_set":
-        raise OptionError(f"backend: only the compiled active set is exported, got {opts['backend']!r}",
-                          field="backend")
-    if method == "lp" and opts.get("backend", "simplex") != "simplex":
-        raise OptionError(f"backend: lp exports the library's compiled simplex only, got {opts['backend']!r}",
-                          field="backend")
+    exporter = exporter_for(method)
+    exporter.check_options(method, opts)
     prefix = c_prefix(f"alloc_{method}" if prefix is None else prefix)
     allocator = make_allocator(problem, method, **opts)
     if allocator.impl is None:
         raise ExportError(f"method: {method} could not be built for this problem ({allocator.build_error})",
                           field="method")
+    data = allocator.export_data()
+    if data is None or data.kernel.kind != exporter.kind:
+        raise ExportError(f"method: {method} with options {_short(opts)} has no {exporter.kind} kernel to export",
+                          field="method")
+    cls = get_method(method)
     real = _Real(precision)
     k, m = problem.k, problem.m
     umin, umax = real.inward(np.asarray(problem.umin, dtype=float), np.asarray(problem.umax, dtype=float))
     up = np.minimum(np.maximum(np.asarray(problem.up, dtype=float), umin), umax)
-    safe = allocator._safe._pinv
-    safe_c, safe_p = (problem.up, np.zeros((m, k))) if safe is None else (safe.c, safe.P)
+    safe_c, safe_p = (problem.up, np.zeros((m, k))) if data.safe is None else (data.safe.c, data.safe.P)
     c = real.consts
     shown = {key: value for key, value in opts.items()}
     # user text (names, the vehicle's title, option values) enters the C as comment text only
@@ -223,8 +223,8 @@ def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "d
         "TITLE": comment_text(f"{method} allocation kernel, {k} axes x {m} effectors, {real.ctype}"),
         "VERSION": comment_text(_version()), "GENERATOR": GENERATOR_VERSION,
         "PROBLEM": comment_text(f"{title}, {k} x {m}, data sha256 {_checksum(problem)}"),
-        "METHOD": comment_text(f"{method}: {type(allocator.impl).summary}"),
-        "EQUATION": comment_text(type(allocator.impl).equation),
+        "METHOD": comment_text(f"{method}: {cls.summary}"),
+        "EQUATION": comment_text(cls.equation),
         "OPTIONS": "" if not shown else ("\n * Options : ", comment_text(", ".join(f"{a}={_short(b)}"
                                                                                for a, b in shown.items()))),
         "REAL": real.ctype, "K": str(k), "M": str(m),
@@ -239,59 +239,21 @@ def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "d
         "SAFE_C": real.array(safe_c, "SafeCommand.c"), "SAFE_P": real.array(safe_p, "SafeCommand.P"),
         "BOUND": "", "HEALTH": "", "LIMITS_QUAL": "const ", "HEALTH_DECL": "", "MAXIT_DEFINE": "",
     }
-    impl = allocator.impl
-    levels, cap = 0, None
-    budget, cert = None, None
-    for name, given in (("iteration_bound", iteration_bound), ("maxit", maxit), ("cache", cache)):
-        if given is not None and method == "lp" and name != "iteration_bound":
-            raise ExportError(f"{name}: lp keeps the library's pivot cap and has no factorisations to cache "
-                              "(give iteration_bound to bound its pivots)", field=name)
-        if given is not None and method not in _ACTIVE_SET_METHODS + ("lp",):
-            raise ExportError(f"{name}: {method} is closed-form (no iterations to cap or bound, or factorisations "
-                              "to cache)", field=name)
+    settings = Settings(precision=precision, maxit=maxit, table=table, iteration_bound=iteration_bound, cache=cache,
+                        warm_start=bool(warm_start) if isinstance(warm_start, (bool, np.bool_)) else False)
+    exporter.check_counts(method, settings)
     if not isinstance(warm_start, (bool, np.bool_)):
         raise ExportError(f"warm_start: expected True or False, got {warm_start!r}", field="warm_start")
-    if warm_start and method not in _ACTIVE_SET_METHODS:
-        raise ExportError(f"warm_start: {method} has no working set to keep (only the active-set methods "
-                          f"{', '.join(_ACTIVE_SET_METHODS)} do)", field="warm_start")
-    if (table or (table is not None and method == "lp")) and method not in _ACTIVE_SET_METHODS + ("cgi",):
-        raise ExportError(f"table: {method} has no tables to make (only cgi and the active-set methods do)",
-                          field="table")
-    cost = _price(method, impl, problem, real, table, iteration_bound)
-    if method in ("pinv", "pinv_clip", "ganging"):
-        map_c, map_p = impl.fused
-        fields.update(MAP_C=real.array(map_c, "c"), MAP_P=real.array(map_p, "P"))
-        body = templates_closed_form.AFFINE
-    elif method == "pinv_scale":
-        fields.update(MAP_P=real.array(impl._P, "P"))
-        body = templates_closed_form.SCALED
-    elif method == "cgi" and impl.groups is not None and len(impl.groups) > 1:
-        fields.update(_cascade_level_fields(impl, problem, real, table))
-        body = templates_cascade.CASCADE_LEVELS
-    elif method == "cgi":
-        fields.update(TAB_P=_cascade_table(impl, problem, real, table))
-        body = templates_closed_form.CASCADE
-    elif method == "lp":
-        body, cap = _simplex_fields(impl, real, fields)
-        levels = 1  # one pivot budget a call (its stages share it, as the library's cap)
-        budget, cert = _iteration_budget(iteration_bound, allocator, problem, precision, cap - 1,
-                                         count=_simplex_pivots(impl, problem), unit="pivots",
-                                         random=SIMPLEX_RANDOM_DEMANDS)
-        fields["BOUND"] = simplex_bound_text(cap, budget, cert)
-        fields["MAXIT_DEFINE"] += ("/* pivots of a call with the nominal limits and no rate window (see above) */\n"
-                                   f"#define PFX_ITERATION_BOUND {budget}\n")
-    else:
-        lexico = [impl._static, impl._dynamic] if method == "dynamic" else [impl._impl]
-        body, levels, cap = _active_set_fields(lexico, problem, real, fields, maxit, table, cache, bool(warm_start))
-        budget, cert = _iteration_budget(iteration_bound, allocator, problem, precision, levels * cap)
-        fields["BOUND"] = bound_text(m, levels, cap, budget, cert, cap_given=maxit is not None,
-                                     warm=bool(warm_start))
-        fields["MAXIT_DEFINE"] += ("/* iterations of a call with the nominal limits and no rate window (see above) */\n"
-                                   f"#define PFX_ITERATION_BOUND {budget}\n")
-    source = fill(templates.COMMON + body, fields, prefix)
+    exporter.check_warm_start(method, bool(warm_start))
+    exporter.check_table(method, table)
+    cost = _price(method, exporter, data.kernel, problem, real, settings)
+    filled = exporter.fill(data, allocator, problem, real, fields, settings)
+    levels = filled.levels
+    source = fill(templates.COMMON + filled.body, fields, prefix)
     header = fill(templates.HEADER, fields, prefix)
     return ExportedKernel(prefix=prefix, method=method, precision=precision, header=header, source=source,
                           header_name=f"{prefix}.h", source_name=f"{prefix}.c", k=k, m=m,
-                          maxit=cap, levels=levels, options=shown,
-                          iteration_bound=budget if levels else None, certificate=cert if levels else None,
+                          maxit=filled.cap, levels=levels, options=shown,
+                          iteration_bound=filled.budget if levels else None,
+                          certificate=filled.certificate if levels else None,
                           warm_start=bool(warm_start), cost=cost)

@@ -22,8 +22,6 @@ from .certify import Certificate
 
 #: bumped whenever the generated code changes for the same input
 GENERATOR_VERSION = "3"
-#: the methods :func:`export_c` generates, in the order the docs list them
-EXPORTABLE = ("pinv", "pinv_clip", "ganging", "pinv_scale", "cgi", "wls", "qp", "dynamic", "lp")
 PRECISIONS = ("double", "float")
 #: ``float`` builds: the status ``exact`` tolerance (the library's 1e-6 is 8 float ulps at 1,
 #: below what a float residual with its rounding bound can certify)
@@ -67,9 +65,6 @@ CACHE_BUDGET = 16 * 1024
 #: float basic value's round-off); the right-hand side clamped at 1e30 (1e200 is beyond float)
 FLOAT_SIMPLEX_TOLS = {"DUAL_TOL": 1e-5, "PIVOT_TOL": 1e-5, "TIE_RTOL": 1e-6, "DEGENERATE_TOL": 1e-6,
                       "SINGULAR_TOL": 1e-6, "FEASIBLE_RTOL": 1e-4, "B_CLAMP": 1e30}
-
-_ACTIVE_SET_METHODS = ("wls", "qp", "dynamic")
-
 
 class ExportError(AllocError, ValueError):
     """A problem, method or option the C generator cannot export (naming the field)."""

@@ -1,6 +1,7 @@
 """What an export will cost, priced before any table is made (:func:`alloc.export.export_c`).
 
-The generated source is the templates (a fixed size per method) plus printed numbers: the
+The generated source is the templates (a fixed size per kind of kernel, declared by its
+exporter, :class:`alloc.export.exporter.Exporter`) plus printed numbers: the
 problem's constants (``O(m k)``; the active set's level rows and weights, ``O(n m + m^2)``; the
 simplex's tableau, ``O(k (m + k))``) and the tables, which dominate wherever they exist:
 
@@ -33,10 +34,6 @@ MAX_GENERATION_SECONDS = 60.0
 #: largest peak memory of the generator priced (the tables' text and its pieces)
 MAX_GENERATION_MEMORY = 2 ** 30
 
-#: bytes of the templates and the header's prose by method (measured 7,948 to 9,755 for the
-#: closed forms, 31,221 to 37,209 for the active set with and without warm start, 21,733 for lp)
-TEMPLATE_BYTES = {"pinv": 9_000, "pinv_clip": 9_000, "ganging": 9_000, "pinv_scale": 9_000, "cgi": 10_000,
-                  "wls": 36_000, "qp": 36_000, "dynamic": 38_000, "lp": 22_000}
 #: bytes of one printed number with its separator: 13.2 measured on cgi tables (half of them
 #: zeros), 21.7 on dense random constants; the declared value is between
 BYTES_PER_NUMBER = 16
@@ -45,9 +42,13 @@ SECONDS_PER_NUMBER = 2.5e-6
 #: seconds per free set tabulated (a pseudo-inverse or a factorisation, and its row)
 SECONDS_PER_FREE_SET = 4e-5
 #: seconds and peak memory of the fixed part (checks, building the allocator, filling the
-#: templates) by kind of kernel: the active set packs its solver state (measured 3 ms and
-#: 3.3 MB at 6 x 10), the closed forms a few matrices (1 ms, 31 KB at 3 x 6)
-FIXED = {"closed": (0.004, 128 * 2 ** 10), "active_set": (0.01, 4 * 2 ** 20), "lp": (0.005, 256 * 2 ** 10)}
+#: templates) by kind of kernel (each exporter names its own): the active set packs its solver
+#: state (measured 3 ms and 3.3 MB at 6 x 10), the closed forms a few matrices (1 ms, 31 KB at 3 x 6)
+FIXED_CLOSED = (0.004, 128 * 2 ** 10)
+FIXED_ACTIVE_SET = (0.01, 4 * 2 ** 20)
+FIXED_SIMPLEX = (0.005, 256 * 2 ** 10)
+#: what to do about tables above the caps, where the kernel cannot do without them
+TABLE_HINT = " (the table grows as m 2^m: fewer effectors)"
 #: seconds per m^2 k of building the allocator (its pseudo-inverses and weights): 0.72 s
 #: measured at 32 x 512
 SECONDS_PER_BUILD = 8e-8
@@ -80,21 +81,22 @@ class ExportCost:
     k: int
     m: int
     method: str
-
-    @property
-    def kind(self) -> str:
-        """The kernel's kind, for its fixed costs: ``closed``, ``active_set`` or ``lp``."""
-        return "active_set" if self.method in ("wls", "qp", "dynamic") else "lp" if self.method == "lp" else "closed"
+    #: bytes of the kernel's templates and the header's prose (its exporter's, measured)
+    template_bytes: int = 0
+    #: seconds and peak memory of the fixed part (its exporter's: :data:`FIXED_CLOSED`, ...)
+    fixed: tuple[float, int] = FIXED_CLOSED
+    #: what to do about tables above the caps (its exporter's)
+    table_hint: str = TABLE_HINT
 
     @property
     def source_bytes(self) -> int:
         """Bytes of the header and the C file."""
-        return TEMPLATE_BYTES[self.method] + BYTES_PER_NUMBER * self.numbers
+        return self.template_bytes + BYTES_PER_NUMBER * self.numbers
 
     @property
     def seconds(self) -> float:
         """CPU seconds of generation on the reference machine."""
-        return (FIXED[self.kind][0] + SECONDS_PER_BUILD * self.m ** 2 * self.k + SECONDS_PER_NUMBER * self.numbers
+        return (self.fixed[0] + SECONDS_PER_BUILD * self.m ** 2 * self.k + SECONDS_PER_NUMBER * self.numbers
                 + SECONDS_PER_FREE_SET * self.free_sets + self.certify_seconds)
 
     @property
@@ -104,7 +106,7 @@ class ExportCost:
     @property
     def memory_bytes(self) -> int:
         """Peak memory of generation."""
-        return int(FIXED[self.kind][1] + MEMORY_PER_BYTE * self.source_bytes + MEMORY_PER_M2 * self.m ** 2
+        return int(self.fixed[1] + MEMORY_PER_BYTE * self.source_bytes + MEMORY_PER_M2 * self.m ** 2
                    + MEMORY_PER_CERTIFY_NUMBER * self.certify_calls * self.k)
 
 
@@ -115,9 +117,7 @@ def check(cost: ExportCost) -> ExportCost:
     field = "table" if tables else "m"
     what = (f"{method}'s tables of the 2^{cost.m} free sets ({cost.table_numbers:,} numbers)" if tables
             else f"{method}'s constants for {cost.k} x {cost.m} ({cost.numbers:,} numbers)")
-    active_set = method in ("wls", "qp", "dynamic")
-    hint = (" (give table=False: the active set factorises at run time)" if tables and active_set
-            else " (the table grows as m 2^m: fewer effectors)" if tables else "")
+    hint = cost.table_hint if tables else ""
     certify_memory = MEMORY_PER_CERTIFY_NUMBER * cost.certify_calls * cost.k
     if cost.certify_seconds > MAX_GENERATION_SECONDS or certify_memory > MAX_GENERATION_MEMORY:
         raise ExportError(f"iteration_bound: certifying on {cost.certify_calls:,} demands of {cost.k} x {cost.m} "

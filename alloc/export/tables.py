@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from ..export_data import CascadeData, SimplexData
 from ..problem import Problem
 from . import templates, templates_active_set, templates_simplex
 from .base import (CACHE_BUDGET, CGI_RTOL, FLOAT_CGI_RTOL, FLOAT_MU_EPS, FLOAT_SIGMA_RTOL, FLOAT_SIMPLEX_TOLS,
@@ -15,12 +16,9 @@ from .base import (CACHE_BUDGET, CGI_RTOL, FLOAT_CGI_RTOL, FLOAT_MU_EPS, FLOAT_S
 from .certify import Certificate, certify
 
 
-def _cascade_table(impl: Any, problem: Problem, real: _Real, table: bool | None) -> str:
-    """Every free set's weighted pseudo-inverse, computed as the library's ``cgi`` computes it
+def _cascade_table(data: CascadeData, problem: Problem, real: _Real, table: bool | None) -> str:
+    """Every free set's weighted pseudo-inverse, computed by the library's ``cgi`` itself
     (so the kernel returns its bits): the C table of :data:`templates_closed_form.CASCADE`."""
-    from .._kernels import free_set_pinv
-    from .._linalg import ABS_FLOOR
-
     k, m = problem.k, problem.m
     _check_cascade_table(m, k, real, table)
     rows = []
@@ -28,10 +26,7 @@ def _cascade_table(impl: Any, problem: Problem, real: _Real, table: bool | None)
         free = np.array([bool(bits >> j & 1) for j in range(m)])
         P = np.zeros((m, k))
         if free.any():
-            if impl._diagonal_Wu:
-                Pf = free_set_pinv(impl._SB, impl._rdiag, impl._S, free, impl.rcond, ABS_FLOOR)
-            else:
-                Pf = impl._pinv(free)
+            Pf = data.free_set_pinv(free)
             P[:Pf.shape[0]] = Pf
         rows.append(real.array(P.ravel(), "P"))
     return "{\n    " + ",\n    ".join(rows) + "\n}"
@@ -51,34 +46,30 @@ def _check_cascade_table(m: int, k: int, real: _Real, table: bool | None) -> Non
                           "caps, alloc.export.cost: 16 effectors at 3 axes, 15 at 6)", field="table")
 
 
-def _cascade_level_fields(impl: Any, problem: Problem, real: _Real, table: bool | None) -> dict[str, str]:
+def _cascade_level_fields(data: CascadeData, problem: Problem, real: _Real, table: bool | None) -> dict[str, str]:
     """``cgi`` with priority levels: each level's axes and its table of the prioritised
-    pseudo-inverse of every free set, from the library's own ``_level_pinv`` (the columns of the
+    pseudo-inverse of every free set, from the library's own ``level_pinv`` (the columns of the
     level's own axes), so the kernel returns the library's bits."""
     k, m = problem.k, problem.m
     _check_cascade_table(m, k, real, table)
     starts, tables, names = [0], [], []
-    done = np.zeros(0, dtype=np.intp)
-    for li, level in enumerate(impl.groups):
-        rows = np.concatenate([done, level])
-        sub = [np.arange(done.size), np.arange(done.size, rows.size)]
-        Wv = problem.Wv[np.ix_(rows, rows)]
+    groups = data.groups or ()
+    for li, level in enumerate(groups):
         per_set = []
         for bits in range(1 << m):
             free = np.array([bool(bits >> j & 1) for j in range(m)])
             P = np.zeros((m, level.size))
             if free.any():
                 F = np.flatnonzero(free)
-                P[:F.size] = impl._level_pinv(li, free, rows, F, Wv, sub)[:, done.size:]
+                P[:F.size] = data.level_pinv(li, free)
             per_set.append(real.array(P.ravel(), f"P{li}"))
         names.append(f"TAB_{li}")
         tables.append(f"static const real TAB_{li}[1 << M][M * {level.size}] = {{\n    " + ",\n    ".join(per_set)
                       + "\n};")
         starts.append(starts[-1] + level.size)
-        done = rows
     tables.append(f"static const real *const TAB[NL] = {{{', '.join(f'&{n}[0][0]' for n in names)}}};")
-    return {"NL": str(len(impl.groups)), "LEVEL_START": _ints(starts),
-            "LEVEL_AXES": _ints(np.concatenate(impl.groups)),
+    return {"NL": str(len(groups)), "LEVEL_START": _ints(starts),
+            "LEVEL_AXES": _ints(np.concatenate(groups)),
             "CGI_RTOL": real.literal(CGI_RTOL if real.double else FLOAT_CGI_RTOL, "rtol"),
             "CGI_REACH": real.literal(CGI_RTOL if real.double else FLOAT_CGI_RTOL, "reach"), "TABLES": "\n".join(tables)}
 
@@ -92,33 +83,33 @@ def _aset() -> Any:
     return SimpleNamespace(**{**vars(_lsq_factor), **vars(_active_set)})
 
 
-def _table_entry(instances: list[Any], aset: Any) -> tuple[int, int]:
+def _table_entry(states: list[tuple[np.ndarray, ...]], aset: Any) -> tuple[int, int]:
     """Numbers of one free set's row of the factorisation tables, and ``ml`` (1: every
     instance's L is diagonal, stored in column 0; else m)."""
-    head = instances[0]._state[2][aset._HEAD]
+    head = states[0][2][aset._HEAD]
     m, ncw, nlw = (int(head[i]) for i in (aset._M, aset._NCW, aset._NLW))
-    ml = 1 if all(int(lex._state[2][aset._HEAD, aset._DIAG]) for lex in instances) else m
+    ml = 1 if all(int(state[2][aset._HEAD, aset._DIAG]) for state in states) else m
     return m * ml + m * ncw + ncw * ncw + ncw + m * nlw + nlw * nlw + nlw, ml
 
 
-def active_set_plan(instances: list[Any], real: _Real, table: bool | None) -> tuple[bool, int, int, int]:
+def active_set_plan(states: list[tuple[np.ndarray, ...]], real: _Real, table: bool | None) -> tuple[bool, int, int, int]:
     """What an active-set kernel prints, before it is made: whether it tabulates (``table``, or
     by default when the tables fit :data:`TABLE_BUDGET`), its constants' numbers, its tables'
     numbers and the free sets it factorises for them (:mod:`alloc.export.cost` prices them)."""
     aset = _aset()
-    head = instances[0]._state[2][aset._HEAD]
+    head = states[0][2][aset._HEAD]
     n, m, k, nlev = (int(head[i]) for i in (aset._N, aset._M, aset._K, aset._NLEV))
-    entry, _ = _table_entry(instances, aset)
-    rows = len(instances) * len(_table_keys(instances[0]._state[2], aset)) << m
+    entry, _ = _table_entry(states, aset)
+    rows = len(states) * len(_table_keys(states[0][2], aset)) << m
     tabulate = rows * entry * (8 if real.double else 4) <= TABLE_BUDGET if table is None else bool(table)
     consts = n * m + n * n + nlev
-    for lex in instances:
-        dyn = bool(lex._state[2][aset._HEAD, aset._DYN])
+    for state in states:
+        dyn = bool(state[2][aset._HEAD, aset._DYN])
         consts += 2 * m * m + m * k + m + (m * k + m * m if dyn else 0)
     return tabulate, consts, rows * entry if tabulate else 0, rows if tabulate else 0
 
 
-def _active_set_fields(instances: list[Any], problem: Problem, real: _Real, fields: dict[str, str],
+def _active_set_fields(states: list[tuple[np.ndarray, ...]], problem: Problem, real: _Real, fields: dict[str, str],
                        maxit: int | None, table: bool | None, cache: int | None,
                        warm: bool = False) -> tuple[str, int, int]:
     """The active set's constants, read from the library's packed solver states
@@ -127,7 +118,7 @@ def _active_set_fields(instances: list[Any], problem: Problem, real: _Real, fiel
     share every level row and differ in the preference weight, cold start and target."""
     aset = _aset()
 
-    mats, vecs, ivecs = instances[0]._state[:3]
+    mats, vecs, ivecs = states[0][:3]
     head = ivecs[aset._HEAD]
     n, m, k, nlev = (int(head[i]) for i in (aset._N, aset._M, aset._K, aset._NLEV))
     final, ncw, nlw = (int(head[i]) for i in (aset._FINAL, aset._NCW, aset._NLW))
@@ -143,28 +134,28 @@ def _active_set_fields(instances: list[Any], problem: Problem, real: _Real, fiel
                 "SIGMA_TINY": 1e-35, "CHOL_TINY": 1e-37, "MU_EPS": FLOAT_MU_EPS}
     fields.update({key: real.literal(value, key) for key, value in tiny.items()})
     if warm:
-        _warm_conditioning(instances, aset, n, m)
-    entry, ml = _table_entry(instances, aset)
+        _warm_conditioning(states, aset, n, m)
+    entry, ml = _table_entry(states, aset)
     fields.update(
         N=str(n), NLEV=str(nlev), FINAL=str(final), NCW=str(ncw), NLW=str(nlw), ML="1" if ml == 1 else "M",
-        NINST=str(len(instances)),
+        NINST=str(len(states)),
         A=real.array(mats[aset._A, :n, :m], "A"), T=real.array(mats[aset._T, :n, :n], "T"),
         PERM=_ints(ivecs[aset._PERM, :n]), STARTS=_ints(ivecs[aset._STARTS, :nlev + 1]),
         GAM=real.array(vecs[aset._GAM, :nlev], "gamma"),
     )
     levels = nlev + final
     keys = _table_keys(ivecs, aset)
-    table = active_set_plan(instances, real, table)[0]
+    table = active_set_plan(states, real, table)[0]
     if table and m > 20:
         raise ExportError(f"table: 2^{m} free sets a level is too many to tabulate", field="table")
     fields["TABLE"] = "1" if table else "0"
     slot_bytes = entry * (8 if real.double else 4) + 4 * (4 + m)
-    slots = _cache_slots(cache, bool(table), slot_bytes, len(instances) * len(keys) << min(m, 30))
+    slots = _cache_slots(cache, bool(table), slot_bytes, len(states) * len(keys) << min(m, 30))
     fields["CACHE"] = str(slots)
     cached = (f" *\n * Cache: the factorisations of the last free sets met, in static storage ({slots} slots of\n"
               f" * about {slot_bytes} bytes); a factorisation depends on the free set alone, so the cache\n"
               " * changes the time of a call, never its answer.\n") if slots else ""
-    fields["INSTANCES"] = _instances(instances, aset, keys, real, ml, bool(table))
+    fields["INSTANCES"] = _instances(states, aset, keys, real, ml, bool(table))
     fields["HEALTH"] = (" *\n * Health at run time: PREFIX_set_limits(umin, umax) sets reduced limits or jams\n"
                         " * (umin[j] == umax[j]) within the nominal limits; an effectiveness change needs a new\n"
                         " * export.  The cold start and the safe answer keep the nominal Eq 1.23 matrix.\n" + cached
@@ -176,7 +167,7 @@ def _active_set_fields(instances: list[Any], problem: Problem, real: _Real, fiel
     return templates_active_set.ACTIVE_SET_WARM if warm else templates_active_set.ACTIVE_SET, levels, cap
 
 
-def _warm_conditioning(instances: list[Any], aset: Any, n: int, m: int) -> None:
+def _warm_conditioning(states: list[tuple[np.ndarray, ...]], aset: Any, n: int, m: int) -> None:
     """Refuse the warm start where the optimum is not determined beyond round-off
     (:data:`WARM_COND_MAX`): a singular value of the weighted effectiveness A, or of a pair of its
     columns (two nearly redundant effectors: the free sets' factorisations are of column
@@ -186,8 +177,8 @@ def _warm_conditioning(instances: list[Any], aset: Any, n: int, m: int) -> None:
     WARM_COND_MAX."""
     from .._warm import warm_conditioning
 
-    found = warm_conditioning(instances[0]._state[0][aset._A, :n, :m],
-                              [lex._state[0][aset._WU, :m, :m] for lex in instances])
+    found = warm_conditioning(states[0][0][aset._A, :n, :m],
+                              [state[0][aset._WU, :m, :m] for state in states])
     worst, what = found if found is not None else (None, "")
     if worst is not None:
         raise ExportError(f"warm_start: the problem's {what} has condition number {worst:.2g}, above "
@@ -243,12 +234,12 @@ def _iteration_budget(bound: int | str | None, allocator: Any, problem: Problem,
 _TABLE_NAMES = ("L", "YC", "VC", "SC", "YA", "VA", "SA")
 
 
-def _instances(instances: list[Any], aset: Any, keys: list[tuple[int, int]], real: _Real, ml: int,
+def _instances(states: list[tuple[np.ndarray, ...]], aset: Any, keys: list[tuple[int, int]], real: _Real, ml: int,
                table: bool) -> str:
     """Each instance's constants and tables, and the ``INSTANCES`` array of the C source."""
     parts, inits = [], []
-    for i, lex in enumerate(instances):
-        mats, vecs, ivecs = lex._state[:3]
+    for i, state in enumerate(states):
+        mats, vecs, ivecs = state[:3]
         head = ivecs[aset._HEAD]
         m, k = int(head[aset._M]), int(head[aset._K])
         dyn, diag = bool(head[aset._DYN]), int(head[aset._DIAG])
@@ -329,15 +320,14 @@ def _tables(mats: np.ndarray, ivecs: np.ndarray, aset: Any, keys: list[tuple[int
                      + "\n};" for name, width in zip(names, widths))
 
 
-def _simplex_fields(impl: Any, real: _Real, fields: dict[str, str]) -> tuple[str, int]:
+def _simplex_fields(lex: SimplexData, real: _Real, fields: dict[str, str]) -> tuple[str, int]:
     """The ``lp`` kernel's constants, read from the library's own scaled problem
     (:class:`alloc._simplex.LexicographicL1`: the tableau ``F``, the row scales, the half-widths
     and the stages' normalised costs), so the C runs on exactly the library's data; and the
     library's pivot cap ``50 (N + k)``."""
     from .. import _simplex
 
-    lex = impl._lex
-    F, costs = lex._F, lex._costs
+    F, costs = lex.F, lex.costs
     k, n = F.shape
     if real.double:
         tol = {name: getattr(_simplex, name) for name in FLOAT_SIMPLEX_TOLS}
@@ -345,7 +335,7 @@ def _simplex_fields(impl: Any, real: _Real, fields: dict[str, str]) -> tuple[str
         tol = FLOAT_SIMPLEX_TOLS
     fields.update({key: real.literal(value, key) for key, value in tol.items()})
     fields.update(NV=str(n), NSTAGE=str(costs.shape[0]), INF=real.literal(np.inf, "inf"),
-                  F=real.array(F, "F"), RHO=real.array(lex._rho, "rho"), D=real.array(lex._D, "D"),
+                  F=real.array(F, "F"), RHO=real.array(lex.rho, "rho"), D=real.array(lex.D, "D"),
                   COSTS=real.array(costs, "costs"))
     fields["HEALTH"] = (" *\n * Health at run time: PREFIX_set_limits(umin, umax) sets reduced limits or jams\n"
                         " * (umin[j] == umax[j]) within the nominal limits: they enter the tableau's bounds and\n"
@@ -359,13 +349,13 @@ def _simplex_fields(impl: Any, real: _Real, fields: dict[str, str]) -> tuple[str
     return templates_simplex.SIMPLEX, cap
 
 
-def _simplex_pivots(impl: Any, problem: Problem) -> Any:
+def _simplex_pivots(lex: SimplexData, problem: Problem) -> Any:
     """``count(v)``: the library simplex's pivots on ``v`` with the nominal limits (what the
     allocator's call runs), also where it stops at its cap (the allocator then reports a
     fallback of 0 iterations)."""
-    lex, lo, hi = impl._lex, problem.umin, problem.umax
+    lo, hi = problem.umin, problem.umax
 
     def count(v: np.ndarray) -> int:
-        return lex.solve(np.ascontiguousarray(v, dtype=float), lo, hi)[2]
+        return lex.pivots(np.ascontiguousarray(v, dtype=float), lo, hi)
 
     return count

@@ -13,6 +13,7 @@ from .._inverse_kernels import cascade, daisy_chain, free_set_insert
 from .._kernels import _FREE_BITS, free_set_pinv, matvec
 from .._linalg import ABS_FLOOR, RCOND, check_rcond, max_scale, priority_groups, sqrt_factor, weighted_pinv
 from ..exceptions import OptionError, ProblemError
+from ..export_data import CascadeData
 from ..options import groups as groups_option
 from ..options import levels, real
 from ..problem import Problem
@@ -67,7 +68,7 @@ def check_priorities(priorities: Any, k: int) -> list[np.ndarray] | None:
     return None if ranks is None else priority_groups(ranks, k)
 
 
-@register("cgi", supports_priorities=True)
+@register("cgi", supports_priorities=True, export="cascade")
 class CascadedGeneralizedInverse(Method):
     """Cascaded generalized inverse (section 1.3.4.6, after Eq 1.23).
 
@@ -162,13 +163,34 @@ class CascadedGeneralizedInverse(Method):
             self._banked = 0
         if self._banked == self._bank.shape[0]:
             self._bank = np.concatenate([self._bank, np.zeros_like(self._bank)])
-        if self._diagonal_Wu:
-            P = free_set_pinv(self._SB, self._rdiag, self._S, free, self.rcond, ABS_FLOOR)
-        else:
-            P = self._pinv(free)
+        P = self.free_set_pinv(free)
         self._bank[self._banked, :P.shape[0]] = P
         free_set_insert(self._keys, self._slots, free, self._banked)
         self._banked += 1
+
+    def free_set_pinv(self, free: np.ndarray) -> FloatArray:
+        """The weighted pseudo-inverse over the free effectors (boolean mask ``free``; rows of
+        the free effectors) that the compiled cascade uses: compiled from ``S B`` and
+        ``Wu^-1/2`` for a diagonal ``Wu``, else :func:`alloc._linalg.weighted_pinv` (cached)."""
+        if self._diagonal_Wu:
+            return free_set_pinv(self._SB, self._rdiag, self._S, free, self.rcond, ABS_FLOOR)
+        return self._pinv(free)
+
+    def level_pinv(self, level: int, free: np.ndarray) -> FloatArray:
+        """Priority level ``level``'s pseudo-inverse over the free effectors ``free`` in the null
+        space of the levels before it: the columns of the level's own axes, as the cascade by
+        level uses them."""
+        if self.groups is None:
+            raise ValueError("level_pinv: cgi without priorities has one level (use free_set_pinv)")
+        done = np.concatenate([np.zeros(0, dtype=np.intp), *self.groups[:level]])
+        rows = np.concatenate([done, self.groups[level]])
+        sub = [np.arange(done.size), np.arange(done.size, rows.size)]
+        Wv = self.problem.Wv[np.ix_(rows, rows)]
+        return self._level_pinv(level, free, rows, np.flatnonzero(free), Wv, sub)[:, done.size:]
+
+    def export_data(self) -> CascadeData:
+        groups = None if self.groups is None else tuple(self.groups)
+        return CascadeData(groups=groups, free_set_pinv=self.free_set_pinv, level_pinv=self.level_pinv)
 
     def solve(self, v, lo, hi, u_prev):
         if self.groups is not None and len(self.groups) > 1:

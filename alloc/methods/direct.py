@@ -59,7 +59,7 @@ def facet_is_cheaper(m: int, k: int) -> bool:
     return math.comb(m, max(k - 1, 0)) <= FACET_LIMIT and facet_call_us(m, k) <= lp_call_us(m, k)
 
 
-@register("da", supports_batch=True)
+@register("da", supports_batch=True, family="da")
 class DirectAllocation(RayLP):
     """Direct allocation by the LP of :class:`~alloc.methods._direct_lp.RayLP` or the facet search."""
 

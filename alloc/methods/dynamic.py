@@ -31,6 +31,7 @@ import numpy as np
 
 from .._linalg import sqrt_factor
 from ..exceptions import OptionError, ProblemError
+from ..export_data import ActiveSetData
 from ..domain import singular_within_round_off
 from ..problem import MAX_MAGNITUDE, MIN_WEIGHT, Problem, as_float_array, check_magnitude
 from ..options import flag, weight
@@ -78,7 +79,7 @@ def _weight(value: object, m: int, field: str) -> FloatArray:
     return out
 
 
-@register("dynamic", supports_batch=True)
+@register("dynamic", supports_batch=True, export="active_set")
 class DynamicAllocation(Method):
     equation = "Eqs 1.20-1.21 with Härkegård (2002) dynamic cost"
     summary = "stage 1 min moment error, stage 2 min ||W1(u-u_s)||^2 + ||W2(u-u_prev)||^2 at that moment"
@@ -142,3 +143,7 @@ class DynamicAllocation(Method):
     def batch_finished(self, V: FloatArray) -> tuple[FloatArray, FloatArray, np.ndarray]:
         """The static stage's compiled solve-and-classify pass (rows without ``u_prev``)."""
         return self._static.batch_finished(V)
+
+    def export_data(self) -> ActiveSetData:
+        """The two solver instances' states: without ``u_prev`` (static), then with it."""
+        return ActiveSetData(states=(self._static.state, self._dynamic.state))

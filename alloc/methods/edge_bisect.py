@@ -26,13 +26,16 @@ from .facet_search import _TOL, FacetSearch, _int_option, _kernel_array
 __all__ = ["EdgeBisect"]
 
 
-@register("da_bisect", needs_ams=True, supports_batch=True)
+@register("da_bisect", needs_ams=True, supports_batch=True, family="da")
 class EdgeBisect(FacetSearch):
     """Direct allocation by Durham's edge-bisecting facet search (k = 3)."""
 
     summary = "direct allocation: Durham's edge-bisecting facet search, cost ~linear in m (Eq 1.16-1.17)"
-    options = {"angles": integer(16, "rotation angles tried per round (1 = plain bisection)", low=1, high=1024),
-               "max_rounds": integer(40, "rounds before falling back to the sequential search", low=1, high=1000)}
+    # both set the work of one call: a shared service holds them to their caps
+    options = {"angles": integer(16, "rotation angles tried per round (1 = plain bisection)", low=1, high=1024,
+                                 call_cap=1024),
+               "max_rounds": integer(40, "rounds before falling back to the sequential search", low=1, high=1000,
+                                     call_cap=1000)}
 
     @classmethod
     def enumeration_cost(cls, problem: Problem, options: dict[str, Any] | None = None) -> tuple[float, int]:

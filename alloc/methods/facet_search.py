@@ -85,7 +85,7 @@ def _int_option(value: object, field: str, lo: int, hi: int, method: str = "da_b
     return int(value)
 
 
-@register("da_facet", needs_ams=True, supports_batch=True)
+@register("da_facet", needs_ams=True, supports_batch=True, family="da")
 class FacetSearch(Method):
     """Direct allocation by sequential facet search over precomputed facet inverses."""
 
@@ -166,6 +166,19 @@ class FacetSearch(Method):
             except Exception as exc:  # noqa: BLE001 - degenerate geometry: handled, not refused
                 self._use_lp(f"{type(exc).__name__}: {exc}")
         self.build_time = time.perf_counter() - t0
+
+    @property
+    def uses_lp(self) -> bool:
+        """The build took the LP formulation (:attr:`lp_reason` says why) instead of the facets."""
+        return self._lp is not None
+
+    @property
+    def tile_count(self) -> int:
+        """Tiles of the attainable set's boundary the search looks through (0 on the LP or on a
+        flat set, which is searched otherwise)."""
+        if self._lp is not None or getattr(self, "_flat", True):
+            return 0
+        return len(self._tiles)
 
     def _use_lp(self, reason: str) -> None:
         # the LP formulation of the same problem (the compiled ray simplex, DAQP behind it)

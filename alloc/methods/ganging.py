@@ -6,13 +6,14 @@ import numpy as np
 
 from .._inverse_kernels import affine, affine_clip_batch
 from ..exceptions import ProblemError
+from ..export_data import AffineData
 from ..options import matrix
 from ..problem import Problem, as_float_array, check_magnitude
 from ..method import Method, register
 from .pseudo_inverse import distribution_matrix
 
 
-@register("ganging", affine=True, supports_batch=True)
+@register("ganging", affine=True, supports_batch=True, export="affine")
 class Ganging(Method):
     """``u = up + G (v - B up)`` clipped to the limits.
 
@@ -28,6 +29,7 @@ class Ganging(Method):
     equation = "section 1.3.4.1"
     summary = "static distribution matrix G (default: Eq 1.23 frozen at design time), clipped"
     options = {"G": matrix("static distribution matrix, shape (m, k); default: Eq 1.23 at design time")}
+    distribution_option = "G"
 
     def __init__(self, problem: Problem, *, G=None) -> None:
         super().__init__(problem)
@@ -48,3 +50,6 @@ class Ganging(Method):
 
     def solve_batch(self, V, lo, hi):
         return affine_clip_batch(self._c, self._G, np.ascontiguousarray(V), lo, hi)
+
+    def export_data(self) -> AffineData:
+        return AffineData(c=self._c, P=self._G)

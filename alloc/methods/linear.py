@@ -31,6 +31,7 @@ import numpy as np
 
 from .._simplex import OPTIMAL, LexicographicL1
 from ..exceptions import SolverError
+from ..export_data import SimplexData
 from ..options import choice, levels
 from ..problem import Problem
 from ..method import Method, register
@@ -41,7 +42,7 @@ from ._common import check_backend, check_diagonal, row_basis
 from .cascade import check_priorities
 
 
-@register("lp", supports_priorities=True)
+@register("lp", supports_priorities=True, export="simplex")
 class TwoStageLP(Method):
     equation = "Eqs 1.18-1.19"
     summary = "stage 1 min weighted 1-norm moment error, stage 2 min weighted 1-norm |u-up|"
@@ -84,6 +85,17 @@ class TwoStageLP(Method):
                                        np.concatenate([p.umax - p.up, p.up - p.umin]))
         self._stage2 = make_backend(name, None, f2, A2, -b2, b2, np.zeros(2 * m),
                                     np.concatenate([p.umax - p.up, p.up - p.umin]))
+
+    def export_data(self) -> SimplexData | None:
+        """The compiled simplex's scaled problem; ``None`` on an LP library backend (not exported)."""
+        lex = self._lex
+        if lex is None:
+            return None
+
+        def pivots(v: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> int:
+            return lex.solve(v, lo, hi)[2]
+
+        return SimplexData(F=lex.F, rho=lex.rho, D=lex.D, costs=lex.costs, max_iter=int(lex.max_iter), pivots=pivots)
 
     def solve(self, v, lo, hi, u_prev):
         if self._lex is not None:

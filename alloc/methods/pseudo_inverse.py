@@ -29,6 +29,7 @@ from .._inverse_kernels import (affine, affine_clip_batch, fused_scaled, increme
                                 scaled_increment_batch)
 from .._linalg import RCOND, check_rcond, max_scale, weighted_pinv
 from ..exceptions import OptionError, SolverError
+from ..export_data import AffineData, ScaledData
 from ..options import flag, real
 from ..problem import MAX_MAGNITUDE, Problem
 from ..method import FloatArray, Method, register
@@ -73,7 +74,7 @@ class _PinvBase(Method):
         return affine(self.c, self.P, v)
 
 
-@register("pinv", affine=True, supports_batch=True)
+@register("pinv", affine=True, supports_batch=True, export="affine")
 class Pinv(_PinvBase):
     summary = "biased weighted pseudo-inverse, min (u-up)'Wu(u-up) s.t. Bu=v; clipped where inadmissible"
 
@@ -88,13 +89,16 @@ class Pinv(_PinvBase):
     def solve_batch(self, V, lo, hi):
         return affine_clip_batch(self.c, self._P, np.ascontiguousarray(V), lo, hi)
 
+    def export_data(self) -> AffineData:
+        return AffineData(c=self.c, P=self._P)
 
-@register("pinv_clip", affine=True, supports_batch=True)
+
+@register("pinv_clip", affine=True, supports_batch=True, export="affine")
 class PinvClip(Pinv):
     summary = "Eq 1.23 with individual commands clipped to their limits"
 
 
-@register("pinv_scale", supports_batch=True)
+@register("pinv_scale", supports_batch=True, export="scaled")
 class PinvScale(_PinvBase):
     summary = "direction-preserving weighted pseudo-inverse: the increment scaled by one factor"
 
@@ -128,6 +132,9 @@ class PinvScale(_PinvBase):
     def solve_batch(self, V, lo, hi):
         return scaled_increment_batch(self._P, self._B, self._up, np.ascontiguousarray(V), lo, hi)
 
+    def export_data(self) -> ScaledData:
+        return ScaledData(P=self._P)
+
 
 class SafeCommand:
     """The documented safe answer returned with ``status="fallback"``.
@@ -150,3 +157,8 @@ class SafeCommand:
         if not np.isfinite(u).all():
             u = self._up
         return np.minimum(np.maximum(u, lo), hi)
+
+    def affine_map(self) -> AffineData | None:
+        """``u = clip(c + P v)`` of the safe answer (the preferred position clipped where the
+        pseudo-inverse could not be formed: ``None``)."""
+        return None if self._pinv is None else self._pinv.export_data()

@@ -30,6 +30,7 @@ import numpy as np
 from .._active_set import _HEAD, _MAXIT, lexico_batch_finished, lexico_call, lexico_solve, pack
 from .._linalg import check_real_option
 from ..exceptions import OptionError, SolverError
+from ..export_data import ActiveSetData
 from ..options import choice, flag, levels, real
 from ..problem import MAX_MAGNITUDE, Problem
 from ..method import FloatArray, Method, register
@@ -221,6 +222,12 @@ class LexicoLS:
         self.packed = (lexico_call, self._state)
 
     @property
+    def state(self) -> tuple[np.ndarray, ...]:
+        """The packed solver state (:func:`alloc._active_set.pack`: matrices, vectors, integers,
+        then the working arrays), which the C generator prints; read it, do not write it."""
+        return self._state
+
+    @property
     def maxit(self) -> int:
         """Iteration cap per level."""
         return int(self._state[2][_HEAD, _MAXIT])
@@ -279,28 +286,12 @@ class _ActiveSetOrBackend(Method):
     def batch_finished(self, V):
         return self._impl.batch_finished(V) if self.backend == ACTIVE_SET else None
 
-
-@register("qp", supports_priorities=True, supports_batch=True)
-class TwoStageQP(_ActiveSetOrBackend):
-    equation = "Eqs 1.20-1.21"
-    summary = "stage 1 min moment error (Wv), stage 2 min (u-up)'Wu(u-up) at that moment"
-    options = {"backend": _AS_BACKEND, "priorities": levels("priority level per axis; larger levels are met first"),
-               "warm_start": flag(False, WARM_START_DOC)}
-
-    def __init__(self, problem: Problem, *, backend: str = ACTIVE_SET, priorities: Sequence[int] | None = None,
-                 warm_start: bool = False) -> None:
-        super().__init__(problem)
-        self.backend = _backend_choice(backend, "qp")
-        warm = check_warm_backend(warm_start, self.backend, "qp")
-        self.groups = check_priorities(priorities, problem.k) or [np.arange(problem.k)]
-        if self.backend != ACTIVE_SET:
-            self._impl = _SolverTwoStageQP(problem, backend=self.backend, priorities=priorities)
-            return
-        self._impl = LexicoLS(problem, self.groups, [0.0] * len(self.groups), final=True, warm_start=warm)
-        self.packed = self.packed_rate = self._impl.packed
+    def export_data(self) -> ActiveSetData | None:
+        """The compiled active set's state; ``None`` on a cross-check backend (not exported)."""
+        return ActiveSetData(states=(self._impl.state,)) if self.backend == ACTIVE_SET else None
 
 
-@register("wls", supports_batch=True)
+@register("wls", supports_batch=True, export="active_set")
 class WeightedLeastSquares(_ActiveSetOrBackend):
     equation = "Eqs 1.20-1.21 (single-stage weighted form)"
     summary = "min (Bu-v)'Wv(Bu-v) + gamma^2 (u-up)'Wu(u-up) over the limits"
@@ -323,3 +314,22 @@ class WeightedLeastSquares(_ActiveSetOrBackend):
         self._impl = LexicoLS(problem, [np.arange(problem.k)], [g], final=False, warm_start=warm)
         self.packed = self.packed_rate = self._impl.packed
 
+
+@register("qp", supports_priorities=True, supports_batch=True, export="active_set")
+class TwoStageQP(_ActiveSetOrBackend):
+    equation = "Eqs 1.20-1.21"
+    summary = "stage 1 min moment error (Wv), stage 2 min (u-up)'Wu(u-up) at that moment"
+    options = {"backend": _AS_BACKEND, "priorities": levels("priority level per axis; larger levels are met first"),
+               "warm_start": flag(False, WARM_START_DOC)}
+
+    def __init__(self, problem: Problem, *, backend: str = ACTIVE_SET, priorities: Sequence[int] | None = None,
+                 warm_start: bool = False) -> None:
+        super().__init__(problem)
+        self.backend = _backend_choice(backend, "qp")
+        warm = check_warm_backend(warm_start, self.backend, "qp")
+        self.groups = check_priorities(priorities, problem.k) or [np.arange(problem.k)]
+        if self.backend != ACTIVE_SET:
+            self._impl = _SolverTwoStageQP(problem, backend=self.backend, priorities=priorities)
+            return
+        self._impl = LexicoLS(problem, self.groups, [0.0] * len(self.groups), final=True, warm_start=warm)
+        self.packed = self.packed_rate = self._impl.packed

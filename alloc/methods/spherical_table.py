@@ -25,7 +25,7 @@ from .facet_search import _TOL, FacetSearch, _int_option
 __all__ = ["SphericalTable"]
 
 
-@register("da_table", needs_ams=True, supports_batch=True)
+@register("da_table", needs_ams=True, supports_batch=True, family="da")
 class SphericalTable(FacetSearch):
     """Direct allocation with a spherical (azimuth, elevation) look-up table of facets (k = 3)."""
 

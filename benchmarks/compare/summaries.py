@@ -14,13 +14,15 @@ from typing import Any
 
 import numpy as np
 
+import alloc.registry
+
 from .runner import read_table, table_of
 from .stats import bootstrap_median, paired_ratio, rank_with_ties, spearman
 from .sweep import STATIC, Spec
 from .tables import Row
 
 __all__ = ["load_rows", "closed_scores", "cell_summaries", "told_blind", "detected_share", "coverage_agreement",
-           "pooled_rows", "verdicts_by_setting", "verdict_stability", "ALL_SETTINGS", "DA_FAMILY", "RANDOM",
+           "pooled_rows", "verdicts_by_setting", "verdict_stability", "ALL_SETTINGS", "FAMILIES", "RANDOM",
            "has_verdicts", "broken_counts", "baseline_fate"]
 
 RANDOM = "random suite"
@@ -272,18 +274,21 @@ def verdicts_by_setting(cells: Sequence[Row], failures: Sequence[str]) -> list[R
     return out
 
 
-#: the direct-allocation family: one allocation by four backends (identical closed-loop rows in
-#: the sweeps); shown as ``da*`` when all four share a verdict
-DA_FAMILY = ("da", "da_bisect", "da_facet", "da_table")
+#: the declared families of more than one method (alloc.registry.families: one allocation by
+#: several algorithms, identical closed-loop rows in the sweeps; today direct allocation, ``da``
+#: and its three backends); a family is shown as ``<family>*`` when all its members share a verdict
+FAMILIES = {name: members for name, members in alloc.registry.families().items() if len(members) > 1}
 
 
 def _short(entries: Sequence[str]) -> str:
-    """``method mode`` entries, with the four ``da*`` backends of one mode written once as ``da*``."""
+    """``method mode`` entries, with every member of a family in one mode written once as
+    ``<family>*`` (``da*``)."""
     items = sorted(set(entries))
     for mode in ("blind", "told"):
-        family = [f"{m} {mode}" for m in DA_FAMILY]
-        if all(f in items for f in family):
-            items = [i for i in items if i not in family] + [f"da* {mode}"]
+        for name, members in FAMILIES.items():
+            family = [f"{m} {mode}" for m in members]
+            if all(f in items for f in family):
+                items = [i for i in items if i not in family] + [f"{name}* {mode}"]
     return ", ".join(sorted(items))
 
 

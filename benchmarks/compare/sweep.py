@@ -33,7 +33,7 @@ from .failures import catalogue_names, is_catalogue
 __all__ = [
     "Spec", "STATIC", "ARMS", "FRAME_PERIOD", "PILOT_SETTINGS", "open_spec", "closed_spec", "closed_grid",
     "setting_tag", "detected_sweep", "quick_sweep", "full_sweep", "tiny_sweep", "smoke_sweep", "check_simulator_support", "SCENARIO_TIMES",
-    "FULL_TIMES", "FULL_PILOTS", "seed_length_sweep", "SEED_LENGTH_FAILURES", "SAME_AS_DA",
+    "FULL_TIMES", "FULL_PILOTS", "seed_length_sweep", "SEED_LENGTH_FAILURES", "SAME_AS_DA", "SAME_AS_FAMILY",
 ]
 
 Spec = dict[str, Any]
@@ -177,21 +177,24 @@ def quick_sweep() -> list[Spec]:
 
 #: failures of the seed-length sweep: each scenario's own and the catalogue's single jam
 SEED_LENGTH_FAILURES = {"ice": ("seed", "jam1"), "harv_latdir": ("failure1", "failure2", "jam1")}
-#: direct-allocation backends the seed-length sweep leaves out: the full sweep's rows of the four
-#: (``da``, ``da_bisect``, ``da_facet``, ``da_table``) are identical in every column (all 1,320 ICE
-#: runs each), so ``da`` stands for them
-SAME_AS_DA = ("da_bisect", "da_facet", "da_table")
+#: methods the seed-length sweep leaves out: each computes the allocation of its declared family
+#: by another algorithm (alloc.registry.families; today ``da_bisect``, ``da_facet``, ``da_table``,
+#: the backends of direct allocation, ``da``).  The full sweep's rows of a family are identical in
+#: every column (all 1,320 ICE runs each of the four), so the family's own method stands for them
+SAME_AS_FAMILY = tuple(m for m in alloc.methods() if alloc.registry.get_method(m).family != m)
+#: the same, by the name the sweep's tests use (direct allocation is today's one family)
+SAME_AS_DA = SAME_AS_FAMILY
 
 
 def seed_length_sweep(seeds: int = 3) -> list[Spec]:
     """The comparison at the seed's run lengths (:data:`SCENARIO_TIMES`: ICE 40 s, failure at
     20 s; HARV lat-dir 50 s, failure at 25 s, ``failure2`` too), judged by the engineering
     criteria (:mod:`sim.criteria`, in every row): every method (``da`` for its three identical
-    backends, :data:`SAME_AS_DA`) and ``static``, blind and told; :data:`SEED_LENGTH_FAILURES`;
+    backends, :data:`SAME_AS_FAMILY`) and ``static``, blind and told; :data:`SEED_LENGTH_FAILURES`;
     the crossover-model pilot at the seed's frame rate; ``seeds`` noise seeds.  Sized for 2
     shared cores (375 runs, about 22 CPU minutes at 3 seeds); no open loop.  Ordered seed by seed."""
     seed_list = list(range(1, seeds + 1))
-    methods = [m for m in all_methods() if m not in SAME_AS_DA]
+    methods = [m for m in all_methods() if m not in SAME_AS_FAMILY]
     specs: list[Spec] = []
     for scenario, (duration, t_fail) in SCENARIO_TIMES.items():
         failures = SEED_LENGTH_FAILURES[scenario]

@@ -129,7 +129,7 @@ def test_the_documented_cgi_range_is_priced_within_the_caps(monkeypatch, k, m):
     def stop(*args, **kwargs):
         raise _Priced
 
-    monkeypatch.setattr(export, "_cascade_table", stop)
+    monkeypatch.setattr(export.cascade, "_cascade_table", stop)  # the cascade kind's exporter
     with pytest.raises(_Priced):
         export_c(_problem(k, m), "cgi", table=True)
     with pytest.raises(ExportError, match="table: .* MiB of C, above the 64 MiB cap"):
