@@ -51,11 +51,11 @@ from numba import njit
 
 from ._threads import run_chunks, threads_for
 from ._kernels import _FREE_BITS, close_out, copy_demand, finish, packed_out, rate_window_into
-from ._active_set_layout import (CACHE_ENTRIES, CACHE_FLOATS, _A, _B, _BV, _CONST, _DIAG, _DYN, _E, _FACTORED, _FIDX,
-                                 _FINAL, _FREE, _G, _GAM, _H, _HEAD, _HI, _K, _KU, _KV, _LAM, _LO, _M, _MAXIT, _MISC,
-                                 _N, _NCW, _NEXT_SLOT, _NLEV, _NLW, _P0, _PERM, _PINNED, _R, _RMAX, _RMIN, _SCALE,
-                                 _STARTS, _T, _TABLE, _TABU, _TMP, _U, _UMAX, _UMIN, _UP, _UPC, _UW, _WARM, _WSIDE, _WU,
-                                 _WVALID, _Y)
+from ._active_set_layout import (CACHE_ENTRIES, CACHE_FLOATS, OVERFLOW_SLOTS, _A, _B, _BV, _CONST, _DIAG, _DYN, _E,
+                                 _FACTORED, _FIDX, _FINAL, _FREE, _G, _GAM, _H, _HEAD, _HI, _K, _KU, _KV, _LAM, _LO, _M,
+                                 _MAXIT, _MISC, _N, _NCW, _NEXT_SLOT, _NLEV, _NLW, _P0, _PERM, _PINNED, _R, _RMAX,
+                                 _RMIN, _SCALE, _STARTS, _T, _TABLE, _TABU, _TMP, _U, _UMAX, _UMIN, _UP, _UPC, _UW,
+                                 _WARM, _WSIDE, _WU, _WVALID, _Y)
 # _FACTORED: read by benchmarks/bench_alloc.py and tests/benchmarks/test_bench_alloc.py from here
 from ._lsq_factor import SIGMA_RTOL, _factors, _lsolve, _ltsolve, _slot_offsets
 
@@ -324,18 +324,18 @@ def pack(A, T, perm, starts, gammas, final, Wu, diag, up, B, P0, umin, umax, rat
                                   nlw, int(bool(warm)), 0]
     ivecs[_PERM, :n] = perm
     ivecs[_STARTS, :nlev + 1] = starts
-    ivecs[_MISC, _NEXT_SLOT] = 1  # the next free cache slot (slot 0 is scratch)
+    ivecs[_MISC, _NEXT_SLOT] = OVERFLOW_SLOTS  # the next free cache slot (the overflow's come first)
     mL = 1 if diag else m  # a diagonal L is stored as its column of pivots
     slot = _slot_offsets(m, ncw, nlw)[5]
-    cap = int(max(4, min(CACHE_ENTRIES, CACHE_FLOATS // (m * mL + slot) - 1)))
+    cap = int(max(4, min(CACHE_ENTRIES, CACHE_FLOATS // (m * mL + slot) - OVERFLOW_SLOTS)))
     # written once here so that every page is resident: a first-seen free set's factorisation
     # then never takes a page fault on the call path (measured: 15-18 % off the first-pass p99
     # of random ICE demands; real-time code pre-faults its memory for the same reason)
-    bankL = np.empty((cap + 1, m, mL))
+    bankL = np.empty((cap + OVERFLOW_SLOTS, m, mL))
     bankL.fill(0.0)
-    bank = np.empty((cap + 1, slot))
+    bank = np.empty((cap + OVERFLOW_SLOTS, slot))
     bank.fill(0.0)
-    size = 1 << int(2 * (cap + 1) - 1).bit_length()  # a power of two, at most half full
+    size = 1 << int(2 * cap - 1).bit_length()  # a power of two, at most half full
     table = np.zeros((size, ivecs.shape[1]), dtype=np.int64)
     table[:, 0] = -1
     return mats, vecs, np.vstack([ivecs, table]), bankL, bank

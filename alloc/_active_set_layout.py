@@ -31,8 +31,16 @@ _NEXT_SLOT, _FACTORED = range(2)
 #: ``vecs`` rows
 (_UP, _UMIN, _UMAX, _RMIN, _RMAX, _GAM, _U, _LO, _HI, _UPC, _BV, _R, _E, _LAM,
  _G, _H, _Y, _TMP, _SCALE, _CONST, _UW, _WSIDE) = range(22)
-#: ``ivecs`` rows
-_HEAD, _PERM, _STARTS, _FREE, _PINNED, _TABU, _FIDX, _KEY, _MISC, _TABLE = range(10)
+#: the factorisation cache's overflow: bank slots ``0 .. OVERFLOW_SLOTS - 1``, direct-mapped by
+#: the free set's hash, hold what the hash table has no room left for, so the free sets of the
+#: last few calls stay cached once it is full (a long smooth flight at m = 192 met more free
+#: sets than the table keeps, and then refactorised each call's sets twice: level 0 and the
+#: final level share one); the table's slots follow
+OVERFLOW_SLOTS = 8
+#: ``ivecs`` rows; from ``_OVER``, one row per overflow slot (column 0: 1 when it holds a key,
+#: then the key's words), then the hash table from ``_TABLE``
+_HEAD, _PERM, _STARTS, _FREE, _PINNED, _TABU, _FIDX, _KEY, _MISC, _OVER = range(10)
+_TABLE = _OVER + OVERFLOW_SLOTS
 #: cache budget per allocator, floats (2 MiB), and entry cap (free sets beyond are computed, not
 #: kept); sized so an allocator stays small enough for the service to cache (a 32 MiB budget made
 #: every inline qp request rebuild a 14 MiB allocator: 4 ms a build, 300 req/s overloaded it)

@@ -14,8 +14,8 @@ import numpy as np
 from numba import njit
 
 from ._kernels import _FREE_BITS
-from ._active_set_layout import (_A, _FACTORED, _FIDX, _FREE, _HEAD, _KEY, _MISC, _NCW, _NEXT_SLOT, _NLW, _TABLE,
-                                 _WORDS, _WU)
+from ._active_set_layout import (_A, _FACTORED, _FIDX, _FREE, _HEAD, _KEY, _MISC, _NCW, _NEXT_SLOT, _NLW, _OVER,
+                                 _TABLE, _WORDS, _WU, OVERFLOW_SLOTS)
 
 __all__ = ["SIGMA_RTOL", "JACOBI_EPS"]
 
@@ -193,7 +193,7 @@ def _factor(A, r0, r1, Wu, diag, F, nf, L, Yc, Vc, sc, Ya, Va, sa):  # pragma: n
 def _factors(mats, ivecs, bankL, bank, r0, r1, lev, diag, nf, m):  # pragma: no cover - compiled
     """The cache slot holding the factorisation of the current free set (``_factor``'s
     ``L = bankL[s]``, the rest :func:`_slot` of ``bank[s]``): looked up, else computed (and
-    kept while the cache has room; past that, computed into the scratch slot 0).  Cached and
+    kept in the hash table while it has room; past that, in the overflow slot of its hash).  Cached and
     recomputed factors are bitwise equal, so the cache never changes an answer, only its cost.  The hash table (rows ``_TABLE:`` of ``ivecs``)
     is open addressing as in :func:`alloc._inverse_kernels._probe`.
     """
@@ -224,8 +224,17 @@ def _factors(mats, ivecs, bankL, bank, r0, r1, lev, diag, nf, m):  # pragma: no 
         for w in range(words):
             ivecs[_TABLE + pos, 1 + w] = ivecs[_KEY, w]
         ivecs[_TABLE + pos, 0] = s
-    else:
-        s = 0  # the cache is full: slot 0 is the scratch (never a table entry)
+    else:  # the table is full: the overflow slot of this hash, looked up, else overwritten
+        s = (h >> np.int64(40)) & np.int64(OVERFLOW_SLOTS - 1)
+        same = ivecs[_OVER + s, 0] != 0
+        for w in range(words):
+            if ivecs[_OVER + s, 1 + w] != ivecs[_KEY, w]:
+                same = False
+        if same:
+            return s
+        ivecs[_OVER + s, 0] = 1
+        for w in range(words):
+            ivecs[_OVER + s, 1 + w] = ivecs[_KEY, w]
     ivecs[_MISC, _FACTORED] += 1  # counted for benchmarks/bench_alloc.py
     Yc, Vc, sc, Ya, Va, sa = _slot(bank, s, m, ivecs[_HEAD, _NCW], ivecs[_HEAD, _NLW])
     _factor(mats[_A], r0, r1, mats[_WU], diag, ivecs[_FIDX], nf, bankL[s], Yc, Vc, sc, Ya, Va, sa)
