@@ -44,18 +44,34 @@ import alloc
 
 from . import ams
 from .allocator_cache import AllocatorCache
-from .builds import REBUILD, REQUEST, TRANSFER_BYTES, Builder, Built, Call, build, check_batch_cost, check_build_cost
+from .builds import (
+    REBUILD,
+    REQUEST,
+    TRANSFER_BYTES,
+    Builder,
+    Built,
+    Call,
+    build,
+    check_batch_cost,
+    check_build_cost,
+)
 from .cost import answer_bytes, is_costly, is_costly_batch
 from .errors import ServiceError
 from .responses import AnswerBudget, StreamedAnswer, allocation_response
 from .schemas import (
-    AllocateRequest, AmsOut, AmsRequest, AmsVehicleRequest, BatchAllocateRequest, ProblemIn, VehicleAllocateRequest,
+    AllocateRequest,
+    AmsOut,
+    AmsRequest,
+    AmsVehicleRequest,
+    BatchAllocateRequest,
+    ProblemIn,
+    VehicleAllocateRequest,
     VehicleBatchRequest,
 )
 from .store import VehicleStore
 from .vehicle_state import VehicleState
 
-__all__ = ["AllocatorPool", "PREBUILD_LIMIT", "options_key"]
+__all__ = ["PREBUILD_LIMIT", "AllocatorPool", "options_key"]
 
 #: allocators rebuilt after an event, per vehicle (the most recently used ones)
 PREBUILD_LIMIT = 4

@@ -75,7 +75,10 @@ def test_the_store_tells_the_pool_of_new_health_and_of_deletes(tmp_path):
         for method in ("pinv", "qp"):
             r = client.post(f"/v1/vehicles/{vid}/allocate", json={"v": [0.1, 0.2, 0.0], "method": method})
             assert r.status_code == 200, r.text
-        mine = lambda: sorted((k[1], k[2]) for k in pool.allocators.keys_where(lambda k: k[0] == vid))  # noqa: E731
+
+        def mine() -> list[tuple[int, str]]:
+            """(health version, method) of the vehicle's cached allocators."""
+            return sorted((k[1], k[2]) for k in pool.allocators.keys_where(lambda k: k[0] == vid))
         assert mine() == [(0, "pinv"), (0, "qp")]
         builds = pool.allocators.builds
         store.record_event(vid, TypeAdapter(EventIn).validate_python(
