@@ -1,5 +1,5 @@
 """The allocators built in this process: an LRU bounded in entries and in bytes, with a
-smaller byte budget for allocators of inline problems (see :mod:`service.store`)."""
+smaller byte budget for allocators of inline problems (see :mod:`service.pool`)."""
 
 from __future__ import annotations
 

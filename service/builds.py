@@ -23,7 +23,7 @@ Three lanes, each bounded in concurrency and queue (429 beyond), each served by 
   the allocators an event invalidated are rebuilt however busy the other lanes are.
 
 The build processes are started with the service, in the background (a few seconds:
-imports, and the numba kernels loaded from their cache), and stop with the store
+imports, and the numba kernels loaded from their cache), and stop with the allocator pool
 (terminated, not waited for) or with the service process.
 
 An allocator comes back from the build process only when it is small enough to be worth

@@ -1,4 +1,5 @@
-"""Dependencies shared by the routers: the store, the settings, the API-key check.
+"""Dependencies shared by the routers: the store (the repository), the allocator pool, the
+settings, the API-key check.
 
 All are ``async``: FastAPI runs a sync dependency in the thread pool, a thread hand-off
 that costs more than the allocation itself.
@@ -16,9 +17,10 @@ from pydantic import BaseModel
 
 from .config import Settings
 from .errors import Unauthorized
+from .pool import AllocatorPool
 from .store import Idempotency, VehicleStore
 
-__all__ = ["StoreDep", "SettingsDep", "IdempotencyKey", "require_api_key", "idempotency", "end_parse_turn"]
+__all__ = ["StoreDep", "PoolDep", "SettingsDep", "IdempotencyKey", "require_api_key", "idempotency", "end_parse_turn"]
 
 #: the scope key service.main.BodySizeLimit stores a request's parse-turn release under
 PARSE_TURN_KEY = "alloc.parse_turn"
@@ -37,11 +39,16 @@ async def get_store(request: Request) -> VehicleStore:
     return request.app.state.store
 
 
+async def get_pool(request: Request) -> AllocatorPool:
+    return request.app.state.pool
+
+
 async def get_settings(request: Request) -> Settings:
     return request.app.state.settings
 
 
 StoreDep = Annotated[VehicleStore, Depends(get_store)]
+PoolDep = Annotated[AllocatorPool, Depends(get_pool)]
 SettingsDep = Annotated[Settings, Depends(get_settings)]
 
 

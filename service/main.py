@@ -29,6 +29,7 @@ from .routes import allocation, ams, methods, system, telemetry, vehicles
 from .priority import GATE_STATE_KEY, PriorityGate, PriorityMiddleware
 from .server import GuardedHttpToolsProtocol
 from .streams import GuardedWebSocketProtocol, StreamLimits
+from .pool import AllocatorPool
 from .store import VehicleStore
 from .warm import start_background_warm_up, warm_up
 
@@ -83,16 +84,16 @@ class ServerTiming:
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:
-    """Build the application: database (migrated), store, routers, error handlers, body limit."""
+    """Build the application: database (migrated), store, allocator pool, routers, error handlers, body limit."""
     settings = settings or Settings()
     if settings.api_key is None:
         _log.warning(NO_KEY_WARNING)
     engine = make_engine(settings.resolved_database_url)
     gate = PriorityGate(settings.api_key)
-    store = VehicleStore(engine, make_sessionmaker(engine), cache_size=settings.cache_size,
-                         cache_bytes=settings.cache_bytes, inline_cache_bytes=settings.inline_cache_bytes,
-                         build_budget=settings.build_budget_s, build_workers=settings.build_workers,
-                         build_queue=settings.build_queue, idempotency_ttl_s=settings.idempotency_ttl_s,
+    store = VehicleStore(engine, make_sessionmaker(engine), idempotency_ttl_s=settings.idempotency_ttl_s)
+    pool = AllocatorPool(store, cache_size=settings.cache_size, cache_bytes=settings.cache_bytes,
+                         inline_cache_bytes=settings.inline_cache_bytes, build_budget=settings.build_budget_s,
+                         build_workers=settings.build_workers, build_queue=settings.build_queue,
                          batch_budget=settings.batch_budget_s, max_answer_bytes=settings.max_answer_bytes,
                          answer_bytes_in_flight=settings.answer_bytes_in_flight)
 
@@ -115,13 +116,14 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             # The kernels load on a thread once the service answers (service.warm); the build
             # processes for costly builds and batches start after that, so that their own
             # imports and warm-up do not compete with this process's for the CPU.
-            warming = start_background_warm_up(stop, then=store.builder.start_processes)
+            warming = start_background_warm_up(stop, then=pool.builder.start_processes)
         app.state.startup_seconds, app.state.ready = time.perf_counter() - t0, True
         yield {GATE_STATE_KEY: gate}  # lifespan state: where the HTTP protocol finds the gate
         app.state.ready = False  # shutting down: /v1/ready answers 503 from here on
         stop.set()
         if warming is not None:
             warming.join(timeout=10)  # at most the method it is warming: no build process started after the close
+        pool.close()
         store.close()
         engine.dispose()
 
@@ -129,6 +131,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                   docs_url=None, redoc_url=None)
     app.state.settings = settings
     app.state.store = store
+    app.state.pool = pool
     app.state.gate = gate
     for module in (allocation, methods, ams, vehicles, system):
         app.include_router(module.router)

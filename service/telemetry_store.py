@@ -296,7 +296,7 @@ class TelemetryStore:
                 continue  # run again on the new health
             new_state, events, proposal_ids, w_seqs, w_ids = applied
             if new_state is not None:
-                self.store.prebuild(new_state)
+                self.store.publish(new_state)
             detections = []
             for i, d in enumerate(outcome.detections):
                 out = detection_out(d)
@@ -451,6 +451,6 @@ class TelemetryStore:
                 session.commit()
             out = proposal_out({**prop._mapping, **values})
             if new_state is not None:
-                self.store.prebuild(new_state)
+                self.store.publish(new_state)
             return out, new_state, event_row
         raise Conflict(f"vehicle {vehicle_id!r}: too many concurrent writes; retry")

@@ -1,10 +1,12 @@
 """A vehicle as this process holds it (its nominal problem, health and effective problem at
-one ``health_version``) and the probe that reads the committed version (see :mod:`service.store`)."""
+one ``health_version``), the states this process holds, and the probe that reads the
+committed version (see :mod:`service.store`)."""
 
 from __future__ import annotations
 
 import sqlite3
 import threading
+from collections import OrderedDict
 from dataclasses import dataclass
 from datetime import datetime
 from typing import Any
@@ -18,7 +20,11 @@ import alloc
 from .db import VehicleRow
 from .health import Health, load_health, to_problem
 
-__all__ = ["VehicleState", "VersionProbe", "method_defaults", "problem_from_dict", "state_from_row"]
+__all__ = ["VehicleState", "StateCache", "VersionProbe", "method_defaults", "problem_from_dict", "state_from_row"]
+
+#: vehicle states kept per process: a state holds two problems, at most ~70 KiB at m = 64
+#: (Wu is m x m), so at most ~70 MiB; part of the documented memory bound
+STATE_ENTRIES = 1024
 
 
 @dataclass(frozen=True, slots=True)
@@ -60,6 +66,38 @@ def state_from_row(row: VehicleRow, nominal: alloc.Problem | None = None) -> Veh
     health = load_health(row.health)
     return VehicleState(row.id, row.name, row.created_at, nominal, health, row.health_version,
                         to_problem(nominal, health), method_defaults(row.problem.get("document")))
+
+
+class StateCache:
+    """The vehicle states this process holds, newest version per vehicle, an LRU of
+    :data:`STATE_ENTRIES` (thread-safe).  Only a cache: the database's version decides."""
+
+    def __init__(self, entries: int = STATE_ENTRIES) -> None:
+        self._entries = entries
+        self._states: OrderedDict[str, VehicleState] = OrderedDict()
+        self._lock = threading.Lock()
+
+    def __contains__(self, vehicle_id: str) -> bool:
+        return vehicle_id in self._states
+
+    def held(self, vehicle_id: str) -> VehicleState | None:
+        with self._lock:
+            return self._states.get(vehicle_id)
+
+    def remember(self, state: VehicleState) -> VehicleState:
+        """Keep ``state`` unless a newer version is already held; return ``state``."""
+        with self._lock:
+            current = self._states.get(state.id)
+            if current is None or current.version <= state.version:
+                self._states[state.id] = state
+            self._states.move_to_end(state.id)
+            while len(self._states) > self._entries:
+                self._states.popitem(last=False)
+        return state
+
+    def forget(self, vehicle_id: str) -> None:
+        with self._lock:
+            self._states.pop(vehicle_id, None)
 
 
 class VersionProbe:

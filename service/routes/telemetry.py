@@ -26,7 +26,7 @@ from starlette.websockets import WebSocketDisconnect
 import alloc
 
 from ..bodies import JsonRoute, refuse_duplicate_keys
-from ..deps import StoreDep, end_parse_turn, require_api_key
+from ..deps import SettingsDep, StoreDep, end_parse_turn, require_api_key
 from ..errors import (
     _LIBRARY_ERRORS, InvalidRequest, ServiceError, Unauthorized,
     _validation_errors, field_error, library_error_fields, problem_response,
@@ -115,10 +115,10 @@ def read(vehicle_id: VehicleId, telemetry: Telemetry) -> TelemetryOut:
 # ------------------------------------------------------------------- batches
 @router.post("/{vehicle_id}/telemetry", response_model=TelemetryResult, dependencies=WriteAccess,
              responses=UNAUTHORIZED, summary="A batch of samples: update the detector, apply or propose detections")
-async def ingest(vehicle_id: VehicleId, body: TelemetryBatchIn, request: Request, store: StoreDep,
+async def ingest(vehicle_id: VehicleId, body: TelemetryBatchIn, request: Request, settings: SettingsDep,
                  telemetry: Telemetry) -> TelemetryResult:
     end_parse_turn(request)
-    return TelemetryResult(**await _ingest(telemetry, vehicle_id, body, store.batch_budget))
+    return TelemetryResult(**await _ingest(telemetry, vehicle_id, body, settings.batch_budget_s))
 
 
 # ----------------------------------------------------------------- proposals
@@ -203,7 +203,7 @@ async def stream(websocket: WebSocket, vehicle_id: str) -> None:
             try:
                 body = _parse(data)
                 answer = TelemetryResult(**await _ingest(telemetry, vehicle_id, body,
-                                                         telemetry.store.batch_budget)).model_dump(mode="json")
+                                                         settings.batch_budget_s)).model_dump(mode="json")
             except (ServiceError, alloc.AllocError, RequestValidationError) as exc:
                 answer = _problem(exc, limit)
             await websocket.send_text(json.dumps(answer))

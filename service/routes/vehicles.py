@@ -12,11 +12,9 @@ import json
 
 from fastapi import APIRouter, Depends, Path, Query, Request, Response, status
 
-from .. import ams
 from ..bodies import JsonRoute
 from ..db import EventRow
-from ..deps import IdempotencyKey, StoreDep, end_parse_turn, idempotency, require_api_key
-from ..responses import allocation_response
+from ..deps import IdempotencyKey, PoolDep, StoreDep, end_parse_turn, idempotency, require_api_key
 from ..health import failure_text, health_out
 from ..schemas import (
     NOT_FOUND, PROBLEM_RESPONSES, UNAUTHORIZED,
@@ -24,7 +22,6 @@ from ..schemas import (
     HealthOut, ProblemOut, VehicleAllocateRequest, VehicleBatchRequest, VehicleList,
     VehicleOut, VehicleSummary,
 )
-from ..builds import Call
 from ..vehicle_document import (TOML_MEDIA_TYPE, VehicleBody, VehicleDocumentIn, document_of,
                                 require_vehicle_media_type, toml_text, vehicle_create)
 from ..store import Answer, VehicleState
@@ -116,13 +113,11 @@ async def delete_vehicle(vehicle_id: VehicleId, store: StoreDep) -> Response:
 async def record_event(vehicle_id: VehicleId, body: EventIn, store: StoreDep, request: Request,
                        idempotency_key: IdempotencyKey = None) -> Response:
     # Committed (fsync'd) on the writer threads and visible to every process before the
-    # response; the allocators that were in use are rebuilt (bounded, this vehicle only, on
-    # the rebuild lane) starting before the response, so the next allocation finds its
-    # rebuild in flight rather than queueing a build of its own behind other requests'.
+    # response; the store publishes the new state to the allocator pool, which starts the
+    # rebuilds before the response (service.pool), so the next allocation finds its rebuild
+    # in flight rather than queueing a build of its own behind other requests'.
     answer = await store.write(store.record_event_once, vehicle_id, body,
                                idempotency(request, idempotency_key, body), _render_event)
-    if answer.state is not None:
-        store.prebuild(answer.state)
     return _answer(answer)
 
 
@@ -142,26 +137,19 @@ def get_health(vehicle_id: VehicleId, store: StoreDep) -> HealthOut:
 
 @router.post("/{vehicle_id}/allocate", response_model=AllocationOut,
              summary="Allocate one demand at the vehicle's current health")
-async def allocate(vehicle_id: VehicleId, body: VehicleAllocateRequest, store: StoreDep, request: Request) -> Response:
+async def allocate(vehicle_id: VehicleId, body: VehicleAllocateRequest, pool: PoolDep, request: Request) -> Response:
     end_parse_turn(request)
-    state = store.get(vehicle_id)
-    options = {**state.defaults.get(body.method, {}), **body.options}
-    result = await store.vehicle_allocate(state, body.method, options, Call(body.v, body.u_prev, body.dt))
-    return allocation_response(result, vehicle_id=state.id, health_version=state.version)
+    return await pool.allocate(vehicle_id, body)
 
 
 @router.post("/{vehicle_id}/allocate/batch", response_model=BatchOut,
              summary="Allocate many demands at the vehicle's current health")
-async def allocate_batch(vehicle_id: VehicleId, body: VehicleBatchRequest, store: StoreDep, request: Request) -> Response:
+async def allocate_batch(vehicle_id: VehicleId, body: VehicleBatchRequest, pool: PoolDep, request: Request) -> Response:
     end_parse_turn(request)
-    state = store.get(vehicle_id)
-    return await store.vehicle_batch(state, body.method, {**state.defaults.get(body.method, {}), **body.options},
-                                     body.V)
+    return await pool.allocate_batch(vehicle_id, body)
 
 
 @router.post("/{vehicle_id}/ams", response_model=AmsOut, summary="AMS summary at the vehicle's current health")
-async def ams_summary(vehicle_id: VehicleId, body: AmsVehicleRequest, store: StoreDep, request: Request) -> AmsOut:
+async def ams_summary(vehicle_id: VehicleId, body: AmsVehicleRequest, pool: PoolDep, request: Request) -> AmsOut:
     end_parse_turn(request)
-    state = store.get(vehicle_id)
-    out = await store.run_bounded(ams.summarize, state.problem, body.directions, store.build_budget)
-    return out.model_copy(update={"vehicle_id": state.id, "health_version": state.version})
+    return await pool.vehicle_ams_summary(vehicle_id, body)

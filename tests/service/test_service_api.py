@@ -283,17 +283,17 @@ def test_effectiveness_limits_rates_float_and_repair(client):
 def test_event_prebuilds_allocators_no_rebuild_on_next_call(client, app):
     """Publishing does not wait for the rebuild; the allocators in use are rebuilt right after."""
     vid = vehicle(client)
-    store = app.state.store
+    pool = app.state.pool
     for method in ("pinv", "qp"):
         client.post(f"/v1/vehicles/{vid}/allocate", json={"v": [0.1, 0.2, 0.0], "method": method})
-    builds = store.allocators.builds
+    builds = pool.allocators.builds
     assert event(client, vid, effector="elevon_l", kind="jam", position=3.0).status_code == 201
-    store.builder.wait_idle(timeout=30.0)
-    assert store.allocators.builds == builds + 2  # rebuilt after the event's response, in the background
+    pool.builder.wait_idle(timeout=30.0)
+    assert pool.allocators.builds == builds + 2  # rebuilt after the event's response, in the background
     for method in ("pinv", "qp"):
         body = client.post(f"/v1/vehicles/{vid}/allocate", json={"v": [0.1, 0.2, 0.0], "method": method}).json()
         assert body["u"][0] == 3.0 and body["health_version"] == 1
-    assert store.allocators.builds == builds + 2  # ... so the next allocations build nothing
+    assert pool.allocators.builds == builds + 2  # ... so the next allocations build nothing
 
 
 def test_solver_failure_returns_flagged_fallback(client, monkeypatch):

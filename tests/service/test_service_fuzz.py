@@ -34,7 +34,7 @@ app.state.store.record_event(
 _alternate = itertools.cycle([True, False])
 # as the lifespan does (in-process requests without ``with TestClient`` never run it), and waited
 # for: a build process warming its kernels on a loaded machine takes longer than a case's 10 s
-for _started in app.state.store.builder.start_processes():
+for _started in app.state.pool.builder.start_processes():
     _started.result(timeout=600)
 
 
@@ -44,6 +44,7 @@ def _close_store():
     without it, a build process still warming its kernels (niced, on a loaded machine: minutes)
     kept pytest from exiting until it finished."""
     yield
+    app.state.pool.close()
     app.state.store.close()
 
 schema = schemathesis.openapi.from_asgi("/openapi.json", app)

@@ -44,6 +44,7 @@ set_aside: Counter[str] = Counter()
 @pytest.fixture(scope="module", autouse=True)
 def _close_store():
     yield
+    app.state.pool.close()
     app.state.store.close()
     print(f"\nset aside (vehicle documents, service/vehicle_document.py): {dict(set_aside)}")
 
