@@ -10,7 +10,8 @@ without one is refused in one line (no plant to fly).  The scenario's vehicle's 
 (:func:`sim.scenarios.mimo.run_mimo`).
 
 ``--plant rotorpy`` flies a multirotor vehicle file with a ``[body]`` on RotorPy's nonlinear physics
-instead of its linear model (:mod:`sim.plants`); ``--plant linear`` is the default, recorded.
+instead of its linear model (:mod:`sim.plants`); ``--plant jsbsim:f22`` flies JSBSim's F-22 (its own
+vehicle file unless ``--vehicle`` names one); ``--plant linear`` is the default, recorded.
 
 Registered as the entry point ``sim`` of the group ``alloc.commands`` (``pyproject.toml``).
 
@@ -103,7 +104,8 @@ def sim_command(
     plot_path: Optional[Path] = typer.Option(None, "--plot", help="write a PNG plot to this new file"),
     plant: Optional[str] = typer.Option(
         None, "--plant", metavar="NAME", help="the plant flown: linear (default: the vehicle's linear model in the "
-        "compiled engine) or rotorpy (RotorPy's nonlinear multirotor, a vehicle file with [body]; sim/plants)"),
+        "compiled engine), rotorpy (RotorPy's nonlinear multirotor, a vehicle file with [body]) or jsbsim:f22 "
+        "(JSBSim's F-22; no --vehicle needed); sim/plants"),
     force: bool = typer.Option(False, "--force", help="overwrite output files that exist"),
     list_: bool = typer.Option(False, "--list", callback=list_scenarios, is_eager=True, expose_value=False,
                                help="list the scenarios, their defaults and failures, and exit"),
@@ -123,6 +125,8 @@ def sim_command(
     """
     settings = dict(settings or {})
     failure, duration, failure_time = (settings.get(k) for k in ("failure", "duration", "failure_time"))
+    if scenario is None and vehicle is None and plant is not None and plant.startswith("jsbsim:"):
+        vehicle = _aircraft_file(plant)  # a JSBSim aircraft flies its own linearisation's design
     if (scenario is None) == (vehicle is None):
         raise typer.BadParameter("give a SCENARIO or --vehicle NAME|FILE (one of them)", param_hint="SCENARIO/--vehicle")
     flown = scenario_of_vehicle(vehicle) if vehicle is not None else scenario
@@ -192,6 +196,16 @@ def sim_command(
     if result.diverged:
         typer.echo(f"diverged at t = {result.duration:.3f} s", err=True)
         raise typer.Exit(EXIT_DIVERGED)
+
+
+def _aircraft_file(plant: str) -> str:
+    """The vehicle file of ``--plant jsbsim:AIRCRAFT``; a one-line usage error naming ``--plant`` otherwise."""
+    from sim.plants.jsbsim_run import JSBSIM_AIRCRAFT, aircraft_of
+
+    try:
+        return str(JSBSIM_AIRCRAFT[aircraft_of(plant)])
+    except AllocError as exc:
+        raise typer.BadParameter(str(exc), param_hint="--plant") from None
 
 
 def _plant_run(plant: str, flown: Any, scenario: str, run: Any) -> Any:

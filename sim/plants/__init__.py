@@ -41,6 +41,7 @@ __all__ = ["PLANTS", "DEFAULT_PLANT", "ROTORPY_FRAME", "check_plant", "fly_on_pl
 PLANTS = {
     "linear": "the vehicle's linear model in the compiled engine (sim.engine)",
     "rotorpy": "RotorPy's nonlinear multirotor (rotorpy 3.0.0, the [plants] extra), any rotor count",
+    "jsbsim:f22": "JSBSim's F-22 (jsbsim 1.3.3, the [plants] extra), pass-through flight control, M0.7 at 20,000 ft",
 }
 DEFAULT_PLANT = "linear"
 #: s: the flight-control frame (and plant step) of a RotorPy run unless --frame-rate says otherwise
@@ -77,6 +78,9 @@ def fly_on_plant(source: Any, plant: str, settings: RunSettings | None = None, *
                  **options: Any) -> SimResult:
     """Fly vehicle ``source`` (a file, a catalogue name or a vehicle) on ``plant`` (module docstring).
 
+    ``plant = "jsbsim:AIRCRAFT"`` flies :func:`sim.plants.jsbsim_run.fly_jsbsim`; ``source`` None is then the
+    aircraft's own vehicle file.
+
     ``settings`` / ``options``: :class:`sim.settings.RunSettings` (method, failure, failure_time, duration,
     health, frame_period, turbulence, seed ...).  ``result.settings["plant"]`` is the plant's ``describe()``.
     """
@@ -87,6 +91,10 @@ def fly_on_plant(source: Any, plant: str, settings: RunSettings | None = None, *
     from sim.user_vehicle import DEFAULT_DURATION, DEFAULT_FAILURE_TIME, flight_model
 
     check_plant(plant)
+    if plant.startswith("jsbsim:"):
+        from sim.plants.jsbsim_run import flown_settings, fly_jsbsim
+
+        return fly_jsbsim(source, plant, flown_settings(settings, options, plant), progress=progress)
     if plant == "linear":
         from sim.user_vehicle import fly
 
