@@ -21,7 +21,7 @@ import numpy as np
 from sim.result import SimResult
 from sim.settings import RunSettings, SettingError
 
-__all__ = ["JSBSIM_AIRCRAFT", "SMCController", "fly_jsbsim", "aircraft_of"]
+__all__ = ["JSBSIM_AIRCRAFT", "SMCController", "aircraft_of", "fly_jsbsim"]
 
 #: the aircraft ``--plant jsbsim:AIRCRAFT`` knows, each with the vehicle file its controller is designed on
 JSBSIM_AIRCRAFT = {"f22": Path(__file__).with_name("data") / "f22_jsbsim.toml"}
@@ -107,7 +107,7 @@ def fly_jsbsim(source: Any, plant: str, flown: RunSettings, *, progress: bool = 
     failure = flown.failure
     if isinstance(failure, str):
         failure = fm.failure(failure, DEFAULT_FAILURE_TIME if flown.failure_time is None else flown.failure_time)
-    n_steps = int(round(duration / frame))
+    n_steps = round(duration / frame)
     channels = tuple(fm.vehicle.channels)
     t = np.arange(n_steps + 1) * frame
     commands = doublets(t)[:, [CONTROLLED.index(c) for c in channels]]  # doublets are q, p, r
@@ -121,8 +121,8 @@ def fly_jsbsim(source: Any, plant: str, flown: RunSettings, *, progress: bool = 
         dt=frame, frame_steps=1, failure=failure, health=flown.health_mode, output_bound=bound,
         output_limits=limits, record_every=1, seed=flown.seed, record_state=("altitude_m", "mach", "qbar_pa", "nz_g"),
         timing=timing, scenario=fm.source.name,
-        alloc_options=dict(rate_aware=flown.rate_aware, preferred=flown.preferred, rate_horizon=flown.rate_horizon,
-                           rate_window=flown.rate_window),
+        alloc_options={"rate_aware": flown.rate_aware, "preferred": flown.preferred,
+                       "rate_horizon": flown.rate_horizon, "rate_window": flown.rate_window},
         u_prev_source=flown.u_prev_source)
     record = {**flown.record(), **result.settings}
     record.update(duration=duration, method=method, failure=None if failure is None else failure.name,
@@ -138,5 +138,5 @@ def flown_settings(settings: RunSettings | None, options: dict[str, Any], plant:
     """The run settings of a JSBSim run from ``settings`` and keyword ``options``; TypeError for a stray one."""
     given, extra = RunSettings.split(options)
     if extra:
-        raise TypeError(f"{sorted(extra)[0]}: not a run setting of a --plant {plant} run")
+        raise TypeError(f"{min(extra)}: not a run setting of a --plant {plant} run")
     return given if settings is None else replace(settings, **options)

@@ -15,9 +15,9 @@ from typer.testing import CliRunner
 
 pytest.importorskip("jsbsim", reason="jsbsim (the [plants] extra) does not import here")
 
-from sim.cli import sim_command  # noqa: E402 (after the import check)
-from sim.plants import fly_on_plant  # noqa: E402
-from sim.plants.jsbsim_loop import fly  # noqa: E402
+from sim.cli import sim_command
+from sim.plants import fly_on_plant
+from sim.plants.jsbsim_loop import fly
 
 app = typer.Typer()
 app.command()(sim_command)
@@ -52,7 +52,7 @@ def test_the_plant_loop_is_the_f22_loop_to_the_bit():
 def test_stabilator_jam_told_flies_blind_diverges():
     # docs/plants-jsbsim.md: jammed at trim at 5 s, the told loop flies the doublets, the blind one diverges
     # (command-fed observers) 4.6 s after the failure
-    kw = dict(duration=12.0, method="qp", failure="jam:stab_l@0", failure_time=5.0)
+    kw = {"duration": 12.0, "method": "qp", "failure": "jam:stab_l@0", "failure_time": 5.0}
     told = fly_on_plant(None, "jsbsim:f22", health="told", **kw)
     blind = fly_on_plant(None, "jsbsim:f22", health="blind", **kw)
     assert not told.diverged and told.duration == pytest.approx(12.0)
