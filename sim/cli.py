@@ -106,6 +106,10 @@ def sim_command(
         None, "--plant", metavar="NAME", help="the plant flown: linear (default: the vehicle's linear model in the "
         "compiled engine), rotorpy (RotorPy's nonlinear multirotor, a vehicle file with [body]) or jsbsim:f22 "
         "(JSBSim's F-22; no --vehicle needed); sim/plants"),
+    forward_speed: Optional[float] = typer.Option(
+        None, "--forward-speed", metavar="M/S", help="--plant rotorpy only: ground speed due north held by the "
+        "cascade's velocity loop, reached from the hover on a 1 m/s^2 ramp (0: hold the hover's zero speed); "
+        "default: no velocity loop (a level hover that drifts)"),
     force: bool = typer.Option(False, "--force", help="overwrite output files that exist"),
     list_: bool = typer.Option(False, "--list", callback=list_scenarios, is_eager=True, expose_value=False,
                                help="list the scenarios, their defaults and failures, and exit"),
@@ -138,7 +142,9 @@ def sim_command(
             raise typer.BadParameter(str(exc.args[0]), param_hint="SCENARIO") from None
     else:  # a vehicle file's model, the seed's section 4.3 design (sim.user_vehicle)
         run, scenario = flown, flown.name
-    runner = run if plant is None else _plant_run(plant, flown, scenario, run)
+    if forward_speed is not None and plant != "rotorpy":
+        raise typer.BadParameter("the velocity loop flies on --plant rotorpy only", param_hint="--forward-speed")
+    runner = run if plant is None else _plant_run(plant, flown, scenario, run, forward_speed)
     if design and isinstance(flown, str):
         raise typer.BadParameter(f"{scenario} flies the seed's own design; --design is for a vehicle file's "
                                  "auto-design", param_hint="--design")
@@ -168,7 +174,7 @@ def sim_command(
     except AllocError as exc:  # a setting (sim.settings.SettingError), the method and its options
         hint = flag_of(exc.field) if exc.field in _SETTING_NAMES else "--method"
         if plant not in (None, "linear") and exc.field not in _SETTING_NAMES:  # what the plant cannot fly
-            hint = "--plant"
+            hint = "--forward-speed" if exc.field == "forward_speed" else "--plant"
         raise typer.BadParameter(str(exc), param_hint=hint) from None
     except TypeError as exc:
         raise typer.BadParameter(f"scenario {scenario!r} does not take this option: {exc}") from None
@@ -208,7 +214,7 @@ def _aircraft_file(plant: str) -> str:
         raise typer.BadParameter(str(exc), param_hint="--plant") from None
 
 
-def _plant_run(plant: str, flown: Any, scenario: str, run: Any) -> Any:
+def _plant_run(plant: str, flown: Any, scenario: str, run: Any, forward_speed: float | None = None) -> Any:
     """The runner of ``--plant``: the scenario's own for ``linear`` (its result records the plant), else
     :func:`sim.plants.fly_on_plant` on the vehicle file; a one-line usage error naming ``--plant``."""
     from sim.plants import check_plant, fly_on_plant
@@ -228,7 +234,8 @@ def _plant_run(plant: str, flown: Any, scenario: str, run: Any) -> Any:
                                  "multirotor vehicle file with a [body] (--vehicle FILE)", param_hint="--plant")
 
     def on_plant(progress: bool = False, **options: Any) -> Any:
-        return fly_on_plant(flown.vehicle, plant, progress=progress, **options)
+        speed = {} if forward_speed is None else {"forward_speed": forward_speed}
+        return fly_on_plant(flown.vehicle, plant, progress=progress, **speed, **options)
 
     return on_plant
 
