@@ -115,8 +115,8 @@ def machine() -> dict[str, Any]:
 
 
 def table(rows: list[dict[str, Any]]) -> str:
-    lines = ["| vehicle | speed m/s | wind | allocation | diverged | roll RMS deg | pitch RMS deg | max roll err deg "
-             "| altitude loss m | heading end deg | max yaw rate deg/s | speed err RMS m/s | real-time factor (plant) |",
+    lines = [("| vehicle | speed m/s | wind | allocation | diverged | roll RMS deg | pitch RMS deg | max roll err deg "
+             "| altitude loss m | heading end deg | max yaw rate deg/s | speed err RMS m/s | real-time factor (plant) |"),
              "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         div = f"at {r['t_end_s']:.2f} s" if r["diverged"] else "no"

@@ -1,7 +1,8 @@
 """A minimal closed loop for the JSBSim F-22: seed section 4.3 SMC, the library's allocator, the plant.
 
-Until the loop for external plants lands, this module flies :class:`sim.plants.jsbsim.JSBSimPlant`
-on its own, so that ``alloc sim --plant jsbsim:f22`` can be wired to it.  Everything the
+This module flies :class:`sim.plants.jsbsim.JSBSimPlant` on its own (:func:`fly`); ``alloc sim --plant
+jsbsim:f22`` flies the same law (:meth:`SMCLoop.demand`, :meth:`SMCLoop.observe`) in the plant loop
+(:mod:`sim.plants.jsbsim_run`).  Everything the
 controller knows comes from the linearisation (the vehicle file
 :data:`sim.plants.jsbsim_linear.VEHICLE_FILE`, or one measured now):
 

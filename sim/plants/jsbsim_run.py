@@ -3,10 +3,10 @@
 The control law is :class:`sim.plants.jsbsim_loop.SMCLoop` (seed section 4.3 on the aircraft's
 linearisation, ``stability_margin`` 0.005 1/s, the observers fed the allocator's command as in the
 seed), its commands the 1 s + 1 s doublets of :func:`sim.plants.jsbsim_loop.doublets`, one frame per
-JSBSim step.  The allocator, the failure injection and the health modes (``blind``, ``told``) are the
+JSBSim step.  The allocator, the failure injection and the health modes (``blind``, ``told``, ``detected``) are the
 plant loop's, the same a RotorPy run flies, so the run returns a :class:`sim.result.SimResult` with the
-JSON summary every ``alloc sim`` prints.  ``--health detected`` is refused: the JSBSim plant does not give
-the detector its sensed response yet.  The vehicle is the aircraft's own file
+JSON summary every ``alloc sim`` prints.  ``--health detected`` runs the engine's detector and do-no-harm
+monitor on the plant's sensed response (:meth:`sim.plants.jsbsim.JSBSimPlant.sensed`), noise-free.  The vehicle is the aircraft's own file
 (:data:`JSBSIM_AIRCRAFT`) unless ``--vehicle`` names another linearisation of the same aircraft.
 """
 
@@ -91,9 +91,6 @@ def fly_jsbsim(source: Any, plant: str, flown: RunSettings, *, progress: bool = 
     if flown.turbulence != "none":
         raise SettingError("turbulence: --plant jsbsim flies JSBSim's still standard atmosphere (no world wind "
                            "wired into it)", field="turbulence")
-    if flown.health_mode == "detected":
-        raise SettingError("health: --plant jsbsim flies blind or told; the JSBSim plant gives the detector no "
-                           "sensed response yet", field="health")
     if flown.noise and flown.noise_scale != 1.0:
         raise SettingError("noise_scale: --plant jsbsim flies without sensor noise", field="noise_scale")
     frame = JSBSIM_DT if flown.frame_period is None else float(flown.frame_period)
@@ -101,6 +98,7 @@ def fly_jsbsim(source: Any, plant: str, flown: RunSettings, *, progress: bool = 
     vehicle_source = JSBSIM_AIRCRAFT[aircraft] if source is None else source
     loop = SMCLoop(vehicle_source, T=frame, method=DEFAULT_METHOD if flown.method is None else flown.method)
     fm = loop.fm
+    the_plant.free_response = np.asarray(loop.fv.model.arrays()[0], dtype=float)  # the design's model, for sensed()
     duration = DEFAULT_DURATION if flown.duration is None else float(flown.duration)
     method = loop.method
     method_options = vehicles.method_options(fm.source, method, flown.method_options)
@@ -123,7 +121,8 @@ def fly_jsbsim(source: Any, plant: str, flown: RunSettings, *, progress: bool = 
         timing=timing, scenario=fm.source.name,
         alloc_options={"rate_aware": flown.rate_aware, "preferred": flown.preferred,
                        "rate_horizon": flown.rate_horizon, "rate_window": flown.rate_window},
-        u_prev_source=flown.u_prev_source)
+        u_prev_source=flown.u_prev_source,
+        detection={"noise_scale": flown.noise_scale, "long_window": flown.detector_long_window})
     record = {**flown.record(), **result.settings}
     record.update(duration=duration, method=method, failure=None if failure is None else failure.name,
                   failure_time=None if failure is None else failure.time, frame_period=frame, dt=frame,
