@@ -110,6 +110,13 @@ def sim_command(
         None, "--forward-speed", metavar="M/S", help="--plant rotorpy only: ground speed due north held by the "
         "cascade's velocity loop, reached from the hover on a 1 m/s^2 ramp (0: hold the hover's zero speed); "
         "default: no velocity loop (a level hover that drifts)"),
+    schedule: list[str] = typer.Option(
+        [], "--schedule", metavar="NAME=START:END", help="a scheduled vehicle file's variable moving linearly from "
+        "START at t = 0 to END at the run's end (tilt=0:45); the linear plant and the allocator follow B(x) "
+        "(sim/plants/scheduled.py); repeatable"),
+    schedule_allocator: str = typer.Option(
+        "follow", "--schedule-allocator", help="with --schedule: the allocator rebuilt on B(x) every frame (follow) "
+        "or kept at the nominal B (frozen)"),
     force: bool = typer.Option(False, "--force", help="overwrite output files that exist"),
     list_: bool = typer.Option(False, "--list", callback=list_scenarios, is_eager=True, expose_value=False,
                                help="list the scenarios, their defaults and failures, and exit"),
@@ -145,6 +152,8 @@ def sim_command(
     if forward_speed is not None and plant != "rotorpy":
         raise typer.BadParameter("the velocity loop flies on --plant rotorpy only", param_hint="--forward-speed")
     runner = run if plant is None else _plant_run(plant, flown, scenario, run, forward_speed)
+    if schedule:
+        runner = _schedule_run(schedule, schedule_allocator, plant, flown, scenario)
     if design and isinstance(flown, str):
         raise typer.BadParameter(f"{scenario} flies the seed's own design; --design is for a vehicle file's "
                                  "auto-design", param_hint="--design")
@@ -202,6 +211,30 @@ def sim_command(
     if result.diverged:
         typer.echo(f"diverged at t = {result.duration:.3f} s", err=True)
         raise typer.Exit(EXIT_DIVERGED)
+
+
+def _schedule_run(schedule: list[str], allocator: str, plant: str | None, flown: Any, scenario: str) -> Any:
+    """The runner of ``--schedule`` (:func:`sim.plants.scheduled.fly_scheduled`); usage errors name the flag."""
+    from sim.plants.scheduled import ALLOCATOR_MODES, fly_scheduled, parse_schedule
+
+    if plant not in (None, "linear"):
+        raise typer.BadParameter(f"--plant {plant} does not follow a schedule; the linear plant does",
+                                 param_hint="--schedule")
+    if isinstance(flown, str):
+        raise typer.BadParameter(f"{scenario} flies its own model; --schedule moves a vehicle file's [schedule]",
+                                 param_hint="--schedule")
+    if allocator not in ALLOCATOR_MODES:
+        raise typer.BadParameter(f"{allocator!r}; expected one of {', '.join(ALLOCATOR_MODES)}",
+                                 param_hint="--schedule-allocator")
+    try:
+        parse_schedule(schedule, flown.vehicle)  # checked before the run
+    except AllocError as exc:
+        raise typer.BadParameter(str(exc), param_hint="--schedule") from None
+
+    def scheduled(progress: bool = False, **options: Any) -> Any:
+        return fly_scheduled(flown.vehicle, schedule, allocator=allocator, progress=progress, **options)
+
+    return scheduled
 
 
 def _aircraft_file(plant: str) -> str:
