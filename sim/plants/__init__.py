@@ -35,7 +35,8 @@ from sim.plants.rotorpy import DEFAULT_STEP  # rotorpy itself is imported when a
 from sim.result import SimResult
 from sim.settings import RunSettings, SettingError
 
-__all__ = ["PLANTS", "DEFAULT_PLANT", "ROTORPY_FRAME", "check_plant", "fly_on_plant", "rotorpy_plant"]
+__all__ = ["PLANTS", "DEFAULT_PLANT", "ROTORPY_FRAME", "check_plant", "fly_on_plant", "flown_settings",
+           "rotorpy_plant"]
 
 #: the plants by ``--plant`` name, with what each is
 PLANTS = {
@@ -99,19 +100,16 @@ def fly_on_plant(source: Any, plant: str, settings: RunSettings | None = None, *
         raise SettingError(f"forward_speed: --plant {plant} flies no velocity loop; --forward-speed is for "
                            "--plant rotorpy", field="forward_speed")
     if plant.startswith("jsbsim:"):
-        from sim.plants.jsbsim_run import flown_settings, fly_jsbsim
+        from sim.plants.jsbsim_run import fly_jsbsim
 
-        return fly_jsbsim(source, plant, flown_settings(settings, options, plant), progress=progress)
+        return fly_jsbsim(source, plant, flown_settings(settings, options, f"--plant {plant}"), progress=progress)
     if plant == "linear":
         from sim.user_vehicle import fly
 
         result = fly(source, settings, progress=progress, **options)
         result.settings["plant"] = {"name": "linear", "source": PLANTS["linear"]}
         return result
-    given, extra = RunSettings.split(options)
-    if extra:
-        raise TypeError(f"{sorted(extra)[0]}: not a run setting of a --plant {plant} run")
-    flown = given if settings is None else replace(settings, **options)
+    flown = flown_settings(settings, options, f"--plant {plant}")
     fv = vehicles.get_vehicle(source)
     if fv.simulation is not None:
         raise SettingError(f"plant: {fv.name!r} flies its own [simulation] design on its linear model; "
@@ -168,6 +166,15 @@ def _speed(value: Any) -> float:
         raise SettingError(f"forward_speed: expected m/s within +-{MAX_FORWARD_SPEED:g}, got {value!r}",
                            field="forward_speed")
     return float(value)
+
+
+def flown_settings(settings: RunSettings | None, options: dict[str, Any], run: str) -> RunSettings:
+    """The run settings of a ``run`` (``"--plant rotorpy"``) from ``settings`` and keyword ``options``;
+    TypeError naming a stray option."""
+    given, extra = RunSettings.split(options)
+    if extra:
+        raise TypeError(f"{min(extra)}: not a run setting of a {run} run")
+    return given if settings is None else replace(settings, **options)
 
 
 def _refuse_unflown(flown: RunSettings) -> None:

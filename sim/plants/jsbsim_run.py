@@ -12,7 +12,6 @@ monitor on the plant's sensed response (:meth:`sim.plants.jsbsim.JSBSimPlant.sen
 
 from __future__ import annotations
 
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -131,11 +130,3 @@ def fly_jsbsim(source: Any, plant: str, flown: RunSettings, *, progress: bool = 
                   timing=timing)
     result.settings = record
     return result
-
-
-def flown_settings(settings: RunSettings | None, options: dict[str, Any], plant: str) -> RunSettings:
-    """The run settings of a JSBSim run from ``settings`` and keyword ``options``; TypeError for a stray one."""
-    given, extra = RunSettings.split(options)
-    if extra:
-        raise TypeError(f"{min(extra)}: not a run setting of a --plant {plant} run")
-    return given if settings is None else replace(settings, **options)

@@ -161,16 +161,14 @@ def fly_scheduled(source: Any, schedule: list[str], settings: RunSettings | None
     from alloc.registry import DEFAULT_METHOD
     from sim.plant_control import EngineController
     from sim.plant_loop import fly_plant
+    from sim.plants import flown_settings
     from sim.settings import LoopSpec
     from sim.user_vehicle import DEFAULT_DURATION, DEFAULT_FAILURE_TIME, flight_model
 
     if allocator not in ALLOCATOR_MODES:
         raise SettingError(f"schedule_allocator: {allocator!r}; expected one of {', '.join(ALLOCATOR_MODES)}",
                            field="schedule_allocator")
-    given, extra = RunSettings.split(options)
-    if extra:
-        raise TypeError(f"{min(extra)}: not a run setting of a scheduled run")
-    flown = given if settings is None else replace(settings, **options)
+    flown = flown_settings(settings, options, "--schedule")
     if flown.health_mode == "detected":
         raise SettingError("health: a scheduled run flies blind or told (the detector's model is the nominal one)",
                            field="health")
