@@ -17,7 +17,8 @@ without one is refused in one line (no plant to fly).  The scenario's vehicle's 
 (:func:`sim.scenarios.mimo.run_mimo`).
 
 ``--plant rotorpy`` flies a multirotor vehicle file with a ``[body]`` on RotorPy's nonlinear physics
-instead of its linear model (:mod:`sim.plants`); ``--plant linear`` is the default, recorded.
+instead of its linear model (:mod:`sim.plants`); ``--plant jsbsim:f22`` flies JSBSim's F-22 (its own
+vehicle file unless ``--vehicle`` names one); ``--plant linear`` is the default, recorded.
 
 Registered as the entry point ``sim`` of the group ``alloc.commands`` (``pyproject.toml``).
 
@@ -130,7 +131,19 @@ def sim_command(
     plot_path: Optional[Path] = typer.Option(None, "--plot", help="write a PNG plot to this new file"),
     plant: Optional[str] = typer.Option(
         None, "--plant", metavar="NAME", help="the plant flown: linear (default: the vehicle's linear model in the "
-        "compiled engine) or rotorpy (RotorPy's nonlinear multirotor, a vehicle file with [body]; sim/plants)"),
+        "compiled engine), rotorpy (RotorPy's nonlinear multirotor, a vehicle file with [body]) or jsbsim:f22 "
+        "(JSBSim's F-22; no --vehicle needed); sim/plants"),
+    forward_speed: Optional[float] = typer.Option(
+        None, "--forward-speed", metavar="M/S", help="--plant rotorpy only: ground speed due north held by the "
+        "cascade's velocity loop, reached from the hover on a 1 m/s^2 ramp (0: hold the hover's zero speed); "
+        "default: no velocity loop (a level hover that drifts)"),
+    schedule: list[str] = typer.Option(
+        [], "--schedule", metavar="NAME=START:END", help="a scheduled vehicle file's variable moving linearly from "
+        "START at t = 0 to END at the run's end (tilt=0:45); the linear plant and the allocator follow B(x) "
+        "(sim/plants/scheduled.py); repeatable"),
+    schedule_allocator: str = typer.Option(
+        "follow", "--schedule-allocator", help="with --schedule: the allocator rebuilt on B(x) every frame (follow) "
+        "or kept at the nominal B (frozen)"),
     force: bool = typer.Option(False, "--force", help="overwrite output files that exist"),
     list_: bool = typer.Option(False, "--list", callback=list_scenarios, is_eager=True, expose_value=False,
                                help="list the scenarios, their defaults and failures, and exit"),
@@ -150,6 +163,8 @@ def sim_command(
     """
     settings = dict(settings or {})
     failure, duration, failure_time = (settings.get(k) for k in ("failure", "duration", "failure_time"))
+    if scenario is None and vehicle is None and plant is not None and plant.startswith("jsbsim:"):
+        vehicle = _aircraft_file(plant)  # a JSBSim aircraft flies its own linearisation's design
     if (scenario is None) == (vehicle is None):
         raise typer.BadParameter("give a SCENARIO or --vehicle NAME|FILE (one of them)", param_hint="SCENARIO/--vehicle")
     flown = scenario_of_vehicle(vehicle) if vehicle is not None else scenario
@@ -161,7 +176,11 @@ def sim_command(
             raise typer.BadParameter(str(exc.args[0]), param_hint="SCENARIO") from None
     else:  # a vehicle file's model, the seed's section 4.3 design (sim.user_vehicle)
         run, scenario = flown, flown.name
-    runner = run if plant is None else _plant_run(plant, flown, scenario, run)
+    if forward_speed is not None and plant != "rotorpy":
+        raise typer.BadParameter("the velocity loop flies on --plant rotorpy only", param_hint="--forward-speed")
+    runner = run if plant is None else _plant_run(plant, flown, scenario, run, forward_speed)
+    if schedule:
+        runner = _schedule_run(schedule, schedule_allocator, plant, flown, scenario)
     if design and isinstance(flown, str):
         raise typer.BadParameter(f"{scenario} flies the seed's own design; --design is for a vehicle file's "
                                  "auto-design", param_hint="--design")
@@ -190,7 +209,7 @@ def sim_command(
     except AllocError as exc:  # a setting (sim.settings.SettingError), the method and its options
         hint = flag_of(exc.field) if exc.field in _SETTING_NAMES else "--method"
         if plant not in (None, "linear") and exc.field not in _SETTING_NAMES:  # what the plant cannot fly
-            hint = "--plant"
+            hint = "--forward-speed" if exc.field == "forward_speed" else "--plant"
         raise typer.BadParameter(str(exc), param_hint=hint) from None
     except TypeError as exc:
         raise typer.BadParameter(f"scenario {scenario!r} does not take this option: {exc}") from None
@@ -220,7 +239,41 @@ def sim_command(
         raise typer.Exit(EXIT_DIVERGED)
 
 
-def _plant_run(plant: str, flown: Any, scenario: str, run: Any) -> Any:
+def _schedule_run(schedule: list[str], allocator: str, plant: str | None, flown: Any, scenario: str) -> Any:
+    """The runner of ``--schedule`` (:func:`sim.plants.scheduled.fly_scheduled`); usage errors name the flag."""
+    from sim.plants.scheduled import ALLOCATOR_MODES, fly_scheduled, parse_schedule
+
+    if plant not in (None, "linear"):
+        raise typer.BadParameter(f"--plant {plant} does not follow a schedule; the linear plant does",
+                                 param_hint="--schedule")
+    if isinstance(flown, str):
+        raise typer.BadParameter(f"{scenario} flies its own model; --schedule moves a vehicle file's [schedule]",
+                                 param_hint="--schedule")
+    if allocator not in ALLOCATOR_MODES:
+        raise typer.BadParameter(f"{allocator!r}; expected one of {', '.join(ALLOCATOR_MODES)}",
+                                 param_hint="--schedule-allocator")
+    try:
+        parse_schedule(schedule, flown.vehicle)  # checked before the run
+    except AllocError as exc:
+        raise typer.BadParameter(str(exc), param_hint="--schedule") from None
+
+    def scheduled(progress: bool = False, **options: Any) -> Any:
+        return fly_scheduled(flown.vehicle, schedule, allocator=allocator, progress=progress, **options)
+
+    return scheduled
+
+
+def _aircraft_file(plant: str) -> str:
+    """The vehicle file of ``--plant jsbsim:AIRCRAFT``; a one-line usage error naming ``--plant`` otherwise."""
+    from sim.plants.jsbsim_run import JSBSIM_AIRCRAFT, aircraft_of
+
+    try:
+        return str(JSBSIM_AIRCRAFT[aircraft_of(plant)])
+    except AllocError as exc:
+        raise typer.BadParameter(str(exc), param_hint="--plant") from None
+
+
+def _plant_run(plant: str, flown: Any, scenario: str, run: Any, forward_speed: float | None = None) -> Any:
     """The runner of ``--plant``: the scenario's own for ``linear`` (its result records the plant), else
     :func:`sim.plants.fly_on_plant` on the vehicle file; a one-line usage error naming ``--plant``."""
     from sim.plants import check_plant, fly_on_plant
@@ -240,7 +293,8 @@ def _plant_run(plant: str, flown: Any, scenario: str, run: Any) -> Any:
                                  "multirotor vehicle file with a [body] (--vehicle FILE)", param_hint="--plant")
 
     def on_plant(progress: bool = False, **options: Any) -> Any:
-        return fly_on_plant(flown.vehicle, plant, progress=progress, **options)
+        speed = {} if forward_speed is None else {"forward_speed": forward_speed}
+        return fly_on_plant(flown.vehicle, plant, progress=progress, **speed, **options)
 
     return on_plant
 

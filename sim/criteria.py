@@ -54,7 +54,8 @@ if TYPE_CHECKING:
 
 __all__ = [
     "Limit", "AxisLimits", "ScenarioCriteria", "Verdict", "CRITERIA", "criteria_for", "evaluate", "verdict_of",
-    "use_scenario", "tracking_metrics", "failed_effectors", "known_failed_effectors", "register_failure_source",
+    "use_scenario", "demand_criteria", "tracking_metrics", "failed_effectors", "known_failed_effectors",
+    "register_failure_source",
     "OUT_OF_COMMAND",
     "SATURATION_RULE",
     "back_in_band_time", "free_parameters", "PHASES", "RECOVERY_HOLD_S", "RECOVERY_MAX_S",
@@ -248,6 +249,14 @@ def _harv_latdir(scenario: Any) -> ScenarioCriteria:
         _sideslip("beta"),
         _demand_limits("ps", np.gradient(phi_c, t), "the bank-angle command's rate (deg/s; seed section 4.6, xi = 6)"),
     ))
+
+
+def demand_criteria(scenario: str, demands: dict[str, tuple[np.ndarray, str]]) -> ScenarioCriteria:
+    """The table of a loop without a seed scenario: per channel, RMS and peak error limits as the same
+    fractions of its demand (``demands[channel] = (demand samples, what they are)``), the common recovery
+    and saturation limits.  Used for a plant's own loop (``benchmarks/bench_f22_failures.py``)."""
+    return _common(scenario, tuple(_demand_limits(c, np.asarray(d, dtype=float), what)
+                                   for c, (d, what) in demands.items()))
 
 
 #: the per-scenario tables, by scenario name: each built from the scenario's own commands and

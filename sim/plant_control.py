@@ -26,7 +26,7 @@ from alloc.exceptions import ProblemError
 from alloc.result import EXACT_RTOL
 from sim.settings import LoopSpec, anti_windup_on
 
-__all__ = ["EngineController", "CascadeController", "CascadeGains", "GRAVITY"]
+__all__ = ["EngineController", "CascadeController", "CascadeGains", "VelocityHold", "GRAVITY"]
 
 GRAVITY = 9.81
 
@@ -141,6 +141,34 @@ class CascadeGains:
         return cls(attitude_p=0.5 * rate_p, rate_p=rate_p, rate_i=1.5 * rate_p)
 
 
+@dataclass(frozen=True)
+class VelocityHold:
+    """A horizontal velocity loop above the cascade's attitude loop (PX4's velocity PI, no position loop).
+
+    The reference is a ground speed ``speed`` m/s due north, reached from the hover on a ramp of ``accel``
+    m/s^2, and zero east.  The loop's acceleration ``a = p e + i int(e) + the ramp's acceleration`` (NED) is
+    turned into the heading frame by the measured heading (yaw may be given up) and into attitude
+    set-points ``theta_d = -atan(a_x / g)``, ``phi_d = atan(a_y cos(theta_d) / g)``, the tilt held to
+    ``tilt_max_deg``.  Gains are PX4's ``MPC_XY_VEL_P_ACC`` 1.8 /s and ``MPC_XY_VEL_I_ACC`` 0.4 /s^2; the ramp
+    (PX4's ``MPC_ACC_HOR`` is 3 m/s^2) and the tilt limit (PX4's ``MPC_TILTMAX_AIR`` is 45 deg) are this
+    loop's own choices, gentler than PX4's.  The speed comes from the plant's state (``v_north_mps``,
+    ``v_east_mps``), as a navigation filter's would, without noise; with this loop the altitude and
+    vertical-speed loops read the down speed (``climb_mps``) instead of body ``w``.
+    """
+
+    speed: float = 0.0          #: m/s, ground speed held due north after the ramp (0: hold the hover)
+    accel: float = 1.0          #: m/s^2, the ramp from the hover to ``speed``
+    p: float = 1.8              #: 1/s, acceleration per velocity error
+    i: float = 0.4              #: 1/s^2
+    tilt_max_deg: float = 35.0  #: deg, the largest tilt the loop asks for
+
+    def reference(self, t: float) -> tuple[float, float]:
+        """``(v_north, a_north)`` of the ramp at ``t`` s."""
+        if self.accel <= 0 or abs(self.speed) <= self.accel * t:
+            return self.speed, 0.0
+        return float(np.sign(self.speed)) * self.accel * t, float(np.sign(self.speed)) * self.accel
+
+
 #: the outputs the cascade reads, by name
 CASCADE_OUTPUTS = ("phi", "theta", "psi", "p", "q", "r", "w")
 #: the wrench components of the four axes it commands, in the order of ``v``
@@ -161,7 +189,8 @@ class CascadeController:
         The frame period (s): the integrators' step.
     """
 
-    def __init__(self, fv: Any, vehicle: Any, gains: CascadeGains, dt: float) -> None:
+    def __init__(self, fv: Any, vehicle: Any, gains: CascadeGains, dt: float,
+                 velocity: VelocityHold | None = None) -> None:
         if fv.body is None:
             raise ProblemError(f"body: the cascade controller scales its gains by the [body]'s inertia and mass; "
                                f"{fv.name!r} has no [body]", field="body")
@@ -181,9 +210,14 @@ class CascadeController:
         self.mass = fv.body.mass
         self.gains = gains
         self.dt = float(dt)
+        self.velocity = velocity
         self.reset()
 
     def reset(self) -> None:
+        self.velocity_integral = np.zeros(2)
+        #: per frame: roll and pitch set-points (rad) and the north speed reference (m/s); zeros without a
+        #: velocity loop (the level hover)
+        self.setpoints: list[tuple[float, float, float]] = []
         self.rate_integral = np.zeros(2)
         self.climb_integral = 0.0
         self.altitude = 0.0  # the controller's own estimate: minus the integral of w (level hover)
@@ -199,8 +233,15 @@ class CascadeController:
         phi, theta, psi = z[i["phi"]], z[i["theta"]], z[i["psi"]]
         rates = np.array([z[i["p"]], z[i["q"]], z[i["r"]]])
         w = z[i["w"]]
-        # attitude P (references: level, heading 0) -> body-rate commands
-        rate_cmd = np.array([g.attitude_p * -phi, g.attitude_p * -theta, g.yaw_p * -_wrap(psi)])
+        phi_d, theta_d, v_ref = 0.0, 0.0, 0.0
+        if self.velocity is not None:
+            phi_d, theta_d, v_ref = self._attitude_setpoint(step, psi, plant)
+            # in forward flight body w carries the forward speed through the pitch: the vertical loops take
+            # the navigation's down speed instead (in a level hover the two are the same)
+            w = -plant.state()["climb_mps"]
+        self.setpoints.append((phi_d, theta_d, v_ref))
+        # attitude P (references: level or the velocity loop's, heading 0) -> body-rate commands
+        rate_cmd = np.array([g.attitude_p * (phi_d - phi), g.attitude_p * (theta_d - theta), g.yaw_p * -_wrap(psi)])
         err = rate_cmd - rates
         self._rate_error = err[:2]
         alpha = np.array([g.rate_p * err[0] + g.rate_i * self.rate_integral[0],
@@ -221,6 +262,25 @@ class CascadeController:
         self.altitude -= w * self.dt
         return self._v
 
+    def _attitude_setpoint(self, step: int, psi: float, plant: Any) -> tuple[float, float, float]:
+        """The velocity loop (:class:`VelocityHold`): roll and pitch set-points (rad) and the speed reference."""
+        hold = self.velocity
+        st = plant.state()
+        v_ref, a_ref = hold.reference(step * self.dt)
+        err = np.array([v_ref - st["v_north_mps"], -st["v_east_mps"]])
+        a_ned = hold.p * err + hold.i * self.velocity_integral + np.array([a_ref, 0.0])
+        c, s = np.cos(psi), np.sin(psi)
+        a_x, a_y = c * a_ned[0] + s * a_ned[1], -s * a_ned[0] + c * a_ned[1]
+        a_max = GRAVITY * np.tan(np.radians(hold.tilt_max_deg))
+        norm = np.hypot(a_x, a_y)
+        if norm > a_max:  # the tilt limit; the integral stops while it binds
+            a_x, a_y = a_x * a_max / norm, a_y * a_max / norm
+        else:
+            self.velocity_integral += self.dt * err
+        theta_d = -np.arctan(a_x / GRAVITY)
+        phi_d = np.arctan(a_y * np.cos(theta_d) / GRAVITY)
+        return float(phi_d), float(theta_d), float(v_ref)
+
     def _channel_order(self) -> np.ndarray:
         names = ("p", "q", "r", "w")
         return np.array([names.index(c) for c in self.channels])
@@ -237,7 +297,9 @@ class CascadeController:
 
     def describe(self) -> dict[str, Any]:
         return {"name": "cascade", "gains": asdict(self.gains), "mass": self.mass, "inertia": self.J.tolist(),
-                "source": "sim.plant_control.CascadeController: attitude P, rate PI, vertical-speed PI, altitude P"}
+                "velocity": None if self.velocity is None else asdict(self.velocity),
+                "source": "sim.plant_control.CascadeController: attitude P, rate PI, vertical-speed PI, altitude P"
+                          + ("" if self.velocity is None else ", velocity PI (VelocityHold)")}
 
 
 def _wrap(angle: float) -> float:

@@ -47,6 +47,7 @@ def fly_plant(
     alloc_options: dict[str, Any] | None = None, u_prev_source: str = "command", seed: int = 0,
     record_state: tuple[str, ...] = (), scenario: str | None = None, timing: dict[str, float] | None = None,
     output_limits: np.ndarray | None = None, detection: dict[str, Any] | None = None,
+    vehicle_at: Any = None,
 ) -> SimResult:
     """Fly ``controller`` + the allocator of ``method`` against ``plant`` for ``duration`` seconds.
 
@@ -75,7 +76,13 @@ def fly_plant(
         plant's :meth:`~sim.plant.Plant.sensed` state derivative.
     timing : dict or None
         Filled with ``wall_s`` (the loop's wall time) and ``plant_s`` (inside ``plant.step``).
+    vehicle_at : callable or None
+        ``t -> Vehicle``: the allocator is rebuilt every frame on the vehicle at the frame's time (a
+        scheduled effectiveness, :mod:`sim.plants.scheduled`), told of the failure as executed when
+        ``health`` is ``told``; None: one allocator, rebuilt only at a failure or a belief.
     """
+    if vehicle_at is not None and health == "detected":
+        raise SettingError("health: a loop whose vehicle moves (vehicle_at) flies blind or told", field="health")
     if health not in PLANT_HEALTH_MODES:
         raise SettingError(f"health: {health!r}; the plant loop flies {', '.join(PLANT_HEALTH_MODES)}",
                            field="health")
@@ -112,8 +119,9 @@ def fly_plant(
     clock = time.perf_counter
     start = clock()
     watch = None if health != "detected" else _Watch(plant, vehicle, dt, n_steps, noise, alloc_kw, detection)
+    told: Failure | None = None  # the failure as executed, once a told allocator has heard of it
     if fail_step == 0:
-        allocator = _inject(plant, failure, vehicle, method, options, alloc_kw, health, allocator, first_call=0)
+        allocator, told = _inject(plant, failure, vehicle, method, options, alloc_kw, health, allocator, first_call=0)
     for step in range(n_steps + 1):
         z = y if noise is None else y + noise[step]
         yc = y[controlled]
@@ -124,6 +132,9 @@ def fly_plant(
         if step % frame == 0:
             if watch is not None and watch.due(step):
                 allocator = watch.rebuild(step, u_cmd, method, options, first_call=step // frame)
+            if vehicle_at is not None:
+                allocator = build_allocator(vehicle_at(step * dt), method, options, failure=told,
+                                            first_call=step // frame, **alloc_kw)
             v = controller.demand(step, z, plant)
             u_prev = plant.positions() if u_prev_source == "position" else u_cmd
             u_cmd, v_achieved, call_status[step // frame] = allocator(v, u_prev, tframe)
@@ -147,8 +158,8 @@ def fly_plant(
         if watch is not None:
             watch.detector.step_model(u_cmd)
         if step == fail_step - 1:  # the engine's order: injected before the next step's outputs are read
-            allocator = _inject(plant, failure, vehicle, method, options, alloc_kw, health, allocator,
-                                first_call=-(-fail_step // frame))
+            allocator, told = _inject(plant, failure, vehicle, method, options, alloc_kw, health, allocator,
+                                      first_call=-(-fail_step // frame))
         if watch is not None and watch.detector.due(step + 1):
             z_next = y if noise is None else y + noise[step + 1]
             watch.sample(step + 1, frame, controller.reference - z_next[controlled],
@@ -184,15 +195,17 @@ def fly_plant(
 
 
 def _inject(plant: Any, failure: Failure, vehicle: Vehicle, method: str, options: dict[str, Any],
-            alloc_kw: dict[str, Any], health: str, allocator: LoopAllocator, *, first_call: int) -> LoopAllocator:
-    """Fail the plant's actuators; a told allocator is rebuilt on the failure as the plant executed it."""
+            alloc_kw: dict[str, Any], health: str, allocator: LoopAllocator, *, first_call: int,
+            ) -> tuple[LoopAllocator, Failure | None]:
+    """Fail the plant's actuators; a told allocator is rebuilt on the failure as the plant executed it
+    (returned too: what the allocator was told)."""
     before = len(plant.executed())
     for f in failure.actuators:
         plant.fail(f.index, f.kind, dict(f.params))
     if health != "told":
-        return allocator
+        return allocator, None
     injected = replace(failure, actuators=tuple(plant.executed()[before:]))
-    return build_allocator(vehicle, method, options, failure=injected, first_call=first_call, **alloc_kw)
+    return build_allocator(vehicle, method, options, failure=injected, first_call=first_call, **alloc_kw), injected
 
 
 class _Watch:

@@ -336,6 +336,9 @@ def closedloop(vehicle: str = typer.Option(..., "--vehicle", metavar="NAME|FILE"
                duration: float = typer.Option(8.0, "--duration", parser=finite(0.0, 3600.0, low_open=True, unit=" s"),
                                               help="simulated seconds per run"),
                seed: int = typer.Option(0, "--seed", min=0, max=2**32 - 1, help="noise seed"),
+               plant: str = typer.Option("linear", "--plant", metavar="NAME", help="the plant flown: linear (the "
+                                         "model, compiled engine), rotorpy or jsbsim:f22 (sim/plants; alloc sim "
+                                         "--plant)"),
                as_json: bool = typer.Option(False, "--json", help="print the rows as JSON")) -> None:
     """Closed-loop comparison of methods on a vehicle file's model, blind and told (the sweep's rows; nothing written)."""
     import alloc
@@ -346,6 +349,12 @@ def closedloop(vehicle: str = typer.Option(..., "--vehicle", metavar="NAME|FILE"
     from .closedloop import run_closed
     from .sweep import closed_spec
 
+    from sim.plants import check_plant
+
+    try:
+        check_plant(plant)
+    except alloc.AllocError as exc:
+        raise typer.BadParameter(str(exc), param_hint="--plant") from None
     v = load_vehicle_option(vehicle)
     if failure_time >= duration:
         raise typer.BadParameter(f"{failure_time:g} s is not before the end of the run ({duration:g} s)",
@@ -355,7 +364,10 @@ def closedloop(vehicle: str = typer.Option(..., "--vehicle", metavar="NAME|FILE"
     except alloc.AllocError as exc:
         raise typer.BadParameter(f"unknown failure {failure!r} for {v.name}: {exc}", param_hint="--failure") from None
     if v.simulation is None:
-        vehicle_failure(flight_model(v), failure, failure_time)  # against the trimmed model's limits
+        design = None
+        if plant.startswith("jsbsim:"):  # the aircraft's loop is designed with its stated option
+            from sim.plants.jsbsim_loop import DESIGN_OPTIONS as design
+        vehicle_failure(flight_model(v, design=design), failure, failure_time)  # against the trimmed model's limits
     names: list[str] = []
     for m in method or alloc.methods():
         if m == STATIC:  # the loop's fixed pseudo-inverse, no registry method (sim.allocation)
@@ -373,15 +385,20 @@ def closedloop(vehicle: str = typer.Option(..., "--vehicle", metavar="NAME|FILE"
     for m in names:
         for told in (False, True):
             spec = {**closed_spec(v.name, failure, m, told=told, seed=seed, duration=duration,
-                                  failure_time=failure_time), "vehicle": vehicle}
-            rows.append(run_closed(spec)[0])
+                                  failure_time=failure_time), "vehicle": vehicle, "plant": plant}
+            try:
+                rows.append(run_closed(spec)[0])
+            except alloc.AllocError as exc:  # what the plant cannot fly (a vehicle without [body], a kind)
+                if plant == "linear":
+                    raise
+                raise typer.BadParameter(str(exc), param_hint="--plant") from None
     if as_json:
         typer.echo(json.dumps(rows, indent=2))
         return
     channels = [c[: -len("_rms_after")] for c in rows[0] if c.endswith("_rms_after")] if rows else []
     columns = [*_CLOSED_COLUMNS, *(f"{c}_{w}" for c in channels for w in ("rms_before", "rms_after"))]
-    typer.echo(f"{v.name}: failure {failure} at {failure_time:g} s, {duration:g} s runs, seed {seed}; tracking "
-               "errors in the model's output units")
+    typer.echo(f"{v.name}: failure {failure} at {failure_time:g} s, {duration:g} s runs, seed {seed}, plant {plant}; "
+               "tracking errors in the model's output units")
     typer.echo("| " + " | ".join(columns) + " |")
     typer.echo("|" + "---|" * len(columns))
     for r in rows:

@@ -62,7 +62,15 @@ def simulate_spec(spec: Spec) -> SimResult:
     A spec with a ``vehicle`` (a vehicle file or catalogue name with a ``[model]``) flies that
     model with the seed's section 4.3 auto-design (:func:`sim.user_vehicle.fly`, which merges
     the vehicle's method defaults); its failure is a name of :data:`sim.user_vehicle.FAILURE_SYNTAX`.
+    A spec with a ``plant`` other than ``linear`` flies :func:`sim.plants.fly_on_plant` (no sensor noise:
+    the plant loop's own).
     """
+    if spec.get("plant") not in (None, "linear"):  # a third-party plant (sim.plants), its own loop and commands
+        from sim.plants import fly_on_plant
+
+        return fly_on_plant(spec.get("vehicle"), spec["plant"], method=spec["method"], failure=spec["failure"],
+                            failure_time=spec["failure_time"], duration=spec["duration"], seed=spec["seed"],
+                            health=spec.get("health", "told" if spec["told"] else "blind"))
     if spec.get("vehicle") is not None:
         from sim.user_vehicle import fly
 

@@ -35,12 +35,14 @@ from sim.plants.rotorpy import DEFAULT_STEP  # rotorpy itself is imported when a
 from sim.result import SimResult
 from sim.settings import RunSettings, SettingError
 
-__all__ = ["PLANTS", "DEFAULT_PLANT", "ROTORPY_FRAME", "check_plant", "fly_on_plant", "rotorpy_plant"]
+__all__ = ["PLANTS", "DEFAULT_PLANT", "ROTORPY_FRAME", "check_plant", "fly_on_plant", "flown_settings",
+           "rotorpy_plant"]
 
 #: the plants by ``--plant`` name, with what each is
 PLANTS = {
     "linear": "the vehicle's linear model in the compiled engine (sim.engine)",
     "rotorpy": "RotorPy's nonlinear multirotor (rotorpy 3.0.0, the [plants] extra), any rotor count",
+    "jsbsim:f22": "JSBSim's F-22 (jsbsim 1.3.3, the [plants] extra), pass-through flight control, M0.7 at 20,000 ft",
 }
 DEFAULT_PLANT = "linear"
 #: s: the flight-control frame (and plant step) of a RotorPy run unless --frame-rate says otherwise
@@ -50,7 +52,8 @@ ROTORPY_FRAME = DEFAULT_STEP
 HOVER_LIMITS = {"phi": np.pi / 2, "theta": np.pi / 2, "psi": np.inf, "p": 20.0, "q": 20.0, "r": 60.0,
                 "u": np.inf, "v": np.inf, "w": 20.0}
 #: plant state recorded into result.extra on a RotorPy run
-RECORDED_STATE = ("altitude_m", "north_m", "east_m", "wind_north_mps", "wind_east_mps", "wind_down_mps")
+RECORDED_STATE = ("altitude_m", "north_m", "east_m", "v_north_mps", "v_east_mps", "wind_north_mps", "wind_east_mps",
+                  "wind_down_mps")
 
 
 def check_plant(name: Any) -> str:
@@ -74,29 +77,39 @@ def rotorpy_plant(fm: Any, *, dt_step: float, wind: np.ndarray | None = None) ->
 
 
 def fly_on_plant(source: Any, plant: str, settings: RunSettings | None = None, *, progress: bool = False,
-                 **options: Any) -> SimResult:
+                 forward_speed: float | None = None, **options: Any) -> SimResult:
     """Fly vehicle ``source`` (a file, a catalogue name or a vehicle) on ``plant`` (module docstring).
+
+    ``forward_speed`` (RotorPy only): m/s due north, held by the cascade's velocity loop
+    (:class:`sim.plant_control.VelocityHold`, its ramp and gains) from the hover on; 0 holds the hover's
+    zero ground speed; None (default) flies the cascade without a velocity loop (a level hover that drifts).
+    ``plant = "jsbsim:AIRCRAFT"`` flies :func:`sim.plants.jsbsim_run.fly_jsbsim`; ``source`` None is then the
+    aircraft's own vehicle file.
 
     ``settings`` / ``options``: :class:`sim.settings.RunSettings` (method, failure, failure_time, duration,
     health, frame_period, turbulence, seed ...).  ``result.settings["plant"]`` is the plant's ``describe()``.
     """
     from alloc import vehicles
     from alloc.registry import DEFAULT_METHOD
-    from sim.plant_control import CascadeController, CascadeGains
+    from sim.plant_control import CascadeController, CascadeGains, VelocityHold
     from sim.plant_loop import fly_plant
     from sim.user_vehicle import DEFAULT_DURATION, DEFAULT_FAILURE_TIME, flight_model
 
     check_plant(plant)
+    if forward_speed is not None and plant != "rotorpy":
+        raise SettingError(f"forward_speed: --plant {plant} flies no velocity loop; --forward-speed is for "
+                           "--plant rotorpy", field="forward_speed")
+    if plant.startswith("jsbsim:"):
+        from sim.plants.jsbsim_run import fly_jsbsim
+
+        return fly_jsbsim(source, plant, flown_settings(settings, options, f"--plant {plant}"), progress=progress)
     if plant == "linear":
         from sim.user_vehicle import fly
 
         result = fly(source, settings, progress=progress, **options)
         result.settings["plant"] = {"name": "linear", "source": PLANTS["linear"]}
         return result
-    given, extra = RunSettings.split(options)
-    if extra:
-        raise TypeError(f"{sorted(extra)[0]}: not a run setting of a --plant {plant} run")
-    flown = given if settings is None else replace(settings, **options)
+    flown = flown_settings(settings, options, f"--plant {plant}")
     fv = vehicles.get_vehicle(source)
     if fv.simulation is not None:
         raise SettingError(f"plant: {fv.name!r} flies its own [simulation] design on its linear model; "
@@ -117,7 +130,8 @@ def fly_on_plant(source: Any, plant: str, settings: RunSettings | None = None, *
     wind, world = _wind(fm, flown, n_steps + 1, frame)
     the_plant = rotorpy_plant(fm, dt_step=frame, wind=wind)
     tau = the_plant.params["tau_m"]
-    controller = CascadeController(fv, fm.vehicle, CascadeGains.for_motor_lag(tau), frame)
+    velocity = None if forward_speed is None else VelocityHold(speed=_speed(forward_speed))
+    controller = CascadeController(fv, fm.vehicle, CascadeGains.for_motor_lag(tau), frame, velocity=velocity)
     limits = np.array([HOVER_LIMITS.get(o, np.inf) for o in fm.vehicle.output_names])
     bound = np.array([HOVER_LIMITS[c] for c in fm.vehicle.channels])
     timing: dict[str, float] = {}
@@ -129,15 +143,38 @@ def fly_on_plant(source: Any, plant: str, settings: RunSettings | None = None, *
                            rate_window=flown.rate_window),
         u_prev_source=flown.u_prev_source, scenario=fv.name,
         detection=dict(noise_scale=flown.noise_scale, long_window=flown.detector_long_window))
+    setpoints = np.array(controller.setpoints[:len(result.t)]).reshape(-1, 3)
+    result.extra.update(phi_setpoint=setpoints[:, 0], theta_setpoint=setpoints[:, 1], v_north_ref=setpoints[:, 2])
     record = {**flown.record(), **result.settings}
     record.update(duration=duration, method=method, failure=None if failure is None else failure.name,
                   failure_time=None if failure is None else failure.time, frame_period=frame, dt=frame,
-                  noise=False, record_every=1, controller="cascade", units=_units(fm), trim_u=fm.trim_u.tolist(),
+                  noise=False, record_every=1, controller="cascade", forward_speed=forward_speed, units=_units(fm), trim_u=fm.trim_u.tolist(),
                   real_time_factor=timing["simulated_s"] / max(timing["wall_s"], 1e-9), timing=timing)
     if world is not None:
         record["world"] = world
     result.settings = record
     return result
+
+
+#: m/s: the largest --forward-speed (a multirotor past it needs a tilt the velocity loop does not ask for)
+MAX_FORWARD_SPEED = 20.0
+
+
+def _speed(value: Any) -> float:
+    """``--forward-speed`` checked: a finite number of m/s within +-:data:`MAX_FORWARD_SPEED`."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not abs(value) <= MAX_FORWARD_SPEED:
+        raise SettingError(f"forward_speed: expected m/s within +-{MAX_FORWARD_SPEED:g}, got {value!r}",
+                           field="forward_speed")
+    return float(value)
+
+
+def flown_settings(settings: RunSettings | None, options: dict[str, Any], run: str) -> RunSettings:
+    """The run settings of a ``run`` (``"--plant rotorpy"``) from ``settings`` and keyword ``options``;
+    TypeError naming a stray option."""
+    given, extra = RunSettings.split(options)
+    if extra:
+        raise TypeError(f"{min(extra)}: not a run setting of a {run} run")
+    return given if settings is None else replace(settings, **options)
 
 
 def _refuse_unflown(flown: RunSettings) -> None:

@@ -70,6 +70,9 @@ class JSBSimPlant:
             bw[k] = float(v)
         self.bandwidth = np.array([bw[e] for e in EFFECTORS])
         self.sim: F22 | None = None
+        #: the linear model's A (states x states) whose free response :meth:`sensed` takes away; None: the
+        #: vehicle file's, read when first needed
+        self.free_response: np.ndarray | None = None
         self._new_sim()
         self.source = (f"jsbsim {self._version()} aircraft/f22/f22.xml, pass-through flight control; trimmed "
                        f"M{self.condition.mach:g} at {self.condition.altitude_ft:g} ft (sim.plants.jsbsim_model)")
@@ -194,11 +197,19 @@ class JSBSimPlant:
         return self.lo.copy(), self.hi.copy()
 
     def sensed(self) -> np.ndarray:
-        """Not given yet: the in-loop detector's sensed response (``x' - A x``) needs the linear
-        model's state mapped from JSBSim's, which this plant does not do; a detected run on it is
-        refused here rather than fed a made-up signal."""
-        raise NotImplementedError("sensed: the JSBSim plant does not give the detector's response yet "
-                                  "(--health detected on --plant jsbsim)")
+        """``x' - A x`` in the vehicle file's states (:data:`~sim.plants.jsbsim_model.STATES`, deviations from
+        trim): JSBSim's own body accelerations of its last pass turned into the states' rates
+        (:func:`~sim.plants.jsbsim_model.state_rates`, what gyros, accelerometers and air data give), less the
+        free response of the linear model's ``A`` (:attr:`free_response`; default: the vehicle file's)."""
+        from sim.plants.jsbsim_model import state_rates
+
+        if self.free_response is None:
+            from alloc import vehicles
+            from sim.plants.jsbsim_linear import VEHICLE_FILE
+
+            self.free_response = np.asarray(vehicles.get_vehicle(VEHICLE_FILE).model.arrays()[0], dtype=float)
+        x = self.sim.state()
+        return state_rates(x, self.sim.accelerations()) - self.free_response @ (x - self.sim.trim_state)
 
     def _execute(self, effect: Effect, i: int, p: dict[str, float]) -> None:
         if effect in (Effect.HOLD, Effect.RUN_TO_STOP):

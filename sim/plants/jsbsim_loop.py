@@ -1,7 +1,8 @@
 """A minimal closed loop for the JSBSim F-22: seed section 4.3 SMC, the library's allocator, the plant.
 
-Until the loop for external plants lands, this module flies :class:`sim.plants.jsbsim.JSBSimPlant`
-on its own, so that ``alloc sim --plant jsbsim:f22`` can be wired to it.  Everything the
+This module flies :class:`sim.plants.jsbsim.JSBSimPlant` on its own (:func:`fly`); ``alloc sim --plant
+jsbsim:f22`` flies the same law (:meth:`SMCLoop.demand`, :meth:`SMCLoop.observe`) in the plant loop
+(:mod:`sim.plants.jsbsim_run`).  Everything the
 controller knows comes from the linearisation (the vehicle file
 :data:`sim.plants.jsbsim_linear.VEHICLE_FILE`, or one measured now):
 
@@ -125,6 +126,8 @@ class SMCLoop:
         self.xr = [np.zeros(Ad.shape[0]) for Ad, *_ in self.refs]
         self.integ = np.zeros(len(self.ctl))
         self.u = np.zeros(self.problem.m)
+        self.r = np.zeros(len(self.ctl))
+        self.u_c = np.zeros(len(self.ctl))
 
     def tell(self, effector: str, kind: str, params: dict[str, float]) -> None:
         """Rebuild the allocator on the problem with this failure's health (a told allocator)."""
@@ -138,10 +141,9 @@ class SMCLoop:
         _, health = apply_event(self.problem, {}, FailureEvent(effector, kind, **params))
         self.allocator = alloc.make_allocator(self.problem.with_health(health), self.method)
 
-    def step(self, y: np.ndarray, command: np.ndarray, positions: np.ndarray | None = None,
-             ) -> tuple[np.ndarray, np.ndarray, str]:
-        """One frame: outputs ``y``, channel commands and (``observer_input="position"``) the effector
-        positions in; effector commands, ``v`` and the allocator's status out."""
+    def demand(self, y: np.ndarray, command: np.ndarray) -> np.ndarray:
+        """A frame's control law up to the allocator: reference models, boundary-layer SMC (seed Eq 4.8) on the
+        observers' estimates, the integral (frozen where saturated); returns ``v = demand_map u_c``."""
         r = np.empty(len(self.refs))
         for i, (Ad, Bd, c, d) in enumerate(self.refs):
             r[i] = float((c @ self.xr[i])[0] + d[0, 0] * command[i])
@@ -149,11 +151,13 @@ class SMCLoop:
         e = np.array([r[i] - self.xh[i][self.ctl[i]] for i in range(len(self.ctl))])
         sigma = self.K0 * e + self.Km1 * self.integ
         inside = np.abs(sigma) < self.eps
-        u_c = self.rho * np.clip(sigma / self.eps, -1.0, 1.0)
+        self.u_c = self.rho * np.clip(sigma / self.eps, -1.0, 1.0)
         self.integ += np.where(inside, e, 0.0) * self.T
-        v = self.demand_map @ u_c
-        res = self.allocator(v, u_prev=self.u, dt=self.T)
-        u = np.asarray(res.u, dtype=float)
+        self.r = r
+        return self.demand_map @ self.u_c
+
+    def observe(self, u: np.ndarray, y: np.ndarray, positions: np.ndarray | None = None) -> None:
+        """A frame's observer update on the effector input (the command, or ``positions``) and outputs ``y``."""
         if self.observer_input == "position":
             if positions is None:
                 raise AllocError("positions: observer_input='position' needs the plant's positions", field="positions")
@@ -163,6 +167,15 @@ class SMCLoop:
         for i, (Ad, Bd) in enumerate(self.obs):
             self.xh[i] = Ad @ self.xh[i] + Bd @ w
         self.u = u
+
+    def step(self, y: np.ndarray, command: np.ndarray, positions: np.ndarray | None = None,
+             ) -> tuple[np.ndarray, np.ndarray, str]:
+        """One frame: outputs ``y``, channel commands and (``observer_input="position"``) the effector
+        positions in; effector commands, ``v`` and the allocator's status out."""
+        v = self.demand(y, command)
+        res = self.allocator(v, u_prev=self.u, dt=self.T)
+        u = np.asarray(res.u, dtype=float)
+        self.observe(u, y, positions)
         return u, v, str(res.status.value)
 
 

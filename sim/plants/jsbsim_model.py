@@ -392,18 +392,25 @@ class F22:
         """
         self.set_positions(positions)
         self.set_state(x)
-        acc = self.settle()
-        vt, alpha, _, theta, beta, _, _, phi = x
-        a, b = math.radians(alpha), math.radians(beta)
-        V = vt / FT
-        u, v, w = V * math.cos(a) * math.cos(b), V * math.sin(b), V * math.sin(a) * math.cos(b)
-        ud, vd, wd = acc[:3]
-        vt_dot = (u * ud + v * vd + w * wd) / V
-        alpha_dot = (u * wd - w * ud) / (u * u + w * w)
-        beta_dot = (vd * V - v * vt_dot) / (V * V * math.cos(b))
-        p, q, r = (math.radians(s) for s in (x[5], x[2], x[6]))
-        th, ph = math.radians(theta), math.radians(phi)
-        theta_dot = q * math.cos(ph) - r * math.sin(ph)
-        phi_dot = p + math.tan(th) * (q * math.sin(ph) + r * math.cos(ph))
-        rad = (alpha_dot, acc[4], theta_dot, beta_dot, acc[3], acc[5], phi_dot)
-        return np.array([vt_dot * FT, *np.degrees(rad)])
+        return state_rates(x, self.settle())
+
+
+def state_rates(x: np.ndarray, acc: np.ndarray) -> np.ndarray:
+    """``x'`` of :data:`STATES` (m/s, deg) at state ``x`` from JSBSim's body accelerations ``acc``
+    (``udot, vdot, wdot`` ft/s^2, ``pdot, qdot, rdot`` rad/s^2, :meth:`F22.accelerations`): airspeed, alpha and
+    beta rates from the body velocities and their derivatives, body rates' from the angular accelerations,
+    the Euler-angle rates from their kinematics."""
+    vt, alpha, _, theta, beta, _, _, phi = x
+    a, b = math.radians(alpha), math.radians(beta)
+    V = vt / FT
+    u, v, w = V * math.cos(a) * math.cos(b), V * math.sin(b), V * math.sin(a) * math.cos(b)
+    ud, vd, wd = acc[:3]
+    vt_dot = (u * ud + v * vd + w * wd) / V
+    alpha_dot = (u * wd - w * ud) / (u * u + w * w)
+    beta_dot = (vd * V - v * vt_dot) / (V * V * math.cos(b))
+    p, q, r = (math.radians(s) for s in (x[5], x[2], x[6]))
+    th, ph = math.radians(theta), math.radians(phi)
+    theta_dot = q * math.cos(ph) - r * math.sin(ph)
+    phi_dot = p + math.tan(th) * (q * math.sin(ph) + r * math.cos(ph))
+    rad = (alpha_dot, acc[4], theta_dot, beta_dot, acc[3], acc[5], phi_dot)
+    return np.array([vt_dot * FT, *np.degrees(rad)])
