@@ -514,7 +514,7 @@ class FailureDetector(Isolation):
                                else detection.end_position)
         self.detections.append(detection)
         del self.detections[:-MAX_KEPT]
-        _probation.start(self, name, detection.time)
+        _probation.start(self, name, detection.time, detection)
         self._restart()
 
     # ------------------------------------------------------------------ withdrawal

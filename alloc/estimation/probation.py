@@ -22,6 +22,21 @@ learnt autocorrelation) scales correlated samples to the independent ones they a
 effective sample size of :func:`.harm.effective_samples`: an approximation of the exact
 generalised-least-squares ratio that keeps each sample's cost ``O(k)``.
 
+The belief's parameter is not known exactly: a jam's position or an effectiveness fraction is
+the isolation's estimate, with its standard deviation.  Judged as exact, an estimate two of its
+stds off loses to "nothing failed" on the first sample where the command happens to sit near
+the true jam (both then predict about the same response, and the belief's small offset costs
+more): a service stream withdrew a real jam one sample after its detection (estimate 3.13, std
+0.04) and re-detected it at 3.03.  So the belief is the mixture over its parameter, a normal
+prior at the estimate with its std, updated sample by sample as a scalar Kalman filter: each
+residual is judged by its predictive law ``N(c m, I + v c c')`` (``c`` the residual's change
+per unit of the parameter, ``m`` and ``v`` the posterior offset and variance), a rank-one
+update of cost ``O(k)``.  The ratio of that marginal likelihood to the health before's is again
+a martingale under the belief (a Bayes factor), so the bound below holds for the mixture.  For
+the robust detector ``c`` is divided by the predictive std (the learner's regressor also moves
+with the position: neglected, a first-order approximation).  Kinds without a parameter std
+(float, limits, rate limits) keep the point belief.
+
 The detection is withdrawn (reason :data:`REASON`, statistic ``-2 Lambda``) as soon as
 ``Lambda <= -ln 100`` -- Jeffreys' "decisive" Bayes factor for the health before -- while the
 health before fits its residuals (their whitened sum of squares, times ``kappa``, within
@@ -64,6 +79,10 @@ __all__ = ["DECISIVE_LOG", "REASON", "position_under", "start", "step", "explain
 DECISIVE_LOG = math.log(100.0)
 REASON = "evidence favours the health before the detection"
 _KEYS = {"time", "end", "llr", "samples", "rate", "ss_before", "values"}
+#: the belief's parameter (posterior offset, variance, and what it is: "position", "effectiveness"
+#: or "" for none); a state stored before them has a point belief
+_PARAMETER_KEYS = {"offset", "variance", "wrt"}
+_WRT = {"jam": "position", "hardover": "position", "effectiveness": "effectiveness"}
 #: the chi-square level at which the health before must fit its residuals to be favoured
 #: (harm.HarmDesign.level: 0.01)
 FIT_LEVEL = 0.01
@@ -83,14 +102,35 @@ def position_under(h: EffectorHealth | None, u: float, prev: float, dt: float) -
     return p, 0.0 if h.floating else h.effectiveness
 
 
-def start(det: Any, name: str, time: float) -> None:
+def start(det: Any, name: str, time: float, detection: Any = None) -> None:
     """Put the detection just applied on ``name`` (at ``time``) on probation (none when 0 s); a
-    refinement's probation replaces its chain's, against the same health before the chain."""
+    refinement's probation replaces its chain's, against the same health before the chain.
+    ``detection``'s parameter std, where its kind has one, is the belief's prior spread."""
     det._probations.pop(name, None)
     if det.probation > 0:
         j = det.problem.index(name)
+        wrt, variance = "", 0.0
+        std = None if detection is None else detection.parameter_std
+        if std is not None and math.isfinite(std) and std > 0:
+            wrt = _WRT.get(str(detection.event.kind), "")
+            variance = min(float(std) ** 2, MAX_MAGNITUDE) if wrt else 0.0
         det._probations[name] = {"time": float(time), "end": float(time) + det.probation, "llr": 0.0,
-                                 "samples": 0, "rate": float(det._rate_state[j]), "ss_before": 0.0, "values": 0}
+                                 "samples": 0, "rate": float(det._rate_state[j]), "ss_before": 0.0, "values": 0,
+                                 "offset": 0.0, "variance": variance, "wrt": wrt}
+
+
+def _sensitivity(det: Any, rec: dict[str, Any], j: int, p_n: float, f_n: float,
+                 s_pred: np.ndarray | None) -> tuple[np.ndarray, float] | None:
+    """``(c_r, c_q)``: how the belief's whitened residuals ``r`` and ``q_j`` fall per unit of its
+    parameter (``None`` for a point belief)."""
+    wrt = rec.get("wrt", "")
+    if not wrt or not rec.get("variance", 0.0) > 0:
+        return None
+    c_r = det._Bn0[:, j] * (f_n if wrt == "position" else p_n)
+    if s_pred is not None:
+        c_r = c_r / s_pred
+    c_q = 1.0 / det.position_std[j] if det.has_position and wrt == "position" else 0.0
+    return c_r, float(c_q)
 
 
 def _kappa(det: Any) -> float:
@@ -139,16 +179,33 @@ def step(det: Any, t: float, u: np.ndarray, known: np.ndarray, r: np.ndarray, q:
                 r_b, s_b = det._learner.residual(r0 + delta, det._learner.regressor(known_b))
                 log_s = 2.0 * float(np.sum(np.log(s_b / s_pred)))
             ss_b = float(r_b @ r_b)
-            gain = ss_b + log_s - float(r @ r)
+            gain = ss_b + log_s
             if det.has_position:
                 q_b = q[j] + (p_n - p_b) / det.position_std[j]
-                gain += float(q_b * q_b - q[j] * q[j])
+                gain += float(q_b * q_b)
                 ss_b += float(q_b * q_b)
+            offset, variance = rec.get("offset", 0.0), rec.get("variance", 0.0)
+            sens = _sensitivity(det, rec, j, p_n, f_n, s_pred)
+            if sens is None:
+                gain -= float(r @ r) + (float(q[j] * q[j]) if det.has_position else 0.0)
+            else:  # the predictive law of the mixture over the parameter (module docstring)
+                c_r, c_q = sens
+                r_m = r - c_r * offset
+                q_m = float(q[j]) - c_q * offset if det.has_position else 0.0
+                cc = float(c_r @ c_r) + c_q * c_q
+                cr = float(c_r @ r_m) + c_q * q_m
+                spread = 1.0 + variance * cc
+                gain -= float(r_m @ r_m) + q_m * q_m - variance * cr * cr / spread + math.log(spread)
+                offset += variance * cr / spread
+                variance /= spread
             llr = rec["llr"] + 0.5 * kappa * gain
             ss_before = rec["ss_before"] + kappa * ss_b
         # held in the stored domain (|x| <= 1e50, as every number of a state): far past ln 100 already
         bounded = float(min(max(llr, -MAX_MAGNITUDE), MAX_MAGNITUDE)) if not math.isnan(llr) else rec["llr"]
-        rec = {**rec, "llr": bounded,
+        if not (math.isfinite(offset) and math.isfinite(variance)):  # beyond the domain: a point belief
+            offset, variance = rec.get("offset", 0.0), 0.0
+        rec = {**rec, "llr": bounded, "offset": float(min(max(offset, -MAX_MAGNITUDE), MAX_MAGNITUDE)),
+               "variance": float(min(variance, MAX_MAGNITUDE)),
                "samples": rec["samples"] + 1, "rate": p_b,
                "ss_before": float(min(ss_before, MAX_MAGNITUDE)) if not math.isnan(ss_before) else rec["ss_before"],
                "values": rec["values"] + len(r) + int(det.has_position)}
@@ -230,8 +287,8 @@ def probations_from_dict(d: Any, det: Any) -> dict[str, dict[str, Any]]:
     for name, rec in d.items():
         if name not in det._active:
             raise StateError(f"probations: {name!r} has no standing detection (active)")
-        if not isinstance(rec, dict) or set(rec) != _KEYS:
-            raise StateError(f"probations: expected mappings with {sorted(_KEYS)}")
+        if not isinstance(rec, dict) or set(rec) not in (_KEYS, _KEYS | _PARAMETER_KEYS):
+            raise StateError(f"probations: expected mappings with {sorted(_KEYS | _PARAMETER_KEYS)}")
         out[name] = {"time": as_real("probations.time", rec["time"], StateError),
                      "end": as_real("probations.end", rec["end"], StateError),
                      "llr": as_real("probations.llr", rec["llr"], StateError),
@@ -239,6 +296,14 @@ def probations_from_dict(d: Any, det: Any) -> dict[str, dict[str, Any]]:
                      "rate": as_real("probations.rate", rec["rate"], StateError),
                      "ss_before": as_real("probations.ss_before", rec["ss_before"], StateError),
                      "values": state_count("probations.values", rec["values"])}
+        wrt = rec.get("wrt", "")
+        if wrt not in ("", "position", "effectiveness"):
+            raise StateError(f"probations.wrt: {wrt!r} is not '', 'position' or 'effectiveness'")
+        out[name].update({"offset": as_real("probations.offset", rec.get("offset", 0.0), StateError),
+                          "variance": as_real("probations.variance", rec.get("variance", 0.0), StateError),
+                          "wrt": wrt})
+        if not out[name]["variance"] >= 0:
+            raise StateError(f"probations.variance: {out[name]['variance']!r} is negative")
         if not out[name]["ss_before"] >= 0:
             raise StateError(f"probations.ss_before: {out[name]['ss_before']!r} is negative")
         if not out[name]["end"] >= out[name]["time"]:

@@ -189,3 +189,55 @@ def test_overwhelming_evidence_stays_in_the_stored_domain(robust: bool) -> None:
     assert det.samples == 40
     if not robust:
         assert lowest == -1e50  # held at the domain's edge, not beyond
+
+
+
+def imprecise_jam(robust: bool, seed: int) -> tuple[FailureDetector, np.ndarray, np.ndarray, str]:
+    """Effector 1 really jammed at 5 from 2 s, noise 0.05; the detector told (as an isolation
+    would report it) a jam at an estimate whose error is drawn from its own std 0.02; then 1 s
+    in which effector 1 is commanded within 0.005 of the true jam, where 'nothing failed'
+    predicts the response about as well as the truth, and better than an estimate off by more."""
+    rng = np.random.default_rng(seed)
+    p = random_vehicle(rng)
+    det = FailureDetector(p, 0.05, DT, window=0.5, robust=True if robust else None)
+    U = commands(rng, p.m, 300)
+    U[200:, 1] = 5.0 + rng.normal(0.0, 0.005, 100)
+    actual = U.copy()
+    actual[200:, 1] = 5.0
+    Y = actual @ np.asarray(p.B).T + rng.normal(size=(300, p.k)) * 0.05
+    for i in range(200):
+        det.update(U[i], Y[i])
+    name = p.names[1]
+    estimate = 5.0 + 0.02 * float(rng.normal())
+    told = Detection(event=FailureEvent(name, FailureKind.JAM, position=estimate), time=det.last_time,
+                     onset=det.last_time, statistic=30.0, threshold=20.0, confidence=0.99, effector_confidence=0.99,
+                     kind_confidence=1.0, parameter=estimate, parameter_std=0.02, samples=4)
+    det._emit(told)
+    return det, U[200:], Y[200:], name
+
+
+def _withdrawn(robust: bool, seeds: range) -> int:
+    count = 0
+    for seed in seeds:
+        det, U, Y, name = imprecise_jam(robust, seed)
+        for i in range(len(U)):
+            det.update(U[i], Y[i])
+        count += any(w.effector == name for w in det.pop_withdrawals())
+    return count
+
+
+@pytest.mark.parametrize("robust", [False, True])
+def test_an_imprecise_estimate_of_a_real_jam_is_rarely_withdrawn(robust: bool, monkeypatch) -> None:
+    """The belief is the mixture over its parameter (the estimate and its std): samples that
+    cannot tell the truth from 'nothing failed' do not condemn an estimate that is off by what
+    its std says it may be.  Ville's bound for the mixture: at most 1 in 100 real jams withdrawn
+    (2 of 30 allowed here; measured 0 of 30).  Judged as an exact position (the point belief,
+    forced here), 13 of the same 30 real jams were withdrawn (7 with the learnt model) -- a service stream withdrew a jam one sample after its
+    detection so (estimate 3.13, std 0.04, re-detected at 3.03)."""
+    import alloc.estimation.probation as probation
+
+    seeds = range(30)
+    mixture = _withdrawn(robust, seeds)
+    monkeypatch.setattr(probation, "_WRT", {})  # the point belief
+    point = _withdrawn(robust, seeds)
+    assert mixture <= 2 and point >= 5, (mixture, point)
