@@ -56,7 +56,7 @@ from ._active_set_layout import (CACHE_ENTRIES, CACHE_FLOATS, _A, _B, _BV, _CONS
                                  _N, _NCW, _NEXT_SLOT, _NLEV, _NLW, _P0, _PERM, _PINNED, _R, _RMAX, _RMIN, _SCALE,
                                  _STARTS, _T, _TABLE, _TABU, _TMP, _U, _UMAX, _UMIN, _UP, _UPC, _UW, _WARM, _WSIDE, _WU,
                                  _WVALID, _Y)
-# _FACTORED: read by benchmarks/bench_alloc.py and tests/benchmarks/test_bench_alloc.py from here
+# _FACTORED: read by benchmarks/bench_alloc.py and tests/benchmarks/test_alloc.py from here
 from ._lsq_factor import SIGMA_RTOL, _factors, _lsolve, _ltsolve, _slot_offsets
 
 __all__ = ["pack", "lexico_call", "lexico_solve", "lexico_batch_finished", "SIGMA_RTOL", "MU_EPS"]

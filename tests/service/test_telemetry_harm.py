@@ -26,7 +26,7 @@ from service.db import ProposalRow, TelemetryRow
 from service.main import create_app
 from service.telemetry import DetectorSettings, detection_out
 
-from test_service_telemetry import H, KEY, SMALL, SMALL_SETTINGS, post, small_flight, small_vehicle
+from test_telemetry import H, KEY, SMALL, SMALL_SETTINGS, post, small_flight, small_vehicle
 
 LN100 = math.log(100.0)
 

@@ -31,7 +31,7 @@ def app(request, tmp_path):
     Without the start-up warm-up (``warmup=False``): these tests are about requests, and a
     costly build still starts its build process, on first use.  The warm-up and the build
     processes it starts are tested in ``tests/alloc/test_cold_start.py``; every
-    ``ServiceProcess`` test (tests/service/test_service_http.py, ...) runs with it."""
+    ``ServiceProcess`` test (tests/service/test_http.py, ...) runs with it."""
     return create_app(Settings(data_dir=tmp_path, api_key=KEY, max_body_bytes=256 * 1024,
                                database_url=database_url(request.param), warmup=False))
 

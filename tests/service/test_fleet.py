@@ -39,8 +39,8 @@ from service.keys import NO_KEY_WARNING, keyed_routes
 from service.main import create_app
 from service.process import ServiceProcess
 from service.streams import KeyBudget
-from test_service_attacks import FLOOR_FACTOR, TARGETS_MS, p99, slack
-from test_service_telemetry import SMALL, SMALL_SETTINGS
+from test_attacks import FLOOR_FACTOR, TARGETS_MS, p99, slack
+from test_telemetry import SMALL, SMALL_SETTINGS
 
 KEY = "fleet-key"
 H = {"X-API-Key": KEY}
