@@ -77,7 +77,7 @@ def _ours(py_file: str) -> bool:
     return len(rel.parts) > 1 and rel.parts[0] in PACKAGES
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _content_hash(path: str, mtime: float, size: int) -> bytes:
     # the stamp numba 0.68's own locators use (a content hash; earlier versions used the mtime
     # and size, which an install changes): the same value, so caches made by either agree
@@ -389,7 +389,7 @@ def warm(methods: list[str] | None = None, stream: Any = None) -> dict[str, floa
     spent: dict[str, float] = {}
     for problem, options in _warm_cases():
         rng = np.random.default_rng(0)
-        k, m = problem.k, problem.m
+        k = problem.k
         scale = np.abs(problem.B).sum(axis=1) * np.maximum(np.abs(problem.umin), np.abs(problem.umax)).max() / 3
         V = rng.uniform(-1.0, 1.0, (5, k)) * scale
         u_prev = 0.5 * (problem.umin + problem.umax)

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .domain import (  # noqa: F401 - re-exported: the problem's checks, imported from here by many
+from .domain import (  # re-exported: the problem's checks, imported from here by many
     MAX_AXES,
     MAX_EFFECTORS,
     MAX_MAGNITUDE,
@@ -140,6 +140,22 @@ class Problem:
         "B", "umin", "umax", "up", "Wu", "Wv", "rate_min", "rate_max",
         "names", "axes", "k", "m", "has_rate_limits", "_frozen",
     )
+    # set once in __init__ through object.__setattr__ (the class is immutable); declared here for
+    # readers and type checkers
+    B: NDArray[np.float64]
+    umin: NDArray[np.float64]
+    umax: NDArray[np.float64]
+    up: NDArray[np.float64]
+    Wu: NDArray[np.float64]
+    Wv: NDArray[np.float64]
+    rate_min: NDArray[np.float64]
+    rate_max: NDArray[np.float64]
+    names: tuple[str, ...]
+    axes: tuple[str, ...]
+    k: int
+    m: int
+    has_rate_limits: bool
+    _frozen: bool
 
     def __init__(
         self,

@@ -231,7 +231,7 @@ def _members(node: Any, *, every_list: bool) -> int:
     return count
 
 
-class _Repeated(dict):  # type: ignore[type-arg]
+class _Repeated(dict):
     """An object in which ``key`` was given more than once (found by :func:`duplicate_key`)."""
 
     key: str

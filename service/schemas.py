@@ -352,7 +352,7 @@ def _event_model(spec: KindSpec) -> type[_Event]:
     a default is optional and the recorded event carries the value it resolved to.
     """
     kind = spec.name.value
-    annotations: dict[str, Any] = {"kind": Literal[kind]}  # type: ignore[valid-type]
+    annotations: dict[str, Any] = {"kind": Literal[kind]}
     namespace: dict[str, Any] = {"__module__": __name__, "__annotations__": annotations,
                                  "__doc__": f"{spec.meaning[0].upper()}{spec.meaning[1:]} (see alloc.health).",
                                  "model_config": _examples({"effector": "left", "kind": kind, **spec.example})}
@@ -372,7 +372,7 @@ def _event_model(spec: KindSpec) -> type[_Event]:
 #: one JSON body per failure kind, derived from the library's table (registered kinds included)
 EVENT_MODELS: dict[str, type[_Event]] = {kind.value: _event_model(kind.spec) for kind in FailureKind}
 
-EventIn = Annotated[Union[tuple(EVENT_MODELS.values())], Field(discriminator="kind")]  # noqa: UP007
+EventIn = Annotated[Union[tuple(EVENT_MODELS.values())], Field(discriminator="kind")]
 
 #: the event kinds: exactly the library's failure kinds (alloc.health.FailureKind)
 EVENT_KINDS = frozenset(EVENT_MODELS)

@@ -320,7 +320,7 @@ def test_concurrent_events_serialise(client, app):
         try:
             store.record_event(vid, adapter.validate_python(
                 {"effector": i % 5, "kind": "effectiveness", "fraction": (i + 1) / 40}))
-        except Exception as exc:  # collected and asserted below
+        except Exception as exc:  # noqa: BLE001 - collected and asserted below
             errors.append(exc)
     threads = [threading.Thread(target=writer, args=(i,)) for i in range(20)]
     for t in threads:

@@ -10,7 +10,6 @@ then healthy telemetry follows."""
 
 from __future__ import annotations
 
-import json
 import math
 import threading
 

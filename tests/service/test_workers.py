@@ -59,7 +59,7 @@ def _gil_hold_length(seconds: float) -> int:
         n += 1
 
 
-async def gil_holding_app(scope, receive, send):  # noqa: ANN001 - a bare ASGI app for the supervisor test
+async def gil_holding_app(scope, receive, send):
     """Start-up holds the GIL for seconds (as a worker loading kernels on a loaded machine)."""
     if scope["type"] == "lifespan":
         while True:
