@@ -263,6 +263,7 @@ class CompileNotice(event.Listener):
         self._depth = 0
         self._told: set[str] = set()
         self.compiles = 0  #: outermost compiles of our kernels in this process
+        self.silent = False  #: counts without a line (``warm`` is the one asked to compile)
 
     def on_start(self, ev: event.Event) -> None:
         # numba holds its global compiler lock across a compile: the nesting is one thread's
@@ -278,6 +279,8 @@ class CompileNotice(event.Listener):
         if not _ours(source):
             return
         self.compiles += 1
+        if self.silent:
+            return
         method = _calling_method()
         if method in self._told:
             return
@@ -328,7 +331,11 @@ def install() -> None:
     _installed = True
 
 
-install()  # importing this module is what installs it (alloc/__init__.py does, when numba loads)
+if __name__ != "__main__":
+    # importing this module is what installs it (alloc/__init__.py does, when numba loads); run as
+    # a script (``python -m``), the installed module, imported with numba, already has: a second
+    # install would register a second listener and print every notice twice
+    install()
 
 
 # ----------------------------------------------------------------------------- warming
@@ -478,12 +485,14 @@ def _main(argv: list[str]) -> int:
     sub = parser.add_subparsers(dest="command", required=True)
     w = sub.add_parser("warm", help="compile every kernel into the cache (what the build does)")
     w.add_argument("methods", nargs="*", help="only these methods (default: all registered)")
-    w.add_argument("--quiet", action="store_true")
+    w.add_argument("--quiet", action="store_true", help="print nothing")
+    w.add_argument("--summary", action="store_true", help="one line, not a line per method")
     sub.add_parser("where", help="where each kernel file's cache is")
     args = parser.parse_args(argv)
     if args.command == "warm":
         t0, c0 = time.perf_counter(), time.process_time()
-        spent = warm(args.methods or None, stream=None if args.quiet else sys.stdout)
+        notice.silent = args.quiet or args.summary
+        spent = warm(args.methods or None, stream=None if args.quiet or args.summary else sys.stdout)
         if not args.quiet:
             print(f"warmed {len(spent)} methods in {time.perf_counter() - t0:.1f} s "
                   f"({time.process_time() - c0:.1f} s CPU; {notice.compiles} kernels compiled)")
