@@ -48,7 +48,7 @@ def render_attack_table(report: dict[str, Any], load_before: tuple[float, float,
              f"{report['cpus']} CPUs shared with other jobs; the suite ran at niceness {report.get('nice', '?')} "
              f"(other jobs at their own); load average (1 / 5 / 15 min) "
              + (f"{fmt(load_before)} before, " if load_before else "") + f"{fmt(report['loadavg'])} at the end.",
-             f"Targets on a quiet machine (issue 23): {targets or 'see tests/service/test_attacks.py'}."
+             f"Targets on a quiet machine: {targets or 'see tests/service/test_attacks.py'}."
              + _DATABASE.get(report.get("database", ""), ""), "",
              "| attack | event p50 / p99 ms | next allocation p50 / p99 ms | /v1/health p50 / p99 ms | rounds "
              "| targets met | memory growth / bound MiB | load (1 min) |",
