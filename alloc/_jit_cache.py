@@ -52,6 +52,7 @@ import tempfile
 import threading
 import time
 from pathlib import Path
+from types import FrameType
 from typing import Any
 
 import numba
@@ -301,7 +302,7 @@ class CompileNotice(event.Listener):
 def _calling_method() -> str:
     """The registered method whose allocator is being built or called, if any (for the notice)."""
     api = os.path.join(str(_ROOT), "alloc", "api.py")
-    frame = sys._getframe(2)
+    frame: FrameType | None = sys._getframe(2)
     while frame is not None:
         if frame.f_code.co_filename == api:
             local = frame.f_locals

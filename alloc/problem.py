@@ -265,7 +265,7 @@ class Problem:
 
     def replace(self, **changes: Any) -> Problem:
         """Return a new validated Problem with some fields changed."""
-        fields = dict(
+        fields: dict[str, Any] = dict(
             B=self.B, umin=self.umin, umax=self.umax, up=self.up, Wu=self.Wu, Wv=self.Wv,
             rate_min=self.rate_min, rate_max=self.rate_max, names=self.names, axes=self.axes,
         )
