@@ -42,7 +42,7 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from dataclasses import replace
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 
 import numpy as np
 
@@ -67,6 +67,8 @@ class Run(Protocol):
     that the judge depends on the run's shape, not on the result module, which asks the judge
     for its summary's verdict: one direction of import, result -> criteria."""
 
+    #: a dataclass: the saturation shares copy it with some effectors' columns left out
+    __dataclass_fields__: ClassVar[dict[str, Any]]
     scenario: str
     failure: str | None
     t: np.ndarray
@@ -382,7 +384,7 @@ def _saturation(result: Run, kind: str, excluded: tuple[int, ...]) -> np.ndarray
     keep = np.setdiff1d(np.arange(result.effectors.shape[1]), excluded)
 
     def columns(pair: tuple[np.ndarray, np.ndarray] | None) -> tuple[np.ndarray, np.ndarray] | None:
-        return None if pair is None else tuple(np.asarray(a)[..., keep] for a in pair)  # type: ignore[return-value]
+        return None if pair is None else (np.asarray(pair[0])[..., keep], np.asarray(pair[1])[..., keep])
 
     rates = None if result.effector_rates is None else result.effector_rates[:, keep]
     kept = replace(result, effectors=result.effectors[:, keep], effector_rates=rates,
@@ -442,7 +444,7 @@ def evaluate(result: Run, criteria: ScenarioCriteria, *,
                       and (result.diverged or t[-1] - failure >= criteria.recovery_hold.value - 1e-9))
     metrics["back_in_band_s"] = (
         (math.inf if result.diverged else back_in_band_time(t, inside, failure, criteria.recovery_hold.value))
-        if judge_recovery else None)
+        if judge_recovery and failure is not None else None)  # judge_recovery implies it; mypy cannot see it
     limits = criteria.limits()
     broken = [name for name, value in metrics.items()
               if value is not None and name in limits and not value <= limits[name]]
