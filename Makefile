@@ -5,21 +5,37 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: install test test-all run bench check-core clean
+.PHONY: install lint test test-all run bench check-core clean
+
+# `make install QUIET=1`, or `make -s install` (--quiet): nothing is printed unless something fails.
+# Otherwise one line per step.
+ifneq ($(findstring s,$(firstword -$(MAKEFLAGS))),)
+QUIET := 1
+endif
+WARM_OUTPUT := $(if $(QUIET),--quiet,--summary)
+PIP_OUTPUT  := $(if $(QUIET),--quiet --quiet,--quiet)
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
-	$(BIN)/pip install --quiet --upgrade pip
-	$(BIN)/pip install --quiet -e '.[dev]'
+	$(BIN)/pip install $(PIP_OUTPUT) --disable-pip-version-check --upgrade pip
+	$(BIN)/pip install $(PIP_OUTPUT) --disable-pip-version-check -e '.[dev]'
 	touch $(STAMP)
 
 # an editable install builds no wheel, so nothing compiled the numba kernels: do it once here
-# (about 2-3 min of CPU; afterwards it only loads them, a few seconds)
+# (about 2-3 min of CPU; afterwards it only loads them, a few seconds).  The library's kernels,
+# then the simulator's (the library knows nothing of it): a first `alloc sim` compiles nothing.
 install: $(STAMP)
-	$(BIN)/python -m alloc._jit_cache warm --quiet
+	$(BIN)/python -m alloc._jit_cache warm $(WARM_OUTPUT)
+	$(BIN)/python -m sim.warm $(if $(QUIET),--quiet)
+
+# ruff (about a second) and mypy (its cache in .mypy_cache: a few seconds warm, a minute or two
+# cold), configured in pyproject.toml
+lint: $(STAMP)
+	$(BIN)/ruff check $(if $(QUIET),--quiet) .
+	$(BIN)/mypy $(if $(QUIET),--no-error-summary)
 
 # after `install`: the kernels a first call would compile are compiled once, not inside timed tests
-test: install
+test: install lint
 	$(BIN)/pytest -q --durations=25
 
 test-all: $(STAMP)

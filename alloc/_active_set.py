@@ -52,11 +52,10 @@ from numba import njit
 from ._threads import run_chunks, threads_for
 from ._kernels import _FREE_BITS, close_out, copy_demand, finish, packed_out, rate_window_into
 from ._active_set_layout import (CACHE_ENTRIES, CACHE_FLOATS, OVERFLOW_SLOTS, _A, _B, _BV, _CONST, _DIAG, _DYN, _E,
-                                 _FACTORED, _FIDX, _FINAL, _FREE, _G, _GAM, _H, _HEAD, _HI, _K, _KU, _KV, _LAM, _LO, _M,
+                                 _FIDX, _FINAL, _FREE, _G, _GAM, _H, _HEAD, _HI, _K, _KU, _KV, _LAM, _LO, _M,
                                  _MAXIT, _MISC, _N, _NCW, _NEXT_SLOT, _NLEV, _NLW, _P0, _PERM, _PINNED, _R, _RMAX,
                                  _RMIN, _SCALE, _STARTS, _T, _TABLE, _TABU, _TMP, _U, _UMAX, _UMIN, _UP, _UPC, _UW,
                                  _WARM, _WSIDE, _WU, _WVALID, _Y)
-# _FACTORED: read by benchmarks/bench_alloc.py and tests/benchmarks/test_bench_alloc.py from here
 from ._lsq_factor import SIGMA_RTOL, _factors, _lsolve, _ltsolve, _slot_offsets
 
 __all__ = ["pack", "lexico_call", "lexico_solve", "lexico_batch_finished", "SIGMA_RTOL", "MU_EPS"]

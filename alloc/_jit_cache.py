@@ -52,6 +52,7 @@ import tempfile
 import threading
 import time
 from pathlib import Path
+from types import FrameType
 from typing import Any
 
 import numba
@@ -77,7 +78,7 @@ def _ours(py_file: str) -> bool:
     return len(rel.parts) > 1 and rel.parts[0] in PACKAGES
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _content_hash(path: str, mtime: float, size: int) -> bytes:
     # the stamp numba 0.68's own locators use (a content hash; earlier versions used the mtime
     # and size, which an install changes): the same value, so caches made by either agree
@@ -263,6 +264,7 @@ class CompileNotice(event.Listener):
         self._depth = 0
         self._told: set[str] = set()
         self.compiles = 0  #: outermost compiles of our kernels in this process
+        self.silent = False  #: counts without a line (``warm`` is the one asked to compile)
 
     def on_start(self, ev: event.Event) -> None:
         # numba holds its global compiler lock across a compile: the nesting is one thread's
@@ -278,6 +280,8 @@ class CompileNotice(event.Listener):
         if not _ours(source):
             return
         self.compiles += 1
+        if self.silent:
+            return
         method = _calling_method()
         if method in self._told:
             return
@@ -298,7 +302,7 @@ class CompileNotice(event.Listener):
 def _calling_method() -> str:
     """The registered method whose allocator is being built or called, if any (for the notice)."""
     api = os.path.join(str(_ROOT), "alloc", "api.py")
-    frame = sys._getframe(2)
+    frame: FrameType | None = sys._getframe(2)
     while frame is not None:
         if frame.f_code.co_filename == api:
             local = frame.f_locals
@@ -328,7 +332,11 @@ def install() -> None:
     _installed = True
 
 
-install()  # importing this module is what installs it (alloc/__init__.py does, when numba loads)
+if __name__ != "__main__":
+    # importing this module is what installs it (alloc/__init__.py does, when numba loads); run as
+    # a script (``python -m``), the installed module, imported with numba, already has: a second
+    # install would register a second listener and print every notice twice
+    install()
 
 
 # ----------------------------------------------------------------------------- warming
@@ -389,7 +397,7 @@ def warm(methods: list[str] | None = None, stream: Any = None) -> dict[str, floa
     spent: dict[str, float] = {}
     for problem, options in _warm_cases():
         rng = np.random.default_rng(0)
-        k, m = problem.k, problem.m
+        k = problem.k
         scale = np.abs(problem.B).sum(axis=1) * np.maximum(np.abs(problem.umin), np.abs(problem.umax)).max() / 3
         V = rng.uniform(-1.0, 1.0, (5, k)) * scale
         u_prev = 0.5 * (problem.umin + problem.umax)
@@ -478,12 +486,14 @@ def _main(argv: list[str]) -> int:
     sub = parser.add_subparsers(dest="command", required=True)
     w = sub.add_parser("warm", help="compile every kernel into the cache (what the build does)")
     w.add_argument("methods", nargs="*", help="only these methods (default: all registered)")
-    w.add_argument("--quiet", action="store_true")
+    w.add_argument("--quiet", action="store_true", help="print nothing")
+    w.add_argument("--summary", action="store_true", help="one line, not a line per method")
     sub.add_parser("where", help="where each kernel file's cache is")
     args = parser.parse_args(argv)
     if args.command == "warm":
         t0, c0 = time.perf_counter(), time.process_time()
-        spent = warm(args.methods or None, stream=None if args.quiet else sys.stdout)
+        notice.silent = args.quiet or args.summary
+        spent = warm(args.methods or None, stream=None if args.quiet or args.summary else sys.stdout)
         if not args.quiet:
             print(f"warmed {len(spent)} methods in {time.perf_counter() - t0:.1f} s "
                   f"({time.process_time() - c0:.1f} s CPU; {notice.compiles} kernels compiled)")

@@ -56,7 +56,7 @@ def split_rows(fn: Callable[[int, int], T], n_rows: int, threads: int) -> list[T
 
 
 def _pool(threads: int) -> ThreadPoolExecutor:
-    if not _POOL or _POOL[0]._max_workers < threads:  # noqa: SLF001 - grow the pool when asked for more
+    if not _POOL or _POOL[0]._max_workers < threads:  # grow the pool when asked for more
         _POOL[:] = [ThreadPoolExecutor(max_workers=max(threads, os.cpu_count() or 1), thread_name_prefix="alloc-batch")]
     return _POOL[0]
 

@@ -46,7 +46,7 @@ class _PyCallBase:
 try:  # the call path in C (alloc/_fastcall.c, built at install); without it the same path in Python
     from ._fastcall import FastCall as _CallBase
 except ImportError:  # pragma: no cover - a build without a C compiler
-    _CallBase = _PyCallBase  # type: ignore[assignment,misc]
+    _CallBase = _PyCallBase
 
 
 def has_c_call_path() -> bool:
@@ -125,7 +125,7 @@ def _reason(exc: BaseException) -> str:
     return str(exc) if isinstance(exc, SolverError) else f"{type(exc).__name__}: {exc}"
 
 
-class Allocator(_CallBase):  # type: ignore[misc,valid-type]
+class Allocator(_CallBase):
     """A method built once for a problem; call it with demands.
 
     ``allocator(v, u_prev=None, dt=None) -> Result``.  With ``u_prev`` and ``dt`` the

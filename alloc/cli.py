@@ -28,7 +28,7 @@ import time
 from functools import cache
 from importlib.metadata import EntryPoint, PackageNotFoundError, entry_points, version
 from pathlib import Path
-from typing import Any, NoReturn, Optional
+from typing import Any, NoReturn
 
 import typer
 from typer.core import TyperCommand, TyperGroup
@@ -40,7 +40,9 @@ except ImportError:  # pragma: no cover - older typer on the click package
 
 import alloc
 from alloc import DISTRIBUTION
-from alloc.cli_input import MAX_JSON_BYTES, finite, json_float, output_file, read_json_file, strict_json
+# output_file is also the sub-commands' (sim, ams, replay): they import it from here
+from alloc.cli_input import finite, json_float, read_json_file, strict_json
+from alloc.cli_input import output_file as output_file
 from alloc.exceptions import AllocError
 
 #: entry-point group through which other packages add sub-commands to ``alloc``
@@ -466,21 +468,21 @@ def _fmt_seconds(s: float) -> str:
 
 @app.command("allocate", cls=DefaultMethodCommand)
 def allocate_command(
-    v: Optional[str] = typer.Option(None, "--v", help="demand, comma-separated, one value per axis (the "
+    v: str | None = typer.Option(None, "--v", help="demand, comma-separated, one value per axis (the "
                                     "problem's axes and units: `alloc vehicles --json`); or the file's 'v'"),
-    method: Optional[str] = typer.Option(None, "--method", "-m",
+    method: str | None = typer.Option(None, "--method", "-m",
                                          help="allocation method (see `alloc methods`); or the file's 'method'"),
-    vehicle: Optional[str] = typer.Option(None, "--vehicle", metavar="NAME|FILE",
+    vehicle: str | None = typer.Option(None, "--vehicle", metavar="NAME|FILE",
                                           help=VEHICLE_HELP + "; its [methods.<method>] defaults apply under --option"),
-    problem: Optional[Path] = typer.Option(
+    problem: Path | None = typer.Option(
         None, "--problem", help="JSON file (UTF-8): B, umin, umax and optionally up, Wu, Wv, rate_min, rate_max "
         "(null: unlimited), names, axes -- the fields of alloc.Problem -- and optionally v, method, options, "
         "u_prev, dt, as in the body of POST /v1/allocate"),
     option: list[str] = typer.Option([], "--option", "-o", help="method option key=value (value parsed as JSON, "
                                      "else text; see `alloc methods`); repeatable"),
-    u_prev: Optional[str] = typer.Option(None, "--u-prev", help="previous command, comma-separated, one value per "
+    u_prev: str | None = typer.Option(None, "--u-prev", help="previous command, comma-separated, one value per "
                                          "effector (rate limits, with --dt)"),
-    dt: Optional[float] = typer.Option(None, "--dt", parser=finite(0.0, low_open=True, unit=" s"),
+    dt: float | None = typer.Option(None, "--dt", parser=finite(0.0, low_open=True, unit=" s"),
                                        help="time step in seconds, > 0 (rate limits, with --u-prev)"),
     repeat: int = typer.Option(100, "--repeat", min=1, max=1_000_000,
                                help=f"calls timed for the solve time (stopping early after {TIMING_BUDGET_S:g} s)"),
@@ -580,25 +582,25 @@ def _problem_at(vehicle: Any, pairs: list[str]) -> alloc.Problem:
 @app.command("export", cls=ExportCommand)
 def export_command(
     vehicle: str = typer.Option(..., "--vehicle", metavar="NAME|FILE", help=VEHICLE_HELP),
-    method: Optional[str] = typer.Option(None, "--method", "-m", help="method to export (alloc.export.exportable())"),
+    method: str | None = typer.Option(None, "--method", "-m", help="method to export (alloc.export.exportable())"),
     precision: str = typer.Option("double", "--precision", help="scalar type of the kernel: double or float"),
     out: Path = typer.Option(..., "--out", help="folder for the .h/.c pair (created)"),
     option: list[str] = typer.Option([], "--option", "-o", help="method option key=value (as for allocate)"),
-    prefix: Optional[str] = typer.Option(None, "--prefix", help="C prefix of the names and files; default "
+    prefix: str | None = typer.Option(None, "--prefix", help="C prefix of the names and files; default "
                                          "alloc_<method>"),
     certify: bool = typer.Option(False, "--certify", help="active set and lp: enforce the iteration bound certified "
                                  "by sampling the demand set (alloc.export.certify); the same as "
                                  "--iteration-bound certify"),
-    iteration_bound: Optional[str] = typer.Option(None, "--iteration-bound", metavar="N|certify",
+    iteration_bound: str | None = typer.Option(None, "--iteration-bound", metavar="N|certify",
                                                   help="active set and lp: iterations (lp: pivots) a call may take "
                                                   "before it returns the safe answer (status 2); default the "
                                                   "library's caps"),
-    maxit: Optional[int] = typer.Option(None, "--maxit", help="active set: iteration cap per level; default the "
+    maxit: int | None = typer.Option(None, "--maxit", help="active set: iteration cap per level; default the "
                                         "library's 50 + 10 (m + k)"),
-    table: Optional[bool] = typer.Option(None, "--table/--no-table", help="active set: precompute every free "
+    table: bool | None = typer.Option(None, "--table/--no-table", help="active set: precompute every free "
                                          "set's factorisation (--table) or factorise at run time (--no-table); "
                                          "default: tables when they fit 256 KiB"),
-    cache: Optional[int] = typer.Option(None, "--cache", metavar="SLOTS", help="active set without tables: slots "
+    cache: int | None = typer.Option(None, "--cache", metavar="SLOTS", help="active set without tables: slots "
                                         "of the static cache of recent factorisations (0: none); default as many "
                                         "as fit 16 KiB"),
     warm_start: bool = typer.Option(False, "--warm-start", help="active set: start each call from the last "

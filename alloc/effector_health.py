@@ -1,8 +1,8 @@
 """What has failed on each effector, and the allocation problem that health gives.
 
 :class:`EffectorHealth` is an effector's state after its failure events (what
-:mod:`alloc.health`'s told rules write); :func:`apply_health` is what an allocator is told,
-``Problem.with_health``, with the precedence stated in :mod:`alloc.health`.  Import these names
+:mod:`alloc.health`'s told rules write); ``Problem.with_health`` is what an allocator is told,
+with the precedence stated in :mod:`alloc.health`.  Import these names
 from :mod:`alloc.health`, which defines the failure kinds and re-exports them.
 """
 
@@ -10,18 +10,14 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from .domain import as_real, short_repr
 from .exceptions import ProblemError
 
-if TYPE_CHECKING:
-    from .problem import Problem
-
-__all__ = ["EffectorHealth", "HEALTHY", "Health", "EFFECTOR_HEALTH_SCHEMA", "apply_health", "health_to_dict",
-           "health_from_dict"]
+__all__ = ["EffectorHealth", "HEALTHY", "Health", "EFFECTOR_HEALTH_SCHEMA", "health_to_dict", "health_from_dict"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -39,7 +35,7 @@ class EffectorHealth:
 
         Only what needs no problem is checked here (types, ``effectiveness`` in [0, 1],
         ordered limits, ``rate_min <= 0 <= rate_max``); positions against the nominal limits
-        are :func:`apply_health`'s to check.
+        are ``Problem.with_health``'s to check.
         """
         setter = object.__setattr__
         if self.jam_position is not None:
@@ -133,39 +129,6 @@ def _checked_health(health: Any) -> Mapping[Any, EffectorHealth]:
             raise ProblemError(f"health: the health of {short_repr(key)} must be an alloc.health.EffectorHealth, "
                                f"got {type(h).__name__}")
     return health
-
-
-def apply_health(nominal: Problem, health: Mapping[int | str, EffectorHealth]) -> Problem:
-    """The problem of a vehicle at ``health`` (``nominal`` itself when all are healthy).
-
-    Keys are effector names or indices.  See the module docstring for each kind's meaning.
-    Reduced position and rate limits act within the nominal ones (their intersection: a
-    failure never widens a limit); reduced limits that do not meet the nominal ones, or a
-    jam outside them, raise ProblemError.
-    """
-    p = nominal
-    rate_min, rate_max = nominal.rate_min.copy(), nominal.rate_max.copy()
-    for key, h in _checked_health(health).items():
-        i = nominal.index(key)
-        if h.effectiveness != 1.0 or h.floating:
-            p = p.with_effectiveness(i, 0.0 if h.floating else h.effectiveness)
-        if h.floating:
-            p = p.with_jam(i, float(nominal.up[i]))
-        elif h.jam_position is not None:
-            p = p.with_jam(i, h.jam_position)
-        elif h.limits is not None:
-            lo0, hi0 = float(nominal.umin[i]), float(nominal.umax[i])
-            lo, hi = max(h.limits[0], lo0), min(h.limits[1], hi0)
-            if lo > hi:
-                raise ProblemError(f"limits: reduced limits [{h.limits[0]:g}, {h.limits[1]:g}] of "
-                                   f"{nominal.names[i]!r} do not meet its nominal limits [{lo0:g}, {hi0:g}]")
-            p = p.with_limits(i, lo, hi)
-        if h.rate_limits is not None:  # rate_min <= 0 <= rate_max on both sides: never empty
-            rate_min[i] = max(h.rate_limits[0], nominal.rate_min[i])
-            rate_max[i] = min(h.rate_limits[1], nominal.rate_max[i])
-    if not (np.array_equal(rate_min, p.rate_min) and np.array_equal(rate_max, p.rate_max)):
-        p = p.replace(rate_min=rate_min, rate_max=rate_max)
-    return p
 
 
 def health_to_dict(health: Mapping[str, EffectorHealth]) -> dict[str, Any]:

@@ -56,19 +56,16 @@ from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field, fields, replace
 from enum import Enum
 from types import MappingProxyType
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 
 from .domain import as_real, short_repr
 from .effector_health import (
-    EFFECTOR_HEALTH_SCHEMA, HEALTHY, EffectorHealth, Health, _checked_health, apply_health, health_from_dict,
-    health_to_dict,
+    EFFECTOR_HEALTH_SCHEMA, HEALTHY, EffectorHealth, Health, _checked_health, health_from_dict, health_to_dict,
 )
 from .exceptions import AllocError, ProblemError
-
-if TYPE_CHECKING:
-    from .problem import Problem
+from .problem import Problem
 
 __all__ = [
     "FailureKind", "FailureEvent", "EffectorHealth", "HEALTHY", "Health",
@@ -524,6 +521,12 @@ class FailureEvent:
 
 if set(PARAMETERS) != {f.name for f in fields(FailureEvent)} - {"effector", "kind"}:
     raise FailureKindError("kind: alloc.health.PARAMETERS and the fields of FailureEvent differ")
+
+
+def apply_health(nominal: Problem, health: Mapping[int | str, EffectorHealth]) -> Problem:
+    """The problem of a vehicle at ``health``: ``nominal.with_health(health)``, where the
+    precedence of the kinds is applied (see :meth:`alloc.Problem.with_health`)."""
+    return nominal.with_health(health)
 
 
 def resolve_event(nominal: Problem, event: FailureEvent) -> FailureEvent:

@@ -10,13 +10,13 @@ preference cost is ``(u - up)' Wu (u - up)`` and the moment-error cost is
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .domain import (  # noqa: F401 - re-exported: the problem's checks, imported from here by many
+from .domain import (  # re-exported: the problem's checks, imported from here by many
     MAX_AXES,
     MAX_EFFECTORS,
     MAX_MAGNITUDE,
@@ -27,6 +27,7 @@ from .domain import (  # noqa: F401 - re-exported: the problem's checks, importe
     short_repr,
     singular_within_round_off,
 )
+from .effector_health import EffectorHealth, _checked_health
 from .exceptions import DemandError, ProblemError
 
 __all__ = ["Problem"]
@@ -140,6 +141,22 @@ class Problem:
         "B", "umin", "umax", "up", "Wu", "Wv", "rate_min", "rate_max",
         "names", "axes", "k", "m", "has_rate_limits", "_frozen",
     )
+    # set once in __init__ through object.__setattr__ (the class is immutable); declared here for
+    # readers and type checkers
+    B: NDArray[np.float64]
+    umin: NDArray[np.float64]
+    umax: NDArray[np.float64]
+    up: NDArray[np.float64]
+    Wu: NDArray[np.float64]
+    Wv: NDArray[np.float64]
+    rate_min: NDArray[np.float64]
+    rate_max: NDArray[np.float64]
+    names: tuple[str, ...]
+    axes: tuple[str, ...]
+    k: int
+    m: int
+    has_rate_limits: bool
+    _frozen: bool
 
     def __init__(
         self,
@@ -248,7 +265,7 @@ class Problem:
 
     def replace(self, **changes: Any) -> Problem:
         """Return a new validated Problem with some fields changed."""
-        fields = dict(
+        fields: dict[str, Any] = dict(
             B=self.B, umin=self.umin, umax=self.umax, up=self.up, Wu=self.Wu, Wv=self.Wv,
             rate_min=self.rate_min, rate_max=self.rate_max, names=self.names, axes=self.axes,
         )
@@ -326,14 +343,38 @@ class Problem:
         umin[i], umax[i] = lo_f, hi_f
         return self.replace(umin=umin, umax=umax)
 
-    def with_health(self, health: Any) -> Problem:
-        """The problem with effector failures applied: ``{effector: alloc.health.EffectorHealth}``.
+    def with_health(self, health: Mapping[int | str, EffectorHealth]) -> Problem:
+        """The problem with effector failures applied: ``{effector: alloc.health.EffectorHealth}``
+        (``self`` when all are healthy).
 
-        See :mod:`alloc.health` for the failure kinds and their one meaning each.
+        Keys are effector names or indices.  See :mod:`alloc.health` for the failure kinds and
+        their one meaning each.  Reduced position and rate limits act within the nominal ones
+        (their intersection: a failure never widens a limit); reduced limits that do not meet
+        the nominal ones, or a jam outside them, raise ProblemError.
         """
-        from .health import apply_health
-
-        return apply_health(self, health)
+        p = self
+        rate_min, rate_max = self.rate_min.copy(), self.rate_max.copy()
+        for key, h in _checked_health(health).items():
+            i = self.index(key)
+            if h.effectiveness != 1.0 or h.floating:
+                p = p.with_effectiveness(i, 0.0 if h.floating else h.effectiveness)
+            if h.floating:
+                p = p.with_jam(i, float(self.up[i]))
+            elif h.jam_position is not None:
+                p = p.with_jam(i, h.jam_position)
+            elif h.limits is not None:
+                lo0, hi0 = float(self.umin[i]), float(self.umax[i])
+                lo, hi = max(h.limits[0], lo0), min(h.limits[1], hi0)
+                if lo > hi:
+                    raise ProblemError(f"limits: reduced limits [{h.limits[0]:g}, {h.limits[1]:g}] of "
+                                       f"{self.names[i]!r} do not meet its nominal limits [{lo0:g}, {hi0:g}]")
+                p = p.with_limits(i, lo, hi)
+            if h.rate_limits is not None:  # rate_min <= 0 <= rate_max on both sides: never empty
+                rate_min[i] = max(h.rate_limits[0], self.rate_min[i])
+                rate_max[i] = min(h.rate_limits[1], self.rate_max[i])
+        if not (np.array_equal(rate_min, p.rate_min) and np.array_equal(rate_max, p.rate_max)):
+            p = p.replace(rate_min=rate_min, rate_max=rate_max)
+        return p
 
     # ------------------------------------------------------------ rate limits
     def check_demand(self, v: ArrayLike) -> FloatArray:

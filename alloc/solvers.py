@@ -409,9 +409,11 @@ class _Qpsolvers:
         up_rows = ~eq & np.isfinite(bu)
         lo_rows = ~eq & np.isfinite(bl)
         if up_rows.any():
-            G_parts.append(A[up_rows]); h_parts.append(bu[up_rows])
+            G_parts.append(A[up_rows])
+            h_parts.append(bu[up_rows])
         if lo_rows.any():
-            G_parts.append(-A[lo_rows]); h_parts.append(-bl[lo_rows])
+            G_parts.append(-A[lo_rows])
+            h_parts.append(-bl[lo_rows])
         G = np.vstack(G_parts) if G_parts else None
         h = np.concatenate(h_parts) if h_parts else None
         Aeq = A[eq] if eq.any() else None

@@ -154,7 +154,7 @@ def tail_rows(p: alloc.Problem, V: np.ndarray, names: tuple[str, ...] = ("qp", "
     pass: the cache has met almost none of ``V``'s free sets), or with ``prior`` every demand
     of ``prior`` (other demands from the same distribution: a long-lived allocator meeting new
     demands)."""
-    from alloc._active_set import _FACTORED, _MISC
+    from alloc._active_set_layout import _FACTORED, _MISC
 
     warmup = V[:warm] if prior is None else prior
 

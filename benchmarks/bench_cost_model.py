@@ -148,7 +148,7 @@ def row(cell, got: dict) -> tuple[str, bool]:
 
 def machine_state() -> str:
     load = os.getloadavg()
-    when = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    when = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC")
     return (f"{when}, {platform.machine()} {os.cpu_count()} cores, load average {load[0]:.2f} / {load[1]:.2f} / "
             f"{load[2]:.2f} (1 / 5 / 15 min), Python {platform.python_version()}")
 

@@ -71,7 +71,7 @@ LARGE = (("pinv", {}), ("da", {}), ("da", {"backend": "simplex"}), ("da", {"back
 def large(calls: int, seed: int) -> None:
     """``da`` and the cascaded methods at k = 4, m = 6 .. 192 (see the module docstring)."""
     rng = np.random.default_rng(seed)
-    print("load average before: %.2f %.2f %.2f" % os.getloadavg())
+    print("load average before: {:.2f} {:.2f} {:.2f}".format(*os.getloadavg()))
     labels = [name + ("" if not o or "groups" in o else f"[{o['backend']}]") for name, o in LARGE]
     print("k  m   " + "  ".join(f"{x:>14}" for x in labels) + "   (median us per call; x floor = pinv)")
     for m in LARGE_MS:
@@ -85,7 +85,7 @@ def large(calls: int, seed: int) -> None:
         us = _medians(allocators, V, rng)
         cells = [f"{u:7.1f} {u / us[0]:5.1f}x" for u in us]
         print(f"4  {m:3d} " + "  ".join(cells), flush=True)
-    print("load average after: %.2f %.2f %.2f" % os.getloadavg())
+    print("load average after: {:.2f} {:.2f} {:.2f}".format(*os.getloadavg()))
 
 
 def main() -> None:

@@ -131,7 +131,7 @@ def fly(vehicle: str, case: str | None, *, condition: str, health: str, seed: in
 def _job(key: str, kwargs: dict[str, Any]) -> tuple[str, dict[str, Any]]:
     try:
         return key, fly(**kwargs)
-    except Exception as exc:  # recorded, not lost: a run that raises is a finding
+    except Exception as exc:  # noqa: BLE001 - recorded, not lost: a run that raises is a finding
         return key, {"error": f"{type(exc).__name__}: {exc}", **{k: v for k, v in kwargs.items()
                                                                   if isinstance(v, (str, int, float, type(None)))}}
 

@@ -68,7 +68,7 @@ async def _socket(url: str, hz: float, start: float, stop: float, seed: int, out
         out["upgrade_refused"][str(exc.response.status_code)] = out["upgrade_refused"].get(
             str(exc.response.status_code), 0) + 1
         return
-    except (OSError, asyncio.TimeoutError) as exc:
+    except (TimeoutError, OSError) as exc:
         out["upgrade_failed"][type(exc).__name__] = out["upgrade_failed"].get(type(exc).__name__, 0) + 1
         return
     out["open"] += 1
@@ -87,7 +87,7 @@ async def _socket(url: str, hz: float, start: float, stop: float, seed: int, out
             try:  # a send the server holds back (it reads at the budget's pace) ends with the run
                 await asyncio.wait_for(ws.send(json.dumps({"t": [round(i * dt, 9)], "u": [u.tolist()],
                                                            "y": [y.tolist()]})), max(0.01, stop - time.time()))
-            except asyncio.TimeoutError:
+            except TimeoutError:
                 out["held_back"] += 1
                 return
             out["sent"] += 1

@@ -27,22 +27,21 @@ import os
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-import argparse  # noqa: E402
-import csv  # noqa: E402
-import math  # noqa: E402
-import sys  # noqa: E402
-import time  # noqa: E402
-from dataclasses import replace  # noqa: E402
-from typing import Any  # noqa: E402
+import argparse
+import csv
+import math
+import sys
+import time
+from typing import Any
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-import alloc  # noqa: E402
-from sim.allocation import STATIC  # noqa: E402
-from sim.packed import FloatSlot  # noqa: E402
-from sim.linearise import FrameLoop, after_failure, linearise, margins, operating_point  # noqa: E402
-from sim.scenarios import harv_latdir, ice  # noqa: E402
-from sim.scenarios.mimo import MimoScenario, mimo_spec  # noqa: E402
+import alloc
+from sim.allocation import STATIC
+from sim.packed import FloatSlot
+from sim.linearise import FrameLoop, after_failure, linearise, margins, operating_point
+from sim.scenarios import harv_latdir, ice
+from sim.scenarios.mimo import MimoScenario, mimo_spec
 
 SCENARIOS: dict[str, tuple[MimoScenario, str]] = {"ice": (ice.SCENARIO, "seed"),
                                                    "harv_latdir": (harv_latdir.SCENARIO, "failure2")}

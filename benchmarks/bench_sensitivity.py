@@ -43,24 +43,24 @@ import os
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-import argparse  # noqa: E402
-import csv  # noqa: E402
-import sys  # noqa: E402
-import time  # noqa: E402
-from collections.abc import Callable, Iterable, Mapping  # noqa: E402
-from dataclasses import dataclass, field, replace  # noqa: E402
-from pathlib import Path  # noqa: E402
-from typing import Any  # noqa: E402
+import argparse
+import csv
+import sys
+import time
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from alloc import vehicles  # noqa: E402
-from sim import pilot  # noqa: E402
-from sim.allocation import PREFERRED_POSITIONS, RATE_HORIZONS, RATE_WINDOWS  # noqa: E402
-from sim.engine import simulate  # noqa: E402
-from sim.scenarios import harv_latdir, ice  # noqa: E402
-from sim.scenarios.mimo import MimoScenario, mimo_spec  # noqa: E402
-from sim.settings import ANTI_WINDUP_RULES, BOUNDARY_LAYER_RULES, U_PREV_SOURCES, LoopSpec, RunSettings  # noqa: E402
+from alloc import vehicles
+from sim import pilot
+from sim.allocation import PREFERRED_POSITIONS, RATE_HORIZONS, RATE_WINDOWS
+from sim.engine import simulate
+from sim.scenarios import harv_latdir, ice
+from sim.scenarios.mimo import MimoScenario, mimo_spec
+from sim.settings import ANTI_WINDUP_RULES, BOUNDARY_LAYER_RULES, U_PREV_SOURCES, LoopSpec, RunSettings
 
 METHODS = ("static", "pinv", "qp", "wls")
 DURATION = 40.0

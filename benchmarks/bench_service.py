@@ -471,7 +471,7 @@ def main() -> None:
     parser.add_argument("--flood-only", type=int, default=0, metavar="RUNS",
                         help="only the option flood: RUNS runs, each on a fresh vehicle, each next to a no-flood floor")
     parser.add_argument("--attack-suite", metavar="REPORT.json", default=None,
-                        help="run the standing attack suite (tests/service/test_service_attacks.py) writing its figures "
+                        help="run the standing attack suite (tests/service/test_attacks.py) writing its figures "
                              "to REPORT.json, then print them as a markdown table")
     parser.add_argument("--attack-table", metavar="REPORT.json", default=None,
                         help="print the markdown table of an attack-suite report already written")

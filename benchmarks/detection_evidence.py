@@ -14,7 +14,7 @@ deadline after the onset (0.5 s for jams and hard-overs, 2 s for losses of effec
   detector reports, and the strongest other hypothesis is given.
 
 The trace reads the detector and changes nothing: a traced run's detections are the untraced
-run's (checked in ``tests/benchmarks/test_bench_detection.py``).
+run's (checked in ``tests/benchmarks/test_detection_sweep.py``).
 """
 
 from __future__ import annotations

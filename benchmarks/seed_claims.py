@@ -20,17 +20,17 @@ import os
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-import argparse  # noqa: E402
-import csv  # noqa: E402
-import sys  # noqa: E402
-import time  # noqa: E402
-from collections.abc import Callable, Mapping  # noqa: E402
-from dataclasses import dataclass  # noqa: E402
-from pathlib import Path  # noqa: E402
+import argparse
+import csv
+import sys
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from benchmarks import bench_sensitivity  # noqa: E402
+from benchmarks import bench_sensitivity
 
 Numbers = dict[str, float]
 
@@ -236,99 +236,99 @@ _MIMO_FREE = "pilot model and gain, divergence bound, noise seed"
 
 CLAIMS: tuple[Claim, ...] = (
     Claim("Figs 2-21 to 2-25", "the two-input decoupled SMC of the pendulum through the section 2.2 plant change",
-          "", None, lambda m: "not implemented", "", "not implemented (tests/sim/test_sim_classic.py::"
+          "", None, lambda m: "not implemented", "", "not implemented (tests/sim/test_classic.py::"
           "test_pendulum_plant_change_switches_the_plant_at_failure_time flies the plant change on the "
           "single-input regulator instead)"),
     Claim("Fig 2-15", "equivalent control alone keeps sliding on the linear model; on the nonlinear simulation "
           "\"stable control is lost\"", "linear |sigma| < 1e-6 after 1 s and nonlinear |state| > 0.05 after 5 s",
           _fig_2_15, _fig_2_15_verdict, "0.15 s reaching phase (seed), rho 50, eps 0.1",
-          "tests/sim/test_sim_classic.py::test_pendulum_equivalent_control_holds_the_surface_only_on_the_design_model"),
+          "tests/sim/test_classic.py::test_pendulum_equivalent_control_holds_the_surface_only_on_the_design_model"),
     Claim("Figs 2-19/2-20", "LQR shows \"a noticeable bias\" under a 10 N force bias; SMC regulation \"very good\"",
           "|LQR mean x| > 10 |SMC mean x| and |SMC mean x| < 0.02 m", _fig_2_19,
           lambda m: _yes(abs(m["LQR mean x 8-10 s (m)"]) > 10 * abs(m["SMC mean x 8-10 s (m)"])
                          and abs(m["SMC mean x 8-10 s (m)"]) < 0.02),
           "noise std 1 N and seed 3 (ours: the seed prints no noise level)",
-          "tests/sim/test_sim_classic.py::test_pendulum_matched_disturbance_rejected_by_smc_not_lqr"),
+          "tests/sim/test_classic.py::test_pendulum_matched_disturbance_rejected_by_smc_not_lqr"),
     Claim("Fig 3-1", "\"excellent regulation of the states\" (no actuator)", "RMS x and theta over 5-10 s < 1e-4",
           _fig_3_1, lambda m: _yes(m["RMS x 5-10 s (m)"] < 1e-4 and m["RMS theta 5-10 s (rad)"] < 1e-4),
-          "none", "tests/sim/test_sim_classic.py::test_pendulum_smc_regulates_without_actuator"),
+          "none", "tests/sim/test_classic.py::test_pendulum_smc_regulates_without_actuator"),
     Claim("Fig 3-2", "actuator 20/(s+20): \"Already, undesired oscillations appear\"",
           ">= 10 sigma zero crossings in 0.5-1 s (the oscillation; it decays, which the figure cannot confirm)",
           _fig_3_2, lambda m: _yes(m["sigma zero crossings 0.5-1 s"] >= 10 and not m["diverged"]), "none",
-          "tests/sim/test_sim_classic.py::test_pendulum_smc_oscillates_with_20_rad_s_actuator"),
+          "tests/sim/test_classic.py::test_pendulum_smc_oscillates_with_20_rad_s_actuator"),
     Claim("Fig 3-3", "actuator 13/(s+13): \"it drives both states unstable\"", "diverged (|theta| > 90 deg)",
           _fig_3_3, lambda m: _yes(bool(m["diverged"])), "divergence bound 90 deg (ours)",
-          "tests/sim/test_sim_classic.py::test_pendulum_smc_diverges_with_13_rad_s_actuator"),
+          "tests/sim/test_classic.py::test_pendulum_smc_diverges_with_13_rad_s_actuator"),
     *(Claim(fig, "no limits: \"excellent tracking\"" + (" through the 5 s tail loss" if fig == "Fig 3-8" else ""),
             "bounded, max |q_r - q| < 0.02 rad/s", (lambda n=name: _f16_numbers(n)),
             lambda m: _yes(not m["diverged"] and m["max error (rad/s)"] < 0.02), "pulse amplitude 0.1 rad/s (seed)",
-            "tests/sim/test_sim_classic.py::test_f16_tracks_without_limits")
+            "tests/sim/test_classic.py::test_f16_tracks_without_limits")
       for fig, name in (("Fig 3-7", "fig_3_7"), ("Fig 3-8", "fig_3_8"))),
     Claim("Fig 3-9", "\"some minor rate limiting occurs, but the position limit is never reached\"",
           "rate saturation > 0 s, position saturation 0 s", lambda: _f16_numbers("fig_3_9"),
           lambda m: _yes(m["rate saturation (s)"] > 0 and m["position saturation (s)"] == 0), "none",
-          "tests/sim/test_sim_classic.py::test_f16_small_pulses_rate_limit_but_no_position_limit"),
+          "tests/sim/test_classic.py::test_f16_small_pulses_rate_limit_but_no_position_limit"),
     Claim("Fig 3-10", "static layer, 0.2 rad/s pulses: \"no longer tracks the input and it becomes unstable\"",
           "diverged", lambda: _f16_numbers("fig_3_10"), lambda m: _yes(bool(m["diverged"])),
           "actuator integrator clamped at the limit (ours; output saturation measured the same)",
-          "tests/sim/test_sim_classic.py::test_f16_static_layer_loses_control_as_in_seed (strict xfail)"),
+          "tests/sim/test_classic.py::test_f16_static_layer_loses_control_as_in_seed (strict xfail)"),
     Claim("Fig 3-11", "dynamic layer (Eqs 3.6-3.8) \"keeps the system stable\", tracking degraded somewhat",
           "bounded, no position saturation", lambda: _f16_numbers("fig_3_11"),
           lambda m: _yes(not m["diverged"] and m["position saturation (s)"] == 0), "none",
-          "tests/sim/test_sim_classic.py::test_f16_dynamic_layer_keeps_control_within_limits"),
+          "tests/sim/test_classic.py::test_f16_dynamic_layer_keeps_control_within_limits"),
     Claim("Fig 3-12", "actuator and Eq 3.7 design both 10 rad/s: \"comparable to the last case\"",
           "bounded, no position saturation", lambda: _f16_numbers("fig_3_12"),
           lambda m: _yes(not m["diverged"] and m["position saturation (s)"] == 0), "none",
-          "tests/sim/test_sim_classic.py::test_f16_dynamic_layer_with_known_slow_actuator"),
+          "tests/sim/test_classic.py::test_f16_dynamic_layer_with_known_slow_actuator"),
     Claim("Fig 3-13", "true actuator 10 rad/s, Eq 3.7 designed for 20: \"The system fails\"", "diverged",
           lambda: _f16_numbers("fig_3_13"), lambda m: _yes(bool(m["diverged"])), "none",
-          "tests/sim/test_sim_classic.py::test_f16_unknown_slow_actuator_fails_as_in_seed (strict xfail)"),
+          "tests/sim/test_classic.py::test_f16_unknown_slow_actuator_fails_as_in_seed (strict xfail)"),
     Claim("Fig 3-18", "DC-8: \"no difference in the tracking performance\" between failed and un-failed",
           "bank angles of the two runs within 1e-3 rad after the failure",
           _fig_3_18, lambda m: _yes(m["max bank difference after failure (rad)"] < 1e-3 and not m["diverged"]),
           "0.2 rad square-wave bank command, period 20 s (ours: not printed); failure at 10 s (seed: 40 s)",
-          "tests/sim/test_sim_classic.py::test_dc8_tracking_is_invariant_to_the_failure"),
+          "tests/sim/test_classic.py::test_dc8_tracking_is_invariant_to_the_failure"),
     Claim("Fig 4-11", "HARV lon SMC without observer, actuators in the loop: unstable",
           "q RMS > 20 deg/s in 3 s", lambda: _harv_lon(observer=False, hedge=False, noise=False, duration=3.0),
           lambda m: _yes(m["q RMS before (deg/s)"] > 20.0), "none",
-          "tests/sim/test_sim_harv.py::test_lon_smc_without_observer_is_unstable_with_actuators_fig_4_11"),
+          "tests/sim/test_harv.py::test_lon_smc_without_observer_is_unstable_with_actuators_fig_4_11"),
     Claim("Fig 4-32", "HARV lon Failure #2: SMC (modified observer/hedge design) survives",
           "bounded, q RMS after < 5 deg/s", lambda: _harv_lon(failure="failure2", duration=20.0),
           lambda m: _yes(not m["diverged"] and m["q RMS after (deg/s)"] < 5.0), _MIMO_FREE + "; 20 s (seed: longer)",
-          "tests/sim/test_sim_harv.py::test_lon_smc_with_hedging_survives_failure_2_fig_4_32"),
+          "tests/sim/test_harv.py::test_lon_smc_with_hedging_survives_failure_2_fig_4_32"),
     Claim("Fig 4-39", "HARV lon Failure #2: the loop-shaped baseline fails",
           "diverged or q RMS after > 10 deg/s", lambda: _harv_lon(failure="failure2", duration=20.0,
                                                                   controller="loopshape"),
           lambda m: _yes(bool(m["diverged"]) or m["q RMS after (deg/s)"] > 10.0), _MIMO_FREE + "; 20 s",
-          "tests/sim/test_sim_harv.py::test_lon_loop_shaped_fails_under_failure_2_fig_4_39 (strict xfail)"),
+          "tests/sim/test_harv.py::test_lon_loop_shaped_fails_under_failure_2_fig_4_39 (strict xfail)"),
     Claim("Fig 4-67", "HARV lat-dir Failure #1: SMC survives, beta excursions about 1 deg",
           "bounded, ps RMS after < 5 deg/s, beta max after < 2 deg", lambda: _harv_latdir_failure1("smc"),
           lambda m: _yes(not m["diverged"] and m["ps RMS after (deg/s)"] < 5.0 and m["beta max after (deg)"] < 2.0),
-          _MIMO_FREE + "; failure at 10 s, 20 s", "tests/sim/test_sim_harv.py::"
+          _MIMO_FREE + "; failure at 10 s, 20 s", "tests/sim/test_harv.py::"
           "test_latdir_smc_survives_failure_1_loop_shaped_does_not"),
     Claim("Fig 4-75", "HARV lat-dir Failure #1: the loop-shaped baseline is unstable",
           "diverged or ps RMS after > 5 x the SMC's", _fig_4_75,
           lambda m: _yes(bool(m["diverged"]) or m["ps RMS after (deg/s)"] > 5.0 * m["SMC ps RMS after (deg/s)"]),
-          _MIMO_FREE + "; failure at 10 s, 20 s", "tests/sim/test_sim_harv.py::"
+          _MIMO_FREE + "; failure at 10 s, 20 s", "tests/sim/test_harv.py::"
           "test_latdir_smc_survives_failure_1_loop_shaped_does_not"),
     Claim("Fig 4-81", "HARV lat-dir Failure #2, filtered bank steps: SMC tracks as well as the reconfigured QFT",
           "ganging bounded, phi error RMS < 10 deg", _fig_4_81,
           lambda m: _yes(not m["ganging diverged"] and m["ganging phi error RMS (deg)"] < 10.0),
           "Fig 4-81 step sizes and times (ours), " + _MIMO_FREE,
-          "tests/sim/test_sim_harv.py::test_latdir_smc_tracks_failure2_fig_4_81 (strict xfail)",
+          "tests/sim/test_harv.py::test_latdir_smc_tracks_failure2_fig_4_81 (strict xfail)",
           sweep_run=("harv_latdir", "failed", "static")),
     Claim("Fig 4-95", "ICE SMC without observer, actuators in the loop: unstable", "diverged within 4 s",
           _fig_4_95, lambda m: _yes(bool(m["diverged"]) and m["time of divergence (s)"] < 4.0),
-          "divergence bound ICE", "tests/sim/test_sim_ice.py::test_no_observer_diverges_fig_4_95"),
+          "divergence bound ICE", "tests/sim/test_ice.py::test_no_observer_diverges_fig_4_95"),
     Claim("Fig 4-110", "ICE, Table 4-6 observers and hedges: stable through the t = 20 s failure",
           "the seed's 40 s run with noise stays bounded", _fig_4_110, _fig_4_110_verdict,
           "ICE alpha pilot (none), " + _MIMO_FREE,
-          "tests/sim/test_sim_ice.py::test_full_seed_run_with_noise_stays_bounded (slow, strict xfail)",
+          "tests/sim/test_ice.py::test_full_seed_run_with_noise_stays_bounded (slow, strict xfail)",
           sweep_run=("ice", "failed", "static")),
     Claim("Fig 4-119", "ICE, Eq 4.28 loop-shaped baseline: diverges after the failure",
           "diverged after the failure (5 s here)", _fig_4_119,
           lambda m: _yes(bool(m["diverged"]) and m["time of divergence (s)"] > 5.0), "divergence bound ICE",
-          "tests/sim/test_sim_ice.py::test_loop_shaped_baseline_diverges_after_failure_fig_4_119"),
+          "tests/sim/test_ice.py::test_loop_shaped_baseline_diverges_after_failure_fig_4_119"),
 )
 
 

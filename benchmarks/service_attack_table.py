@@ -1,6 +1,6 @@
 """The attack suite's figures as a markdown table (``bench_service --attack-suite/--attack-table``).
 
-``tests/service/test_service_attacks.py`` writes its figures as JSON when ``ALLOC_ATTACK_REPORT``
+``tests/service/test_attacks.py`` writes its figures as JSON when ``ALLOC_ATTACK_REPORT``
 names a file; :func:`render_attack_table` turns such a report into the table that
 ``benchmarks/reference/service_attacks.md`` holds and ``docs/service.md`` includes, so the
 documented figures are generated, never typed.
@@ -25,7 +25,7 @@ def attack_table(path: str, run: bool, markdown: str | None = None) -> None:
     root = Path(__file__).resolve().parent.parent
     load_before = os.getloadavg()
     if run:
-        subprocess.run([sys.executable, "-m", "pytest", "tests/service/test_service_attacks.py", "-q", "-p", "no:cacheprovider"],
+        subprocess.run([sys.executable, "-m", "pytest", "tests/service/test_attacks.py", "-q", "-p", "no:cacheprovider"],
                        cwd=root, env={**os.environ, "ALLOC_ATTACK_REPORT": str(Path(path).resolve())}, check=False)
     text = render_attack_table(json.loads(Path(path).read_text()), load_before if run else None)
     print(text)
@@ -48,7 +48,7 @@ def render_attack_table(report: dict[str, Any], load_before: tuple[float, float,
              f"{report['cpus']} CPUs shared with other jobs; the suite ran at niceness {report.get('nice', '?')} "
              f"(other jobs at their own); load average (1 / 5 / 15 min) "
              + (f"{fmt(load_before)} before, " if load_before else "") + f"{fmt(report['loadavg'])} at the end.",
-             f"Targets on a quiet machine (issue 23): {targets or 'see tests/service/test_service_attacks.py'}."
+             f"Targets on a quiet machine: {targets or 'see tests/service/test_attacks.py'}."
              + _DATABASE.get(report.get("database", ""), ""), "",
              "| attack | event p50 / p99 ms | next allocation p50 / p99 ms | /v1/health p50 / p99 ms | rounds "
              "| targets met | memory growth / bound MiB | load (1 min) |",

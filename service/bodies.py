@@ -23,7 +23,7 @@ bodies parsed one at a time, never while an authenticated write or a light reque
   bytes had arrived meanwhile (its wake-up was queued before the loop read the socket), and
   again while the allocation awaited its rebuild on a build thread (a parse holds the GIL
   for its whole document).  Measured under the validation-error flood of
-  ``tests/service/test_service_attacks.py`` at load 15, niceness -20: the allocation's
+  ``tests/service/test_attacks.py`` at load 15, niceness -20: the allocation's
   ``Server-Timing`` ``dispatch`` was 60-334 ms in 4 of 6 rounds before, 0.2-0.6 ms in 11 of
   11 after; its p50 at the client 324 ms before, 160 ms after.
 
@@ -231,7 +231,7 @@ def _members(node: Any, *, every_list: bool) -> int:
     return count
 
 
-class _Repeated(dict):  # type: ignore[type-arg]
+class _Repeated(dict):
     """An object in which ``key`` was given more than once (found by :func:`duplicate_key`)."""
 
     key: str

@@ -10,7 +10,6 @@ from __future__ import annotations
 import ipaddress
 import re
 from pathlib import Path
-from typing import Optional
 
 import typer
 
@@ -36,10 +35,10 @@ def bind_address(text: str) -> str:
 def serve_command(
     host: str = typer.Option("127.0.0.1", parser=bind_address, help="bind address: an IP address or a host name"),
     port: int = typer.Option(8000, min=1, max=65535, help="TCP port (1-65535)"),
-    data_dir: Optional[Path] = typer.Option(None, file_okay=False,
+    data_dir: Path | None = typer.Option(None, file_okay=False,
                                             help="where the embedded SQLite database lives (ALLOC_DATA_DIR)"),
-    database_url: Optional[str] = typer.Option(None, help="SQLAlchemy URL, e.g. postgresql+psycopg://... (ALLOC_DATABASE_URL)"),
-    api_key_file: Optional[Path] = typer.Option(
+    database_url: str | None = typer.Option(None, help="SQLAlchemy URL, e.g. postgresql+psycopg://... (ALLOC_DATABASE_URL)"),
+    api_key_file: Path | None = typer.Option(
         None, exists=True, dir_okay=False, readable=True, help="file holding the X-API-Key that write endpoints require (ALLOC_API_KEY_FILE; or set "
                    "ALLOC_API_KEY). A key is never taken on the command line: /proc/<pid>/cmdline is world-readable"),
     workers: int = typer.Option(1, min=1, max=MAX_WORKERS, help=f"worker processes on this port (1-{MAX_WORKERS}); "

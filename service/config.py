@@ -53,8 +53,8 @@
 The size caps (``MAX_EFFECTORS``, ``MAX_AXES``, ``MAX_BATCH``, ``MAX_MAGNITUDE``) are part
 of the API contract (they appear in the OpenAPI schema) and are therefore constants.
 
-Memory bound (documented, checked by ``tests/service/test_service_limits.py`` and
-``tests/service/test_service_attacks.py`` on the service and its build processes together): the
+Memory bound (documented, checked by ``tests/service/test_limits.py`` and
+``tests/service/test_attacks.py`` on the service and its build processes together): the
 start-up RSS of the service and of its ``ALLOC_BUILD_WORKERS`` build processes, plus
 ``ALLOC_CACHE_BYTES``, plus up to 1,024 vehicle states (~70 MiB at m = 64), plus one build
 in flight per build process of at most ~90 MiB (a facet enumeration at the cost cap, see

@@ -28,7 +28,6 @@ from typing import Any
 import numpy as np
 
 import alloc
-from alloc.facet_cost import FACET_LIMIT, facet_build_seconds
 from alloc.registry import CHEAP_BUILD_SECONDS, get_method
 
 __all__ = ["DEFAULT_BUILD_BUDGET_S", "build_seconds", "call_seconds", "batch_seconds",

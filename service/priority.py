@@ -326,13 +326,13 @@ class PriorityMiddleware:
         priority = scope.get(SCOPE_KEY)
         if priority is None:  # not marked by the protocol: classify here
             priority = gate.claims(scope["method"], scope["path"], scope.get("headers", ()))
-            scope[SCOPE_KEY] = priority  # type: ignore[literal-required]
+            scope[SCOPE_KEY] = priority
             if priority:
                 gate.enter()
         if not priority:
             ticket = scope.get(LIGHT_KEY)
             if ticket is None and is_light(scope.get("headers", ())):
-                ticket = scope[LIGHT_KEY] = LightTicket(gate)  # type: ignore[literal-required]
+                ticket = scope[LIGHT_KEY] = LightTicket(gate)
             if ticket is None:
                 await _wait_turn(gate, scope)
                 timing.mark("gate")

@@ -352,7 +352,7 @@ def _event_model(spec: KindSpec) -> type[_Event]:
     a default is optional and the recorded event carries the value it resolved to.
     """
     kind = spec.name.value
-    annotations: dict[str, Any] = {"kind": Literal[kind]}  # type: ignore[valid-type]
+    annotations: dict[str, Any] = {"kind": Literal[kind]}
     namespace: dict[str, Any] = {"__module__": __name__, "__annotations__": annotations,
                                  "__doc__": f"{spec.meaning[0].upper()}{spec.meaning[1:]} (see alloc.health).",
                                  "model_config": _examples({"effector": "left", "kind": kind, **spec.example})}
@@ -404,7 +404,7 @@ def event_of_text(data: Any) -> Any:
 
 
 #: an event body: its kind's fields, or the same failure as text (:func:`event_of_text`)
-EventIn = Annotated[Union[tuple(EVENT_MODELS.values())], Discriminator("kind"),  # noqa: UP007
+EventIn = Annotated[Union[tuple(EVENT_MODELS.values())], Discriminator("kind"),
                     BeforeValidator(event_of_text)]
 
 #: the event kinds: exactly the library's failure kinds (alloc.health.FailureKind)

@@ -122,7 +122,7 @@ class DetectorSettings:
     min_confidence: float = 0.95
     #: "learnt": residuals against a nominal model learnt in flight from ``model_uncertainty``
     #: (the library's ``robust``); "exact": the stated model and noise are taken as exact.  The
-    #: default is exact: on the ICE silent-jam flight (tests/service/test_service_telemetry.py)
+    #: default is exact: on the ICE silent-jam flight (tests/service/test_telemetry.py)
     #: the learnt model, 1.5 s into its learning, isolated a hard-over of lef_r instead of the
     #: jam of elevon_l that the exact model finds on the first sample after it
     model: str = "exact"

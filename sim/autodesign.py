@@ -224,7 +224,7 @@ def closed_loop_poles(
     The second array is False for the neutral modes at the origin (:data:`NEUTRAL_TOL`): free
     integrators of uncontrolled variables.
     """
-    n, m, k = A.shape[0], B.shape[1], len(controlled)
+    n, k = A.shape[0], len(controlled)
     Aa, Ba, Ca = _actuator_ss(actuators)
     na = Aa.shape[0]
     Cz, Dz = C[list(measured)], D[list(measured)]
@@ -234,7 +234,8 @@ def closed_loop_poles(
     n_obs = k * n if obs else 0
     N = n + na + n_obs + k
     Acl = np.zeros((N, N))
-    ix, ia, io, ii = slice(0, n), slice(n, n + na), slice(n + na, n + na + n_obs), slice(n + na + n_obs, N)
+    # the observers' rows, n + na .. n + na + n_obs, are filled block by block below
+    ix, ia, ii = slice(0, n), slice(n, n + na), slice(n + na + n_obs, N)
     # e = -E z_state: rows selecting the feedback signal of each channel
     E = np.zeros((k, N))
     if obs:

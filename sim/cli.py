@@ -33,7 +33,7 @@ import json
 import shlex
 from dataclasses import fields
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any
 
 import typer
 
@@ -115,25 +115,25 @@ def scenario_of_vehicle(source: str) -> Any:
 
 @with_setting_options
 def sim_command(
-    scenario: Optional[str] = typer.Argument(None, help=f"scenario name: {', '.join(scenarios())} (see --list); "
+    scenario: str | None = typer.Argument(None, help=f"scenario name: {', '.join(scenarios())} (see --list); "
                                              "or give --vehicle"),
-    vehicle: Optional[str] = typer.Option(None, "--vehicle", metavar="NAME|FILE",
+    vehicle: str | None = typer.Option(None, "--vehicle", metavar="NAME|FILE",
                                           help=f"{VEHICLE_HELP}: flies the scenario of that name (harv: harv_latdir); "
                                           "instead of SCENARIO"),
     design: list[str] = typer.Option(
         [], "--design", help="vehicle file only: override a choice of the seed's section 4.3 design, key=value "
         "(see sim/autodesign.py DESIGN_OPTIONS; the JSON summary's settings.design reports every choice); repeatable"),
-    json_path: Optional[Path] = typer.Option(None, "--json", help="write the JSON summary to this new file"),
-    csv_path: Optional[Path] = typer.Option(None, "--csv", help="write the time histories to this new file (CSV)"),
-    parquet_path: Optional[Path] = typer.Option(
+    json_path: Path | None = typer.Option(None, "--json", help="write the JSON summary to this new file"),
+    csv_path: Path | None = typer.Option(None, "--csv", help="write the time histories to this new file (CSV)"),
+    parquet_path: Path | None = typer.Option(
         None, "--parquet", help="write the time histories to this new file (Parquet, full precision; needs pyarrow)"
     ),
-    plot_path: Optional[Path] = typer.Option(None, "--plot", help="write a PNG plot to this new file"),
-    plant: Optional[str] = typer.Option(
+    plot_path: Path | None = typer.Option(None, "--plot", help="write a PNG plot to this new file"),
+    plant: str | None = typer.Option(
         None, "--plant", metavar="NAME", help="the plant flown: linear (default: the vehicle's linear model in the "
         "compiled engine), rotorpy (RotorPy's nonlinear multirotor, a vehicle file with [body]) or jsbsim:f22 "
         "(JSBSim's F-22; no --vehicle needed); sim/plants"),
-    forward_speed: Optional[float] = typer.Option(
+    forward_speed: float | None = typer.Option(
         None, "--forward-speed", metavar="M/S", help="--plant rotorpy only: ground speed due north held by the "
         "cascade's velocity loop, reached from the hover on a 1 m/s^2 ramp (0: hold the hover's zero speed); "
         "default: no velocity loop (a level hover that drifts)"),
@@ -147,7 +147,7 @@ def sim_command(
     force: bool = typer.Option(False, "--force", help="overwrite output files that exist"),
     list_: bool = typer.Option(False, "--list", callback=list_scenarios, is_eager=True, expose_value=False,
                                help="list the scenarios, their defaults and failures, and exit"),
-    settings: Optional[dict[str, Any]] = None,
+    settings: dict[str, Any] | None = None,
 ) -> None:
     """Run SCENARIO in closed loop and print its JSON summary (exit 1 if it diverged).
 

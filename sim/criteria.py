@@ -42,7 +42,7 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from dataclasses import replace
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 
 import numpy as np
 
@@ -50,7 +50,6 @@ from alloc.health import Effect
 
 if TYPE_CHECKING:
     from sim.model import Failure
-    from sim.result import SimResult
 
 __all__ = [
     "Limit", "AxisLimits", "ScenarioCriteria", "Verdict", "CRITERIA", "criteria_for", "evaluate", "verdict_of",
@@ -62,6 +61,30 @@ __all__ = [
     "NOMINAL_RMS_FRACTION", "FAILED_RMS_FRACTION", "NOMINAL_PEAK_FRACTION", "FAILED_PEAK_FRACTION",
     "SATURATION_MAX_FRACTION", "SIDESLIP_RMS_DEG", "render_markdown",
 ]
+
+
+class Run(Protocol):
+    """What the criteria read of a run (a :class:`sim.result.SimResult` is one).  Declared here so
+    that the judge depends on the run's shape, not on the result module, which asks the judge
+    for its summary's verdict: one direction of import, result -> criteria."""
+
+    #: a dataclass: the saturation shares copy it with some effectors' columns left out
+    __dataclass_fields__: ClassVar[dict[str, Any]]
+    scenario: str
+    failure: str | None
+    t: np.ndarray
+    channels: list[str]
+    reference: np.ndarray
+    output: np.ndarray
+    effectors: np.ndarray | None
+    effector_rates: np.ndarray | None
+    effector_limits: tuple[np.ndarray, np.ndarray] | None
+    rate_limits: tuple[np.ndarray, np.ndarray] | None
+    failure_time: float | None
+    diverged: bool
+
+    def saturated_samples(self, kind: str) -> np.ndarray | None: ...
+
 
 PHASES = ("before", "after")
 
@@ -341,7 +364,7 @@ def register_failure_source(source: Callable[[str, str, float | None], Failure |
         _FAILURE_SOURCES.append(source)
 
 
-def known_failed_effectors(result: SimResult) -> tuple[int, ...]:
+def known_failed_effectors(result: Run) -> tuple[int, ...]:
     """:func:`failed_effectors` of the failure ``result`` flew, rebuilt by name from its scenario or a
     registered source (:func:`register_failure_source`).
 
@@ -364,14 +387,14 @@ def known_failed_effectors(result: SimResult) -> tuple[int, ...]:
     return ()
 
 
-def _saturation(result: SimResult, kind: str, excluded: tuple[int, ...]) -> np.ndarray | None:
+def _saturation(result: Run, kind: str, excluded: tuple[int, ...]) -> np.ndarray | None:
     """Per sample, whether any effector but ``excluded`` sits at a ``kind`` limit (None: not recorded)."""
     if not excluded or result.effectors is None:
         return result.saturated_samples(kind)
     keep = np.setdiff1d(np.arange(result.effectors.shape[1]), excluded)
 
     def columns(pair: tuple[np.ndarray, np.ndarray] | None) -> tuple[np.ndarray, np.ndarray] | None:
-        return None if pair is None else tuple(np.asarray(a)[..., keep] for a in pair)  # type: ignore[return-value]
+        return None if pair is None else (np.asarray(pair[0])[..., keep], np.asarray(pair[1])[..., keep])
 
     rates = None if result.effector_rates is None else result.effector_rates[:, keep]
     kept = replace(result, effectors=result.effectors[:, keep], effector_rates=rates,
@@ -379,7 +402,7 @@ def _saturation(result: SimResult, kind: str, excluded: tuple[int, ...]) -> np.n
     return kept.saturated_samples(kind)
 
 
-def _signals(result: SimResult, axis: AxisLimits) -> tuple[np.ndarray, np.ndarray] | None:
+def _signals(result: Run, axis: AxisLimits) -> tuple[np.ndarray, np.ndarray] | None:
     """(error, output) of an axis, or None when the run does not have that channel."""
     if axis.signal not in result.channels:
         return None
@@ -391,7 +414,7 @@ def _masked(stat: Callable[[np.ndarray], float], x: np.ndarray, mask: np.ndarray
     return stat(x[mask]) if np.any(mask) else None
 
 
-def evaluate(result: SimResult, criteria: ScenarioCriteria, *,
+def evaluate(result: Run, criteria: ScenarioCriteria, *,
              failed: tuple[int, ...] | None = None) -> Verdict:
     """Judge ``result`` against ``criteria`` (module docstring).
 
@@ -431,7 +454,7 @@ def evaluate(result: SimResult, criteria: ScenarioCriteria, *,
                       and (result.diverged or t[-1] - failure >= criteria.recovery_hold.value - 1e-9))
     metrics["back_in_band_s"] = (
         (math.inf if result.diverged else back_in_band_time(t, inside, failure, criteria.recovery_hold.value))
-        if judge_recovery else None)
+        if judge_recovery and failure is not None else None)  # judge_recovery implies it; mypy cannot see it
     limits = criteria.limits()
     broken = [name for name, value in metrics.items()
               if value is not None and name in limits and not value <= limits[name]]
@@ -441,7 +464,7 @@ def evaluate(result: SimResult, criteria: ScenarioCriteria, *,
                    limits={k: v for k, v in limits.items() if k in metrics})
 
 
-def verdict_of(result: SimResult) -> Verdict | None:
+def verdict_of(result: Run) -> Verdict | None:
     """The verdict of ``result`` by its scenario's table; None for a scenario without one."""
     criteria = criteria_for(result.scenario)
     return None if criteria is None else evaluate(result, criteria)

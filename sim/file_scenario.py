@@ -5,7 +5,7 @@ the simulator's objects -- a :class:`sim.scenarios.mimo.MimoScenario` -- and
 :func:`sim.scenarios.mimo.run_mimo` flies it, the runner of the seed's scenarios.  So the
 seed's ICE and F-18/HARV lat-dir, flown from ``alloc/data/vehicles/ice.toml`` and
 ``harv.toml``, are the scenarios ``ice`` and ``harv_latdir`` bit for bit
-(tests/sim/test_sim_user_vehicle.py): the file carries everything the scenario has.
+(tests/sim/test_user_vehicle.py): the file carries everything the scenario has.
 
 Design options: ``observer`` and ``hedge`` (as the seed's scenarios), and
 ``<group>_hedge`` for every hedge group of the file (HARV's ``cross_hedge``).  Input

@@ -165,7 +165,7 @@ class FrameLoop:
     def step(self, X: np.ndarray, cmd: np.ndarray, att_cmd: np.ndarray | None = None,
              u_in: np.ndarray | None = None, p_in: np.ndarray | None = None) -> tuple[np.ndarray, dict[str, Any]]:
         """One frame from state ``X`` (see the class docstring); ``cmd`` direct commands, ``att_cmd`` pilots'."""
-        P, k, m = self.P, self.k, self.m
+        P, k = self.P, self.k
         X = X.copy()
         x, pos, rate, uact = (self.part(X, n) for n in ("x", "pos", "rate", "uact"))
         ctrl, meas = P[IntSlot.CTRL].astype(int), P[IntSlot.MEAS].astype(int)

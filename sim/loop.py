@@ -8,7 +8,7 @@ The loop is split by concern: :mod:`sim.model` (vehicle, failure, designs, pilot
 
 from __future__ import annotations
 
-# the private names are what tests/sim/test_sim_blocks.py and older callers import from here
+# the private names are what tests/sim/test_blocks.py and older callers import from here
 from sim.engine import _controller_system, simulate  # noqa: F401
 from sim.injection import inject_failure as _inject  # noqa: F401
 from sim.model import TF, Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle

@@ -93,7 +93,7 @@ class FloatSlot(IntEnum):
     W = auto()
     UDEL = auto()
     # controller outputs [r, y_hat, y_f]; two scratch rows for matrix-vector products
-    O = auto()  # noqa: E741
+    O = auto()
     SCRATCH = auto()
     #: per output: the quantisation step of the measured value (0: none; sim.world ``quantised``)
     QSTEP = auto()

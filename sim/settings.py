@@ -29,13 +29,13 @@ import numpy as np
 
 from alloc.exceptions import AllocError
 from sim.allocation import PREFERRED_POSITIONS, RATE_HORIZONS, RATE_WINDOWS
-
-#: ``--detector-model`` choices (sim.detection)
-DETECTOR_MODELS = ("exact", "learnt")
 from sim.blocks import DEFAULT_DT
 from sim.model import TF, Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle
 from sim.pilot import PILOT_MODELS
 from sim.world import MAX_MODEL_ERROR, TURBULENCE_LEVELS, parse_noise
+
+#: ``--detector-model`` choices (sim.detection)
+DETECTOR_MODELS = ("exact", "learnt")
 
 __all__ = ["Setting", "SettingError", "SettingTypeError", "LoopSettings", "RunSettings", "LoopSpec",
            "setting_of", "value_types", "check_setting", "U_PREV_SOURCES", "BOUNDARY_LAYER_RULES", "ANTI_WINDUP_RULES",

@@ -125,7 +125,10 @@ def polish_stage1(p, v, lo, hi, u_ref):
     cand = u.copy()
     if F.any():
         cand[F] = np.linalg.lstsq(S @ p.B[:, F], S @ (v - p.B[:, X] @ u[X]), rcond=1e-13)[0]
-    J = lambda x: float(np.sum((S @ (p.B @ x - v)) ** 2))
+
+    def J(x: np.ndarray) -> float:
+        return float(np.sum((S @ (p.B @ x - v)) ** 2))
+
     ok = (cand >= lo - 1e-12 * span).all() and (cand <= hi + 1e-12 * span).all() and J(cand) <= J(u) + 1e-14
     return p.B @ (cand if ok else u)
 

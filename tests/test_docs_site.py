@@ -83,6 +83,81 @@ def test_cited_files_exist(page):
     assert not missing, f"{page} cites files that are not in the repository: {missing}"
 
 
+
+# ------------------------------------------------------------ pages read as documentation
+_SNIPPET = re.compile(r'^--8<-- "([^"]+)"[ \t]*$', re.MULTILINE)
+#: "issue 26", "issues 6 and 14", "issue #3": a page says what is true, not which ticket asked
+_ISSUE_NUMBER = re.compile(r"\bissues?\s*#?\s*\d+", re.IGNORECASE)
+#: the history (CHANGELOG.md, included whole): its release sections repeat "Added", "Fixed", ...
+#: and its entries may name the issue they closed
+_HISTORY = {"changelog.md"}
+#: pages that still paste a committed benchmark report because their prose reads its tables
+#: (to link it instead, as docs/detection.md does).  A listed page that pastes none fails.
+_PASTED_REPORTS_LEFT = {"export.md", "service.md"}
+
+
+def _expanded(text: str) -> str:
+    """The page as rendered: every ``--8<--`` snippet replaced by the file it names."""
+    return _SNIPPET.sub(lambda m: _expanded((ROOT / m.group(1)).read_text()), text)
+
+
+def _repeated_headings(text: str) -> list[str]:
+    """Headings that repeat a sibling's title under the same parent (code blocks skipped)."""
+    parents: list[tuple[int, str]] = []
+    seen: set[tuple[tuple[str, ...], int, str]] = set()
+    repeated, fenced = [], False
+    for line in text.splitlines():
+        if line.lstrip().startswith(("```", "~~~")):
+            fenced = not fenced
+        heading = None if fenced else re.match(r"^(#{1,6})\s+(.+?)\s*#*\s*$", line)
+        if heading is None:
+            continue
+        level, title = len(heading.group(1)), heading.group(2)
+        parents = [(lv, t) for lv, t in parents if lv < level]
+        key = (tuple(t for _, t in parents), level, title.lower())
+        if key in seen:
+            repeated.append(title)
+        seen.add(key)
+        parents.append((level, title))
+    return repeated
+
+
+@pytest.mark.parametrize("page", sorted(p.name for p in DOCS.glob("*.md") if p.name not in _HISTORY))
+def test_a_page_names_no_issue_and_repeats_no_heading(page):
+    text = _expanded((DOCS / page).read_text())
+    assert _ISSUE_NUMBER.findall(text) == [], f"{page} names an issue: say what is true instead"
+    assert _repeated_headings(text) == [], f"{page} repeats headings (a pasted report?)"
+
+
+def test_reports_are_linked_not_pasted():
+    pasting = {p.name for p in DOCS.glob("*.md")
+               if any(m.startswith("benchmarks/reference/") for m in _SNIPPET.findall(p.read_text()))}
+    assert pasting <= _PASTED_REPORTS_LEFT, f"link the report by its path instead: {pasting - _PASTED_REPORTS_LEFT}"
+    assert _PASTED_REPORTS_LEFT <= pasting, f"no longer pasting; remove from the list: {_PASTED_REPORTS_LEFT - pasting}"
+
+
+def test_the_page_rules_catch_what_they_are_for():
+    pasted_twice = "# Page\n\n## Runs\n\n## Machine state\n\nx\n\n## Machine state\n"
+    assert _repeated_headings(pasted_twice) == ["Machine state"]
+    history = "# Log\n\n## [2]\n\n### Added\n\n## [1]\n\n### Added\n\n```\n# Added\n# Added\n```\n"
+    assert _repeated_headings(history) == []  # siblings under different parents; code is not a heading
+    assert _ISSUE_NUMBER.findall("as issue 26 asked; issues 6 and 14; Issue #3") == ["issue 26", "issues 6", "Issue #3"]
+    assert _ISSUE_NUMBER.findall("Failure #2 at 25 s; the seed's Fig 4-81") == []
+
+
+#: wordings that gave the seed what is ours or another's: the Fig 4-81 steps' times and sizes are
+#: ours (docs/verdict-choices.md); "coverage predicts closed-loop rank" is Bordignon and Durham's,
+#: which the seed's section 1.3.4.9 reports and questions
+_MISATTRIBUTED = ("seed's filtered step", "seed's filtered-step", "the seed's claim, section 1.3.4.9")
+
+
+def test_disclosures_do_not_give_the_seed_what_is_not_its():
+    files = [*DOCS.glob("*.md"), *(ROOT / "benchmarks/reference").rglob("*.md"),
+             *(ROOT / "sim/scenarios").glob("*.py"), ROOT / "benchmarks/compare/report.py"]
+    found = [f"{path.relative_to(ROOT)}: {phrase}" for path in files for phrase in _MISATTRIBUTED
+             if phrase in path.read_text()]
+    assert found == []
+
 def _pipe_rows(text: str) -> list[list[str]]:
     rows = []
     for line in text.splitlines():

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any
 
 import numpy as np
 import typer
@@ -53,7 +53,7 @@ def default_options(vehicle: Vehicle, method: str) -> dict[str, Any]:
 
 
 @app.command()
-def summary(vehicle: Optional[str] = _VEHICLE, problem: Optional[str] = _PROBLEM,
+def summary(vehicle: str | None = _VEHICLE, problem: str | None = _PROBLEM,
             as_json: bool = typer.Option(False, "--json", help="print JSON")) -> None:
     """Volume, facets, vertices of the AMS (volume in the product of the axes' units)."""
     from .geometry import AttainableSet
@@ -67,7 +67,7 @@ def summary(vehicle: Optional[str] = _VEHICLE, problem: Optional[str] = _PROBLEM
 
 
 @app.command()
-def plot(vehicle: Optional[str] = _VEHICLE, problem: Optional[str] = _PROBLEM,
+def plot(vehicle: str | None = _VEHICLE, problem: str | None = _PROBLEM,
          method: str = typer.Option(DEFAULT_METHOD, help="method whose reached region is drawn inside "
                                     "(see `alloc methods`)"),
          out: Path = typer.Option(..., "--out", help="PNG file to write (required; an existing file is refused "
@@ -76,10 +76,10 @@ def plot(vehicle: Optional[str] = _VEHICLE, problem: Optional[str] = _PROBLEM,
          samples: int = typer.Option(4000, min=1, max=MAX_SAMPLES,
                                      help="Monte Carlo demands for non-affine methods"),
          seed: int = _SEED,
-         axes: Optional[str] = typer.Option(None, "--axes", metavar="A,B[,C]",
+         axes: str | None = typer.Option(None, "--axes", metavar="A,B[,C]",
                                             help="the 2 or 3 axes to draw (required for more than 3 axes, "
                                             "e.g. roll,pitch,yaw on a multirotor)"),
-         at: Optional[list[str]] = typer.Option(None, "--at", metavar="AXIS=VALUE",
+         at: list[str] | None = typer.Option(None, "--at", metavar="AXIS=VALUE",
                                                 help="fix an axis that is not drawn (repeat for each): the "
                                                 "picture is the exact slice there, e.g. --at thrust=-19.6 for "
                                                 "hover; without --at it is the exact projection")) -> None:
@@ -120,7 +120,7 @@ def _at_option(items: list[str] | None) -> dict[str, float] | None:
 
 
 @app.command("coverage")
-def coverage_cmd(vehicle: Optional[str] = _VEHICLE, problem: Optional[str] = _PROBLEM,
+def coverage_cmd(vehicle: str | None = _VEHICLE, problem: str | None = _PROBLEM,
                  method: list[str] = typer.Option(None, help="methods (default: all registered that the vehicle "
                                                   "can run; a skipped one is named on stderr)"),
                  samples: int = typer.Option(20_000, min=1, max=MAX_SAMPLES,

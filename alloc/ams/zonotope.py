@@ -229,7 +229,7 @@ def zonotope_volume(B: ArrayLike, lo: ArrayLike, hi: ArrayLike) -> float:
     it = combinations(range(idx.size), k)
     n_sub = comb(idx.size, k)
     chunk = 200_000
-    for start in range(0, n_sub, chunk):
+    for _ in range(0, n_sub, chunk):
         S = np.array([s for _, s in zip(range(chunk), it)], dtype=np.intp)
         total += float(np.abs(np.linalg.det(np.moveaxis(G[:, S], 1, 0))).sum())
     return total

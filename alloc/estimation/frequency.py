@@ -208,7 +208,7 @@ class FrequencyDomainEstimator:
     def estimate(self) -> FrequencyEstimate:
         """Eq 1.12 on the older bank, with its uncertainty (module docstring)."""
         bank = self._active()
-        f, p, k = self.freqs.size, self.p, self.k
+        p, k = self.p, self.k
         X = bank.X * self.dt  # Eq 1.7: x~ = X dt
         Y = bank.Y * self.dt
         if self.form == "derivative":

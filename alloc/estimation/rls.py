@@ -21,7 +21,7 @@ of ``R_n + alpha I`` was rounded to zero.  So the penalty solved with is ``alpha
 PENALTY_FLOOR trace R_n)`` (the stated fallback; ``alpha`` itself whenever ``trace R_n <= 1e10
 alpha``, every ordinary case), and the condition number is at most ``1 + 1e10`` whatever
 the data: the estimate is within about ``1e10 eps`` of the exact minimiser (1.1e-5 relative
-measured at the bound, tests/alloc/estimation/test_estimation_hostile.py).  The covariance
+measured at the bound, tests/alloc/estimation/test_hostile_inputs.py).  The covariance
 below uses the same ``alpha_n``, so it stays exact for the estimate computed.
 
 Domain.  Settings and samples are finite with ``|x| <= 1e50`` (:data:`alloc.domain.MAX_MAGNITUDE`),

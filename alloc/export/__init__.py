@@ -36,7 +36,8 @@ generating again (``Problem.with_health``), as does an effectiveness change for 
 from __future__ import annotations
 
 import hashlib
-from typing import Any, Mapping
+from typing import Any
+from collections.abc import Mapping
 
 import numpy as np
 

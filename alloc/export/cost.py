@@ -13,7 +13,7 @@ simplex's tableau, ``O(k (m + k))``) and the tables, which dominate wherever the
 * ``iteration_bound="certify"``: no source, but a library call per demand of the sample.
 
 Bytes, seconds and peak memory are linear in those counts, with the coefficients below measured
-on this generator (tests/alloc/export/test_export_cost.py measures a grid and keeps
+on this generator (tests/alloc/export/test_cost.py measures a grid and keeps
 measured / declared within [0.1, 2]).  An export priced above :data:`MAX_SOURCE_BYTES`, :data:`MAX_GENERATION_SECONDS` or
 :data:`MAX_GENERATION_MEMORY` is refused with an :class:`~alloc.export.ExportError` naming the
 field that drives it (``table`` for the tables, ``iteration_bound`` for the certification, ``m``

@@ -4,7 +4,7 @@ A Durham search round is a dozen numpy calls on arrays of a few dozen floats, ea
 about a microsecond of dispatch; here a whole call (Eqs 1.15-1.17) is one compiled
 function fed with the tables :class:`~alloc.methods.facet_search.FacetSearch` stores at build time.
 Every kernel follows its numpy reference (``_solve_reference``) operation for operation, so
-the answers agree to round-off (``tests/alloc/ams/test_ams_kernels.py``).
+the answers agree to round-off (``tests/alloc/ams/test_kernels.py``).
 """
 
 from __future__ import annotations

@@ -73,7 +73,7 @@ class EdgeBisect(FacetSearch):
         tiles_of = {}
         for i, f in enumerate(self._facet_of_tile):
             tiles_of.setdefault(int(f), []).append(i)
-        for f, tl in tiles_of.items():
+        for f in tiles_of:
             F = np.flatnonzero(ams.tiling.free_classes[f])
             n = ams.tiling.normals[f]
             for a in range(len(F)):

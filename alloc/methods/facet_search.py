@@ -53,7 +53,6 @@ from ..exceptions import OptionError, SolverError
 from ..facet_cost import (_CALL_BASE_S, _CALL_SUBSET_K2_S, _CALL_SUBSET_M_S, FACET_BYTES, FACET_LIMIT,
                            FACET_SECONDS, NEAR_FLAT_RTOL, TILES_PER_SUBSET, facet_build_bytes, facet_build_seconds,
                            lp_build_bytes, near_flat_ratio)
-from ..options import integer
 from ..problem import Problem
 from ..method import BUILD_LIMIT_BYTES, BUILD_LIMIT_SECONDS, FloatArray, Method, register
 from . import _facet_kernels as _kernels
@@ -336,7 +335,7 @@ class FacetSearch(Method):
             return None
         if not hasattr(self, "_facet_pad"):
             self._pad_tiles()
-        k, N = self.problem.k, len(V)
+        N = len(V)
         ams = self.ams
         D = V - self._p0
         U = np.empty((N, self.problem.m))

@@ -187,4 +187,4 @@ def _inertia(value: Any, path: str) -> tuple[tuple[tuple[float, float, float], .
     ev = np.linalg.eigvalsh(0.5 * (J + J.T))
     if ev[0] + ev[1] < ev[2] * (1.0 - COEFFICIENT_RTOL):
         raise _fail(path, f"principal moments {ev.tolist()} break the triangle inequality (no rigid body has them)")
-    return tuple(tuple(float(x) for x in row) for row in J), diagonal  # type: ignore[return-value]
+    return tuple(tuple(float(x) for x in row) for row in J), diagonal

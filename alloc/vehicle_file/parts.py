@@ -310,7 +310,7 @@ class LinearModel:
         B = _matrix(t["B"], f"{path}.B", n, m)
         C = _matrix(t["C"], f"{path}.C", p, n)
         D = _matrix(t["D"], f"{path}.D", p, m) if "D" in t else tuple((0.0,) * m for _ in range(p))
-        controlled = ()
+        controlled: tuple[str, ...] = ()
         if "controlled" in t:
             controlled = _names(t["controlled"], f"{path}.controlled")
             for i, name in enumerate(controlled):

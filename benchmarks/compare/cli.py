@@ -57,7 +57,7 @@ def _command() -> str:
 
 
 def _default_out(name: str) -> Path:
-    stamp = dt.datetime.now(dt.timezone.utc).strftime("%Y%m%d-%H%M%S")
+    stamp = dt.datetime.now(dt.UTC).strftime("%Y%m%d-%H%M%S")
     return Path.cwd() / f"bench-{name}-{stamp}"
 
 
@@ -105,7 +105,7 @@ def _run(name: str, specs: list[Spec], scheduler: str | None, out: Path | None, 
         latency_s = round(time.perf_counter() - t0, 1)
     meta = {
         "sweep": name, "command": _command(),
-        "date": dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
+        "date": dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M UTC"),
         "cores": os.cpu_count(), "load_avg_1min": round(os.getloadavg()[0], 2),
         "platform": f"{platform.system()} {platform.machine()}",
         "python": platform.python_version(), "numpy": np.__version__, "engine": engine,

@@ -22,7 +22,8 @@ Open-loop / closed-loop agreement
     Spearman rank correlation, over the registry methods, between AMS coverage on the scenario's
     own allocation problem (higher is better) and the closed-loop median score (lower is
     better), per failure and told/blind; a *negative* rho means more coverage, lower error
-    (the seed's claim, section 1.3.4.9: coverage predicts closed-loop rank).
+    (Bordignon and Durham's conclusion, which the seed's section 1.3.4.9 reports and questions:
+    open-loop measures need not carry over to the closed loop).
 
 Engineering verdict (rows that carry one)
     Each run judged by its scenario's pass/fail criteria (:mod:`sim.criteria`: tracking-error

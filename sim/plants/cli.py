@@ -13,7 +13,7 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any
 
 import typer
 
@@ -80,7 +80,7 @@ def linearise_command(plant: str = typer.Argument("jsbsim:f22", help="plant to l
 def fly_command(plant: str = typer.Argument("jsbsim:f22", help="plant to fly"),
                 duration: float = typer.Option(20.0, help="simulated seconds"),
                 method: str = typer.Option("qp", help="allocation method (alloc methods)"),
-                failure: Optional[str] = typer.Option(None, help=FAILURE_SYNTAX),  # noqa: UP007 (typer)
+                failure: str | None = typer.Option(None, help=FAILURE_SYNTAX),
                 failure_time: float = typer.Option(5.0, help="s"),
                 blind: bool = typer.Option(False, help="do not tell the allocator of the failure")) -> None:
     """Fly the plant in the closed loop (seed section 4.3 SMC on its linearisation) and print a summary."""

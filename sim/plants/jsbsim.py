@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 
 from alloc.exceptions import AllocError, ProblemError
-from alloc.health import Default, Effect, FailureKind, check_parameters, resolve_defaults
+from alloc.health import Effect, FailureKind, check_parameters, resolve_defaults
 from sim.plants.jsbsim_linear import ACTUATOR_BANDWIDTH, EFFECTORS
 from sim.plants.jsbsim_model import JSBSIM_DT, SURFACES, STATES, STATE_UNITS, F22, FT, TrimCondition
 

@@ -97,7 +97,9 @@ def fly_jsbsim(source: Any, plant: str, flown: RunSettings, *, progress: bool = 
     vehicle_source = JSBSIM_AIRCRAFT[aircraft] if source is None else source
     loop = SMCLoop(vehicle_source, T=frame, method=DEFAULT_METHOD if flown.method is None else flown.method)
     fm = loop.fm
-    the_plant.free_response = np.asarray(loop.fv.model.arrays()[0], dtype=float)  # the design's model, for sensed()
+    model = loop.fv.model
+    assert model is not None  # the F-22 file carries its linear model (SMCLoop designs on it)
+    the_plant.free_response = np.asarray(model.arrays()[0], dtype=float)  # the design's model, for sensed()
     duration = DEFAULT_DURATION if flown.duration is None else float(flown.duration)
     method = loop.method
     method_options = vehicles.method_options(fm.source, method, flown.method_options)

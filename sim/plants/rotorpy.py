@@ -352,10 +352,10 @@ def _build(Multirotor: type, params: dict[str, Any]) -> Any:
     """A ``Multirotor`` of ``params``' rotors: built on a four-rotor placeholder (RotorPy's constructor
     inverts a 4 x n mixer), then given the real geometry; stopped rotors lose translational lift."""
 
-    class _Multirotor(Multirotor):  # type: ignore[misc, valid-type]
+    class _Multirotor(Multirotor):
         stopped: np.ndarray
 
-        def compute_body_wrench(self, body_rates, rotor_speeds, body_airspeed_vector):  # noqa: ANN001, ANN201
+        def compute_body_wrench(self, body_rates, rotor_speeds, body_airspeed_vector):
             F, M = super().compute_body_wrench(body_rates, rotor_speeds, body_airspeed_vector)
             if self.aero and self.k_h and self.stopped.any():
                 # RotorPy lifts every rotor by k_h |v_xy|^2 whatever its speed; a stopped rotor makes none

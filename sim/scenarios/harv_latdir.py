@@ -15,7 +15,7 @@ bank angle ``phi = int(p + tan(alpha0) r)`` (level flight, theta0 = alpha0).
 Substitutions (ours): the beta reference model is not printed (beta_c = 0),
 the roll model is reused; the pilot (Fig 4-41, an image) is a crossover-model
 pilot ``p_c = 2 (phi_c - phi)`` delayed 0.2 s (or the crossover pilot, :mod:`sim.pilot`).
-Failure #2 with the seed's filtered-step input (Fig 4-81) is the scenario
+Failure #2 with filtered bank-angle steps (the form of Fig 4-81) is the scenario
 ``harv_latdir_failure2``; its step times and sizes are ours (the figure is an image).
 """
 
@@ -228,7 +228,7 @@ def run(**options: Any) -> SimResult:
 @register_scenario(
     "harv_latdir_failure2",
     description="F-18/HARV lat-dir, Failure #2 at t = 0 (yaw thrust vector 10 %, +-3 deg, 6 deg/s) with the "
-    "seed's filtered-step bank-angle input (seed 4.6, Fig 4-81)",
+    "filtered bank-angle steps of seed 4.6, Fig 4-81 (their times and sizes are ours)",
     failures={"failure2": FAILURES["failure2"]},
     default_duration=40.0,
     default_method="ganging",

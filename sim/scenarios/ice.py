@@ -4,7 +4,7 @@ Flight condition: 1 g, wings level, M = 0.3, h = 15,000 ft.  Controlled
 variables (channels, in the order of the seed's Eq 4.24 columns): angle of
 attack ``alphaw``, stability-axis roll rate ``ps`` and sideslip ``betaw``.
 
-Transcription checks (tests/sim/test_sim_ice.py): the weighted pseudo-inverse of
+Transcription checks (tests/sim/test_ice.py): the weighted pseudo-inverse of
 :data:`B_DESIGN` with ``Wu = diag(2, 2, 1, ...)`` reproduces the printed
 Eq 4.24; the actuator natural frequencies sqrt(40*100) = 63 and
 sqrt(37.168*41.3) = 39 rad/s are the ones quoted in the failure list.

@@ -31,7 +31,7 @@ from alloc.testing import random_demands, random_problem
 
 
 def test_every_backend_is_bounded_by_iterations_not_time() -> None:
-    for name, settings in solvers._TIGHT.items():  # noqa: SLF001 - the settings handed to qpsolvers
+    for name, settings in solvers._TIGHT.items():  # the settings handed to qpsolvers
         assert not any("time" in key for key in settings), (name, settings)
         assert any("iter" in key for key in settings), (name, settings)
         assert int(next(v for k, v in settings.items() if "iter" in k)) == solvers.ITERATION_LIMITS[name]

@@ -32,7 +32,7 @@ def dispatchers() -> dict[str, Dispatcher]:
     for name, module in list(sys.modules.items()):
         if module is None or not (name == "alloc" or name.startswith("alloc.")):
             continue
-        for attr, value in list(vars(module).items()):
+        for value in list(vars(module).values()):
             if isinstance(value, Dispatcher):
                 found.setdefault(f"{value.py_func.__module__}.{value.py_func.__qualname__}", value)
     return found

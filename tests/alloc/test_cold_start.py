@@ -17,7 +17,6 @@ import json
 import os
 import re
 import shutil
-import stat
 import subprocess
 import sys
 import textwrap
@@ -324,3 +323,18 @@ def test_a_stopped_service_starts_no_build_process_after_warming(tmp_path, monke
     n = len(calls)
     time.sleep(0.3)
     assert len(calls) == n and "processes" not in calls and n < len(alloc.methods())
+
+
+def test_warm_as_a_script_tells_each_compile_once_and_quiet_prints_nothing(tmp_path):
+    """``python -m alloc._jit_cache warm`` runs the file as a second module object besides the
+    installed one: both once installed a listener and every compile notice came out twice."""
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
+    command = [sys.executable, "-m", "alloc._jit_cache", "warm", "pinv"]
+    cold = subprocess.run(command, capture_output=True, text=True, cwd=ROOT, env=env, check=True)
+    notices = [line for line in cold.stderr.splitlines() if line.startswith("alloc: compiling")]
+    assert notices and len(notices) == len(set(notices)), cold.stderr
+    assert re.search(r"^warmed 1 methods in .*kernels compiled\)$", cold.stdout, re.MULTILINE), cold.stdout
+    quiet = subprocess.run(command + ["--quiet"], capture_output=True, text=True, cwd=ROOT, env=env, check=True)
+    assert (quiet.stdout, quiet.stderr) == ("", "")
+    summary = subprocess.run(command + ["--summary"], capture_output=True, text=True, cwd=ROOT, env=env, check=True)
+    assert summary.stderr == "" and len(summary.stdout.splitlines()) == 1, summary.stdout

@@ -343,7 +343,7 @@ def factor_texts(root: Path, rng: random.Random, n: int) -> Iterator[tuple[str, 
     for label, path in special_files(root / "factors-special"):
         if path.suffix == ".toml":
             yield f"factor {label}", lambda p=path: read_factor_table(p)
-            yield f"factor {label} (.csv)", lambda p=path.with_suffix(".csv"): read_factor_table(p)
+            yield f"factor {label} (.csv)", lambda p=path.with_suffix(".csv"): read_factor_table(p)  # noqa: B008 - binds this path
 
 
 # ------------------------------------------------------------------ the runs

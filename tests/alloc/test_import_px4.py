@@ -255,7 +255,7 @@ def test_bad_parameters_are_named(params, message):
 def test_seeded_random_multirotors_match_the_formula_and_load_back():
     """Hostile geometry: random positions, tilted and zero axes, zero CT, any rotor count."""
     rng = np.random.default_rng(25)
-    for trial in range(60):
+    for _ in range(60):
         n = int(rng.integers(1, 13))
         params: dict = {"CA_ROTOR_COUNT": n}
         for i in range(n):

@@ -22,9 +22,9 @@ import pytest
 
 pytest.importorskip("pyulog")
 
-from alloc.exceptions import ProblemError  # noqa: E402
-from alloc.importers.px4 import vehicle_from_params  # noqa: E402
-from alloc.importers.ulog import read_ulog, replay, replay_command  # noqa: E402
+from alloc.exceptions import ProblemError
+from alloc.importers.px4 import vehicle_from_params
+from alloc.importers.ulog import read_ulog, replay, replay_command
 
 LOG = Path(__file__).parent / "data" / "px4_sitl_quad.ulg"
 #: float32 log values: a residual of a few float32 epsilons of the demand (~1e-7)

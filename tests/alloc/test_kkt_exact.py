@@ -186,7 +186,7 @@ def test_qp_stages_are_kkt_exact(priorities):
         else:  # every level's implied bounds, the levels above it held
             pins = np.zeros(p.m, dtype=bool)
             levels = sorted(set(pr), reverse=True)
-            for n, lv in enumerate(levels):
+            for lv in levels:
                 rows = np.flatnonzero(np.asarray(pr) == lv)
                 above = np.flatnonzero(np.asarray(pr) > lv)
                 pins |= implied_bounds(p.B[rows], p.Wv[np.ix_(rows, rows)], v[rows], r.u, lo, hi,

@@ -18,17 +18,18 @@ import struct
 import time
 from collections import Counter
 from pathlib import Path
-from typing import Any, Callable, Iterator
+from typing import Any
+from collections.abc import Callable, Iterator
 
 import numpy as np
 import pytest
 
 pytest.importorskip("pyulog")
 
-from alloc.exceptions import AllocError, ProblemError  # noqa: E402
-from alloc.importers import _ulog_scan  # noqa: E402
-from alloc.importers.px4 import vehicle_from_params  # noqa: E402
-from alloc.importers.ulog import read_ulog, replay  # noqa: E402
+from alloc.exceptions import AllocError, ProblemError
+from alloc.importers import _ulog_scan
+from alloc.importers.px4 import vehicle_from_params
+from alloc.importers.ulog import read_ulog, replay
 
 LOG = Path(__file__).parent / "data" / "px4_sitl_quad.ulg"
 RAW = LOG.read_bytes()

@@ -41,7 +41,7 @@ def test_octa_x_is_ardupilots_octa_x():
 
 rotorpy = pytest.importorskip("rotorpy", reason="rotorpy (the [plants] extra) does not import here")
 
-from sim.plants import fly_on_plant
+from sim.plants import fly_on_plant  # noqa: E402
 
 
 def test_five_metres_per_second_held_level_without_a_failure():

@@ -7,8 +7,8 @@ import pytest
 
 pytest.importorskip("jsbsim", reason="jsbsim not installed: pip install 'alloc-toolkit[plants]'")
 
-from alloc.exceptions import AllocError  # noqa: E402
-from sim.plants.jsbsim_loop import OUTPUT_BOUND, doublets, fly  # noqa: E402
+from alloc.exceptions import AllocError
+from sim.plants.jsbsim_loop import OUTPUT_BOUND, doublets, fly
 
 JAM_AT_TRIM = ("stab_l", "jam", {"position": 0.0})
 

@@ -40,10 +40,10 @@ from alloc.exceptions import AllocError
 
 # the detector's and the estimators' deferred scipy imports (1-2 s on first use) are not the
 # calls' time: loaded here, before any call is timed
-import scipy.linalg  # noqa: E402, F401
-import scipy.signal  # noqa: E402, F401
-import scipy.special  # noqa: E402, F401
-import scipy.stats  # noqa: E402, F401
+import scipy.linalg
+import scipy.signal
+import scipy.special
+import scipy.stats  # noqa: F401
 
 #: per call: a priced setting is refused in milliseconds; an accepted one is at most the
 #: detector's isolation cap (about 3 s) -- with room for a machine shared with other jobs
@@ -374,7 +374,7 @@ def excitation_case(rng: np.random.Generator, counts: Counter) -> None:
         kwargs = spoil(rng, {"problem": p, "method": "wls", "spread": 4.0, "n_weights": 3, "dwell": 5, "seed": 1})
         rw = attempt(lambda: RandomWeightAllocator(**kwargs), EXC_FIELDS, counts, "RandomWeightAllocator()")
         if rw is not None:
-            for i in range(10):
+            for _ in range(10):
                 r = attempt(lambda: rw(p.B @ (p.umax * 0.2)), EXC_FIELDS, counts, "RandomWeightAllocator call")
                 if r is not None:
                     finite(r.u)

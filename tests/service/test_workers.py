@@ -59,7 +59,7 @@ def _gil_hold_length(seconds: float) -> int:
         n += 1
 
 
-async def gil_holding_app(scope, receive, send):  # noqa: ANN001 - a bare ASGI app for the supervisor test
+async def gil_holding_app(scope, receive, send):
     """Start-up holds the GIL for seconds (as a worker loading kernels on a loaded machine)."""
     if scope["type"] == "lifespan":
         while True:
@@ -78,7 +78,7 @@ _SUPERVISE = """
 import sys, threading, uvicorn
 from uvicorn.supervisors.multiprocess import Multiprocess
 from service.supervisor import ReadinessSupervisor
-config = uvicorn.Config("test_service_workers:gil_holding_app", host="127.0.0.1", port=0, workers=2,
+config = uvicorn.Config("test_workers:gil_holding_app", host="127.0.0.1", port=0, workers=2,
                         timeout_worker_healthcheck=1, log_level="info")
 sockets = [config.bind_socket()]
 supervisor = ReadinessSupervisor(config, sockets, 60.0) if sys.argv[1] == "ours" else Multiprocess(config, sockets)

@@ -31,7 +31,7 @@ def app(request, tmp_path):
     Without the start-up warm-up (``warmup=False``): these tests are about requests, and a
     costly build still starts its build process, on first use.  The warm-up and the build
     processes it starts are tested in ``tests/alloc/test_cold_start.py``; every
-    ``ServiceProcess`` test (tests/service/test_service_http.py, ...) runs with it."""
+    ``ServiceProcess`` test (tests/service/test_http.py, ...) runs with it."""
     return create_app(Settings(data_dir=tmp_path, api_key=KEY, max_body_bytes=256 * 1024,
                                database_url=database_url(request.param), warmup=False))
 
@@ -320,7 +320,7 @@ def test_concurrent_events_serialise(client, app):
         try:
             store.record_event(vid, adapter.validate_python(
                 {"effector": i % 5, "kind": "effectiveness", "fraction": (i + 1) / 40}))
-        except Exception as exc:  # collected and asserted below
+        except Exception as exc:  # noqa: BLE001 - collected and asserted below
             errors.append(exc)
     threads = [threading.Thread(target=writer, args=(i,)) for i in range(20)]
     for t in threads:

@@ -5,8 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 import alloc
-from alloc._active_set import _FACTORED, _MISC
-from alloc._active_set_layout import OVERFLOW_SLOTS
+from alloc._active_set_layout import _FACTORED, _MISC, OVERFLOW_SLOTS
 from alloc.vehicles import ice
 from benchmarks.bench_alloc import hexacopter, markdown, random_sequence, tail_rows
 from benchmarks.bench_scaling import demands

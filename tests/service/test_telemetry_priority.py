@@ -9,7 +9,7 @@ unclassified) by a seeded generator of methods, paths, keys and bodies; the WebS
 per-message hold of the gate on the ASGI level; and the promise itself on a real server: a
 silent jam posted in a telemetry batch (HTTP and WebSocket) while a validation-error flood
 runs changes the health and the next allocation holds it, within the attack suite's
-same-run-floor bound (``test_service_attacks``).
+same-run-floor bound (``test_attacks``).
 """
 
 from __future__ import annotations
@@ -32,8 +32,8 @@ from service.deps import require_api_key
 from service.main import create_app
 from service.priority import HEAVY_BODY_BYTES, PriorityGate, PriorityMiddleware
 from service.process import ServiceProcess
-from test_service_attacks import FLOOR_FACTOR, PARSES_WAITED, TARGETS_MS, attack, p99, slack
-from test_service_telemetry import SMALL, SMALL_SETTINGS, small_flight
+from test_attacks import FLOOR_FACTOR, PARSES_WAITED, TARGETS_MS, attack, p99, slack
+from test_telemetry import SMALL, SMALL_SETTINGS, small_flight
 
 KEY = "telemetry-priority-key"
 H = {"X-API-Key": KEY}
@@ -249,7 +249,7 @@ def _run_stream(messages: list[dict[str, Any]], headers: list[tuple[bytes, bytes
         scope = {"type": "websocket", "path": "/v1/vehicles/v/telemetry/ws", "headers": headers}
         try:
             await PriorityMiddleware(route, gate)(scope, receive, send)
-        except (RuntimeError, asyncio.TimeoutError):
+        except (TimeoutError, RuntimeError):
             pass  # the failure propagates as it would to the server
     asyncio.run(scenario())
     assert sending == [0] * len(sending)  # an answer being sent holds nobody back
@@ -354,7 +354,7 @@ def _rounds(server, seeds: range) -> dict[str, list[float]]:
     return out
 
 
-#: the flood's bodies (test_service_attacks.test_validation_error_flood's class): 60,000 bad
+#: the flood's bodies (test_attacks.test_validation_error_flood's class): 60,000 bad
 #: entries in a 0.3 MB batch body, and 40,000 unknown members
 BAD_ROWS = json.dumps({"B": [[1.0] * 6] * 6, "umin": [-1.0] * 6, "umax": [1.0] * 6,
                        "V": [["x"] * 6 for _ in range(10_000)]})
@@ -367,7 +367,7 @@ SEEDS = range(3)
 
 @pytest.mark.slow  # a server of its own and two phases: 10-40 s (the attack suite's module has the default run's)
 def test_a_silent_jam_in_a_telemetry_batch_is_held_during_a_validation_flood(server):
-    """Same-run floor (test_service_attacks): the jam batch's answer and the first allocation after
+    """Same-run floor (test_attacks): the jam batch's answer and the first allocation after
     it, over HTTP and the WebSocket, p99 under the larger of the target scaled by the load and
     FLOOR_FACTOR x the floor, plus the one flood parse a priority request may wait for."""
     floor = _rounds(server, SEEDS)

@@ -39,8 +39,8 @@ from service.keys import NO_KEY_WARNING, keyed_routes
 from service.main import create_app
 from service.process import ServiceProcess
 from service.streams import KeyBudget
-from test_service_attacks import FLOOR_FACTOR, TARGETS_MS, p99, slack
-from test_service_telemetry import SMALL, SMALL_SETTINGS
+from test_attacks import FLOOR_FACTOR, TARGETS_MS, p99, slack
+from test_telemetry import SMALL, SMALL_SETTINGS
 
 KEY = "fleet-key"
 H = {"X-API-Key": KEY}
@@ -224,8 +224,8 @@ def test_a_keyless_write_is_refused_before_its_body_is_sent(budgeted):
     port = int(budgeted.url.rsplit(":", 1)[1])
     for key in (None, "wrong"):
         with socket.create_connection(("127.0.0.1", port), timeout=10.0) as s:
-            head = (f"POST /v1/vehicles/any/events HTTP/1.1\r\nhost: x\r\ncontent-type: application/json\r\n"
-                    f"content-length: 3900000\r\n" + (f"x-api-key: {key}\r\n" if key else "") + "\r\n")
+            head = ("POST /v1/vehicles/any/events HTTP/1.1\r\nhost: x\r\ncontent-type: application/json\r\n"
+                    "content-length: 3900000\r\n" + (f"x-api-key: {key}\r\n" if key else "") + "\r\n")
             s.sendall(head.encode())
             data = b""
             while chunk := s.recv(65536):  # until the server closes

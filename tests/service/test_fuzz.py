@@ -53,7 +53,7 @@ schema.config.generation.update(modes=[GenerationMode.POSITIVE, GenerationMode.N
 
 
 @schema.hook
-def map_path_parameters(ctx, path_parameters):  # noqa: ANN001 - schemathesis hook signature
+def map_path_parameters(ctx, path_parameters):
     # Every other generated vehicle id is the stored vehicle's, so its endpoints get exercised
     # (not for DELETE, which would remove it for the rest of the run).
     if (path_parameters and "vehicle_id" in path_parameters and ctx.operation.method.upper() != "DELETE"

@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 from scipy import signal
 
-import sim.scenarios
 from sim.allocation import build_allocator
 from sim.blocks import ActuatorBank, ActuatorFailure, ActuatorSpec, DelayLine, DiscreteLTI, HedgeTerm, ScheduledPlant
 from sim.blocks import actuator_heun_step, band_limited_noise, hedge_system, observer_gain, smc_control, sum_of_sines

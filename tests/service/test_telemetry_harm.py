@@ -10,7 +10,6 @@ then healthy telemetry follows."""
 
 from __future__ import annotations
 
-import json
 import math
 import threading
 
@@ -26,7 +25,7 @@ from service.db import ProposalRow, TelemetryRow
 from service.main import create_app
 from service.telemetry import DetectorSettings, detection_out
 
-from test_service_telemetry import H, KEY, SMALL, SMALL_SETTINGS, post, small_flight, small_vehicle
+from test_telemetry import H, KEY, SMALL, SMALL_SETTINGS, post, small_flight, small_vehicle
 
 LN100 = math.log(100.0)
 

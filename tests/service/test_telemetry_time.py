@@ -28,7 +28,7 @@ from service.config import Settings
 from service.main import create_app
 from service.telemetry import KEPT_SEGMENTS
 
-from test_service_telemetry import H, KEY, SMALL, SMALL_SETTINGS, _snapshot, post, small_vehicle
+from test_telemetry import H, KEY, SMALL, SMALL_SETTINGS, _snapshot, post, small_vehicle
 
 DT = SMALL_SETTINGS["sample_time"]
 WINDOW = SMALL_SETTINGS["window"]  # 4 samples: the longest step inside a batch, the gap that starts a segment

@@ -50,7 +50,7 @@ def _close_store():
 
 
 @schema.hook
-def map_path_parameters(ctx, path_parameters):  # noqa: ANN001 - schemathesis hook signature
+def map_path_parameters(ctx, path_parameters):
     # the stored vehicle's endpoints are reached (never deleted: DELETE keeps its generated id)
     if path_parameters and "vehicle_id" in path_parameters and ctx.operation.method.upper() != "DELETE":
         path_parameters["vehicle_id"] = _vehicle.id

@@ -209,12 +209,12 @@ def test_uvicorn_workers_share_one_truth(tmp_path):
     try:
         with httpx.Client(base_url=proc.url, timeout=30.0) as http:
             vid = _create(http)
-            for i in range(40):  # connections spread over both workers
+            for _ in range(40):  # connections spread over both workers
                 with httpx.Client(base_url=proc.url) as c:
                     assert c.post(f"/v1/vehicles/{vid}/allocate", json={"v": V}).json()["health_version"] == 0
             assert http.post(f"/v1/vehicles/{vid}/events", json={"effector": 0, "kind": "jam", "position": 2.5},
                              headers=H).status_code == 201
-            for i in range(40):
+            for _ in range(40):
                 with httpx.Client(base_url=proc.url) as c:
                     body = c.post(f"/v1/vehicles/{vid}/allocate", json={"v": V}).json()
                     assert body["health_version"] == 1 and body["u"][0] == 2.5

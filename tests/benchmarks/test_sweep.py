@@ -4,7 +4,6 @@ name (or are refused before any run), and latency comes from its own single-proc
 from __future__ import annotations
 
 import csv
-import inspect
 from pathlib import Path
 
 import numpy as np
@@ -75,7 +74,6 @@ def test_simulator_settings_pass_through_by_name_or_are_refused_before_running()
         check_simulator_support([bad])
     with pytest.raises(ValueError, match="failure 'nope'"):
         check_simulator_support([dict(ok, failure="nope")])
-    from sim.scenarios import get_scenario
 
     check_simulator_support([dict(ok, sim={FRAME_PERIOD: 0.01, "pilot": "crossover"})])  # the multi-rate loop
 

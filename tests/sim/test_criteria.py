@@ -132,7 +132,7 @@ def _independent(run: SimResult) -> tuple[set[str], dict[str, float | None]]:
     pos_sat = np.abs(run.effectors[:, 0]) >= 1.0 - 2e-3
     rate_sat = np.abs(run.effector_rates[:, 0]) >= 1.0 - 2e-3
     metrics: dict[str, float | None] = {}
-    for phase, mask, idx in (("before", T < FAILURE_T, 0), ("after", T >= FAILURE_T, 1)):
+    for phase, mask in (("before", T < FAILURE_T), ("after", T >= FAILURE_T)):
         metrics[f"q_rms_{phase}"] = math.sqrt(sum(x * x for x in err_q[mask]) / mask.sum())
         metrics[f"q_max_{phase}"] = max(abs(x) for x in err_q[mask])
         metrics[f"b_rms_{phase}"] = math.sqrt(sum(x * x for x in b[mask]) / mask.sum())
