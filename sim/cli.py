@@ -163,8 +163,9 @@ def sim_command(
     """
     settings = dict(settings or {})
     failure, duration, failure_time = (settings.get(k) for k in ("failure", "duration", "failure_time"))
-    if scenario is None and vehicle is None and plant is not None and plant.startswith("jsbsim:"):
-        vehicle = _aircraft_file(plant)  # a JSBSim aircraft flies its own linearisation's design
+    spec = None if plant is None else _plant_spec(plant)
+    if scenario is None and vehicle is None and spec is not None and spec.own_vehicle is not None:
+        vehicle = spec.own_vehicle()  # a third-party aircraft flies its own linearisation's design
     if (scenario is None) == (vehicle is None):
         raise typer.BadParameter("give a SCENARIO or --vehicle NAME|FILE (one of them)", param_hint="SCENARIO/--vehicle")
     flown = scenario_of_vehicle(vehicle) if vehicle is not None else scenario
@@ -176,8 +177,9 @@ def sim_command(
             raise typer.BadParameter(str(exc.args[0]), param_hint="SCENARIO") from None
     else:  # a vehicle file's model, the seed's section 4.3 design (sim.user_vehicle)
         run, scenario = flown, flown.name
-    if forward_speed is not None and plant != "rotorpy":
-        raise typer.BadParameter("the velocity loop flies on --plant rotorpy only", param_hint="--forward-speed")
+    if forward_speed is not None and (spec is None or not spec.velocity_loop):
+        raise typer.BadParameter(f"--plant {plant or 'linear'} flies no velocity loop (a plant with one: --plant "
+                                 "rotorpy)", param_hint="--forward-speed")
     runner = run if plant is None else _plant_run(plant, flown, scenario, run, forward_speed)
     if schedule:
         runner = _schedule_run(schedule, schedule_allocator, plant, flown, scenario)
@@ -243,7 +245,7 @@ def _schedule_run(schedule: list[str], allocator: str, plant: str | None, flown:
     """The runner of ``--schedule`` (:func:`sim.plants.scheduled.fly_scheduled`); usage errors name the flag."""
     from sim.plants.scheduled import ALLOCATOR_MODES, fly_scheduled, parse_schedule
 
-    if plant not in (None, "linear"):
+    if plant is not None and not _plant_spec(plant).follows_schedule:
         raise typer.BadParameter(f"--plant {plant} does not follow a schedule; the linear plant does",
                                  param_hint="--schedule")
     if isinstance(flown, str):
@@ -263,12 +265,13 @@ def _schedule_run(schedule: list[str], allocator: str, plant: str | None, flown:
     return scheduled
 
 
-def _aircraft_file(plant: str) -> str:
-    """The vehicle file of ``--plant jsbsim:AIRCRAFT``; a one-line usage error naming ``--plant`` otherwise."""
-    from sim.plants.jsbsim_run import JSBSIM_AIRCRAFT, aircraft_of
+def _plant_spec(plant: str) -> Any:
+    """The registered plant ``--plant`` names (:func:`sim.plants.plant_spec`); a one-line usage error
+    naming ``--plant`` and the plants otherwise."""
+    from sim.plants import plant_spec
 
     try:
-        return str(JSBSIM_AIRCRAFT[aircraft_of(plant)])
+        return plant_spec(plant)
     except AllocError as exc:
         raise typer.BadParameter(str(exc), param_hint="--plant") from None
 
@@ -276,13 +279,9 @@ def _aircraft_file(plant: str) -> str:
 def _plant_run(plant: str, flown: Any, scenario: str, run: Any, forward_speed: float | None = None) -> Any:
     """The runner of ``--plant``: the scenario's own for ``linear`` (its result records the plant), else
     :func:`sim.plants.fly_on_plant` on the vehicle file; a one-line usage error naming ``--plant``."""
-    from sim.plants import check_plant, fly_on_plant
+    from sim.plants import fly_on_plant
 
-    try:
-        check_plant(plant)
-    except AllocError as exc:
-        raise typer.BadParameter(str(exc), param_hint="--plant") from None
-    if plant == "linear":
+    if _plant_spec(plant).flies_scenarios:
         def linear(**options: Any) -> Any:
             result = run(**options)
             result.settings["plant"] = {"name": "linear", "source": "the vehicle's linear model, compiled engine"}

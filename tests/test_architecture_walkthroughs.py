@@ -44,5 +44,5 @@ def test_architecture_doc_names_the_tests_that_exercise_it():
     for name in ("tests/walkthroughs/test_add_a_method.py", "tests/walkthroughs/test_add_an_exportable_method.py",
                  "tests/test_private_access.py", "test_every_failure_kind_is_defined_once_and_applied",
                  "test_layering.py", "tests/walkthroughs/test_add_failure_kind.py",
-                 "tests/walkthroughs/test_add_a_vehicle.py"):
+                 "tests/walkthroughs/test_add_a_vehicle.py", "tests/walkthroughs/test_add_a_plant.py"):
         assert name in text

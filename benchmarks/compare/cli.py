@@ -349,7 +349,7 @@ def closedloop(vehicle: str = typer.Option(..., "--vehicle", metavar="NAME|FILE"
     from .closedloop import run_closed
     from .sweep import closed_spec
 
-    from sim.plants import check_plant
+    from sim.plants import check_plant, plant_spec
 
     try:
         check_plant(plant)
@@ -365,8 +365,8 @@ def closedloop(vehicle: str = typer.Option(..., "--vehicle", metavar="NAME|FILE"
         raise typer.BadParameter(f"unknown failure {failure!r} for {v.name}: {exc}", param_hint="--failure") from None
     if v.simulation is None:
         design = None
-        if plant.startswith("jsbsim:"):  # the aircraft's loop is designed with its stated option
-            from sim.plants.jsbsim_loop import DESIGN_OPTIONS as design
+        if plant_spec(plant).design_options is not None:  # the aircraft's loop is designed with its stated options
+            design = plant_spec(plant).design_options()
         vehicle_failure(flight_model(v, design=design), failure, failure_time)  # against the trimmed model's limits
     names: list[str] = []
     for m in method or alloc.methods():
@@ -389,7 +389,7 @@ def closedloop(vehicle: str = typer.Option(..., "--vehicle", metavar="NAME|FILE"
             try:
                 rows.append(run_closed(spec)[0])
             except alloc.AllocError as exc:  # what the plant cannot fly (a vehicle without [body], a kind)
-                if plant == "linear":
+                if plant_spec(plant).flies_scenarios:  # the model's own loop: a real error
                     raise
                 raise typer.BadParameter(str(exc), param_hint="--plant") from None
     if as_json:

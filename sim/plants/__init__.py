@@ -25,7 +25,8 @@ A RotorPy run (:func:`fly_on_plant`):
 
 from __future__ import annotations
 
-from dataclasses import replace
+from collections.abc import Callable
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -35,15 +36,80 @@ from sim.plants.rotorpy import DEFAULT_STEP  # rotorpy itself is imported when a
 from sim.result import SimResult
 from sim.settings import RunSettings, SettingError
 
-__all__ = ["PLANTS", "DEFAULT_PLANT", "ROTORPY_FRAME", "check_plant", "fly_on_plant", "flown_settings",
-           "rotorpy_plant"]
+__all__ = ["PLANTS", "DEFAULT_PLANT", "ROTORPY_FRAME", "PlantSpec", "register_plant", "plant_spec", "check_plant",
+           "fly_on_plant", "fly_multirotor", "flown_settings", "rotorpy_plant"]
 
-#: the plants by ``--plant`` name, with what each is
-PLANTS = {
-    "linear": "the vehicle's linear model in the compiled engine (sim.engine)",
-    "rotorpy": "RotorPy's nonlinear multirotor (rotorpy 3.0.0, the [plants] extra), any rotor count",
-    "jsbsim:f22": "JSBSim's F-22 (jsbsim 1.3.3, the [plants] extra), pass-through flight control, M0.7 at 20,000 ft",
-}
+#: ``fly(source, settings, options, *, progress, forward_speed) -> SimResult``: a plant's runner
+PlantRunner = Callable[..., SimResult]
+
+
+@dataclass(frozen=True)
+class PlantSpec:
+    """A plant ``alloc sim --plant NAME`` flies, with what it can do (read by the CLI, the
+    closed-loop benchmark and :func:`fly_on_plant`; nothing branches on a plant's name).
+
+    ``fly`` runs a vehicle on it; ``flies_scenarios``: the seed's scenarios (not only vehicle
+    files) fly on it; ``velocity_loop``: it takes ``forward_speed``; ``follows_schedule``: it
+    follows a scheduled ``B`` (``--schedule``); ``own_vehicle``: the vehicle file it flies when
+    none is named (a third-party aircraft's own linearisation), else None; ``design_options``: the
+    section 4.3 design options its aircraft's loop is designed with, else None."""
+
+    name: str
+    description: str
+    fly: PlantRunner
+    flies_scenarios: bool = False
+    velocity_loop: bool = False
+    follows_schedule: bool = False
+    own_vehicle: Callable[[], str] | None = None
+    design_options: Callable[[], Any] | None = None
+
+
+_SPECS: dict[str, PlantSpec] = {}
+#: the plants by ``--plant`` name, with what each is (kept by :func:`register_plant`)
+PLANTS: dict[str, str] = {}
+
+
+def register_plant(spec: PlantSpec) -> PlantSpec:
+    """Make ``spec`` a plant of ``--plant`` (its name is taken once; ValueError otherwise)."""
+    if not isinstance(spec, PlantSpec) or not spec.name or spec.name in _SPECS:
+        raise ValueError(f"plant: {getattr(spec, 'name', spec)!r} is not a new PlantSpec")
+    _SPECS[spec.name] = spec
+    PLANTS[spec.name] = spec.description
+    return spec
+
+
+#: entry-point group of plants a package publishes: loading one registers its plants
+ENTRY_POINTS = "alloc.plants"
+_plugins_loaded = False
+
+
+def _load_plugins() -> None:
+    """Import the ``alloc.plants`` entry points once (a plant another package registers)."""
+    global _plugins_loaded
+    if _plugins_loaded:
+        return
+    _plugins_loaded = True
+    from importlib.metadata import entry_points
+
+    for ep in entry_points(group=ENTRY_POINTS):
+        try:
+            ep.load()
+        except Exception as exc:  # noqa: BLE001 - a broken plug-in is named, the built-in plants still fly
+            import warnings
+
+            warnings.warn(f"plant entry point {ep.name!r} ({ep.value}) failed to load: {exc}", stacklevel=2)
+
+
+def plant_spec(name: Any) -> PlantSpec:
+    """The registered plant ``name`` (built in, registered, or published under the
+    ``alloc.plants`` entry-point group); SettingError naming ``plant`` and the plants otherwise."""
+    if isinstance(name, str) and name not in _SPECS:
+        _load_plugins()
+    if not isinstance(name, str) or name not in _SPECS:
+        raise SettingError(f"plant: unknown plant {name!r}; plants: {', '.join(_SPECS)}", field="plant")
+    return _SPECS[name]
+
+
 DEFAULT_PLANT = "linear"
 #: s: the flight-control frame (and plant step) of a RotorPy run unless --frame-rate says otherwise
 ROTORPY_FRAME = DEFAULT_STEP
@@ -51,16 +117,10 @@ ROTORPY_FRAME = DEFAULT_STEP
 #: 20 rad/s of roll or pitch rate, 60 rad/s of yaw rate or 20 m/s of heave the vehicle has lost control
 HOVER_LIMITS = {"phi": np.pi / 2, "theta": np.pi / 2, "psi": np.inf, "p": 20.0, "q": 20.0, "r": 60.0,
                 "u": np.inf, "v": np.inf, "w": 20.0}
-#: plant state recorded into result.extra on a RotorPy run
-RECORDED_STATE = ("altitude_m", "north_m", "east_m", "v_north_mps", "v_east_mps", "wind_north_mps", "wind_east_mps",
-                  "wind_down_mps")
-
 
 def check_plant(name: Any) -> str:
     """``name`` if it is a plant (:data:`PLANTS`); SettingError naming ``plant`` otherwise."""
-    if not isinstance(name, str) or name not in PLANTS:
-        raise SettingError(f"plant: unknown plant {name!r}; plants: {', '.join(PLANTS)}", field="plant")
-    return name
+    return plant_spec(name).name
 
 
 def rotorpy_plant(fm: Any, *, dt_step: float, wind: np.ndarray | None = None) -> Any:
@@ -80,35 +140,75 @@ def fly_on_plant(source: Any, plant: str, settings: RunSettings | None = None, *
                  forward_speed: float | None = None, **options: Any) -> SimResult:
     """Fly vehicle ``source`` (a file, a catalogue name or a vehicle) on ``plant`` (module docstring).
 
-    ``forward_speed`` (RotorPy only): m/s due north, held by the cascade's velocity loop
-    (:class:`sim.plant_control.VelocityHold`, its ramp and gains) from the hover on; 0 holds the hover's
-    zero ground speed; None (default) flies the cascade without a velocity loop (a level hover that drifts).
-    ``plant = "jsbsim:AIRCRAFT"`` flies :func:`sim.plants.jsbsim_run.fly_jsbsim`; ``source`` None is then the
-    aircraft's own vehicle file.
+    ``forward_speed`` (plants with a velocity loop, RotorPy's): m/s due north, held by the cascade's
+    velocity loop (:class:`sim.plant_control.VelocityHold`, its ramp and gains) from the hover on; 0 holds
+    the hover's zero ground speed; None (default) flies the cascade without a velocity loop (a level hover
+    that drifts).  ``plant = "jsbsim:AIRCRAFT"`` flies :func:`sim.plants.jsbsim_run.fly_jsbsim`; ``source``
+    None is then the aircraft's own vehicle file.
 
     ``settings`` / ``options``: :class:`sim.settings.RunSettings` (method, failure, failure_time, duration,
     health, frame_period, turbulence, seed ...).  ``result.settings["plant"]`` is the plant's ``describe()``.
     """
+    spec = plant_spec(plant)
+    if forward_speed is not None and not spec.velocity_loop:
+        takes = ", ".join(f"--plant {n}" for n, s in _SPECS.items() if s.velocity_loop)
+        raise SettingError(f"forward_speed: --plant {plant} flies no velocity loop; --forward-speed is for "
+                           f"{takes}", field="forward_speed")
+    return spec.fly(source, settings, options, progress=progress, forward_speed=forward_speed)
+
+
+def _fly_linear(source: Any, settings: RunSettings | None, options: dict[str, Any], *, progress: bool = False,
+                forward_speed: float | None = None) -> SimResult:
+    from sim.user_vehicle import fly
+
+    result = fly(source, settings, progress=progress, **options)
+    result.settings["plant"] = {"name": "linear", "source": PLANTS["linear"]}
+    return result
+
+
+def _fly_jsbsim_f22(source: Any, settings: RunSettings | None, options: dict[str, Any], *, progress: bool = False,
+                    forward_speed: float | None = None) -> SimResult:
+    from sim.plants.jsbsim_run import fly_jsbsim
+
+    return fly_jsbsim(source, "jsbsim:f22", flown_settings(settings, options, "--plant jsbsim:f22"),
+                      progress=progress)
+
+
+def _f22_design() -> Any:
+    from sim.plants.jsbsim_loop import DESIGN_OPTIONS
+
+    return DESIGN_OPTIONS
+
+
+def _f22_file() -> str:
+    from sim.plants.jsbsim_run import JSBSIM_AIRCRAFT
+
+    return str(JSBSIM_AIRCRAFT["f22"])
+
+
+def fly_multirotor(name: str, make_plant: Callable[..., Any]) -> PlantRunner:
+    """The runner of a multirotor plant: ``make_plant(fm, dt_step=, wind=)`` builds the
+    :class:`sim.plant.Plant` of a flight model (its ``motor_time_constant``, s, sets the cascade's
+    gains; its ``recorded_state``, names of :meth:`~sim.plant.Plant.state`, go into ``result.extra``), flown by :func:`sim.plant_loop.fly_plant` with the multirotor cascade holding a level
+    hover at the trim (module docstring; RotorPy's runner, and any other multirotor physics')."""
+
+    def fly(source: Any, settings: RunSettings | None, options: dict[str, Any], *, progress: bool = False,
+            forward_speed: float | None = None) -> SimResult:
+        return _fly_multirotor(name, make_plant, source, settings, options, progress=progress,
+                               forward_speed=forward_speed)
+
+    return fly
+
+
+def _fly_multirotor(plant: str, make_plant: Callable[..., Any], source: Any, settings: RunSettings | None,
+                    options: dict[str, Any], *, progress: bool = False,
+                    forward_speed: float | None = None) -> SimResult:
     from alloc import vehicles
     from alloc.registry import DEFAULT_METHOD
     from sim.plant_control import CascadeController, CascadeGains, VelocityHold
     from sim.plant_loop import fly_plant
     from sim.user_vehicle import DEFAULT_DURATION, DEFAULT_FAILURE_TIME, flight_model
 
-    check_plant(plant)
-    if forward_speed is not None and plant != "rotorpy":
-        raise SettingError(f"forward_speed: --plant {plant} flies no velocity loop; --forward-speed is for "
-                           "--plant rotorpy", field="forward_speed")
-    if plant.startswith("jsbsim:"):
-        from sim.plants.jsbsim_run import fly_jsbsim
-
-        return fly_jsbsim(source, plant, flown_settings(settings, options, f"--plant {plant}"), progress=progress)
-    if plant == "linear":
-        from sim.user_vehicle import fly
-
-        result = fly(source, settings, progress=progress, **options)
-        result.settings["plant"] = {"name": "linear", "source": PLANTS["linear"]}
-        return result
     flown = flown_settings(settings, options, f"--plant {plant}")
     fv = vehicles.get_vehicle(source)
     if fv.simulation is not None:
@@ -128,8 +228,8 @@ def fly_on_plant(source: Any, plant: str, settings: RunSettings | None = None, *
         failure = fm.failure(failure, DEFAULT_FAILURE_TIME if flown.failure_time is None else flown.failure_time)
     n_steps = int(round(duration / frame))
     wind, world = _wind(fm, flown, n_steps + 1, frame)
-    the_plant = rotorpy_plant(fm, dt_step=frame, wind=wind)
-    tau = the_plant.params["tau_m"]
+    the_plant = make_plant(fm, dt_step=frame, wind=wind)
+    tau = float(the_plant.motor_time_constant)
     velocity = None if forward_speed is None else VelocityHold(speed=_speed(forward_speed))
     controller = CascadeController(fv, fm.vehicle, CascadeGains.for_motor_lag(tau), frame, velocity=velocity)
     limits = np.array([HOVER_LIMITS.get(o, np.inf) for o in fm.vehicle.output_names])
@@ -138,7 +238,7 @@ def fly_on_plant(source: Any, plant: str, settings: RunSettings | None = None, *
     result = fly_plant(
         the_plant, controller, fm.vehicle, method=method, method_options=method_options, duration=duration,
         dt=frame, frame_steps=1, failure=failure, health=flown.health_mode, output_bound=bound,
-        output_limits=limits, record_every=1, seed=flown.seed, record_state=RECORDED_STATE, timing=timing,
+        output_limits=limits, record_every=1, seed=flown.seed, record_state=tuple(getattr(the_plant, "recorded_state", ())), timing=timing,
         alloc_options=dict(rate_aware=flown.rate_aware, preferred=flown.preferred, rate_horizon=flown.rate_horizon,
                            rate_window=flown.rate_window),
         u_prev_source=flown.u_prev_source, scenario=fv.name,
@@ -209,3 +309,12 @@ def _units(fm: Any) -> dict[str, Any]:
     from sim.user_vehicle import file_units
 
     return file_units(fm.source)
+
+
+register_plant(PlantSpec("linear", "the vehicle's linear model in the compiled engine (sim.engine)", _fly_linear,
+                         flies_scenarios=True, follows_schedule=True))
+register_plant(PlantSpec("rotorpy", "RotorPy's nonlinear multirotor (rotorpy 3.0.0, the [plants] extra), any rotor "
+                         "count", fly_multirotor("rotorpy", rotorpy_plant), velocity_loop=True))
+register_plant(PlantSpec("jsbsim:f22", "JSBSim's F-22 (jsbsim 1.3.3, the [plants] extra), pass-through flight "
+                         "control, M0.7 at 20,000 ft", _fly_jsbsim_f22, own_vehicle=_f22_file,
+                         design_options=_f22_design))

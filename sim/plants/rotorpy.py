@@ -149,6 +149,9 @@ class RotorPyPlant:
     """
 
     name = "rotorpy"
+    #: the state recorded into a run's ``result.extra`` (sim.plants.fly_multirotor)
+    recorded_state = ("altitude_m", "north_m", "east_m", "v_north_mps", "v_east_mps", "wind_north_mps",
+                      "wind_east_mps", "wind_down_mps")
 
     def __init__(self, fv: Any, vehicle: Any, trim_u: np.ndarray, *, dt_step: float = DEFAULT_STEP,
                  wind: np.ndarray | None = None) -> None:
@@ -178,6 +181,11 @@ class RotorPyPlant:
         self.reset(seed=0)
 
     # ------------------------------------------------------------------ the contract
+    @property
+    def motor_time_constant(self) -> float:
+        """s: the rotors' first-order speed lag ``tau_m`` (the multirotor cascade's gains follow it)."""
+        return float(self.params["tau_m"])
+
     def reset(self, *, seed: int) -> np.ndarray:
         """Hover at the trim, at the origin, level, rotors at their trim speeds (RotorPy draws nothing here)."""
         from sim.blocks import ActuatorBank
