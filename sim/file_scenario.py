@@ -24,10 +24,9 @@ from alloc.exceptions import ProblemError
 from alloc.vehicle_file import Vehicle as FileVehicle
 from alloc.vehicle_file.simulation import Command, FailureSpec, Simulation
 from sim.blocks import ActuatorFailure, ActuatorSpec, HedgeTerm, sum_of_sines
-from sim.model import Failure, FlightCondition, LoopShapedDesign, Pilot, SMCDesign, Vehicle
+from sim.model import Failure, FlightCondition, LoopShapedDesign, Pilot, SMCDesign, PlantModel
 from sim.scenarios.mimo import MimoScenario
 from sim import world
-from sim.scenarios import harv_latdir, harv_lon, ice
 
 __all__ = ["file_scenario", "actuator_of", "command_signal", "filtered_steps", "flight_of_model"]
 
@@ -109,8 +108,8 @@ def file_scenario(fv: FileVehicle, *, static_bandwidth: float = 1000.0) -> MimoS
     actuators = tuple(actuator_of(e, i, e.min, e.max, static_bandwidth) for i, e in enumerate(fv.effectors))
     alloc = sim.allocation
 
-    def vehicle() -> Vehicle:
-        return Vehicle(
+    def vehicle() -> PlantModel:
+        return PlantModel(
             name=fv.name, A=A.copy(), B=B.copy(), C=C.copy(), D=D.copy(), output_names=outputs,
             actuators=actuators, controlled=tuple(outputs.index(c) for c in channels),
             measured=tuple(outputs.index(x) for x in sim.measured), noise_gains=np.array(sim.noise, dtype=float),
@@ -192,6 +191,8 @@ def flight_of_model(A: np.ndarray, states: tuple[str, ...], units: dict[str, str
     aerodynamic damping) gets the hover mapping (:data:`sim.world.HOVER_HEAVE_DAMPING`); ``units`` are the
     states' (where a state is also an output of the same name).
     """
+    from sim.scenarios import harv_latdir, harv_lon, ice  # here: those scenarios are built by file_scenario
+
     A = np.asarray(A, dtype=float)
     for module in (ice, harv_latdir, harv_lon):
         if A.shape == module.A.shape and np.allclose(A, module.A, rtol=1e-9, atol=0.0):
