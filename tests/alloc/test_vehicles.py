@@ -161,3 +161,31 @@ def test_catalogue_entries_and_aliases():
     assert info.value.field == "vehicle"
     assert vehicles.CATALOGUE["harv"].aliases == ("harv_latdir", "harv-latdir")
     assert vehicles.lookup("harv_latdir").title == "F-18/HARV lat-dir"
+
+
+def test_seed_numbers_live_only_in_the_files():
+    """One definition: no Python module under alloc/ or sim/ repeats a distinctive number of the
+    seed's files (their B, model and failure matrices with 7 or more significant digits: ICE's
+    and the failed plants'; the HARV's printed 4-digit entries are too short to search for, and
+    round numbers such as limits are shared by chance).  Before the files became the source,
+    alloc/vehicles.py held 34 of these numbers and sim/scenarios/ice.py 56."""
+    import re
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    numbers: set[str] = set()
+    for name in ("ice", "harv"):
+        v = bundled(name)
+        arrays = [np.asarray(a, dtype=float) for a in v.model.arrays()] + [np.asarray(v.problem().B)]
+        for spec in v.simulation.failures.values():
+            arrays += [np.asarray(a, dtype=float) for a in (spec.A, spec.B, spec.D) if a is not None]
+        for a in arrays:
+            numbers |= {repr(abs(float(x))) for x in a.ravel() if len(re.sub(r"[^0-9]", "", repr(abs(float(x)))).strip("0")) >= 7}
+    assert len(numbers) > 100
+    found = {}
+    for path in [*(root / "alloc").rglob("*.py"), *(root / "sim").rglob("*.py")]:
+        text = path.read_text()
+        hits = [n for n in numbers if re.search(rf"(?<![0-9.]){re.escape(n)}(?![0-9])", text)]
+        if hits:
+            found[str(path.relative_to(root))] = hits[:3]
+    assert found == {}
