@@ -111,6 +111,14 @@ def harv_latdir() -> Problem:
     return bundled("harv").problem()
 
 
+def _seed_loop(name: str) -> Any:
+    """The ``[simulation]`` section of bundled file ``name`` (the seed's ICE and HARV carry one)."""
+    simulation = bundled(name).simulation
+    if simulation is None:
+        raise ProblemError(f"simulation: bundled vehicle {name!r} has no [simulation] section", field="simulation")
+    return simulation
+
+
 def _read_only(a: Any) -> np.ndarray:
     out = np.array(a, dtype=float)
     out.setflags(write=False)
@@ -119,13 +127,13 @@ def _read_only(a: Any) -> np.ndarray:
 
 #: names the seed's aircraft once had as Python constants, now read from the files
 _FROM_FILES: dict[str, Callable[[], Any]] = {
-    "ICE_B_FULL": lambda: _read_only(bundled("ice").model.arrays()[1]),
+    "ICE_B_FULL": lambda: _read_only(bundled("ice").model.arrays()[1]),  # type: ignore[union-attr]  # ice.toml has one
     "ICE_EFFECTORS": lambda: bundled("ice").effector_names,
-    "ICE_BK_SEED": lambda: _read_only(bundled("ice").simulation.allocation.static),
+    "ICE_BK_SEED": lambda: _read_only(_seed_loop("ice").allocation.static),
     "ICE_DAISY_GROUPS": lambda: tuple(tuple(g) for g in ice_daisy_groups()),
-    "HARV_LATDIR_B": lambda: _read_only(harv_latdir().B),
+    "HARV_LATDIR_B": lambda: _read_only(bundled("harv").B),
     "HARV_LATDIR_EFFECTORS": lambda: bundled("harv").effector_names,
-    "HARV_LATDIR_BK_SEED": lambda: _read_only(bundled("harv").simulation.allocation.static),
+    "HARV_LATDIR_BK_SEED": lambda: _read_only(_seed_loop("harv").allocation.static),
     "HARV_LATDIR_DAISY_GROUPS": lambda: tuple(tuple(g) for g in bundled("harv").method_options("daisy")["groups"]),
 }
 

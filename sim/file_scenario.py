@@ -21,14 +21,14 @@ from typing import Any
 import numpy as np
 
 from alloc.exceptions import ProblemError
-from alloc.vehicle_file import Vehicle as FileVehicle
+from alloc.vehicle_file import LinearModel, Vehicle as FileVehicle
 from alloc.vehicle_file.simulation import Command, FailureSpec, Simulation
 from sim.blocks import ActuatorFailure, ActuatorSpec, HedgeTerm, sum_of_sines
 from sim.model import Failure, FlightCondition, LoopShapedDesign, Pilot, SMCDesign, PlantModel
 from sim.scenarios.mimo import MimoScenario
 from sim import world
 
-__all__ = ["file_scenario", "actuator_of", "command_signal", "filtered_steps", "flight_of_model"]
+__all__ = ["file_scenario", "loop_of", "actuator_of", "command_signal", "filtered_steps", "flight_of_model"]
 
 
 def filtered_steps(t: np.ndarray, times: tuple[float, ...], levels: tuple[float, ...],
@@ -91,16 +91,20 @@ def _failure(spec: FailureSpec, name: str, time: float | None, effectors: tuple[
     )
 
 
+def loop_of(fv: FileVehicle) -> tuple[LinearModel, Simulation]:
+    """A vehicle file's ``[model]`` and ``[simulation]`` (ProblemError naming ``simulation`` without them)."""
+    if fv.simulation is None or fv.model is None:
+        raise ProblemError(f"simulation: vehicle {fv.name!r} has no [simulation] section", field="simulation")
+    return fv.model, fv.simulation
+
+
 def file_scenario(fv: FileVehicle, *, static_bandwidth: float = 1000.0) -> MimoScenario:
     """The :class:`MimoScenario` of a vehicle file with a ``[simulation]`` section.
 
     ``static_bandwidth``: the first-order lag of an effector without ``dynamics``
     (:func:`actuator_of`).
     """
-    sim: Simulation | None = fv.simulation
-    if sim is None or fv.model is None:
-        raise ProblemError(f"simulation: vehicle {fv.name!r} has no [simulation] section", field="simulation")
-    model = fv.model
+    model, sim = loop_of(fv)
     A, B, C, D = model.arrays()
     outputs, channels = tuple(model.outputs), tuple(model.controlled)
     effectors = fv.effector_names
@@ -191,12 +195,12 @@ def flight_of_model(A: np.ndarray, states: tuple[str, ...], units: dict[str, str
     aerodynamic damping) gets the hover mapping (:data:`sim.world.HOVER_HEAVE_DAMPING`); ``units`` are the
     states' (where a state is also an output of the same name).
     """
-    from sim.scenarios import harv_latdir, harv_lon, ice  # here: those scenarios are built by file_scenario
+    from sim.seed_flight import flight_of_seed_model  # deferred: it reads the bundled files
 
     A = np.asarray(A, dtype=float)
-    for module in (ice, harv_latdir, harv_lon):
-        if A.shape == module.A.shape and np.allclose(A, module.A, rtol=1e-9, atol=0.0):
-            return module.flight_condition()
+    seed = flight_of_seed_model(A)
+    if seed is not None:
+        return seed
     names = {n: i for i, n in enumerate(states)}
     rates = [(names[c], c) for c in "pqr" if c in names]
     if {"u", "v", "alpha", "beta"} & set(names) or not rates:

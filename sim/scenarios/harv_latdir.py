@@ -30,11 +30,13 @@ import numpy as np
 
 from alloc.vehicles import bundled
 
-from sim.file_scenario import file_scenario, filtered_steps as _filtered_steps
-from sim.model import Failure, FlightCondition, LoopShapedDesign, PlantModel, SMCDesign
+from sim.file_scenario import file_scenario, loop_of, filtered_steps as _filtered_steps
+from sim.model import Failure, LoopShapedDesign, PlantModel, SMCDesign
 from sim.scenarios.mimo import mimo_scenario, run_mimo
 from sim.result import SimResult
 from sim.scenarios.registry import register_scenario
+from sim.seed_flight import HARV_LATDIR_ALTITUDE as ALTITUDE, HARV_LATDIR_SPEED as SPEED  # noqa: F401  # this scenario's names
+from sim.seed_flight import harv_latdir as flight_condition  # noqa: F401
 
 __all__ = ["A", "B", "SEED_BK", "vehicle", "allocation_problem", "failure", "run"]
 
@@ -43,32 +45,17 @@ __all__ = ["A", "B", "SEED_BK", "vehicle", "allocation_problem", "failure", "run
 #: section 4.6 tables), the failures (Eq 4.17, section 4.6) and the Failure #2 input.
 _FILE = bundled("harv")
 _LOOP = file_scenario(_FILE)
-_SIM = _FILE.simulation
+_MODEL, _SIM = loop_of(_FILE)
 
 #: the seed's effector labels, in the file's order (diff_tail is DT, ...)
 EFFECTORS = ("dt", "ai", "ru", "rtv", "ytv")
-A, B, C, _D = _FILE.model.arrays()  # seed Eq 4.16, states beta, p, r
+A, B, C, _D = _MODEL.arrays()  # seed Eq 4.16, states beta, p, r
 ALPHA0 = float(np.arctan2(A[0, 1], -A[0, 2]))  # body-axis beta-dot row: sin(alpha0), -cos(alpha0)
-OUTPUTS = tuple(_FILE.model.outputs)  # beta, p, r and ps = cos(alpha0) p + sin(alpha0) r
+OUTPUTS = tuple(_MODEL.outputs)  # beta, p, r and ps = cos(alpha0) p + sin(alpha0) r
 SEED_BK = np.array(_SIM.allocation.static, dtype=float)  # seed Eq 4.19 (beta, p)
 REFERENCES = _LOOP.references  # seed Eq 4.18, the roll model, reused for beta
 ROLL_MODEL = REFERENCES[1]
 OUTPUT_BOUND = _LOOP.output_bound  # |beta| deg, |ps| deg/s
-
-
-#: ft, ft/s: the seed gives no altitude or speed for Eq 4.16 ("this low speed, high angle of attack,
-#: flight condition", section 4.6, line 2912 of the OCR'd seed); ours: 25,000 ft and 250 ft/s
-#: (about M 0.25), a HARV high-alpha test point's order of magnitude at alpha0 = 29.7 deg
-ALTITUDE, SPEED = 25000.0, 250.0
-
-
-def flight_condition() -> FlightCondition:
-    """Where the HARV lat-dir model flies (ours, :data:`ALTITUDE`, :data:`SPEED`) and what the air moves:
-    sideslip (deg) sees ``v_g / V``, the body rates (deg/s) ``p_g, r_g``; span 37.5 ft (the F/A-18's)."""
-    deg = 180.0 / np.pi
-    return FlightCondition(altitude=ALTITUDE, speed=SPEED, span=37.5,
-                           gust_states=((0, "v", deg / SPEED), (1, "p", deg), (2, "r", deg)),
-                           source="ours: the seed gives no altitude or speed for Eq 4.16")
 
 
 def vehicle() -> PlantModel:
@@ -105,7 +92,7 @@ def loop_shaped_design() -> LoopShapedDesign:
 #: seed section 4.6, Failure #2 input: "a series of steps filtered by
 #: (100/(s^2+20s+100)) (1/(s^2+2s+1))".  Step times and sizes are in Fig 4-81 (an image):
 #: ours, bank-angle steps (deg) of a roll-reversal sequence.
-_STEPS = dict(_FILE.simulation.pilot.commands)["filtered_steps"]
+_STEPS = dict(_SIM.pilot.commands)["filtered_steps"]  # type: ignore[union-attr]  # harv.toml has a pilot
 STEP_TIMES, STEP_LEVELS, STEP_FILTER = _STEPS.times, _STEPS.levels, _STEPS.filter.pair()
 
 

@@ -31,8 +31,9 @@ import numpy as np
 from alloc.vehicles import bundled
 
 from sim.blocks import sum_of_sines
-from sim.file_scenario import file_scenario
-from sim.model import Failure, FlightCondition, LoopShapedDesign, PlantModel, Pilot, SMCDesign
+from sim.file_scenario import file_scenario, loop_of
+from sim.seed_flight import ice as flight_condition  # noqa: F401  # this scenario's name for it
+from sim.model import Failure, LoopShapedDesign, PlantModel, Pilot, SMCDesign
 from sim.pilot import CROSSOVER_DELAY, CROSSOVER_NEUROMUSCULAR, crossover_gain
 from sim.scenarios.mimo import mimo_scenario, run_mimo
 from sim.result import SimResult
@@ -47,14 +48,14 @@ __all__ = [
 #: (Eq 4.22, 4.27, 4.28, Table 4-6) and the failure; this module adds what is no file's.
 _FILE = bundled("ice")
 _LOOP = file_scenario(_FILE)
-_SIM = _FILE.simulation
+_MODEL, _SIM = loop_of(_FILE)
 
-STATES = tuple(_FILE.model.states)
-OUTPUTS = tuple(_FILE.model.outputs)
+STATES = tuple(_MODEL.states)
+OUTPUTS = tuple(_MODEL.outputs)
 #: the seed's effector labels, in the file's order (elevon_l is de3, ...)
 EFFECTORS = ("de3", "de13", "de4", "de5", "de15", "de9", "de19", "de2", "de12", "de10", "de20")
-A, B, C, D = _FILE.model.arrays()
-CONTROLLED = tuple(OUTPUTS.index(c) for c in _FILE.model.controlled)
+A, B, C, D = _MODEL.arrays()
+CONTROLLED = tuple(OUTPUTS.index(c) for c in _MODEL.controlled)
 
 # The design effectiveness behind Eq 4.24 is the state-derivative rows (w, pb, v)
 # of B -- recovered from the printed B_k as (B_k' Wu B_k)^-1 B_k' Wu, which matches
@@ -67,25 +68,6 @@ WU = np.array(_SIM.allocation.weights, dtype=float)
 SEED_BK = np.array(_SIM.allocation.static, dtype=float)
 
 
-def flight_condition() -> FlightCondition:
-    """Where ICE flies and what the air moves (``--turbulence``, :mod:`sim.world`).
-
-    seed section 4.7 ("1g, wings-level, M = 0.3, h = 15,000 ft", line 3258 of the OCR'd seed):
-    15,000 ft and M 0.3 with the standard atmosphere's 1057.4 ft/s there, V = 317.2 ft/s -- the
-    model agrees: the inertial terms of A are U0 pi/180 = 5.3737 and W0 pi/180 = 1.3310, so
-    sqrt(U0^2 + W0^2) = 317.2 ft/s.  States u, w, v in ft/s and qb, pb, rb in deg/s (seed
-    section 4.7 state list); the aerodynamic entries of A are those the plant failure doubles
-    (not :data:`_KINEMATIC`).  Span 37.5 ft: ours (the seed gives none; a fighter's, the F/A-18's).
-    """
-    deg = 180.0 / np.pi
-    s = STATES.index
-    return FlightCondition(
-        altitude=15000.0, speed=317.2, span=37.5,
-        gust_states=((s("u"), "u", 1.0), (s("w"), "w", 1.0), (s("v"), "v", 1.0), (s("pb"), "p", deg),
-                     (s("qb"), "q", deg), (s("rb"), "r", deg)),
-        aero=~_KINEMATIC, source="seed section 4.7: M 0.3, 15,000 ft; span ours")
-
-
 def vehicle() -> PlantModel:
     """The nominal ICE model with its allocation data (ice.toml; the flight condition above)."""
     return _LOOP.vehicle()
@@ -96,19 +78,6 @@ def allocation_problem() -> Any:
     from sim.allocation import allocation_problem as _problem
 
     return _problem(vehicle())
-
-
-# Kinematic elements of A kept at their nominal value by the plant failure ("A-matrix
-# is multiplied by 2 -- with the exception of the elements describing kinematic
-# relationships", seed section 4.7): the theta and phi rows, the gravity terms
-# (theta column in u', w'; phi column in v') and the inertial U0, W0 terms
-# (q in u', w'; p, r in v'), identified by value (U0 pi/180 = 5.374, g pi/180 cos(theta0) = 0.545).
-_KINEMATIC = np.zeros_like(A, dtype=bool)
-_KINEMATIC[[3, 7], :] = True
-_KINEMATIC[[0, 1], 3] = True
-_KINEMATIC[4, 7] = True
-_KINEMATIC[[0, 1], 2] = True
-_KINEMATIC[4, [5, 6]] = True
 
 
 def failure(time: float = 20.0) -> Failure:
