@@ -1,11 +1,12 @@
 """A vehicle file's own closed loop (its ``[simulation]`` section) as a MIMO scenario.
 
 :mod:`alloc.vehicle_file.simulation` reads and checks the section; this module turns it into
-the simulator's objects -- a :class:`sim.scenarios.mimo.MimoScenario` -- and
-:func:`sim.scenarios.mimo.run_mimo` flies it, the runner of the seed's scenarios.  So the
-seed's ICE and F-18/HARV lat-dir, flown from ``alloc/data/vehicles/ice.toml`` and
-``harv.toml``, are the scenarios ``ice`` and ``harv_latdir`` bit for bit
-(tests/sim/test_sim_user_vehicle.py): the file carries everything the scenario has.
+the simulator's objects -- a :class:`sim.scenarios.mimo.MimoScenario` whose plant is a
+:class:`sim.model.PlantModel` -- and :func:`sim.scenarios.mimo.run_mimo` flies it, the runner
+of the seed's scenarios.  The scenarios ``ice`` and ``harv_latdir`` are this function's loops of
+``alloc/data/vehicles/ice.toml`` and ``harv.toml`` (their modules add only flight conditions and
+extra options), so ``alloc sim --vehicle ice`` flies the scenario ``ice`` bit for bit
+(tests/sim/test_sim_user_vehicle.py).
 
 Design options: ``observer`` and ``hedge`` (as the seed's scenarios), and
 ``<group>_hedge`` for every hedge group of the file (HARV's ``cross_hedge``).  Input
