@@ -7,7 +7,7 @@ K_-1 = 50``; ``beta: 3000, 1, 5``; ``eps = 1``); observers and hedges as
 tabulated in section 4.6 (poles -10, -11, -12 per channel; hedge gains
 ``p_s 1.0, beta 2.0``).  Channels in Eq 4.19 column order: ``beta``, ``ps``.
 All of it is alloc/data/vehicles/harv.toml's; this module names it for the simulator and
-adds the flight condition and the Failure #2 scenario.
+adds the Failure #2 scenario (where it flies: :mod:`sim.seed_flight`).
 
 Derived (ours, from the model): the states are body axes -- the
 ``beta``-dot row of Eq 4.16 holds ``sin(alpha0) = 0.4959`` and ``-cos(alpha0) =

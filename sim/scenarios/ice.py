@@ -5,7 +5,7 @@ variables (channels, in the order of the seed's Eq 4.24 columns): angle of
 attack ``alphaw``, stability-axis roll rate ``ps`` and sideslip ``betaw``.
 
 The numbers are alloc/data/vehicles/ice.toml's (its ``[model]``, effectors and ``[simulation]``);
-this module names them for the simulator and adds the flight condition and the alpha pilot.
+this module names them for the simulator and adds the alpha pilot (where it flies: :mod:`sim.seed_flight`).
 Transcription checks (tests/sim/test_sim_ice.py): the weighted pseudo-inverse of
 :data:`B_DESIGN` with ``Wu = diag(2, 2, 1, ...)`` reproduces the printed
 Eq 4.24; the actuator natural frequencies sqrt(40*100) = 63 and
@@ -69,7 +69,7 @@ SEED_BK = np.array(_SIM.allocation.static, dtype=float)
 
 
 def vehicle() -> PlantModel:
-    """The nominal ICE model with its allocation data (ice.toml; the flight condition above)."""
+    """The nominal ICE model with its allocation data (ice.toml; flight condition :func:`sim.seed_flight.ice`)."""
     return _LOOP.vehicle()
 
 
