@@ -35,12 +35,10 @@ Per-vehicle method defaults (daisy groups, priorities, a gang matrix) live in th
 vehicle's ``[methods.<name>]`` tables; :func:`method_options` merges them under the
 caller's options, the one rule every tool applies.
 
-The seed's aircraft are also transcribed here in Python (:func:`ice`, :func:`harv_latdir`,
-:data:`SEED`): tests/alloc/test_vehicles.py checks the bundled files against them bit for bit.
-
-Transcribed from the seed (OCR'd: decimal points restored where the scan lost them, e.g.
-``-0009123567`` -> ``-0.009123567``) and checked by reproducing the seed's printed
-control distribution of Eq 4.24 with the project's own ``pinv`` (tests/alloc/test_vehicles.py).
+The seed's aircraft are data only: :func:`ice`, :func:`ice_mid` and :func:`harv_latdir` read
+the bundled files (:func:`bundled`); the numbers, with their seed citations, live in those
+files alone.  tests/alloc/test_vehicles.py checks that they reproduce the seed's printed
+control distributions (Eq 4.24 by the project's own ``pinv``, Eq 4.19 by ``ganging``).
 Units: degrees and degrees per second for effectors; the rows of ``B`` are state
 derivatives per degree of deflection.
 """
@@ -62,140 +60,82 @@ from .problem import Problem
 from .vehicle_file import DATA_DIR, Vehicle, load_vehicle, vehicle_from_dict
 
 __all__ = [
-    "ICE_B_FULL", "ICE_EFFECTORS", "ICE_STATES", "ICE_BK_SEED", "ice", "ice_mid",
-    "HARV_LATDIR_B", "HARV_LATDIR_EFFECTORS", "HARV_LATDIR_BK_SEED", "harv_latdir",
-    "ICE_DAISY_GROUPS", "HARV_LATDIR_DAISY_GROUPS", "ice_daisy_groups",
-    "SEED", "VEHICLE_PATH_ENV", "ENTRY_POINT_GROUP", "VEHICLE_SUFFIXES",
+    "ice", "ice_mid", "harv_latdir", "ice_daisy_groups", "bundled", "SEED_NAMES",
+    "VEHICLE_PATH_ENV", "ENTRY_POINT_GROUP", "VEHICLE_SUFFIXES",
     "NamedProblem", "CATALOGUE", "catalogue", "names", "lookup", "problem", "daisy_groups",
     "get_vehicle", "method_options",
 ]
 
-# seed section 4.7, B' (11 effectors x 8 states), flight condition M = 0.3, h = 15,000 ft.
-# States x = [u w qb theta v pb rb phi]; effectors in the order below.
-ICE_STATES = ("u", "w", "q", "theta", "v", "p", "r", "phi")
-ICE_EFFECTORS = (
-    "elevon_l", "elevon_r", "pitch_flap", "amt_l", "amt_r",
-    "ssd_l", "ssd_r", "lef_l", "lef_r", "pitch_tv", "yaw_tv",
-)  # seed: de3 de13 de4 de5 de15 de9 de19 de2 de12 de10 de20
-ICE_B_FULL = np.array([
-    [-0.005969294, -0.267968418, -1.385041358, 0, -0.009123567, 2.411735136, 0.037657455, 0],
-    [-0.005969294, -0.267968418, -1.385041358, 0, 0.009123567, -2.411735136, -0.037657455, 0],
-    [-0.004085579, -0.230586355, -1.20225331, 0, 0, 0, 0, 0],
-    [-0.014173739, -0.084039328, -0.352069164, 0, -0.000248489, 0.536897487, -0.05609334, 0],
-    [-0.014173739, -0.084039326, -0.352069164, 0, 0.000248489, -0.536903664, 0.0560923, 0],
-    [-0.02523841, 0.111216392, 0.266496208, 0, 0.021932906, -1.196261818, -0.123503836, 0],
-    [-0.025238416, 0.111216392, 0.266496208, 0, -0.021932906, 1.196261818, 0.123503836, 0],
-    [0.011499932, 0.09704284, 0.233406726, 0, -0.028900689, -0.985320208, 0.185896833, 0],
-    [0.011499932, 0.09704284, 0.233406726, 0, 0.028900689, 0.985320208, -0.185896833, 0],
-    [-1.1804e-05, -0.123946616, -1.731151121, 0, 0, 0, 0, 0],
-    [0, 0, 0, 0, 0.123946616, -0.066733456, -1.227324384, 0],
-]).T
-ICE_B_FULL.setflags(write=False)
+#: the seed's aircraft among the bundled files, in catalogue order (their numbers: the files)
+SEED_NAMES = ("ice", "ice-design", "ice-mid", "harv")
+#: other names of the bundled vehicles (the simulator's scenario is ``harv_latdir``)
+_ALIASES = {"harv": ("harv_latdir", "harv-latdir")}
 
-# seed Table 4-5: position limits (deg) and rate limits (deg/s), in ICE_EFFECTORS order.
-_ICE_UMIN = np.array([-30, -30, -30, 0, 0, 0, 0, -40, -40, -15, -15], dtype=float)
-_ICE_UMAX = np.array([30, 30, 30, 60, 60, 60, 60, 40, 40, 15, 15], dtype=float)
-_ICE_RATE = np.array([150, 150, 50, 150, 150, 150, 150, 40, 40, 60, 60], dtype=float)
 
-# The allocation rows: the controlled variables are alpha, p and beta (Eq 4.25); the seed
-# allocates with the rows w-dot, p-dot, v-dot of B (found by reproducing Eq 4.24).
-_ICE_ROWS = (1, 5, 4)
+def bundled(name: str) -> Vehicle:
+    """The bundled vehicle file ``alloc/data/vehicles/<name>.toml``, read once per file version.
 
-# seed Eq 4.24 as printed (3 significant digits): the design control distribution B_k.
-ICE_BK_SEED = np.array([
-    [-0.773, 0.107, -0.097], [-0.773, -0.107, 0.097], [-1.33, 0, 0],
-    [-0.485, 0.048, 0.055], [-0.485, -0.048, -0.055], [0, -0.104, 1.06],
-    [0, 0.104, -1.06], [0.560, -0.0920, -1.73], [0.560, 0.0920, 1.73],
-    [-0.715, 0, 0], [0, 0.01, 6.87],
-])
-ICE_BK_SEED.setflags(write=False)
+    Unlike :func:`get_vehicle`, never a user's file of the same name: the seed's aircraft
+    are these files whatever ``ALLOC_VEHICLE_PATH`` adds.
+    """
+    return _file_loader(DATA_DIR / f"{name}.toml")()
 
 
 def ice(*, design: bool = False) -> Problem:
-    """The ICE allocation problem: axes (alpha, p, beta) <- rows (w-dot, p-dot, v-dot), 11 effectors.
+    """The ICE allocation problem (``ice.toml``): axes (alpha, p, beta) <- rows (w-dot, p-dot, v-dot), 11 effectors.
 
-    ``design=True`` gives the seed's design problem of Eq 4.24: the spoiler-slot deflectors
-    "artificially removed from the pitch channel" (their w-dot entries zeroed) and
-    ``Wu = diag[2, 2, 1, ..., 1]`` (seed prints ten entries for eleven effectors; the
-    eleventh 1 is what reproduces Eq 4.24).
+    ``design=True`` gives the seed's design problem of Eq 4.24 (``ice-design.toml``): the
+    spoiler-slot deflectors "artificially removed from the pitch channel" (their w-dot
+    entries zeroed) and ``Wu = diag[2, 2, 1, ..., 1]`` (seed prints ten entries for eleven
+    effectors; the eleventh 1 is what reproduces Eq 4.24).
     """
-    B = ICE_B_FULL[list(_ICE_ROWS)].copy()
-    Wu = None
-    if design:
-        B[0, 5:7] = 0.0
-        Wu = np.array([2, 2, 1, 1, 1, 1, 1, 1, 1, 1, 1], dtype=float)
-    return Problem(
-        B, _ICE_UMIN, _ICE_UMAX, Wu=Wu, rate_min=-_ICE_RATE, rate_max=_ICE_RATE,
-        names=ICE_EFFECTORS, axes=("alpha", "p", "beta"),
-    )
+    return bundled("ice-design" if design else "ice").problem()
 
 
 def ice_mid() -> Problem:
-    """ICE with the one-sided effectors (AMT, SSD: 0..60 deg) preferring mid-range (30 deg).
+    """ICE with the one-sided effectors (AMT, SSD: 0..60 deg) preferring mid-range (30 deg), ``ice-mid.toml``.
 
     With ``up = 0`` they rest on a limit and the pseudo-inverse family can only push them one
     way; mid-range preferences are what the AMS coverage comparison of section 1.3.4.9 uses.
     """
-    p = ice()
-    up = p.up.copy()
-    one_sided = p.umin >= 0
-    up[one_sided] = (p.umin[one_sided] + p.umax[one_sided]) / 2
-    return p.replace(up=up)
-
-
-#: Daisy-chain groups for ICE in the spirit of seed Eq 1.25: aerodynamic surfaces first,
-#: then the innovative effectors, then thrust vectoring.
-ICE_DAISY_GROUPS = (
-    ("elevon_l", "elevon_r", "pitch_flap", "lef_l", "lef_r"),
-    ("amt_l", "amt_r", "ssd_l", "ssd_r"),
-    ("pitch_tv", "yaw_tv"),
-)
+    return bundled("ice-mid").problem()
 
 
 def ice_daisy_groups() -> list[list[str]]:
-    """:data:`ICE_DAISY_GROUPS` as lists (the ``groups`` option of ``daisy``)."""
-    return [list(g) for g in ICE_DAISY_GROUPS]
-
-
-# seed Eq 4.16: F-18/HARV lateral-directional, x = [beta p r], u = [DT AI RU RTV YTV].
-HARV_LATDIR_EFFECTORS = ("diff_tail", "aileron", "rudder", "roll_tv", "yaw_tv")
-HARV_LATDIR_B = np.array([
-    [0.005629, 0.005764, 0.003685, 0, 0.0904],
-    [1.879, 1.328, 0.02922, 0.6754, 0.217],
-    [-0.1092, -0.09645, -0.08404, 0.006811, -2.974],
-])
-HARV_LATDIR_B.setflags(write=False)
-# seed Table 4-3: limits (deg) and rate limits (deg/s).
-_HARV_UMAX = np.array([17.5, 27.5, 30, 30, 30], dtype=float)
-_HARV_RATE = np.array([60, 100, 100, 60, 60], dtype=float)
-# seed Eq 4.19: ganged distribution of the (beta, p) pseudo-commands to the five effectors.
-HARV_LATDIR_BK_SEED = np.array([[0, 0.6], [0, 1], [1, 0], [0, 0.6], [0.6, 0]])
-HARV_LATDIR_BK_SEED.setflags(write=False)
+    """ICE's daisy-chain groups (``ice.toml`` ``[methods.daisy] groups``, the ``groups`` option of ``daisy``)."""
+    return [list(g) for g in bundled("ice").method_options("daisy")["groups"]]
 
 
 def harv_latdir() -> Problem:
-    """F-18/HARV lateral-directional allocation: axes (beta-dot, p-dot, r-dot), 5 effectors."""
-    return Problem(
-        HARV_LATDIR_B, -_HARV_UMAX, _HARV_UMAX, rate_min=-_HARV_RATE, rate_max=_HARV_RATE,
-        names=HARV_LATDIR_EFFECTORS, axes=("beta", "p", "r"),
-    )
+    """F-18/HARV lateral-directional allocation (``harv.toml``): axes (beta-dot, p-dot, r-dot), 5 effectors."""
+    return bundled("harv").problem()
 
 
-#: Daisy-chain groups for the HARV lateral-directional suite: surfaces, then thrust vectoring.
-HARV_LATDIR_DAISY_GROUPS = (("diff_tail", "aileron", "rudder"), ("roll_tv", "yaw_tv"))
+def _seed_loop(name: str) -> Any:
+    """The ``[simulation]`` section of bundled file ``name`` (the seed's ICE and HARV carry one)."""
+    simulation = bundled(name).simulation
+    if simulation is None:
+        raise ProblemError(f"simulation: bundled vehicle {name!r} has no [simulation] section", field="simulation")
+    return simulation
 
 
-# --------------------------------------------------------------------------- the seed, transcribed
-#: the seed's aircraft as transcribed above, by catalogue name: the bundled files must
-#: yield these problems and daisy groups bit for bit (tests/alloc/test_vehicles.py)
-SEED: dict[str, tuple[Callable[[], Problem], tuple[tuple[str, ...], ...]]] = {
-    "ice": (ice, ICE_DAISY_GROUPS),
-    "ice-design": (lambda: ice(design=True), ICE_DAISY_GROUPS),
-    "ice-mid": (ice_mid, ICE_DAISY_GROUPS),
-    "harv": (harv_latdir, HARV_LATDIR_DAISY_GROUPS),
+def _read_only(a: Any) -> np.ndarray:
+    out = np.array(a, dtype=float)
+    out.setflags(write=False)
+    return out
+
+
+#: names the seed's aircraft once had as Python constants, now read from the files
+_FROM_FILES: dict[str, Callable[[], Any]] = {
+    "ICE_B_FULL": lambda: _read_only(bundled("ice").model.arrays()[1]),  # type: ignore[union-attr]  # ice.toml has one
+    "ICE_EFFECTORS": lambda: bundled("ice").effector_names,
+    "ICE_BK_SEED": lambda: _read_only(_seed_loop("ice").allocation.static),
+    "ICE_DAISY_GROUPS": lambda: tuple(tuple(g) for g in ice_daisy_groups()),
+    "HARV_LATDIR_B": lambda: _read_only(bundled("harv").B),
+    "HARV_LATDIR_EFFECTORS": lambda: bundled("harv").effector_names,
+    "HARV_LATDIR_BK_SEED": lambda: _read_only(_seed_loop("harv").allocation.static),
+    "HARV_LATDIR_DAISY_GROUPS": lambda: tuple(tuple(g) for g in bundled("harv").method_options("daisy")["groups"]),
 }
-#: other names of the bundled vehicles (the simulator's scenario is ``harv_latdir``)
-_ALIASES = {"harv": ("harv_latdir", "harv-latdir")}
 
 
 # --------------------------------------------------------------------------- catalogue
@@ -289,9 +229,9 @@ def _folder_files(folder: Path) -> list[Path]:
 
 def _definitions() -> list[NamedProblem]:
     """Every definition, in catalogue order (bundled, ALLOC_VEHICLE_PATH, entry points), duplicates kept."""
-    bundled = {p.stem: p for p in DATA_DIR.glob("*.toml")}
-    order = [n for n in SEED if n in bundled] + sorted(set(bundled) - set(SEED))
-    out = [NamedProblem(n, f"bundled {bundled[n].name}", _file_loader(bundled[n]), _ALIASES.get(n, ()))
+    files = {p.stem: p for p in DATA_DIR.glob("*.toml")}
+    order = [n for n in SEED_NAMES if n in files] + sorted(set(files) - set(SEED_NAMES))
+    out = [NamedProblem(n, f"bundled {files[n].name}", _file_loader(files[n]), _ALIASES.get(n, ()))
            for n in order]
     for folder in filter(None, os.environ.get(VEHICLE_PATH_ENV, "").split(os.pathsep)):
         out += [NamedProblem(p.stem, str(p), _file_loader(p)) for p in _folder_files(Path(folder))]
@@ -322,6 +262,8 @@ def catalogue() -> dict[str, NamedProblem]:
 def __getattr__(name: str) -> Any:
     if name == "CATALOGUE":  # the catalogue as it is now (ALLOC_VEHICLE_PATH may change)
         return catalogue()
+    if name in _FROM_FILES:  # the seed's numbers, from the bundled files (no second copy in Python)
+        return _FROM_FILES[name]()
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 

@@ -22,7 +22,7 @@ from numba import njit
 from sim.result import STATUS_NAMES
 
 if TYPE_CHECKING:
-    from sim.model import Failure, Vehicle
+    from sim.model import Failure, PlantModel
 
 __all__ = ["LoopAllocator", "STATIC", "PREFERRED_POSITIONS", "RATE_HORIZONS", "actuator_lag", "allocation_problem",
            "build_allocator", "health_events", "hold_commands", "preferred_positions", "rate_horizon_scale",
@@ -43,7 +43,7 @@ LoopAllocator = Callable[[np.ndarray, np.ndarray, float], tuple[np.ndarray, np.n
 PREFERRED_POSITIONS = ("mid", "zero")
 
 
-def preferred_positions(vehicle: Vehicle, rule: str = "mid") -> np.ndarray:
+def preferred_positions(vehicle: PlantModel, rule: str = "mid") -> np.ndarray:
     """Preferred positions ``up``: 0 for two-sided effectors; one-sided ones by ``rule``.
 
     A one-sided effector (a position limit at 0) preferred at that limit can
@@ -61,7 +61,7 @@ def preferred_positions(vehicle: Vehicle, rule: str = "mid") -> np.ndarray:
     return up
 
 
-def health_events(vehicle: Vehicle, failure: Failure) -> list[Any]:
+def health_events(vehicle: PlantModel, failure: Failure) -> list[Any]:
     """The failure's effector events in the one health vocabulary (:mod:`alloc.health`).
 
     Each :class:`sim.blocks.ActuatorFailure` of a told kind is the :class:`alloc.health.FailureEvent`
@@ -78,7 +78,7 @@ def health_events(vehicle: Vehicle, failure: Failure) -> list[Any]:
             for f in failure.actuators if f.kind not in SIMULATOR_ONLY]
 
 
-def allocation_problem(vehicle: Vehicle, failure: Failure | None = None, *, preferred: str = "mid",
+def allocation_problem(vehicle: PlantModel, failure: Failure | None = None, *, preferred: str = "mid",
                        health: Mapping[str, Any] | None = None) -> Any:
     """The vehicle's :class:`alloc.Problem`; with ``failure``, as told of the failed effectors.
 
@@ -146,12 +146,12 @@ def _inside_rate_window(u: np.ndarray, u_prev: np.ndarray, limits: np.ndarray, d
     return inside
 
 
-def actuator_lag(vehicle: Vehicle) -> np.ndarray:
+def actuator_lag(vehicle: PlantModel) -> np.ndarray:
     """Ramp-following lag (s) of each nominal actuator: ``c1 / wn2`` (second order), ``1 / a`` (first)."""
     return np.array([a.c1 / a.wn2 if a.order == 2 else 1.0 / a.c1 for a in vehicle.actuators])
 
 
-def rate_horizon_scale(vehicle: Vehicle, frame_period: float, horizon: str) -> np.ndarray:
+def rate_horizon_scale(vehicle: PlantModel, frame_period: float, horizon: str) -> np.ndarray:
     """Factor on each rate limit so the Eq 1.28 box at ``dt = T`` spans ``max(T, lag)`` (``horizon="actuator"``)."""
     if horizon not in RATE_HORIZONS:
         raise ValueError(f"rate_horizon: {horizon!r}; expected one of {RATE_HORIZONS}")
@@ -161,7 +161,7 @@ def rate_horizon_scale(vehicle: Vehicle, frame_period: float, horizon: str) -> n
 
 
 def build_allocator(
-    vehicle: Vehicle,
+    vehicle: PlantModel,
     method: str,
     options: dict[str, Any],
     *,
@@ -307,7 +307,7 @@ def _excited(chosen: LoopAllocator, solve: Any, problem: Any, frame_period: floa
     return excited
 
 
-def stuck_effectors(vehicle: Vehicle, health: Mapping[str, Any]) -> list[int]:
+def stuck_effectors(vehicle: PlantModel, health: Mapping[str, Any]) -> list[int]:
     """Indices of the effectors a belief says are stuck: jammed, hard-over (a jam at a stop) or floating."""
     names = list(vehicle.effector_names)
     return sorted(names.index(name) for name, h in health.items() if h.jam_position is not None or h.floating)

@@ -143,19 +143,19 @@ def verdict_choices() -> list[Choice]:
                                                      zip(harv_latdir.STEP_TIMES, harv_latdir.STEP_LEVELS,
                                                          strict=True)),
                "ours (the seed's figure shows filtered steps; sizes and times are not printed)",
-               "sim/scenarios/harv_latdir.py STEP_TIMES, STEP_LEVELS"),
+               "alloc/data/vehicles/harv.toml [simulation.pilot.commands.filtered_steps]"),
         Choice("daisy groups (ICE)", " | ".join(", ".join(g) for g in daisy), "ours",
-               "alloc/vehicles ice [methods.daisy] groups"),
+               "alloc/data/vehicles/ice.toml [methods.daisy] groups"),
         Choice("divergence bound ICE", f"|alpha| {ice.OUTPUT_BOUND[0]:g} deg, |p_s| {ice.OUTPUT_BOUND[1]:g} deg/s, "
-               f"|beta| {ice.OUTPUT_BOUND[2]:g} deg", "ours", "sim/scenarios/ice.py OUTPUT_BOUND"),
+               f"|beta| {ice.OUTPUT_BOUND[2]:g} deg", "ours", "alloc/data/vehicles/ice.toml [simulation] output_bound"),
         Choice("divergence bound HARV lat-dir", f"|beta| {harv_latdir.OUTPUT_BOUND[0]:g} deg, "
-               f"|p_s| {harv_latdir.OUTPUT_BOUND[1]:g} deg/s", "ours", "sim/scenarios/harv_latdir.py OUTPUT_BOUND"),
+               f"|p_s| {harv_latdir.OUTPUT_BOUND[1]:g} deg/s", "ours", "alloc/data/vehicles/harv.toml [simulation] output_bound"),
         Choice("noise model", "band-limited white noise (power 0.1, 10 ms hold) through 100/(s^2 + 20 s + 100) "
                "times the output gains", "seed sections 4.6, 4.7 (Simulink block and gains)",
                f"sim/blocks.py {band_limited_noise.__name__}"),
-        Choice("noise gains ICE", _ice_noise_gains(), "seed section 4.7", "sim/scenarios/ice.py vehicle"),
+        Choice("noise gains ICE", _ice_noise_gains(), "seed section 4.7", "alloc/data/vehicles/ice.toml [simulation] noise"),
         Choice("noise gains HARV lat-dir", _text(harv_latdir.vehicle().noise_gains), "seed section 4.6",
-               "sim/scenarios/harv_latdir.py vehicle"),
+               "alloc/data/vehicles/harv.toml [simulation] noise"),
         # the engineering pass/fail limits no standard or the seed gives (sim.criteria decides each
         # run's verdict with them)
         *(Choice(name, value, "ours", "sim/criteria.py", why) for name, value, why in criteria.free_parameters()),

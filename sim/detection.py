@@ -50,7 +50,7 @@ from alloc.effector_health import EffectorHealth
 from alloc.exceptions import AllocError
 from alloc.estimation import Detection, FailureDetector, RobustSettings
 from sim.blocks import actuator_heun_step, band_limited_noise
-from sim.model import Vehicle
+from sim.model import PlantModel
 from sim.settings import SettingError
 
 __all__ = ["DetectionDesign", "InLoopDetector", "response_outputs", "response_noise_std", "response_noise_correlation",
@@ -114,7 +114,7 @@ def design_with(long_window: float | None, model: str = "exact") -> DetectionDes
     return replace(design, long_window=float(long_window) if long_window > 0 else None)
 
 
-def response_outputs(vehicle: Vehicle) -> tuple[int, ...]:
+def response_outputs(vehicle: PlantModel) -> tuple[int, ...]:
     """Measured outputs whose derivative the effectors drive directly, with no feedthrough and
     with a stated sensor noise (a positive noise gain).
 
@@ -137,7 +137,7 @@ def response_outputs(vehicle: Vehicle) -> tuple[int, ...]:
     return tuple(out)
 
 
-def _noise_gains(vehicle: Vehicle) -> np.ndarray:
+def _noise_gains(vehicle: PlantModel) -> np.ndarray:
     """The stated sensor-noise gain of every output (0 for the unmeasured)."""
     gains = np.zeros(vehicle.C.shape[0])
     gains[np.asarray(vehicle.measured, dtype=int)] = vehicle.noise_gains
@@ -169,7 +169,7 @@ def response_noise_correlation(dt: float, sample_time: float) -> tuple[float, ..
     return _differenced_noise(dt, sample_time)[1]
 
 
-def response_noise_std(vehicle: Vehicle, dt: float, sample_time: float, noise_scale: float = 1.0) -> np.ndarray:
+def response_noise_std(vehicle: PlantModel, dt: float, sample_time: float, noise_scale: float = 1.0) -> np.ndarray:
     """Per response output: the differenced sensor noise's std at the sample period."""
     rows = list(response_outputs(vehicle))
     return _differenced_noise(dt, sample_time)[0] * _noise_gains(vehicle)[rows] * noise_scale
@@ -180,7 +180,7 @@ class InLoopDetector:
 
     Parameters
     ----------
-    vehicle : Vehicle
+    vehicle : PlantModel
         The nominal vehicle (what the flight computer's designers know).
     dt : float
         Integration step.
@@ -197,7 +197,7 @@ class InLoopDetector:
     design : DetectionDesign
     """
 
-    def __init__(self, vehicle: Vehicle, dt: float, noise: np.ndarray, *, noise_scale: float, actuators: bool,
+    def __init__(self, vehicle: PlantModel, dt: float, noise: np.ndarray, *, noise_scale: float, actuators: bool,
                  preferred: np.ndarray, design: DetectionDesign = DEFAULT_DESIGN) -> None:
         import alloc
 
@@ -296,7 +296,7 @@ class InLoopDetector:
         return dict(self.detector.health)
 
 
-def _lags(vehicle: Vehicle) -> np.ndarray:
+def _lags(vehicle: PlantModel) -> np.ndarray:
     """Each actuator's lag in seconds, the rate regressors' scale: ``c1 / wn2`` of a second-order
     actuator (its low-frequency delay), ``1 / a`` of a first-order one."""
     return np.array([s.c1 / s.wn2 if s.order == 2 else 1.0 / s.c1 for s in vehicle.actuators])

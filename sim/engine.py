@@ -53,7 +53,7 @@ from sim.blocks import (
 from sim.detection import InLoopDetector, design_with, detection_record
 from sim.harm import InLoopHarm
 from sim.injection import inject_failure
-from sim.model import TF, Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle
+from sim.model import TF, Failure, LoopShapedDesign, Pilot, SMCDesign, PlantModel
 from sim.packed import DIVERGED, N_MISC, FloatSlot, IntSlot, Misc, Packed, advance, observe, record_columns
 from sim.result import SimResult
 from sim.settings import LoopSpec, SettingError, anti_windup_on, boundary_layer_at
@@ -393,7 +393,7 @@ def _pack(
 
 
 def _result(
-    rec: np.ndarray, cols: dict[str, slice], scenario: str, method: str, vehicle: Vehicle,
+    rec: np.ndarray, cols: dict[str, slice], scenario: str, method: str, vehicle: PlantModel,
     failure: Failure | None, pilots: Sequence[Pilot], *, diverged: bool,
 ) -> SimResult:
     """SimResult from the record matrix (contiguous copies of its columns)."""
@@ -429,7 +429,7 @@ def _result(
 
 
 def _controller_slots(
-    vehicle: Vehicle, controller: SMCDesign | LoopShapedDesign, references: Sequence[TF], dt: float,
+    vehicle: PlantModel, controller: SMCDesign | LoopShapedDesign, references: Sequence[TF], dt: float,
     boundary_layer: str = "frame",
 ) -> dict[int, np.ndarray]:
     """Packed arrays of the controller: the SMC system and gains, or reference models and compensators.
@@ -495,7 +495,7 @@ def _diagonal_system(tfs: Sequence[TF], k: int) -> tuple[np.ndarray, ...]:
 
 
 def _controller_system(
-    vehicle: Vehicle, design: SMCDesign, references: Sequence[TF], dt: float
+    vehicle: PlantModel, design: SMCDesign, references: Sequence[TF], dt: float
 ) -> tuple[DiscreteLTI, int]:
     """Stack reference models, observers and hedge into one discrete LTI.
 

@@ -42,7 +42,7 @@ from alloc.exceptions import ProblemError
 from alloc.failure_grammar import EffectorFailure, format_failure, parse_failure
 from alloc.health import Effect, FailureKind
 from sim.blocks import ActuatorFailure
-from sim.model import Failure, Vehicle
+from sim.model import Failure, PlantModel
 
 __all__ = [
     "LIMIT_FRACTION",
@@ -126,7 +126,7 @@ def _effector_failures(kind: str, effector: str, lo: float, hi: float, rate: flo
     return out
 
 
-def catalogue(vehicle: Vehicle, effectors: Sequence[str]) -> dict[str, str]:
+def catalogue(vehicle: PlantModel, effectors: Sequence[str]) -> dict[str, str]:
     """Catalogue name -> its grammar text on ``vehicle``, failing ``effectors`` (by name; first, then both).
 
     Empty when the scenario names no catalogue effectors.  ProblemError (field ``failure``)
@@ -149,7 +149,7 @@ def catalogue(vehicle: Vehicle, effectors: Sequence[str]) -> dict[str, str]:
     return out
 
 
-def failure_of_text(vehicle: Vehicle, text: str, time: float, *, name: str | None = None,
+def failure_of_text(vehicle: PlantModel, text: str, time: float, *, name: str | None = None,
                     description: str | None = None) -> Failure:
     """The :class:`sim.model.Failure` a grammar text names on ``vehicle`` at ``time`` (effector failures only).
 
@@ -179,7 +179,7 @@ def failure_help(named: Mapping[str, str], catalogued: Mapping[str, str], effect
 
 
 def resolve(text: str, time: float | None, *, named: Callable[[str, float | None], Failure],
-            own: Mapping[str, str], vehicle: Vehicle, catalogued: Mapping[str, str],
+            own: Mapping[str, str], vehicle: PlantModel, catalogued: Mapping[str, str],
             default_time: float) -> Failure:
     """A failure by name: the scenario's own (``named``), a catalogue name, or grammar text (module docstring)."""
     if text in own:
@@ -196,7 +196,7 @@ def resolve(text: str, time: float | None, *, named: Callable[[str, float | None
     return failure_of_text(vehicle, text, at)
 
 
-def check(text: object, *, own: Mapping[str, str], vehicle: Vehicle, catalogued: Mapping[str, str]) -> None:
+def check(text: object, *, own: Mapping[str, str], vehicle: PlantModel, catalogued: Mapping[str, str]) -> None:
     """ProblemError (field ``failure``) unless ``text`` names a failure :func:`resolve` can build; says what is taken."""
     if isinstance(text, str) and (text in own or text in catalogued):
         return

@@ -1,11 +1,12 @@
 """A vehicle file's own closed loop (its ``[simulation]`` section) as a MIMO scenario.
 
 :mod:`alloc.vehicle_file.simulation` reads and checks the section; this module turns it into
-the simulator's objects -- a :class:`sim.scenarios.mimo.MimoScenario` -- and
-:func:`sim.scenarios.mimo.run_mimo` flies it, the runner of the seed's scenarios.  So the
-seed's ICE and F-18/HARV lat-dir, flown from ``alloc/data/vehicles/ice.toml`` and
-``harv.toml``, are the scenarios ``ice`` and ``harv_latdir`` bit for bit
-(tests/sim/test_user_vehicle.py): the file carries everything the scenario has.
+the simulator's objects -- a :class:`sim.scenarios.mimo.MimoScenario` whose plant is a
+:class:`sim.model.PlantModel` -- and :func:`sim.scenarios.mimo.run_mimo` flies it, the runner
+of the seed's scenarios.  The scenarios ``ice`` and ``harv_latdir`` are this function's loops of
+``alloc/data/vehicles/ice.toml`` and ``harv.toml`` (their modules add only flight conditions and
+extra options), so ``alloc sim --vehicle ice`` flies the scenario ``ice`` bit for bit
+(tests/sim/test_user_vehicle.py).
 
 Design options: ``observer`` and ``hedge`` (as the seed's scenarios), and
 ``<group>_hedge`` for every hedge group of the file (HARV's ``cross_hedge``).  Input
@@ -21,15 +22,14 @@ from typing import Any
 import numpy as np
 
 from alloc.exceptions import ProblemError
-from alloc.vehicle_file import Vehicle as FileVehicle
+from alloc.vehicle_file import LinearModel, Vehicle as FileVehicle
 from alloc.vehicle_file.simulation import Command, FailureSpec, Simulation
 from sim.blocks import ActuatorFailure, ActuatorSpec, HedgeTerm, sum_of_sines
-from sim.model import Failure, FlightCondition, LoopShapedDesign, Pilot, SMCDesign, Vehicle
+from sim.model import Failure, FlightCondition, LoopShapedDesign, Pilot, SMCDesign, PlantModel
 from sim.scenarios.mimo import MimoScenario
 from sim import world
-from sim.scenarios import harv_latdir, harv_lon, ice
 
-__all__ = ["file_scenario", "actuator_of", "command_signal", "filtered_steps", "flight_of_model"]
+__all__ = ["file_scenario", "loop_of", "actuator_of", "command_signal", "filtered_steps", "flight_of_model"]
 
 
 def filtered_steps(t: np.ndarray, times: tuple[float, ...], levels: tuple[float, ...],
@@ -92,16 +92,20 @@ def _failure(spec: FailureSpec, name: str, time: float | None, effectors: tuple[
     )
 
 
+def loop_of(fv: FileVehicle) -> tuple[LinearModel, Simulation]:
+    """A vehicle file's ``[model]`` and ``[simulation]`` (ProblemError naming ``simulation`` without them)."""
+    if fv.simulation is None or fv.model is None:
+        raise ProblemError(f"simulation: vehicle {fv.name!r} has no [simulation] section", field="simulation")
+    return fv.model, fv.simulation
+
+
 def file_scenario(fv: FileVehicle, *, static_bandwidth: float = 1000.0) -> MimoScenario:
     """The :class:`MimoScenario` of a vehicle file with a ``[simulation]`` section.
 
     ``static_bandwidth``: the first-order lag of an effector without ``dynamics``
     (:func:`actuator_of`).
     """
-    sim: Simulation | None = fv.simulation
-    if sim is None or fv.model is None:
-        raise ProblemError(f"simulation: vehicle {fv.name!r} has no [simulation] section", field="simulation")
-    model = fv.model
+    model, sim = loop_of(fv)
     A, B, C, D = model.arrays()
     outputs, channels = tuple(model.outputs), tuple(model.controlled)
     effectors = fv.effector_names
@@ -109,8 +113,8 @@ def file_scenario(fv: FileVehicle, *, static_bandwidth: float = 1000.0) -> MimoS
     actuators = tuple(actuator_of(e, i, e.min, e.max, static_bandwidth) for i, e in enumerate(fv.effectors))
     alloc = sim.allocation
 
-    def vehicle() -> Vehicle:
-        return Vehicle(
+    def vehicle() -> PlantModel:
+        return PlantModel(
             name=fv.name, A=A.copy(), B=B.copy(), C=C.copy(), D=D.copy(), output_names=outputs,
             actuators=actuators, controlled=tuple(outputs.index(c) for c in channels),
             measured=tuple(outputs.index(x) for x in sim.measured), noise_gains=np.array(sim.noise, dtype=float),
@@ -192,10 +196,12 @@ def flight_of_model(A: np.ndarray, states: tuple[str, ...], units: dict[str, str
     aerodynamic damping) gets the hover mapping (:data:`sim.world.HOVER_HEAVE_DAMPING`); ``units`` are the
     states' (where a state is also an output of the same name).
     """
+    from sim.seed_flight import flight_of_seed_model  # deferred: it reads the bundled files
+
     A = np.asarray(A, dtype=float)
-    for module in (ice, harv_latdir, harv_lon):
-        if A.shape == module.A.shape and np.allclose(A, module.A, rtol=1e-9, atol=0.0):
-            return module.flight_condition()
+    seed = flight_of_seed_model(A)
+    if seed is not None:
+        return seed
     names = {n: i for i, n in enumerate(states)}
     rates = [(names[c], c) for c in "pqr" if c in names]
     if {"u", "v", "alpha", "beta"} & set(names) or not rates:

@@ -31,7 +31,7 @@ from alloc.effector_health import EffectorHealth
 from alloc.estimation.harm import DEFAULT_HARM, HarmDesign, belief_fits, evidence_log_ratio, judge, looks, whitener
 from sim.allocation import stuck_effectors
 from sim.detection import InLoopDetector
-from sim.model import Vehicle
+from sim.model import PlantModel
 
 __all__ = ["InLoopHarm", "DESIGN"]
 
@@ -55,12 +55,12 @@ class InLoopHarm:
 
     Parameters
     ----------
-    vehicle : Vehicle
+    vehicle : PlantModel
     detector : InLoopDetector
     design : HarmDesign
     """
 
-    def __init__(self, vehicle: Vehicle, detector: InLoopDetector, design: HarmDesign | None = None) -> None:
+    def __init__(self, vehicle: PlantModel, detector: InLoopDetector, design: HarmDesign | None = None) -> None:
         design = DESIGN if design is None else design
         self.vehicle = vehicle
         self.detector = detector

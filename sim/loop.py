@@ -11,7 +11,7 @@ from __future__ import annotations
 # the private names are what tests/sim/test_blocks.py and older callers import from here
 from sim.engine import _controller_system, simulate  # noqa: F401
 from sim.injection import inject_failure as _inject  # noqa: F401
-from sim.model import TF, Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle
+from sim.model import TF, Failure, LoopShapedDesign, Pilot, SMCDesign, PlantModel
 from sim.packed import FloatSlot, IntSlot, Misc, _matvec  # noqa: F401
 from sim.settings import (
     ANTI_WINDUP_RULES,
@@ -23,6 +23,6 @@ from sim.settings import (
     boundary_layer_at,
 )
 
-__all__ = ["Vehicle", "Failure", "SMCDesign", "LoopShapedDesign", "Pilot", "LoopSpec", "simulate",
+__all__ = ["PlantModel", "Failure", "SMCDesign", "LoopShapedDesign", "Pilot", "LoopSpec", "simulate",
            "boundary_layer_at", "BOUNDARY_LAYER_RULES", "anti_windup_on", "ANTI_WINDUP_RULES",
            "FloatSlot", "IntSlot", "Misc", "TF", "U_PREV_SOURCES", "SEED_FRAME_PERIOD"]

@@ -1,4 +1,4 @@
-"""The closed loop's data: the vehicle, its failure, the controller designs and the pilot.
+"""The closed loop's data: the plant model, its failure, the controller designs and the pilot.
 
 Frozen dataclasses and nothing else: the scenarios (:mod:`sim.scenarios`) build them, the
 engine (:mod:`sim.engine`) flies them.
@@ -14,7 +14,16 @@ import numpy as np
 
 from sim.blocks import ActuatorFailure, ActuatorSpec, HedgeTerm
 
-__all__ = ["TF", "FlightCondition", "Vehicle", "Failure", "SMCDesign", "LoopShapedDesign", "Pilot"]
+__all__ = ["TF", "FlightCondition", "PlantModel", "Failure", "SMCDesign", "LoopShapedDesign", "Pilot"]
+
+def __getattr__(name: str) -> Any:
+    if name == "Vehicle":  # the old name; a vehicle is alloc.vehicle_file.Vehicle
+        import warnings
+
+        warnings.warn("sim.model.Vehicle is renamed sim.model.PlantModel", DeprecationWarning, stacklevel=2)
+        return PlantModel
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 #: A transfer function ``(numerator, denominator)``, coefficients in descending powers of ``s``.
 TF = tuple[Sequence[float], Sequence[float]]
@@ -57,8 +66,13 @@ class FlightCondition:
 
 
 @dataclass(frozen=True)
-class Vehicle:
-    """Linear vehicle model plus its allocation data.
+class PlantModel:
+    """A linear plant as the loop flies it: the model, its actuators and sensors, its allocation data.
+
+    What :class:`sim.plant.LinearPlant` and the compiled engine integrate (``x' = A x + B u``,
+    ``y = C x + D u``, deviations from trim), not a vehicle: a vehicle is a vehicle file
+    (:class:`alloc.vehicle_file.Vehicle`), whose ``[model]`` and ``[simulation]`` sections a
+    scenario turns into one of these (:func:`sim.file_scenario.file_scenario`).
 
     ``controlled`` are the output indices of the controlled variables (the
     channels, in the order of the pseudo-commands); ``measured`` the output

@@ -97,7 +97,7 @@ class LinearPlant:
 
     Parameters
     ----------
-    vehicle : sim.model.Vehicle
+    vehicle : sim.model.PlantModel
         The linear model, its actuators and names (deviations from trim).
     dt_step : float
         The plant's own integration step (s); :meth:`step` takes a whole number of them.

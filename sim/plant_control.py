@@ -182,7 +182,7 @@ class CascadeController:
     ----------
     fv : alloc.vehicle_file.Vehicle
         The vehicle file: its ``[body]`` (inertia, mass) and the axes' wrench components.
-    vehicle : sim.model.Vehicle
+    vehicle : sim.model.PlantModel
         The loop's vehicle: output names and the controlled channels.
     gains : CascadeGains
     dt : float

@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from sim.allocation import LoopAllocator, build_allocator
-from sim.model import Failure, Vehicle
+from sim.model import Failure, PlantModel
 from sim.result import SimResult
 from sim.settings import SettingError
 
@@ -41,7 +41,7 @@ PLANT_HEALTH_MODES = ("blind", "told", "detected")
 
 
 def fly_plant(
-    plant: Any, controller: Any, vehicle: Vehicle, *, method: str, method_options: dict[str, Any] | None = None,
+    plant: Any, controller: Any, vehicle: PlantModel, *, method: str, method_options: dict[str, Any] | None = None,
     duration: float, dt: float, frame_steps: int = 1, failure: Failure | None = None, health: str = "blind",
     noise: np.ndarray | None = None, output_bound: float | np.ndarray = 1.0e3, record_every: int = 1,
     alloc_options: dict[str, Any] | None = None, u_prev_source: str = "command", seed: int = 0,
@@ -58,7 +58,7 @@ def fly_plant(
     controller
         ``channels``, ``reset()``, ``demand(step, z, plant) -> v`` and ``update(u_cmd, v_achieved)``;
         after ``demand`` its ``reference``, ``command`` and ``pseudo`` (length k) are recorded.
-    vehicle : sim.model.Vehicle
+    vehicle : sim.model.PlantModel
         The loop's vehicle: the allocator's problem (``B_alloc``, limits as deviations), the
         controlled outputs (``controlled``), the names.
     noise : ndarray (n_steps + 1, ny) or None
@@ -77,7 +77,7 @@ def fly_plant(
     timing : dict or None
         Filled with ``wall_s`` (the loop's wall time) and ``plant_s`` (inside ``plant.step``).
     vehicle_at : callable or None
-        ``t -> Vehicle``: the allocator is rebuilt every frame on the vehicle at the frame's time (a
+        ``t -> PlantModel``: the allocator is rebuilt every frame on the vehicle at the frame's time (a
         scheduled effectiveness, :mod:`sim.plants.scheduled`), told of the failure as executed when
         ``health`` is ``told``; None: one allocator, rebuilt only at a failure or a belief.
     """
@@ -194,7 +194,7 @@ def fly_plant(
     return result
 
 
-def _inject(plant: Any, failure: Failure, vehicle: Vehicle, method: str, options: dict[str, Any],
+def _inject(plant: Any, failure: Failure, vehicle: PlantModel, method: str, options: dict[str, Any],
             alloc_kw: dict[str, Any], health: str, allocator: LoopAllocator, *, first_call: int,
             ) -> tuple[LoopAllocator, Failure | None]:
     """Fail the plant's actuators; a told allocator is rebuilt on the failure as the plant executed it
@@ -212,7 +212,7 @@ class _Watch:
     """``--health detected`` in the plant loop: the engine's detector and do-no-harm monitor
     (:mod:`sim.detection`, :mod:`sim.harm`), sampling the plant's sensed state derivative."""
 
-    def __init__(self, plant: Any, vehicle: Vehicle, dt: float, n_steps: int, noise: np.ndarray | None,
+    def __init__(self, plant: Any, vehicle: PlantModel, dt: float, n_steps: int, noise: np.ndarray | None,
                  alloc_kw: dict[str, Any], detection: dict[str, Any] | None) -> None:
         from sim.allocation import preferred_positions
         from sim.detection import InLoopDetector, design_with

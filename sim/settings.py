@@ -30,7 +30,7 @@ import numpy as np
 from alloc.exceptions import AllocError
 from sim.allocation import PREFERRED_POSITIONS, RATE_HORIZONS, RATE_WINDOWS
 from sim.blocks import DEFAULT_DT
-from sim.model import TF, Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle
+from sim.model import TF, Failure, LoopShapedDesign, Pilot, SMCDesign, PlantModel
 from sim.pilot import PILOT_MODELS
 from sim.world import MAX_MODEL_ERROR, TURBULENCE_LEVELS, parse_noise
 
@@ -450,7 +450,7 @@ class LoopSpec(LoopSettings):
     """
 
     scenario: str
-    vehicle: Vehicle
+    vehicle: PlantModel
     references: Sequence[TF]
     controller: SMCDesign | LoopShapedDesign
     commands: np.ndarray

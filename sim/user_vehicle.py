@@ -41,7 +41,7 @@ from alloc.failure_grammar import GRAMMAR, parse_failure
 from sim.autodesign import AutoDesign, auto_design, design_options, weighted_pinv
 from sim.file_scenario import actuator_of, file_scenario, flight_of_model
 from sim.blocks import DEFAULT_DT, SUM_OF_SINES_TABLE_4_2, ActuatorFailure, sum_of_sines
-from sim.loop import Failure, LoopSpec, Vehicle, simulate
+from sim.loop import Failure, LoopSpec, PlantModel, simulate
 from sim.result import SimResult
 from sim.settings import RunSettings
 
@@ -65,7 +65,7 @@ class FlightModel:
     """
 
     source: Any
-    vehicle: Vehicle
+    vehicle: PlantModel
     trim_u: np.ndarray
     design: AutoDesign
     command_scale: np.ndarray
@@ -154,7 +154,7 @@ def flight_model(source: Any, *, design: Mapping[str, Any] | None = None,
     command_peak = xi * sum(abs(a) for a, _ in SUM_OF_SINES_TABLE_4_2)
     gains = np.zeros(len(model.outputs))
     gains[list(controlled)] = opt["noise_fraction"] * command_peak
-    vehicle = Vehicle(
+    vehicle = PlantModel(
         name=fv.name, A=A, B=B, C=C, D=D, output_names=tuple(model.outputs), actuators=actuators,
         controlled=controlled, measured=measured, noise_gains=gains, B_alloc=B_axes,
         # no seed matrix for a user's aircraft: ``static`` is the unconstrained (weighted) pseudo-inverse

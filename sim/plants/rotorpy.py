@@ -138,7 +138,7 @@ class RotorPyPlant:
     ----------
     fv : alloc.vehicle_file.Vehicle
         The vehicle file (``[body]``, rotor effectors).
-    vehicle : sim.model.Vehicle
+    vehicle : sim.model.PlantModel
         The loop's vehicle (deviation limits, actuators, output names) of the same file.
     trim_u : ndarray
         ``u0``, the trim command (file units).

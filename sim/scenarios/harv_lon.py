@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from sim.blocks import ActuatorFailure, ActuatorSpec, HedgeTerm, sum_of_sines
-from sim.model import Failure, FlightCondition, LoopShapedDesign, Pilot, SMCDesign, Vehicle
+from sim.model import Failure, FlightCondition, LoopShapedDesign, Pilot, SMCDesign, PlantModel
 from sim.scenarios.mimo import MimoScenario, mimo_scenario, run_mimo
 from sim.result import SimResult
 
@@ -62,10 +62,10 @@ def flight_condition() -> FlightCondition:
                            source="seed section 4.5: M 0.6, 30,000 ft; span ours")
 
 
-def vehicle() -> Vehicle:
+def vehicle() -> PlantModel:
     """Nominal HARV longitudinal model; allocation rows: q-dot effectiveness."""
     B_alloc = B[[1]]
-    return Vehicle(
+    return PlantModel(
         name="harv_lon", A=A, B=B, C=np.eye(2), D=np.zeros((2, 2)), output_names=OUTPUTS,
         actuators=_actuators(), controlled=(1,), measured=(0, 1), noise_gains=np.array([1.0, 1.0]),
         B_alloc=B_alloc, Bk_seed=SEED_BK, demand_map=B_alloc @ SEED_BK, flight=flight_condition(),

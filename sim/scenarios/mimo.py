@@ -21,7 +21,7 @@ from alloc import vehicles
 from sim import criteria, failure_catalogue
 from sim.allocation import STATIC
 from sim.engine import simulate
-from sim.model import TF, Failure, LoopShapedDesign, Pilot, SMCDesign, Vehicle
+from sim.model import TF, Failure, LoopShapedDesign, Pilot, SMCDesign, PlantModel
 from sim.pilot import pilot_parameters
 from sim.result import SimResult
 from sim.scenarios.registry import Scenario, register_scenario
@@ -39,7 +39,7 @@ class MimoScenario:
     name : str
         Registered scenario name.
     vehicle : callable
-        ``() -> Vehicle``.
+        ``() -> PlantModel``.
     references : sequence of TF
         Reference model per channel.
     smc_design : callable
@@ -74,7 +74,7 @@ class MimoScenario:
     """
 
     name: str
-    vehicle: Callable[[], Vehicle]
+    vehicle: Callable[[], PlantModel]
     references: Sequence[TF]
     smc_design: Callable[..., SMCDesign]
     loop_shaped_design: Callable[[], LoopShapedDesign]

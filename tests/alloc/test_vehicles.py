@@ -7,7 +7,11 @@ import pytest
 
 import alloc
 from alloc.methods.pseudo_inverse import distribution_matrix
-from alloc.vehicles import HARV_LATDIR_BK_SEED, ICE_BK_SEED, harv_latdir, ice
+from alloc.vehicles import bundled, harv_latdir, ice, ice_mid
+
+# seed Eq 4.24 and Eq 4.19 as the files carry them ([simulation.allocation] static)
+ICE_BK_SEED = np.array(bundled("ice").simulation.allocation.static)
+HARV_LATDIR_BK_SEED = np.array(bundled("harv").simulation.allocation.static)
 
 # seed Eq 4.24 as printed, kept as text to know each entry's printed precision
 EQ_4_24 = """-0.773 0.107 -0.097
@@ -89,17 +93,52 @@ def test_every_command_names_the_same_problems_the_same_way():
 
 
 @pytest.mark.parametrize("name", SEED_NAMES)
-def test_bundled_files_are_the_seed_transcription_bit_for_bit(name):
-    """The catalogue reads the bundled files; they carry the seed's problems and groups exactly."""
+def test_seed_functions_read_the_bundled_files(name):
+    """ice(), ice_mid(), harv_latdir() are the catalogue's problems: one definition, the file."""
     from alloc import vehicles
 
-    make, groups = vehicles.SEED[name]
+    make = {"ice": ice, "ice-design": lambda: ice(design=True), "ice-mid": ice_mid, "harv": harv_latdir}[name]
     p, q = vehicles.problem(name), make()
     for f in ("B", "umin", "umax", "up", "Wu", "Wv", "rate_min", "rate_max"):
         a, b = getattr(p, f), getattr(q, f)
         assert a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes(), f
     assert p.names == q.names and p.axes == q.axes
-    assert vehicles.daisy_groups(name) == [list(g) for g in groups]
+
+
+def test_ice_files_agree_with_each_other_and_the_model():
+    """seed section 4.7: the allocation rows are (w-dot, pb-dot, v-dot) of the model's B; the design
+    problem of Eq 4.24 zeroes the SSD pitch entries and weights the elevons 2 (Eq 4.23); ice-mid
+    prefers mid-range on the one-sided AMT/SSD; the loop allocates with the design problem."""
+    v = bundled("ice")
+    B = v.model.arrays()[1]
+    states = list(v.model.states)
+    p = ice()
+    np.testing.assert_array_equal(p.B, B[[states.index("w"), states.index("pb"), states.index("v")]])
+    design = ice(design=True)
+    expected = p.B.copy()
+    expected[0, [p.names.index("ssd_l"), p.names.index("ssd_r")]] = 0.0
+    np.testing.assert_array_equal(design.B, expected)
+    np.testing.assert_array_equal(np.diag(design.Wu), [2, 2, 1, 1, 1, 1, 1, 1, 1, 1, 1])
+    np.testing.assert_array_equal(v.simulation.allocation.B, design.B)
+    np.testing.assert_array_equal(v.simulation.allocation.weights, np.diag(design.Wu))
+    mid = ice_mid()
+    one_sided = p.umin >= 0
+    np.testing.assert_array_equal(mid.up[one_sided], 30.0)
+    np.testing.assert_array_equal(mid.up[~one_sided], p.up[~one_sided])
+    # seed Table 4-5: limits (deg) and rates (deg/s)
+    np.testing.assert_array_equal(p.umax, [30, 30, 30, 60, 60, 60, 60, 40, 40, 15, 15])
+    np.testing.assert_array_equal(p.rate_max, [150, 150, 50, 150, 150, 150, 150, 40, 40, 60, 60])
+
+
+def test_harv_file_agrees_with_its_model():
+    """seed Eq 4.16: the allocation problem is the model's B (states beta, p, r); Table 4-3 limits."""
+    v = bundled("harv")
+    _, B, C, _ = v.model.arrays()
+    p = harv_latdir()
+    np.testing.assert_array_equal(p.B, B)
+    np.testing.assert_array_equal(p.umax, [17.5, 27.5, 30, 30, 30])
+    np.testing.assert_array_equal(p.rate_max, [60, 100, 100, 60, 60])
+    np.testing.assert_array_equal(v.simulation.allocation.B, C[[0, 3]] @ B)  # beta-dot and ps-dot rows
 
 
 def test_catalogue_entries_and_aliases():
@@ -122,3 +161,31 @@ def test_catalogue_entries_and_aliases():
     assert info.value.field == "vehicle"
     assert vehicles.CATALOGUE["harv"].aliases == ("harv_latdir", "harv-latdir")
     assert vehicles.lookup("harv_latdir").title == "F-18/HARV lat-dir"
+
+
+def test_seed_numbers_live_only_in_the_files():
+    """One definition: no Python module under alloc/ or sim/ repeats a distinctive number of the
+    seed's files (their B, model and failure matrices with 7 or more significant digits: ICE's
+    and the failed plants'; the HARV's printed 4-digit entries are too short to search for, and
+    round numbers such as limits are shared by chance).  Before the files became the source,
+    alloc/vehicles.py held 34 of these numbers and sim/scenarios/ice.py 56."""
+    import re
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    numbers: set[str] = set()
+    for name in ("ice", "harv"):
+        v = bundled(name)
+        arrays = [np.asarray(a, dtype=float) for a in v.model.arrays()] + [np.asarray(v.problem().B)]
+        for spec in v.simulation.failures.values():
+            arrays += [np.asarray(a, dtype=float) for a in (spec.A, spec.B, spec.D) if a is not None]
+        for a in arrays:
+            numbers |= {repr(abs(float(x))) for x in a.ravel() if len(re.sub(r"[^0-9]", "", repr(abs(float(x)))).strip("0")) >= 7}
+    assert len(numbers) > 100
+    found = {}
+    for path in [*(root / "alloc").rglob("*.py"), *(root / "sim").rglob("*.py")]:
+        text = path.read_text()
+        hits = [n for n in numbers if re.search(rf"(?<![0-9.]){re.escape(n)}(?![0-9])", text)]
+        if hits:
+            found[str(path.relative_to(root))] = hits[:3]
+    assert found == {}
