@@ -209,7 +209,7 @@ class SimulatorOnlySpec:
     problem cannot express, executed by the simulator and never told to an allocator.
 
     ``per_actuator``: a kind of :class:`sim.blocks.ActuatorFailure` (else a field of the whole
-    failure, :class:`sim.loop.Failure`)."""
+    failure, :class:`sim.model.Failure`)."""
 
     name: str
     meaning: str
@@ -370,7 +370,7 @@ def _kind(value: Any) -> FailureKind:
 SIMULATOR_ONLY: Mapping[str, SimulatorOnlySpec] = MappingProxyType({s.name: s for s in (
     SimulatorOnlySpec("bandwidth", "the actuator is slower: natural frequency wn (seed section 4.7 failure list)",
                       {"wn": None}, (Effect.BANDWIDTH,), per_actuator=True),
-    SimulatorOnlySpec("delay", "an added actuator time delay (sim.loop.Failure.delay: scalar or one per effector)",
+    SimulatorOnlySpec("delay", "an added actuator time delay (sim.model.Failure.delay: scalar or one per effector)",
                       {"delay": None}, (Effect.DELAY,), per_actuator=False),
 )})
 for _spec in SIMULATOR_ONLY.values():

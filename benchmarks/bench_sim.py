@@ -13,7 +13,7 @@ process) and allocator set-up are not counted.
 
 Columns: wall seconds of the whole run (set-up included) and the median and
 90th percentile of the per-step wall time (allocator call plus the compiled
-step, ``step_times`` of :func:`sim.loop.simulate`).  The issue's goal: >= 20x real time with
+step, ``step_times`` of :func:`sim.engine.simulate`).  The issue's goal: >= 20x real time with
 ``pinv`` and >= 5x with ``qp``, i.e. <= 25 us per step with ``pinv``.
 """
 

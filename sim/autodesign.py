@@ -27,7 +27,7 @@ name, :data:`DESIGN_OPTIONS`):
   parasitic dynamics: 20 x the limit frequency ("very high crossover frequencies may result
   ... well beyond the limit frequency"; ICE's design crosses near 880-970 rad/s with 40 rad/s
   actuators), capped at ``0.5 / T`` so the per-frame gain of the boundary layer stays the
-  seed's 0.5 (:func:`sim.loop.boundary_layer_at`), then lowered by factors of 2 until the
+  seed's 0.5 (:func:`sim.settings.boundary_layer_at`), then lowered by factors of 2 until the
   step-10 check passes.
 * ``rho`` (step 5): the largest pseudo-command the effectors can produce along the channel
   from trim (the attainable set's reach, an LP), so the control saturates where the effectors
@@ -60,7 +60,7 @@ import scipy.optimize
 
 from alloc.exceptions import OptionError, ProblemError
 from sim.blocks import DEFAULT_DT, ActuatorSpec, observer_gain
-from sim.loop import TF, LoopShapedDesign, SMCDesign
+from sim.model import TF, LoopShapedDesign, SMCDesign
 
 __all__ = ["DESIGN_OPTIONS", "AutoDesign", "auto_design", "design_options", "relative_order", "pseudo_command_map",
            "channel_reach", "limit_frequency", "closed_loop_poles", "weighted_pinv"]

@@ -8,7 +8,7 @@ step of dt = 0.0005 sec", seed section 4.5), by a numba-compiled kernel
 (:func:`actuator_heun_step`) that the loop engine also calls directly.
 
 Every block here is independent of any vehicle; the vehicles in
-:mod:`sim.vehicles` and the engine in :mod:`sim.loop` assemble them.
+:mod:`sim.vehicles` and the engine in :mod:`sim.engine` assemble them.
 """
 
 from __future__ import annotations

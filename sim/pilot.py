@@ -1,6 +1,6 @@
 """Pilot models for the compensatory attitude loops (the seed's Figs 4-6, 4-41, 4-86 are images).
 
-Two rules set the :class:`sim.loop.Pilot` parameters:
+Two rules set the :class:`sim.model.Pilot` parameters:
 
 ``standin``
     The project's original stand-in: ``command = 2 (att_cmd - att)`` delayed
@@ -183,7 +183,7 @@ def pilot_parameters(
     model: str, controlled_element: tuple[Sequence[float], Sequence[float]], *,
     gain: float | None = None, delay: float | None = None,
 ) -> dict[str, Any]:
-    """Keyword arguments of :class:`sim.loop.Pilot` for ``model`` (see the module docstring).
+    """Keyword arguments of :class:`sim.model.Pilot` for ``model`` (see the module docstring).
 
     ``controlled_element`` is ``(num, den)`` of what the pilot flies, stick to attitude.
     ``gain`` / ``delay`` override the rule's values.

@@ -41,7 +41,9 @@ from alloc.failure_grammar import GRAMMAR, parse_failure
 from sim.autodesign import AutoDesign, auto_design, design_options, weighted_pinv
 from sim.file_scenario import actuator_of, file_scenario, flight_of_model
 from sim.blocks import DEFAULT_DT, SUM_OF_SINES_TABLE_4_2, ActuatorFailure, sum_of_sines
-from sim.loop import Failure, LoopSpec, PlantModel, simulate
+from sim.engine import simulate
+from sim.model import Failure, PlantModel
+from sim.settings import LoopSpec
 from sim.result import SimResult
 from sim.settings import RunSettings
 
@@ -178,7 +180,7 @@ def flight_model(source: Any, *, design: Mapping[str, Any] | None = None,
 
 
 def vehicle_failure(fm: FlightModel, name: str, time: float) -> Failure:
-    """The :class:`sim.loop.Failure` named ``name`` (:data:`FAILURE_SYNTAX`, :mod:`alloc.failure_grammar`) at ``time``.
+    """The :class:`sim.model.Failure` named ``name`` (:data:`FAILURE_SYNTAX`, :mod:`alloc.failure_grammar`) at ``time``.
 
     The values after ``@`` fill the kind's parameters in the order of its row in
     :data:`alloc.health.FAILURE_KINDS` (``limits:x@lo:hi``); a parameter left out takes the
@@ -274,7 +276,7 @@ def _fly_designed(fv: Any, settings: RunSettings, *, design: Mapping[str, Any] |
     from sim.allocation import STATIC
 
     # designed at the seed's 0.5 ms frame, as the seed's scenarios were: the loop's boundary-layer
-    # rule (sim.loop.boundary_layer_at) adapts eps to a slower frame_period, once
+    # rule (sim.settings.boundary_layer_at) adapts eps to a slower frame_period, once
     fm = flight_model(fv, design=design)
     method = DEFAULT_METHOD if settings.method is None else settings.method
     method_options = settings.method_options

@@ -16,7 +16,7 @@ is ``jam:elevon_l@15``, and ``alloc sim ice --failure jam1`` flies what the swee
 A *told* allocator is given the same failure as a changed :class:`alloc.Problem`
 (:func:`sim.allocation.allocation_problem`); a *blind* one keeps the nominal problem.
 
-A catalogue failure is a :class:`sim.loop.Failure`, handed to scenarios that take failure
+A catalogue failure is a :class:`sim.model.Failure`, handed to scenarios that take failure
 objects (attribute ``accepts_failure_objects``: the MIMO scenarios of ``sim.scenarios.mimo``).
 """
 
@@ -98,7 +98,7 @@ def is_catalogue(name: str | None) -> bool:
 
 
 def make_failure(scenario: str, name: str, time: float) -> Any:
-    """The :class:`sim.loop.Failure` named ``name`` (``<kind><1|2>``) for ``scenario`` at ``time``:
+    """The :class:`sim.model.Failure` named ``name`` (``<kind><1|2>``) for ``scenario`` at ``time``:
     the scenario's own resolution of the catalogue name (:meth:`sim.scenarios.mimo.MimoScenario.resolve_failure`)."""
     if _parse(name) is None:
         raise ValueError(f"failure: {name!r} is not a catalogue failure; expected <kind><1|2> with kind in "

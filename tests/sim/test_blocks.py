@@ -13,7 +13,8 @@ from scipy import signal
 from sim.allocation import build_allocator
 from sim.blocks import ActuatorBank, ActuatorFailure, ActuatorSpec, DelayLine, DiscreteLTI, HedgeTerm, ScheduledPlant
 from sim.blocks import actuator_heun_step, band_limited_noise, hedge_system, observer_gain, smc_control, sum_of_sines
-from sim.loop import _controller_system, _matvec
+from sim.engine import _controller_system
+from sim.packed import _matvec
 from sim.result import SimResult, divergence_check
 from sim.scenarios import get_scenario, scenarios
 
@@ -127,7 +128,7 @@ def test_a_jam_without_a_position_holds_and_tells_the_position_at_the_failure(mo
     import sim.engine
     from alloc import ProblemError
     from sim.allocation import allocation_problem
-    from sim.loop import Failure
+    from sim.model import Failure
     from sim.scenarios import ice
 
     failure = Failure("jam_here", 0.5, "elevon_l jams where it is", actuators=(ActuatorFailure(0, "jam"),))
@@ -362,14 +363,14 @@ def _reference_loop(*, vehicle, references, controller, commands, pilots, failur
     ("harv_latdir", dict(failure="failure1", failure_time=0.05, duration=0.4)),
 ])
 def test_compiled_loop_matches_reference_loop_bit_for_bit(monkeypatch, name, options):
-    import sim.loop
+    import sim.engine
 
     module = importlib.import_module("sim.scenarios.mimo")  # the one MIMO runner calls simulate
     captured = {}
 
     def capture(spec, **kwargs):
         captured.update({f.name: getattr(spec, f.name) for f in dataclasses.fields(spec)})
-        return sim.loop.simulate(spec, **kwargs)
+        return sim.engine.simulate(spec, **kwargs)
 
     monkeypatch.setattr(module, "simulate", capture)
     result = get_scenario(name)(method="static", record_every=1, **options)

@@ -82,7 +82,7 @@ def test_told_and_untold_simulator_runs_honour_it(damage, monkeypatch):
     from benchmarks.compare.failures import catalogue_names, catalogue_texts, make_failure
     from sim.allocation import allocation_problem
     from sim.blocks import ActuatorFailure
-    from sim.loop import Failure
+    from sim.model import Failure
     from sim.scenarios import ice
 
     # the sweep's catalogue has it (parameters set by its effects' severities: 25 %, a quarter range),
