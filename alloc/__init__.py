@@ -19,8 +19,6 @@ kernels until they allocate.  The method modules load on the first registry look
 from __future__ import annotations
 
 import importlib
-import importlib.util
-import sys
 import types
 from typing import TYPE_CHECKING, Any
 
@@ -78,54 +76,3 @@ def _registry_methods() -> Any:
 __getattr__, __dir__ = _lazy.attach(__name__, _LAZY, __all__, _submodule)
 # the sub-package ``alloc.methods`` has the name of the registry's function ``alloc.methods()``
 _lazy.keep_function(__name__, "methods", _registry_methods)
-
-
-def _place_kernel_caches() -> None:
-    # importing the module installs its locator (at its end: numba may be imported by it)
-    try:
-        importlib.import_module("alloc._jit_cache")
-    except Exception as exc:  # noqa: BLE001 - numba's private cache API changed: never break `import numba`
-        import warnings
-
-        warnings.warn(f"alloc: the kernel cache locator is not installed ({type(exc).__name__}: {exc}); "
-                      "numba's own cache locations apply", RuntimeWarning, stacklevel=2)
-
-
-class _AfterNumbaImport:
-    """Runs :func:`alloc._jit_cache.install` as soon as numba is imported, before any kernel is
-    decorated: numba's default cache locators raise at decoration where the package directory
-    and the home are not writable (a root install used by another user).  Importing numba
-    here instead would cost ``import alloc`` about a second."""
-
-    def find_spec(self, fullname: str, path: Any = None, target: Any = None) -> Any:
-        if fullname != "numba":
-            return None
-        if self in sys.meta_path:
-            sys.meta_path.remove(self)  # one use; and the look-up below must not find us again
-        spec = importlib.util.find_spec("numba")
-        if spec is not None and spec.loader is not None:
-            spec.loader = _InstallAfterExec(spec.loader)
-        return spec
-
-
-class _InstallAfterExec:
-    """numba's own loader, followed by the kernel-cache set-up."""
-
-    def __init__(self, loader: Any) -> None:
-        self._loader = loader
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self._loader, name)
-
-    def create_module(self, spec: Any) -> Any:
-        return self._loader.create_module(spec)
-
-    def exec_module(self, module: types.ModuleType) -> None:
-        self._loader.exec_module(module)
-        _place_kernel_caches()
-
-
-if "numba" in sys.modules:
-    _place_kernel_caches()
-elif not any(isinstance(f, _AfterNumbaImport) for f in sys.meta_path):
-    sys.meta_path.insert(0, _AfterNumbaImport())

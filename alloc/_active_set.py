@@ -47,6 +47,7 @@ mutate that state hold the GIL (no ``nogil``): an allocator shared by threads st
 from __future__ import annotations
 
 import numpy as np
+import alloc._kernel_cache  # noqa: F401 - kernel caches placed before any kernel is decorated
 from numba import njit
 
 from ._threads import run_chunks, threads_for

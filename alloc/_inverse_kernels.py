@@ -11,6 +11,7 @@ packed output, the rate window) is in :mod:`alloc._kernels`.
 from __future__ import annotations
 
 import numpy as np
+import alloc._kernel_cache  # noqa: F401 - kernel caches placed before any kernel is decorated
 from numba import njit
 
 from ._kernels import _FREE_BITS, clip_scalar, close_out, copy_demand, finish, packed_out

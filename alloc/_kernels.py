@@ -10,6 +10,7 @@ The pseudo-inverse family's own kernels (``pinv_scale``, ``cgi``, ``daisy``, ...
 from __future__ import annotations
 
 import numpy as np
+import alloc._kernel_cache  # noqa: F401 - kernel caches placed before any kernel is decorated
 from numba import njit
 
 __all__ = ["all_finite", "owned_demand", "finish", "finish_owned", "fused_affine", "rate_window", "facet_polish"]

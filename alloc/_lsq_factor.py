@@ -11,6 +11,7 @@ the cache changes the cost, never the answer.
 from __future__ import annotations
 
 import numpy as np
+import alloc._kernel_cache  # noqa: F401 - kernel caches placed before any kernel is decorated
 from numba import njit
 
 from ._kernels import _FREE_BITS

@@ -28,6 +28,7 @@ steps, and a nominal call is one compiled pass (:func:`ray_call`): 30 us a call 
 from __future__ import annotations
 
 import numpy as np
+import alloc._kernel_cache  # noqa: F401 - kernel caches placed before any kernel is decorated
 from numba import njit
 
 from ._kernels import facet_polish

@@ -1,6 +1,6 @@
 """Compile (or load) the simulator's numba kernels, as ``make install`` does after the library's.
 
-``python -m alloc._jit_cache warm`` compiles the library's kernels; the library knows nothing of
+``python -m alloc._jit_warm warm`` compiles the library's kernels; the library knows nothing of
 the simulator, so the simulator's own (``sim.packed``, ``sim.blocks``, ``sim.allocation``,
 ``sim.world``) are warmed here, by flying what a first ``alloc sim`` flies: one second of the ICE
 scenario with its default failure, and a moment of it in turbulence (the Dryden recursion).  They

@@ -56,6 +56,7 @@ module after ``allocate``).
 from __future__ import annotations
 
 import numpy as np
+import alloc._kernel_cache  # noqa: F401 - kernel caches placed before any kernel is decorated
 from numba import njit
 
 from .._kernels import close_out, copy_demand, finish, packed_out, rate_window_into

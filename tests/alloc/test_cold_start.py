@@ -82,15 +82,15 @@ def _unlisten(notice) -> None:
     event.unregister("numba:compile", notice)
 
 
-def test_import_alloc_does_not_import_numba_but_numba_gets_the_locator():
+def test_import_alloc_leaves_numba_alone_until_its_kernels_load():
+    """``import alloc`` neither imports numba nor changes it for the process (a user's own numba
+    functions keep numba's cache); the locator is installed when alloc's kernel modules load."""
     code = ("import sys, alloc\nprint('numba' in sys.modules)\nimport numba\n"
-            "from numba.core.caching import FunctionCache\nprint(FunctionCache._impl_class.__name__)")
+            "from numba.core.caching import FunctionCache\nprint(FunctionCache._impl_class.__name__)\n"
+            "import numpy as np\nalloc.make_allocator(alloc.Problem(np.eye(2), [-1, -1], [1, 1]), 'qp')\n"
+            "print(FunctionCache._impl_class.__name__)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
-    assert out.stdout.split() == ["False", "KernelCacheImpl"]
-    # numba imported first: alloc installs it on import
-    code = "import numba, alloc\nfrom numba.core.caching import FunctionCache\nprint(FunctionCache._impl_class.__name__)"
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
-    assert out.stdout.split() == ["KernelCacheImpl"]
+    assert out.stdout.split() == ["False", "CompileResultCacheImpl", "KernelCacheImpl"]
 
 
 def test_package_kernels_use_the_package_pycache_where_writable():
@@ -326,10 +326,11 @@ def test_a_stopped_service_starts_no_build_process_after_warming(tmp_path, monke
 
 
 def test_warm_as_a_script_tells_each_compile_once_and_quiet_prints_nothing(tmp_path):
-    """``python -m alloc._jit_cache warm`` runs the file as a second module object besides the
-    installed one: both once installed a listener and every compile notice came out twice."""
+    """``python -m alloc._jit_warm warm`` tells each compile once (when the warm-up lived in the
+    locator's module, the script was a second module object that installed a second listener,
+    and every compile notice came out twice), and prints nothing when asked."""
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
-    command = [sys.executable, "-m", "alloc._jit_cache", "warm", "pinv"]
+    command = [sys.executable, "-m", "alloc._jit_warm", "warm", "pinv"]
     cold = subprocess.run(command, capture_output=True, text=True, cwd=ROOT, env=env, check=True)
     notices = [line for line in cold.stderr.splitlines() if line.startswith("alloc: compiling")]
     assert notices and len(notices) == len(set(notices)), cold.stderr
