@@ -39,7 +39,10 @@ eigenvalues 7.7e29 and 3.4e13, in the domain, a long-lived allocator returned an
 than a fresh one; adversarial seed 10037684, moments 0.81 vs -0.39 on the weak axis.)  The
 ``warm_start`` option opts in to the C export's warm start (:func:`_warm_pick`, the single call
 only), refused by :mod:`alloc._warm` on problems like that one; its answers agree with the cold
-ones to round-off (tests/alloc/test_warm_start.py).  All work arrays
+ones to round-off (tests/alloc/test_warm_start.py).  A call that takes the warm start also skips
+what it already knows: a least-squares level at zero residual after its step stops there, and the
+final level of ``qp`` and ``dynamic`` starts at its multiplier test when level 0 ended on its own
+step (:func:`_levels`; on ICE sines a call is then one step and two tests).  All work arrays
 live in the packed state (no allocation per call but the result).  The entry points that
 mutate that state hold the GIL (no ``nogil``): an allocator shared by threads stays safe.
 """
@@ -66,8 +69,8 @@ MU_EPS = 1e3 * np.finfo(float).eps
 
 
 @njit(cache=True, nogil=True, _nrt=False)
-def _level(mats, vecs, ivecs, bankL, bank, r0, r1, lev, gam, diag, iup, ilo, ihi, maxit,
-           m):  # pragma: no cover - compiled
+def _level(mats, vecs, ivecs, bankL, bank, r0, r1, lev, gam, diag, iup, ilo, ihi, maxit, m, warm, at_step,
+           at_slot):  # pragma: no cover - compiled
     """Solve one level in place on ``u`` (feasible on entry) and ``free`` (working set).
 
     Rows ``A[r0:r1]`` are this level's least-squares rows, rows ``A[:r0]`` its equality
@@ -79,7 +82,12 @@ def _level(mats, vecs, ivecs, bankL, bank, r0, r1, lev, gam, diag, iup, ilo, ihi
     (a degenerate multiplier) is not freed again until the iterate moves.  Everything is
     addressed by row in the stacked arrays of :func:`pack` (``up``, ``lo``, ``hi`` are the
     rows ``iup``, ``ilo``, ``ihi`` of ``vecs``; the cache slot is indexed flat): no allocation.
-    Returns the iteration count, or -1 when the cap was hit.
+    ``warm`` (a call started from the kept working set, :func:`_warm_pick`): a pure
+    least-squares level at zero residual after a step returns there; ``at_step``: ``u`` is
+    already this level's step on ``free`` (:func:`_levels`) from the factors in slot
+    ``at_slot``, so the first iteration tests the multipliers only, on those factors.  Returns
+    ``(iterations, stepped, slot)``: iterations -1 when the cap was hit, ``stepped`` when the
+    level ended on its own step (the multiplier test passed after a step), from slot ``slot``.
     """
     nl = r1 - r0
     nc = r0
@@ -111,100 +119,121 @@ def _level(mats, vecs, ivecs, bankL, bank, r0, r1, lev, gam, diag, iup, ilo, ihi
     last = -1
     gam2 = gam * gam
     for it in range(maxit):
+        # the first iteration of a level entered at its own step (``at_step``: :func:`_levels`)
+        # would step by zero to round-off: it goes straight to the multiplier test
+        stepping = it > 0 or not at_step
         # --- residual e = b - A u of this level's rows.  A pure least-squares level whose
         # residual is zero to round-off is at its global minimum (the objective is >= 0):
         # done, with zero multipliers (the common attainable case).
         zero = nl > 0 and gam2 == 0.0
-        for i in range(nl):
-            acc = bv[r0 + i]
-            mag = abs(bv[r0 + i])
-            for j in range(m):
-                t = A[r0 + i, j] * u[j]
-                acc -= t
-                mag += abs(t)
-            e[i] = acc
-            if abs(acc) > MU_EPS * mag:
-                zero = False
-        if zero:
-            return it + 1
+        if stepping:
+            for i in range(nl):
+                acc = bv[r0 + i]
+                mag = abs(bv[r0 + i])
+                for j in range(m):
+                    t = A[r0 + i, j] * u[j]
+                    acc -= t
+                    mag += abs(t)
+                e[i] = acc
+                if abs(acc) > MU_EPS * mag:
+                    zero = False
+            if zero:
+                return it + 1, False, 0
         nf = 0
         for j in range(m):
             if free[j]:
                 fidx[nf] = j
                 nf += 1
-        slot = _factors(mats, ivecs, bankL, bank, kr0, kr1, klev, diag, nf, m)
+        slot = _factors(mats, ivecs, bankL, bank, kr0, kr1, klev, diag, nf, m) if stepping else at_slot
         E = bank[slot]
-        # --- the preference gradient Wu (u - up)
-        for j in range(m):
-            tmp[j] = u[j] - up[j]
-        for q in range(nf):
-            j = fidx[q]
-            acc = 0.0
-            if diag:
-                acc = Wu[j, j] * tmp[j]
-            else:
-                for s in range(m):
-                    acc += Wu[j, s] * tmp[s]
-            h[q] = acc
-        _lsolve(bankL, slot, nf, diag, vecs, _H)  # h = L^-1 (Wu (u - up))_F
-        # --- step y = -P h + Ua z   (P: projector onto null(Ct) and null(At)),
-        #     z_i = (s_i (Va' e)_i - gam^2 (Ua' h)_i) / (s_i^2 + gam^2)
-        for q in range(nf):
-            y[q] = -h[q]
-        for c in range(nc):
-            if E[osc + c] > 0.0:
+        if stepping:
+            # --- the preference gradient Wu (u - up)
+            for j in range(m):
+                tmp[j] = u[j] - up[j]
+            for q in range(nf):
+                j = fidx[q]
                 acc = 0.0
-                for q in range(nf):
-                    acc += E[oYc + q * wc + c] * h[q]
-                for q in range(nf):
-                    y[q] += acc * E[oYc + q * wc + c]
-        for i in range(nl):
-            if E[osa + i] > 0.0:
-                uh = 0.0
-                for q in range(nf):
-                    uh += E[oYa + q * nlw + i] * h[q]
-                ve = 0.0
-                for r in range(nl):
-                    ve += E[oVa + r * nlw + i] * e[r]
-                z = (E[osa + i] * ve - gam2 * uh) / (E[osa + i] * E[osa + i] + gam2)
-                for q in range(nf):
-                    y[q] += (uh + z) * E[oYa + q * nlw + i]
-        for c in range(nc):  # y in null(Ct) to round-off: the held moments do not drift
-            if E[osc + c] > 0.0:
-                acc = 0.0
-                for q in range(nf):
-                    acc += E[oYc + q * wc + c] * y[q]
-                for q in range(nf):
-                    y[q] -= acc * E[oYc + q * wc + c]
-        _ltsolve(bankL, slot, nf, diag, vecs, _Y)  # p_F = L^-T y
-        # --- ratio test
-        alpha = 1.0
-        block = -1
-        for q in range(nf):
-            j = fidx[q]
-            d = y[q]
-            if d > 0.0:
-                room = hi[j] - u[j]
-                if room < alpha * d:
-                    alpha = max(room, 0.0) / d
-                    block = q
-            elif d < 0.0:
-                room = lo[j] - u[j]
-                if room > alpha * d:
-                    alpha = min(room, 0.0) / d
-                    block = q
-        for q in range(nf):
-            u[fidx[q]] += alpha * y[q]
-        if block >= 0:
-            j = fidx[block]
-            u[j] = hi[j] if y[block] > 0.0 else lo[j]
-            free[j] = 0
-            if alpha > 0.0:
-                for t in range(m):
-                    tabu[t] = 0
-            elif j == last:
-                tabu[j] = 1
-            continue
+                if diag:
+                    acc = Wu[j, j] * tmp[j]
+                else:
+                    for s in range(m):
+                        acc += Wu[j, s] * tmp[s]
+                h[q] = acc
+            _lsolve(bankL, slot, nf, diag, vecs, _H)  # h = L^-1 (Wu (u - up))_F
+            # --- step y = -P h + Ua z   (P: projector onto null(Ct) and null(At)),
+            #     z_i = (s_i (Va' e)_i - gam^2 (Ua' h)_i) / (s_i^2 + gam^2)
+            for q in range(nf):
+                y[q] = -h[q]
+            for c in range(nc):
+                if E[osc + c] > 0.0:
+                    acc = 0.0
+                    for q in range(nf):
+                        acc += E[oYc + q * wc + c] * h[q]
+                    for q in range(nf):
+                        y[q] += acc * E[oYc + q * wc + c]
+            for i in range(nl):
+                if E[osa + i] > 0.0:
+                    uh = 0.0
+                    for q in range(nf):
+                        uh += E[oYa + q * nlw + i] * h[q]
+                    ve = 0.0
+                    for r in range(nl):
+                        ve += E[oVa + r * nlw + i] * e[r]
+                    z = (E[osa + i] * ve - gam2 * uh) / (E[osa + i] * E[osa + i] + gam2)
+                    for q in range(nf):
+                        y[q] += (uh + z) * E[oYa + q * nlw + i]
+            for c in range(nc):  # y in null(Ct) to round-off: the held moments do not drift
+                if E[osc + c] > 0.0:
+                    acc = 0.0
+                    for q in range(nf):
+                        acc += E[oYc + q * wc + c] * y[q]
+                    for q in range(nf):
+                        y[q] -= acc * E[oYc + q * wc + c]
+            _ltsolve(bankL, slot, nf, diag, vecs, _Y)  # p_F = L^-T y
+            # --- ratio test
+            alpha = 1.0
+            block = -1
+            for q in range(nf):
+                j = fidx[q]
+                d = y[q]
+                if d > 0.0:
+                    room = hi[j] - u[j]
+                    if room < alpha * d:
+                        alpha = max(room, 0.0) / d
+                        block = q
+                elif d < 0.0:
+                    room = lo[j] - u[j]
+                    if room > alpha * d:
+                        alpha = min(room, 0.0) / d
+                        block = q
+            for q in range(nf):
+                u[fidx[q]] += alpha * y[q]
+            if block >= 0:
+                j = fidx[block]
+                u[j] = hi[j] if y[block] > 0.0 else lo[j]
+                free[j] = 0
+                if alpha > 0.0:
+                    for t in range(m):
+                        tabu[t] = 0
+                elif j == last:
+                    tabu[j] = 1
+                continue
+            if warm and nc == 0 and nl > 0 and gam2 == 0.0:
+                # warm: a pure least-squares level at zero residual after its step is at its
+                # global minimum; the test below would find every multiplier zero to round-off
+                flat = True
+                for i in range(nl):
+                    acc = bv[r0 + i]
+                    mag = abs(bv[r0 + i])
+                    for j in range(m):
+                        t = A[r0 + i, j] * u[j]
+                        acc -= t
+                        mag += abs(t)
+                    if abs(acc) > MU_EPS * mag:
+                        flat = False
+                        break
+                if flat:
+                    return it + 1, True, slot
         # --- full step: multipliers of the bounds held, mu = g + A[:r0]' lam
         for j in range(m):
             tmp[j] = u[j] - up[j]
@@ -280,10 +309,10 @@ def _level(mats, vecs, ivecs, bankL, bank, r0, r1, lev, gam, diag, iup, ilo, ihi
                         mu = -g[j] if u[j] <= lo[j] else g[j]
                         if mu < -100.0 * MU_EPS * scale[j]:
                             pinned[j] = 1
-            return it + 1
+            return it + 1, True, slot
         free[worst] = 1
         last = worst
-    return -1
+    return -1, False, 0
 
 
 def pack(A, T, perm, starts, gammas, final, Wu, diag, up, B, P0, umin, umax, rate_min, rate_max, maxit,
@@ -415,20 +444,33 @@ def _warm_keep(vecs, ivecs, ihi, m):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True, _nrt=False)
-def _levels(mats, vecs, ivecs, bankL, bank, ilo, ihi, iup):  # pragma: no cover - compiled
-    """Every level from the start in ``vecs[_U]``, ``ivecs[_FREE]``; ``(iterations, ok)``."""
+def _levels(mats, vecs, ivecs, bankL, bank, ilo, ihi, iup, warm):  # pragma: no cover - compiled
+    """Every level from the start in ``vecs[_U]``, ``ivecs[_FREE]``; ``(iterations, ok)``.
+
+    ``warm``: the start is the kept working set (:func:`_warm_pick`).  Then, where the final
+    level reads level 0's factors (``qp``, ``dynamic``) and level 0 ended on its own step, the
+    final level starts at its multiplier test, on level 0's factors of the same free set: that
+    step already minimised ``(u - up)' Wu (u - up)`` over the free set with level 0's moments
+    held (the same projection, from the same factorisation), so the final level's first step
+    is zero to round-off.  On a smoothly
+    moving demand the kept working set is usually the optimal one, and a call is then one step
+    and two multiplier tests."""
     n, m, nlev = ivecs[_HEAD, _N], ivecs[_HEAD, _M], ivecs[_HEAD, _NLEV]
     maxit = ivecs[_HEAD, _MAXIT]
     diag = ivecs[_HEAD, _DIAG] != 0
+    share = nlev == 1 and ivecs[_STARTS, 0] == 0
     for j in range(m):
         ivecs[_PINNED, j] = 0
-    total = 0
+    total = slot = 0
+    stepped = False
     for l in range(nlev + (1 if ivecs[_HEAD, _FINAL] else 0)):
         if l < nlev:
             r0, r1, gam = ivecs[_STARTS, l], ivecs[_STARTS, l + 1], vecs[_GAM, l]
         else:
             r0, r1, gam = n, n, 1.0
-        it = _level(mats, vecs, ivecs, bankL, bank, r0, r1, l, gam, diag, iup, ilo, ihi, maxit, m)
+        at_step = warm and stepped and share and l == nlev
+        it, stepped, slot = _level(mats, vecs, ivecs, bankL, bank, r0, r1, l, gam, diag, iup, ilo, ihi, maxit, m,
+                                   warm, at_step, slot)
         if it < 0:
             return total + maxit, False
         total += it
@@ -453,12 +495,12 @@ def _run(mats, vecs, ivecs, bankL, bank, v, ilo, ihi, iup, warm):  # pragma: no 
         vecs[_BV, i] = acc
     _start(mats, vecs, ivecs, v, ilo, ihi, iup, m, k)
     if not (warm and ivecs[_HEAD, _WVALID] != 0 and _warm_pick(mats, vecs, ivecs, ilo, ihi, iup, m)):
-        return _levels(mats, vecs, ivecs, bankL, bank, ilo, ihi, iup)
-    total, ok = _levels(mats, vecs, ivecs, bankL, bank, ilo, ihi, iup)
+        return _levels(mats, vecs, ivecs, bankL, bank, ilo, ihi, iup, False)
+    total, ok = _levels(mats, vecs, ivecs, bankL, bank, ilo, ihi, iup, True)
     if ok:
         return total, ok
     _start(mats, vecs, ivecs, v, ilo, ihi, iup, m, k)
-    again, ok = _levels(mats, vecs, ivecs, bankL, bank, ilo, ihi, iup)
+    again, ok = _levels(mats, vecs, ivecs, bankL, bank, ilo, ihi, iup, False)
     return total + again, ok
 
 

@@ -1,5 +1,5 @@
-"""Host ``qp`` and ``wls``, cold and warm-started (``warm_start=True``), against DAQP's Python
-``Model`` as the number of effectors grows.
+"""Host ``qp``, ``wls`` and ``dynamic``, cold and warm-started (``warm_start=True``), against
+DAQP's Python ``Model`` as the number of effectors grows.
 
 Problems: ``k`` = 4 and 6 axes, ``m`` = 6 ... 192 effectors, ``B`` seeded normal, limits
 [-1, 1], ``up = 0``, identity weights.  Demands: ``random`` (independent, each axis uniform in
@@ -50,6 +50,8 @@ def demands(p: alloc.Problem, kind: str, n: int, rng: np.random.Generator) -> np
 def variants(p: alloc.Problem) -> dict:
     return {"qp cold": alloc.make_allocator(p, "qp"), "qp warm": alloc.make_allocator(p, "qp", warm_start=True),
             "wls cold": alloc.make_allocator(p, "wls"), "wls warm": alloc.make_allocator(p, "wls", warm_start=True),
+            "dynamic cold": alloc.make_allocator(p, "dynamic"),
+            "dynamic warm": alloc.make_allocator(p, "dynamic", warm_start=True),
             "daqp warm": daqp_reference(p, keep_active_set=True), "daqp cold": daqp_reference(p)}
 
 
@@ -103,9 +105,9 @@ def main() -> None:
     rng = np.random.default_rng(2026)
     for k in (int(x) for x in args.ks.split(",")):
         print(f"\n## k = {k}")
-        print("| m | demands | qp cold | qp warm | wls cold | wls warm | DAQP warm | DAQP cold | "
-              "qp cold / DAQP warm | qp warm / DAQP warm | iterations | abs du |")
-        print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+        print("| m | demands | qp cold | qp warm | wls cold | wls warm | dynamic cold | dynamic warm | DAQP warm | "
+              "DAQP cold | qp cold / DAQP warm | qp warm / DAQP warm | iterations | abs du |")
+        print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
         for m in (int(x) for x in args.ms.split(",")):
             p = problem(k, m, seed=1000 * k + m)
             for kind in ("random", "smooth"):
@@ -116,8 +118,8 @@ def main() -> None:
 
                 dw = c["daqp warm"][0]
                 print(f"| {m} | {kind} | {fmt('qp cold')} | {fmt('qp warm')} | {fmt('wls cold')} | {fmt('wls warm')} | "
-                      f"{fmt('daqp warm')} | {fmt('daqp cold')} | {c['qp cold'][0] / dw:.2f} | "
-                      f"{c['qp warm'][0] / dw:.2f} | {c['iters'][0]:.1f} / {c['iters'][1]:.1f} | "
+                      f"{fmt('dynamic cold')} | {fmt('dynamic warm')} | {fmt('daqp warm')} | {fmt('daqp cold')} | "
+                      f"{c['qp cold'][0] / dw:.2f} | {c['qp warm'][0] / dw:.2f} | {c['iters'][0]:.1f} / {c['iters'][1]:.1f} | "
                       f"{c['worst']:.1e} |", flush=True)
     uptime = subprocess.run(["uptime"], capture_output=True, text=True).stdout.strip()
     print(f"\n# uptime at the end: {uptime}")

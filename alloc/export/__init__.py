@@ -172,9 +172,10 @@ def export_c(problem_or_vehicle: Any, method: str = "qp", *, precision: str = "d
         Active set: keep the last answer's working set in static storage and start the next call
         from it when the first level's objective is not larger there than at the cold start
         (a smooth demand sequence then takes one iteration a level where the cold start takes
-        several).  The answers then agree with the library's to round-off where the optimum is
-        unique, not bit for bit, and depend on the calls before (``PREFIX_warm_reset`` forgets
-        them; ``PREFIX_set_limits`` does too).  A warm run that reaches the budget is redone
+        several).  The answers then agree with the library's cold ones to round-off where the
+        optimum is unique (bit for bit with its ``warm_start=True`` allocator's, double), and
+        depend on the calls before (``PREFIX_warm_reset`` forgets them; ``PREFIX_set_limits``
+        does too).  A warm run that reaches the budget is redone
         from the cold start under the same budget, so a call takes at most twice
         ``iteration_bound``.  Default False: every answer a function of the call alone, as the
         library's.

@@ -119,7 +119,7 @@ static void ltsolve(const struct work *w, int n, real *x)
 _LEVEL = r"""/* one level on w->u (feasible on entry) and w->freeset, at most cap iterations: iterations,
    or -1 at the cap */
 static int level(struct work *w, int r0, int r1, int lev, real gam, const real *up, const real *lo,
-                 const real *hi, int cap)
+                 const real *hi, int cap@LEVEL_ARGS@)
 {
     int nl = r1 - r0, nc = r0, it, i, j, q, s, c, r, last = -1;
     /* a one-level problem's final level holds level 0's rows: its factors are level 0's, and
@@ -132,9 +132,11 @@ static int level(struct work *w, int r0, int r1, int lev, real gam, const real *
     real *lam = w->lam;
     int *freeset = w->freeset, *fidx = w->fidx, *tabu = w->tabu, *pinned = w->pinned;
     for (j = 0; j < M; ++j) tabu[j] = 0;
+@LEVEL_INIT@
     for (it = 0; it < cap; ++it) {
         int zero = nl > 0 && gam2 == 0, nf = 0, block = -1, worst = -1, unique = 1;
         real alpha = 1, wv = 0;
+@SKIP_RESIDUAL@
         /* residual e = b - A u; a pure least-squares level at zero residual is optimal */
         for (i = 0; i < nl; ++i) {
             real acc = w->bv[r0 + i], mag = ABS(w->bv[r0 + i]);
@@ -147,20 +149,24 @@ static int level(struct work *w, int r0, int r1, int lev, real gam, const real *
             if (ABS(acc) > MU_EPS * mag) zero = 0;
         }
         if (zero) return it + 1;
+@FREE_SET_LABEL@
         for (j = 0; j < M; ++j) {
             if (freeset[j]) fidx[nf++] = j;
         }
+@LOOKUP_OPEN@
 #if TABLE
         lookup(w, share ? 0 : lev);
 #else
         factorise(w, share ? 0 : lev, share ? 0 : r0, share ? r0 : r1, nf);
 #endif
+@LOOKUP_CLOSE@
         Yc = share ? w->Ya : w->Yc;
         Vc = share ? w->Va : w->Vc;
         sc = share ? w->sa : w->sc;
         Ya = w->Ya;
         Va = w->Va;
         sa = w->sa;
+@SKIP_STEP@
         /* h = L^-1 (Wu (u - up))_F */
         for (j = 0; j < M; ++j) tmp[j] = u[j] - up[j];
         for (q = 0; q < nf; ++q) {
@@ -230,6 +236,8 @@ static int level(struct work *w, int r0, int r1, int lev, real gam, const real *
             }
             continue;
         }
+@AFTER_STEP@
+@MULTIPLIERS_LABEL@
         /* full step: multipliers of the bounds held, mu = g + A[:r0]' lam */
         for (j = 0; j < M; ++j) tmp[j] = u[j] - up[j];
         for (j = 0; j < M; ++j) {
@@ -311,6 +319,7 @@ static int level(struct work *w, int r0, int r1, int lev, real gam, const real *
                     }
                 }
             }
+@STEPPED@
             return it + 1;
         }
         freeset[worst] = 1;
@@ -327,7 +336,7 @@ _ENTRY = r"""/* all levels for one demand into w->u within budget iterations (an
 static int run(struct work *w, const real *v, const real *lo, const real *hi, const real *up, int budget,
                int *ok)
 {
-    int i, j, q, l, total = 0;
+    int i, j, q, l, total = 0@RUN_DECL@;
     real r[K];
     for (i = 0; i < N; ++i) {
         real acc = 0;
@@ -356,9 +365,9 @@ static int run(struct work *w, const real *v, const real *lo, const real *hi, co
             break;
         }
         if (l < NLEV) {
-            it = level(w, STARTS[l], STARTS[l + 1], l, GAM[l], up, lo, hi, cap);
+            it = level(w, STARTS[l], STARTS[l + 1], l, GAM[l], up, lo, hi, cap@LEVEL_CALL@);
         } else {
-            it = level(w, N, N, l, 1, up, lo, hi, cap);
+            it = level(w, N, N, l, 1, up, lo, hi, cap@FINAL_CALL@);
         }
         if (it < 0) {
             total += cap;
@@ -431,9 +440,9 @@ _COLD_RUN = r"""    /* the certified budget covers the nominal limits without a 
 
 """
 
-# The warm start of a kernel exported with warm_start=True (not in the library, whose answers
-# are functions of the call alone: see alloc/_active_set.py).  Placed before run(), which
-# calls warm_pick where the cold start is made.
+# The warm start of a kernel exported with warm_start=True (the library's opt-in warm_start,
+# alloc/_active_set.py: _warm_pick, _warm_keep).  Placed before run(), which calls warm_pick
+# where the cold start is made.
 _WARM = r"""/*
  * Warm start: each instance keeps its last answer and that answer's working set (each effector
  * free, or held at its lower or its upper bound).  A call then starts from that working set on
@@ -441,7 +450,9 @@ _WARM = r"""/*
  * bound) instead of the cold start when the first level's objective is not larger there; a run
  * from it that reaches the budget is redone from the cold start.  Any start is feasible and the
  * levels end at the same optimum, so the answer is the cold one up to round-off where the
- * optimum is unique; it is not the library's bit for bit.
+ * optimum is unique.  Where level 0 ends on its own step, the final level starts at its
+ * multiplier test (its first step would be zero to round-off).  The library's allocator with
+ * warm_start=True follows the same rule in the same order: its answers bit for bit.
  */
 static int warm_valid[NINST];
 static real warm_u[NINST][M];
@@ -541,14 +552,67 @@ _WARM_RUN = r"""    /* the certified budget covers the nominal limits without a 
 
 """
 
+# What the warm kernel adds to the level and the run (alloc._active_set._level, _levels: the
+# same rule, the same order of operations); the cold kernel's text has none of it
+_WARM_LEVEL = {
+    "@LEVEL_ARGS@": ", int warm, int at_step, int *stepped",
+    "@LEVEL_INIT@": "    *stepped = 0; /* 1 when the level ends on its own step */\n",
+    "@SKIP_RESIDUAL@": ("        /* u already is this level's step on the free set (run): the first step would be zero\n"
+                        "           to round-off, so the first iteration tests the multipliers only */\n"
+                        "        if (it == 0 && at_step) goto free_set;\n"),
+    "@FREE_SET_LABEL@": "    free_set:\n",
+    # at the step, level 0's factors of this free set are the current ones (w->L, ...)
+    "@LOOKUP_OPEN@": "        if (!(it == 0 && at_step)) {\n",
+    "@LOOKUP_CLOSE@": "        }\n",
+    "@SKIP_STEP@": "        if (it == 0 && at_step) goto multipliers;\n",
+    "@AFTER_STEP@": r"""        if (warm && nc == 0 && nl > 0 && gam2 == 0) {
+            /* warm: a pure least-squares level at zero residual after its step is at its global
+               minimum; the test below would find every multiplier zero to round-off */
+            int flat = 1;
+            for (i = 0; flat && i < nl; ++i) {
+                real acc = w->bv[r0 + i], mag = ABS(w->bv[r0 + i]);
+                for (j = 0; j < M; ++j) {
+                    real t = A[r0 + i][j] * u[j];
+                    acc -= t;
+                    mag += ABS(t);
+                }
+                if (ABS(acc) > MU_EPS * mag) flat = 0;
+            }
+            if (flat) {
+                *stepped = 1;
+                return it + 1;
+            }
+        }
+""",
+    "@MULTIPLIERS_LABEL@": "    multipliers:\n",
+    "@STEPPED@": "            *stepped = 1;\n",
+    "@RUN_DECL@": ", stepped = 0",
+    "@LEVEL_CALL@": ", warm_try == 2, 0, &stepped",
+    # the final level of a one-level problem reads level 0's factors: entered at level 0's step
+    "@FINAL_CALL@": ",\n                       warm_try == 2, warm_try == 2 && stepped && NLEV == 1 && STARTS[0] == 0, &stepped",
+}
+
+
+def _fill_warm(text: str, warm: bool) -> str:
+    """``text`` with the warm kernel's additions, or without them (a placeholder alone on its
+    line goes with the line: the cold kernel's text is what it was before they existed)."""
+    for key, value in _WARM_LEVEL.items():
+        if warm:
+            text = text.replace(key + "\n", value) if value.endswith("\n") else text.replace(key, value)
+        else:
+            text = text.replace(f"\n{key}\n", "\n").replace(key, "")
+    return text
+
+
 # qp, wls (and their priorities): the lexicographic least-squares active set of
 # alloc/_active_set.py (_level, _start, _run, _call_into) with the factorisation of
 # alloc/_lsq_factor.py (_jacobi, _factor), with a fixed-size static cache of factorisations
-# in the library's place (both change the cost, never the answer).  The library has no warm
-# start, so the default kernel has none either; ACTIVE_SET_WARM adds one (export_c's
-# warm_start), whose answers agree with the library's to round-off instead of bit for bit.
+# in the library's place (both change the cost, never the answer).  The library starts cold
+# by default, so the default kernel does too; ACTIVE_SET_WARM adds the warm start (export_c's
+# warm_start), the library's warm_start=True bit for bit and its cold answers to round-off.
 _ALLOCATE = _ALLOCATE_HEAD.replace("@DECL@", "") + _COLD_RUN
 _ALLOCATE_WARM = _ALLOCATE_HEAD.replace("@DECL@", ", budget") + _WARM_RUN
-ACTIVE_SET = _DATA + FACTOR + _LEVEL + _ENTRY.replace("@WARM_PICK@", "") + _ALLOCATE + SET_LIMITS
-ACTIVE_SET_WARM = (_DATA + FACTOR + _LEVEL + _WARM + _ENTRY.replace("@WARM_PICK@", _PICK) + _ALLOCATE_WARM
+ACTIVE_SET = _fill_warm(_DATA + FACTOR + _LEVEL + _ENTRY.replace("@WARM_PICK@", ""), False) + _ALLOCATE + SET_LIMITS
+ACTIVE_SET_WARM = (_fill_warm(_DATA + FACTOR + _LEVEL + _WARM + _ENTRY.replace("@WARM_PICK@", _PICK), True)
+                   + _ALLOCATE_WARM
                    + re.sub(r"( +)limits_nominal = 1;\n", r"\1PREFIX_warm_reset();\n\1limits_nominal = 1;\n", SET_LIMITS))

@@ -8,7 +8,7 @@ checkout's library first on the path (the script's folder is, the checkout is no
 
 Each case exports one (vehicle, method, settings) and records the sha256 of header + source
 (raw text: on one machine the bits are the same; across machines LAPACK's last bits differ,
-which is why test_export_golden.py rounds its literals), or the refusal's type and message.
+which is why test_golden.py rounds its literals), or the refusal's type and message.
 """
 
 from __future__ import annotations
@@ -66,7 +66,7 @@ _LITERAL = re.compile(r"(?<![\w.])-?\d+\.\d*(?:e[-+]?\d+)?")
 
 def rounded_digest(vehicle: str, method: str) -> str:
     """sha256 (16 hex digits) of the double kernel with the default settings, as
-    test_export_golden.py hashes: literals rounded to 1e-9 (LAPACK's last bits differ between
+    test_golden.py hashes: literals rounded to 1e-9 (LAPACK's last bits differ between
     numpy builds), the library's version and the input's fingerprint masked."""
     kernel = export_c(alloc.vehicles.problem(vehicle), method, precision="double")
     text = (kernel.header + kernel.source).replace(alloc.__version__, "@VERSION@")

@@ -1,13 +1,14 @@
 """The warm start of the active-set kernels (``export_c(..., warm_start=True)``), against the library.
 
-The library has no warm start (its answers are functions of the call alone), so a warm kernel
-cannot be its bits: it must give the library's statuses, its commands to round-off where the
-optimum is strictly determined, and elsewhere (a flat optimum, where the optimality test's
-tolerance admits several working sets: ``wls`` at its small default gamma) a command that an
-independent KKT check accepts.  Sequences are smooth (where a warm start pays) and random
+The library's default allocator starts cold (its answers are functions of the call alone), so
+a warm kernel cannot be its bits: it must give the cold library's statuses, its commands to
+round-off where the optimum is strictly determined, and elsewhere (a flat optimum, where the
+optimality test's tolerance admits several working sets: ``wls`` at its small default gamma) a
+command that an independent KKT check accepts.  Sequences are smooth (where a warm start pays) and random
 (where the kernel must notice that the last answer is a bad start); forgetting the warm start
 (``PREFIX_warm_reset``, ``PREFIX_set_limits``) must give the library's bits again, and a warm run
-that spends the budget must be redone from the cold start.
+that spends the budget must be redone from the cold start.  Against the library's own opt-in
+``warm_start=True`` allocator, which follows the same rule, a double warm kernel is bit for bit.
 """
 
 from __future__ import annotations
@@ -287,3 +288,58 @@ def test_warm_header_states_the_semantics_and_the_default_kernel_is_unchanged():
     assert "void alloc_qp_warm_reset(void);" in warm.header and "warm_reset" not in cold.header
     assert "at most twice the budget a call" in warm.header and "depends on the calls" in warm.header
     assert "warm" not in cold.source
+
+
+def _hostile_calls(rng: np.random.Generator, p: alloc.Problem, n: int) -> list[tuple]:
+    """``n`` calls ``(v, u_prev, dt)`` in seeded segments of random kinds: independent demands,
+    sines at 2 kHz (slow and 20x faster), 3x unattainable ones, and rate-limited stretches
+    (``u_prev`` the last answer, the string "last", or a jump elsewhere; ``dt`` 0.5 ms to 0.1 s)
+    interleaved with nominal calls (``u_prev`` None)."""
+    calls: list[tuple] = []
+    reach = np.abs(p.B) @ np.maximum(np.abs(p.umin), np.abs(p.umax)) + 1e-12
+    while len(calls) < n:
+        kind = rng.choice(["random", "sines", "unattainable", "rate", "rate_jump"])
+        length = int(rng.integers(5, 40))
+        if kind == "random":
+            V = random_demands(rng, p, length)
+        elif kind == "unattainable":
+            V = 3.0 * random_demands(rng, p, length, attainable_fraction=0.0)
+        else:
+            t = np.arange(length)[:, None] / 2000.0 * rng.choice([1.0, 20.0])
+            f = rng.uniform(0.2, 5.0, (1, p.k))
+            V = rng.uniform(0.1, 1.5) * reach * np.sin(2 * np.pi * f * t + rng.uniform(0, 6.3, (1, p.k)))
+        for v in V:
+            if kind.startswith("rate"):
+                jump = kind == "rate_jump" and rng.random() < 0.3
+                calls.append((v, rng.uniform(p.umin, p.umax) if jump else "last", float(rng.choice([5e-4, 1e-2, 0.1]))))
+            else:
+                calls.append((v, None, 0.0))
+    return calls[:n]
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_warm_kernel_is_the_library_warm_start_bit_for_bit(build, method):
+    """The double warm kernel mirrors the library's ``warm_start=True`` allocator
+    (alloc/_active_set.py: ``_warm_pick``, ``_levels``' entry at the step): the same commands
+    bit for bit, statuses and iteration counts over hostile sequences; every output finite and
+    within the call's bounds; and the answers the cold library's to round-off (U_TOL)."""
+    rng = np.random.default_rng(77 + METHODS.index(method))
+    calls = warm_its = cold_its = 0
+    for name, p, options in _problems():
+        opts = options(method)
+        kern = build(export_c(p, method, options=opts, prefix=f"wb_{name}_{method}".replace("-", "_"), warm_start=True))
+        warm = alloc.make_allocator(p, method, warm_start=True, **opts)
+        check = Agreement(kern, alloc.make_allocator(p, method, **opts), method, opts)
+        last = np.clip(p.up, p.umin, p.umax)
+        for v, u_prev, dt in _hostile_calls(rng, p, 120):
+            u0 = last if isinstance(u_prev, str) else u_prev
+            r = warm(v) if u0 is None else warm(v, u_prev=u0, dt=dt)
+            u, status, it, cold = check.call(v, u0, dt)  # also: finite, within bounds, the cold answer
+            np.testing.assert_array_equal(u, r.u, err_msg=f"{name} {method}")
+            assert status == STATUS[r.status.value] and (status == 2 or it == r.iterations), (name, it, r.iterations)
+            warm_its += it
+            cold_its += cold.iterations
+            last = u
+        calls += check.calls
+    assert calls >= 9 * 120
+    assert warm_its < cold_its, (warm_its, cold_its)
