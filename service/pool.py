@@ -58,6 +58,7 @@ from .builds import (
 from .cost import answer_bytes, is_costly, is_costly_batch
 from .errors import ServiceError
 from .responses import AnswerBudget, StreamedAnswer, allocation_response
+from .schedule import problem_at
 from .schemas import (
     AllocateRequest,
     AmsOut,
@@ -119,18 +120,22 @@ class AllocatorPool:
 
     # ------------------------------------------------------------ requests
     async def allocate(self, vehicle_id: str, body: VehicleAllocateRequest) -> Response:
-        """One demand at the vehicle's current health."""
+        """One demand at the vehicle's current health (and its schedule's ``at``: :meth:`_answer_at`)."""
         state = self._store.get(vehicle_id)
         options = _options(state, body.method, body.options)
-        key = (state.id, state.version, body.method, options_key(options))
-        result = await self._answer(key, lambda: state.problem, body.method, options,
-                                    Call(body.v, body.u_prev, body.dt))
+        call = Call(body.v, body.u_prev, body.dt)
+        if body.at:
+            result = await self._answer_at(problem_at(state, body.at), body.method, options, call)
+        else:
+            key = (state.id, state.version, body.method, options_key(options))
+            result = await self._answer(key, lambda: state.problem, body.method, options, call)
         return allocation_response(result, vehicle_id=state.id, health_version=state.version)
 
     async def allocate_batch(self, vehicle_id: str, body: VehicleBatchRequest) -> StreamedAnswer:
-        """Many demands at the vehicle's current health (:meth:`_batch`)."""
+        """Many demands at the vehicle's current health and ``at`` (:meth:`_batch`)."""
         state = self._store.get(vehicle_id)
-        return await self._batch(state.problem, body.method, _options(state, body.method, body.options), body.V,
+        return await self._batch(problem_at(state, body.at), body.method,
+                                 _options(state, body.method, body.options), body.V,
                                  {"vehicle_id": state.id, "health_version": state.version})
 
     async def allocate_inline(self, body: AllocateRequest) -> Response:
@@ -221,6 +226,20 @@ class AllocatorPool:
             private = ("private", call.token)
             built = await self.builder.outcome(self._start_build(private, p, method, options, call, seconds))
         return built.result if built.allocator is None else call.run(built.allocator)
+
+    async def _answer_at(self, problem: alloc.Problem, method: str, options: dict[str, Any], call: Call) -> Any:
+        """``call`` answered for a scheduled vehicle's problem at a request's ``at``: built, priced
+        as any build, and answered on the build lane, the allocator not kept.
+
+        No method of the library follows a new ``B`` without a build (none declares it), so each
+        ``at`` is a build of its own; caching them by ``at`` would fill the cache with values a
+        flight never asks again.  Each request's allocator is its own: concurrent requests at
+        different ``at`` share nothing.
+        """
+        seconds = check_build_cost(problem, method, options, self.build_budget)
+        private = ("private", call.token)  # never cached
+        built: Built = await self.builder.outcome(self._start_build(private, problem, method, options, call, seconds))
+        return built.result
 
     async def _batch(self, problem: alloc.Problem, method: str, options: dict[str, Any], V: Any,
                      extra: dict[str, Any]) -> StreamedAnswer:

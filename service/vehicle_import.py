@@ -86,8 +86,9 @@ def check_import_query(media: str, form: str | None, name: str | None) -> str | 
     422 naming ``query.import`` or ``query.name`` when the query does not fit the type."""
     if media not in IMPORT_MEDIA_TYPES:
         if form is not None:
-            raise _query_error("import", f"applies to a flight stack's file sent as {' or '.join(IMPORT_MEDIA_TYPES)};"
-                                         f" this body is {media or 'untyped'} (a vehicle document or an effector suite)")
+            types = " or ".join(IMPORT_MEDIA_TYPES)
+            raise _query_error("import", f"applies to a flight stack's file sent as {types}; this body is "
+                                         f"{media or 'untyped'} (a vehicle document or an effector suite)")
         if name is not None:
             raise _query_error("name", "applies to an imported file; a document or suite carries its own name")
         return None
@@ -101,8 +102,8 @@ def check_import_query(media: str, form: str | None, name: str | None) -> str | 
     return form
 
 
-def imported_vehicle(raw: bytes, form: str, name: str | None, charset: str | None) -> tuple[VehicleCreate, Vehicle,
-                                                                                              ImportedFile]:
+def imported_vehicle(raw: bytes, form: str, name: str | None,
+                     charset: str | None) -> tuple[VehicleCreate, Vehicle, ImportedFile]:
     """The stored vehicle's body of a flight stack's file (its problem, its name, its document
     kept), the vehicle, and what a retry's fingerprint is taken over.
 

@@ -93,7 +93,8 @@ from .vehicle import Vehicle, vehicle_from_dict, vehicle_from_problem
 __all__ = [
     "FORMAT", "FORMAT_SIMULATION", "FORMAT_SCHEDULE", "FORMATS", "Schedule", "ScheduledEffectiveness", "SCHEMA_PATH", "Simulation", "DATA_DIR", "EFFECTOR_KINDS", "WRENCH_COMPONENTS",
     "Body", "Dynamics", "Rotor", "Effector", "Axis", "LinearModel", "Vehicle",
-    "load_vehicle", "import_vehicle_text", "IMPORT_FORMATS", "vehicle_from_dict", "vehicle_from_problem", "vehicle_names", "rotor_wrench", "to_toml",
+    "load_vehicle", "import_vehicle_text", "IMPORT_FORMATS",
+    "vehicle_from_dict", "vehicle_from_problem", "vehicle_names", "rotor_wrench", "to_toml",
 ]
 
 

@@ -168,7 +168,8 @@ def test_the_query_must_fit_the_body(client, headers, params, status, where, tex
 @pytest.mark.parametrize("form, body, detail, loc", [
     ("ardupilot-params", b"FRAME_CLASS,1\nFRAME_CLASS,2\n",
      "ardupilot-params: params: line 2: FRAME_CLASS is set again (first at line 1)", ["body", "params"]),
-    ("ardupilot-params", b"FRAME_CLASS,7\n", "ardupilot-params: FRAME_CLASS: 7 is not supported", ["body", "FRAME_CLASS"]),
+    ("ardupilot-params", b"FRAME_CLASS,7\n", "ardupilot-params: FRAME_CLASS: 7 is not supported",
+     ["body", "FRAME_CLASS"]),
     ("ardupilot-csv", b"motor,roll,pitch,yaw\nm1,1,nan,0\n", "ardupilot-csv: factors: row 2: pitch: must be finite",
      ["body", "factors"]),
     ("px4-params", b"1\t1\tCA_ROTOR_COUNT\tinf\t6\n", "px4-params: params: line 1: CA_ROTOR_COUNT", ["body", "params"]),
