@@ -42,8 +42,8 @@ from alloc.vehicle_file import IMPORT_FORMATS, Vehicle, import_vehicle_text
 from .errors import InvalidRequest, ServiceError
 from .schemas import VehicleCreate
 
-__all__ = ["IMPORT_MEDIA_TYPES", "ImportFormat", "InvalidImport", "ImportedFile", "check_import_query", "media_type",
-           "imported_vehicle"]
+__all__ = ["IMPORT_MEDIA_TYPES", "ImportFormat", "ImportedFile", "InvalidImport", "check_import_query",
+           "imported_vehicle", "media_type"]
 
 #: the media types of a flight stack's file: ``text/csv`` is an ArduPilot factor table (RFC 4180),
 #: ``text/plain`` a parameter or airframe file named by ``?import=``

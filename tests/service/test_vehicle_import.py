@@ -153,8 +153,8 @@ def test_skipped_shell_lines_are_reported_in_source(client):
     ({"content-type": "text/plain; charset=latin-1"}, {"import": "px4-params"}, 415, ["header", "content-type"],
      "charset 'latin-1'"),
     ({"content-type": "application/octet-stream"}, {}, 415, ["header", "content-type"],
-     "as text/csv (an ArduPilot factor table) or as text/plain with ?import=ardupilot-params, px4-params or "
-     "px4-airframe"),
+     ("as text/csv (an ArduPilot factor table) or as text/plain with ?import=ardupilot-params, px4-params or "
+      "px4-airframe")),
     (PLAIN, {"import": "ardupilot-params", "name": "a\x01b"}, 422, ["query", "name"], "String should match"),
 ])
 def test_the_query_must_fit_the_body(client, headers, params, status, where, text):

@@ -142,7 +142,7 @@ def test_hostile_at_is_422_naming_the_variable(client, tiltrotor, at, loc, text)
 
 @pytest.mark.parametrize("literal", ["NaN", "Infinity", "-Infinity", "1e400"])
 def test_non_finite_at_is_422_naming_the_variable(client, tiltrotor, literal):
-    body = '{"v": [0.1, 0, 0, -5], "at": {"tilt": %s}}' % literal
+    body = '{"v": [0.1, 0, 0, -5], "at": {"tilt": ' + literal + "}}"
     response = client.post(f"/v1/vehicles/{tiltrotor}/allocate", content=body,
                            headers={"content-type": "application/json"})
     assert response.status_code == 422, response.text
