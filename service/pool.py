@@ -4,7 +4,9 @@ An allocation is one hand-off: the route gives the pool its vehicle id and valid
 (:meth:`AllocatorPool.allocate`); the pool reads the vehicle's committed state from the
 repository (:meth:`service.store.VehicleStore.get`, its version from the database now),
 applies the vehicle's method defaults under the request's options, and answers from the
-allocator cached under ``(vehicle, health_version, method, options)``, built if missing.
+allocator cached under ``(vehicle, health_version, method, options)``, built if missing; at a
+scheduled vehicle's ``at``, under the same key and the variables' values, one such per vehicle,
+method and options (:meth:`AllocatorPool._forget_other_at`).
 
 Allocators are cached in a :class:`~service.allocator_cache.AllocatorCache` bounded in
 entries and in bytes (measured by :func:`service.cost.estimate_bytes`); inline problems
@@ -58,7 +60,7 @@ from .builds import (
 from .cost import answer_bytes, is_costly, is_costly_batch
 from .errors import ServiceError
 from .responses import AnswerBudget, StreamedAnswer, allocation_response
-from .schedule import problem_at
+from .schedule import at_values, problem_at, problem_at_values
 from .schemas import (
     AllocateRequest,
     AmsOut,
@@ -124,11 +126,13 @@ class AllocatorPool:
         state = self._store.get(vehicle_id)
         options = _options(state, body.method, body.options)
         call = Call(body.v, body.u_prev, body.dt)
-        if body.at:
-            result = await self._answer_at(problem_at(state, body.at), body.method, options, call)
-        else:
-            key = (state.id, state.version, body.method, options_key(options))
-            result = await self._answer(key, lambda: state.problem, body.method, options, call)
+        key: tuple[Any, ...] = (state.id, state.version, body.method, options_key(options))
+        values = at_values(state, body.at)
+        if values is not None:
+            key = (*key, values)
+            if self.allocators.lookup(key) is None:
+                self._forget_other_at(key)
+        result = await self._answer(key, lambda: problem_at_values(state, values), body.method, options, call)
         return allocation_response(result, vehicle_id=state.id, health_version=state.version)
 
     async def allocate_batch(self, vehicle_id: str, body: VehicleBatchRequest) -> StreamedAnswer:
@@ -175,6 +179,8 @@ class AllocatorPool:
         started = 0
         seen: set[tuple[str, str]] = set()
         for key in reversed(stale):
+            if len(key) != 4:
+                continue  # an allocator at a request's `at`: the next request at that `at` builds it
             _, _, method, okey = key
             if (method, okey) in seen or started >= PREBUILD_LIMIT:
                 continue
@@ -227,19 +233,19 @@ class AllocatorPool:
             built = await self.builder.outcome(self._start_build(private, p, method, options, call, seconds))
         return built.result if built.allocator is None else call.run(built.allocator)
 
-    async def _answer_at(self, problem: alloc.Problem, method: str, options: dict[str, Any], call: Call) -> Any:
-        """``call`` answered for a scheduled vehicle's problem at a request's ``at``: built, priced
-        as any build, and answered on the build lane, the allocator not kept.
+    def _forget_other_at(self, key: tuple[Any, ...]) -> None:
+        """Drop the allocators cached for this vehicle, method and options at another ``at``.
 
-        No method of the library follows a new ``B`` without a build (none declares it), so each
-        ``at`` is a build of its own; caching them by ``at`` would fill the cache with values a
-        flight never asks again.  Each request's allocator is its own: concurrent requests at
-        different ``at`` share nothing.
+        No method of the library follows a new ``B`` without a build (none declares it), so an
+        allocation at ``at`` is answered by an allocator built for those values, priced as any
+        build.  One is kept per vehicle, method and options (the last ``at`` built: a vehicle
+        holding its tilt reuses it), not one per ``at``, which would fill the cache with values
+        a flight never asks again and evict the allocators other vehicles use.  An allocator is
+        keyed by its own values, so concurrent requests at different ``at`` never share one.
         """
-        seconds = check_build_cost(problem, method, options, self.build_budget)
-        private = ("private", call.token)  # never cached
-        built: Built = await self.builder.outcome(self._start_build(private, problem, method, options, call, seconds))
-        return built.result
+        stem = key[:4]
+        self.allocators.drop(self.allocators.keys_where(
+            lambda k: isinstance(k, tuple) and len(k) == 5 and k[:4] == stem and k[4] != key[4]))
 
     async def _batch(self, problem: alloc.Problem, method: str, options: dict[str, Any], V: Any,
                      extra: dict[str, Any]) -> StreamedAnswer:

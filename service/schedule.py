@@ -23,7 +23,7 @@ from .errors import InvalidRequest
 from .health import to_problem
 from .vehicle_state import VehicleState
 
-__all__ = ["problem_at"]
+__all__ = ["at_values", "problem_at", "problem_at_values"]
 
 
 def _at_error(name: str | None, reason: str) -> InvalidRequest:
@@ -33,10 +33,9 @@ def _at_error(name: str | None, reason: str) -> InvalidRequest:
     return InvalidRequest(f"{where}: {reason}", [{"loc": loc, "pointer": pointer, "reason": reason}])
 
 
-def problem_at(state: VehicleState, at: Mapping[str, float] | None) -> alloc.Problem:
-    """The effective problem of ``state`` with ``B`` at ``at`` (``state.problem`` when ``at`` is
-    absent or empty): the schedule evaluated into a new array (shared evaluator, no shared
-    buffer), then the vehicle's health applied as to its nominal problem.
+def at_values(state: VehicleState, at: Mapping[str, float] | None) -> tuple[float, ...] | None:
+    """Every scheduling variable's value, in declared order, for a request's ``at`` (those not
+    given at their nominal values), checked by the library; ``None`` when ``at`` is absent or empty.
 
     Raises
     ------
@@ -44,7 +43,7 @@ def problem_at(state: VehicleState, at: Mapping[str, float] | None) -> alloc.Pro
         naming ``at.<name>`` (unknown, out of its range) or ``at`` (the vehicle has no schedule).
     """
     if not at:
-        return state.problem
+        return None
     if state.schedule is None:
         raise _at_error(None, f"vehicle {state.name or state.id!r} declares no [schedule]; its B is constant")
     declared = state.schedule.schedule.names
@@ -52,8 +51,22 @@ def problem_at(state: VehicleState, at: Mapping[str, float] | None) -> alloc.Pro
     if unknown is not None:
         raise _at_error(unknown, f"unknown scheduling variable; declared: {', '.join(declared)}")
     try:
-        B = state.schedule.evaluate(at, out=np.empty(state.schedule.shape))
+        return tuple(state.schedule.values(at))
     except ProblemError as exc:
         name = exc.field if exc.field in declared else None
         raise _at_error(name, str(exc).removeprefix(f"{name}: ")) from None
+
+
+def problem_at_values(state: VehicleState, values: tuple[float, ...] | None) -> alloc.Problem:
+    """The effective problem of ``state`` with ``B`` at ``values`` (:func:`at_values`;
+    ``state.problem`` for ``None``): the schedule evaluated into a new array (the evaluator is
+    shared, no buffer is), then the vehicle's health applied as to its nominal problem."""
+    if values is None or state.schedule is None:
+        return state.problem
+    B = state.schedule.evaluate(values, out=np.empty(state.schedule.shape))
     return to_problem(state.nominal.replace(B=B), state.health)
+
+
+def problem_at(state: VehicleState, at: Mapping[str, float] | None) -> alloc.Problem:
+    """:func:`problem_at_values` of :func:`at_values`: the problem at a request's ``at``."""
+    return problem_at_values(state, at_values(state, at))

@@ -169,3 +169,28 @@ def test_concurrent_requests_at_different_at_get_their_own_answers(client, tiltr
         assert response.status_code == 200, response.text
         assert response.json()["u"] == want[json.dumps(p)], p
     assert len({json.dumps(u) for u in want.values()}) > 100  # the points do give different answers
+
+
+def test_one_allocator_is_kept_per_vehicle_method_and_options_not_per_at(client, vehicle):
+    vid = client.post("/v1/vehicles", content=TILTROTOR.read_bytes(), headers={"content-type": "text/plain"},
+                      params={"import": "px4-airframe"}).json()["id"]
+    pool = client.app.state.pool
+
+    def kept() -> list:
+        return pool.allocators.keys_where(lambda k: isinstance(k, tuple) and len(k) == 5 and k[0] == vid)
+
+    for tilt in (10.0, 20.0, 30.0, 40.0):
+        assert allocate(client, vid, {"tilt": tilt}).status_code == 200
+        assert [k[4] for k in kept()] == [(tilt, 15.0)]  # the last at, its values resolved
+    builds = pool.allocators.builds
+    first = allocate(client, vid, {"tilt": 40.0, "airspeed": 15.0}).json()["u"]  # the same values: reused
+    assert pool.allocators.builds == builds
+    assert first == alloc.make_allocator(vehicle.problem_at({"tilt": 40.0}), "qp")(V).u.tolist()
+    assert allocate(client, vid, {"tilt": 40.0}, method="pinv").status_code == 200
+    assert sorted(k[2] for k in kept()) == ["pinv", "qp"]  # one per method
+    client.post(f"/v1/vehicles/{vid}/events", json={"effector": vehicle.effector_names[1], "kind": "jam",
+                                                     "position": 0.1})
+    assert kept() == []  # dropped with the vehicle's stale allocators, not rebuilt for the new health
+    after = allocate(client, vid, {"tilt": 40.0})
+    assert after.json()["health_version"] == 1 and after.json()["u"][1] == 0.1
+    assert [k[1] for k in kept() if k[2] == "qp"] == [1]
