@@ -6,7 +6,9 @@ the airspeed goes 0 -> 18 m/s) one demand is allocated per point, ``--repeat`` r
 
 * ``nominal``: no ``at``, the vehicle's stored ``B`` (the allocator cached after the first call);
 * ``at``: ``"at": {"tilt": ..., "airspeed": ...}``, a build per request (no library method
-  follows a new ``B`` without one), priced and answered on a build thread;
+  follows a new ``B`` without one), priced and built on a build thread;
+* ``at held``: the same ``at`` every request (a vehicle holding its tilt): the allocator kept for
+  the last ``at`` answers;
 
 and, in this process without the service, the parts of an ``at`` request: the problem at ``at``
 (:func:`service.schedule.problem_at`: ``B(x)``, a validated Problem, the health), that and the build
@@ -69,7 +71,7 @@ def main(argv: list[str] | None = None) -> None:
         url = f"/v1/vehicles/{vehicle_id}/allocate"
         print(f"PX4 13100_generic_vtol_tiltrotor (k = {state.problem.k}, m = {state.problem.m}), {args.steps} points "
               f"(tilt 90 -> 0 deg, airspeed 0 -> 18 m/s), median of {args.repeat} rounds, us per request")
-        print(f"{'method':8} {'nominal':>9} {'at':>9} {'problem_at':>11} {'+ build':>9} {'call':>9}")
+        print(f"{'method':8} {'nominal':>9} {'at':>9} {'at held':>9} {'problem_at':>11} {'+ build':>9} {'call':>9}")
         for method in args.methods.split(","):
             def nominal(x, method=method):
                 assert client.post(url, json={"v": V, "method": method}).status_code == 200
@@ -77,15 +79,19 @@ def main(argv: list[str] | None = None) -> None:
             def scheduled(x, method=method):
                 assert client.post(url, json={"v": V, "method": method, "at": x}).status_code == 200
 
+            def held(x, method=method):
+                assert client.post(url, json={"v": V, "method": method, "at": points[0]}).status_code == 200
+
             def built(x, method=method):
                 return alloc.make_allocator(problem_at(state, x), method)
 
             nominal(points[0])  # the cached allocator, built once
             scheduled(points[0])
             allocator = built(points[0])
-            times = medians_us([nominal, scheduled, lambda x: problem_at(state, x), built,
+            times = medians_us([nominal, scheduled, held, lambda x: problem_at(state, x), built,
                                 lambda x, a=allocator: a(V)], points, args.repeat)
-            print(f"{method:8} {times[0]:9.0f} {times[1]:9.0f} {times[2]:11.1f} {times[3]:9.0f} {times[4]:9.1f}")
+            print(f"{method:8} {times[0]:9.0f} {times[1]:9.0f} {times[2]:9.0f} {times[3]:11.1f} {times[4]:9.0f} "
+                  f"{times[5]:9.1f}")
 
 if __name__ == "__main__":
     main()
