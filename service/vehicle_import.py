@@ -41,13 +41,11 @@ from alloc.vehicle_file import IMPORT_FORMATS, Vehicle, import_vehicle_text
 
 from .errors import InvalidRequest, ServiceError
 from .schemas import VehicleCreate
+from .vehicle_document import IMPORT_MEDIA_TYPES, UnsupportedMediaType, vehicle_create
 
-__all__ = ["IMPORT_MEDIA_TYPES", "ImportFormat", "ImportedFile", "InvalidImport", "check_import_query",
+__all__ = ["ImportFormat", "ImportedFile", "InvalidImport", "check_import_query",
            "imported_vehicle", "media_type"]
 
-#: the media types of a flight stack's file: ``text/csv`` is an ArduPilot factor table (RFC 4180),
-#: ``text/plain`` a parameter or airframe file named by ``?import=``
-IMPORT_MEDIA_TYPES = ("text/csv", "text/plain")
 _CSV_FORM = "ardupilot-csv"
 _CHARSETS = ("utf-8", "utf8", "us-ascii")
 
@@ -113,8 +111,6 @@ def imported_vehicle(raw: bytes, form: str, name: str | None,
         the importer's refusal (naming the line or parameter), a body that is not UTF-8 or
         over :data:`~alloc._files.MAX_TEXT_BYTES`.
     """
-    from .vehicle_document import UnsupportedMediaType, vehicle_create
-
     if charset is not None and charset not in _CHARSETS:
         raise UnsupportedMediaType(f"charset {charset[:40]!r}: a flight stack's file is read as UTF-8",
                                    [{"loc": ["header", "content-type"], "pointer": None, "reason": "charset"}])
