@@ -52,8 +52,8 @@ def test_a_text_is_never_read_as_a_path(tmp_path):
 
 
 @pytest.mark.parametrize("text, form, field, message", [
-    ("FRAME_CLASS,1\n", "mavlink", "format", "format: unknown 'mavlink'; flight-stack files are read as one of "
-     "ardupilot-csv, ardupilot-params, px4-params, px4-airframe"),
+    ("FRAME_CLASS,1\n", "mavlink", "format", ("format: unknown 'mavlink'; flight-stack files are read as one of "
+                                             "ardupilot-csv, ardupilot-params, px4-params, px4-airframe")),
     ("1\t1\tCA_AIRFRAME\t0\t6\n", "px4-airframe", "params", "params: the text is not a PX4 airframe file"),
     ("#" * (MAX_TEXT_BYTES + 1), "px4-params", "params", f"params: the text is {MAX_TEXT_BYTES + 1} characters"),
     ("#" * (MAX_TEXT_BYTES + 1), "ardupilot-params", "params", "params: the text is"),
