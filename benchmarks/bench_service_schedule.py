@@ -11,7 +11,8 @@ the airspeed goes 0 -> 18 m/s) one demand is allocated per point, ``--repeat`` r
   the last ``at`` answers;
 
 and, in this process without the service, the parts of an ``at`` request: the problem at ``at``
-(:func:`service.schedule.problem_at`: ``B(x)``, a validated Problem, the health), that and the build
+(:func:`service.schedule.at_values` and :func:`~service.schedule.problem_at_values`: the values
+checked, ``B(x)``, a validated Problem, the health), that and the build
 (:func:`alloc.make_allocator`) and the call.  Medians in microseconds per request, in-process
 (``TestClient``: the ASGI app without sockets, so HTTP framing is not counted).
 
@@ -32,7 +33,7 @@ from fastapi.testclient import TestClient
 import alloc
 from service.config import Settings
 from service.main import create_app
-from service.schedule import problem_at
+from service.schedule import at_values, problem_at_values
 
 AIRFRAME = Path(__file__).parents[1] / "tests" / "alloc" / "data" / "px4_airframes" / "13100_generic_vtol_tiltrotor"
 V = [0.1, -0.05, 0.02, -5.0]
@@ -68,6 +69,10 @@ def main(argv: list[str] | None = None) -> None:
                               params={"import": "px4-airframe"})
         vehicle_id = created.json()["id"]
         state = client.app.state.store.get(vehicle_id)
+        evaluator = client.app.state.pool.schedules.of(state)
+
+        def problem_at(x):
+            return problem_at_values(state, evaluator, at_values(evaluator, x))
         url = f"/v1/vehicles/{vehicle_id}/allocate"
         print(f"PX4 13100_generic_vtol_tiltrotor (k = {state.problem.k}, m = {state.problem.m}), {args.steps} points "
               f"(tilt 90 -> 0 deg, airspeed 0 -> 18 m/s), median of {args.repeat} rounds, us per request")

@@ -60,7 +60,7 @@ from .builds import (
 from .cost import answer_bytes, is_costly, is_costly_batch
 from .errors import ServiceError
 from .responses import AnswerBudget, StreamedAnswer, allocation_response
-from .schedule import at_values, problem_at, problem_at_values
+from .schedule import Schedules, at_values, problem_at_values
 from .schemas import (
     AllocateRequest,
     AmsOut,
@@ -115,6 +115,7 @@ class AllocatorPool:
         self.build_budget = build_budget
         self.batch_budget, self.max_answer_bytes = batch_budget, max_answer_bytes
         self.answers = AnswerBudget(answer_bytes_in_flight)
+        self.schedules = Schedules(store.document)
         store.subscribe(self._vehicle_changed)
 
     def close(self) -> None:
@@ -127,18 +128,22 @@ class AllocatorPool:
         options = _options(state, body.method, body.options)
         call = Call(body.v, body.u_prev, body.dt)
         key: tuple[Any, ...] = (state.id, state.version, body.method, options_key(options))
-        values = at_values(state, body.at)
+        evaluator = self.schedules.of(state) if body.at else None
+        values = None if evaluator is None or body.at is None else at_values(evaluator, body.at)
         if values is not None:
             key = (*key, values)
             if self.allocators.lookup(key) is None:
                 self._forget_other_at(key)
-        result = await self._answer(key, lambda: problem_at_values(state, values), body.method, options, call)
+        result = await self._answer(key, lambda: problem_at_values(state, evaluator, values), body.method, options,
+                                    call)
         return allocation_response(result, vehicle_id=state.id, health_version=state.version)
 
     async def allocate_batch(self, vehicle_id: str, body: VehicleBatchRequest) -> StreamedAnswer:
         """Many demands at the vehicle's current health and ``at`` (:meth:`_batch`)."""
         state = self._store.get(vehicle_id)
-        return await self._batch(problem_at(state, body.at), body.method,
+        evaluator = self.schedules.of(state) if body.at else None
+        values = None if evaluator is None or body.at is None else at_values(evaluator, body.at)
+        return await self._batch(problem_at_values(state, evaluator, values), body.method,
                                  _options(state, body.method, body.options), body.V,
                                  {"vehicle_id": state.id, "health_version": state.version})
 
@@ -168,6 +173,7 @@ class AllocatorPool:
         """The repository's news: a new health (rebuild) or the vehicle gone (drop its allocators)."""
         if state is None:
             self.allocators.drop(self.allocators.keys_where(lambda k: k[0] == vehicle_id))
+            self.schedules.forget(vehicle_id)
         else:
             self.rebuild_after_event(state)
 

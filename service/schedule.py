@@ -8,22 +8,34 @@ variables.  An allocation or batch with ``"at": {"tilt": 45, "airspeed": 12}`` i
 (:meth:`alloc.vehicle_file.schedule.ScheduledEffectiveness.values`: each finite, within its
 declared range; a variable not given takes its ``nominal``).  A refusal is 422 naming
 ``at.<name>``; ``at`` on a vehicle without a schedule is 422 naming ``at``.
+
+The evaluators are held apart from the vehicle states, in :class:`Schedules`, an LRU of
+:data:`SCHEDULE_ENTRIES` vehicles filled on a vehicle's first allocation at ``at``: an evaluator
+keeps its terms (at the caps, 32 terms of 6 x 64: about 225 KB measured with ``tracemalloc``),
+which in each of the 1,024 states a process holds would triple their memory bound.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import threading
+from collections import OrderedDict
+from collections.abc import Callable, Mapping
+from typing import Any
 
 import numpy as np
 
 import alloc
 from alloc.exceptions import ProblemError
+from alloc.vehicle_file.schedule import ScheduledEffectiveness
 
 from .errors import InvalidRequest
 from .health import to_problem
 from .vehicle_state import VehicleState
 
-__all__ = ["at_values", "problem_at", "problem_at_values"]
+__all__ = ["SCHEDULE_ENTRIES", "Schedules", "at_values", "problem_at_values"]
+
+#: vehicles whose schedule evaluator a process keeps (about 225 KB each at the caps: ~14 MB)
+SCHEDULE_ENTRIES = 64
 
 
 def _at_error(name: str | None, reason: str) -> InvalidRequest:
@@ -33,40 +45,66 @@ def _at_error(name: str | None, reason: str) -> InvalidRequest:
     return InvalidRequest(f"{where}: {reason}", [{"loc": loc, "pointer": pointer, "reason": reason}])
 
 
-def at_values(state: VehicleState, at: Mapping[str, float] | None) -> tuple[float, ...] | None:
+class Schedules:
+    """The schedule evaluators of the vehicles allocated at ``at`` in this process, an LRU of
+    :data:`SCHEDULE_ENTRIES` (thread-safe), each made from the stored document (read with
+    ``document``) on a miss.  A vehicle's document never changes, so an entry never goes stale."""
+
+    def __init__(self, document: Callable[[str], dict[str, Any] | None], entries: int = SCHEDULE_ENTRIES) -> None:
+        self._document, self._entries = document, entries
+        self._items: OrderedDict[str, ScheduledEffectiveness] = OrderedDict()
+        self._lock = threading.Lock()
+
+    def of(self, state: VehicleState) -> ScheduledEffectiveness:
+        """The evaluator of ``state``'s vehicle; 422 naming ``at`` when it declares no schedule."""
+        if not state.scheduled:
+            raise _at_error(None, f"vehicle {state.name or state.id!r} declares no [schedule]; its B is constant")
+        with self._lock:
+            found = self._items.get(state.id)
+            if found is not None:
+                self._items.move_to_end(state.id)
+                return found
+        from alloc.vehicle_file.vehicle import vehicle_from_dict
+
+        document = self._document(state.id)
+        evaluator = vehicle_from_dict(document or {}).scheduled()  # validated when the vehicle was created
+        with self._lock:
+            self._items[state.id] = evaluator
+            while len(self._items) > self._entries:
+                self._items.popitem(last=False)
+        return evaluator
+
+    def forget(self, vehicle_id: str) -> None:
+        with self._lock:
+            self._items.pop(vehicle_id, None)
+
+
+def at_values(evaluator: ScheduledEffectiveness, at: Mapping[str, float]) -> tuple[float, ...]:
     """Every scheduling variable's value, in declared order, for a request's ``at`` (those not
-    given at their nominal values), checked by the library; ``None`` when ``at`` is absent or empty.
+    given at their nominal values), checked by the library.
 
     Raises
     ------
     InvalidRequest
-        naming ``at.<name>`` (unknown, out of its range) or ``at`` (the vehicle has no schedule).
+        naming ``at.<name>``: an unknown variable, a value out of its range.
     """
-    if not at:
-        return None
-    if state.schedule is None:
-        raise _at_error(None, f"vehicle {state.name or state.id!r} declares no [schedule]; its B is constant")
-    declared = state.schedule.schedule.names
+    declared = tuple(v.name for v in evaluator.schedule.variables)
     unknown = next((name for name in at if name not in declared), None)
     if unknown is not None:
         raise _at_error(unknown, f"unknown scheduling variable; declared: {', '.join(declared)}")
     try:
-        return tuple(state.schedule.values(at))
+        return tuple(evaluator.values(at))
     except ProblemError as exc:
         name = exc.field if exc.field in declared else None
         raise _at_error(name, str(exc).removeprefix(f"{name}: ")) from None
 
 
-def problem_at_values(state: VehicleState, values: tuple[float, ...] | None) -> alloc.Problem:
+def problem_at_values(state: VehicleState, evaluator: ScheduledEffectiveness | None,
+                      values: tuple[float, ...] | None) -> alloc.Problem:
     """The effective problem of ``state`` with ``B`` at ``values`` (:func:`at_values`;
     ``state.problem`` for ``None``): the schedule evaluated into a new array (the evaluator is
     shared, no buffer is), then the vehicle's health applied as to its nominal problem."""
-    if values is None or state.schedule is None:
+    if values is None or evaluator is None:
         return state.problem
-    B = state.schedule.evaluate(values, out=np.empty(state.schedule.shape))
+    B = evaluator.evaluate(values, out=np.empty(evaluator.shape))
     return to_problem(state.nominal.replace(B=B), state.health)
-
-
-def problem_at(state: VehicleState, at: Mapping[str, float] | None) -> alloc.Problem:
-    """:func:`problem_at_values` of :func:`at_values`: the problem at a request's ``at``."""
-    return problem_at_values(state, at_values(state, at))

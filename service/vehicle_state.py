@@ -16,7 +16,6 @@ from sqlalchemy import text
 from sqlalchemy.engine import Engine
 
 import alloc
-from alloc.vehicle_file.schedule import ScheduledEffectiveness
 
 from .db import VehicleRow
 from .health import Health, load_health, to_problem
@@ -40,9 +39,9 @@ class VehicleState:
     # method -> options: the vehicle document's [methods.<method>] defaults (daisy groups, gang
     # matrix, priorities), applied under a request's own options as `alloc allocate --vehicle` does
     defaults: dict[str, dict[str, Any]]
-    # B as a function of the document's [schedule] variables (None: B is constant); evaluated with
-    # an `out` buffer per call, which touches no state of the evaluator, so threads share it
-    schedule: ScheduledEffectiveness | None = None
+    # whether the document declares a [schedule] (B a function of named variables); the
+    # evaluators are held apart, in service.schedule.Schedules, bounded on their own
+    scheduled: bool = False
 
     def with_health(self, health: Health, version: int) -> VehicleState:
         """This vehicle at a new health and version (everything read from its document kept)."""
@@ -64,25 +63,23 @@ def method_defaults(document: dict[str, Any] | None) -> dict[str, dict[str, Any]
     return document_parts(document)[0]
 
 
-def document_parts(document: dict[str, Any] | None) -> tuple[dict[str, dict[str, Any]],
-                                                              ScheduledEffectiveness | None]:
-    """A stored document's per-method defaults and its schedule's evaluator (``None``: no
-    ``[schedule]``), the document read once; ``({}, None)`` for an effector suite."""
+def document_parts(document: dict[str, Any] | None) -> tuple[dict[str, dict[str, Any]], bool]:
+    """A stored document's per-method defaults and whether it declares a ``[schedule]``, the
+    document read once; ``({}, False)`` for an effector suite."""
     if document is None:
-        return {}, None
+        return {}, False
     from alloc.vehicle_file.vehicle import vehicle_from_dict
 
     vehicle = vehicle_from_dict(document)
-    defaults = {method: vehicle.method_options(method) for method in vehicle.methods}
-    return defaults, None if vehicle.schedule is None else vehicle.scheduled()
+    return {method: vehicle.method_options(method) for method in vehicle.methods}, vehicle.schedule is not None
 
 
 def state_from_row(row: VehicleRow, nominal: alloc.Problem | None = None) -> VehicleState:
     nominal = nominal or problem_from_dict(row.problem)
     health = load_health(row.health)
-    defaults, schedule = document_parts(row.problem.get("document"))
+    defaults, scheduled = document_parts(row.problem.get("document"))
     return VehicleState(row.id, row.name, row.created_at, nominal, health, row.health_version,
-                        to_problem(nominal, health), defaults, schedule)
+                        to_problem(nominal, health), defaults, scheduled)
 
 
 class StateCache:

@@ -194,3 +194,19 @@ def test_one_allocator_is_kept_per_vehicle_method_and_options_not_per_at(client,
     after = allocate(client, vid, {"tilt": 40.0})
     assert after.json()["health_version"] == 1 and after.json()["u"][1] == 0.1
     assert [k[1] for k in kept() if k[2] == "qp"] == [1]
+
+
+def test_evaluators_are_held_apart_from_states_and_bounded(client, tiltrotor):
+    from service.schedule import Schedules
+
+    store = client.app.state.store
+    other = client.post("/v1/vehicles", content=TILTROTOR.read_bytes(), headers={"content-type": "text/plain"},
+                        params={"import": "px4-airframe"}).json()["id"]
+    reads: list[str] = []
+    schedules = Schedules(lambda vid: reads.append(vid) or store.document(vid), entries=1)
+    first, second = store.get(tiltrotor), store.get(other)
+    assert first.scheduled and not hasattr(first, "schedule")  # a state holds a flag, not the terms
+    assert schedules.of(first) is schedules.of(first) and reads == [tiltrotor]
+    schedules.of(second)  # evicts the first: one entry
+    schedules.of(first)
+    assert reads == [tiltrotor, other, tiltrotor]
