@@ -123,13 +123,12 @@ class AllocatorPool:
 
     # ------------------------------------------------------------ requests
     async def allocate(self, vehicle_id: str, body: VehicleAllocateRequest) -> Response:
-        """One demand at the vehicle's current health (and its schedule's ``at``: :meth:`_answer_at`)."""
+        """One demand at the vehicle's current health (and its schedule's ``at``: :meth:`_forget_other_at`)."""
         state = self._store.get(vehicle_id)
         options = _options(state, body.method, body.options)
         call = Call(body.v, body.u_prev, body.dt)
         key: tuple[Any, ...] = (state.id, state.version, body.method, options_key(options))
-        evaluator = self.schedules.of(state) if body.at else None
-        values = None if evaluator is None or body.at is None else at_values(evaluator, body.at)
+        evaluator, values = self._at(state, body.at)
         if values is not None:
             key = (*key, values)
             if self.allocators.lookup(key) is None:
@@ -141,8 +140,7 @@ class AllocatorPool:
     async def allocate_batch(self, vehicle_id: str, body: VehicleBatchRequest) -> StreamedAnswer:
         """Many demands at the vehicle's current health and ``at`` (:meth:`_batch`)."""
         state = self._store.get(vehicle_id)
-        evaluator = self.schedules.of(state) if body.at else None
-        values = None if evaluator is None or body.at is None else at_values(evaluator, body.at)
+        evaluator, values = self._at(state, body.at)
         return await self._batch(problem_at_values(state, evaluator, values), body.method,
                                  _options(state, body.method, body.options), body.V,
                                  {"vehicle_id": state.id, "health_version": state.version})
@@ -185,7 +183,7 @@ class AllocatorPool:
         started = 0
         seen: set[tuple[str, str]] = set()
         for key in reversed(stale):
-            if len(key) != 4:
+            if not isinstance(key, tuple) or len(key) != 4:
                 continue  # an allocator at a request's `at`: the next request at that `at` builds it
             _, _, method, okey = key
             if (method, okey) in seen or started >= PREBUILD_LIMIT:
@@ -238,6 +236,14 @@ class AllocatorPool:
             private = ("private", call.token)
             built = await self.builder.outcome(self._start_build(private, p, method, options, call, seconds))
         return built.result if built.allocator is None else call.run(built.allocator)
+
+    def _at(self, state: VehicleState, at: dict[str, float] | None) -> tuple[Any, tuple[float, ...] | None]:
+        """The vehicle's schedule evaluator and the values of a request's ``at`` (``(None, None)``
+        when ``at`` is absent or empty); 422 naming ``at`` or ``at.<name>`` (:mod:`service.schedule`)."""
+        if not at:
+            return None, None
+        evaluator = self.schedules.of(state)
+        return evaluator, at_values(evaluator, at)
 
     def _forget_other_at(self, key: tuple[Any, ...]) -> None:
         """Drop the allocators cached for this vehicle, method and options at another ``at``.
