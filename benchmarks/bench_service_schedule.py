@@ -88,12 +88,12 @@ def main(argv: list[str] | None = None) -> None:
                 assert client.post(url, json={"v": V, "method": method, "at": points[0]}).status_code == 200
 
             def built(x, method=method):
-                return alloc.make_allocator(problem_at(state, x), method)
+                return alloc.make_allocator(problem_at(x), method)
 
             nominal(points[0])  # the cached allocator, built once
             scheduled(points[0])
             allocator = built(points[0])
-            times = medians_us([nominal, scheduled, held, lambda x: problem_at(state, x), built,
+            times = medians_us([nominal, scheduled, held, lambda x: problem_at(x), built,
                                 lambda x, a=allocator: a(V)], points, args.repeat)
             print(f"{method:8} {times[0]:9.0f} {times[1]:9.0f} {times[2]:9.0f} {times[3]:11.1f} {times[4]:9.0f} "
                   f"{times[5]:9.1f}")
