@@ -4,7 +4,9 @@ An allocation is one hand-off: the route gives the pool its vehicle id and valid
 (:meth:`AllocatorPool.allocate`); the pool reads the vehicle's committed state from the
 repository (:meth:`service.store.VehicleStore.get`, its version from the database now),
 applies the vehicle's method defaults under the request's options, and answers from the
-allocator cached under ``(vehicle, health_version, method, options)``, built if missing.
+allocator cached under ``(vehicle, health_version, method, options)``, built if missing; at a
+scheduled vehicle's ``at``, under the same key and the variables' values, one such per vehicle,
+method and options (:meth:`AllocatorPool._forget_other_at`).
 
 Allocators are cached in a :class:`~service.allocator_cache.AllocatorCache` bounded in
 entries and in bytes (measured by :func:`service.cost.estimate_bytes`); inline problems
@@ -58,6 +60,7 @@ from .builds import (
 from .cost import answer_bytes, is_costly, is_costly_batch
 from .errors import ServiceError
 from .responses import AnswerBudget, StreamedAnswer, allocation_response
+from .schedule import Schedules, at_values, problem_at_values
 from .schemas import (
     AllocateRequest,
     AmsOut,
@@ -112,6 +115,7 @@ class AllocatorPool:
         self.build_budget = build_budget
         self.batch_budget, self.max_answer_bytes = batch_budget, max_answer_bytes
         self.answers = AnswerBudget(answer_bytes_in_flight)
+        self.schedules = Schedules(store.document)
         store.subscribe(self._vehicle_changed)
 
     def close(self) -> None:
@@ -119,18 +123,26 @@ class AllocatorPool:
 
     # ------------------------------------------------------------ requests
     async def allocate(self, vehicle_id: str, body: VehicleAllocateRequest) -> Response:
-        """One demand at the vehicle's current health."""
+        """One demand at the vehicle's current health (and its schedule's ``at``: :meth:`_forget_other_at`)."""
         state = self._store.get(vehicle_id)
         options = _options(state, body.method, body.options)
-        key = (state.id, state.version, body.method, options_key(options))
-        result = await self._answer(key, lambda: state.problem, body.method, options,
-                                    Call(body.v, body.u_prev, body.dt))
+        call = Call(body.v, body.u_prev, body.dt)
+        key: tuple[Any, ...] = (state.id, state.version, body.method, options_key(options))
+        evaluator, values = self._at(state, body.at)
+        if values is not None:
+            key = (*key, values)
+            if self.allocators.lookup(key) is None:
+                self._forget_other_at(key)
+        result = await self._answer(key, lambda: problem_at_values(state, evaluator, values), body.method, options,
+                                    call)
         return allocation_response(result, vehicle_id=state.id, health_version=state.version)
 
     async def allocate_batch(self, vehicle_id: str, body: VehicleBatchRequest) -> StreamedAnswer:
-        """Many demands at the vehicle's current health (:meth:`_batch`)."""
+        """Many demands at the vehicle's current health and ``at`` (:meth:`_batch`)."""
         state = self._store.get(vehicle_id)
-        return await self._batch(state.problem, body.method, _options(state, body.method, body.options), body.V,
+        evaluator, values = self._at(state, body.at)
+        return await self._batch(problem_at_values(state, evaluator, values), body.method,
+                                 _options(state, body.method, body.options), body.V,
                                  {"vehicle_id": state.id, "health_version": state.version})
 
     async def allocate_inline(self, body: AllocateRequest) -> Response:
@@ -159,6 +171,7 @@ class AllocatorPool:
         """The repository's news: a new health (rebuild) or the vehicle gone (drop its allocators)."""
         if state is None:
             self.allocators.drop(self.allocators.keys_where(lambda k: k[0] == vehicle_id))
+            self.schedules.forget(vehicle_id)
         else:
             self.rebuild_after_event(state)
 
@@ -170,6 +183,8 @@ class AllocatorPool:
         started = 0
         seen: set[tuple[str, str]] = set()
         for key in reversed(stale):
+            if not isinstance(key, tuple) or len(key) != 4:
+                continue  # an allocator at a request's `at`: the next request at that `at` builds it
             _, _, method, okey = key
             if (method, okey) in seen or started >= PREBUILD_LIMIT:
                 continue
@@ -221,6 +236,28 @@ class AllocatorPool:
             private = ("private", call.token)
             built = await self.builder.outcome(self._start_build(private, p, method, options, call, seconds))
         return built.result if built.allocator is None else call.run(built.allocator)
+
+    def _at(self, state: VehicleState, at: dict[str, float] | None) -> tuple[Any, tuple[float, ...] | None]:
+        """The vehicle's schedule evaluator and the values of a request's ``at`` (``(None, None)``
+        when ``at`` is absent or empty); 422 naming ``at`` or ``at.<name>`` (:mod:`service.schedule`)."""
+        if not at:
+            return None, None
+        evaluator = self.schedules.of(state)
+        return evaluator, at_values(evaluator, at)
+
+    def _forget_other_at(self, key: tuple[Any, ...]) -> None:
+        """Drop the allocators cached for this vehicle, method and options at another ``at``.
+
+        No method of the library follows a new ``B`` without a build (none declares it), so an
+        allocation at ``at`` is answered by an allocator built for those values, priced as any
+        build.  One is kept per vehicle, method and options (the last ``at`` built: a vehicle
+        holding its tilt reuses it), not one per ``at``, which would fill the cache with values
+        a flight never asks again and evict the allocators other vehicles use.  An allocator is
+        keyed by its own values, so concurrent requests at different ``at`` never share one.
+        """
+        stem = key[:4]
+        self.allocators.drop(self.allocators.keys_where(
+            lambda k: isinstance(k, tuple) and len(k) == 5 and k[:4] == stem and k[4] != key[4]))
 
     async def _batch(self, problem: alloc.Problem, method: str, options: dict[str, Any], V: Any,
                      extra: dict[str, Any]) -> StreamedAnswer:

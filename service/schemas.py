@@ -172,15 +172,29 @@ class BatchAllocateRequest(ProblemIn, _Batch):
     model_config = _examples({**_EXAMPLE_PROBLEM, "V": [[1.2, 0.3], [0.5, 0.0]], "method": "pinv"})
 
 
-class VehicleAllocateRequest(_Single):
+#: scheduling variables of one request, at most (the library's bound on a [schedule])
+MAX_SCHEDULE_VARIABLES = 8
+ScheduleName = Annotated[str, Field(min_length=1, max_length=64)]
+
+
+class _Scheduled(_In):
+    at: Annotated[dict[ScheduleName, Finite], Field(max_length=MAX_SCHEDULE_VARIABLES)] | None = Field(
+        default=None, examples=[{"tilt": 45.0, "airspeed": 12.0}],
+        description="a scheduled vehicle's variables by name (its document's [schedule]: tilt, airspeed), "
+                    "each within its declared range; those not given take their nominal values; absent or {}: "
+                    "the vehicle's nominal effectiveness")
+
+
+class VehicleAllocateRequest(_Single, _Scheduled):
     """``POST /v1/vehicles/{id}/allocate``: one demand against the vehicle's current health."""
 
     model_config = _examples({"v": [1.2, 0.3], "method": "qp"},
-                             {"v": [1.2, 0.3], "method": "qp", "u_prev": [0.0, 0.0, 0.0], "dt": 0.01})
+                             {"v": [1.2, 0.3], "method": "qp", "u_prev": [0.0, 0.0, 0.0], "dt": 0.01},
+                             {"v": [0.1, 0.0, 0.0, -20.0], "method": "qp", "at": {"tilt": 45.0, "airspeed": 12.0}})
 
 
-class VehicleBatchRequest(_Batch):
-    """``POST /v1/vehicles/{id}/allocate/batch``."""
+class VehicleBatchRequest(_Batch, _Scheduled):
+    """``POST /v1/vehicles/{id}/allocate/batch``: every row at the same ``at``."""
 
 
 Status = Literal["exact", "unattainable", "fallback"]

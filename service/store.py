@@ -49,7 +49,7 @@ from . import timing
 from .db import EventRow, VehicleRow, utcnow
 from .errors import Conflict, NotFound
 from .idempotency import Answer, Idempotency, remember_answer, replay_answer
-from .health import apply_event, dump_health, to_problem
+from .health import apply_event, dump_health
 from .schemas import EventIn, VehicleCreate
 from .vehicle_state import StateCache, VehicleState, VersionProbe, state_from_row
 
@@ -267,8 +267,7 @@ class VehicleStore:
                 db.execute(insert(_EVENTS).values(vehicle_id=ev.vehicle_id, seq=ev.seq, effector=ev.effector,
                                                    kind=ev.kind, params=ev.params, note=ev.note,
                                                    recorded_at=ev.recorded_at))
-                new = VehicleState(old.id, old.name, old.created_at, old.nominal, health, version,
-                                   to_problem(old.nominal, health), old.defaults)
+                new = old.with_health(health, version)
                 answer = Answer(201, render(ev, new, old.version), new)
                 remember_answer(session, once, answer.status, answer.body, self.idempotency_ttl_s)
                 try:

@@ -50,7 +50,7 @@ from alloc.health import apply_event as apply_health_event
 
 from .db import EventRow, ProposalRow, TelemetryRow, VehicleRow, utcnow
 from .errors import Conflict, InvalidRequest, NotFound, TooManyRequests, field_error
-from .health import dump_health, to_problem
+from .health import dump_health
 from .store import VehicleStore
 from .telemetry import (
     BatchOutcome, DetectorSettings, Policy, Samples, batch_seconds, belief, detection_out, event_of,
@@ -152,8 +152,7 @@ def append_events(db: Any, vehicle: VehicleState, events: list[tuple[FailureEven
     if done.rowcount != 1:
         return None
     db.execute(insert(_EVENTS), rows)
-    return (VehicleState(vehicle.id, vehicle.name, vehicle.created_at, vehicle.nominal, health, version,
-                         to_problem(vehicle.nominal, health), vehicle.defaults), rows)
+    return vehicle.with_health(health, version), rows
 
 
 class TelemetryStore:

@@ -31,11 +31,15 @@ from alloc.vehicle_file import FORMAT, Vehicle, to_toml, vehicle_from_dict, vehi
 from .errors import ServiceError, field_error
 from .schemas import MAX_MEMBERS, VehicleCreate
 
-__all__ = ["TOML_MEDIA_TYPE", "VehicleDocumentIn", "VehicleBody", "vehicle_create", "document_of",
+__all__ = ["TOML_MEDIA_TYPE", "IMPORT_MEDIA_TYPES",
+           "VehicleDocumentIn", "VehicleBody", "vehicle_create", "document_of",
            "require_vehicle_media_type", "document_pointer", "InvalidVehicleDocument", "UnsupportedMediaType"]
 
 #: the media type of a vehicle file in TOML (RFC 9618 registers ``application/toml``)
 TOML_MEDIA_TYPE = "application/toml"
+#: the media types of a flight stack's file (:mod:`service.vehicle_import`): ``text/csv`` is an
+#: ArduPilot factor table (RFC 4180), ``text/plain`` a parameter or airframe file named by ``?import=``
+IMPORT_MEDIA_TYPES = ("text/csv", "text/plain")
 
 
 class InvalidVehicleDocument(ServiceError, status=422, slug="invalid-vehicle-document",
@@ -103,15 +107,18 @@ VehicleBody = Annotated[Annotated[VehicleCreate, Tag("problem")] | Annotated[Veh
 
 
 def require_vehicle_media_type(request: Request) -> None:
-    """JSON (``application/json``, ``+json``) or ``application/toml``; anything else is a 415."""
+    """JSON (``application/json``, ``+json``), ``application/toml``, or a flight stack's file
+    (``text/csv``, ``text/plain``: :mod:`service.vehicle_import`); anything else is a 415 naming them."""
     value = request.headers.get("content-type")
     if value is None:
         return  # FastAPI's own answer (a body without a type is not read as JSON)
     media = value.split(";", 1)[0].strip().lower()
-    if media == "application/json" or media.endswith("+json") or media == TOML_MEDIA_TYPE:
+    if media == "application/json" or media.endswith("+json") or media in (TOML_MEDIA_TYPE, *IMPORT_MEDIA_TYPES):
         return
-    raise UnsupportedMediaType(f"content-type {media!r}: send the vehicle as application/json (an effector "
-                               f"suite or a vehicle document) or as {TOML_MEDIA_TYPE} (a vehicle file)",
+    raise UnsupportedMediaType(f"content-type {media[:60]!r}: send the vehicle as application/json (an effector "
+                               f"suite or a vehicle document), as {TOML_MEDIA_TYPE} (a vehicle file), as text/csv "
+                               "(an ArduPilot factor table) or as text/plain with ?import=ardupilot-params, "
+                               "px4-params or px4-airframe (a flight stack's parameter or airframe file)",
                                [{"loc": ["header", "content-type"], "pointer": None, "reason": "unsupported"}])
 
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 import sqlite3
 import threading
 from collections import OrderedDict
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import datetime
 from typing import Any
 
@@ -39,6 +39,13 @@ class VehicleState:
     # method -> options: the vehicle document's [methods.<method>] defaults (daisy groups, gang
     # matrix, priorities), applied under a request's own options as `alloc allocate --vehicle` does
     defaults: dict[str, dict[str, Any]]
+    # whether the document declares a [schedule] (B a function of named variables); the
+    # evaluators are held apart, in service.schedule.Schedules, bounded on their own
+    scheduled: bool = False
+
+    def with_health(self, health: Health, version: int) -> VehicleState:
+        """This vehicle at a new health and version (everything read from its document kept)."""
+        return replace(self, health=health, version=version, problem=to_problem(self.nominal, health))
 
 
 def problem_from_dict(d: dict[str, Any]) -> alloc.Problem:
@@ -53,19 +60,26 @@ def problem_from_dict(d: dict[str, Any]) -> alloc.Problem:
 def method_defaults(document: dict[str, Any] | None) -> dict[str, dict[str, Any]]:
     """The per-method defaults of a stored vehicle document (read by the library's reader: the
     document was validated by it when the vehicle was created); ``{}`` for an effector suite."""
+    return document_parts(document)[0]
+
+
+def document_parts(document: dict[str, Any] | None) -> tuple[dict[str, dict[str, Any]], bool]:
+    """A stored document's per-method defaults and whether it declares a ``[schedule]``, the
+    document read once; ``({}, False)`` for an effector suite."""
     if document is None:
-        return {}
+        return {}, False
     from alloc.vehicle_file.vehicle import vehicle_from_dict
 
     vehicle = vehicle_from_dict(document)
-    return {method: vehicle.method_options(method) for method in vehicle.methods}
+    return {method: vehicle.method_options(method) for method in vehicle.methods}, vehicle.schedule is not None
 
 
 def state_from_row(row: VehicleRow, nominal: alloc.Problem | None = None) -> VehicleState:
     nominal = nominal or problem_from_dict(row.problem)
     health = load_health(row.health)
+    defaults, scheduled = document_parts(row.problem.get("document"))
     return VehicleState(row.id, row.name, row.created_at, nominal, health, row.health_version,
-                        to_problem(nominal, health), method_defaults(row.problem.get("document")))
+                        to_problem(nominal, health), defaults, scheduled)
 
 
 class StateCache:

@@ -55,8 +55,8 @@ from ..vehicle_file.vehicle import Vehicle, vehicle_from_dict
 from .ardupilot_frames import FRAME_CLASSES, FRAME_TYPES, TABLES, Y6_DEFAULT, Motor, frame_name
 
 __all__ = ["FRAMES", "YAW_CW", "YAW_CCW", "frame_factors", "normalise_rpy_factors", "read_factor_table",
-           "vehicle_from_factors", "vehicle_from_frame", "read_ardupilot_params", "vehicle_from_ardupilot_params",
-           "frame_of_params"]
+           "factor_table_from_text", "vehicle_from_factors", "vehicle_from_frame", "read_ardupilot_params",
+           "ardupilot_params_from_text", "vehicle_from_ardupilot_params", "frame_of_params"]
 
 YAW_CW = -1.0  # AP_MOTORS_MATRIX_YAW_FACTOR_CW
 YAW_CCW = 1.0  # AP_MOTORS_MATRIX_YAW_FACTOR_CCW
@@ -112,16 +112,26 @@ def read_factor_table(source: str | Path) -> tuple[list[str], np.ndarray]:
         text = read_user_text(path, field="path", max_bytes=MAX_TOML_BYTES if toml else MAX_TEXT_BYTES)
         label = path.name
     elif isinstance(source, str):
-        text = source
-        toml = "[[motors]]" in text
-        cap = MAX_TOML_BYTES if toml else MAX_TEXT_BYTES
-        if len(text) > cap:
-            raise ProblemError(f"factors: the text is {len(text)} characters, more than the {cap} allowed",
-                               field="factors")
-        label = "the table"
+        return factor_table_from_text(source, toml="[[motors]]" in source)
     else:
         raise ProblemError(f"factors: expected a path or the table's text, got {type(source).__name__}",
                            field="factors")
+    return _factor_rows(text, toml, label)
+
+
+def factor_table_from_text(text: str, *, toml: bool = False, label: str = "the table") -> tuple[list[str], np.ndarray]:
+    """:func:`read_factor_table` of a text, CSV (or TOML with ``toml``) whatever it contains: never
+    read as a path (the service hands it a request body), held to the same length."""
+    cap = MAX_TOML_BYTES if toml else MAX_TEXT_BYTES
+    if not isinstance(text, str):
+        raise ProblemError(f"factors: expected the table's text, got {type(text).__name__}", field="factors")
+    if len(text) > cap:
+        raise ProblemError(f"factors: the text is {len(text)} characters, more than the {cap} allowed",
+                           field="factors")
+    return _factor_rows(text, toml, label)
+
+
+def _factor_rows(text: str, toml: bool, label: str) -> tuple[list[str], np.ndarray]:
     rows, where = _toml_rows(text, label) if toml else _csv_rows(text)
     names, table = [], []
     first_row: dict[str, int] = {}
@@ -322,6 +332,13 @@ def read_ardupilot_params(source: str | Path) -> dict[str, float | int]:
     """
     text = params_text(source, is_path=isinstance(source, str) and "\n" not in source
                        and source.lower().endswith((".param", ".parm")))
+    return ardupilot_params_from_text(text)
+
+
+def ardupilot_params_from_text(text: str) -> dict[str, float | int]:
+    """:func:`read_ardupilot_params` of a text, never read as a path (the service hands it a request
+    body), held to :data:`~alloc._files.MAX_TEXT_BYTES`."""
+    text = params_text(text, is_path=False)
     out: dict[str, float | int] = {}
     first: dict[str, int] = {}
     for n, raw in enumerate(text.splitlines(), start=1):

@@ -93,7 +93,8 @@ from .vehicle import Vehicle, vehicle_from_dict, vehicle_from_problem
 __all__ = [
     "FORMAT", "FORMAT_SIMULATION", "FORMAT_SCHEDULE", "FORMATS", "Schedule", "ScheduledEffectiveness", "SCHEMA_PATH", "Simulation", "DATA_DIR", "EFFECTOR_KINDS", "WRENCH_COMPONENTS",
     "Body", "Dynamics", "Rotor", "Effector", "Axis", "LinearModel", "Vehicle",
-    "load_vehicle", "vehicle_from_dict", "vehicle_from_problem", "vehicle_names", "rotor_wrench", "to_toml",
+    "load_vehicle", "import_vehicle_text", "IMPORT_FORMATS",
+    "vehicle_from_dict", "vehicle_from_problem", "vehicle_names", "rotor_wrench", "to_toml",
 ]
 
 
@@ -156,30 +157,81 @@ _KNOWN_FILES = (".toml or .json vehicle files, PX4 .params or airframe files (RO
                 "an extension), ArduPilot .csv factor tables or .param/.parm parameter files")
 
 
-def _import_vehicle(path: Path, suffix: str) -> Vehicle:
-    """A vehicle from a flight stack's file: by extension, else (an airframe's name, ``13000_my_quadplane``,
-    ``1103_standard_vtol_sih.hil``) by its text.  Skipped shell lines are listed in a
-    :class:`~alloc.exceptions.SkippedLinesWarning` and in the vehicle's ``source``."""
-    if suffix == ".csv":
-        from ..importers.ardupilot import read_factor_table, vehicle_from_factors
+#: the flight-stack files :func:`import_vehicle_text` reads, by name: an ArduPilot motor factor table
+#: (CSV), an ArduPilot parameter file (``.param``/``.parm``), a QGroundControl ``.params`` file, a
+#: PX4 airframe file as PX4 ships it
+IMPORT_FORMATS = ("ardupilot-csv", "ardupilot-params", "px4-params", "px4-airframe")
 
-        names, factors = read_factor_table(path)
-        return vehicle_from_factors(factors, names, name=path.stem)
-    if suffix in (".param", ".parm"):
-        from ..importers.ardupilot import read_ardupilot_params, vehicle_from_ardupilot_params
 
-        return vehicle_from_ardupilot_params(read_ardupilot_params(path), name=path.stem)
+def import_vehicle_text(text: str, form: str, *, name: str | None = None, label: str = "the text") -> Vehicle:
+    """A vehicle from the text of a flight stack's file, read as ``form`` (one of
+    :data:`IMPORT_FORMATS`), never as a path: what :func:`load_vehicle` does with such a file's
+    content (the service hands it a request body).  ``name`` is the vehicle's name (default the
+    importer's); ``label`` names the text in :attr:`Vehicle.source`.
+
+    The text is held to :data:`~alloc._files.MAX_TEXT_BYTES`, as a file is.  Shell lines a PX4
+    airframe file has (``. ${R}etc/init.d/rc.vtol_defaults``) are skipped and listed in the
+    vehicle's ``source``; no warning is issued (:func:`load_vehicle` issues one for a file).
+
+    Raises
+    ------
+    ProblemError
+        naming the line or the parameter (``params: line 4: ...``, ``FRAME_CLASS: ...``,
+        ``factors: row 3: ...``), ``format`` for an unknown ``form``.
+    """
+    return _imported(text, form, name, label)[0]
+
+
+def _imported(text: str, form: str, name: str | None, label: str) -> tuple[Vehicle, str]:
+    """:func:`import_vehicle_text` and the summary of the lines it skipped (``""``: none)."""
+    named = {} if name is None else {"name": name}
+    if form == "ardupilot-csv":
+        from ..importers.ardupilot import factor_table_from_text, vehicle_from_factors
+
+        names, factors = factor_table_from_text(text, label=label)
+        return vehicle_from_factors(factors, names, **named), ""
+    if form == "ardupilot-params":
+        from ..importers.ardupilot import ardupilot_params_from_text, vehicle_from_ardupilot_params
+
+        return vehicle_from_ardupilot_params(ardupilot_params_from_text(text), name=name), ""
+    if form not in ("px4-params", "px4-airframe"):
+        raise ProblemError(f"format: unknown {form[:40]!r}; flight-stack files are read as one of "
+                           f"{', '.join(IMPORT_FORMATS)}", field="format")
+    from .._files import params_text
     from ..importers.px4 import looks_like_airframe, params_from_text, vehicle_from_params
 
-    text = read_user_text(path, field="path", max_bytes=MAX_TEXT_BYTES)
-    if suffix != ".params" and not looks_like_airframe(text):
-        what = f"unknown extension {path.suffix!r}" if suffix else f"{path.name} has no extension"
-        raise ProblemError(f"path: {what} and is not a PX4 airframe file (no '#!' first line, no 'param set-default' "
-                           f"lines); vehicles are read from {_KNOWN_FILES}", field="path")
+    text = params_text(text, is_path=False)
+    if form == "px4-airframe" and not looks_like_airframe(text):
+        raise ProblemError(f"params: {label} is not a PX4 airframe file (no '#!' first line, no 'param set-default' "
+                           "lines)", field="params")
     read = params_from_text(text)
-    vehicle = vehicle_from_params(read.params, name=path.stem)
+    vehicle = vehicle_from_params(read.params, **named)
     summary = read.skipped_summary()
-    if not summary:
-        return vehicle
-    warnings.warn(f"{path.name}: {summary}", SkippedLinesWarning, stacklevel=3)
-    return replace(vehicle, source=f"{vehicle.source}; PX4 airframe file {path.name}: {summary}")
+    if summary:
+        vehicle = replace(vehicle, source=f"{vehicle.source}; PX4 airframe file {label}: {summary}")
+    return vehicle, summary
+
+
+def _import_vehicle(path: Path, suffix: str) -> Vehicle:
+    """A vehicle from a flight stack's file: by extension, else (an airframe's name, ``13000_my_quadplane``,
+    ``1103_standard_vtol_sih.hil``) by its text (:func:`import_vehicle_text`).  Skipped shell lines are
+    listed in a :class:`~alloc.exceptions.SkippedLinesWarning` and in the vehicle's ``source``."""
+    text = read_user_text(path, field="path", max_bytes=MAX_TEXT_BYTES)
+    if suffix == ".csv":
+        form = "ardupilot-csv"
+    elif suffix in (".param", ".parm"):
+        form = "ardupilot-params"
+    elif suffix == ".params":
+        form = "px4-params"
+    else:
+        from ..importers.px4 import looks_like_airframe
+
+        if not looks_like_airframe(text):
+            what = f"unknown extension {path.suffix!r}" if suffix else f"{path.name} has no extension"
+            raise ProblemError(f"path: {what} and is not a PX4 airframe file (no '#!' first line, no 'param "
+                               f"set-default' lines); vehicles are read from {_KNOWN_FILES}", field="path")
+        form = "px4-airframe"
+    vehicle, summary = _imported(text, form, path.stem, path.name)
+    if summary:
+        warnings.warn(f"{path.name}: {summary}", SkippedLinesWarning, stacklevel=3)
+    return vehicle

@@ -28,8 +28,8 @@ The effectiveness at ``x`` is::
     B(x) = B + sum_t (f_t(x) - f_t(nominal)) B_t
 
 with ``B`` the file's own effectiveness, which is therefore the effectiveness at the nominal
-values: every tool that knows nothing of schedules (the service, the simulator, ``problem()``)
-sees the vehicle at its nominal point.  Angles are read in the variable's unit: ``deg`` means
+values: every tool that knows nothing of schedules (the simulator, ``problem()``) sees the
+vehicle at its nominal point; the service evaluates ``B`` at a request's ``at``.  Angles are read in the variable's unit: ``deg`` means
 degrees, anything else radians.  Every term is linear in its ``B_t``, so a rotor whose axis
 turns, ``a(t) = sin(t) h + cos(t) v``, is two terms: PX4's rotor column is linear in the axis
 (:func:`alloc.vehicle_file.rotor_wrench`).

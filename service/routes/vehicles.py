@@ -11,6 +11,7 @@ from typing import Annotated
 import json
 
 from fastapi import APIRouter, Depends, Path, Query, Request, Response, status
+from pydantic import BaseModel
 
 from ..bodies import JsonRoute
 from ..db import EventRow
@@ -25,6 +26,7 @@ from ..schemas import (
 from ..vehicle_document import (TOML_MEDIA_TYPE, VehicleBody, VehicleDocumentIn, document_of,
                                 require_vehicle_media_type, toml_text, vehicle_create)
 from ..store import Answer, VehicleState
+from ..vehicle_import import ImportFormat, check_import_query, imported_vehicle, media_type
 
 router = APIRouter(prefix="/v1/vehicles", tags=["vehicles"], responses={**PROBLEM_RESPONSES, **NOT_FOUND},
                    route_class=JsonRoute)
@@ -50,15 +52,41 @@ def _event_out(e: EventRow) -> EventOut:
 
 @router.post("", response_model=VehicleOut, status_code=status.HTTP_201_CREATED,
              dependencies=[*WriteAccess, Depends(require_vehicle_media_type)],
-             responses={**UNAUTHORIZED, 415: {"description": "neither JSON nor a TOML vehicle file"}},
-             summary="Create a vehicle (an effector suite, or a vehicle document: JSON or TOML)",
-             openapi_extra={"requestBody": {"content": {TOML_MEDIA_TYPE: {"schema": {
-                 "type": "string", "description": "a vehicle file (alloc-vehicle/1), as alloc.load_vehicle reads it"}}}}})
+             responses={**UNAUTHORIZED, 415: {"description": "not JSON, a TOML vehicle file or a flight stack's file"}},
+             summary="Create a vehicle (an effector suite, a vehicle document: JSON or TOML, or a flight stack's file)",
+             description="The body is an effector suite or a vehicle document (JSON), a vehicle file "
+                         f"({TOML_MEDIA_TYPE}), or a flight stack's file read by the library's importers: an "
+                         "ArduPilot motor factor table (text/csv), or as text/plain an ArduPilot parameter file "
+                         "(?import=ardupilot-params: FRAME_CLASS, FRAME_TYPE), a QGroundControl .params file "
+                         "(?import=px4-params) or a PX4 airframe file as PX4 ships it (?import=px4-airframe); "
+                         "?name= names an imported vehicle.",
+             openapi_extra={"requestBody": {"content": {
+                 TOML_MEDIA_TYPE: {"schema": {"type": "string", "description": "a vehicle file (alloc-vehicle/1), "
+                                              "as alloc.load_vehicle reads it"}},
+                 "text/csv": {"schema": {"type": "string", "description": "an ArduPilot motor factor table: header "
+                                         "motor,roll,pitch,yaw[,throttle], one motor a row"}},
+                 "text/plain": {"schema": {"type": "string", "description": "an ArduPilot .param/.parm file, a "
+                                           "QGroundControl .params file or a PX4 airframe file, named by ?import="}},
+             }}})
 def create_vehicle(body: VehicleBody, store: StoreDep, request: Request,
-                   idempotency_key: IdempotencyKey = None) -> Response:
-    suite = vehicle_create(body)[0] if isinstance(body, VehicleDocumentIn) else body
-    # the fingerprint is the body as sent (suite or document), once it is known to be valid
-    once = idempotency(request, idempotency_key, body)
+                   idempotency_key: IdempotencyKey = None,
+                   import_format: Annotated[ImportFormat | None, Query(
+                       alias="import", description="how to read a text/plain (or text/csv) body: a flight stack's "
+                       "file")] = None,
+                   name: Annotated[str | None, Query(min_length=1, max_length=64, pattern=r"^[^\x00-\x1f\x7f]*$",
+                                                     description="the name of an imported vehicle (default the "
+                                                     "importer's)")] = None) -> Response:
+    media, charset = media_type(request.headers.get("content-type"))
+    form = check_import_query(media, None if import_format is None else import_format.value, name)
+    fingerprinted: BaseModel = body
+    if form is not None and isinstance(body, VehicleDocumentIn) and isinstance(body.root, bytes):
+        suite, _, fingerprinted = imported_vehicle(body.root, form, name, charset)
+    elif isinstance(body, VehicleDocumentIn):
+        suite = vehicle_create(body)[0]
+    else:
+        suite = body
+    # the fingerprint is the body as sent (suite, document or file), once it is known to be valid
+    once = idempotency(request, idempotency_key, fingerprinted)
     answer = store.create_once(suite, once, lambda state: _vehicle_out(state).model_dump_json().encode())
     location = f"/v1/vehicles/{json.loads(answer.body)['id']}"
     return _answer(answer, Location=location)
