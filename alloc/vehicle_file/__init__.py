@@ -184,7 +184,7 @@ def import_vehicle_text(text: str, form: str, *, name: str | None = None, label:
 
 def _imported(text: str, form: str, name: str | None, label: str) -> tuple[Vehicle, str]:
     """:func:`import_vehicle_text` and the summary of the lines it skipped (``""``: none)."""
-    named = {} if name is None else {"name": name}
+    named: dict[str, Any] = {} if name is None else {"name": name}
     if form == "ardupilot-csv":
         from ..importers.ardupilot import factor_table_from_text, vehicle_from_factors
 
