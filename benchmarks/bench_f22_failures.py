@@ -106,12 +106,10 @@ def markdown(rows: list[dict[str, Any]]) -> str:
 
 def plot(results: dict[tuple[str, str, str], Any], path: Path) -> None:
     """q command, reference and output per failure, one line per allocation."""
-    import matplotlib
+    from matplotlib.figure import Figure  # a bare figure renders headless; no backend chosen
 
-    matplotlib.use("Agg")  # a script's choice; the library never chooses a backend
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(len(FAILURES), 1, figsize=(10, 3.6 * len(FAILURES)), sharex=True, squeeze=False)
+    fig = Figure(figsize=(10, 3.6 * len(FAILURES)))
+    axes = fig.subplots(len(FAILURES), 1, sharex=True, squeeze=False)
     for k, failure in enumerate(FAILURES):
         ax = axes[k, 0]
         for (f, method, health), r in results.items():
@@ -130,7 +128,6 @@ def plot(results: dict[tuple[str, str, str], Any], path: Path) -> None:
     axes[-1, 0].set_xlabel("time (s)")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def main() -> None:

@@ -129,13 +129,11 @@ def table(rows: list[dict[str, Any]]) -> str:
 
 def plot(results: dict[str, Any], path: Path) -> None:
     """Roll error, altitude and heading of the 5 m/s moderate-wind runs, one column per vehicle."""
-    import matplotlib
-
-    matplotlib.use("Agg")  # a script's choice; the library never chooses a backend
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure  # a bare figure renders headless; no backend chosen
 
     vehicles = sorted({k[0] for k in results})
-    fig, axes = plt.subplots(3, len(vehicles), figsize=(6 * len(vehicles), 8), sharex=True, squeeze=False)
+    fig = Figure(figsize=(6 * len(vehicles), 8))
+    axes = fig.subplots(3, len(vehicles), sharex=True, squeeze=False)
     for j, name in enumerate(vehicles):
         for (veh, speed, turb, method, health), r in results.items():
             if veh != name or speed != 5.0 or turb != "moderate":
@@ -156,7 +154,6 @@ def plot(results: dict[str, Any], path: Path) -> None:
             ax.grid(alpha=0.3)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def main() -> None:
