@@ -25,7 +25,7 @@ $(STAMP): pyproject.toml
 # (about 2-3 min of CPU; afterwards it only loads them, a few seconds).  The library's kernels,
 # then the simulator's (the library knows nothing of it): a first `alloc sim` compiles nothing.
 install: $(STAMP)
-	$(BIN)/python -m alloc._jit_warm warm $(WARM_OUTPUT)
+	$(BIN)/python -m alloc._engine._jit_warm warm $(WARM_OUTPUT)
 	$(BIN)/python -m sim.warm $(if $(QUIET),--quiet)
 
 # ruff (about a second) and mypy (its cache in .mypy_cache: a few seconds warm, a minute or two

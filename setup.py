@@ -1,8 +1,8 @@
-"""Build steps that pyproject.toml cannot declare: the one C extension, ``alloc._fastcall`` (the
-allocator's call path; see alloc/_fastcall.c), and the numba kernels compiled into the build tree.
+"""Build steps that pyproject.toml cannot declare: the one C extension, ``alloc._engine._fastcall`` (the
+allocator's call path; see alloc/_engine/_fastcall.c), and the numba kernels compiled into the build tree.
 
 The extension is optional: where it cannot be built, ``alloc`` runs the same call path in Python
-(``alloc.api.has_c_call_path()``).  The kernels: after the build, :func:`alloc._jit_warm.warm` runs on
+(``alloc.api.has_c_call_path()``).  The kernels: after the build, :func:`alloc._engine._jit_warm.warm` runs on
 the built tree, so a wheel (and ``pip install .``) carries every kernel compiled for the build
 machine's CPU, numba and Python in the packages' ``__pycache__``; the first allocation after the
 install loads them instead of compiling for about a minute.  ``ALLOC_BUILD_KERNELS=0`` skips it
@@ -22,7 +22,7 @@ try:
 except ImportError:  # pragma: no cover - numpy is a build requirement
     ext_modules = []
 else:
-    ext_modules = [Extension("alloc._fastcall", ["alloc/_fastcall.c"], include_dirs=[numpy.get_include()],
+    ext_modules = [Extension("alloc._engine._fastcall", ["alloc/_engine/_fastcall.c"], include_dirs=[numpy.get_include()],
                              extra_compile_args=["-O2"], optional=True)]
 
 
@@ -39,7 +39,7 @@ class BuildWithKernels(build):
         path = [build_lib, *(p for p in sys.path if p and os.path.abspath(p) != os.path.abspath("."))]
         env = {**os.environ, "PYTHONPATH": os.pathsep.join(path), "PYTHONNOUSERSITE": "1"}
         env.pop("NUMBA_CACHE_DIR", None)
-        command = [sys.executable, "-m", "alloc._jit_warm", "warm"]
+        command = [sys.executable, "-m", "alloc._engine._jit_warm", "warm"]
         print(f"compiling the numba kernels into {build_lib} (about a minute per method family)", flush=True)
         done = subprocess.run(command, cwd=build_lib, env=env)
         if done.returncode != 0:  # the package still works: the kernels compile on first use

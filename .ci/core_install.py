@@ -57,8 +57,8 @@ from alloc import vehicles  # noqa: E402
 assert "site-packages" in alloc.__file__, f"not the installed package: {alloc.__file__}"
 from alloc.api import has_c_call_path  # noqa: E402
 
-# the C call path (alloc/_fastcall.c) is optional in general, but this machine has a compiler
-assert has_c_call_path(), "alloc._fastcall was not built by `pip install .`"
+# the C call path (alloc/_engine/_fastcall.c) is optional in general, but this machine has a compiler
+assert has_c_call_path(), "alloc._engine._fastcall was not built by `pip install .`"
 p = vehicles.problem("ice")
 v = np.array([2.0, 30.0, 0.5])  # attainable: the README's example demand
 for method in alloc.methods():
@@ -70,7 +70,7 @@ for method in alloc.methods():
     assert meets == (r.status.value == "exact"), (method, r.status, p.B @ r.u)
     if method in ("qp", "lp", "da", "da_facet", "cgi"):  # optimal or boundary methods reach it
         assert meets, (method, p.B @ r.u)
-from alloc import _jit_cache  # noqa: E402
+from alloc._engine import _jit_cache  # noqa: E402
 
 assert _jit_cache.notice.compiles == 0, f"{_jit_cache.notice.compiles} kernels compiled: the wheel lacks them"
 print(f"core install: {len(alloc.methods())} methods allocate on ICE without optional packages, "

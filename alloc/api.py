@@ -9,8 +9,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._kernels import finish_batch, finish_owned, fused_affine, owned_demand
-from ._threads import split_rows, threads_for
+from ._engine._kernels import finish_batch, finish_owned, fused_affine, owned_demand
+from ._engine._threads import split_rows, threads_for
 from .exceptions import AllocError, DemandError, MethodTypeError, ProblemTypeError, SolverError
 from .export_data import ExportData
 from .problem import MAX_MAGNITUDE, Problem, as_float_array, check_magnitude
@@ -26,7 +26,7 @@ _new_result = tuple.__new__  # Result is a tuple: built in one C call on the fas
 _STATUS = (Status.EXACT, Status.UNATTAINABLE)  # by the kernels' code
 
 class _PyCallBase:
-    """The allocator's lock where ``alloc._fastcall`` is not built: a re-entrant lock made with
+    """The allocator's lock where ``alloc._engine._fastcall`` is not built: a re-entrant lock made with
     the object (also by ``__new__`` alone, as unpickling and copying do)."""
 
     __slots__ = ("_rlock",)
@@ -43,14 +43,14 @@ class _PyCallBase:
         self._rlock.release()
 
 
-try:  # the call path in C (alloc/_fastcall.c, built at install); without it the same path in Python
-    from ._fastcall import FastCall as _CallBase
+try:  # the call path in C (alloc/_engine/_fastcall.c, built at install); without it the same path in Python
+    from ._engine._fastcall import FastCall as _CallBase
 except ImportError:  # pragma: no cover - a build without a C compiler
     _CallBase = _PyCallBase
 
 
 def has_c_call_path() -> bool:
-    """Whether an allocator's call runs in C: ``alloc._fastcall`` was built at install (it
+    """Whether an allocator's call runs in C: ``alloc._engine._fastcall`` was built at install (it
     needs a C compiler; without it the same path runs in Python, with the same answers).
     A fact of the installation, read from :class:`Allocator`'s base class; not a switch."""
     return _CallBase is not _PyCallBase
@@ -136,7 +136,7 @@ class Allocator(_CallBase):
     backend raises -- at build or at call -- becomes the safe answer of
     :class:`~alloc.methods.pseudo_inverse.SafeCommand` with status ``fallback`` and the reason.
 
-    The call is :meth:`_call_py`; where ``alloc._fastcall`` is built (:func:`has_c_call_path`), its fast
+    The call is :meth:`_call_py`; where ``alloc._engine._fastcall`` is built (:func:`has_c_call_path`), its fast
     paths run in C (the same compiled kernel with the same arguments, so the same bits) and
     every other case goes to :meth:`_call_py`.
 
@@ -146,7 +146,7 @@ class Allocator(_CallBase):
     mutable state (factorisation caches, warm starts, backend models, none of which are
     re-entrant) -- on the C path and on the Python path alike.  The one path that takes no
     lock is the fused affine kernel ``u = clip(c + P v)`` without rate limits, which only
-    reads its matrix.  Batches that run on internal threads (:mod:`alloc._threads`) hold the
+    reads its matrix.  Batches that run on internal threads (:mod:`alloc._engine._threads`) hold the
     lock in the calling thread and give each worker thread private solver state.  Different
     allocators share no mutable state and do not wait for each other.
 
@@ -179,7 +179,7 @@ class Allocator(_CallBase):
         self._lo, self._hi = problem.umin, problem.umax
         m, k = problem.m, problem.k
         self._kshape, self._mshape = (k,), (m,)
-        # the fast paths' packed output (alloc._kernels.packed_out): u, B u, v, v - B u
+        # the fast paths' packed output (alloc._engine._kernels.packed_out): u, B u, v, v - B u
         self._su, self._sa, self._sv, self._sr = (slice(0, m), slice(m, m + k), slice(m + k, m + 2 * k),
                                                   slice(m + 2 * k, m + 3 * k))
         self._zm = np.zeros(m)  # the u_prev argument of a call without rate limits (unused)
@@ -196,7 +196,7 @@ class Allocator(_CallBase):
         self._wire()
 
     def _wire(self) -> None:
-        """Hand the C call path (``alloc._fastcall``) the kernels of :meth:`_call_py`'s fast paths."""
+        """Hand the C call path (``alloc._engine._fastcall``) the kernels of :meth:`_call_py`'s fast paths."""
         if _CallBase is _PyCallBase:
             return
         k, m = self.problem.k, self.problem.m

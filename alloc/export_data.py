@@ -74,14 +74,14 @@ class ActiveSetData:
     """The compiled lexicographic least-squares active set (``wls``, ``qp``, ``dynamic``)."""
 
     kind: ClassVar[str] = "active_set"
-    #: each solver instance's packed state (:func:`alloc._active_set.pack`): one for ``qp`` and
+    #: each solver instance's packed state (:func:`alloc._engine._active_set.pack`): one for ``qp`` and
     #: ``wls``, two for ``dynamic`` (without and with ``u_prev``)
     states: tuple[tuple[np.ndarray, ...], ...]
 
 
 @dataclass(frozen=True)
 class SimplexData:
-    """The compiled lexicographic simplex (:class:`alloc._simplex.LexicographicL1`, ``lp``)."""
+    """The compiled lexicographic simplex (:class:`alloc._engine._simplex.LexicographicL1`, ``lp``)."""
 
     kind: ClassVar[str] = "simplex"
     #: the scaled tableau (k x N), its row scales (k,), the half-widths (m,), the stages' costs

@@ -164,7 +164,7 @@ class Method(ABC):
     #: allocator then runs it as one compiled call (pseudo-inverse family, ganging).
     fused: tuple[FloatArray, FloatArray] | None = None
     #: ``(kernel, state)`` when a call is one compiled call ``kernel(*state, v, u_prev, dt) -> out``
-    #: (the allocator's fast path, see :func:`alloc._active_set.lexico_call`; ``dt = 0`` without
+    #: (the allocator's fast path, see :func:`alloc._engine._active_set.lexico_call`; ``dt = 0`` without
     #: rate limits); ``packed_rate`` the same for rate-limited calls.
     packed: tuple[Any, tuple[Any, ...]] | None = None
     packed_rate: tuple[Any, tuple[Any, ...]] | None = None
@@ -184,7 +184,7 @@ class Method(ABC):
 
     def batch_finished(self, V: FloatArray) -> tuple[FloatArray, FloatArray, np.ndarray] | None:
         """``(U, B U, codes)`` for the rows of ``V`` within the position limits, each row
-        exactly what the allocator's single call returns (its :func:`alloc._kernels.finish`
+        exactly what the allocator's single call returns (its :func:`alloc._engine._kernels.finish`
         codes: 0 exact, 1 unattainable, anything else a row to redo one by one), solved and
         classified in one compiled pass; ``None`` where the method has no such pass."""
         return None

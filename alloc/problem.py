@@ -95,7 +95,7 @@ def _rate_window(*args: Any) -> tuple[np.ndarray, np.ndarray]:
     # start) would pay before anything is allocated.  The first call rebinds the name, so
     # later calls reach the kernel directly.
     global _rate_window
-    from ._kernels import rate_window
+    from ._engine._kernels import rate_window
     _rate_window = rate_window
     return rate_window(*args)
 

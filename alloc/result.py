@@ -14,7 +14,7 @@ __all__ = ["Status", "Result", "BatchResult", "EXACT_RTOL"]
 
 #: Relative tolerance of the ``exact`` status: the residual in exact arithmetic is certified
 #: within it, ``max_i (|fl(B u - v)_i| + gamma_{m+1} (|B| |u| + |v|)_i) <= EXACT_RTOL * max(1, max|v|)``
-#: (the computed residual plus its rounding bound, :func:`alloc._kernels.rounding_gamma`).
+#: (the computed residual plus its rounding bound, :func:`alloc._engine._kernels.rounding_gamma`).
 EXACT_RTOL = 1e-6
 
 

@@ -154,7 +154,7 @@ def tail_rows(p: alloc.Problem, V: np.ndarray, names: tuple[str, ...] = ("qp", "
     pass: the cache has met almost none of ``V``'s free sets), or with ``prior`` every demand
     of ``prior`` (other demands from the same distribution: a long-lived allocator meeting new
     demands)."""
-    from alloc._active_set_layout import _FACTORED, _MISC
+    from alloc._engine._active_set_layout import _FACTORED, _MISC
 
     warmup = V[:warm] if prior is None else prior
 
@@ -216,7 +216,7 @@ def batch_rows(p: alloc.Problem, n: int, repeats: int = 5) -> list[dict]:
     back to back, in one state of this machine, whose speed changes by up to 2x within a
     minute); the medians of the batch and loop times and the pairs' lowest and highest ratios
     are reported with it."""
-    from alloc._threads import ROWS_PER_THREAD, threads_for
+    from alloc._engine._threads import ROWS_PER_THREAD, threads_for
 
     V = random_sequence(p, n, seed=3)
     # the warm-up batch: the same 10 rows, repeated so that it takes the threaded path too

@@ -1,4 +1,4 @@
-"""What the allocator's lock costs on the uncontended C call path (alloc/_fastcall.c).
+"""What the allocator's lock costs on the uncontended C call path (alloc/_engine/_fastcall.c).
 
 The same allocator is wired twice, with its lock (as :class:`alloc.api.Allocator` wires it)
 and without (the kernel alone: unsafe when shared, measured here only), and the two are
@@ -51,7 +51,7 @@ def main() -> None:
     ap.add_argument("--calls", type=int, default=50)
     args = ap.parse_args()
     if not api.has_c_call_path():
-        raise SystemExit("alloc._fastcall is not built: nothing to measure")
+        raise SystemExit("alloc._engine._fastcall is not built: nothing to measure")
     p = alloc.vehicles.problem("ice")
     V = list(random_demands(np.random.default_rng(0), p, args.calls))
     print(f"{'method':<12}{'locked min':>12}{'unlocked min':>14}{'min diff':>10}{'paired median diff':>20}"

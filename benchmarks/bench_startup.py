@@ -72,7 +72,7 @@ allocator = alloc.make_allocator(p, sys.argv[1], **options)
 c2, w2 = time.process_time(), time.perf_counter()
 r = allocator(np.array([2.0, 30.0, 0.5]))
 c3, w3 = time.process_time(), time.perf_counter()
-from alloc import _jit_cache
+from alloc._engine import _jit_cache
 print(json.dumps({"status": r.status.value, "compiles": _jit_cache.notice.compiles,
                   "import_cpu": c1 - c0, "make_cpu": c2 - c1, "call_cpu": c3 - c2,
                   "import_wall": w1 - w0, "make_wall": w2 - w1, "call_wall": w3 - w2,

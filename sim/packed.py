@@ -18,7 +18,7 @@ from __future__ import annotations
 from enum import IntEnum, auto
 
 import numpy as np
-import alloc._kernel_cache  # noqa: F401 - kernel caches placed before any kernel is decorated
+import alloc._engine._kernel_cache  # noqa: F401 - kernel caches placed before any kernel is decorated
 from numba import njit
 
 from alloc.result import EXACT_RTOL

@@ -1,10 +1,10 @@
 """Compile (or load) the simulator's numba kernels, as ``make install`` does after the library's.
 
-``python -m alloc._jit_warm warm`` compiles the library's kernels; the library knows nothing of
+``python -m alloc._engine._jit_warm warm`` compiles the library's kernels; the library knows nothing of
 the simulator, so the simulator's own (``sim.packed``, ``sim.blocks``, ``sim.allocation``,
 ``sim.world``) are warmed here, by flying what a first ``alloc sim`` flies: one second of the ICE
 scenario with its default failure, and a moment of it in turbulence (the Dryden recursion).  They
-land in the same kernel cache (:mod:`alloc._jit_cache` places them).
+land in the same kernel cache (:mod:`alloc._engine._jit_cache` places them).
 
 ``python -m sim.warm [--quiet]``: one line (the seconds and kernels compiled), or nothing.
 """
@@ -19,7 +19,7 @@ __all__ = ["warm"]
 
 def warm() -> int:
     """Fly the runs above; the number of our kernels compiled (0 when the cache had them all)."""
-    from alloc._jit_cache import notice
+    from alloc._engine._jit_cache import notice
     from sim.scenarios import get_scenario
 
     before = notice.compiles
@@ -35,7 +35,7 @@ def _main(argv: list[str]) -> int:
     parser = argparse.ArgumentParser(prog="python -m sim.warm", description=__doc__.split("\n")[0])
     parser.add_argument("--quiet", action="store_true", help="print nothing")
     args = parser.parse_args(argv)
-    from alloc._jit_cache import notice
+    from alloc._engine._jit_cache import notice
 
     notice.silent = True  # this is the compile that was asked for: no per-kernel notice
     t0, c0 = time.perf_counter(), time.process_time()

@@ -49,7 +49,7 @@ from functools import cache
 from typing import Any
 
 import numpy as np
-import alloc._kernel_cache  # noqa: F401 - kernel caches placed before any kernel is decorated
+import alloc._engine._kernel_cache  # noqa: F401 - kernel caches placed before any kernel is decorated
 from numba import njit
 from scipy import linalg, signal, stats
 

@@ -78,7 +78,7 @@ def _worker(conn: Any) -> None:  # pragma: no cover - runs in a subprocess
             f(v, u_prev=np.zeros(3), dt=0.01)
             f.batch(v[None, :])
             f(v.tolist(), u_prev=[0.0, 0.1, 0.2], dt=0.01)
-    from alloc._jit_warm import warm
+    from alloc._engine._jit_warm import warm
 
     warm()  # every kernel signature an install compiles, loaded (the rest would compile in a call: a failure)
     conn.send("ready")

@@ -453,8 +453,8 @@ def test_the_core_graph_is_read_with_its_lazy_names():
     """The facade packages' lazy names (``alloc/__init__``, ``alloc/ams/__init__``) are arrows."""
     graph = _project_graph()
     assert {"alloc.api", "alloc.problem", "alloc.registry"} <= set(graph["alloc"])
-    # the kernel caches are placed by the kernel modules, not by the package (alloc._kernel_cache)
-    assert "alloc._jit_cache" not in graph["alloc"] and "alloc._kernel_cache" in graph["alloc._active_set"]
+    # the kernel caches are placed by the kernel modules, not by the package (alloc._engine._kernel_cache)
+    assert "alloc._engine._jit_cache" not in graph["alloc"] and "alloc._engine._kernel_cache" in graph["alloc._engine._active_set"]
     assert {"alloc.ams.geometry", "alloc.ams.coverage"} <= set(graph["alloc.ams"])
     assert "alloc.methods" in graph["alloc.registry"]  # the registry's look-ups load the built-in methods
     # the failure kinds build on the problem (Problem.with_health applies an effector's health)
@@ -481,7 +481,7 @@ def _module_level_switches(path: Path) -> list[str]:
 
 def test_the_library_has_no_module_level_switches(monkeypatch):
     """Behaviour is chosen by arguments and options, never by flipping a module constant
-    (``alloc._active_set.WARM_START`` guarded dead branches; ``alloc.api.FAST_CALL`` applied
+    (``alloc._engine._active_set.WARM_START`` guarded dead branches; ``alloc.api.FAST_CALL`` applied
     half-way when flipped)."""
     found = [s for path in sorted((ROOT / "alloc").rglob("*.py")) for s in _module_level_switches(path)]
     assert found == []
@@ -498,7 +498,7 @@ def test_the_c_call_path_is_a_fact_of_the_class():
     from alloc import api
 
     try:
-        from alloc._fastcall import FastCall
+        from alloc._engine._fastcall import FastCall
     except ImportError:  # pragma: no cover - a build without a C compiler
         assert not api.has_c_call_path() and not hasattr(alloc.Allocator, "_fast_setup")
     else:

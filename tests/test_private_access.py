@@ -5,7 +5,7 @@ method is declared and public: its capabilities (``alloc.method.Method``), its o
 its kernel for the C generator (``Method.export_data``, ``Allocator.export_data``).  This test
 reads the source with :mod:`ast`: it lists the private attribute names of the method classes
 (``alloc/methods/``: every ``self._x`` and private method), of the solver a method holds
-(``alloc/_simplex.py``) and of the allocator (``alloc/api.py``), then fails on any
+(``alloc/_engine/_simplex.py``) and of the allocator (``alloc/api.py``), then fails on any
 ``obj._x`` with one of those names, or ``getattr(obj, "_x")``, elsewhere in ``alloc``, ``sim``,
 ``service`` and ``benchmarks`` -- ``self._x`` and ``cls._x`` excepted (an object's own state).
 
@@ -20,19 +20,19 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 #: where the private names are defined (and may be used)
-OWNERS = sorted((ROOT / "alloc" / "methods").glob("*.py")) + [ROOT / "alloc" / "_simplex.py", ROOT / "alloc" / "api.py"]
+OWNERS = sorted((ROOT / "alloc" / "methods").glob("*.py")) + [ROOT / "alloc" / "_engine" / "_simplex.py", ROOT / "alloc" / "api.py"]
 SCANNED = ("alloc", "sim", "service", "benchmarks")
 
 #: (file, expression) -> why it is not a method's or an allocator's private state
 ALLOWED = {
-    ("alloc/_jit_cache.py", "getattr(dispatcher, '_cache', None)"): "numba's dispatcher, not an allocator",
-    ("alloc/_jit_cache.py", "getattr(getattr(dispatcher, '_cache', None), '_impl', None)"): "numba's cache",
-    ("alloc/_jit_cache.py", "allocator._solve"): "the kernel-cache warm-up runs the allocator's Python call "
+    ("alloc/_engine/_jit_cache.py", "getattr(dispatcher, '_cache', None)"): "numba's dispatcher, not an allocator",
+    ("alloc/_engine/_jit_cache.py", "getattr(getattr(dispatcher, '_cache', None), '_impl', None)"): "numba's cache",
+    ("alloc/_engine/_jit_warm.py", "allocator._solve"): "the kernel-cache warm-up runs the allocator's Python call "
                                                   "path, which a fast path skips (the allocator's own package)",
     ("alloc/estimation/detection.py", "det._U"): "the detector's own buffers, restored from its saved state",
     ("alloc/estimation/detection.py", "det._R"): "the detector's own buffers",
     ("alloc/estimation/detection.py", "det._Q"): "the detector's own buffers",
-    ("alloc/export/tables.py", "aset._A"): "an index of alloc._active_set's packed layout (a module constant)",
+    ("alloc/export/tables.py", "aset._A"): "an index of alloc._engine._active_set's packed layout (a module constant)",
     ("benchmarks/bench_ams.py", "impl._solve_reference"): "times a method's numpy reference against its "
                                                          "compiled solve, as the method's own tests compare them",
     ("benchmarks/bench_lock.py", "f._W"): "measures the allocator's lock by wiring its call path both ways",

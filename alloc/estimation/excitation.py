@@ -219,7 +219,7 @@ class NullSpaceExcitation:
 def _result(p: Problem, u: np.ndarray, lo: np.ndarray, hi: np.ndarray, r: Result) -> Result:
     """The Result of admissible command ``u`` for ``r``'s demand, its status recomputed by the
     library's certified test (``fallback`` kept)."""
-    from .._kernels import finish_owned
+    from .._engine._kernels import finish_owned
 
     c = np.ascontiguousarray
     out, code = finish_owned(p.B, c(u, dtype=float), c(lo, dtype=float), c(hi, dtype=float),

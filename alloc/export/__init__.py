@@ -24,7 +24,7 @@ level is capped at the library's own cap and per call at ``iteration_bound`` (by
 levels' caps added; ``"certify"``: the largest count on a dense sample of the demand set,
 :mod:`alloc.export.certify`), both stated and argued in the header and enforced: reaching
 either returns the safe answer with status 2.  And ``lp`` (with ``priorities``): the library's
-compiled lexicographic simplex (:mod:`alloc._simplex`), its pivots capped at the library's cap
+compiled lexicographic simplex (:mod:`alloc._engine._simplex`), its pivots capped at the library's cap
 and per call at ``iteration_bound`` likewise (certified by counting the simplex's pivots).
 
 Health at run time: the active-set and ``lp`` kernels take reduced limits and jams through

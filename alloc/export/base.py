@@ -17,7 +17,7 @@ import numpy as np
 from ..exceptions import AllocError
 from ..problem import MAX_MAGNITUDE
 from ..result import EXACT_RTOL
-from .._warm import WARM_COND_MAX, WARM_ROUND_OFF  # noqa: F401 - re-exported (export's names)
+from .._engine._warm import WARM_COND_MAX, WARM_ROUND_OFF  # noqa: F401 - re-exported (export's names)
 from .certify import Certificate
 
 #: bumped whenever the generated code changes for the same input
@@ -56,9 +56,9 @@ TABLE_BUDGET = 256 * 1024
 #: its 612-byte slots (the 4 x 6 hexacopter's kernels are tabulated and keep none)
 CACHE_BUDGET = 16 * 1024
 # the warm start's conditioning limits (WARM_COND_MAX, WARM_ROUND_OFF) are the library's, shared with the
-# host's warm_start option: alloc/_warm.py
+# host's warm_start option: alloc/_engine/_warm.py
 
-#: ``float`` ``lp``: the simplex's tolerances (alloc._simplex's names; the double build takes the
+#: ``float`` ``lp``: the simplex's tolerances (alloc._engine._simplex's names; the double build takes the
 #: library's values) at float's round-off.  Reduced costs and pivots at 1e-5 (about 80 float ulps
 #: of the O(1) scaled tableau, as FLOAT_SIGMA_RTOL); ties, degenerate steps and singular pivots at
 #: 1e-6 (8 ulps); the final feasibility check at 1e-4 relative (the library's 1e-9 is below a

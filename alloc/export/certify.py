@@ -26,7 +26,7 @@ Two statements, of different strength, go into every active-set kernel's header:
 Calls with a rate window (``u_prev``) or reduced limits (``set_limits``) have bounds that are
 not in the sample; they keep the library's cap, ``PFX_MAXIT`` a level.
 
-The ``lp`` kernel (the library's simplex, :mod:`alloc._simplex`) is certified by the same
+The ``lp`` kernel (the library's simplex, :mod:`alloc._engine._simplex`) is certified by the same
 sample and the same rule, counting the simplex's pivots (bound flips included) instead of
 active-set iterations (:func:`certify` with ``count``; :func:`simplex_bound_text`), and with
 one part more, :data:`SIMPLEX_RANDOM_DEMANDS` seeded random demands: the pivot count changes

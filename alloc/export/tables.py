@@ -79,7 +79,7 @@ def _aset() -> Any:
     factorisation and its tolerances (_lsq_factor), read by one name."""
     from types import SimpleNamespace
 
-    from .. import _active_set, _lsq_factor
+    from .._engine import _active_set, _lsq_factor
     return SimpleNamespace(**{**vars(_lsq_factor), **vars(_active_set)})
 
 
@@ -113,7 +113,7 @@ def _active_set_fields(states: list[tuple[np.ndarray, ...]], problem: Problem, r
                        maxit: int | None, table: bool | None, cache: int | None,
                        warm: bool = False) -> tuple[str, int, int]:
     """The active set's constants, read from the library's packed solver states
-    (:func:`alloc._active_set.pack`), so the C runs on exactly the library's data.  One
+    (:func:`alloc._engine._active_set.pack`), so the C runs on exactly the library's data.  One
     instance for ``qp`` and ``wls``; ``dynamic`` has two (without and with ``u_prev``), which
     share every level row and differ in the preference weight, cold start and target."""
     aset = _aset()
@@ -175,7 +175,7 @@ def _warm_conditioning(states: list[tuple[np.ndarray, ...]], aset: Any, n: int, 
     it, that is nearly but not exactly rank-deficient; rows of A (axes with their weights)
     scaled more than WARM_COND_MAX apart; or each instance's Wu conditioned beyond
     WARM_COND_MAX."""
-    from .._warm import warm_conditioning
+    from .._engine._warm import warm_conditioning
 
     found = warm_conditioning(states[0][0][aset._A, :n, :m],
                               [state[0][aset._WU, :m, :m] for state in states])
@@ -251,7 +251,7 @@ def _instances(states: list[tuple[np.ndarray, ...]], aset: Any, keys: list[tuple
             parts.append(f"static const real KU_{i}[M][M] = {real.array(mats[aset._KU, :m, :m], 'Ku')};")
         if table:
             parts.append("/* the factorisations of every free set of every level, computed by the generator with\n"
-                         "   the library's own code (alloc._lsq_factor._factor): row [key][free-set bits] */")
+                         "   the library's own code (alloc._engine._lsq_factor._factor): row [key][free-set bits] */")
             parts.append(_tables(mats, ivecs, aset, keys, real, ml, suffix=f"_{i}"))
         kv, ku = (f"KV_{i}", f"KU_{i}") if dyn else ("NULL", "NULL")
         tabs = "".join(f", TAB_{name}_{i}" for name in _TABLE_NAMES) if table else ""
@@ -277,7 +277,7 @@ def _table_keys(ivecs: np.ndarray, aset: Any) -> list[tuple[int, int]]:
 def _float_cut(blocks: tuple[np.ndarray, ...], A: np.ndarray, r0: int, r1: int, F: np.ndarray,
                rtol: float) -> None:
     """Drop, in a table made in double for a float kernel, the singular values a float
-    factorisation would drop (below ``rtol`` of the scale, as :func:`alloc._lsq_factor._jacobi`
+    factorisation would drop (below ``rtol`` of the scale, as :func:`alloc._engine._lsq_factor._jacobi`
     does at double's round-off): kept, they would divide float noise by a tiny number."""
     L, _, _, sc, Ya, _, sa = blocks
     if len(sc) and sc.max() > 0.0:
@@ -322,10 +322,10 @@ def _tables(mats: np.ndarray, ivecs: np.ndarray, aset: Any, keys: list[tuple[int
 
 def _simplex_fields(lex: SimplexData, real: _Real, fields: dict[str, str]) -> tuple[str, int]:
     """The ``lp`` kernel's constants, read from the library's own scaled problem
-    (:class:`alloc._simplex.LexicographicL1`: the tableau ``F``, the row scales, the half-widths
+    (:class:`alloc._engine._simplex.LexicographicL1`: the tableau ``F``, the row scales, the half-widths
     and the stages' normalised costs), so the C runs on exactly the library's data; and the
     library's pivot cap ``50 (N + k)``."""
-    from .. import _simplex
+    from .._engine import _simplex
 
     F, costs = lex.F, lex.costs
     k, n = F.shape

@@ -72,7 +72,7 @@ int PREFIX_iterations(void);
 """
 
 # The parts every kernel shares: constants, clipping, the rate window, the status test and
-# the safe answer.  Transcribes alloc/_kernels.py (rate_window_into, finish) and
+# the safe answer.  Transcribes alloc/_engine/_kernels.py (rate_window_into, finish) and
 # alloc/methods/pseudo_inverse.py (SafeCommand).
 COMMON = r"""/*
  * @SOURCE_NAME@: @TITLE@ -- see @HEADER_NAME@ for the interface.
@@ -92,7 +92,7 @@ typedef PREFIX_real real;
 /* finite: false for NaN and +-inf */
 #define FINITE(x) (ABS(x) <= @REAL_MAX@)
 
-/* rounding bound factor of a computed residual, (m + 2) u (alloc._kernels.rounding_gamma) */
+/* rounding bound factor of a computed residual, (m + 2) u (alloc._engine._kernels.rounding_gamma) */
 static const real ROUND_GAMMA = @ROUND_GAMMA@;
 
 static const real BM[K][M] = @B@;

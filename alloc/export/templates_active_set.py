@@ -115,7 +115,7 @@ static void ltsolve(const struct work *w, int n, real *x)
 
 """
 
-# one level of the lexicographic problem (alloc._active_set._level)
+# one level of the lexicographic problem (alloc._engine._active_set._level)
 _LEVEL = r"""/* one level on w->u (feasible on entry) and w->freeset, at most cap iterations: iterations,
    or -1 at the cap */
 static int level(struct work *w, int r0, int r1, int lev, real gam, const real *up, const real *lo,
@@ -379,7 +379,7 @@ static int run(struct work *w, const real *v, const real *lo, const real *hi, co
     return total;
 }
 
-/* the call's preference point (alloc._active_set._target): UPT, or UPT + KV v (+ KU u_prev);
+/* the call's preference point (alloc._engine._active_set._target): UPT, or UPT + KV v (+ KU u_prev);
    0 when it is not finite */
 static int target(const struct instance *S, const real *v, const real *u_prev, real *upc)
 {
@@ -441,7 +441,7 @@ _COLD_RUN = r"""    /* the certified budget covers the nominal limits without a 
 """
 
 # The warm start of a kernel exported with warm_start=True (the library's opt-in warm_start,
-# alloc/_active_set.py: _warm_pick, _warm_keep).  Placed before run(), which calls warm_pick
+# alloc/_engine/_active_set.py: _warm_pick, _warm_keep).  Placed before run(), which calls warm_pick
 # where the cold start is made.
 _WARM = r"""/*
  * Warm start: each instance keeps its last answer and that answer's working set (each effector
@@ -552,7 +552,7 @@ _WARM_RUN = r"""    /* the certified budget covers the nominal limits without a 
 
 """
 
-# What the warm kernel adds to the level and the run (alloc._active_set._level, _levels: the
+# What the warm kernel adds to the level and the run (alloc._engine._active_set._level, _levels: the
 # same rule, the same order of operations); the cold kernel's text has none of it
 _WARM_LEVEL = {
     "@LEVEL_ARGS@": ", int warm, int at_step, int *stepped",
@@ -605,8 +605,8 @@ def _fill_warm(text: str, warm: bool) -> str:
 
 
 # qp, wls (and their priorities): the lexicographic least-squares active set of
-# alloc/_active_set.py (_level, _start, _run, _call_into) with the factorisation of
-# alloc/_lsq_factor.py (_jacobi, _factor), with a fixed-size static cache of factorisations
+# alloc/_engine/_active_set.py (_level, _start, _run, _call_into) with the factorisation of
+# alloc/_engine/_lsq_factor.py (_jacobi, _factor), with a fixed-size static cache of factorisations
 # in the library's place (both change the cost, never the answer).  The library starts cold
 # by default, so the default kernel does too; ACTIVE_SET_WARM adds the warm start (export_c's
 # warm_start), the library's warm_start=True bit for bit and its cold answers to round-off.

@@ -1,7 +1,7 @@
 """C99 template of ``cgi`` with priority levels (:mod:`alloc.export`); filled as
 :mod:`.templates` describes.  Transcribes
 ``alloc.methods.cascade.CascadedGeneralizedInverse._solve_by_level`` (and
-:func:`alloc._linalg.max_scale`, :func:`alloc._kernels.matvec`) in the same order of
+:func:`alloc._engine._linalg.max_scale`, :func:`alloc._engine._kernels.matvec`) in the same order of
 operations, over constant tables of every level's prioritised pseudo-inverse of every free set
 computed by the library's own ``_level_pinv``."""
 

@@ -18,7 +18,7 @@ def _clipped_preference(also: str = "") -> str:
             "    }\n")
 
 
-# pinv, pinv_clip, ganging: u = clip(c + P v) (alloc._kernels.fused_affine and, with rate
+# pinv, pinv_clip, ganging: u = clip(c + P v) (alloc._engine._kernels.fused_affine and, with rate
 # limits, Method.solve + finish_owned: the same arithmetic).
 AFFINE = r"""
 /* the method's affine map u = C + P v before clipping */
@@ -44,7 +44,7 @@ int PREFIX_allocate(const real *v, const real *u_prev, real dt, real *u)
 }
 """
 
-# pinv_scale (alloc._inverse_kernels.fused_scaled / scaled_increment): the increment from
+# pinv_scale (alloc._engine._inverse_kernels.fused_scaled / scaled_increment): the increment from
 # the clipped preferred position scaled by one factor into the box.
 SCALED = r"""
 static const real MAP_P[M][K] = @MAP_P@;
@@ -83,7 +83,7 @@ int PREFIX_allocate(const real *v, const real *u_prev, real dt, real *u)
 }
 """
 
-# cgi (alloc._inverse_kernels.cascade): the cascaded generalized inverse of section 1.3.4.6
+# cgi (alloc._engine._inverse_kernels.cascade): the cascaded generalized inverse of section 1.3.4.6
 # over the pseudo-inverses of every free set, precomputed by the library's own code.
 CASCADE = r"""
 /* the weighted pseudo-inverse of every free set (row: the free-set bits; rows q < nf of the

@@ -1,6 +1,6 @@
 """C99 template of the active set's factorisation of a free set (:mod:`alloc.export`): the
 table lookup, or at run time the Cholesky factor of ``Wu[F, F]`` and the one-sided Jacobi SVDs
-of alloc/_lsq_factor.py (``_jacobi``, ``_factor``) in the same order of operations."""
+of alloc/_engine/_lsq_factor.py (``_jacobi``, ``_factor``) in the same order of operations."""
 
 FACTOR = r"""#if TABLE
 static void lookup(struct work *w, int key)

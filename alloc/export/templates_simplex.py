@@ -1,12 +1,12 @@
 """C99 template of the ``lp`` kernel (:mod:`alloc.export`): the library's compiled lexicographic
-simplex (:mod:`alloc._simplex`, seed Eqs 1.18-1.19), filled as :mod:`.templates` describes.
+simplex (:mod:`alloc._engine._simplex`, seed Eqs 1.18-1.19), filled as :mod:`.templates` describes.
 
 Transcribes ``_eliminate``, ``_refactor``, ``_reduced_costs``, ``_step_to_bound``, ``_iterate``
 and ``solve_lexicographic`` line for line and in the same order of operations (numba's
 ``max(a, b)`` and ``min(a, b)`` are ``rmax``/``rmin`` of the common part: the second argument
 when it compares greater, resp. smaller, else the first).  The scaled tableau ``F``, the
 half-widths ``D``, the row scales ``rho`` and the stages' normalised costs are the library's
-own arrays (:class:`alloc._simplex.LexicographicL1`), printed as constants; everything that
+own arrays (:class:`alloc._engine._simplex.LexicographicL1`), printed as constants; everything that
 depends on the call's limits (the centre ``c``, the variables' upper bounds, the right-hand
 side) is computed per call, so ``set_limits`` needs no new export.  One guard is added, the
 per-call pivot budget ``PFX_ITERATION_BOUND``: a pivot beyond it is not taken (the call returns
@@ -17,7 +17,7 @@ the safe answer).  It does not move the refactorisation points, which follow the
 from .templates import SET_LIMITS
 
 SIMPLEX = r"""
-/* the tableau of alloc/_simplex.py: A (p - n) - e+ + e- = b, u = c + D (p - n), columns
+/* the tableau of alloc/_engine/_simplex.py: A (p - n) - e+ + e- = b, u = c + D (p - n), columns
    [p (M), n (M), e+ (K), e- (K)]; F = [A, -A, -I, I] with A = diag(1/rho) B D */
 #define NV @NV@
 #define NSTAGE @NSTAGE@
@@ -37,7 +37,7 @@ SIMPLEX = r"""
 #define BASIC 0
 #define LOWER 1
 #define UPPER 2
-/* solve codes (alloc._simplex): OPTIMAL, ITERATION_LIMIT, NUMERICAL */
+/* solve codes (alloc._engine._simplex): OPTIMAL, ITERATION_LIMIT, NUMERICAL */
 #define LP_OPTIMAL 0
 #define LP_LIMIT 1
 #define LP_NUMERICAL 2
@@ -249,7 +249,7 @@ static int priced_out(const struct lp *s)
     return 1;
 }
 
-/* every stage in order from the canonical basis (alloc._simplex.solve_lexicographic): u, and
+/* every stage in order from the canonical basis (alloc._engine._simplex.solve_lexicographic): u, and
    the solve code; s->spent the pivots taken */
 static int lp_solve(struct lp *s, const real *v, const real *lo, const real *hi, real *u)
 {

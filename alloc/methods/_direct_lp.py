@@ -17,8 +17,8 @@ import math
 
 import numpy as np
 
-from .. import _ray_simplex
-from .._kernels import facet_polish, matvec, rmatvec
+from .._engine import _ray_simplex
+from .._engine._kernels import facet_polish, matvec, rmatvec
 from ..exceptions import SolverError
 from ..facet_cost import lp_build_bytes, lp_build_seconds
 from ..method import FloatArray, Method
@@ -49,7 +49,7 @@ class RayLP(Method):
     def __init__(self, problem: Problem, *, backend: str = "daqp", simplex: bool = False) -> None:
         super().__init__(problem)
         name = check_backend(backend, backends(lp=True), "da")
-        #: the compiled ray simplex (:mod:`alloc._ray_simplex`) answers first; the backend's
+        #: the compiled ray simplex (:mod:`alloc._engine._ray_simplex`) answers first; the backend's
         #: model only where it stops at its iteration bound or on a singular basis
         self.simplex = bool(simplex)
         self.simplex_fallbacks = 0
@@ -120,14 +120,14 @@ class RayLP(Method):
         The LP runs along the unit direction ``d / |d|`` in scaled variables (see
         ``__init__``) so that its bound on the distance (the AMS's extent) is a constant
         and, without rate limits, no bound is re-sent per call.  With ``simplex`` the compiled
-        solvers of :mod:`alloc._ray_simplex` answer first (exact vertices); the LP (DAQP's
+        solvers of :mod:`alloc._engine._ray_simplex` answer first (exact vertices); the LP (DAQP's
         proximal iterations) meets the equality to ~1e-8 relative; on a facet hit (``k - 1``
         effectors strictly inside their limits) the point is then re-solved exactly from
-        Eq 1.16 on that facet (:func:`alloc._kernels.facet_polish`).  Edges and degenerate
+        Eq 1.16 on that facet (:func:`alloc._engine._kernels.facet_polish`).  Edges and degenerate
         facets keep the LP's answer.
         """
         p = self.problem
-        # fixed-order products (alloc._kernels.matvec): numpy's ``@`` rounds by the operands'
+        # fixed-order products (alloc._engine._kernels.matvec): numpy's ``@`` rounds by the operands'
         # layout, and a copy of this allocator must answer bit for bit
         dmax = float(np.abs(d).max())
         ds = d / dmax  # |d| without overflow or underflow of its square
@@ -177,7 +177,7 @@ class RayLP(Method):
     def solve(self, v, lo, hi, u_prev):
         p = self.problem
         if self.simplex and lo is p.umin and hi is p.umax:
-            # the nominal call in one compiled pass (alloc._ray_simplex.ray_call); the path below
+            # the nominal call in one compiled pass (alloc._engine._ray_simplex.ray_call); the path below
             # only when the dual walk stops
             code, u, it = _ray_simplex.ray_call(v, self._Bu0, self._u0, self._B, self._Q, self._Ax, self._G,
                                                 self._cnorm, self._x0, self._xlo, self._xhi, self._c0, self._D,

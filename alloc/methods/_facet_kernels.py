@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import alloc._kernel_cache  # noqa: F401 - kernel caches placed before any kernel is decorated
+import alloc._engine._kernel_cache  # noqa: F401 - kernel caches placed before any kernel is decorated
 from numba import njit
 
 __all__ = ["facet_solve", "bisect_solve", "ray_exit_solve", "flat_ray_exit_solve"]

@@ -9,9 +9,9 @@ from typing import Any
 
 import numpy as np
 
-from .._inverse_kernels import cascade, daisy_chain, free_set_insert
-from .._kernels import _FREE_BITS, free_set_pinv, matvec
-from .._linalg import ABS_FLOOR, RCOND, check_rcond, max_scale, priority_groups, sqrt_factor, weighted_pinv
+from .._engine._inverse_kernels import cascade, daisy_chain, free_set_insert
+from .._engine._kernels import _FREE_BITS, free_set_pinv, matvec
+from .._engine._linalg import ABS_FLOOR, RCOND, check_rcond, max_scale, priority_groups, sqrt_factor, weighted_pinv
 from ..exceptions import OptionError, ProblemError
 from ..export_data import CascadeData
 from ..options import groups as groups_option
@@ -171,7 +171,7 @@ class CascadedGeneralizedInverse(Method):
     def free_set_pinv(self, free: np.ndarray) -> FloatArray:
         """The weighted pseudo-inverse over the free effectors (boolean mask ``free``; rows of
         the free effectors) that the compiled cascade uses: compiled from ``S B`` and
-        ``Wu^-1/2`` for a diagonal ``Wu``, else :func:`alloc._linalg.weighted_pinv` (cached)."""
+        ``Wu^-1/2`` for a diagonal ``Wu``, else :func:`alloc._engine._linalg.weighted_pinv` (cached)."""
         if self._diagonal_Wu:
             return free_set_pinv(self._SB, self._rdiag, self._S, free, self.rcond, ABS_FLOOR)
         return self._pinv(free)
@@ -206,7 +206,7 @@ class CascadedGeneralizedInverse(Method):
             self._bank_pinv(free)
 
     def _solve_reference(self, v, lo, hi, u_prev):
-        """The cascade in numpy (what :func:`alloc._inverse_kernels.cascade` computes, compiled)."""
+        """The cascade in numpy (what :func:`alloc._engine._inverse_kernels.cascade` computes, compiled)."""
         if self.groups is not None and len(self.groups) > 1:
             return self._solve_by_level(v, lo, hi)
         p = self.problem
@@ -260,7 +260,7 @@ class CascadedGeneralizedInverse(Method):
             sub = [np.arange(done.size), np.arange(done.size, rows.size)]
             Wv = p.Wv[np.ix_(rows, rows)]
             for _ in range(p.m + 1):
-                r = v[level] - matvec(p.B[level], u)  # fixed order (alloc._kernels.matvec): any copy, same bits
+                r = v[level] - matvec(p.B[level], u)  # fixed order (alloc._engine._kernels.matvec): any copy, same bits
                 if not free.any() or np.abs(r).max() <= 1e-12 * max(1.0, float(np.abs(v).max())):
                     break
                 F = np.flatnonzero(free)
@@ -351,7 +351,7 @@ class DaisyChain(Method):
         return daisy_chain(p.B, p.up, v, lo, hi, self._idx, self._start, self._Pcat)
 
     def _solve_reference(self, v, lo, hi, u_prev):
-        """The chain in numpy (what :func:`alloc._inverse_kernels.daisy_chain` computes, compiled)."""
+        """The chain in numpy (what :func:`alloc._engine._inverse_kernels.daisy_chain` computes, compiled)."""
         p = self.problem
         u = np.minimum(np.maximum(p.up, lo), hi)
         r = v - p.B @ u

@@ -14,7 +14,7 @@ the demanded direction (status ``unattainable``).
 
 Backends: the exact facet search of :mod:`alloc.methods.facet_search` (``da_facet``:
 precomputed facet inverses, compiled) and the LP of :mod:`alloc.methods._direct_lp`: the compiled ray
-simplex (``backend="simplex"``, :mod:`alloc._ray_simplex`; a persistent DAQP model behind it) or a persistent
+simplex (``backend="simplex"``, :mod:`alloc._engine._ray_simplex`; a persistent DAQP model behind it) or a persistent
 DAQP (or HiGHS) model alone, polished on the facet it finds.  ``backend="auto"`` picks the backend a measured cost model says is
 cheaper per call (:func:`facet_is_cheaper`; never the facet search beyond ``FACET_LIMIT``).  With a rank-deficient ``B`` the ray
 follows the part of ``d`` in the range of ``B``; the rest is reported as unallocated.  When the ray leaves the AMS through an
@@ -102,7 +102,7 @@ class DirectAllocation(RayLP):
                 return
             backend = "simplex"
         if backend == "simplex":
-            # the compiled ray simplex, DAQP's model behind it (alloc._ray_simplex)
+            # the compiled ray simplex, DAQP's model behind it (alloc._engine._ray_simplex)
             super().__init__(problem, backend="daqp", simplex=True)
             return
         super().__init__(problem, backend=backend)

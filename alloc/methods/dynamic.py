@@ -17,7 +17,7 @@ constrained quadratic programming", AIAA GNC; after seed Eqs 1.20-1.21).
 
     The cost is ``(u - c)' Wd (u - c)`` plus a constant, ``Wd = W1'W1 + W2'W2``,
     ``c = Wd^-1 (W1'W1 u_s + W2'W2 u_prev)``: stage 2 of ``qp`` with ``Wu = Wd`` and
-    ``up = c``, solved by the same compiled active set (:mod:`alloc._active_set`).
+    ``up = c``, solved by the same compiled active set (:mod:`alloc._engine._active_set`).
     Without ``u_prev`` (the first call) the ``W2`` term is absent and ``u`` is the
     two-stage allocation closest to ``u_s``.  The method keeps no state between calls:
     the caller (the simulator's loop) passes ``u_prev``.
@@ -29,7 +29,7 @@ import math
 
 import numpy as np
 
-from .._linalg import sqrt_factor
+from .._engine._linalg import sqrt_factor
 from ..exceptions import OptionError, ProblemError
 from ..export_data import ActiveSetData
 from ..domain import singular_within_round_off

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._inverse_kernels import affine, affine_clip_batch
+from .._engine._inverse_kernels import affine, affine_clip_batch
 from ..exceptions import ProblemError
 from ..export_data import AffineData
 from ..options import matrix

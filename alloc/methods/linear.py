@@ -11,7 +11,7 @@ diagonals of ``Wv`` and ``Wu`` (the seed's weight vectors).  With ``priorities``
 stage 1 runs per level, most important first, earlier levels keeping their errors.
 
 Backends.  ``simplex`` (default): the compiled lexicographic simplex of
-:mod:`alloc._simplex` -- both stages (and the priority levels) in one compiled call, in
+:mod:`alloc._engine._simplex` -- both stages (and the priority levels) in one compiled call, in
 scaled variables, cold-started from a canonical basis on every call, stage 2 over the
 whole optimal set of stage 1 and a final generic linear tie-break, so that ``u`` is a
 function of the call's data alone (see that module for the canonical choice).  ``daqp``
@@ -29,7 +29,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from .._simplex import OPTIMAL, LexicographicL1
+from .._engine._simplex import OPTIMAL, LexicographicL1
 from ..exceptions import SolverError
 from ..export_data import SimplexData
 from ..options import choice, levels

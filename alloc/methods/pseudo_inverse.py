@@ -25,9 +25,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._inverse_kernels import (affine, affine_clip_batch, fused_scaled, increment, scaled_increment,
+from .._engine._inverse_kernels import (affine, affine_clip_batch, fused_scaled, increment, scaled_increment,
                                 scaled_increment_batch)
-from .._linalg import RCOND, check_rcond, max_scale, weighted_pinv
+from .._engine._linalg import RCOND, check_rcond, max_scale, weighted_pinv
 from ..exceptions import OptionError, SolverError
 from ..export_data import AffineData, ScaledData
 from ..options import flag, real
@@ -124,7 +124,7 @@ class PinvScale(_PinvBase):
         return scaled_increment(self._P, self._B, self._bias(u_prev), v, lo, hi), 0
 
     def _solve_reference(self, v, lo, hi, u_prev):
-        """The scaling in numpy (what :func:`alloc._inverse_kernels.scaled_increment` computes, compiled)."""
+        """The scaling in numpy (what :func:`alloc._engine._inverse_kernels.scaled_increment` computes, compiled)."""
         base = self._base(lo, hi, u_prev)
         du = self.P @ (v - self.problem.B @ base)
         return base + max_scale(base, du, lo, hi) * du, 0

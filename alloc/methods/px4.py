@@ -56,11 +56,11 @@ module after ``allocate``).
 from __future__ import annotations
 
 import numpy as np
-import alloc._kernel_cache  # noqa: F401 - kernel caches placed before any kernel is decorated
+import alloc._engine._kernel_cache  # noqa: F401 - kernel caches placed before any kernel is decorated
 from numba import njit
 
-from .._kernels import close_out, copy_demand, finish, packed_out, rate_window_into
-from .._linalg import RCOND, check_rcond
+from .._engine._kernels import close_out, copy_demand, finish, packed_out, rate_window_into
+from .._engine._linalg import RCOND, check_rcond
 from ..exceptions import SolverError
 from ..method import Method, register
 from ..options import choice, real
@@ -177,7 +177,7 @@ def fused_px4(M1, myaw, yaw, C, U, mode, down, B, up, umin, umax, rate_min, rate
               v, u_prev, dt):  # pragma: no cover - compiled
     """One call of ``px4`` (the allocator's packed fast path, with or without rate limits):
     domain checks, the Eq 1.28 window when ``dt > 0`` (into the scratch ``lo``, ``hi``),
-    :func:`px4_mix`, then the clip, ``B u`` and the status of :func:`alloc._kernels.finish`.
+    :func:`px4_mix`, then the clip, ``B u`` and the status of :func:`alloc._engine._kernels.finish`.
     Returns ``(out, code, 0)``: code 3 ``v``, 4 ``u_prev`` outside the valid domain."""
     k, m = B.shape
     out = packed_out(m, k)

@@ -14,7 +14,7 @@
     by O(gamma^2), so tiny gammas are needed for an ``exact`` status.
 
 Both run by default on the compiled lexicographic least-squares active set of
-:mod:`alloc._active_set` (``backend="active_set"``: Härkegård's sequential least squares,
+:mod:`alloc._engine._active_set` (``backend="active_set"``: Härkegård's sequential least squares,
 KKT-exact, one compiled call per allocation, a compiled loop for ``allocate_batch``).
 ``backend="daqp"`` (DAQP models built once; stage 1 on ``B'WvB`` plus a ridge, stage 2 in
 a band) or any qpsolvers name keep the previous formulation as cross-checks.
@@ -27,8 +27,8 @@ from typing import Any
 
 import numpy as np
 
-from .._active_set import _HEAD, _MAXIT, lexico_batch_finished, lexico_call, lexico_solve, pack
-from .._linalg import check_real_option
+from .._engine._active_set import _HEAD, _MAXIT, lexico_batch_finished, lexico_call, lexico_solve, pack
+from .._engine._linalg import check_real_option
 from ..exceptions import OptionError, SolverError
 from ..export_data import ActiveSetData
 from ..options import choice, flag, levels, real
@@ -162,9 +162,9 @@ WARM_START_DOC = ("keep the last call's working set and start the next call from
 
 def check_warm_start(A: FloatArray, Wu: FloatArray) -> None:
     """Refuse ``warm_start`` (OptionError naming it) where the optimum is determined only to
-    round-off times a condition number above :data:`alloc._warm.WARM_COND_MAX`: a warm start
+    round-off times a condition number above :data:`alloc._engine._warm.WARM_COND_MAX`: a warm start
     would end elsewhere.  The same rule as the C export's."""
-    from .._warm import WARM_COND_MAX, warm_conditioning
+    from .._engine._warm import WARM_COND_MAX, warm_conditioning
 
     found = warm_conditioning(A, [Wu])
     if found is not None:
@@ -185,7 +185,7 @@ def check_warm_backend(warm_start: bool, backend: str, method: str) -> bool:
 
 
 class LexicoLS:
-    """Data and state of the compiled lexicographic least-squares solver (:mod:`alloc._active_set`).
+    """Data and state of the compiled lexicographic least-squares solver (:mod:`alloc._engine._active_set`).
 
     Level ``l`` is ``min ||S_l (B_l u - v_l)||^2 + gammas[l]^2 (u - up)' Wu (u - up)`` with
     ``S_l' S_l = Wv[rows_l, rows_l]``, the earlier levels' moments held; ``final`` adds
@@ -223,7 +223,7 @@ class LexicoLS:
 
     @property
     def state(self) -> tuple[np.ndarray, ...]:
-        """The packed solver state (:func:`alloc._active_set.pack`: matrices, vectors, integers,
+        """The packed solver state (:func:`alloc._engine._active_set.pack`: matrices, vectors, integers,
         then the working arrays), which the C generator prints; read it, do not write it."""
         return self._state
 
@@ -255,7 +255,7 @@ class LexicoLS:
         return U
 
     def batch_finished(self, V: FloatArray) -> tuple[FloatArray, FloatArray, np.ndarray]:
-        """Solve and classify in one compiled pass (:func:`alloc._active_set.lexico_batch_finished`)."""
+        """Solve and classify in one compiled pass (:func:`alloc._engine._active_set.lexico_batch_finished`)."""
         return lexico_batch_finished(self._state, V)
 
 

@@ -1,6 +1,6 @@
 """Compiled kernels for any user (issue 22): where numba's cache goes, and the shipped cache.
 
-The fast tests drive :mod:`alloc._jit_cache` in this process on a one-kernel package written to
+The fast tests drive :mod:`alloc._engine._jit_cache` in this process on a one-kernel package written to
 a temporary directory (numba compiles it in well under a second).  The slow one installs the
 project into a fresh venv and runs ``.ci/check-core-install`` (an unprivileged user with no home
 imports and allocates from the root-owned install, no kernel compiled, within 5 s of CPU).
@@ -26,7 +26,7 @@ from pathlib import Path
 
 import pytest
 
-from alloc import _jit_cache
+from alloc._engine import _jit_cache
 
 ROOT = Path(__file__).resolve().parents[2]
 TINY = textwrap.dedent('''
@@ -326,11 +326,11 @@ def test_a_stopped_service_starts_no_build_process_after_warming(tmp_path, monke
 
 
 def test_warm_as_a_script_tells_each_compile_once_and_quiet_prints_nothing(tmp_path):
-    """``python -m alloc._jit_warm warm`` tells each compile once (when the warm-up lived in the
+    """``python -m alloc._engine._jit_warm warm`` tells each compile once (when the warm-up lived in the
     locator's module, the script was a second module object that installed a second listener,
     and every compile notice came out twice), and prints nothing when asked."""
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
-    command = [sys.executable, "-m", "alloc._jit_warm", "warm", "pinv"]
+    command = [sys.executable, "-m", "alloc._engine._jit_warm", "warm", "pinv"]
     cold = subprocess.run(command, capture_output=True, text=True, cwd=ROOT, env=env, check=True)
     notices = [line for line in cold.stderr.splitlines() if line.startswith("alloc: compiling")]
     assert notices and len(notices) == len(set(notices)), cold.stderr

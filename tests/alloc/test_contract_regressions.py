@@ -52,7 +52,7 @@ def test_scaled_pseudo_inverse_never_hands_lapack_a_non_finite_matrix():
     # the weighted pseudo-inverse of the hang, called directly below the Problem boundary
     out = run_isolated(
         "import numpy as np\n"
-        "from alloc._linalg import weighted_pinv\n"
+        "from alloc._engine._linalg import weighted_pinv\n"
         f"P = weighted_pinv(np.array({HANG_B!r}), np.diag([1e-20, 1, 1, 1]))\n"
         "print(np.isfinite(P).all())\n")
     assert out.strip().endswith("True")
@@ -193,7 +193,7 @@ def test_nan_moment_is_never_exact():
 
 
 def test_finish_kernel_classifies_nan_as_non_finite():
-    from alloc._kernels import finish, fused_affine
+    from alloc._engine._kernels import finish, fused_affine
 
     B = np.array([[1.0, 1.0]])
     v_ach = np.empty(1)

@@ -270,7 +270,7 @@ COMPILED_IN_A_CALL = (50002140, 50087490, 50000021, 50000077, 50000385)
 
 
 def test_no_call_compiles_after_the_warm_up():
-    """After :func:`alloc._jit_warm.warm` (what an install runs), the hostile suite's calls --
+    """After :func:`alloc._engine._jit_warm.warm` (what an install runs), the hostile suite's calls --
     the seeds above and 300 seeded cases of every method, input form and class -- compile no
     new version of any kernel (a compile is seconds inside a call)."""
     import os
@@ -279,7 +279,7 @@ def test_no_call_compiles_after_the_warm_up():
 
     sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     import hostile
-    from alloc._jit_warm import warm
+    from alloc._engine._jit_warm import warm
 
     warm()
     before = _kernel_signatures()

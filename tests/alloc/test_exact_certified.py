@@ -15,7 +15,7 @@ import pytest
 
 import alloc
 from alloc import vehicles
-from alloc._kernels import finish
+from alloc._engine._kernels import finish
 from alloc.result import EXACT_RTOL
 
 

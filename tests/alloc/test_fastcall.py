@@ -1,4 +1,4 @@
-"""The allocator's call path in C (alloc/_fastcall.c) against its Python twin (``Allocator._call_py``).
+"""The allocator's call path in C (alloc/_engine/_fastcall.c) against its Python twin (``Allocator._call_py``).
 
 The C path must be invisible except in time: for every method and every argument form --
 valid, odd or invalid -- ``allocator(...)`` returns what ``allocator._call_py(...)`` returns,
@@ -20,7 +20,7 @@ import alloc
 from alloc.api import has_c_call_path
 from alloc.testing import KINDS, random_problem
 
-pytestmark = pytest.mark.skipif(not has_c_call_path(), reason="alloc._fastcall is not built (no C compiler at install)")
+pytestmark = pytest.mark.skipif(not has_c_call_path(), reason="alloc._engine._fastcall is not built (no C compiler at install)")
 
 FLAGS = ("C_CONTIGUOUS", "F_CONTIGUOUS", "OWNDATA", "WRITEABLE", "ALIGNED")
 
@@ -157,7 +157,7 @@ def test_pickle_round_trip_keeps_the_c_path() -> None:
 def test_threaded_batch_equals_single_calls(method: str, monkeypatch: pytest.MonkeyPatch) -> None:
     """``allocate_batch`` on several threads (each on a private copy of the solver state) returns
     the single calls' answers bit for bit, whatever the split."""
-    from alloc import _threads
+    from alloc._engine import _threads
 
     rng = np.random.default_rng(31)
     p = random_problem(rng, 3, 9, "coplanar")
@@ -180,7 +180,7 @@ def test_threaded_batch_equals_single_calls(method: str, monkeypatch: pytest.Mon
 def test_batch_rows_at_the_iteration_cap_are_the_single_calls(method: str, monkeypatch: pytest.MonkeyPatch) -> None:
     """Rows the compiled batch cannot finish (a level's iteration cap) are redone by the single
     call: the batch still equals the single calls row by row, fallbacks included."""
-    from alloc import _threads
+    from alloc._engine import _threads
 
     rng = np.random.default_rng(32)
     p = random_problem(rng, 3, 10, "general")
@@ -200,7 +200,7 @@ def test_batch_rows_at_the_iteration_cap_are_the_single_calls(method: str, monke
 
 @pytest.mark.parametrize("threads,chunk", [(1, 5), (2, 1), (2, 64), (3, 7), (5, 1000)])
 def test_run_chunks_covers_every_row_once_and_raises(threads: int, chunk: int) -> None:
-    from alloc._threads import run_chunks
+    from alloc._engine._threads import run_chunks
 
     n = 531
     seen = np.zeros(n, dtype=np.int64)
@@ -230,7 +230,7 @@ def test_concurrent_batches_on_one_allocator(monkeypatch: pytest.MonkeyPatch) ->
     thread pool and the allocator; every batch still equals the single calls."""
     import threading
 
-    from alloc import _threads
+    from alloc._engine import _threads
 
     rng = np.random.default_rng(33)
     p = random_problem(rng, 3, 9, "general")

@@ -1,5 +1,5 @@
 """The kernel caches are placed by the modules that have kernels, not by ``import alloc``: every
-module of the distribution that imports numba as it loads imports :mod:`alloc._kernel_cache`
+module of the distribution that imports numba as it loads imports :mod:`alloc._engine._kernel_cache`
 first (so the locator is in place before any kernel is decorated; a function that reads an
 existing kernel's types imports numba after some kernel module has), and ``import alloc`` leaves numba
 unimported and the import system as it found it."""
@@ -12,7 +12,7 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
-EXEMPT = {"alloc/_jit_cache.py"}  # the locator itself
+EXEMPT = {"alloc/_engine/_jit_cache.py"}  # the locator itself
 
 
 def _numba_modules() -> list[Path]:
@@ -44,9 +44,9 @@ def test_every_kernel_module_places_the_caches_before_importing_numba() -> None:
         numba = _first_line(tree, lambda n: any(a.name.split(".")[0] == "numba" for a in n.names)
                             if isinstance(n, ast.Import) else (n.module or "").split(".")[0] == "numba")
         placed = [node for node in tree.body if isinstance(node, ast.Import)
-                  and any(a.name == "alloc._kernel_cache" for a in node.names)]
-        assert placed, f"{path.relative_to(ROOT)} imports numba without alloc._kernel_cache"
-        assert placed[0].lineno < numba, f"{path.relative_to(ROOT)}: alloc._kernel_cache after numba"
+                  and any(a.name == "alloc._engine._kernel_cache" for a in node.names)]
+        assert placed, f"{path.relative_to(ROOT)} imports numba without alloc._engine._kernel_cache"
+        assert placed[0].lineno < numba, f"{path.relative_to(ROOT)}: alloc._engine._kernel_cache after numba"
 
 
 def test_import_alloc_leaves_numba_and_the_import_system_alone() -> None:

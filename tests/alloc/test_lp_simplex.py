@@ -1,4 +1,4 @@
-"""The compiled lexicographic simplex behind ``lp`` (alloc/_simplex.py, seed Eqs 1.18-1.19).
+"""The compiled lexicographic simplex behind ``lp`` (alloc/_engine/_simplex.py, seed Eqs 1.18-1.19).
 
 Cross-checks of both stages' optimal values against HiGHS (``lp backend=highs``) and an
 independent cvxpy formulation of the lexicographic programme on the shared random suites
@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 import alloc
-from alloc._simplex import ITERATION_LIMIT, LexicographicL1, tie_break_weights
+from alloc._engine._simplex import ITERATION_LIMIT, LexicographicL1, tie_break_weights
 from alloc.testing import KINDS, diagonal_wv, random_demands, random_problem
 from alloc.vehicles import ice
 

@@ -23,7 +23,7 @@ ROUND_TRIPS = {
     "copy": copy.copy,
     "deepcopy": copy.deepcopy,
 }
-#: protocols 0 and 1 (pre-2003) cannot pickle an Allocator: its C base (alloc._fastcall)
+#: protocols 0 and 1 (pre-2003) cannot pickle an Allocator: its C base (alloc._engine._fastcall)
 #: needs protocol 2's object reconstruction; the records and Problem take any protocol
 OLD_PROTOCOLS = {"pickle-0": lambda x: pickle.loads(pickle.dumps(x, protocol=0))}
 #: backends whose native models cannot be pickled (they hold the solver module and a C

@@ -1,4 +1,4 @@
-"""``da``'s compiled ray solvers (alloc._ray_simplex) against an independent LP (HiGHS).
+"""``da``'s compiled ray solvers (alloc._engine._ray_simplex) against an independent LP (HiGHS).
 
 The dual facet walk answers first, the primal ray simplex behind it, DAQP last; each must give
 the boundary the LP formulation of Eqs 1.15-1.17 gives, nominal and rate-limited, at the
@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import alloc
-from alloc import _ray_simplex as rs
+from alloc._engine import _ray_simplex as rs
 from alloc.testing import random_demands, random_problem
 
 

@@ -1,12 +1,12 @@
 """The host's opt-in ``warm_start`` (``qp``, ``wls``, ``dynamic``) against cold calls.
 
 A warm allocator keeps its last single call's answer and working set and starts the next call
-there (alloc/_active_set.py, ``_warm_pick``; the C export's rule).  Whatever the history, its
+there (alloc/_engine/_active_set.py, ``_warm_pick``; the C export's rule).  Whatever the history, its
 output keeps the contract (finite, within the call's bounds, ``exact`` iff ``B u = v``), and its
 answer is the cold one up to round-off where the optimum is determined: for ``qp`` and
 ``dynamic`` the commands, for ``wls`` (whose optimum the optimality test resolves only to its
 tolerance: a flat valley at gamma = 1e-4) the objective.  Problems whose optimum is round-off
-(``alloc._warm.WARM_COND_MAX``) are refused, naming ``warm_start``.
+(``alloc._engine._warm.WARM_COND_MAX``) are refused, naming ``warm_start``.
 
 The sequences are hostile on purpose and seeded (:func:`hostile_sequence`): random demands,
 smooth ones (sums of sines at 2 kHz), unattainable ones (3x beyond the attainable set), jumps,
@@ -169,7 +169,7 @@ def test_smooth_demands_take_fewer_iterations_and_agree():
 
 
 def test_ill_conditioned_problems_are_refused_naming_warm_start():
-    """The case that took the library's first warm start out (alloc/_active_set.py: Wv's
+    """The case that took the library's first warm start out (alloc/_engine/_active_set.py: Wv's
     eigenvalues 7.7e29 and 3.4e13, a long-lived allocator answered another point than a fresh
     one) is refused by every method; cold, it is accepted."""
     import hostile

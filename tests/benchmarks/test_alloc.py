@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 import alloc
-from alloc._active_set_layout import _FACTORED, _MISC, OVERFLOW_SLOTS
+from alloc._engine._active_set_layout import _FACTORED, _MISC, OVERFLOW_SLOTS
 from alloc.vehicles import ice
 from benchmarks.bench_alloc import hexacopter, markdown, random_sequence, tail_rows
 from benchmarks.bench_scaling import demands
@@ -49,7 +49,7 @@ def test_full_cache_gives_the_same_bits(monkeypatch):
     """A cache of 4 free sets (nearly every factorisation recomputed into an overflow slot)
     answers bit for bit as the default one, on every level layout: one level (wls), two stages
     sharing level 0's factors (qp, dynamic) and axis priorities (levels with equalities)."""
-    import alloc._active_set as active_set
+    import alloc._engine._active_set as active_set
 
     cases = [(ice(), "wls", {}), (ice(), "qp", {}), (ice(), "dynamic", {}), (ice(), "qp", {"priorities": [3, 2, 1]}),
              (hexacopter(), "qp", {}), (hexacopter(), "qp", {"priorities": [2, 2, 1, 1, 1, 1]})]
@@ -74,7 +74,7 @@ def test_full_cache_keeps_the_last_calls_free_sets(monkeypatch):
     the next call's start.  With only a scratch slot it refactorised them: 4,994
     factorisations in 2,500 calls with 4 table entries, against 102 now (94 with the full
     2,048); the answers stay bit for bit those of the large cache."""
-    import alloc._active_set as active_set
+    import alloc._engine._active_set as active_set
 
     p = hexacopter()
     V = demands(p, "smooth", 3000, np.random.default_rng(3))

@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from alloc._jit_cache import PACKAGES
+from alloc._engine._jit_cache import PACKAGES
 from alloc.cli import app
 
 REPO = Path(__file__).resolve().parents[2]

@@ -459,7 +459,7 @@ def test_lp_set_limits_is_the_library_simplex_on_those_limits(build):
     the kernel is the library's simplex called on those limits (LexicographicL1.solve with the
     nominal scaling, classified by the allocator's finish) bit for bit, pivots included, and the
     optimum of the jammed problem (Problem.with_jam, whose scaling differs) to round-off."""
-    from alloc._kernels import finish_owned
+    from alloc._engine._kernels import finish_owned
     from alloc.result import EXACT_RTOL
 
     p = alloc.vehicles.problem("ice")

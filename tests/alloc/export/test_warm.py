@@ -262,7 +262,7 @@ def test_warm_start_is_refused_where_the_optimum_is_round_off():
     with pytest.raises(ExportError, match="preference weight Wu has condition number 1e\\+07"):
         export_c(stiff, "wls", warm_start=True)
     export_c(p.replace(Wu=np.diag(np.geomspace(1.0, WARM_COND_MAX / 10, p.m))), "wls", warm_start=True)
-    # the case that took the library's own warm start out (alloc/_active_set.py): Wv's eigenvalues
+    # the case that took the library's own warm start out (alloc/_engine/_active_set.py): Wv's eigenvalues
     # 7.7e29 and 3.4e13, where a long-lived allocator answered another point than a fresh one
     import hostile
 
@@ -320,7 +320,7 @@ def _hostile_calls(rng: np.random.Generator, p: alloc.Problem, n: int) -> list[t
 @pytest.mark.parametrize("method", METHODS)
 def test_warm_kernel_is_the_library_warm_start_bit_for_bit(build, method):
     """The double warm kernel mirrors the library's ``warm_start=True`` allocator
-    (alloc/_active_set.py: ``_warm_pick``, ``_levels``' entry at the step): the same commands
+    (alloc/_engine/_active_set.py: ``_warm_pick``, ``_levels``' entry at the step): the same commands
     bit for bit, statuses and iteration counts over hostile sequences; every output finite and
     within the call's bounds; and the answers the cold library's to round-off (U_TOL)."""
     rng = np.random.default_rng(77 + METHODS.index(method))

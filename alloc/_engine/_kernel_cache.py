@@ -1,5 +1,5 @@
 """Imported first by every module that decorates numba kernels (alloc's and sim's): it places the
-kernel caches (:mod:`alloc._jit_cache`) before any kernel is decorated, since numba's default
+kernel caches (:mod:`alloc._engine._jit_cache`) before any kernel is decorated, since numba's default
 cache locators raise at decoration where the package directory and the home are not writable
 (a root install used by another user).
 
@@ -15,7 +15,7 @@ import importlib
 import warnings
 
 try:
-    importlib.import_module("alloc._jit_cache")
+    importlib.import_module("alloc._engine._jit_cache")
 except Exception as exc:  # noqa: BLE001 - numba's private cache API changed: never break a kernel module
     warnings.warn(f"alloc: the kernel cache locator is not installed ({type(exc).__name__}: {exc}); "
                   "numba's own cache locations apply", RuntimeWarning, stacklevel=2)

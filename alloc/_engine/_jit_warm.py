@@ -1,6 +1,6 @@
-"""Compile every kernel the registered methods use into the kernel cache (:mod:`alloc._jit_cache`
-places it): what a wheel's build and ``make install`` run, ``python -m alloc._jit_warm warm``;
-``python -m alloc._jit_warm where`` says where each kernel file's cache is.
+"""Compile every kernel the registered methods use into the kernel cache (:mod:`alloc._engine._jit_cache`
+places it): what a wheel's build and ``make install`` run, ``python -m alloc._engine._jit_warm warm``;
+``python -m alloc._engine._jit_warm where`` says where each kernel file's cache is.
 
 Kept apart from the cache's locator because warming reaches every method (the registry, the
 vehicles), while the locator is imported by every kernel module before its kernels exist.
@@ -12,8 +12,8 @@ import sys
 import time
 from typing import Any
 
-import alloc._kernel_cache  # noqa: F401 - the caches placed before any kernel is compiled
-from alloc._jit_cache import notice, where
+import alloc._engine._kernel_cache  # noqa: F401 - the caches placed before any kernel is compiled
+from alloc._engine._jit_cache import notice, where
 
 __all__ = ["warm", "where"]
 
@@ -23,9 +23,9 @@ def _warm_cases() -> list[tuple[Any, dict[str, dict[str, Any]]]]:
     import numpy as np
 
     # the modules themselves, not the package: the package imports this module
-    from . import vehicles
-    from .problem import Problem
-    from .registry import method_info, methods
+    from .. import vehicles
+    from ..problem import Problem
+    from ..registry import method_info, methods
 
     small = Problem(np.array([[1.0, -1.0, 0.5, 0.2], [0.3, 0.4, -1.0, 0.8], [0.2, 0.1, 0.3, -1.0]]),
                           [-1.0] * 4, [1.0] * 4, rate_min=[-5.0] * 4, rate_max=[5.0] * 4)
@@ -67,8 +67,8 @@ def warm(methods: list[str] | None = None, stream: Any = None) -> dict[str, floa
     """
     import numpy as np
 
-    from .api import make_allocator
-    from .exceptions import AllocError
+    from ..api import make_allocator
+    from ..exceptions import AllocError
 
     spent: dict[str, float] = {}
     for problem, options in _warm_cases():
@@ -128,7 +128,7 @@ def _warm_ray_fallback(np: Any) -> None:
 def _main(argv: list[str]) -> int:
     import argparse
 
-    parser = argparse.ArgumentParser(prog="python -m alloc._jit_warm", description=__doc__.split("\n")[0])
+    parser = argparse.ArgumentParser(prog="python -m alloc._engine._jit_warm", description=__doc__.split("\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
     w = sub.add_parser("warm", help="compile every kernel into the cache (what the build does)")
     w.add_argument("methods", nargs="*", help="only these methods (default: all registered)")

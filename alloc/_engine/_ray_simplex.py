@@ -15,7 +15,7 @@ is ``A p - A n - t q + e = 0`` with one artificial ``e_i`` per row fixed at ``[0
 call starts from the same basis (history independent): ``t`` and the ``k - 1`` columns nearest
 the predicted facet, or the artificials when those are singular, every variable at zero
 (``u = u0``, ``t = 0``), which is feasible, so there is no phase 1.  The pivots are
-:mod:`alloc._simplex`'s rules (Dantzig's, Bland's after degenerate pivots, refactorisation every
+:mod:`alloc._engine._simplex`'s rules (Dantzig's, Bland's after degenerate pivots, refactorisation every
 ``REFACTOR_EVERY`` pivots) with bound flips taken in passes (:func:`_iterate_long`).
 
 Why not the DAQP model alone: a proximal-point LP solve per call cost 86 us at k = 4, m = 24,
@@ -28,7 +28,7 @@ steps, and a nominal call is one compiled pass (:func:`ray_call`): 30 us a call 
 from __future__ import annotations
 
 import numpy as np
-import alloc._kernel_cache  # noqa: F401 - kernel caches placed before any kernel is decorated
+import alloc._engine._kernel_cache  # noqa: F401 - kernel caches placed before any kernel is decorated
 from numba import njit
 
 from ._kernels import facet_polish
@@ -84,7 +84,7 @@ def _iterate_long(T, basis, status, x, lb, ub, d, budget):  # pragma: no cover -
 
     A bound flip leaves the basis and the reduced costs as they are, so one pass over the
     columns flips every improving candidate whose flip fits its ratio test (O(k) each) and
-    keeps the best one that does not fit for a basis change.  :func:`alloc._simplex._iterate`
+    keeps the best one that does not fit for a basis change.  :func:`alloc._engine._simplex._iterate`
     re-prices all N columns after each flip: starting from the base point, nearly every
     effector flips once on the way to the boundary, O(m N) per call -- the super-linear
     growth of ``da``'s LP path in m.  Here a call costs O(N k) per basis change.
@@ -470,7 +470,7 @@ def dual_ray(A, q, x0, lb, ub, G, cnorm, max_iter, x):  # pragma: no cover - com
 def ray_call(v, Bu0, u0, B, Q, Ax, G, cnorm, x0, xlo, xhi, c0, D, lo, hi, sigma, max_iter):  # pragma: no cover - compiled
     """One nominal ``da`` call through :func:`dual_ray` in one compiled pass: the demand measured
     from the base point, the unit ray in the row basis ``Q``, the walk, the boundary control,
-    the exact re-solve on its facet (:func:`alloc._kernels.facet_polish`) and Eq 1.15's scaling
+    the exact re-solve on its facet (:func:`alloc._engine._kernels.facet_polish`) and Eq 1.15's scaling
     back.  Returns ``(code, u, iterations)``; any code but ``OPTIMAL`` leaves the call to the
     caller's slower path (the primal simplex, then DAQP).  The same arithmetic, in the same
     order, as :meth:`alloc.methods._direct_lp.RayLP.solve` without rate limits.

@@ -4,13 +4,13 @@ Each numpy call on an 11-element array costs about a microsecond of overhead; th
 post-processing every allocation needs (clip onto the bounds, ``B u``, the ``exact`` test,
 finiteness) is a handful of such calls, so it is done in one compiled function instead.
 The pseudo-inverse family's own kernels (``pinv_scale``, ``cgi``, ``daisy``, ...) are in
-:mod:`alloc._inverse_kernels`.
+:mod:`alloc._engine._inverse_kernels`.
 """
 
 from __future__ import annotations
 
 import numpy as np
-import alloc._kernel_cache  # noqa: F401 - kernel caches placed before any kernel is decorated
+import alloc._engine._kernel_cache  # noqa: F401 - kernel caches placed before any kernel is decorated
 from numba import njit
 
 __all__ = ["all_finite", "owned_demand", "finish", "finish_owned", "fused_affine", "rate_window", "facet_polish"]
@@ -223,7 +223,7 @@ def facet_polish(B, ustar, d, u0, lo, hi, a):  # pragma: no cover - compiled
 
 
 # Bits of one word of a free-set key (63 effectors a word): the keys of the cascade's table
-# (alloc._inverse_kernels) and of the active set's factor cache (alloc._lsq_factor).
+# (alloc._engine._inverse_kernels) and of the active set's factor cache (alloc._engine._lsq_factor).
 _FREE_BITS = 63
 
 
@@ -302,7 +302,7 @@ def free_set_pinv(SB, rdiag, S, free, rcond, floor):  # pragma: no cover - compi
 
     ``SB = S B`` with ``S' S = Wv`` and ``rdiag = Wu^-1/2``: ``A = S B_F R_F``, and
     ``P = R_F A^+ S`` with singular values ``<= max(rcond * s_max(A), floor)`` dropped
-    (``alloc._linalg.truncated_pinv``).  Returns ``P`` (|F| x k).
+    (``alloc._engine._linalg.truncated_pinv``).  Returns ``P`` (|F| x k).
     """
     k, m = SB.shape
     nf = 0

@@ -1,6 +1,6 @@
 """The active-set solver's packed state: which row of which stacked array holds what
-(:func:`alloc._active_set.pack` builds it; the solver and its factorisation cache,
-:mod:`alloc._lsq_factor`, index it), and the cache's budget."""
+(:func:`alloc._engine._active_set.pack` builds it; the solver and its factorisation cache,
+:mod:`alloc._engine._lsq_factor`, index it), and the cache's budget."""
 
 # --- packed solver: a few stacked arrays per allocator ---------------------------------
 #

@@ -38,7 +38,7 @@ made answers depend on call history where they are unique only to round-off: wit
 eigenvalues 7.7e29 and 3.4e13, in the domain, a long-lived allocator returned another point
 than a fresh one; adversarial seed 10037684, moments 0.81 vs -0.39 on the weak axis.)  The
 ``warm_start`` option opts in to the C export's warm start (:func:`_warm_pick`, the single call
-only), refused by :mod:`alloc._warm` on problems like that one; its answers agree with the cold
+only), refused by :mod:`alloc._engine._warm` on problems like that one; its answers agree with the cold
 ones to round-off (tests/alloc/test_warm_start.py).  A call that takes the warm start also skips
 what it already knows: a least-squares level at zero residual after its step stops there, and the
 final level of ``qp`` and ``dynamic`` starts at its multiplier test when level 0 ended on its own
@@ -50,7 +50,7 @@ mutate that state hold the GIL (no ``nogil``): an allocator shared by threads st
 from __future__ import annotations
 
 import numpy as np
-import alloc._kernel_cache  # noqa: F401 - kernel caches placed before any kernel is decorated
+import alloc._engine._kernel_cache  # noqa: F401 - kernel caches placed before any kernel is decorated
 from numba import njit
 
 from ._threads import run_chunks, threads_for
@@ -531,8 +531,8 @@ def lexico_call(mats, vecs, ivecs, bankL, bank, v, u_prev, dt):  # pragma: no co
 
     Checks the demand (and ``u_prev`` when ``dt > 0``) against the valid domain, forms the
     rate-limited bounds (Eq 1.28) when ``dt > 0``, solves, clips, and classifies like
-    :func:`alloc._kernels.finish`.  Returns ``(out, code, iterations)``: the
-    :func:`alloc._kernels.packed_out` array and the code, 0 exact, 1 unattainable,
+    :func:`alloc._engine._kernels.finish`.  Returns ``(out, code, iterations)``: the
+    :func:`alloc._engine._kernels.packed_out` array and the code, 0 exact, 1 unattainable,
     2 non-finite, 3 ``v`` outside the domain, 4 ``u_prev`` outside the domain, 5 the cap.
     """
     out = packed_out(ivecs[_HEAD, _M], ivecs[_HEAD, _K])
@@ -594,7 +594,7 @@ def lexico_solve(mats, vecs, ivecs, bankL, bank, v, lo, hi, u_prev, rate):  # pr
 @njit(cache=True, nogil=True, _nrt=False)
 def _finished_into(mats, vecs, ivecs, bankL, bank, V, U, Vach, codes, a, b):  # pragma: no cover - compiled
     """Rows ``a:b`` of the batch, each what :func:`_call_into` does for it without rate
-    limits: solve, then :func:`alloc._kernels.finish` (clip, ``B u``, the code) into ``U``,
+    limits: solve, then :func:`alloc._engine._kernels.finish` (clip, ``B u``, the code) into ``U``,
     ``Vach``, ``codes``; code 5 where a level hit its cap, 2 where the preference point is
     not finite (the caller redoes such rows one by one)."""
     m, k = ivecs[_HEAD, _M], ivecs[_HEAD, _K]
@@ -626,10 +626,10 @@ def _finished_nogil(mats, vecs, ivecs, bankL, bank, V, U, Vach, codes, a, b):  #
 
 def lexico_batch_finished(state: tuple, V: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(U, B U, codes)`` of the rows of ``V`` within the position limits: the solve and the
-    single call's :func:`alloc._kernels.finish` in one compiled pass per chunk of rows.
+    single call's :func:`alloc._engine._kernels.finish` in one compiled pass per chunk of rows.
 
-    Large batches run on :func:`alloc._threads.threads_for` threads that pull chunks of rows
-    from a shared counter (:func:`alloc._threads.run_chunks`: a thread slowed by other load
+    Large batches run on :func:`alloc._engine._threads.threads_for` threads that pull chunks of rows
+    from a shared counter (:func:`alloc._engine._threads.run_chunks`: a thread slowed by other load
     takes fewer), each on a private copy of the solver's state; the allocator's own state is
     used, under the GIL, only by a one-thread batch.  Rows are pure functions of the data (the
     factorisation cache changes the cost, never the answer), so every split gives the same

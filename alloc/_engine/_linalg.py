@@ -8,7 +8,7 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from .exceptions import OptionError, SolverError
+from ..exceptions import OptionError, SolverError
 
 FloatArray = NDArray[np.float64]
 

@@ -35,7 +35,7 @@ singular basis, returns an error code (the allocator answers with its fallback).
 from __future__ import annotations
 
 import numpy as np
-import alloc._kernel_cache  # noqa: F401 - kernel caches placed before any kernel is decorated
+import alloc._engine._kernel_cache  # noqa: F401 - kernel caches placed before any kernel is decorated
 from numba import njit
 
 __all__ = ["OPTIMAL", "ITERATION_LIMIT", "NUMERICAL", "solve_lexicographic", "tie_break_weights"]

@@ -15,7 +15,7 @@ distribution (``alloc``, ``sim``, ``service``, ``benchmarks``) and never fails:
    compiled in memory for this process only (nothing is written, nothing raises).
 
 The package's ``__pycache__`` is also the *shipped* cache: ``pip install`` builds the wheel
-with every kernel compiled (setup.py's build step runs :func:`alloc._jit_warm.warm` in the build tree), and
+with every kernel compiled (setup.py's build step runs :func:`alloc._engine._jit_warm.warm` in the build tree), and
 ``make install`` warms the editable clone.  numba keys an entry by the source file's content
 hash, the function's bytecode, the Python and numba versions and the CPU (name and features).
 On a user's first use of a kernel from a fallback directory (2-3), the shipped entries for this
@@ -27,13 +27,13 @@ on first use into the location above, with one line on stderr per method (one li
     up to a minute; saved in /home/me/.cache/alloc-toolkit/alloc_4be1...) ...
 
 ``NUMBA_CACHE_DIR`` (numba's own setting) still wins: the kernels are then cached only there.
-``python -m alloc._jit_warm`` warms the cache (``warm``) or says where the kernels load from
+``python -m alloc._engine._jit_warm`` warms the cache (``warm``) or says where the kernels load from
 (``where``).
 
 This module imports numba, and importing it installs the locator: numba's per-function cache
 (``FunctionCache``) gets :class:`KernelCacheImpl`, which tries :class:`KernelCacheLocator` before
 numba's own locators and saves nothing where nothing is writable (a locator alone cannot stop a
-save).  Every module with kernels imports it first, through :mod:`alloc._kernel_cache`, before
+save).  Every module with kernels imports it first, through :mod:`alloc._engine._kernel_cache`, before
 any kernel is decorated; ``import alloc`` alone does not.
 """
 
@@ -63,7 +63,7 @@ __all__ = ["KernelCacheLocator", "install", "kernel_files", "where"]
 #: the distribution's packages whose numba kernels this module places
 PACKAGES = ("alloc", "sim", "service", "benchmarks")
 #: the directory that holds those packages (site-packages, or the root of a clone)
-_ROOT = Path(__file__).resolve().parent.parent
+_ROOT = Path(__file__).resolve().parents[2]  # the folder holding the packages (alloc/_engine/ is two below)
 _APP = "alloc-toolkit"
 _PYCACHE = "__pycache__"
 
@@ -321,7 +321,7 @@ notice = CompileNotice()
 def install() -> None:
     """Place our kernels' caches with :class:`KernelCacheLocator` and report compiles.
 
-    Idempotent.  Must run before a kernel is decorated (:mod:`alloc._kernel_cache` sees to it).
+    Idempotent.  Must run before a kernel is decorated (:mod:`alloc._engine._kernel_cache` sees to it).
     """
     global _installed
     if _installed:
@@ -332,7 +332,7 @@ def install() -> None:
 
 
 if __name__ != "__main__":
-    # importing this module is what installs it (alloc._kernel_cache does, first thing in every
+    # importing this module is what installs it (alloc._engine._kernel_cache does, first thing in every
     # module with kernels)
     install()
 

@@ -1,4 +1,4 @@
-/* alloc._fastcall: the allocator's call path in C.
+/* alloc._engine._fastcall: the allocator's call path in C.
  *
  * ``FastCall`` is the base type of ``alloc.Allocator``.  Its ``tp_call`` does, without a
  * Python frame, what ``Allocator._call_py`` does on its fast paths: check the demand (and
@@ -10,7 +10,7 @@
  * goes to ``self._call_py(*args, **kwargs)``, the Python implementation, which re-checks
  * and answers (or raises the named error).  Measured in benchmarks/bench_alloc.py.
  *
- * Packed output of a kernel (alloc._kernels.packed_out): u (m), B u (k), v (k), v - B u (k).
+ * Packed output of a kernel (alloc._engine._kernels.packed_out): u (m), B u (k), v (k), v - B u (k).
  * The kernel returns (out, code, iterations); code 0 = exact, 1 = unattainable.
  *
  * Thread safety: each FastCall owns one re-entrant lock.  The C path holds it around a
@@ -38,7 +38,7 @@
 #include <pythread.h>
 
 #if defined(Py_GIL_DISABLED) || defined(_WIN32)
-#error "alloc._fastcall's lock relies on the GIL and pthreads; alloc runs its Python call path instead"
+#error "alloc._engine._fastcall's lock relies on the GIL and pthreads; alloc runs its Python call path instead"
 #endif
 
 #define MAXARGS 40
@@ -400,10 +400,10 @@ static PyMethodDef fc_methods[] = {
     {NULL, NULL, 0, NULL}};
 
 static PyTypeObject FastCallType = {
-    PyVarObject_HEAD_INIT(NULL, 0).tp_name = "alloc._fastcall.FastCall",
+    PyVarObject_HEAD_INIT(NULL, 0).tp_name = "alloc._engine._fastcall.FastCall",
     .tp_basicsize = sizeof(FastCall),
     .tp_flags = Py_TPFLAGS_DEFAULT | Py_TPFLAGS_BASETYPE | Py_TPFLAGS_HAVE_GC,
-    .tp_doc = "Base of alloc.Allocator: its call path in C (see alloc/_fastcall.c).",
+    .tp_doc = "Base of alloc.Allocator: its call path in C (see alloc/_engine/_fastcall.c).",
     .tp_call = fc_call,
     .tp_traverse = fc_traverse,
     .tp_clear = fc_clear,
@@ -412,7 +412,7 @@ static PyTypeObject FastCallType = {
     .tp_new = fc_new,
 };
 
-static struct PyModuleDef moduledef = {PyModuleDef_HEAD_INIT, "alloc._fastcall",
+static struct PyModuleDef moduledef = {PyModuleDef_HEAD_INIT, "alloc._engine._fastcall",
                                        "The allocator's call path in C (see alloc/api.py).", -1, NULL};
 
 PyMODINIT_FUNC PyInit__fastcall(void) {

@@ -5,13 +5,13 @@ Each replaces a Python loop of small numpy calls (clip, fancy indexing, ``B u``,
 lookup per iteration) with one compiled call.  The arithmetic is the same as the numpy
 code it replaces (tests/alloc/test_kernels_cascade.py compares the two on random problems).
 What every method's call shares (the clip onto the bounds, ``B u`` and the status, the
-packed output, the rate window) is in :mod:`alloc._kernels`.
+packed output, the rate window) is in :mod:`alloc._engine._kernels`.
 """
 
 from __future__ import annotations
 
 import numpy as np
-import alloc._kernel_cache  # noqa: F401 - kernel caches placed before any kernel is decorated
+import alloc._engine._kernel_cache  # noqa: F401 - kernel caches placed before any kernel is decorated
 from numba import njit
 
 from ._kernels import _FREE_BITS, clip_scalar, close_out, copy_demand, finish, packed_out

@@ -1,4 +1,4 @@
-"""Factorisations of the active-set solver's free sets (:mod:`alloc._active_set`).
+"""Factorisations of the active-set solver's free sets (:mod:`alloc._engine._active_set`).
 
 The least-squares step on the free effectors is the minimum-norm solution from a one-sided
 Jacobi SVD of the small ``rows x free`` matrix in the ``Wu`` metric (:func:`_jacobi`,
@@ -11,7 +11,7 @@ the cache changes the cost, never the answer.
 from __future__ import annotations
 
 import numpy as np
-import alloc._kernel_cache  # noqa: F401 - kernel caches placed before any kernel is decorated
+import alloc._engine._kernel_cache  # noqa: F401 - kernel caches placed before any kernel is decorated
 from numba import njit
 
 from ._kernels import _FREE_BITS
@@ -196,7 +196,7 @@ def _factors(mats, ivecs, bankL, bank, r0, r1, lev, diag, nf, m):  # pragma: no 
     ``L = bankL[s]``, the rest :func:`_slot` of ``bank[s]``): looked up, else computed (and
     kept in the hash table while it has room; past that, in the overflow slot of its hash).  Cached and
     recomputed factors are bitwise equal, so the cache never changes an answer, only its cost.  The hash table (rows ``_TABLE:`` of ``ivecs``)
-    is open addressing as in :func:`alloc._inverse_kernels._probe`.
+    is open addressing as in :func:`alloc._engine._inverse_kernels._probe`.
     """
     words = ivecs[_HEAD, _WORDS]
     for w in range(words):
