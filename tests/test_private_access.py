@@ -27,7 +27,7 @@ SCANNED = ("alloc", "sim", "service", "benchmarks")
 ALLOWED = {
     ("alloc/_jit_cache.py", "getattr(dispatcher, '_cache', None)"): "numba's dispatcher, not an allocator",
     ("alloc/_jit_cache.py", "getattr(getattr(dispatcher, '_cache', None), '_impl', None)"): "numba's cache",
-    ("alloc/_jit_cache.py", "allocator._solve"): "the kernel-cache warm-up runs the allocator's Python call "
+    ("alloc/_jit_warm.py", "allocator._solve"): "the kernel-cache warm-up runs the allocator's Python call "
                                                   "path, which a fast path skips (the allocator's own package)",
     ("alloc/estimation/detection.py", "det._U"): "the detector's own buffers, restored from its saved state",
     ("alloc/estimation/detection.py", "det._R"): "the detector's own buffers",
