@@ -97,8 +97,8 @@ def test_package_kernels_use_the_package_pycache_where_writable():
     def probe():
         pass
 
-    locator = _jit_cache.KernelCacheLocator.from_function(probe, str(ROOT / "alloc" / "_kernels.py"))
-    assert locator.writable and locator.get_cache_path() == str(ROOT / "alloc" / "__pycache__")
+    locator = _jit_cache.KernelCacheLocator.from_function(probe, str(ROOT / "alloc" / "_engine" / "_kernels.py"))
+    assert locator.writable and locator.get_cache_path() == str(ROOT / "alloc" / "_engine" / "__pycache__")
     # another project's file: numba's own locators decide
     assert _jit_cache.KernelCacheLocator.from_function(probe, str(ROOT / "tests" / "hostile.py")) is None
     assert _jit_cache.KernelCacheLocator.from_function(probe, "/usr/lib/python3/x.py") is None
