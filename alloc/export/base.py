@@ -21,7 +21,7 @@ from .._engine._warm import WARM_COND_MAX, WARM_ROUND_OFF  # noqa: F401 - re-exp
 from .certify import Certificate
 
 #: bumped whenever the generated code changes for the same input
-GENERATOR_VERSION = "4"
+GENERATOR_VERSION = "5"
 PRECISIONS = ("double", "float")
 #: ``float`` builds: the status ``exact`` tolerance (the library's 1e-6 is 8 float ulps at 1,
 #: below what a float residual with its rounding bound can certify)
